@@ -1,0 +1,108 @@
+# terrafarm build.  `make` builds bin/terrafarm; `make test` builds and runs every test;
+# `make asan` builds an AddressSanitizer+UBSan tree under build-asan/ and runs the tests with it;
+# `make deps` installs the Debian packages the build and tests need; `make bench` builds benchmarks.
+#
+# Sources are found by wildcard: every common/*.c, coordinator/*.c, worker/*.c goes into
+# libterrafarm.a; cli/*.c is linked with it into bin/terrafarm; each tests/unit/test_*.c is its
+# own cmocka program; each bench/*.c its own benchmark; each tests/fuzz/fuzz_*.c a fuzz target.
+
+CC      ?= cc
+BUILD   ?= build
+BIN     ?= bin
+VERSION := 0.1.0
+
+PKGS      := inih libpng libsodium
+EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
+EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
+CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
+
+# -ffp-contract=off: no fused multiply-add contraction, so every machine computes the same
+# bits (DESIGN.md section 4: deterministic terrain and pixels everywhere).
+CFLAGS   ?= -O2 -g
+SAN      ?=
+ALL_CFLAGS := $(CFLAGS) $(SAN) -std=c11 -D_GNU_SOURCE -Wall -Wextra -ffp-contract=off -pthread \
+            -I. -Icommon -DTF_VERSION='"$(VERSION)"' \
+            $(shell pkg-config --cflags $(PKGS)) $(EXR_CFLAGS)
+LDLIBS   := $(shell pkg-config --libs $(PKGS)) $(EXR_LIBS) $(CL_LIBS) -lm -pthread
+TEST_LIBS := $(shell pkg-config --libs cmocka)
+
+LIB_SRC   := $(wildcard common/*.c coordinator/*.c worker/*.c)
+CLI_SRC   := $(wildcard cli/*.c)
+TEST_SRC  := $(wildcard tests/unit/test_*.c)
+BENCH_SRC := $(wildcard bench/*.c)
+FUZZ_SRC  := $(wildcard tests/fuzz/fuzz_*.c)
+KERNELS   := $(wildcard worker/kernels/*.cl)
+
+LIB_OBJ   := $(LIB_SRC:%.c=$(BUILD)/%.o)
+CLI_OBJ   := $(CLI_SRC:%.c=$(BUILD)/%.o)
+TESTS     := $(TEST_SRC:tests/unit/%.c=$(BUILD)/tests/%)
+BENCHES   := $(BENCH_SRC:bench/%.c=$(BUILD)/bench/%)
+LIB       := $(BUILD)/libterrafarm.a
+PROG      := $(BIN)/terrafarm
+
+.PHONY: all test asan bench fuzz deps clean install check-warnings
+all: $(PROG)
+
+$(BUILD)/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -MMD -MP -c $< -o $@
+
+$(LIB): $(LIB_OBJ)
+	@mkdir -p $(dir $@)
+	rm -f $@ && ar rcs $@ $^
+
+$(PROG): $(CLI_OBJ) $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -o $@ $(CLI_OBJ) $(LIB) $(LDLIBS)
+
+$(BUILD)/tests/%: tests/unit/%.c $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB) $(TEST_LIBS) $(LDLIBS)
+
+$(BUILD)/bench/%: bench/%.c $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB) $(LDLIBS)
+
+# libFuzzer targets (clang).  The harness sources are plain LLVMFuzzerTestOneInput files; the
+# test suite also links each one with tests/fuzz/replay_main.c (gcc) to replay the corpus.
+FUZZ_LIB_SRC := $(LIB_SRC)
+$(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB_SRC)
+	@mkdir -p $(dir $@)
+	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon \
+	  -DTF_VERSION='"$(VERSION)"' $(shell pkg-config --cflags $(PKGS)) $(EXR_CFLAGS) \
+	  -o $@ $< $(FUZZ_LIB_SRC) $(LDLIBS)
+$(BUILD)/replay/%: tests/fuzz/%.c tests/fuzz/replay_main.c $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -o $@ $< tests/fuzz/replay_main.c $(LIB) $(LDLIBS)
+
+fuzz: $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/fuzz/%)
+
+REPLAYS := $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/replay/%)
+
+test: $(PROG) $(TESTS) $(REPLAYS)
+	BUILD=$(BUILD) BIN=$(BIN) tests/run.sh
+
+asan:
+	$(MAKE) BUILD=build-asan BIN=build-asan/bin CFLAGS="-O1 -g" \
+	  SAN="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined" test
+
+bench: $(PROG) $(BENCHES)
+
+# Every Debian package the build, the tests and the benchmarks use.
+DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
+            libopenexr-dev openexr ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
+            iproute2 python3
+deps:
+	@missing=""; for p in $(DEB_PKGS); do dpkg-query -W -f='$${Status}' $$p 2>/dev/null | \
+	  grep -q 'ok installed' || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then echo "installing:$$missing"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
+	else echo "all build and test packages present"; fi
+
+install: $(PROG)
+	install -D -m 755 $(PROG) $(DESTDIR)/usr/local/bin/terrafarm
+
+clean:
+	rm -rf build build-asan bin
+
+-include $(shell find build build-asan -name '*.d' 2>/dev/null)

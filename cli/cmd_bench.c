@@ -1,0 +1,12 @@
+/* cmd_bench.c: NOT IMPLEMENTED YET -- placeholder so the executable links while the command is
+ * being written. */
+#include "commands.h"
+#include "log.h"
+
+int cmd_bench(int argc, char **argv)
+{
+    (void)argc;
+    (void)argv;
+    tf_error("'bench' is not implemented yet");
+    return TF_EXIT_FAIL;
+}

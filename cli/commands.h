@@ -1,0 +1,14 @@
+/* commands.h: the subcommands of bin/terrafarm.  Each takes the arguments after its name
+ * (argv[0] is the command name) and returns the process exit status. */
+#ifndef TF_COMMANDS_H
+#define TF_COMMANDS_H
+
+int cmd_render(int argc, char **argv);      /* cmd_render.c: the coordinator */
+int cmd_worker(int argc, char **argv);      /* cmd_worker.c: a networked worker */
+int cmd_heightfield(int argc, char **argv); /* cmd_heightfield.c: export the terrain */
+int cmd_bench(int argc, char **argv);       /* cmd_bench.c: speedup against worker count */
+
+/* Exit statuses shared by all commands. */
+enum { TF_EXIT_OK = 0, TF_EXIT_FAIL = 1, TF_EXIT_USAGE = 2 };
+
+#endif

@@ -1,0 +1,47 @@
+/* heightfield.h: the terrain as the renderer sees it: (2^k+1)^2 height samples over a square of
+ * side `extent`, plus a hierarchy of max-altitude grids ("A grids", Musgrave 3.x; a max mipmap).
+ *
+ * Sample (i, j) sits at world (i * cell, j * cell, h[j*n + i]).  Cell (ci, cj), 0 <= ci, cj < n-1,
+ * is the square between samples (ci, cj) and (ci+1, cj+1); it is split into two triangles along
+ * the diagonal from (ci, cj) to (ci+1, cj+1).
+ *
+ * maxgrid[0][cj * cells + ci] is the maximum of the cell's four corner heights; maxgrid[L] has
+ * (cells >> L)^2 entries, each the max of the 2x2 block of level L-1 below it; the last level is
+ * 1x1 (the whole terrain).  mingrid likewise with minimum (rays from below).
+ *
+ * Built once by the coordinator before forking workers (shared copy-on-write), and by each
+ * networked worker from the scene text.  Construction uses all cores and is bit-identical
+ * whatever the thread count. */
+#ifndef TF_HEIGHTFIELD_H
+#define TF_HEIGHTFIELD_H
+
+#include "scene.h"
+
+typedef struct tf_heightfield {
+    int k;             /* n = 2^k + 1 */
+    int n;             /* samples per side */
+    int cells;         /* n - 1 cells per side */
+    double extent;     /* world size of a side */
+    double cell;       /* extent / cells */
+    float *h;          /* n * n world heights */
+    float hmin, hmax;  /* range of h */
+    int levels;        /* number of max-grid levels: k + 1 (cells, cells/2, ..., 1) */
+    float **maxgrid;   /* maxgrid[L]: (cells >> L)^2 entries */
+    float **mingrid;   /* mingrid[L]: same shape, minima */
+} tf_heightfield;
+
+/* Build the scene's height field with `threads` threads (0 = all online CPUs).
+ * Returns NULL with a one-line message in err on failure (e.g. out of memory). */
+tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, size_t errlen);
+/* Wrap existing heights (copied) and build the max/min grids; for tests and tools. */
+tf_heightfield *tf_heightfield_from_heights(const float *h, int k, double extent, int threads);
+void tf_heightfield_free(tf_heightfield *hf);
+
+/* Height and surface normal at world (x, y) by the same two-triangle interpolation the tracer
+ * uses (clamped to the terrain's edge). */
+double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y);
+
+/* Number of worker threads to use for `threads` (0 -> online CPUs). */
+int tf_thread_count(int threads);
+
+#endif

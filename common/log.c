@@ -1,0 +1,62 @@
+/* log.c: see log.h. */
+#include "log.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static int log_level = TF_LOG_INFO;
+static char log_tag[64];
+
+void tf_log_set_level(int level) { log_level = level; }
+int tf_log_get_level(void) { return log_level; }
+
+void tf_log_set_tag(const char *tag)
+{
+    snprintf(log_tag, sizeof log_tag, "%s", tag ? tag : "");
+}
+
+static void emit(int level, const char *kind, const char *fmt, va_list ap)
+{
+    if (level > log_level)
+        return;
+    char line[2048];
+    int n = snprintf(line, sizeof line, "terrafarm%s%s%s: %s", log_tag[0] ? "[" : "", log_tag,
+                     log_tag[0] ? "]" : "", kind);
+    if (n < 0 || n >= (int)sizeof line)
+        n = 0;
+    int m = vsnprintf(line + n, sizeof line - (size_t)n - 1, fmt, ap);
+    if (m < 0)
+        m = 0;
+    size_t len = strlen(line);
+    while (len > 0 && line[len - 1] == '\n')
+        len--;
+    line[len++] = '\n';
+    ssize_t w = write(STDERR_FILENO, line, len);
+    (void)w;
+}
+
+#define DEFINE_LOG(name, level, kind)                                                          \
+    void name(const char *fmt, ...)                                                            \
+    {                                                                                          \
+        va_list ap;                                                                            \
+        va_start(ap, fmt);                                                                     \
+        emit(level, kind, fmt, ap);                                                            \
+        va_end(ap);                                                                            \
+    }
+
+DEFINE_LOG(tf_error, TF_LOG_ERROR, "")
+DEFINE_LOG(tf_warn, TF_LOG_WARN, "warning: ")
+DEFINE_LOG(tf_info, TF_LOG_INFO, "")
+DEFINE_LOG(tf_debug, TF_LOG_DEBUG, "debug: ")
+
+void tf_die(int status, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    emit(TF_LOG_ERROR, "", fmt, ap);
+    va_end(ap);
+    exit(status);
+}

@@ -4,7 +4,7 @@
 #
 # Sources are found by wildcard: every common/*.c, coordinator/*.c, worker/*.c goes into
 # libterrafarm.a; cli/*.c is linked with it into bin/terrafarm; each tests/unit/test_*.c is its
-# own cmocka program; each bench/*.c its own benchmark; each tests/fuzz/fuzz_*.c a fuzz target.
+# own cmocka program (objects are linked directly, not through an archive); each bench/*.c its own benchmark; each tests/fuzz/fuzz_*.c a fuzz target.
 
 CC      ?= cc
 BUILD   ?= build
@@ -51,17 +51,17 @@ $(LIB): $(LIB_OBJ)
 	@mkdir -p $(dir $@)
 	rm -f $@ && ar rcs $@ $^
 
-$(PROG): $(CLI_OBJ) $(LIB)
+$(PROG): $(CLI_OBJ) $(LIB_OBJ)
 	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -o $@ $(CLI_OBJ) $(LIB) $(LDLIBS)
+	$(CC) $(ALL_CFLAGS) -o $@ $(CLI_OBJ) $(LIB_OBJ) $(LDLIBS)
 
-$(BUILD)/tests/%: tests/unit/%.c $(LIB)
+$(BUILD)/tests/%: tests/unit/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB) $(TEST_LIBS) $(LDLIBS)
+	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB_OBJ) $(TEST_LIBS) $(LDLIBS)
 
-$(BUILD)/bench/%: bench/%.c $(LIB)
+$(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB) $(LDLIBS)
+	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
 
 # libFuzzer targets (clang).  The harness sources are plain LLVMFuzzerTestOneInput files; the
 # test suite also links each one with tests/fuzz/replay_main.c (gcc) to replay the corpus.
@@ -71,9 +71,9 @@ $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB_SRC)
 	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon \
 	  -DTF_VERSION='"$(VERSION)"' $(shell pkg-config --cflags $(PKGS)) $(EXR_CFLAGS) \
 	  -o $@ $< $(FUZZ_LIB_SRC) $(LDLIBS)
-$(BUILD)/replay/%: tests/fuzz/%.c tests/fuzz/replay_main.c $(LIB)
+$(BUILD)/replay/%: tests/fuzz/%.c tests/fuzz/replay_main.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -o $@ $< tests/fuzz/replay_main.c $(LIB) $(LDLIBS)
+	$(CC) $(ALL_CFLAGS) -o $@ $< tests/fuzz/replay_main.c $(LIB_OBJ) $(LDLIBS)
 
 fuzz: $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/fuzz/%)
 

@@ -35,6 +35,9 @@ typedef struct tf_heightfield {
 tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, size_t errlen);
 /* Wrap existing heights (copied) and build the max/min grids; for tests and tools. */
 tf_heightfield *tf_heightfield_from_heights(const float *h, int k, double extent, int threads);
+/* Take ownership of h (malloc'd n*n world heights) and build the grids: what
+ * tf_heightfield_build calls once the heights are generated.  NULL on out of memory (h freed). */
+tf_heightfield *tf_heightfield_wrap(float *h, int k, double extent, int threads);
 void tf_heightfield_free(tf_heightfield *hf);
 
 /* Height and surface normal at world (x, y) by the same two-triangle interpolation the tracer

@@ -1,0 +1,38 @@
+/* noise.h: seeded gradient (Perlin) noise in 2D and 3D and fBm sums of it (Musgrave 2.3.1,
+ * 2.3.2.1).  The basis of every procedural terrain and of the renderer's textures (bump detail,
+ * snow line perturbation, water ripples).  Deterministic from the seed on every machine: a
+ * permutation built by a fixed integer PRNG, gradients from fixed tables, plain double
+ * arithmetic.  Values of tf_noise2/3 lie in [-1, 1] and are 0 at integer lattice points. */
+#ifndef TF_NOISE_H
+#define TF_NOISE_H
+
+#include <stdint.h>
+
+struct tf_noise {
+    uint64_t seed;
+    uint16_t perm[512]; /* permutation of 0..255, repeated */
+};
+typedef struct tf_noise tf_noise;
+
+void tf_noise_init(tf_noise *nz, uint64_t seed);
+double tf_noise2(const tf_noise *nz, double x, double y);
+double tf_noise3(const tf_noise *nz, double x, double y, double z);
+
+/* fBm: sum over octaves i of noise(p * lacunarity^i) * lacunarity^(-H i); a fractional
+ * remainder of `octaves` adds that fraction of one more octave. */
+double tf_fbm2(const tf_noise *nz, double x, double y, double H, double lacunarity, double octaves);
+double tf_fbm3(const tf_noise *nz, double x, double y, double z, double H, double lacunarity,
+               double octaves);
+
+/* A 64-bit integer hash (splitmix64 finaliser) and a uniform double in [0,1) from it: the one
+ * source of deterministic "randomness" everywhere (generators, jitter). */
+static inline uint64_t tf_hash64(uint64_t x)
+{
+    x += 0x9e3779b97f4a7c15ULL;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+    return x ^ (x >> 31);
+}
+static inline double tf_hash_unit(uint64_t x) { return (double)(tf_hash64(x) >> 11) * 0x1.0p-53; }
+
+#endif

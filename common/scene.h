@@ -1,4 +1,4 @@
-/* scene.h: the parsed, validated scene.  A scene file (scenes/*.scene, INI syntax read with
+/* scene.h: the parsed, validated scene.  A scene file (scenes/NAME.scene, INI syntax read with
  * inih) is the whole description of a render: image, camera, sun, sky, terrain generator,
  * materials, mist and antialiasing.  The coordinator parses it; forked workers inherit the
  * parsed struct; networked workers receive the text through the tuple space and parse it

@@ -48,7 +48,9 @@ void tf_exr_abandon(tf_exr_writer *w);
 
 /* What is at path?  Returns 1 if no file exists; 0 if it is a terrafarm EXR (fills meta,
  * *rows_done = rows in whole verified chunks, *complete = 1 if every row is there); -1 if it
- * exists but is not a terrafarm EXR we can resume (message in err). */
+ * exists but is not a terrafarm EXR we can resume (message in err).  A file killed after its
+ * last chunk but before tf_exr_finish has every row but no offset table: it reports
+ * *complete = 0 (and rows_done = height), so it is resumed and finished, not taken as done. */
 int tf_exr_probe(const char *path, tf_exr_meta *meta, int *rows_done, int *complete, char *err,
                  size_t errlen);
 
@@ -58,7 +60,9 @@ tf_exr_writer *tf_exr_resume(const char *path, const tf_exr_meta *expect, int *r
                              char *err, size_t errlen);
 
 /* Read back rows [0, *rows_valid) of a (possibly partial) file, chunk by chunk, calling
- * fn(user, y, row_pixels) for each row in order.  Returns 0 on success. */
+ * fn(user, y, row_pixels) for each row in order.  *meta is filled before the first call, so fn
+ * may size its output from it.  A nonzero return from fn stops reading (returns -1).
+ * Returns 0 on success. */
 typedef int (*tf_exr_row_fn)(void *user, int y, const tf_pixel *row);
 int tf_exr_read_rows(const char *path, tf_exr_meta *meta, int *rows_valid, tf_exr_row_fn fn,
                      void *user, char *err, size_t errlen);

@@ -6,7 +6,6 @@
 #include "shade.h"
 
 #include <math.h>
-#include "trace.h"
 
 #define DEG2RAD (3.14159265358979323846 / 180.0)
 #define FAR_AWAY 1e30
@@ -214,7 +213,7 @@ static tf_vec3 terrain_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double 
     return v3_lerp(c, ALBEDO_SNOW, w_snow);
 }
 
-static tf_vec3 shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays)
+tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays)
 {
     tf_vec3 n = smooth_normal(sh->hf, hit->ci, hit->cj, hit->p);
     tf_vec3 nb = n;
@@ -236,7 +235,7 @@ static tf_vec3 shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *s
     return v3_mul(albedo, light);
 }
 
-static tf_vec3 shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, uint64_t *shadow_rays)
+tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, uint64_t *shadow_rays)
 {
     tf_vec3 n = v3(0, 0, 1);
     if (sh->textured && sh->scene->materials.bump > 0) {
@@ -275,10 +274,10 @@ void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *o
     double dist;
     if (tf_trace(sh->hf, origin, dir, 0.0, t_water, &hit)) {
         dist = hit.t;
-        c = shade_terrain(sh, &hit, shadow_rays);
+        c = tf_shade_terrain(sh, &hit, shadow_rays);
     } else if (t_water < FAR_AWAY) {
         dist = t_water;
-        c = shade_water(sh, v3_add(origin, v3_scale(dir, t_water)), dir, shadow_rays);
+        c = tf_shade_water(sh, v3_add(origin, v3_scale(dir, t_water)), dir, shadow_rays);
     } else {
         c = tf_mist_apply(sh, tf_sky_color(sh, dir), origin, dir, INFINITY);
         *out = (tf_sample){(float)c.x, (float)c.y, (float)c.z, 0.0f, TF_SKY_DIST};

@@ -26,6 +26,7 @@
 #include "heightfield.h"
 #include "noise.h"
 #include "scene.h"
+#include "trace.h"
 #include "vec.h"
 
 typedef struct tf_shader {
@@ -57,6 +58,12 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
 /* Trace and shade one camera ray (dir unit).  Adds the shadow rays it casts to *shadow_rays. */
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,
                   uint64_t *shadow_rays);
+
+/* The two surfaces, before mist (tf_shade_ray calls them; tests call them directly).
+ * tf_shade_terrain: colour at a terrain hit; tf_shade_water: colour of the water plane at p
+ * seen along unit dir.  Both cast one shadow ray when the sun is in front of the surface. */
+tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays);
+tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, uint64_t *shadow_rays);
 
 /* Sky radiance in direction dir (unit), before mist. */
 tf_vec3 tf_sky_color(const tf_shader *sh, tf_vec3 dir);

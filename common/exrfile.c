@@ -406,10 +406,11 @@ int tf_exr_write_gray(const char *path, int width, int height, const float *data
                                    errlen);
     if (!w)
         return -1;
-    if (exr_attr_set_string(w->ctx, 0, ATTR_VERSION, TF_VERSION) != EXR_ERR_SUCCESS ||
-        write_header(w, err, errlen) != 0 || write_rows_raw(w, height, data, err, errlen) != 0) {
-        if (!err[0])
-            snprintf(err, errlen, "%s: cannot write the EXR header", path);
+    exr_result_t rv = exr_attr_set_string(w->ctx, 0, ATTR_VERSION, TF_VERSION);
+    if (rv != EXR_ERR_SUCCESS)
+        writer_error(w, err, errlen, "cannot set a header attribute", rv);
+    if (rv != EXR_ERR_SUCCESS || write_header(w, err, errlen) != 0 ||
+        write_rows_raw(w, height, data, err, errlen) != 0) {
         writer_free(w, 1);
         return -1;
     }
@@ -659,6 +660,8 @@ int tf_exr_read_rows(const char *path, tf_exr_meta *meta, int *rows_valid, tf_ex
                      void *user, char *err, size_t errlen)
 {
     exr_reader r;
+    if (errlen > 0)
+        err[0] = '\0'; /* so a stop by fn can be told from our own failures below */
     int rc = reader_open(&r, path, err, errlen);
     if (rc == 1)
         snprintf(err, errlen, "%s: no such file", path);
@@ -667,7 +670,7 @@ int tf_exr_read_rows(const char *path, tf_exr_meta *meta, int *rows_valid, tf_ex
     *meta = r.meta; /* filled before the first row arrives, so fn may size things from it */
     row_stream s = {fn, user};
     int good = walk_chunks(&r, stream_chunk_rows, &s, err, errlen);
-    if (good < 0 && !err[0])
+    if (good < 0 && errlen > 0 && !err[0])
         snprintf(err, errlen, "%s: reading stopped by the row consumer", path);
     if (good >= 0)
         *rows_valid = rows_in_chunks(&r, good);

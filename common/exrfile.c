@@ -146,6 +146,7 @@ struct tf_exr_writer {
     const channel_map *channels;
     int nchannels;
     size_t pixel_bytes;          /* stride of one caller pixel */
+    int broken;                  /* a chunk write failed: every later write/sync/finish fails */
 };
 
 int tf_exr_chunk_rows(void) { return TF_EXR_CHUNK_ROWS; }
@@ -324,23 +325,26 @@ static int write_chunk(tf_exr_writer *w, int y, const uint8_t *rows, char *err, 
 /* Write nrows caller rows starting at w->next_row; shared by pixel and gray writers. */
 static int write_rows_raw(tf_exr_writer *w, int nrows, const void *px, char *err, size_t errlen)
 {
-    if (w->sink.write_errno) {
-        snprintf(err, errlen, "%s: earlier write failed: %s", w->path,
-                 strerror(w->sink.write_errno));
+    if (w->broken || w->sink.write_errno) {
+        snprintf(err, errlen, "%s: an earlier write failed%s%s", w->path,
+                 w->sink.write_errno ? ": " : "",
+                 w->sink.write_errno ? strerror(w->sink.write_errno) : "");
         return -1;
     }
-    int end = w->next_row + nrows;
     if (nrows <= 0 || nrows > w->height - w->next_row ||
-        (nrows % TF_EXR_CHUNK_ROWS != 0 && end != w->height)) {
+        (nrows % TF_EXR_CHUNK_ROWS != 0 && w->next_row + nrows != w->height)) {
         snprintf(err, errlen, "%s: cannot write %d rows at row %d of %d (whole chunks of %d only)",
                  w->path, nrows, w->next_row, w->height, TF_EXR_CHUNK_ROWS);
         return -1;
     }
+    int end = w->next_row + nrows; /* <= height: no overflow */
     const uint8_t *rows = px;
     size_t chunk_bytes = (size_t)w->width * w->pixel_bytes * TF_EXR_CHUNK_ROWS;
     for (int y = w->next_row; y < end; y += TF_EXR_CHUNK_ROWS, rows += chunk_bytes) {
-        if (write_chunk(w, y, rows, err, errlen) != 0)
+        if (write_chunk(w, y, rows, err, errlen) != 0) {
+            w->broken = 1; /* OpenEXRCore's chunk state is unknown now: write nothing more */
             return -1;
+        }
         w->next_row = y + TF_EXR_CHUNK_ROWS < end ? y + TF_EXR_CHUNK_ROWS : end;
     }
     return 0;
@@ -353,9 +357,10 @@ int tf_exr_write_rows(tf_exr_writer *w, int nrows, const tf_pixel *px, char *err
 
 int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen)
 {
-    if (w->sink.write_errno) {
-        snprintf(err, errlen, "%s: earlier write failed: %s", w->path,
-                 strerror(w->sink.write_errno));
+    if (w->broken || w->sink.write_errno) {
+        snprintf(err, errlen, "%s: an earlier write failed%s%s", w->path,
+                 w->sink.write_errno ? ": " : "",
+                 w->sink.write_errno ? strerror(w->sink.write_errno) : "");
         return -1;
     }
     if (fsync(w->sink.fd) != 0) {
@@ -367,7 +372,7 @@ int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen)
 
 int tf_exr_finish(tf_exr_writer *w, char *err, size_t errlen)
 {
-    if (w->next_row != w->height) {
+    if (w->broken || w->next_row != w->height) {
         snprintf(err, errlen, "%s: cannot finish: only %d of %d rows written", w->path,
                  w->next_row, w->height);
         writer_free(w, 1);

@@ -210,6 +210,27 @@ static void test_round_trip_is_bit_exact(void **state)
     free(px);
 }
 
+/* ZIP encoding is deterministic: the same pixels written twice (in different row batches)
+ * give the same file, byte for byte. */
+static void test_same_pixels_give_same_bytes(void **state)
+{
+    (void)state;
+    const char *a = path_in_dir("same_a.exr");
+    const char *b = path_in_dir("same_b.exr");
+    tf_exr_meta m = test_meta(W, H);
+    tf_pixel *px = random_image(W, H, 6);
+    write_file(a, &m, px, H, 1); /* one chunk per call */
+    char err[512] = "";
+    tf_exr_writer *w = tf_exr_create(b, &m, err, sizeof err);
+    assert_non_null(w);
+    assert_int_equal(tf_exr_write_rows(w, H, px, err, sizeof err), 0); /* all in one call */
+    assert_int_equal(tf_exr_finish(w, err, sizeof err), 0);
+    long sa, sb;
+    assert_true(file_checksum(a, &sa) == file_checksum(b, &sb));
+    assert_int_equal(sa, sb);
+    free(px);
+}
+
 static void test_attributes_read_back(void **state)
 {
     (void)state;
@@ -593,6 +614,10 @@ static void test_mid_render_write_error_is_reported(void **state)
     if (!strstr(err, path) || !strstr(err, strerror(EFBIG)))
         fail_msg("unclear error: %s", err);
     assert_int_equal(rc2, -1);
+    /* The limit is gone now, but the writer must not carry on past a lost chunk. */
+    assert_int_equal(tf_exr_write_rows(w, 16, px, err, sizeof err), -1);
+    assert_non_null(strstr(err, "earlier write failed"));
+    assert_int_equal(tf_exr_next_row(w), 0);
     tf_exr_abandon(w);
     free(px);
 }
@@ -639,6 +664,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_round_trip_is_bit_exact),
+        cmocka_unit_test(test_same_pixels_give_same_bytes),
         cmocka_unit_test(test_attributes_read_back),
         cmocka_unit_test(test_exrheader_parses_the_file),
         cmocka_unit_test(test_core_rebuilds_zero_offset_table),

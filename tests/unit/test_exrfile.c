@@ -101,6 +101,22 @@ static tf_pixel *smooth_image(int w, int h)
     return px;
 }
 
+static uint64_t file_checksum(const char *path, long *size)
+{
+    FILE *f = fopen(path, "rb");
+    assert_non_null(f);
+    uint64_t h = 1469598103934665603ULL;
+    long n = 0;
+    int ch;
+    while ((ch = fgetc(f)) != EOF) {
+        h = (h ^ (uint64_t)ch) * 1099511628211ULL;
+        n++;
+    }
+    fclose(f);
+    *size = n;
+    return h;
+}
+
 static void write_file(const char *path, const tf_exr_meta *m, const tf_pixel *px, int rows,
                        int finish)
 {
@@ -117,8 +133,13 @@ static void write_file(const char *path, const tf_exr_meta *m, const tf_pixel *p
     if (finish) {
         assert_int_equal(tf_exr_finish(w, err, sizeof err), 0);
     } else {
+        /* Abandon is a kill: not one more byte may reach the file. */
         assert_int_equal(tf_exr_sync(w, err, sizeof err), 0);
+        long before_size, after_size;
+        uint64_t before = file_checksum(path, &before_size);
         tf_exr_abandon(w);
+        assert_true(file_checksum(path, &after_size) == before);
+        assert_int_equal(after_size, before_size);
     }
 }
 
@@ -149,22 +170,6 @@ static int read_back(const char *path, tf_pixel *out, int w, int h, tf_exr_meta 
     assert_int_equal(c.out_of_order, 0);
     assert_int_equal(c.rows_seen, rows);
     return rows;
-}
-
-static uint64_t file_checksum(const char *path, long *size)
-{
-    FILE *f = fopen(path, "rb");
-    assert_non_null(f);
-    uint64_t h = 1469598103934665603ULL;
-    long n = 0;
-    int ch;
-    while ((ch = fgetc(f)) != EOF) {
-        h = (h ^ (uint64_t)ch) * 1099511628211ULL;
-        n++;
-    }
-    fclose(f);
-    *size = n;
-    return h;
 }
 
 static long file_size(const char *path)

@@ -45,11 +45,22 @@ static const double tf_grad2[16][2] = {
 static inline double tf_fade(double t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }
 
 /* floor() for |x| < TF_NOISE_COORD_LIMIT without the libm call: truncate, then step down for
- * negative non-integers. */
-static inline int64_t tf_floor_i64(double x)
+ * negative non-integers.  *fraction = x - floor(x).  One int->double conversion only (the
+ * conversions were the hottest instructions of the row loop), and the step down is done on
+ * the double too, which is exact below 2^53, so the bits equal x - (double)floor(x). */
+static inline int64_t tf_floor_split(double x, double *fraction)
 {
     int64_t i = (int64_t)x;
-    return i - (x < (double)i);
+    double d = (double)i;
+    int below = x < d;
+    *fraction = x - (d - (below ? 1.0 : 0.0));
+    return i - below;
+}
+
+static inline int64_t tf_floor_i64(double x)
+{
+    double fraction;
+    return tf_floor_split(x, &fraction);
 }
 
 /* The y half of a 2D noise evaluation.  ok == 0 marks an out-of-range y (noise is then 0). */
@@ -70,10 +81,35 @@ static inline void tf_noise_axis_set(tf_noise_axis *a, double y)
     a->fade = tf_fade(a->f0);
 }
 
-static inline double tf_grad2_dot(unsigned h, double dx, double dy)
+/* The noise along one lattice column: with the y half fixed, the two corners (X, Y) and
+ * (X, Y + 1) of column X blend (by the y fade) into a linear function of the x offset from X,
+ * slope * (x - X) + intercept.  Both the point kernel and the row evaluator build the noise
+ * from these column lines, so they perform the same operations and agree to the bit. */
+typedef struct tf_noise_column {
+    double slope, intercept;
+} tf_noise_column;
+
+static inline tf_noise_column tf_noise_column_at(const tf_noise *nz, int64_t xi,
+                                                 const tf_noise_axis *ay)
 {
-    const double *g = tf_grad2[h & 15];
-    return g[0] * dx + g[1] * dy;
+    const uint16_t *p = nz->perm;
+    /* perm holds 0..255 twice, so perm[X] + Y + 1 <= 511 stays in bounds. */
+    int a = p[xi & 255] + ay->lattice;
+    const double *g0 = tf_grad2[p[a] & 15], *g1 = tf_grad2[p[a + 1] & 15];
+    double e0 = g0[1] * ay->f0, e1 = g1[1] * ay->f1;
+    tf_noise_column c;
+    c.slope = g0[0] + ay->fade * (g1[0] - g0[0]);
+    c.intercept = e0 + ay->fade * (e1 - e0);
+    return c;
+}
+
+/* Noise at x offset fx from the column `left`, with `right` the next column. */
+static inline double tf_noise_blend(double fx, tf_noise_column left, tf_noise_column right)
+{
+    double u = tf_fade(fx);
+    double l = left.slope * fx + left.intercept;
+    double r = right.slope * (fx - 1.0) + right.intercept;
+    return (l + u * (r - l)) * TF_NOISE2_SCALE;
 }
 
 /* 2D noise at (x, y) where `ay` was set from y. */
@@ -81,20 +117,10 @@ static inline double tf_noise2_axis(const tf_noise *nz, double x, const tf_noise
 {
     if (!(fabs(x) < TF_NOISE_COORD_LIMIT) || !ay->ok)
         return 0.0;
-    int64_t xi = tf_floor_i64(x);
-    int X = (int)(xi & 255);
-    double fx0 = x - (double)xi, fx1 = fx0 - 1.0;
-    double u = tf_fade(fx0);
-    const uint16_t *p = nz->perm;
-    /* perm holds 0..255 twice, so X + 1 <= 256 and perm[X] + Y + 1 <= 511 stay in bounds. */
-    int a = p[X] + ay->lattice, b = p[X + 1] + ay->lattice;
-    double d00 = tf_grad2_dot(p[a], fx0, ay->f0);
-    double d10 = tf_grad2_dot(p[b], fx1, ay->f0);
-    double d01 = tf_grad2_dot(p[a + 1], fx0, ay->f1);
-    double d11 = tf_grad2_dot(p[b + 1], fx1, ay->f1);
-    double n0 = d00 + u * (d10 - d00);
-    double n1 = d01 + u * (d11 - d01);
-    return (n0 + ay->fade * (n1 - n0)) * TF_NOISE2_SCALE;
+    double fx;
+    int64_t xi = tf_floor_split(x, &fx);
+    return tf_noise_blend(fx, tf_noise_column_at(nz, xi, ay),
+                          tf_noise_column_at(nz, xi + 1, ay));
 }
 
 /* Octave plan shared by every spectral sum: amp[i] is the weight lacunarity^(-H i) of octave i
@@ -132,10 +158,12 @@ static inline void tf_octaves_plan(tf_octaves *o, double H, double lacunarity, d
 /* Fill axes[0 .. o->count-1] with the y halves of every octave of noise-space y. */
 static inline void tf_octave_axes(const tf_octaves *o, double y, tf_noise_axis *axes)
 {
-    for (int i = 0; i < o->count; i++) {
+    /* count >= 1 always (tf_octaves_plan); the do-while says so to the compiler too. */
+    int i = 0;
+    do {
         tf_noise_axis_set(&axes[i], y);
         y *= o->lacunarity;
-    }
+    } while (++i < o->count);
 }
 
 /* fBm (Musgrave 2.3.2.1): sum of amp[i] * N(p * lacunarity^i). */

@@ -1,0 +1,225 @@
+/* bench_terrain.c: terrain synthesis speed against DESIGN.md section 6's target of <= 5 ns per
+ * octave per sample per core for fBm-type terrain.
+ *
+ * For each of the seven generators it builds the heights (tf_terrain_heights) once on one
+ * thread and once on all online CPUs, and prints ns per sample per octave (point generators)
+ * or ns per sample (grid generators), per core, with the ratio to the 5 ns target measured in
+ * the same run.  Per-core figures use the process's CPU time (CLOCK_PROCESS_CPUTIME_ID), so
+ * other load on a shared machine inflates them less than wall time would; the speedup column
+ * is wall time.  A plain reference Perlin noise (libm floor, corner loop) is timed alongside
+ * as a peer baseline.  Each generator runs in a forked child so one that fails (or is not yet
+ * written) is reported and the others still run.
+ *
+ * usage: build/bench/bench_terrain [SIZE_EXP] [OCTAVES]     (defaults 10 and 8) */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "noise.h"
+#include "scene.h"
+#include "terrain_build.h"
+
+#define TARGET_NS 5.0
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static double cpu_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+typedef struct timing {
+    double wall, cpu; /* seconds, best of the repetitions (by wall time) */
+} timing;
+
+static tf_terrain bench_terrain(enum tf_generator g, int size_exp, double octaves)
+{
+    tf_terrain t;
+    memset(&t, 0, sizeof t);
+    t.generator = g;
+    t.seed = 12345;
+    t.size_exp = size_exp;
+    t.extent = 10000.0;
+    t.height_scale = 1000.0;
+    t.feature_size = 5000.0;
+    t.octaves = octaves;
+    t.H = 0.8;
+    t.lacunarity = 2.0;
+    t.offset = g == TF_GEN_RIDGED ? 1.0 : 0.8;
+    t.gain = 2.0;
+    t.roughness = 0.8;
+    t.envelope_n = 0;
+    t.envelope_tolerance = 1.0;
+    t.faults = 200;
+    t.fault_step = 0.05;
+    t.wind_passes = 1;
+    t.rain_passes = 1;
+    t.erosion_k = 0.5;
+    t.sub_M = 1.0;
+    t.sub_E = 2.0;
+    t.sub_W = 0.3;
+    return t;
+}
+
+/* Best of `reps` builds (by wall time); wall < 0 on failure (message printed). */
+static timing time_build(const tf_terrain *t, int threads, int reps)
+{
+    timing best = {-1.0, -1.0};
+    for (int r = 0; r < reps; r++) {
+        char err[256];
+        double w0 = now_s(), c0 = cpu_s();
+        float *h = tf_terrain_heights(t, threads, err, sizeof err);
+        timing now = {now_s() - w0, cpu_s() - c0};
+        if (!h) {
+            fprintf(stderr, "  %s\n", err);
+            return (timing){-1.0, -1.0};
+        }
+        free(h);
+        if (best.wall < 0 || now.wall < best.wall)
+            best = now;
+    }
+    return best;
+}
+
+/* Child process: time generator g, write the four figures to fd. */
+static void measure_child(enum tf_generator g, int size_exp, double octaves, int cpus, int fd)
+{
+    tf_terrain t = bench_terrain(g, size_exp, octaves);
+    timing one = time_build(&t, 1, 3);
+    timing all = one.wall < 0 ? one : time_build(&t, cpus, 3);
+    char line[128];
+    int len = snprintf(line, sizeof line, "%.9f %.9f %.9f %.9f\n", one.wall, one.cpu, all.wall,
+                       all.cpu);
+    if (write(fd, line, (size_t)len) != len)
+        _exit(3);
+    _exit(one.wall < 0 || all.wall < 0 ? 1 : 0);
+}
+
+static int measure(enum tf_generator g, int size_exp, double octaves, int cpus, timing *one,
+                   timing *all)
+{
+    int fds[2];
+    if (pipe(fds) != 0)
+        return -1;
+    fflush(stdout);
+    pid_t pid = fork();
+    if (pid < 0)
+        return -1;
+    if (pid == 0) {
+        close(fds[0]);
+        measure_child(g, size_exp, octaves, cpus, fds[1]);
+    }
+    close(fds[1]);
+    char buf[128] = {0};
+    ssize_t got = read(fds[0], buf, sizeof buf - 1);
+    close(fds[0]);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    if (got <= 0 || sscanf(buf, "%lf %lf %lf %lf", &one->wall, &one->cpu, &all->wall,
+                           &all->cpu) != 4 || one->wall < 0 || all->wall < 0)
+        return -1;
+    return 0;
+}
+
+/* Peer baseline: textbook Perlin noise with libm floor and a loop over corners. */
+static double plain_noise2(const tf_noise *nz, double x, double y)
+{
+    static const double g[8][2] = {{1, 0}, {0.7071, 0.7071}, {0, 1}, {-0.7071, 0.7071},
+                                   {-1, 0}, {-0.7071, -0.7071}, {0, -1}, {0.7071, -0.7071}};
+    double x0 = floor(x), y0 = floor(y), fx = x - x0, fy = y - y0;
+    double wx = fx * fx * fx * (fx * (fx * 6 - 15) + 10);
+    double wy = fy * fy * fy * (fy * (fy * 6 - 15) + 10);
+    double sum = 0.0;
+    for (int c = 0; c < 4; c++) {
+        int cx = c & 1, cy = c >> 1;
+        int h = nz->perm[nz->perm[((int)x0 + cx) & 255] + (((int)y0 + cy) & 255)] & 7;
+        sum += (cx ? wx : 1 - wx) * (cy ? wy : 1 - wy) *
+               (g[h][0] * (fx - cx) + g[h][1] * (fy - cy));
+    }
+    return sum;
+}
+
+static double time_noise(int plain, int count)
+{
+    tf_noise nz;
+    tf_noise_init(&nz, 7);
+    volatile double sink = 0.0;
+    double best = 1e9;
+    for (int r = 0; r < 3; r++) {
+        double acc = 0.0, t0 = now_s();
+        for (int i = 0; i < count; i++) {
+            double x = 0.37 + i * 0.013, y = 5.1 + (i & 1023) * 0.021;
+            acc += plain ? plain_noise2(&nz, x, y) : tf_noise2(&nz, x, y);
+        }
+        double dt = now_s() - t0;
+        sink += acc;
+        if (dt < best)
+            best = dt;
+    }
+    (void)sink;
+    return best * 1e9 / count;
+}
+
+int main(int argc, char **argv)
+{
+    int size_exp = argc > 1 ? atoi(argv[1]) : 10;
+    double octaves = argc > 2 ? atof(argv[2]) : 8.0;
+    if (size_exp < 1 || size_exp > TF_TERRAIN_MAX_SIZE_EXP || !(octaves >= 1 && octaves <= 32)) {
+        fprintf(stderr, "usage: bench_terrain [SIZE_EXP 1..13] [OCTAVES 1..32]\n");
+        return 2;
+    }
+    int cpus = (int)sysconf(_SC_NPROCESSORS_ONLN);
+    if (cpus < 1)
+        cpus = 1;
+    long n = (1L << size_exp) + 1;
+    double samples = (double)n * (double)n;
+
+    printf("terrain synthesis: %ldx%ld samples, %.1f octaves, %d CPUs; target %.1f ns per "
+           "octave per sample per core\n", n, n, octaves, cpus, TARGET_NS);
+    double tf_ns = time_noise(0, 4000000), plain_ns = time_noise(1, 4000000);
+    printf("single 2D noise call: terrafarm %.2f ns, plain Perlin %.2f ns (%.2fx faster)\n\n",
+           tf_ns, plain_ns, plain_ns / tf_ns);
+    printf("%-10s %12s %8s %14s %8s %9s\n", "generator", "1 core", "ratio", "all cores/core",
+           "ratio", "speedup");
+
+    static const enum tf_generator gens[] = {TF_GEN_FBM, TF_GEN_HETERO, TF_GEN_HYBRID,
+                                             TF_GEN_RIDGED, TF_GEN_MIDPOINT, TF_GEN_FAULT,
+                                             TF_GEN_SUBDIVIDE};
+    static const char *names[] = {"fbm", "hetero", "hybrid", "ridged", "midpoint", "fault",
+                                  "subdivide"};
+    int failures = 0;
+    for (size_t i = 0; i < sizeof gens / sizeof gens[0]; i++) {
+        timing one, all;
+        int point = gens[i] <= TF_GEN_RIDGED;
+        if (measure(gens[i], size_exp, octaves, cpus, &one, &all) != 0) {
+            printf("%-10s %s\n", names[i], "failed (see above)");
+            failures++;
+            continue;
+        }
+        /* CPU ns per sample (per octave for point generators); ratio to the target. */
+        double per = samples * (point ? ceil(octaves) : 1.0) * 1e-9;
+        double ns1 = one.cpu / per, nsn = all.cpu / per;
+        printf("%-10s %9.2f ns %7.2fx %11.2f ns %7.2fx %8.2fx%s\n", names[i], ns1,
+               ns1 / TARGET_NS, nsn, nsn / TARGET_NS, one.wall / all.wall,
+               point ? "" : "   per sample, not per octave");
+    }
+    double load[3] = {0};
+    if (getloadavg(load, 3) < 1)
+        load[0] = -1;
+    printf("\nns = CPU ns per sample per octave per core; ratio = ns / %.1f ns target (<= 1.00 "
+           "meets it);\nspeedup = wall time on 1 core / wall time on %d cores.  Load average "
+           "during the run: %.2f\n", TARGET_NS, cpus, load[0]);
+    return failures ? 1 : 0;
+}

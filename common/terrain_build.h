@@ -1,0 +1,22 @@
+/* terrain_build.h: the height samples of a scene's terrain, before the max/min grids are built
+ * around them.  tf_heightfield_build (heightfield.h) is tf_terrain_heights followed by
+ * tf_heightfield_wrap; tools that only need the heights (terrafarm heightfield) call this
+ * directly and skip the grids' memory. */
+#ifndef TF_TERRAIN_BUILD_H
+#define TF_TERRAIN_BUILD_H
+
+#include <stddef.h>
+#include "scene.h"
+
+/* Largest size_exp accepted: 8193^2 floats = 268 MB of heights. */
+#define TF_TERRAIN_MAX_SIZE_EXP 13
+
+/* World heights of the terrain t: a malloc'd array of n * n floats, n = 2^size_exp + 1,
+ * row-major h[j * n + i] for the sample at world (i * cell, j * cell), cell = extent / (n - 1).
+ * Point generators are evaluated with `threads` threads (<= 0: all online CPUs), each taking
+ * every threads-th row, so the bits never depend on the thread count.  Grid generators fill
+ * the grid, then heights are scaled by height_scale, then thermal weathering runs if asked.
+ * Returns NULL with one line in err on failure (bad size, out of memory, non-finite output). */
+float *tf_terrain_heights(const tf_terrain *t, int threads, char *err, size_t errlen);
+
+#endif

@@ -1,0 +1,274 @@
+/* test_render.c: tf_render_rect (common/render.c) on a small synthetic terrain built by hand.
+ * The decomposition invariant: the whole image, single rows, single columns, odd stamps (7x5,
+ * 13x11) and two threads give memcmp-identical pixels.  Adaptive antialiasing: uniform sky is
+ * not subdivided (spp 4), a silhouette is; ray counts add up; max_depth 0 never subdivides; Z
+ * and alpha; bad settings are refused. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "render.h"
+#include "render_internal.h"
+
+#define W 61
+#define H 37
+#define K 5
+#define SIDE ((1 << K) + 1)
+
+typedef struct fixture {
+    tf_scene scene;
+    tf_heightfield *hf;
+    tf_renderer *r;
+    tf_pixel whole[W * H];
+    tf_render_counts whole_counts;
+} fixture;
+
+static void fill_scene(tf_scene *s)
+{
+    memset(s, 0, sizeof *s);
+    s->width = W;
+    s->height = H;
+    s->camera.kind = TF_CAMERA_PINHOLE;
+    s->camera.position = v3(500, -250, 420);
+    s->camera.look_at = v3(500, 600, 300);
+    s->camera.up = v3(0, 0, 1);
+    s->camera.fov_deg = 55;
+    s->sun.azimuth_deg = 150; /* behind-left of the camera's view north: no glow in view */
+    s->sun.elevation_deg = 30;
+    s->sun.color = v3(1, 0.95, 0.85);
+    s->sun.intensity = 3;
+    s->sky.zenith = v3(0.15, 0.3, 0.7);
+    s->sky.horizon = v3(0.55, 0.65, 0.8);
+    s->sky.intensity = 0.8;
+    s->terrain.seed = 1234;
+    s->materials.sea_level = 60;
+    s->materials.tree_line = 200;
+    s->materials.snow_line = 330;
+    s->materials.snow_jitter = 20;
+    s->materials.rock_slope_deg = 35;
+    s->materials.bump = 0.4;
+    s->mist.enabled = 1;
+    s->mist.density = 0.0008;
+    s->mist.falloff = 150;
+    s->mist.color = v3(0.6, 0.7, 0.85);
+    s->mist.extinction = v3(1, 1.6, 3);
+    s->antialias.threshold = 0.05;
+    s->antialias.max_depth = 2;
+}
+
+/* Hills and a ridge over [0, 1000]^2, dropping under the sea in one corner. */
+static void fill_heights(float *h)
+{
+    for (int j = 0; j < SIDE; j++)
+        for (int i = 0; i < SIDE; i++) {
+            double x = i * 1000.0 / (SIDE - 1), y = j * 1000.0 / (SIDE - 1);
+            double z = 160 + 110 * sin(x * 0.011) * cos(y * 0.008) + 0.25 * y -
+                       90 * exp(-((x - 200) * (x - 200) + (y - 150) * (y - 150)) / 40000.0);
+            h[j * SIDE + i] = (float)z;
+        }
+}
+
+static int setup(void **state)
+{
+    fixture *f = calloc(1, sizeof *f);
+    fill_scene(&f->scene);
+    float h[SIDE * SIDE];
+    fill_heights(h);
+    f->hf = tf_heightfield_from_heights(h, K, 1000.0, 1);
+    char err[256];
+    f->r = tf_renderer_new(&f->scene, f->hf, err, sizeof err);
+    if (!f->r)
+        return -1;
+    tf_render_rect(f->r, (tf_rect){0, 0, W, H}, f->whole, &f->whole_counts);
+    *state = f;
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    fixture *f = *state;
+    tf_renderer_free(f->r);
+    tf_heightfield_free(f->hf);
+    free(f);
+    return 0;
+}
+
+/* Render the image as tiles of tw x th (clipped at the edges) into out; sums counts. */
+static void render_tiled(const tf_renderer *r, int tw, int th, tf_pixel *out,
+                         tf_render_counts *counts)
+{
+    tf_pixel *tile = malloc(sizeof *tile * (size_t)tw * (size_t)th);
+    for (int y = 0; y < H; y += th)
+        for (int x = 0; x < W; x += tw) {
+            tf_rect rc = {x, y, x + tw <= W ? tw : W - x, y + th <= H ? th : H - y};
+            tf_render_rect(r, rc, tile, counts);
+            for (int j = 0; j < rc.h; j++)
+                memcpy(&out[(y + j) * W + x], &tile[j * rc.w], sizeof *tile * (size_t)rc.w);
+        }
+    free(tile);
+}
+
+static void assert_decomposition_identical(fixture *f, int tw, int th)
+{
+    tf_pixel *img = calloc(W * H, sizeof *img);
+    tf_render_counts c = {0};
+    render_tiled(f->r, tw, th, img, &c);
+    assert_memory_equal(img, f->whole, sizeof f->whole);
+    free(img);
+}
+
+static void test_rows_identical_to_whole(void **state) { assert_decomposition_identical(*state, W, 1); }
+static void test_columns_identical_to_whole(void **state) { assert_decomposition_identical(*state, 1, H); }
+static void test_stamps_7x5_identical_to_whole(void **state) { assert_decomposition_identical(*state, 7, 5); }
+static void test_stamps_13x11_identical_to_whole(void **state) { assert_decomposition_identical(*state, 13, 11); }
+
+typedef struct thread_job { const tf_renderer *r; tf_pixel *img; int first_row; } thread_job;
+
+static void *render_alternate_rows(void *arg)
+{
+    thread_job *job = arg;
+    for (int y = job->first_row; y < H; y += 2)
+        tf_render_rect(job->r, (tf_rect){0, y, W, 1}, &job->img[y * W], NULL);
+    return NULL;
+}
+
+static void test_two_threads_identical_to_whole(void **state)
+{
+    fixture *f = *state;
+    tf_pixel *img = calloc(W * H, sizeof *img);
+    thread_job jobs[2] = {{f->r, img, 0}, {f->r, img, 1}};
+    pthread_t t[2];
+    for (int i = 0; i < 2; i++)
+        assert_int_equal(pthread_create(&t[i], NULL, render_alternate_rows, &jobs[i]), 0);
+    for (int i = 0; i < 2; i++)
+        pthread_join(t[i], NULL);
+    assert_memory_equal(img, f->whole, sizeof f->whole);
+    free(img);
+}
+
+static void test_sky_not_subdivided_edges_are(void **state)
+{
+    fixture *f = *state;
+    const tf_pixel *sky = &f->whole[W / 2]; /* top row, centre: open sky */
+    assert_true(sky->a == 0.0f);
+    assert_true(sky->spp == 4.0f);
+    assert_true(sky->z == 1e30f);
+    int silhouettes = 0, refined_silhouettes = 0;
+    float max_spp = 0;
+    for (int i = 0; i < W * H; i++) {
+        const tf_pixel *p = &f->whole[i];
+        if (p->spp > max_spp)
+            max_spp = p->spp;
+        if (p->a > 0 && p->a < 1) {
+            silhouettes++;
+            refined_silhouettes += p->spp > 4;
+        }
+    }
+    assert_true(silhouettes > 10);
+    /* near ridges stand out against the sky and get refined; only far ridges, hazed to nearly
+     * the sky's colour by the mist, may stay below the contrast threshold */
+    assert_true(refined_silhouettes * 4 >= silhouettes * 3);
+    assert_true(max_spp > 4 && max_spp <= 25);          /* depth 2: at most 5x5 samples */
+    const tf_pixel *ground = &f->whole[(H - 1) * W + W / 2];
+    assert_true(ground->a == 1.0f && ground->z > 0 && ground->z < 5000);
+}
+
+/* primary = corner samples of each rectangle + refinement samples of each pixel. */
+static void assert_counts_add_up(const tf_pixel *img, const tf_render_counts *c,
+                                 uint64_t corners, uint64_t external, uint64_t pixels)
+{
+    uint64_t refinement = 0;
+    for (int i = 0; i < W * H; i++)
+        refinement += (uint64_t)img[i].spp - 4;
+    assert_int_equal(c->pixels, pixels);
+    assert_int_equal(c->external_rays, external);
+    assert_int_equal(c->primary_rays, corners + refinement);
+    assert_true(c->shadow_rays > 0 && c->shadow_rays <= c->primary_rays);
+}
+
+static void test_counts_add_up(void **state)
+{
+    fixture *f = *state;
+    assert_counts_add_up(f->whole, &f->whole_counts, (W + 1) * (H + 1), W + H + 1, W * H);
+    /* 13x11 stamps: 5 x 4 stamps, clipped to 9 wide and 4 high at the far edges */
+    tf_pixel *img = calloc(W * H, sizeof *img);
+    tf_render_counts c = {0};
+    render_tiled(f->r, 13, 11, img, &c);
+    uint64_t corners = 0, external = 0;
+    for (int y = 0; y < H; y += 11)
+        for (int x = 0; x < W; x += 13) {
+            uint64_t w = x + 13 <= W ? 13 : W - x, h = y + 11 <= H ? 11 : H - y;
+            corners += (w + 1) * (h + 1);
+            external += w + h + 1;
+        }
+    assert_counts_add_up(img, &c, corners, external, W * H);
+    free(img);
+}
+
+static void test_depth_zero_never_subdivides(void **state)
+{
+    fixture *f = *state;
+    tf_scene s = f->scene;
+    s.antialias.max_depth = 0;
+    char err[256];
+    tf_renderer *r = tf_renderer_new(&s, f->hf, err, sizeof err);
+    assert_non_null(r);
+    tf_pixel *img = calloc(W * H, sizeof *img);
+    tf_render_counts c = {0};
+    tf_render_rect(r, (tf_rect){0, 0, W, H}, img, &c);
+    for (int i = 0; i < W * H; i++)
+        assert_true(img[i].spp == 4.0f);
+    assert_int_equal(c.primary_rays, (W + 1) * (H + 1));
+    /* rows again, for the invariant at depth 0 */
+    tf_pixel *rows = calloc(W * H, sizeof *rows);
+    render_tiled(r, W, 1, rows, NULL);
+    assert_memory_equal(rows, img, sizeof(tf_pixel) * W * H);
+    free(rows);
+    free(img);
+    tf_renderer_free(r);
+}
+
+static void test_bad_settings_refused(void **state)
+{
+    fixture *f = *state;
+    tf_scene s = f->scene;
+    char err[256] = "";
+    s.antialias.max_depth = TF_AA_MAX_DEPTH + 1;
+    assert_null(tf_renderer_new(&s, f->hf, err, sizeof err));
+    assert_non_null(strstr(err, "max_depth"));
+    s = f->scene;
+    s.camera.fov_deg = 0;
+    assert_null(tf_renderer_new(&s, f->hf, err, sizeof err));
+    assert_non_null(strstr(err, "fov"));
+}
+
+static void test_contrast_is_relative(void **state)
+{
+    (void)state;
+    assert_true(tf_contrast4(0.5, 0.5, 0.5, 0.5) == 0);
+    /* the same absolute step is more visible in the dark */
+    assert_true(tf_contrast4(0.02, 0.04, 0.02, 0.02) > tf_contrast4(0.8, 0.82, 0.8, 0.8));
+    assert_true(fabs(tf_contrast4(1, 0, 0, 0) - 1 / (1 + TF_CONTRAST_FLOOR)) < 1e-15);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_contrast_is_relative),
+        cmocka_unit_test(test_rows_identical_to_whole),
+        cmocka_unit_test(test_columns_identical_to_whole),
+        cmocka_unit_test(test_stamps_7x5_identical_to_whole),
+        cmocka_unit_test(test_stamps_13x11_identical_to_whole),
+        cmocka_unit_test(test_two_threads_identical_to_whole),
+        cmocka_unit_test(test_sky_not_subdivided_edges_are),
+        cmocka_unit_test(test_counts_add_up),
+        cmocka_unit_test(test_depth_zero_never_subdivides),
+        cmocka_unit_test(test_bad_settings_refused),
+    };
+    return cmocka_run_group_tests(tests, setup, teardown);
+}

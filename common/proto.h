@@ -32,7 +32,7 @@
  *                       server knows the key too (mutual authentication)
  *   ERROR   14    s->c  UTF-8 message, at most 256 bytes; the server closes after sending it
  *
- * When the HELLO says authentication is required, any frame but AUTH (and PING) before a
+ * When the HELLO says authentication is required, any frame but AUTH (even a PING) before a
  * successful AUTH closes the connection.  A wrong MAC gets an ERROR and a close, and the server
  * logs "authentication failed from PEER".  The key is never sent (see auth.h).
  * An unknown op, a wrong version, a length out of bounds, a body that does not decode, or a

@@ -303,7 +303,7 @@ static int take_double(struct parser *p, const char *key, const char **sp, doubl
     int is_integer;
     size_t n = scan_decimal(s, &is_integer);
     if (n == 0) {
-        size_t m = strcspn(s, " \t,");
+        size_t m = strcspn(s, " \t");
         quote(q, sizeof q, s, m);
         if (looks_like_nan_or_inf(s))
             fail_at(p, p->line, "%s: NaN and infinity are not allowed (got \"%s\")", key, q);
@@ -343,6 +343,8 @@ static int expect_end(struct parser *p, const char *key, const char *s)
 {
     if (is_blank(s))
         return 0;
+    while (isspace((unsigned char)*s))
+        s++;
     char q[64];
     quote(q, sizeof q, s, strlen(s));
     fail_at(p, p->line, "%s: trailing junk \"%s\" after the number", key, q);
@@ -716,8 +718,11 @@ static int on_key(void *user, const char *section, const char *name, const char 
         /* inih passes an indented line as a continuation of the previous key's value */
         if (p->last_key >= 0 && KEYS[p->last_key].type == KT_ENVELOPE)
             return continue_envelope(p, value);
-        fail_at(p, p->line, "%s: indented line (only the envelope list may continue on "
-                "indented lines)", p->last_key >= 0 ? KEYS[p->last_key].name : "syntax");
+        if (p->last_key >= 0)
+            fail_at(p, p->line, "%s: indented line would continue its value (only envelope may "
+                    "span lines; remove the indentation)", KEYS[p->last_key].name);
+        else
+            fail_at(p, p->line, "syntax: indented line (remove the indentation)");
         return 0;
     }
     if (*name == '\0') {

@@ -339,7 +339,7 @@ static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type, t
     size_t rest = len - *pos;
     if (type == TF_FIELD_INT || type == TF_FIELD_DOUBLE) {
         if (rest < 8) {
-            snprintf(err, errlen, "tuple truncated in a %s field",
+            snprintf(err, errlen, "tuple truncated in a field of type %s",
                      type == TF_FIELD_INT ? "int" : "double");
             return -1;
         }

@@ -1,0 +1,371 @@
+/* test_tsserver.c: the tuple-space server and client end to end (coordinator/tsserver.c,
+ * common/tsclient.c): over a socketpair and loopback TCP; a blocked in woken by another
+ * client's out; hooks (on_take, on_out, on_disconnect); garbage, oversized, unknown-op and
+ * half frames each dropping only their own connection; authentication with the right and the
+ * wrong secret and an op before the handshake.  The server loop runs in a background thread;
+ * the hooks record what they saw under a mutex. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <cmocka.h>
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "coordinator/tsserver.h"
+#include "proto.h"
+#include "tsclient.h"
+
+typedef struct fixture {
+    ts_space *space;
+    ts_server *srv;
+    pthread_t thread;
+    volatile int stop;
+    pthread_mutex_t lock;
+    int takes, outs, disconnects;
+    char addr[64];
+} fixture;
+
+static void on_take(void *ctx, uint64_t id, const tf_tuple *t)
+{
+    (void)id;
+    (void)t;
+    fixture *fx = ctx;
+    pthread_mutex_lock(&fx->lock);
+    fx->takes++;
+    pthread_mutex_unlock(&fx->lock);
+}
+
+static void on_out(void *ctx, uint64_t id, const tf_tuple *t)
+{
+    (void)id;
+    (void)t;
+    fixture *fx = ctx;
+    pthread_mutex_lock(&fx->lock);
+    fx->outs++;
+    pthread_mutex_unlock(&fx->lock);
+}
+
+static void on_disconnect(void *ctx, uint64_t id, const char *peer)
+{
+    (void)id;
+    (void)peer;
+    fixture *fx = ctx;
+    pthread_mutex_lock(&fx->lock);
+    fx->disconnects++;
+    pthread_mutex_unlock(&fx->lock);
+}
+
+static int counter(fixture *fx, int *which)
+{
+    pthread_mutex_lock(&fx->lock);
+    int v = *which;
+    pthread_mutex_unlock(&fx->lock);
+    return v;
+}
+
+/* Wait up to 2 s for *which to reach want. */
+static int wait_counter(fixture *fx, int *which, int want)
+{
+    for (int i = 0; i < 200; i++) {
+        if (counter(fx, which) >= want)
+            return 1;
+        usleep(10000);
+    }
+    return 0;
+}
+
+static void *server_main(void *arg)
+{
+    fixture *fx = arg;
+    while (!fx->stop)
+        ts_server_run_once(fx->srv, 10);
+    return NULL;
+}
+
+static fixture *start(const uint8_t *key, int extra_fd)
+{
+    fixture *fx = calloc(1, sizeof *fx);
+    pthread_mutex_init(&fx->lock, NULL);
+    fx->space = ts_space_new();
+    ts_server_config cfg = {.listen = "127.0.0.1:0", .key = key, .silence_timeout_ms = 5000};
+    ts_server_hooks hooks = {fx, on_take, on_out, on_disconnect};
+    char err[256];
+    fx->srv = ts_server_new(fx->space, &cfg, &hooks, err, sizeof err);
+    assert_non_null(fx->srv);
+    assert_true(ts_server_port(fx->srv) > 0);
+    snprintf(fx->addr, sizeof fx->addr, "127.0.0.1:%d", ts_server_port(fx->srv));
+    if (extra_fd >= 0)
+        assert_true(ts_server_add_fd(fx->srv, extra_fd, "worker 1") > 0);
+    pthread_create(&fx->thread, NULL, server_main, fx);
+    return fx;
+}
+
+static void stop(fixture *fx)
+{
+    fx->stop = 1;
+    pthread_join(fx->thread, NULL);
+    ts_server_free(fx->srv);
+    ts_space_free(fx->space);
+    free(fx);
+}
+
+static void tup(tf_tuple *t, const char *fmt, const char *name, int64_t v)
+{
+    tf_tuple_init(t);
+    assert_int_equal(tf_tuple_pack(t, fmt, name, v), 0);
+}
+
+/* out, rdp, inp, rd, in and the empty answers over one client. */
+static void exercise(ts_client *c)
+{
+    tf_tuple t, m, got;
+    tup(&t, "si", "task", 5);
+    assert_int_equal(ts_out(c, &t), 0);
+    tf_tuple_clear(&t);
+    tup(&m, "sI", "task", 0);
+    assert_int_equal(ts_rdp(c, &m, &got), 1);
+    tf_tuple_clear(&got);
+    assert_int_equal(ts_rd(c, &m, &got), 0);
+    tf_tuple_clear(&got);
+    assert_int_equal(ts_in(c, &m, &got), 0);
+    int64_t v;
+    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
+    assert_int_equal(v, 5);
+    tf_tuple_clear(&got);
+    assert_int_equal(ts_inp(c, &m, &got), 0);
+    assert_int_equal(ts_rdp(c, &m, &got), 0);
+    tf_tuple_clear(&m);
+    assert_int_equal(ts_ping(c), 0);
+}
+
+static void test_socketpair_client(void **state)
+{
+    (void)state;
+    int sv[2];
+    assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+    fixture *fx = start(NULL, sv[0]);
+    ts_client *c = ts_client_from_fd(sv[1]);
+    exercise(c);
+    assert_int_equal(counter(fx, &fx->takes), 1);
+    assert_int_equal(counter(fx, &fx->outs), 1);
+    ts_client_close(c);
+    assert_true(wait_counter(fx, &fx->disconnects, 1));
+    stop(fx);
+}
+
+typedef struct blocked {
+    const char *addr;
+    int rc;
+    int64_t value;
+} blocked;
+
+static void *blocked_in(void *arg)
+{
+    blocked *b = arg;
+    char err[256];
+    ts_client *c = ts_client_connect(b->addr, NULL, 2000, err, sizeof err);
+    if (!c)
+        return NULL;
+    tf_tuple m, got;
+    tf_tuple_init(&m);
+    tf_tuple_pack(&m, "sI", "wake");
+    b->rc = ts_in(c, &m, &got);
+    tf_tuple_get_int(&got, 1, &b->value);
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&m);
+    ts_client_close(c);
+    return NULL;
+}
+
+static void test_tcp_blocked_in_woken_by_other_client(void **state)
+{
+    (void)state;
+    fixture *fx = start(NULL, -1);
+    char err[256];
+    ts_client *c = ts_client_connect(fx->addr, NULL, 2000, err, sizeof err);
+    assert_non_null(c);
+    exercise(c);
+
+    blocked b = {fx->addr, -1, 0};
+    pthread_t th;
+    pthread_create(&th, NULL, blocked_in, &b);
+    usleep(100000); /* let the in block */
+    int takes = counter(fx, &fx->takes);
+    tf_tuple t;
+    tup(&t, "si", "wake", 42);
+    assert_int_equal(ts_out(c, &t), 0);
+    tf_tuple_clear(&t);
+    pthread_join(th, NULL);
+    assert_int_equal(b.rc, 0);
+    assert_int_equal(b.value, 42);
+    assert_int_equal(counter(fx, &fx->takes), takes + 1);
+    assert_true(wait_counter(fx, &fx->disconnects, 1)); /* the thread's client closed */
+    ts_client_close(c);
+    assert_true(wait_counter(fx, &fx->disconnects, 2));
+    stop(fx);
+}
+
+static int raw_connect(fixture *fx)
+{
+    int fd = socket(AF_INET, SOCK_STREAM, 0);
+    struct sockaddr_in sa = {.sin_family = AF_INET, .sin_port = htons((uint16_t)ts_server_port(fx->srv))};
+    sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    assert_int_equal(connect(fd, (struct sockaddr *)&sa, sizeof sa), 0);
+    return fd;
+}
+
+/* 1 if the server closed fd within 2 s (reads until EOF, skipping HELLO/ERROR bytes). */
+static int closed_by_server(int fd)
+{
+    char buf[4096];
+    for (int i = 0; i < 200; i++) {
+        struct pollfd p = {.fd = fd, .events = POLLIN};
+        if (poll(&p, 1, 10) > 0) {
+            ssize_t n = recv(fd, buf, sizeof buf, 0);
+            if (n <= 0)
+                return 1;
+        }
+    }
+    return 0;
+}
+
+static void test_bad_traffic_drops_only_that_connection(void **state)
+{
+    (void)state;
+    fixture *fx = start(NULL, -1);
+    char err[256];
+    ts_client *good = ts_client_connect(fx->addr, NULL, 2000, err, sizeof err);
+    assert_non_null(good);
+    const uint8_t garbage[] = "GET / HTTP/1.0\r\n\r\n";
+    const uint8_t oversized[] = {0xff, 0xff, 0xff, 0x7f, 1, 1};
+    const uint8_t unknown_op[] = {6, 0, 0, 0, 1, 200, 1, 0, 0, 0};
+    const uint8_t half[] = {20, 0, 0, 0, 1, TF_OP_OUT, 1, 0, 0, 0, 1};
+    const uint8_t bad_body[] = {8, 0, 0, 0, 1, TF_OP_OUT, 1, 0, 0, 0, 5, 1};
+    struct { const uint8_t *p; size_t n; int then_close; } cases[] = {
+        {garbage, sizeof garbage, 0}, {oversized, sizeof oversized, 0},
+        {unknown_op, sizeof unknown_op, 0}, {half, sizeof half, 1},
+        {bad_body, sizeof bad_body, 0},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        int before = counter(fx, &fx->disconnects);
+        int fd = raw_connect(fx);
+        assert_int_equal(send(fd, cases[i].p, cases[i].n, MSG_NOSIGNAL), (ssize_t)cases[i].n);
+        if (cases[i].then_close)
+            close(fd);
+        else {
+            assert_true(closed_by_server(fd));
+            close(fd);
+        }
+        assert_true(wait_counter(fx, &fx->disconnects, before + 1));
+        exercise(good); /* the other client is undisturbed */
+    }
+    ts_client_close(good);
+    stop(fx);
+}
+
+static void test_auth(void **state)
+{
+    (void)state;
+    uint8_t key[TF_KEY_BYTES], wrong[TF_KEY_BYTES];
+    tf_secret_from_bytes("correct horse", 13, key);
+    tf_secret_from_bytes("battery staple", 14, wrong);
+    fixture *fx = start(key, -1);
+    char err[256];
+    ts_client *good = ts_client_connect(fx->addr, key, 2000, err, sizeof err);
+    assert_non_null(good);
+    exercise(good);
+
+    /* capture stderr to check the log line */
+    char path[] = "/tmp/tf-auth-log.XXXXXX";
+    int logfd = mkstemp(path);
+    int saved = dup(2);
+    dup2(logfd, 2);
+    ts_client *bad = ts_client_connect(fx->addr, wrong, 2000, err, sizeof err);
+    ts_client *none = ts_client_connect(fx->addr, NULL, 2000, err + 128, sizeof err - 128);
+    int fd = raw_connect(fx); /* an op before the handshake */
+    tf_buf b;
+    tf_buf_init(&b);
+    tf_frame_append_tuple(&b, TF_OP_OUT, 1, NULL);
+    send(fd, tf_buf_head(&b), b.len, MSG_NOSIGNAL);
+    tf_buf_free(&b);
+    int was_closed = closed_by_server(fd);
+    close(fd);
+    usleep(50000);
+    dup2(saved, 2);
+    close(saved);
+    assert_null(bad);
+    assert_non_null(strstr(err, "authentication failed"));
+    assert_null(none);
+    assert_non_null(strstr(err + 128, "requires a secret"));
+    assert_true(was_closed);
+    char log[4096] = {0};
+    pread(logfd, log, sizeof log - 1, 0);
+    close(logfd);
+    unlink(path);
+    assert_non_null(strstr(log, "authentication failed from 127.0.0.1:"));
+    assert_non_null(strstr(log, "unauthenticated OUT"));
+
+    exercise(good); /* undisturbed */
+    ts_client_close(good);
+
+    /* a client with a key refuses a server that does not authenticate */
+    fixture *open_fx = start(NULL, -1);
+    assert_null(ts_client_connect(open_fx->addr, key, 2000, err, sizeof err));
+    assert_non_null(strstr(err, "does not authenticate"));
+    stop(open_fx);
+    stop(fx);
+}
+
+static void test_silence_timeout_and_heartbeat(void **state)
+{
+    (void)state;
+    fixture *fx = calloc(1, sizeof *fx);
+    pthread_mutex_init(&fx->lock, NULL);
+    fx->space = ts_space_new();
+    ts_server_config cfg = {.listen = "127.0.0.1:0", .silence_timeout_ms = 300};
+    ts_server_hooks hooks = {fx, on_take, on_out, on_disconnect};
+    char err[256];
+    fx->srv = ts_server_new(fx->space, &cfg, &hooks, err, sizeof err);
+    snprintf(fx->addr, sizeof fx->addr, "127.0.0.1:%d", ts_server_port(fx->srv));
+    pthread_create(&fx->thread, NULL, server_main, fx);
+    ts_client *beating = ts_client_connect(fx->addr, NULL, 2000, err, sizeof err);
+    ts_client *silent = ts_client_connect(fx->addr, NULL, 2000, err, sizeof err);
+    assert_non_null(beating);
+    assert_non_null(silent);
+    assert_int_equal(ts_client_heartbeat(beating, 50), 0);
+    int saved = dup(2), devnull = open("/dev/null", O_WRONLY);
+    dup2(devnull, 2);
+    usleep(700000);
+    dup2(saved, 2);
+    close(saved);
+    close(devnull);
+    assert_int_equal(counter(fx, &fx->disconnects), 1); /* only the silent one */
+    assert_int_equal(ts_ping(beating), 0);
+    assert_int_equal(ts_ping(silent), -1);
+    assert_true(strlen(ts_client_error(silent)) > 0);
+    ts_client_close(beating);
+    ts_client_close(silent);
+    stop(fx);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_socketpair_client),
+        cmocka_unit_test(test_tcp_blocked_in_woken_by_other_client),
+        cmocka_unit_test(test_bad_traffic_drops_only_that_connection),
+        cmocka_unit_test(test_auth),
+        cmocka_unit_test(test_silence_timeout_and_heartbeat),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

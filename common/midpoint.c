@@ -72,12 +72,9 @@ static void envelope_coord(int i, int n, int cn, int *cell, double *frac)
 /* Control elevation at grid point (i, j) of an n x n grid: the plane of the control triangle
  * over it (Koh & Hearn eq. 12), the envelope split along the (0,0)-(1,1) diagonal of each
  * control square.  Needs t->envelope_n >= 2. */
-double tf_envelope_at(const tf_terrain *t, int n, int i, int j)
+static double envelope_plane(const tf_terrain *t, int ci, double fx, int cj, double fy)
 {
-    int cn = t->envelope_n, ci, cj;
-    double fx, fy;
-    envelope_coord(i, n, cn, &ci, &fx);
-    envelope_coord(j, n, cn, &cj, &fy);
+    int cn = t->envelope_n;
     const double *e = t->envelope;
     double z00 = e[cj * cn + ci], z10 = e[cj * cn + ci + 1];
     double z01 = e[(cj + 1) * cn + ci], z11 = e[(cj + 1) * cn + ci + 1];
@@ -86,6 +83,15 @@ double tf_envelope_at(const tf_terrain *t, int n, int i, int j)
     if (fx >= fy) /* triangle (0,0) (1,0) (1,1) */
         return (1.0 - fx) * z00 + (fx - fy) * z10 + fy * z11;
     return (1.0 - fy) * z00 + (fy - fx) * z01 + fx * z11; /* triangle (0,0) (0,1) (1,1) */
+}
+
+double tf_envelope_at(const tf_terrain *t, int n, int i, int j)
+{
+    int ci, cj;
+    double fx, fy;
+    envelope_coord(i, n, t->envelope_n, &ci, &fx);
+    envelope_coord(j, n, t->envelope_n, &cj, &fy);
+    return envelope_plane(t, ci, fx, cj, fy);
 }
 
 typedef struct {
@@ -97,7 +103,15 @@ typedef struct {
     int step, half; /* this level: squares of side `step`, new points at offset `half` */
     int level;      /* 1 for the first subdivision */
     double amp;     /* displacement amplitude at this level */
+    int *ecell;     /* envelope_coord of every grid index (both axes), precomputed: */
+    double *efrac;  /* control elevations then cost no division */
 } mp_ctx;
+
+/* tf_envelope_at from the precomputed per-index coordinates: the same numbers, same bits. */
+static inline double mp_envelope(const mp_ctx *c, int i, int j)
+{
+    return envelope_plane(c->t, c->ecell[i], c->efrac[i], c->ecell[j], c->efrac[j]);
+}
 
 /* Store height z at (i, j), limited to the envelope band when there is one.  The float that
  * is stored is itself checked against the band (rounding to float must not leave it). */
@@ -105,7 +119,7 @@ static void mp_store(mp_ctx *c, int i, int j, double z)
 {
     float f;
     if (c->enveloped) {
-        double ctl = tf_envelope_at(c->t, c->n, i, j);
+        double ctl = mp_envelope(c, i, j);
         double lo = ctl - c->tol, hi = ctl + c->tol;
         if (z < lo) z = lo;
         if (z > hi) z = hi;
@@ -132,7 +146,7 @@ static void mp_displace(mp_ctx *c, int i, int j, double avg, double avg_ctl)
         mp_store(c, i, j, avg + c->amp * g);
         return;
     }
-    double ctl = tf_envelope_at(c->t, c->n, i, j);
+    double ctl = mp_envelope(c, i, j);
     /* mu = (C - A) - (1 - P) (A - A_c): all of the envelope's own bend C - A_c is followed,
      * a fraction P of the inherited deviation A - A_c is pulled back. */
     double mu = (ctl - avg) + (1.0 - MP_PULL) * (avg - avg_ctl);
@@ -145,7 +159,7 @@ static inline double mp_at(const mp_ctx *c, int i, int j) { return c->h[(size_t)
 /* Control elevation at (i, j), or 0 without an envelope (then unused). */
 static inline double mp_ctl(const mp_ctx *c, int i, int j)
 {
-    return c->enveloped ? tf_envelope_at(c->t, c->n, i, j) : 0.0;
+    return c->enveloped ? mp_envelope(c, i, j) : 0.0;
 }
 
 /* Diamond step: the centre of every square of side `step`; rows are the square rows. */
@@ -254,6 +268,17 @@ int tf_gen_midpoint(float *h, int k, const tf_terrain *t, int threads, char *err
      * has separation 2^(13-l) at the k = 13 scale), so amplitudes match across sizes. */
     double ratio = pow(2.0, -t->roughness);
     double amp = c.enveloped ? c.tol * MP_ROUGH_SCALE : MP_FREE_AMP;
+    if (c.enveloped) {
+        c.ecell = malloc((size_t)c.n * sizeof *c.ecell);
+        c.efrac = malloc((size_t)c.n * sizeof *c.efrac);
+        if (!c.ecell || !c.efrac) {
+            free(c.ecell), free(c.efrac);
+            snprintf(err, errlen, "midpoint: out of memory");
+            return -1;
+        }
+        for (int i = 0; i < c.n; i++)
+            envelope_coord(i, c.n, t->envelope_n, &c.ecell[i], &c.efrac[i]);
+    }
     mp_corners(&c);
     for (int step = c.n - 1, level = 1; step >= 2; step /= 2, level++) {
         c.step = step;
@@ -266,5 +291,6 @@ int tf_gen_midpoint(float *h, int k, const tf_terrain *t, int threads, char *err
         tf_grid_parallel((c.n - 1) / c.half + 1, threads, 1 + 8192 / per_row, mp_square_rows, &c);
         amp *= ratio;
     }
+    free(c.ecell), free(c.efrac);
     return 0;
 }

@@ -53,6 +53,24 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
     sh->bump_scale = 2.0 * hf->cell;
     sh->ripple_scale = fmax(4.0 * hf->cell, hf->extent / 300.0);
     sh->shadow_lift = 0.01 * hf->cell + 1e-6 * relief;
+    double columns = s->width > 0 ? s->width : 1;
+    if (s->camera.kind == TF_CAMERA_PANORAMA)
+        sh->pixel_angle = s->camera.fov_deg * DEG2RAD / columns;
+    else
+        sh->pixel_angle = 2.0 * tan(0.5 * s->camera.fov_deg * DEG2RAD) / columns;
+}
+
+/* How many octaves of a texture whose first octave has wavelength `scale` a pixel can show at
+ * distance dist: octave i (wavelength scale / 2^i) is kept while it spans at least two pixel
+ * footprints (Nyquist); the last one fades in fractionally, so the cut moves smoothly with
+ * distance.  0 means the texture is invisible there. */
+static double visible_octaves(const tf_shader *sh, double scale, double dist, double max_octaves)
+{
+    double footprint = 2.0 * dist * sh->pixel_angle;
+    if (!(footprint > 0))
+        return max_octaves;
+    double octaves = log2(scale / footprint) + 1.0;
+    return octaves < 0 ? 0 : octaves > max_octaves ? max_octaves : octaves;
 }
 
 /* ---------------------------------------------------------------- surface normals */
@@ -218,10 +236,11 @@ tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shado
     tf_vec3 n = smooth_normal(sh->hf, hit->ci, hit->cj, hit->p);
     tf_vec3 nb = n;
     double variation = 0;
-    if (sh->textured && sh->scene->materials.bump > 0) {
+    double octaves = visible_octaves(sh, sh->bump_scale, hit->t, BUMP_OCTAVES);
+    if (sh->textured && sh->scene->materials.bump > 0 && octaves > 0) {
         double gx, gy;
         variation = fbm_with_gradient(&sh->noise, hit->p.x, hit->p.y, sh->bump_scale, BUMP_H,
-                                      BUMP_OCTAVES, 0.0, &gx, &gy);
+                                      octaves, 0.0, &gx, &gy);
         double amp = sh->scene->materials.bump;
         nb = v3_norm(v3_add(n, v3(-amp * gx, -amp * gy, 0.0)));
         if (nb.z < 0.05) /* never tip a bumped normal over the horizon */
@@ -235,13 +254,14 @@ tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shado
     return v3_mul(albedo, light);
 }
 
-tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, uint64_t *shadow_rays)
+tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
+                       uint64_t *shadow_rays)
 {
     tf_vec3 n = v3(0, 0, 1);
-    if (sh->textured && sh->scene->materials.bump > 0) {
+    double octaves = visible_octaves(sh, sh->ripple_scale, dist, RIPPLE_OCTAVES);
+    if (sh->textured && sh->scene->materials.bump > 0 && octaves > 0) {
         double gx, gy;
-        fbm_with_gradient(&sh->noise, p.x, p.y, sh->ripple_scale, 0.5, RIPPLE_OCTAVES, 71.0,
-                          &gx, &gy);
+        fbm_with_gradient(&sh->noise, p.x, p.y, sh->ripple_scale, 0.5, octaves, 71.0, &gx, &gy);
         n = v3_norm(v3(-RIPPLE_STRENGTH * gx, -RIPPLE_STRENGTH * gy, 1.0));
     }
     double cos_i = -v3_dot(dir, n);
@@ -277,7 +297,7 @@ void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *o
         c = tf_shade_terrain(sh, &hit, shadow_rays);
     } else if (t_water < FAR_AWAY) {
         dist = t_water;
-        c = tf_shade_water(sh, v3_add(origin, v3_scale(dir, t_water)), dir, shadow_rays);
+        c = tf_shade_water(sh, v3_add(origin, v3_scale(dir, t_water)), dir, t_water, shadow_rays);
     } else {
         c = tf_mist_apply(sh, tf_sky_color(sh, dir), origin, dir, INFINITY);
         *out = (tf_sample){(float)c.x, (float)c.y, (float)c.z, 0.0f, TF_SKY_DIST};

@@ -8,7 +8,9 @@
  *               interpolated across each triangle from vertex normals (no faceting), then
  *               perturbed by fBm bump mapping (materials.bump) whose octaves start where the
  *               height field's resolution stops ("leave the highest frequencies to the
- *               texture", Musgrave 5).
+ *               texture", Musgrave 5).  Texture octaves finer than the pixel's footprint
+ *               at the hit are faded out (band-limited textures: less aliasing, and the
+ *               adaptive antialiasing is not sent chasing sub-pixel noise).
  *   light       sun (direct, shadowed through tf_occluded from a point lifted along the
  *               geometric normal) plus sky light weighted by how much sky the normal sees.
  *   water       an infinite plane at sea_level, flat with fBm ripples in its normal; reflects
@@ -42,6 +44,7 @@ typedef struct tf_shader {
     double bump_scale;       /* world wavelength of the first bump octave */
     double ripple_scale;     /* world wavelength of the first water ripple octave */
     double shadow_lift;      /* shadow ray start offset along the normal */
+    double pixel_angle;      /* angle one pixel subtends at the image centre, radians */
 } tf_shader;
 
 /* One camera sample: linear RGB, alpha (1 = terrain or water), distance to the hit (or
@@ -61,9 +64,10 @@ void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *o
 
 /* The two surfaces, before mist (tf_shade_ray calls them; tests call them directly).
  * tf_shade_terrain: colour at a terrain hit; tf_shade_water: colour of the water plane at p
- * seen along unit dir.  Both cast one shadow ray when the sun is in front of the surface. */
+ * seen along unit dir from distance dist.  Both cast one shadow ray when the sun is in front of the surface. */
 tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays);
-tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, uint64_t *shadow_rays);
+tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
+                       uint64_t *shadow_rays);
 
 /* Sky radiance in direction dir (unit), before mist. */
 tf_vec3 tf_sky_color(const tf_shader *sh, tf_vec3 dir);

@@ -223,8 +223,8 @@ static void test_water_reflects_sky_with_fresnel(void **state)
     f->scene.materials.sea_level = 0;
     tf_shader_init(&f->sh, &f->scene, &f->hf);
     uint64_t shadow = 0;
-    tf_vec3 steep = tf_shade_water(&f->sh, v3(50, 50, 0), v3_norm(v3(0, 0.2, -1)), &shadow);
-    tf_vec3 grazing = tf_shade_water(&f->sh, v3(50, 50, 0), v3_norm(v3(0, 1, -0.02)), &shadow);
+    tf_vec3 steep = tf_shade_water(&f->sh, v3(50, 50, 0), v3_norm(v3(0, 0.2, -1)), 100, &shadow);
+    tf_vec3 grazing = tf_shade_water(&f->sh, v3(50, 50, 0), v3_norm(v3(0, 1, -0.02)), 100, &shadow);
     assert_true(steep.z > steep.x);              /* blue */
     assert_true(grazing.z > 4 * steep.z);        /* Fresnel: bright at grazing angles */
     tf_vec3 horizon = f->scene.sky.horizon;      /* ... approaching the sky it mirrors */
@@ -238,8 +238,8 @@ static void test_sun_shadow_through_tracer(void **state)
     (void)state;
     fixture *f = calloc(1, sizeof *f);
     fill_scene(&f->scene);
-    f->scene.sun.azimuth_deg = 270; /* west, low */
-    f->scene.sun.elevation_deg = 20;
+    f->scene.sun.azimuth_deg = 270; /* west, 45 degrees up: the wall's shadow reaches x = 600 */
+    f->scene.sun.elevation_deg = 45;
     /* 9x9 samples (k = 3), flat at 0 with a tall north-south wall at i = 2 */
     float h[81];
     for (int j = 0; j < 9; j++)
@@ -249,7 +249,7 @@ static void test_sun_shadow_through_tracer(void **state)
     assert_non_null(hf);
     tf_shader_init(&f->sh, &f->scene, hf);
     uint64_t shadow = 0;
-    tf_hit shaded = {.t = 1, .p = v3(350, 400, 0), .n = v3(0, 0, 1), .ci = 3, .cj = 4};
+    tf_hit shaded = {.t = 1, .p = v3(450, 400, 0), .n = v3(0, 0, 1), .ci = 4, .cj = 4};
     tf_hit open = {.t = 1, .p = v3(750, 400, 0), .n = v3(0, 0, 1), .ci = 7, .cj = 4};
     tf_vec3 in_shadow = tf_shade_terrain(&f->sh, &shaded, &shadow);
     tf_vec3 in_sun = tf_shade_terrain(&f->sh, &open, &shadow);

@@ -1,0 +1,31 @@
+#!/bin/sh
+# tuplespace_vs_redis.sh: the tuple space as a task queue (one producer, N consumers, out/in over
+# loopback) side by side with Redis doing the same work with LPUSH/BRPOP, in one run; prints both
+# lines and the throughput ratio.  Starts a private redis-server on a free port in a temp dir
+# and stops it afterwards.  Usage: bench/tuplespace_vs_redis.sh [CONSUMERS] [TASKS]
+set -e
+N=${1:-4}
+T=${2:-20000}
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+BENCH="$ROOT/build/bench/bench_tuplespace"
+(cd "$ROOT" && make -s build/bench/bench_tuplespace)
+if ! command -v redis-server >/dev/null 2>&1; then
+    echo "redis-server missing: installing it (apt-get install -y redis-server)" >&2
+    apt-get install -y -qq redis-server >/dev/null || { echo "cannot install redis-server" >&2; exit 1; }
+fi
+DIR=$(mktemp -d "${TMPDIR:-/tmp}/tf-redis.XXXXXX")
+PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+redis-server --port "$PORT" --bind 127.0.0.1 --dir "$DIR" --save "" --appendonly no \
+    --daemonize yes --pidfile "$DIR/redis.pid" --logfile "$DIR/redis.log"
+trap 'kill "$(cat "$DIR/redis.pid")" 2>/dev/null; rm -rf "$DIR"' EXIT
+i=0
+while ! redis-cli -p "$PORT" ping >/dev/null 2>&1; do
+    i=$((i + 1)); [ $i -gt 50 ] && { echo "redis-server did not start" >&2; exit 1; }; sleep 0.1
+done
+TS=$("$BENCH" -n "$N" -t "$T")
+RS=$("$BENCH" -n "$N" -t "$T" --redis "$PORT")
+echo "$TS"
+echo "$RS"
+ts_ops=$(echo "$TS" | sed 's/.*ops_per_s=\([0-9.]*\).*/\1/')
+rs_ops=$(echo "$RS" | sed 's/.*ops_per_s=\([0-9.]*\).*/\1/')
+python3 -c "print('tuplespace/redis throughput ratio: %.2f' % ($ts_ops / $rs_ops))"

@@ -1,12 +1,228 @@
-/* cmd_heightfield.c: NOT IMPLEMENTED YET -- placeholder so the executable links while the command is
- * being written. */
+/* cmd_heightfield.c: `terrafarm heightfield SCENE -o FILE.png|FILE.exr`: export the scene's
+ * terrain heights, the same samples the renderer traces (tf_terrain_heights, the first half of
+ * tf_heightfield_build; the max/min grids are not needed here, which saves their memory).
+ *
+ * PNG: 16-bit grayscale, [hmin, hmax] mapped linearly to 0..65535.  EXR: one FLOAT channel "Y"
+ * of world heights.  Row order in both: image row r holds terrain row j = r, i.e. world
+ * y = r * cell, so row 0 is the NEAR (south, y = 0) edge and the last row the far edge; image
+ * column c is world x = c * cell.  That order is chosen for POV-Ray: its height_field puts the
+ * image's last row at local z = 0 and splits each cell along the (x+1, z)-(x, z+1) diagonal;
+ * mirrored in z by the printed transform, that split becomes terrafarm's own (ci, cj)-(ci+1,
+ * cj+1) diagonal, so POV-Ray traces exactly the triangles the terrafarm tracer does. */
+#include <getopt.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
 #include "commands.h"
+#include "exrfile.h"
 #include "log.h"
+#include "png_write.h"
+#include "scene.h"
+#include "terrain_build.h"
+
+static const char usage[] =
+    "usage: terrafarm heightfield SCENE -o FILE.png|FILE.exr [--threads N] [--size-exp K]\n"
+    "\n"
+    "Export the terrain of SCENE as a height field image.\n"
+    "\n"
+    "  -o, --output FILE     FILE.png: 16-bit grayscale, the height range [hmin, hmax]\n"
+    "                        mapped to 0..65535 (readable by POV-Ray's height_field);\n"
+    "                        FILE.exr: one float channel Y of world heights\n"
+    "  -t, --threads N       threads for the terrain synthesis (default: online CPUs)\n"
+    "  -k, --size-exp K      override the scene's size_exp: (2^K + 1)^2 samples, K in 1..13\n"
+    "  -h, --help            this text\n"
+    "\n"
+    "Orientation: image column c is world x = c * cell; image row r is world y = r * cell, so\n"
+    "row 0 (the top of the image) is the NEAR edge y = 0 and the last row the far edge\n"
+    "y = extent (north is at the bottom).  Printed after writing: the world extent, the height\n"
+    "range, and the POV-Ray transform that places the PNG exactly on the terrain (POV-Ray's y\n"
+    "is up and its z is terrafarm's y; the negative z scale undoes POV-Ray's bottom-row-first\n"
+    "reading and makes its triangle split equal terrafarm's).\n";
+
+struct hf_options {
+    const char *scene_path;
+    const char *output;
+    int threads;
+    int size_exp; /* 0 = the scene's */
+};
+
+static int ends_with(const char *s, const char *suffix)
+{
+    size_t ls = strlen(s), lf = strlen(suffix);
+    return ls >= lf && strcasecmp(s + ls - lf, suffix) == 0;
+}
+
+/* Parse a whole decimal integer in [lo, hi]; 0 on success. */
+static int parse_int(const char *text, int lo, int hi, int *out)
+{
+    char *end;
+    long v = strtol(text, &end, 10);
+    if (end == text || *end != '\0' || v < lo || v > hi)
+        return -1;
+    *out = (int)v;
+    return 0;
+}
+
+/* Returns -1 to continue, else the exit status (help, usage error). */
+static int parse_options(int argc, char **argv, struct hf_options *o)
+{
+    static const struct option longopts[] = {
+        {"output", required_argument, NULL, 'o'},   {"threads", required_argument, NULL, 't'},
+        {"size-exp", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    memset(o, 0, sizeof *o);
+    opterr = 0;
+    optind = 1;
+    int c;
+    while ((c = getopt_long(argc, argv, ":o:t:k:h", longopts, NULL)) != -1) {
+        switch (c) {
+        case 'o':
+            o->output = optarg;
+            break;
+        case 't':
+            if (parse_int(optarg, 0, 1024, &o->threads) != 0) {
+                tf_error("heightfield: --threads wants an integer 0..1024, not '%s'", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        case 'k':
+            if (parse_int(optarg, 1, TF_TERRAIN_MAX_SIZE_EXP, &o->size_exp) != 0) {
+                tf_error("heightfield: --size-exp wants an integer 1..%d, not '%s'",
+                         TF_TERRAIN_MAX_SIZE_EXP, optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        case 'h':
+            fputs(usage, stdout);
+            return TF_EXIT_OK;
+        case ':':
+            tf_error("heightfield: option '%s' needs a value", argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        default:
+            tf_error("heightfield: unknown option '%s' (try 'terrafarm heightfield --help')",
+                     argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        }
+    }
+    if (optind != argc - 1) {
+        tf_error("heightfield: expected exactly one SCENE argument (try 'terrafarm heightfield "
+                 "--help')");
+        return TF_EXIT_USAGE;
+    }
+    o->scene_path = argv[optind];
+    if (!o->output) {
+        tf_error("heightfield: -o FILE.png or -o FILE.exr is required");
+        return TF_EXIT_USAGE;
+    }
+    if (!ends_with(o->output, ".png") && !ends_with(o->output, ".exr")) {
+        tf_error("heightfield: output '%s' must end in .png or .exr", o->output);
+        return TF_EXIT_USAGE;
+    }
+    return -1;
+}
+
+static void height_range(const float *h, size_t count, float *lo, float *hi)
+{
+    *lo = *hi = h[0];
+    for (size_t i = 1; i < count; i++) {
+        if (h[i] < *lo) *lo = h[i];
+        if (h[i] > *hi) *hi = h[i];
+    }
+}
+
+/* 16-bit PNG, row r = terrain row r.  0 on success. */
+static int write_png(const char *path, const float *h, int n, float lo, float hi, char *err,
+                     size_t errlen)
+{
+    uint16_t *row = malloc((size_t)n * sizeof *row);
+    if (!row) {
+        snprintf(err, errlen, "out of memory for a PNG row");
+        return -1;
+    }
+    tf_png_writer *w = tf_png_create(path, n, n, 16, 1, err, errlen);
+    if (!w) {
+        free(row);
+        return -1;
+    }
+    /* A flat terrain maps every sample to 0. */
+    double range = (double)hi - (double)lo;
+    double to_code = range > 0.0 ? 65535.0 / range : 0.0;
+    for (int j = 0; j < n; j++) {
+        const float *src = h + (size_t)j * (size_t)n;
+        for (int i = 0; i < n; i++) {
+            double code = ((double)src[i] - (double)lo) * to_code + 0.5;
+            row[i] = (uint16_t)(code < 0.0 ? 0.0 : code > 65535.0 ? 65535.0 : code);
+        }
+        if (tf_png_write_row(w, row, err, errlen) != 0) {
+            tf_png_abort(w);
+            free(row);
+            return -1;
+        }
+    }
+    free(row);
+    return tf_png_finish(w, err, errlen);
+}
+
+static void print_placement(const char *path, int n, double extent, float lo, float hi, int png)
+{
+    double range = (double)hi - (double)lo;
+    printf("wrote %s: %dx%d samples, cell %.9g\n", path, n, n, extent / (n - 1));
+    printf("world extent: x, y in [0, %.9g]\n", extent);
+    printf("height range: [%.9g, %.9g] (hmin, hmax)\n", (double)lo, (double)hi);
+    if (!png) {
+        printf("EXR channel Y holds world heights; row r is world y = r * cell (row 0 = y 0)\n");
+        return;
+    }
+    printf("PNG code v in 0..65535 is height hmin + v / 65535 * (hmax - hmin); row r is world "
+           "y = r * cell (row 0 = y 0)\n");
+    /* POV-Ray reads a 16-bit value v as local height v / 65536, so the y scale that lands
+     * v = 65535 exactly on hmax is range * 65536 / 65535. */
+    printf("POV-Ray (y up, z = terrafarm y; sample (i, j) lands at <i*cell, h, j*cell>):\n");
+    printf("  height_field { png \"%s\"\n", path);
+    printf("    scale <%.9g, %.9g, %.9g>\n", extent, range * 65536.0 / 65535.0, -extent);
+    printf("    translate <0, %.9g, %.9g> }\n", (double)lo, extent);
+}
 
 int cmd_heightfield(int argc, char **argv)
 {
-    (void)argc;
-    (void)argv;
-    tf_error("'heightfield' is not implemented yet");
-    return TF_EXIT_FAIL;
+    struct hf_options o;
+    int status = parse_options(argc, argv, &o);
+    if (status >= 0)
+        return status;
+
+    char err[512];
+    tf_scene *scene = tf_scene_load(o.scene_path, err, sizeof err);
+    if (!scene) {
+        tf_error("%s", err);
+        return TF_EXIT_FAIL;
+    }
+    tf_terrain terrain = scene->terrain;
+    if (o.size_exp)
+        terrain.size_exp = o.size_exp;
+    int n = (1 << terrain.size_exp) + 1;
+
+    float *h = tf_terrain_heights(&terrain, o.threads, err, sizeof err);
+    if (!h) {
+        tf_error("%s", err);
+        tf_scene_free(scene);
+        return TF_EXIT_FAIL;
+    }
+    float lo, hi;
+    height_range(h, (size_t)n * (size_t)n, &lo, &hi);
+    int png = ends_with(o.output, ".png");
+    int rc = png ? write_png(o.output, h, n, lo, hi, err, sizeof err)
+                 : tf_exr_write_gray(o.output, n, n, h, err, sizeof err);
+    free(h);
+    if (rc != 0) {
+        tf_error("%s", err);
+        tf_scene_free(scene);
+        return TF_EXIT_FAIL;
+    }
+    print_placement(o.output, n, terrain.extent, lo, hi, png);
+    tf_scene_free(scene);
+    return TF_EXIT_OK;
 }

@@ -898,8 +898,10 @@ tf_scene *tf_scene_parse_text(const char *name, const char *text, size_t len, ch
         set_err(err, errlen, "%s: too large (%zu bytes, at most %d)", name, len, SCENE_MAX_BYTES);
         return NULL;
     }
-    if (!text)
+    if (!text) { /* no text at all: an empty scene (which then lacks its required keys) */
         text = "";
+        len = 0;
+    }
     tf_scene *s = scene_new(name, text, len);
     if (!s) {
         set_err(err, errlen, "%s: out of memory", name);

@@ -21,7 +21,7 @@ CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
 CFLAGS   ?= -O2 -g
 SAN      ?=
 ALL_CFLAGS := $(CFLAGS) $(SAN) -std=c11 -D_GNU_SOURCE -Wall -Wextra -ffp-contract=off -pthread \
-            -I. -Icommon -DTF_VERSION='"$(VERSION)"' \
+            -I. -Icommon -Icoordinator -Iworker -DTF_VERSION='"$(VERSION)"' \
             $(shell pkg-config --cflags $(PKGS)) $(EXR_CFLAGS)
 LDLIBS   := $(shell pkg-config --libs $(PKGS)) $(EXR_LIBS) $(CL_LIBS) -lm -pthread
 TEST_LIBS := $(shell pkg-config --libs cmocka)
@@ -68,7 +68,7 @@ $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 FUZZ_LIB_SRC := $(LIB_SRC)
 $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB_SRC)
 	@mkdir -p $(dir $@)
-	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon \
+	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon -Icoordinator -Iworker \
 	  -DTF_VERSION='"$(VERSION)"' $(shell pkg-config --cflags $(PKGS)) $(EXR_CFLAGS) \
 	  -o $@ $< $(FUZZ_LIB_SRC) $(LDLIBS)
 $(BUILD)/replay/%: tests/fuzz/%.c tests/fuzz/replay_main.c $(LIB_OBJ)

@@ -1,12 +1,162 @@
-/* cmd_render.c: NOT IMPLEMENTED YET -- placeholder so the executable links while the command is
- * being written. */
+/* cmd_render.c: `terrafarm render SCENE [options]`: parse the command line (DESIGN.md section 2)
+ * into tf_render_opts and run the coordinator. */
+#include <getopt.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
 #include "commands.h"
+#include "coordinator.h"
 #include "log.h"
+
+static const char usage[] =
+    "usage: terrafarm render SCENE [options]\n"
+    "\n"
+    "Render SCENE to an OpenEXR file with forked local workers and any networked workers that\n"
+    "join (terrafarm worker --connect HOST:PORT).  Finished rows are written in order and made\n"
+    "durable, so an interrupted render continues with --resume.\n"
+    "\n"
+    "  -o, --output FILE.exr     output image (default out/<scene>.exr); a PNG preview goes beside it\n"
+    "  -j, --workers N           local workers to fork (default: online CPUs); 0 = networked only\n"
+    "      --tasks rows:K        scanline-block tasks of K rows\n"
+    "      --tasks stamps:WxH    postage-stamp tasks of WxH pixels (default: stamps sized from the\n"
+    "                            image and the worker count)\n"
+    "      --watermark N         at most N tasks dealt beyond the write front (default: one band\n"
+    "                            of tasks plus three per worker)\n"
+    "      --size WxH            override the scene's image size\n"
+    "      --backend c|opencl    backend of the local workers (default c)\n"
+    "      --listen HOST:PORT    accept networked workers there (default 127.0.0.1:7878, loopback)\n"
+    "      --secret-file FILE    shared secret; required to listen on a non-loopback address\n"
+    "      --resume              continue an interrupted render of the same scene into the same output\n"
+    "      --overwrite           discard a partial render (or a foreign file) at the output\n"
+    "      --stats FILE.json     write the run statistics\n"
+    "      --lease-timeout MS    drop a worker silent this long and re-deal its task (default 15000)\n"
+    "  -q, --quiet               errors only\n"
+    "  -v, --verbose             more detail (workers joining, re-dealt tasks)\n"
+    "  -h, --help                this help\n";
+
+static int parse_int(const char *flag, const char *s, int lo, int hi, int *out)
+{
+    char *end;
+    long v = strtol(s, &end, 10);
+    if (end == s || *end || v < lo || v > hi) {
+        tf_error("%s '%s': expected an integer from %d to %d", flag, s, lo, hi);
+        return -1;
+    }
+    *out = (int)v;
+    return 0;
+}
+
+static int parse_size(const char *s, int *w, int *h)
+{
+    char *end;
+    long a = strtol(s, &end, 10);
+    if (end == s || (*end != 'x' && *end != 'X'))
+        goto bad;
+    const char *p = end + 1;
+    long b = strtol(p, &end, 10);
+    if (end == p || *end || a < 1 || b < 1 || a > 65536 || b > 65536)
+        goto bad;
+    *w = (int)a;
+    *h = (int)b;
+    return 0;
+bad:
+    tf_error("--size '%s': expected WxH with sides from 1 to 65536", s);
+    return -1;
+}
 
 int cmd_render(int argc, char **argv)
 {
-    (void)argc;
-    (void)argv;
-    tf_error("'render' is not implemented yet");
-    return TF_EXIT_FAIL;
+    enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
+           O_OVERWRITE, O_STATS, O_LEASE };
+    static const struct option longopts[] = {
+        {"output", required_argument, NULL, 'o'},
+        {"workers", required_argument, NULL, 'j'},
+        {"tasks", required_argument, NULL, O_TASKS},
+        {"watermark", required_argument, NULL, O_WATERMARK},
+        {"size", required_argument, NULL, O_SIZE},
+        {"backend", required_argument, NULL, O_BACKEND},
+        {"listen", required_argument, NULL, O_LISTEN},
+        {"secret-file", required_argument, NULL, O_SECRET},
+        {"resume", no_argument, NULL, O_RESUME},
+        {"overwrite", no_argument, NULL, O_OVERWRITE},
+        {"stats", required_argument, NULL, O_STATS},
+        {"lease-timeout", required_argument, NULL, O_LEASE},
+        {"quiet", no_argument, NULL, 'q'},
+        {"verbose", no_argument, NULL, 'v'},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    tf_render_opts o;
+    tf_render_opts_init(&o);
+    char err[512];
+    int c;
+    optind = 1;
+    opterr = 0;
+    while ((c = getopt_long(argc, argv, ":o:j:qvh", longopts, NULL)) != -1) {
+        switch (c) {
+        case 'o': o.output = optarg; break;
+        case 'j':
+            if (parse_int("--workers", optarg, 0, 4096, &o.workers))
+                return TF_EXIT_USAGE;
+            break;
+        case O_TASKS:
+            if (tf_task_spec_parse(optarg, &o.tasks, err, sizeof err)) {
+                tf_error("%s", err);
+                return TF_EXIT_USAGE;
+            }
+            o.tasks_given = 1;
+            break;
+        case O_WATERMARK:
+            if (parse_int("--watermark", optarg, 1, 1 << 20, &o.watermark))
+                return TF_EXIT_USAGE;
+            break;
+        case O_SIZE:
+            if (parse_size(optarg, &o.width, &o.height))
+                return TF_EXIT_USAGE;
+            break;
+        case O_BACKEND:
+            if (strcmp(optarg, "c") && strcmp(optarg, "opencl")) {
+                tf_error("--backend '%s': expected c or opencl", optarg);
+                return TF_EXIT_USAGE;
+            }
+            o.backend = optarg;
+            break;
+        case O_LISTEN: o.listen = optarg; break;
+        case O_SECRET: o.secret_file = optarg; break;
+        case O_RESUME: o.resume = 1; break;
+        case O_OVERWRITE: o.overwrite = 1; break;
+        case O_STATS: o.stats_path = optarg; break;
+        case O_LEASE:
+            if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))
+                return TF_EXIT_USAGE;
+            break;
+        case 'q': o.quiet = 1; break;
+        case 'v': o.verbose = 1; break;
+        case 'h': fputs(usage, stdout); return TF_EXIT_OK;
+        case ':':
+            tf_error("render: option '%s' needs a value (see terrafarm render --help)",
+                     argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        default:
+            tf_error("render: unknown option '%s' (see terrafarm render --help)", argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        }
+    }
+    if (optind != argc - 1) {
+        tf_error(optind >= argc ? "render: missing SCENE (see terrafarm render --help)"
+                                : "render: expected one SCENE, got extra arguments (see "
+                                  "terrafarm render --help)");
+        return TF_EXIT_USAGE;
+    }
+    if (o.resume && o.overwrite) {
+        tf_error("render: --resume and --overwrite contradict each other");
+        return TF_EXIT_USAGE;
+    }
+    o.scene_path = argv[optind];
+    if (o.quiet)
+        tf_log_set_level(TF_LOG_WARN);
+    if (o.verbose)
+        tf_log_set_level(TF_LOG_DEBUG);
+    return tf_coordinator_run(&o);
 }

@@ -1,12 +1,178 @@
-/* cmd_worker.c: NOT IMPLEMENTED YET -- placeholder so the executable links while the command is
- * being written. */
+/* cmd_worker.c: `terrafarm worker --connect HOST:PORT [-j N]`: a networked worker (the tsnet
+ * model).  It reads the scene from the coordinator's tuple space, builds the terrain itself
+ * (once, on all cores), then runs N worker processes that share it copy-on-write, each with
+ * its own connection, until the render is finished. */
+#include <getopt.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "auth.h"
 #include "commands.h"
+#include "heightfield.h"
 #include "log.h"
+#include "scene.h"
+#include "tsclient.h"
+#include "worker.h"
+
+static const char usage[] =
+    "usage: terrafarm worker --connect HOST:PORT [options]\n"
+    "\n"
+    "Join a render as a networked worker: fetch the scene from the coordinator, build the\n"
+    "terrain, and render tasks until the render is finished.\n"
+    "\n"
+    "  -c, --connect HOST:PORT   the coordinator (terrafarm render ... --listen HOST:PORT)\n"
+    "      --secret-file FILE    shared secret, if the coordinator requires one\n"
+    "      --backend c|opencl    rendering backend (default c)\n"
+    "  -j, --workers N           worker processes on this machine (default: online CPUs)\n"
+    "      --timeout MS          give up connecting after MS milliseconds (default 10000)\n"
+    "  -q, --quiet / -v, --verbose\n"
+    "  -h, --help\n";
+
+static int run_one(const char *connect, const uint8_t *key, int timeout_ms, const tf_scene *s,
+                   const tf_heightfield *hf, const char *backend)
+{
+    char err[1024];
+    ts_client *c = ts_client_connect(connect, key, timeout_ms, err, sizeof err);
+    if (!c) {
+        tf_error("%s", err);
+        return 1;
+    }
+    int status = tf_worker_loop(c, s, hf, "networked", backend);
+    ts_client_close(c);
+    return status;
+}
 
 int cmd_worker(int argc, char **argv)
 {
-    (void)argc;
-    (void)argv;
-    tf_error("'worker' is not implemented yet");
-    return TF_EXIT_FAIL;
+    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT };
+    static const struct option longopts[] = {
+        {"connect", required_argument, NULL, 'c'},
+        {"secret-file", required_argument, NULL, O_SECRET},
+        {"backend", required_argument, NULL, O_BACKEND},
+        {"workers", required_argument, NULL, 'j'},
+        {"timeout", required_argument, NULL, O_TIMEOUT},
+        {"quiet", no_argument, NULL, 'q'},
+        {"verbose", no_argument, NULL, 'v'},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    const char *connect = NULL, *secret = NULL, *backend = "c";
+    int nproc = 0, timeout_ms = 10000, ch;
+    char *end;
+    optind = 1;
+    opterr = 0;
+    while ((ch = getopt_long(argc, argv, ":c:j:qvh", longopts, NULL)) != -1) {
+        switch (ch) {
+        case 'c': connect = optarg; break;
+        case O_SECRET: secret = optarg; break;
+        case O_BACKEND:
+            if (strcmp(optarg, "c") && strcmp(optarg, "opencl")) {
+                tf_error("--backend '%s': expected c or opencl", optarg);
+                return TF_EXIT_USAGE;
+            }
+            backend = optarg;
+            break;
+        case 'j':
+            nproc = (int)strtol(optarg, &end, 10);
+            if (end == optarg || *end || nproc < 1 || nproc > 4096) {
+                tf_error("--workers '%s': expected an integer from 1 to 4096", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        case O_TIMEOUT:
+            timeout_ms = (int)strtol(optarg, &end, 10);
+            if (end == optarg || *end || timeout_ms < 1) {
+                tf_error("--timeout '%s': expected a positive number of milliseconds", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        case 'q': tf_log_set_level(TF_LOG_WARN); break;
+        case 'v': tf_log_set_level(TF_LOG_DEBUG); break;
+        case 'h': fputs(usage, stdout); return TF_EXIT_OK;
+        case ':':
+            tf_error("worker: option '%s' needs a value", argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        default:
+            tf_error("worker: unknown option '%s' (see terrafarm worker --help)", argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        }
+    }
+    if (!connect || optind != argc) {
+        tf_error(!connect ? "worker: --connect HOST:PORT is required"
+                          : "worker: unexpected argument '%s'",
+                 argv[optind]);
+        return TF_EXIT_USAGE;
+    }
+    signal(SIGPIPE, SIG_IGN);
+    uint8_t key[TF_KEY_BYTES];
+    char err[1024];
+    if (secret && (tf_auth_init() || tf_secret_load(secret, key, err, sizeof err))) {
+        tf_error("%s", err);
+        return TF_EXIT_FAIL;
+    }
+    const uint8_t *k = secret ? key : NULL;
+
+    /* The scene, from the coordinator (tsnet model): the first connection only reads it. */
+    ts_client *c = ts_client_connect(connect, k, timeout_ms, err, sizeof err);
+    if (!c) {
+        tf_error("%s", err);
+        return TF_EXIT_FAIL;
+    }
+    tf_scene *s = tf_worker_fetch_scene(c, connect, err, sizeof err);
+    if (!s) {
+        tf_error("%s", err);
+        ts_client_close(c);
+        return TF_EXIT_FAIL;
+    }
+    if (nproc == 0)
+        nproc = tf_thread_count(0);
+    tf_info("joining %s: %dx%d render of a %s terrain; building the height field", connect,
+            s->width, s->height, tf_generator_name(s->terrain.generator));
+    ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS); /* stay alive while the terrain builds */
+    tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
+    if (!hf) {
+        tf_error("%s", err);
+        tf_scene_free(s);
+        ts_client_close(c);
+        return TF_EXIT_FAIL;
+    }
+    int status = 0;
+    if (nproc == 1) {
+        status = tf_worker_loop(c, s, hf, "networked", backend);
+        ts_client_close(c);
+    } else {
+        ts_client_close(c);
+        pid_t *pids = calloc((size_t)nproc, sizeof *pids);
+        if (!pids) {
+            tf_error("out of memory");
+            return TF_EXIT_FAIL;
+        }
+        for (int i = 0; i < nproc; i++) {
+            pid_t p = fork();
+            if (p == 0) {
+                prctl(PR_SET_PDEATHSIG, SIGTERM);
+                _exit(run_one(connect, k, timeout_ms, s, hf, backend));
+            }
+            pids[i] = p;
+            if (p < 0)
+                tf_warn("fork: cannot start worker process %d", i);
+        }
+        for (int i = 0; i < nproc; i++) {
+            int st;
+            if (pids[i] > 0 && waitpid(pids[i], &st, 0) == pids[i] &&
+                !(WIFEXITED(st) && WEXITSTATUS(st) == 0))
+                status = 1;
+        }
+        free(pids);
+    }
+    if (status == 0)
+        tf_info("render finished; worker leaving");
+    tf_heightfield_free(hf);
+    tf_scene_free(s);
+    return status;
 }

@@ -1,0 +1,39 @@
+/* coordinator.h: `terrafarm render`, the coordinator (DESIGN.md sections 2, 3, 5).
+ *
+ * One process, one thread, one event loop (tsserver.h).  In order:
+ *   1. load the scene, check the output (resume or refuse to clobber a partial render);
+ *   2. build the height field, then fork the local workers so they share it copy-on-write
+ *      (Musgrave's fork model); networked workers join over TCP and build their own (tsnet);
+ *   3. supervise (supervisor.h): deal task tuples up to the watermark, lease them, collect
+ *      results in order, write finished rows to the OpenEXR checkpoint, re-deal what is lost;
+ *   4. finish the file, write the PNG preview and the statistics. */
+#ifndef TF_COORDINATOR_H
+#define TF_COORDINATOR_H
+
+#include "tasks.h"
+
+typedef struct tf_render_opts {
+    const char *scene_path;
+    const char *output;        /* NULL: out/<scene>.exr */
+    int workers;               /* forked local workers; -1 = online CPUs */
+    int tasks_given;           /* 1 if --tasks was given */
+    tf_task_spec tasks;
+    int watermark;             /* 0 = default */
+    int width, height;         /* --size, 0 = scene's */
+    const char *backend;       /* "c" | "opencl" */
+    const char *listen;        /* NULL = 127.0.0.1:7878 (falls back to ephemeral if busy) */
+    const char *secret_file;
+    int resume;
+    int overwrite;             /* --overwrite: discard a partial render at the output */
+    const char *stats_path;
+    int lease_timeout_ms;      /* a silent worker is dropped after this (default 15000) */
+    int max_task_failures;     /* distinct workers a task may fail on before the render stops */
+    int fsync_interval_ms;     /* at most this long between durable checkpoints */
+    int quiet, verbose;
+} tf_render_opts;
+
+void tf_render_opts_init(tf_render_opts *o);
+/* Run a render. Returns the process exit status; every failure has printed one line. */
+int tf_coordinator_run(const tf_render_opts *o);
+
+#endif

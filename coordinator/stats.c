@@ -1,0 +1,96 @@
+/* stats.c: see stats.h. */
+#include "stats.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* JSON string with the escapes RFC 8259 requires. */
+static void json_string(FILE *f, const char *s)
+{
+    fputc('"', f);
+    for (; s && *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\')
+            fprintf(f, "\\%c", c);
+        else if (c < 0x20)
+            fprintf(f, "\\u%04x", c);
+        else
+            fputc(c, f);
+    }
+    fputc('"', f);
+}
+
+int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats *st, char *err,
+                   size_t errlen)
+{
+    size_t n = strlen(path) + 8;
+    char *tmp = malloc(n);
+    if (!tmp) {
+        snprintf(err, errlen, "%s: out of memory", path);
+        return -1;
+    }
+    snprintf(tmp, n, "%s.tmp", path);
+    FILE *f = fopen(tmp, "w");
+    if (!f) {
+        snprintf(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
+        free(tmp);
+        return -1;
+    }
+    uint64_t rays = st->primary_rays + st->shadow_rays;
+    fprintf(f, "{\n  \"wall_s\": %.3f,\n  \"width\": %d,\n  \"height\": %d,\n", run->wall_s,
+            run->width, run->height);
+    fprintf(f, "  \"scene\": ");
+    json_string(f, run->scene);
+    fprintf(f, ",\n  \"output\": ");
+    json_string(f, run->output);
+    fprintf(f, ",\n  \"tasks\": ");
+    json_string(f, run->tasks);
+    fprintf(f,
+            ",\n  \"tasks_total\": %lld,\n  \"tasks_redealt\": %lld,\n"
+            "  \"tasks_duplicated\": %lld,\n  \"results_dropped\": %lld,\n"
+            "  \"task_failures\": %lld,\n",
+            (long long)st->tasks_total, (long long)st->tasks_redealt,
+            (long long)st->tasks_duplicated, (long long)st->results_dropped,
+            (long long)st->task_failures);
+    fprintf(f, "  \"rows_resumed\": %d,\n  \"rows_rendered\": %d,\n", st->rows_resumed,
+            st->rows_rendered);
+    fprintf(f,
+            "  \"rays_total\": %llu,\n  \"primary_rays\": %llu,\n  \"shadow_rays\": %llu,\n"
+            "  \"external_rays\": %llu,\n",
+            (unsigned long long)rays, (unsigned long long)st->primary_rays,
+            (unsigned long long)st->shadow_rays, (unsigned long long)st->external_rays);
+    fprintf(f, "  \"samples_per_pixel_avg\": %.4f,\n",
+            st->pixels ? st->spp_sum / (double)st->pixels : 0.0);
+    fprintf(f, "  \"rays_per_pixel_avg\": %.4f,\n",
+            st->pixels ? (double)st->primary_rays / (double)st->pixels : 0.0);
+    fprintf(f, "  \"max_outstanding_tasks\": %d,\n  \"watermark\": %d,\n", st->max_outstanding_tasks,
+            st->watermark);
+    fprintf(f, "  \"max_tuple_bytes\": %zu,\n", st->max_tuple_bytes);
+    fprintf(f, "  \"local_workers\": %d,\n  \"heightfield_s\": %.3f,\n", run->local_workers,
+            run->heightfield_s);
+    fprintf(f, "  \"workers\": [");
+    for (int i = 0; i < st->nworkers; i++) {
+        const tf_worker_stats *w = &st->workers[i];
+        fprintf(f, "%s\n    {\"id\": %lld, \"kind\": ", i ? "," : "", (long long)w->id);
+        json_string(f, w->kind);
+        fprintf(f, ", \"host\": ");
+        json_string(f, w->host);
+        fprintf(f, ", \"backend\": ");
+        json_string(f, w->backend);
+        fprintf(f, ", \"tasks\": %lld, \"rays\": %llu, \"busy_s\": %.3f}", (long long)w->tasks,
+                (unsigned long long)w->rays, w->busy_s);
+    }
+    fprintf(f, "%s]\n}\n", st->nworkers ? "\n  " : "");
+    int bad = ferror(f);
+    bad |= fclose(f) != 0;
+    if (bad || rename(tmp, path)) {
+        snprintf(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
+        remove(tmp);
+        free(tmp);
+        return -1;
+    }
+    free(tmp);
+    return 0;
+}

@@ -1,0 +1,22 @@
+/* stats.h: the run statistics as JSON (--stats FILE.json, DESIGN.md section 5: keep the names). */
+#ifndef TF_STATS_H
+#define TF_STATS_H
+
+#include <stddef.h>
+#include "supervisor.h"
+
+typedef struct tf_run_info {
+    double wall_s;
+    int width, height;
+    const char *scene;
+    const char *output;
+    const char *tasks;       /* e.g. "stamps:64x64" */
+    int local_workers;
+    double heightfield_s;    /* time to build the height field before forking */
+} tf_run_info;
+
+/* Write atomically (temporary file + rename).  0, or -1 with a message. */
+int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats *st, char *err,
+                   size_t errlen);
+
+#endif

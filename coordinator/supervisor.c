@@ -1,0 +1,647 @@
+/* supervisor.c: see supervisor.h for what it does; this comment is about how.
+ *
+ * Task ids run 0 .. tasks.count-1 in write order.  Three cursors move only forward:
+ *     write_task <= next_deal <= tasks.count
+ * Tasks below write_task are on disk; tasks in [write_task, next_deal) are "outstanding"
+ * (dealt, in the space, leased to a worker, or done and waiting for their band); tasks from
+ * next_deal on have not been dealt.  INVARIANT: next_deal - write_task <= watermark, so the
+ * ring of watermark slots holds the state of every outstanding task, at slot id % ring_size.
+ *
+ * A task's copies: `in_space` task tuples sit in the space, `leased` are held by workers (one
+ * lease record each in `leases`).  When both reach zero before a result arrived, the task is
+ * lost and is dealt again.  A result for a task that already has one, or is written, is
+ * removed from the space and dropped. */
+#include "supervisor.h"
+
+#include <inttypes.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "farmproto.h"
+#include "log.h"
+
+#define MAX_FAILED_WORKERS 16 /* per task: distinct workers that failed it */
+#define FAILURES_TO_EXCLUDE 2 /* failures of one task on one worker before it is excluded */
+
+typedef struct task_slot {
+    int64_t id;          /* task in this slot, -1 if none */
+    int has_result;
+    int duplicated;      /* a straggler copy was dealt */
+    int in_space;        /* task tuples in the space */
+    int leased;          /* copies held by workers */
+    int nfailed;
+    int64_t failed_worker[MAX_FAILED_WORKERS];
+    int failed_count[MAX_FAILED_WORKERS];
+} task_slot;
+
+typedef struct lease {
+    uint64_t conn;
+    int64_t task;
+} lease;
+
+struct tf_supervisor {
+    ts_space *space;
+    ts_server *srv;
+    tf_tasks tasks;
+    tf_supervisor_config cfg;
+    int64_t write_task, next_deal;
+    int ring_size;
+    task_slot *ring;
+    lease *leases;
+    int nleases, cap_leases;
+    int chunk_rows;          /* rows per EXR chunk */
+    tf_pixel *chunk;         /* accumulator: chunk_rows rows of width pixels */
+    int chunk_fill;          /* rows in the accumulator */
+    int rows_written;        /* rows handed to the writer by this run (plus first_row) */
+    double last_sync_ms;
+    int dirty;               /* written since the last sync */
+    int stop_sent;
+    char error[512];
+    tf_farm_stats stats;
+    int cap_workers;
+};
+
+/* ---- small helpers ---------------------------------------------------------------------- */
+
+static task_slot *slot_of(tf_supervisor *s, int64_t id)
+{
+    if (id < s->write_task || id >= s->next_deal)
+        return NULL;
+    task_slot *t = &s->ring[id % s->ring_size];
+    return t->id == id ? t : NULL;
+}
+
+static void fail(tf_supervisor *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void fail(tf_supervisor *s, const char *fmt, ...)
+{
+    if (s->error[0])
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(s->error, sizeof s->error, fmt, ap);
+    va_end(ap);
+}
+
+static tf_worker_stats *worker_by_id(tf_supervisor *s, int64_t id)
+{
+    for (int i = 0; i < s->stats.nworkers; i++)
+        if (s->stats.workers[i].id == id)
+            return &s->stats.workers[i];
+    return NULL;
+}
+
+static tf_worker_stats *worker_by_conn(tf_supervisor *s, uint64_t conn)
+{
+    for (int i = 0; i < s->stats.nworkers; i++)
+        if (s->stats.workers[i].conn == conn)
+            return &s->stats.workers[i];
+    return NULL;
+}
+
+static tf_worker_stats *add_worker(tf_supervisor *s, int64_t id)
+{
+    tf_worker_stats *w = worker_by_id(s, id);
+    if (w)
+        return w;
+    if (s->stats.nworkers == s->cap_workers) {
+        int cap = s->cap_workers ? 2 * s->cap_workers : 16;
+        tf_worker_stats *nw = realloc(s->stats.workers, (size_t)cap * sizeof *nw);
+        if (!nw)
+            return NULL;
+        s->stats.workers = nw;
+        s->cap_workers = cap;
+    }
+    w = &s->stats.workers[s->stats.nworkers++];
+    memset(w, 0, sizeof *w);
+    w->id = id;
+    snprintf(w->kind, sizeof w->kind, "networked");
+    return w;
+}
+
+/* Put a task tuple for `id` in the space, carrying the workers it must avoid. */
+static int deal_copy(tf_supervisor *s, task_slot *t)
+{
+    tf_task_msg m;
+    memset(&m, 0, sizeof m);
+    m.id = t->id;
+    m.rect = tf_task_rect(&s->tasks, (int)t->id);
+    for (int i = 0; i < t->nfailed && m.nexcluded < TF_EXCLUDED_MAX; i++)
+        if (t->failed_count[i] >= FAILURES_TO_EXCLUDE)
+            m.excluded[m.nexcluded++] = t->failed_worker[i];
+    tf_tuple tup;
+    if (tf_task_pack(&tup, &m) || ts_space_out(s->space, &tup)) {
+        fail(s, "out of memory dealing task %" PRId64, t->id);
+        return -1;
+    }
+    /* ts_space_out may have handed it straight to a blocked worker: on_take has then already
+     * moved the copy from in_space to leased, so count it as in the space first. */
+    return 0;
+}
+
+static void deal_new_tasks(tf_supervisor *s)
+{
+    while (!s->error[0] && s->next_deal < s->tasks.count &&
+           s->next_deal - s->write_task < s->cfg.watermark) {
+        int64_t id = s->next_deal++;
+        task_slot *t = &s->ring[id % s->ring_size];
+        memset(t, 0, sizeof *t);
+        t->id = id;
+        t->in_space = 1;
+        int outstanding = (int)(s->next_deal - s->write_task);
+        if (outstanding > s->stats.max_outstanding_tasks)
+            s->stats.max_outstanding_tasks = outstanding;
+        deal_copy(s, t);
+    }
+}
+
+/* Record that `worker` failed task t; returns 1 if the task has now failed everywhere. */
+static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
+{
+    s->stats.task_failures++;
+    int i;
+    for (i = 0; i < t->nfailed; i++)
+        if (t->failed_worker[i] == worker)
+            break;
+    if (i == t->nfailed) {
+        if (t->nfailed == MAX_FAILED_WORKERS)
+            i = MAX_FAILED_WORKERS - 1;
+        else
+            t->nfailed++;
+        t->failed_worker[i] = worker;
+        t->failed_count[i] = 0;
+    }
+    t->failed_count[i]++;
+    if (t->nfailed >= s->cfg.max_task_failures) {
+        tf_rect r = tf_task_rect(&s->tasks, (int)t->id);
+        fail(s, "task %" PRId64 " (%dx%d at %d,%d) failed on %d different workers; stopping "
+                "(rows written so far are kept: rerun with --resume)",
+             t->id, r.w, r.h, r.x, r.y, t->nfailed);
+        return 1;
+    }
+    return 0;
+}
+
+/* A copy of task t was lost (its worker died or gave up): deal it again if no copy is left. */
+static void redeal_if_lost(tf_supervisor *s, task_slot *t)
+{
+    if (t->has_result || t->in_space > 0 || t->leased > 0 || s->error[0])
+        return;
+    t->in_space++;
+    s->stats.tasks_redealt++;
+    tf_rect r = tf_task_rect(&s->tasks, (int)t->id);
+    tf_info("re-dealing task %" PRId64 " (%dx%d at %d,%d)", t->id, r.w, r.h, r.x, r.y);
+    deal_copy(s, t);
+}
+
+/* Remove any task tuples of a finished task still waiting in the space. */
+static void withdraw_copies(tf_supervisor *s, task_slot *t)
+{
+    tf_tuple tmpl, got;
+    if (tf_task_template(&tmpl, t->id))
+        return;
+    while (t->in_space > 0) {
+        tf_tuple_init(&got);
+        if (ts_space_inp(s->space, &tmpl, &got) != 1)
+            break;
+        tf_tuple_clear(&got);
+        t->in_space--;
+    }
+    tf_tuple_clear(&tmpl);
+}
+
+/* ---- writing ------------------------------------------------------------------------------ */
+
+static int flush_chunk(tf_supervisor *s, int final)
+{
+    if (s->chunk_fill == 0 || (s->chunk_fill < s->chunk_rows && !final))
+        return 0;
+    char err[512];
+    if (tf_exr_write_rows(s->cfg.writer, s->chunk_fill, s->chunk, err, sizeof err)) {
+        fail(s, "%s", err);
+        return -1;
+    }
+    s->rows_written += s->chunk_fill;
+    s->chunk_fill = 0;
+    s->dirty = 1;
+    return 0;
+}
+
+/* Band `band` has every result: take them out of the space in order and write its rows. */
+static int write_band(tf_supervisor *s, int band)
+{
+    int y0, rows;
+    tf_band_rows(&s->tasks, band, &y0, &rows);
+    int first = tf_band_first_task(&s->tasks, band);
+    int cols = s->tasks.cols;
+    tf_tuple *res = calloc((size_t)cols, sizeof *res);
+    tf_result_msg *msg = calloc((size_t)cols, sizeof *msg);
+    int rc = -1;
+    if (!res || !msg) {
+        fail(s, "out of memory writing rows %d..%d", y0, y0 + rows - 1);
+        goto out;
+    }
+    for (int c = 0; c < cols; c++) {
+        tf_tuple tmpl;
+        if (tf_result_template(&tmpl, first + c, -1) ||
+            ts_space_inp(s->space, &tmpl, &res[c]) != 1 || tf_result_unpack(&res[c], &msg[c])) {
+            tf_tuple_clear(&tmpl);
+            fail(s, "internal error: result of task %d missing from the tuple space", first + c);
+            goto out;
+        }
+        tf_tuple_clear(&tmpl);
+    }
+    for (int row = 0; row < rows; row++) {
+        tf_pixel *dst = s->chunk + (size_t)s->chunk_fill * (size_t)s->tasks.width;
+        for (int c = 0; c < cols; c++) {
+            tf_rect r = tf_task_rect(&s->tasks, first + c);
+            tf_pixels_decode(msg[c].pixels + (size_t)row * (size_t)r.w * TF_PIXEL_WIRE_BYTES,
+                             dst + r.x, (size_t)r.w);
+        }
+        for (int x = 0; x < s->tasks.width; x++)
+            s->stats.spp_sum += dst[x].spp;
+        s->stats.pixels += (uint64_t)s->tasks.width;
+        s->chunk_fill++;
+        if (flush_chunk(s, 0))
+            goto out;
+    }
+    s->stats.rows_rendered += rows;
+    rc = 0;
+out:
+    if (res)
+        for (int c = 0; c < cols; c++)
+            tf_tuple_clear(&res[c]);
+    free(res);
+    free(msg);
+    return rc;
+}
+
+/* Advance the write front over every band whose results are all in. */
+static void write_ready_bands(tf_supervisor *s)
+{
+    while (!s->error[0] && s->write_task < s->tasks.count) {
+        int band = tf_task_band(&s->tasks, (int)s->write_task);
+        int first = tf_band_first_task(&s->tasks, band);
+        int last = first + s->tasks.cols; /* exclusive */
+        if (last > s->next_deal)
+            return;
+        for (int id = first; id < last; id++) {
+            task_slot *t = slot_of(s, id);
+            if (!t || !t->has_result)
+                return;
+        }
+        if (write_band(s, band))
+            return;
+        for (int id = first; id < last; id++) {
+            task_slot *t = slot_of(s, id);
+            withdraw_copies(s, t);
+            t->id = -1;
+        }
+        s->write_task = last;
+    }
+    if (s->write_task == s->tasks.count)
+        flush_chunk(s, 1);
+}
+
+/* ---- hooks ---------------------------------------------------------------------------------- */
+
+static void remove_lease(tf_supervisor *s, uint64_t conn, int64_t task)
+{
+    for (int i = 0; i < s->nleases; i++)
+        if (s->leases[i].conn == conn && s->leases[i].task == task) {
+            s->leases[i] = s->leases[--s->nleases];
+            task_slot *t = slot_of(s, task);
+            if (t && t->leased > 0)
+                t->leased--;
+            return;
+        }
+}
+
+static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)
+{
+    tf_supervisor *s = ctx;
+    const char *name = tf_tuple_name(tuple);
+    if (!name || strcmp(name, "task"))
+        return;
+    tf_task_msg m;
+    if (tf_task_unpack(tuple, &m) || m.id < 0)
+        return;
+    task_slot *t = slot_of(s, m.id);
+    if (!t)
+        return;
+    /* May go to -1 for a moment: when a worker puts a task back (on_task_returned) and the
+     * space hands it straight to a waiting worker, on_take for the taker runs before on_out
+     * for the returner. */
+    t->in_space--;
+    if (s->nleases == s->cap_leases) {
+        int cap = s->cap_leases ? 2 * s->cap_leases : 64;
+        lease *nl = realloc(s->leases, (size_t)cap * sizeof *nl);
+        if (!nl) {
+            fail(s, "out of memory recording a lease");
+            return;
+        }
+        s->leases = nl;
+        s->cap_leases = cap;
+    }
+    s->leases[s->nleases++] = (lease){conn, m.id};
+    t->leased++;
+}
+
+/* A worker put a task back (it is excluded from it): the copy is in the space again. */
+static void on_task_returned(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
+{
+    tf_task_msg m;
+    if (tf_task_unpack(tuple, &m) || m.id < 0)
+        return;
+    task_slot *t = slot_of(s, m.id);
+    remove_lease(s, conn, m.id);
+    if (t)
+        t->in_space++;
+}
+
+static void drop_result(tf_supervisor *s, int64_t id, int64_t worker)
+{
+    tf_tuple tmpl, got;
+    if (tf_result_template(&tmpl, id, worker))
+        return;
+    tf_tuple_init(&got);
+    if (ts_space_inp(s->space, &tmpl, &got) == 1)
+        s->stats.results_dropped++;
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&tmpl);
+}
+
+/* Take this very tuple (all fields actual) out of the space. */
+static void remove_exact(tf_supervisor *s, const tf_tuple *tuple)
+{
+    tf_tuple tmpl, got;
+    tf_tuple_init(&tmpl);
+    tf_tuple_init(&got);
+    if (tf_tuple_copy(&tmpl, tuple) == 0 && ts_space_inp(s->space, &tmpl, &got) == 1)
+        tf_tuple_clear(&got);
+    tf_tuple_clear(&tmpl);
+}
+
+static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
+{
+    tf_result_msg m;
+    const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
+    if (tf_result_unpack(tuple, &m)) {
+        tf_warn("malformed result tuple from %s dropped", peer ? peer : "?");
+        remove_exact(s, tuple);
+        return;
+    }
+    remove_lease(s, conn, m.id);
+    task_slot *t = slot_of(s, m.id);
+    if (!t || t->has_result) {
+        drop_result(s, m.id, m.worker);
+        return;
+    }
+    tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
+    if (m.pixels_len != (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES) {
+        tf_warn("result of task %" PRId64 " from %s has %zu pixel bytes, expected %zu; dropped",
+                m.id, peer ? peer : "?", m.pixels_len,
+                (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES);
+        drop_result(s, m.id, m.worker);
+        if (!note_failure(s, t, m.worker))
+            redeal_if_lost(s, t);
+        return;
+    }
+    t->has_result = 1;
+    withdraw_copies(s, t);
+    tf_worker_stats *w = worker_by_id(s, m.worker);
+    if (!w)
+        w = add_worker(s, m.worker);
+    if (w) {
+        w->tasks++;
+        w->rays += m.counts.primary_rays + m.counts.shadow_rays;
+        w->busy_s += (double)m.busy_ns * 1e-9;
+    }
+    s->stats.primary_rays += m.counts.primary_rays;
+    s->stats.shadow_rays += m.counts.shadow_rays;
+    s->stats.external_rays += m.counts.external_rays;
+    write_ready_bands(s);
+}
+
+static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
+{
+    int64_t id, pid;
+    const char *kind, *host, *backend;
+    if (tuple->nfields == 6 && !tf_tuple_get_int(tuple, 1, &id) &&
+        !tf_tuple_get_string(tuple, 2, &kind) && !tf_tuple_get_string(tuple, 3, &host) &&
+        !tf_tuple_get_int(tuple, 4, &pid) && !tf_tuple_get_string(tuple, 5, &backend)) {
+        tf_worker_stats *w = add_worker(s, id);
+        if (w) {
+            snprintf(w->kind, sizeof w->kind, "%s", kind);
+            snprintf(w->host, sizeof w->host, "%s", host);
+            snprintf(w->backend, sizeof w->backend, "%s", backend);
+            w->conn = conn;
+            const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
+            tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)", id,
+                     kind, host, pid, backend, peer ? peer : "?");
+        }
+    }
+    remove_exact(s, tuple);
+}
+
+static void on_failed(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
+{
+    int64_t id, worker;
+    const char *msg;
+    if (tuple->nfields == 4 && !tf_tuple_get_int(tuple, 1, &id) &&
+        !tf_tuple_get_int(tuple, 2, &worker) && !tf_tuple_get_string(tuple, 3, &msg)) {
+        tf_warn("worker %" PRId64 " failed task %" PRId64 ": %s", worker, id, msg);
+        remove_lease(s, conn, id);
+        task_slot *t = slot_of(s, id);
+        if (t && !t->has_result && !note_failure(s, t, worker))
+            redeal_if_lost(s, t);
+    }
+    remove_exact(s, tuple);
+}
+
+static void on_out(void *ctx, uint64_t conn, const tf_tuple *tuple)
+{
+    tf_supervisor *s = ctx;
+    const char *name = tf_tuple_name(tuple);
+    if (!name)
+        return;
+    if (!strcmp(name, "result"))
+        on_result(s, conn, tuple);
+    else if (!strcmp(name, "task"))
+        on_task_returned(s, conn, tuple);
+    else if (!strcmp(name, "hello"))
+        on_hello(s, conn, tuple);
+    else if (!strcmp(name, "failed"))
+        on_failed(s, conn, tuple);
+}
+
+static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
+{
+    tf_supervisor *s = ctx;
+    tf_worker_stats *w = worker_by_conn(s, conn);
+    int64_t worker = w ? w->id : -(int64_t)conn; /* a connection that never said hello */
+    if (w)
+        w->conn = 0;
+    for (int i = 0; i < s->nleases;) {
+        if (s->leases[i].conn != conn) {
+            i++;
+            continue;
+        }
+        int64_t id = s->leases[i].task;
+        s->leases[i] = s->leases[--s->nleases];
+        task_slot *t = slot_of(s, id);
+        if (!t)
+            continue;
+        if (t->leased > 0)
+            t->leased--;
+        if (t->has_result)
+            continue;
+        tf_warn("worker %s left holding task %" PRId64, peer ? peer : "?", id);
+        if (!note_failure(s, t, worker))
+            redeal_if_lost(s, t);
+    }
+}
+
+ts_server_hooks tf_supervisor_hooks(tf_supervisor *sup)
+{
+    ts_server_hooks h = {sup, on_take, on_out, on_disconnect};
+    return h;
+}
+
+/* ---- stragglers ------------------------------------------------------------------------------- */
+
+/* Nothing left to deal and workers idle: deal a second copy of the oldest outstanding task. */
+static void deal_duplicate(tf_supervisor *s)
+{
+    ts_space_stats st;
+    ts_space_get_stats(s->space, &st);
+    if (st.waiters == 0)
+        return;
+    if (s->next_deal < s->tasks.count && s->next_deal - s->write_task < s->cfg.watermark)
+        return; /* fresh work can still be dealt */
+    for (int64_t id = s->write_task; id < s->next_deal; id++) {
+        task_slot *t = slot_of(s, id);
+        if (t && t->in_space > 0 && !t->has_result)
+            return; /* an undealt copy is waiting: idle workers will take it */
+    }
+    for (int64_t id = s->write_task; id < s->next_deal; id++) {
+        task_slot *t = slot_of(s, id);
+        if (!t || t->has_result || t->duplicated || t->leased == 0)
+            continue;
+        t->duplicated = 1;
+        t->in_space++;
+        s->stats.tasks_duplicated++;
+        tf_debug("straggler: dealing a second copy of task %" PRId64, id);
+        deal_copy(s, t);
+        return;
+    }
+}
+
+/* ---- public --------------------------------------------------------------------------------- */
+
+tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cfg, char *err,
+                                 size_t errlen)
+{
+    tf_supervisor *s = calloc(1, sizeof *s);
+    if (!s) {
+        snprintf(err, errlen, "out of memory");
+        return NULL;
+    }
+    s->space = space;
+    s->cfg = *cfg;
+    if (s->cfg.max_task_failures < 1)
+        s->cfg.max_task_failures = 3;
+    tf_tasks_init(&s->tasks, cfg->width, cfg->height, cfg->first_row, cfg->spec);
+    if (cfg->watermark < s->tasks.cols) {
+        snprintf(err, errlen,
+                 "--watermark %d is smaller than the %d tasks of one row band: the first band "
+                 "could never be written; use at least %d",
+                 cfg->watermark, s->tasks.cols, s->tasks.cols);
+        free(s);
+        return NULL;
+    }
+    s->ring_size = cfg->watermark;
+    s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
+    s->chunk_rows = tf_exr_chunk_rows();
+    s->chunk = calloc((size_t)s->chunk_rows * (size_t)cfg->width, sizeof *s->chunk);
+    if (!s->ring || !s->chunk) {
+        snprintf(err, errlen, "out of memory");
+        tf_supervisor_free(s);
+        return NULL;
+    }
+    for (int i = 0; i < s->ring_size; i++)
+        s->ring[i].id = -1;
+    s->rows_written = cfg->first_row;
+    s->stats.tasks_total = s->tasks.count;
+    s->stats.rows_resumed = cfg->first_row;
+    s->stats.watermark = cfg->watermark;
+    return s;
+}
+
+void tf_supervisor_free(tf_supervisor *s)
+{
+    if (!s)
+        return;
+    free(s->ring);
+    free(s->leases);
+    free(s->chunk);
+    free(s->stats.workers);
+    free(s);
+}
+
+void tf_supervisor_attach(tf_supervisor *s, ts_server *srv) { s->srv = srv; }
+
+void tf_supervisor_step(tf_supervisor *s, double now_ms)
+{
+    if (s->error[0])
+        return;
+    write_ready_bands(s);
+    deal_new_tasks(s);
+    deal_duplicate(s);
+    if (s->dirty && (now_ms - s->last_sync_ms >= s->cfg.fsync_interval_ms ||
+                     tf_supervisor_done(s))) {
+        char err[512];
+        if (tf_exr_sync(s->cfg.writer, err, sizeof err))
+            fail(s, "%s", err);
+        s->dirty = 0;
+        s->last_sync_ms = now_ms;
+    }
+}
+
+int tf_supervisor_done(const tf_supervisor *s)
+{
+    return s->write_task == s->tasks.count && s->chunk_fill == 0 && !s->error[0];
+}
+
+const char *tf_supervisor_error(const tf_supervisor *s) { return s->error[0] ? s->error : NULL; }
+
+void tf_supervisor_stop_workers(tf_supervisor *s)
+{
+    if (s->stop_sent)
+        return;
+    tf_task_msg m;
+    memset(&m, 0, sizeof m);
+    m.id = TF_TASK_STOP;
+    tf_tuple t;
+    if (tf_task_pack(&t, &m) == 0 && ts_space_out(s->space, &t) == 0)
+        s->stop_sent = 1;
+}
+
+int tf_supervisor_rows_written(const tf_supervisor *s) { return s->rows_written; }
+
+const tf_farm_stats *tf_supervisor_stats(tf_supervisor *s)
+{
+    ts_space_stats st;
+    ts_space_get_stats(s->space, &st);
+    s->stats.max_tuple_bytes = st.max_bytes;
+    return &s->stats;
+}
+
+int tf_supervisor_live_workers(const tf_supervisor *s)
+{
+    int n = 0;
+    for (int i = 0; i < s->stats.nworkers; i++)
+        n += s->stats.workers[i].conn != 0;
+    return n;
+}

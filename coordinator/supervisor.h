@@ -1,0 +1,90 @@
+/* supervisor.h: the farm's supervisor (Musgrave Appendix A), an in-process client of the tuple
+ * space that runs in the coordinator's event-loop thread.
+ *
+ * It deals ("task", ...) tuples in id order, never more than `watermark` tasks beyond the write
+ * front (the first task whose rows are not yet on disk), so the space holds a bounded number of
+ * bytes whatever the image size.  Results wait in the space until their whole band is done;
+ * then it takes them out in order, writes the band's rows to the OpenEXR checkpoint and makes
+ * them durable at a bounded interval.
+ *
+ * Faults.  Every take of a task by a connection is a lease (server hook on_take).  When a
+ * connection closes (worker killed, link cut, silence timeout) while it holds leases, those
+ * tasks go back into the space (tasks_redealt).  A task a worker reports as failed, or loses by
+ * dying, counts against that worker; after two failures there the worker is excluded from it
+ * (the task tuple carries the exclusion list), and a task that fails on max_task_failures
+ * distinct workers stops the render (rows already written remain valid for --resume).
+ * Stragglers: when no task is left to deal and workers are idle, the oldest outstanding task
+ * is dealt once more; the first result wins and later ones are dropped.
+ *
+ * Memory is O(watermark): per-task state lives in a ring indexed by task id modulo its size. */
+#ifndef TF_SUPERVISOR_H
+#define TF_SUPERVISOR_H
+
+#include <stdint.h>
+
+#include "exrfile.h"
+#include "tasks.h"
+#include "tsserver.h"
+#include "tuplespace.h"
+
+typedef struct tf_supervisor tf_supervisor;
+
+typedef struct tf_worker_stats {
+    int64_t id;
+    char kind[16];     /* forked | networked */
+    char host[64];
+    char backend[16];
+    uint64_t conn;     /* 0 once disconnected */
+    int64_t tasks;
+    uint64_t rays;
+    double busy_s;
+} tf_worker_stats;
+
+typedef struct tf_farm_stats {
+    int64_t tasks_total, tasks_redealt, tasks_duplicated, results_dropped, task_failures;
+    int rows_resumed, rows_rendered;
+    uint64_t primary_rays, shadow_rays, external_rays;
+    double spp_sum;           /* sum of the spp channel over rendered pixels */
+    uint64_t pixels;
+    int max_outstanding_tasks;
+    int watermark;
+    size_t max_tuple_bytes;
+    int nworkers;
+    tf_worker_stats *workers;
+} tf_farm_stats;
+
+typedef struct tf_supervisor_config {
+    int width, height;
+    int first_row;            /* rows [0, first_row) are already on disk */
+    tf_task_spec spec;
+    int watermark;            /* >= tasks per band (checked) */
+    int max_task_failures;
+    int fsync_interval_ms;
+    tf_exr_writer *writer;    /* positioned at first_row; the supervisor writes, syncs */
+} tf_supervisor_config;
+
+/* NULL with a message on error (e.g. watermark smaller than a band). */
+tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cfg, char *err,
+                                 size_t errlen);
+void tf_supervisor_free(tf_supervisor *sup);
+/* The server the workers use; needed to name peers.  Call once after ts_server_new. */
+void tf_supervisor_attach(tf_supervisor *sup, ts_server *srv);
+/* Hooks for ts_server_new (ctx = the supervisor). */
+ts_server_hooks tf_supervisor_hooks(tf_supervisor *sup);
+
+/* Deal, duplicate for stragglers, write, sync.  Call after every server iteration. */
+void tf_supervisor_step(tf_supervisor *sup, double now_ms);
+/* All rows written (the writer is then finished by the caller). */
+int tf_supervisor_done(const tf_supervisor *sup);
+/* A fatal farm error (a task failed everywhere, a write error): the message, else NULL. */
+const char *tf_supervisor_error(const tf_supervisor *sup);
+/* Put the stop tuple out so workers leave. */
+void tf_supervisor_stop_workers(tf_supervisor *sup);
+/* Rows durably... written so far (first_row + rows written by this run). */
+int tf_supervisor_rows_written(const tf_supervisor *sup);
+/* Live statistics (pointers valid until the next call into the supervisor). */
+const tf_farm_stats *tf_supervisor_stats(tf_supervisor *sup);
+/* Connected workers that said hello and have not left. */
+int tf_supervisor_live_workers(const tf_supervisor *sup);
+
+#endif

@@ -1,0 +1,43 @@
+/* tasks.h: screen-space decomposition of a render into tasks (Musgrave Appendix A 7.2.1):
+ * scanline blocks of K rows or near-square postage stamps of W x H pixels.
+ *
+ * Tasks are numbered in write order: band by band from the top (the first row still to be
+ * rendered), left to right within a band.  A band is a horizontal strip as tall as one task;
+ * the coordinator can write a band's rows once every task of the band has its result.  Task
+ * ids are therefore also the dealing order, which keeps the watermark simple: the tasks dealt
+ * and not yet written always form one contiguous range of ids. */
+#ifndef TF_TASKS_H
+#define TF_TASKS_H
+
+#include "render.h"
+
+enum tf_task_shape { TF_TASKS_ROWS, TF_TASKS_STAMPS };
+
+typedef struct tf_task_spec {
+    enum tf_task_shape shape;
+    int w, h;   /* stamps: w x h pixels; rows: w = image width, h = K */
+} tf_task_spec;
+
+typedef struct tf_tasks {
+    int width, height;  /* image */
+    int first_row;      /* rows before it are already on disk (resume) */
+    int tw, th;         /* task size (the last column / band may be smaller) */
+    int cols, bands;    /* tasks per band, number of bands */
+    int count;          /* cols * bands */
+} tf_tasks;
+
+/* Parse "rows:K" or "stamps:WxH".  Returns 0, or -1 with a one-line message. */
+int tf_task_spec_parse(const char *text, tf_task_spec *spec, char *err, size_t errlen);
+/* Default: near-square stamps sized so each worker gets many tasks (load balance) while the
+ * border overhead (external samples) stays small. */
+tf_task_spec tf_task_spec_default(int width, int height, int workers);
+
+void tf_tasks_init(tf_tasks *t, int width, int height, int first_row, tf_task_spec spec);
+/* Rectangle of task id (0 <= id < count). */
+tf_rect tf_task_rect(const tf_tasks *t, int id);
+/* Band of task id, first task id of a band, and a band's rows [y0, y0 + rows). */
+static inline int tf_task_band(const tf_tasks *t, int id) { return id / t->cols; }
+static inline int tf_band_first_task(const tf_tasks *t, int band) { return band * t->cols; }
+void tf_band_rows(const tf_tasks *t, int band, int *y0, int *rows);
+
+#endif

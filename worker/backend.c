@@ -1,0 +1,62 @@
+/* backend.c: see backend.h.  The C backend is tf_render_rect itself; the OpenCL backend lives in
+ * backend_opencl.c behind the same three calls. */
+#include "backend.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "backend_opencl.h"
+
+enum backend_kind { BACKEND_C, BACKEND_OPENCL };
+
+struct tf_backend {
+    enum backend_kind kind;
+    tf_renderer *renderer;   /* BACKEND_C */
+    tf_cl_backend *cl;       /* BACKEND_OPENCL */
+};
+
+tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightfield *hf,
+                           char *err, size_t errlen)
+{
+    tf_backend *b = calloc(1, sizeof *b);
+    if (!b) {
+        snprintf(err, errlen, "out of memory");
+        return NULL;
+    }
+    if (!strcmp(name, "c")) {
+        b->kind = BACKEND_C;
+        b->renderer = tf_renderer_new(s, hf, err, errlen);
+        if (b->renderer)
+            return b;
+    } else if (!strcmp(name, "opencl")) {
+        b->kind = BACKEND_OPENCL;
+        b->cl = tf_cl_backend_new(s, hf, err, errlen);
+        if (b->cl)
+            return b;
+    } else {
+        snprintf(err, errlen, "unknown backend '%s' (expected c or opencl)", name);
+    }
+    free(b);
+    return NULL;
+}
+
+int tf_backend_render(tf_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
+                      char *err, size_t errlen)
+{
+    if (b->kind == BACKEND_OPENCL)
+        return tf_cl_backend_render(b->cl, rect, out, counts, err, errlen);
+    tf_render_rect(b->renderer, rect, out, counts);
+    return 0;
+}
+
+const char *tf_backend_name(const tf_backend *b) { return b->kind == BACKEND_C ? "c" : "opencl"; }
+
+void tf_backend_free(tf_backend *b)
+{
+    if (!b)
+        return;
+    tf_renderer_free(b->renderer);
+    tf_cl_backend_free(b->cl);
+    free(b);
+}

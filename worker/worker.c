@@ -1,0 +1,202 @@
+/* worker.c: see worker.h. */
+#include "worker.h"
+
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "backend.h"
+#include "farmproto.h"
+#include "log.h"
+
+static int64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+/* Linda's counter idiom: in ("next_worker", ?n), out ("next_worker", n + 1). */
+static int take_worker_id(ts_client *c, int64_t *id)
+{
+    tf_tuple tmpl, got, next;
+    tf_tuple_init(&tmpl);
+    tf_tuple_init(&got);
+    if (tf_tuple_pack(&tmpl, "sI", "next_worker") || ts_in(c, &tmpl, &got) ||
+        tf_tuple_get_int(&got, 1, id)) {
+        tf_tuple_clear(&tmpl);
+        tf_tuple_clear(&got);
+        return -1;
+    }
+    tf_tuple_clear(&tmpl);
+    tf_tuple_clear(&got);
+    tf_tuple_init(&next);
+    int rc = tf_tuple_pack(&next, "si", "next_worker", *id + 1) || ts_out(c, &next) ? -1 : 0;
+    tf_tuple_clear(&next);
+    return rc;
+}
+
+static int say_hello(ts_client *c, int64_t id, const char *kind, const char *backend)
+{
+    char host[64] = "";
+    gethostname(host, sizeof host - 1);
+    tf_tuple t;
+    tf_tuple_init(&t);
+    int rc = tf_tuple_pack(&t, "sissis", "hello", id, kind, host, (int64_t)getpid(), backend) ||
+                     ts_out(c, &t)
+                 ? -1
+                 : 0;
+    tf_tuple_clear(&t);
+    return rc;
+}
+
+static int put_back(ts_client *c, tf_tuple *task)
+{
+    int rc = ts_out(c, task);
+    tf_tuple_clear(task);
+    return rc;
+}
+
+static int report_failure(ts_client *c, int64_t task, int64_t worker, const char *msg)
+{
+    tf_tuple t;
+    tf_tuple_init(&t);
+    int rc = tf_tuple_pack(&t, "siis", "failed", task, worker, msg) || ts_out(c, &t) ? -1 : 0;
+    tf_tuple_clear(&t);
+    return rc;
+}
+
+int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, const char *kind,
+                   const char *backend_name)
+{
+    char err[1024];
+    int64_t id;
+    ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS);
+    if (take_worker_id(c, &id)) {
+        tf_error("cannot join the render: %s", ts_client_error(c));
+        return 1;
+    }
+    char tag[32];
+    snprintf(tag, sizeof tag, "worker %" PRId64, id);
+    tf_log_set_tag(tag);
+    tf_backend *b = tf_backend_new(backend_name, s, hf, err, sizeof err);
+    if (!b) {
+        tf_error("%s", err);
+        return 1;
+    }
+    if (say_hello(c, id, kind, tf_backend_name(b))) {
+        tf_error("cannot join the render: %s", ts_client_error(c));
+        tf_backend_free(b);
+        return 1;
+    }
+    tf_tuple tmpl;
+    tf_task_template(&tmpl, TF_TASK_ANY);
+    int status = 0;
+    tf_pixel *px = NULL;
+    size_t px_cap = 0;
+    for (;;) {
+        tf_tuple task;
+        tf_task_msg m;
+        tf_tuple_init(&task);
+        if (ts_in(c, &tmpl, &task)) {
+            tf_error("lost the coordinator: %s", ts_client_error(c));
+            status = 1;
+            break;
+        }
+        if (tf_task_unpack(&task, &m)) {
+            tf_warn("ignoring a malformed task tuple");
+            tf_tuple_clear(&task);
+            continue;
+        }
+        if (m.id == TF_TASK_STOP) {
+            put_back(c, &task); /* so every other worker sees it too */
+            break;
+        }
+        if (tf_task_excludes(&m, id)) {
+            put_back(c, &task);
+            usleep(200 * 1000); /* let a worker that can render it take it */
+            continue;
+        }
+        tf_tuple_clear(&task);
+        size_t n = (size_t)m.rect.w * (size_t)m.rect.h;
+        if (n > px_cap) {
+            tf_pixel *np = realloc(px, n * sizeof *px);
+            if (!np) {
+                report_failure(c, m.id, id, "out of memory");
+                continue;
+            }
+            px = np;
+            px_cap = n;
+        }
+        tf_render_counts counts = {0};
+        int64_t t0 = now_ns();
+        if (m.rect.x + m.rect.w > s->width || m.rect.y + m.rect.h > s->height) {
+            report_failure(c, m.id, id, "task rectangle outside the image");
+            continue;
+        }
+        if (tf_backend_render(b, m.rect, px, &counts, err, sizeof err)) {
+            tf_warn("task %" PRId64 ": %s", m.id, err);
+            if (report_failure(c, m.id, id, err))
+                break;
+            continue;
+        }
+        int64_t busy = now_ns() - t0;
+        tf_tuple result;
+        if (tf_result_pack(&result, m.id, id, &counts, busy, px, n) || ts_out(c, &result)) {
+            tf_tuple_clear(&result);
+            tf_error("cannot deliver the result of task %" PRId64 ": %s", m.id,
+                     ts_client_error(c));
+            status = 1;
+            break;
+        }
+        tf_tuple_clear(&result);
+    }
+    tf_tuple_clear(&tmpl);
+    free(px);
+    tf_backend_free(b);
+    return status;
+}
+
+tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen)
+{
+    tf_tuple tmpl, got;
+    tf_tuple_init(&tmpl);
+    tf_tuple_init(&got);
+    const char *text, *hash;
+    int64_t w, h;
+    if (tf_tuple_pack(&tmpl, "sSIIS", "scene") || ts_rd(c, &tmpl, &got)) {
+        snprintf(err, errlen, "%s: cannot read the scene: %s", coordinator, ts_client_error(c));
+        goto fail;
+    }
+    if (tf_tuple_get_string(&got, 1, &text) || tf_tuple_get_int(&got, 2, &w) ||
+        tf_tuple_get_int(&got, 3, &h) || tf_tuple_get_string(&got, 4, &hash) || w < 1 ||
+        h < 1 || w > 65536 || h > 65536) {
+        snprintf(err, errlen, "%s: malformed scene tuple", coordinator);
+        goto fail;
+    }
+    char perr[1024];
+    tf_scene *s = tf_scene_parse_text("<coordinator scene>", text, strlen(text), perr, sizeof perr);
+    if (!s) {
+        snprintf(err, errlen, "%s: scene does not parse here: %s", coordinator, perr);
+        goto fail;
+    }
+    tf_scene_set_size(s, (int)w, (int)h);
+    if (strcmp(s->hash_hex, hash)) {
+        snprintf(err, errlen,
+                 "%s: the scene hashes differently here (%.12s vs %.12s): mismatched terrafarm "
+                 "versions?",
+                 coordinator, s->hash_hex, hash);
+        tf_scene_free(s);
+        goto fail;
+    }
+    tf_tuple_clear(&tmpl);
+    tf_tuple_clear(&got);
+    return s;
+fail:
+    tf_tuple_clear(&tmpl);
+    tf_tuple_clear(&got);
+    return NULL;
+}

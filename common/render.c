@@ -6,8 +6,9 @@
  * computed here rather than borrowed from a neighbour, so tasks never wait on each other.
  *
  * Each pixel then refines itself (render_pixel): starting from its 4 corners it pops quads off a
- * small explicit stack; a quad whose corners differ in contrast by more than the threshold in
- * any channel is split into four, down to quads of one lattice step.  Samples inside the pixel
+ * small explicit stack; a quad whose corners differ in contrast (Mitchell: per channel,
+ * (max-min)/(max+min)) by more than the threshold divided by the quad's share of the pixel's
+ * area is split into four, down to quads of one lattice step.  Samples inside the pixel
  * are cached on the pixel's (N+1)^2 lattice so shared quad corners are traced once.  Because
  * every sample is a function of its lattice point only (render_internal.h) and the pixel's
  * refinement looks at nothing but its own samples, a pixel's bits do not depend on the
@@ -159,7 +160,11 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
         const tf_sample *s01 = cached_sample(r, pc, px, py, q.i, q.j + q.size, &spp, tally);
         const tf_sample *s11 =
             cached_sample(r, pc, px, py, q.i + q.size, q.j + q.size, &spp, tally);
-        if (q.size > 1 && quad_needs_split(r->threshold, s00, s10, s01, s11)) {
+        /* A quad's error weighs in the pixel by its share of the pixel's area, so the
+         * threshold grows with depth by the inverse of that share (4x per level): busy
+         * texture stops early, a strong edge still goes deep. */
+        double area_share = ((double)q.size * q.size) / ((double)N * N);
+        if (q.size > 1 && quad_needs_split(r->threshold / area_share, s00, s10, s01, s11)) {
             int h = q.size / 2;
             stack[sp++] = (quad){q.i + h, q.j + h, h};
             stack[sp++] = (quad){q.i, q.j + h, h};

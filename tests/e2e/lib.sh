@@ -1,0 +1,105 @@
+# tests/e2e/lib.sh: shared helpers of the end-to-end farm and resume scripts (sourced, POSIX sh).
+#
+# Every script: `. "$(dirname "$0")/lib.sh"`, then e2e_init.  That makes a private temp dir
+# $T, and a trap that kills every process the script started (recorded with e2e_track, plus
+# their children) and removes $T, whether the script passes, fails or is interrupted.
+# tests/run.sh sets TF_BIN (the binary under test: bin/terrafarm or the ASan build) and
+# TF_ROOT; run by hand, both default to this checkout.
+#
+# Conventions: say() prints what is checked; fail() prints one reason and exits 1; skip()
+# exits 77 with the reason as its last line.  Never a fixed port: coordinators listen on
+# 127.0.0.1:0 and e2e_port reads the port they print ("workers may join at HOST:PORT").
+
+TF_ROOT=${TF_ROOT:-$(cd "$(dirname "$0")/../.." && pwd)}
+TF_BIN=${TF_BIN:-$TF_ROOT/bin/terrafarm}
+SCENE=$TF_ROOT/scenes/default.scene
+E2E_PIDS=""
+
+say() { echo "-- $*"; }
+fail() { echo "FAIL: $*"; exit 1; }
+skip() { echo "$*"; exit 77; }
+
+e2e_cleanup() {
+    for p in $E2E_PIDS; do
+        for c in $(pgrep -P "$p" 2>/dev/null); do kill -KILL "$c" 2>/dev/null; kill -CONT "$c" 2>/dev/null; done
+        kill -KILL "$p" 2>/dev/null
+        kill -CONT "$p" 2>/dev/null
+    done
+    for p in $E2E_PIDS; do wait "$p" 2>/dev/null; done
+    [ -n "${T:-}" ] && rm -rf "$T"
+}
+
+e2e_init() {
+    [ -x "$TF_BIN" ] || skip "no terrafarm binary at $TF_BIN (run make)"
+    command -v python3 >/dev/null 2>&1 || skip "python3 is not installed"
+    T=$(mktemp -d "${TMPDIR:-/tmp}/tf-e2e.XXXXXX") || fail "mktemp"
+    trap e2e_cleanup EXIT
+    trap 'exit 1' INT TERM HUP
+}
+
+# Remember a background process so the trap kills it (and its children).
+e2e_track() { E2E_PIDS="$E2E_PIDS $1"; }
+
+# render ARGS...: a foreground render of the default scene; stderr to $T/last.err.
+render() { "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 "$@" 2>"$T/last.err"; }
+
+# e2e_port LOGFILE [SECONDS]: wait until a coordinator logging to LOGFILE prints its port.
+e2e_port() {
+    i=0 lim=$(( ${2:-20} * 10 ))
+    while [ $i -lt $lim ]; do
+        p=$(sed -n 's/.*workers may join at [^ ]*:\([0-9][0-9]*\).*/\1/p' "$1" 2>/dev/null | head -1)
+        [ -n "$p" ] && { echo "$p"; return 0; }
+        sleep 0.1; i=$((i + 1))
+    done
+    return 1
+}
+
+# wait_exit PID SECONDS: wait for a tracked background process; its exit status in $rc.
+# Fails the test if it does not end in time.
+wait_exit() {
+    i=0 lim=$(( $2 * 10 ))
+    while kill -0 "$1" 2>/dev/null; do
+        # a zombie counts as ended: `wait` below reaps it
+        [ "$(ps -o stat= -p "$1" 2>/dev/null | cut -c1)" = Z ] && break
+        i=$((i + 1)); [ $i -ge $lim ] && fail "process $1 still running after $2 s"
+        sleep 0.1
+    done
+    wait "$1"; rc=$?
+}
+
+# jstat KEY FILE.json: one value of the statistics.
+jstat() { python3 -c 'import json,sys; print(json.load(open(sys.argv[2]))[sys.argv[1]])' "$1" "$2"; }
+
+# same A B WHAT: the two images must be byte-identical.
+same() {
+    cmp -s "$1" "$2" || fail "$3: $2 differs from the reference $1"
+    say "$3: identical to the reference"
+}
+
+# rows_on_disk FILE: rows in whole verified chunks of a (partial) output, read with the
+# coordinator's own probe: "resuming ...: N of H rows already on disk" from a --resume that is
+# stopped right after it (its stderr is the only thing used; the copy is thrown away).
+# Prints N, or nothing if the file is not resumable.
+rows_on_disk() {
+    mkdir -p "$T/probe" && cp "$1" "$T/probe/p.exr" || return 1
+    "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 -j 0 --resume -o "$T/probe/p.exr" \
+        $PROBE_ARGS >"$T/probe/out" 2>&1 &
+    pp=$!
+    i=0
+    while [ $i -lt 100 ] && ! grep -q 'rows already on disk\|nothing to resume\|already complete\|cannot\|error' "$T/probe/out"; do
+        sleep 0.05; i=$((i + 1))
+    done
+    kill -KILL $pp 2>/dev/null; wait $pp 2>/dev/null
+    sed -n 's/.*resuming .*: \([0-9][0-9]*\) of [0-9]* rows already on disk.*/\1/p' "$T/probe/out"
+    grep -q 'already complete' "$T/probe/out" && echo complete
+    rm -rf "$T/probe"
+}
+
+# no_leftovers PIDS...: none of these processes may still exist (zombies excluded).
+no_leftovers() {
+    for p in "$@"; do
+        s=$(ps -o stat= -p "$p" 2>/dev/null | cut -c1)
+        [ -n "$s" ] && [ "$s" != Z ] && fail "process $p ($(ps -o args= -p "$p")) outlived its coordinator"
+    done
+    return 0
+}

@@ -371,21 +371,25 @@ static int walk_hier(const ray_ctx *r, candidate *best)
 {
     const tf_heightfield *hf = r->hf;
     const int cells = hf->cells, top = hf->levels - 1;
-    const double oz = r->o[2], dz = r->d[2], t1 = r->t1;
+    /* Local copies of the hot fields; the crossing expressions are xcross()/ycross() spelled
+     * out, term for term, so they give the same bits. */
+    const double ox = r->o[0], oy = r->o[1], oz = r->o[2], dz = r->d[2], t1 = r->t1;
+    const double cell = hf->cell, inv_dx = r->inv_dx, inv_dy = r->inv_dy, margin = r->margin;
+    const int sx = r->sx, sy = r->sy, x_ahead = sx > 0, y_ahead = sy > 0;
     int ci = r->ci, cj = r->cj, level = top;
     int stale = STALE_NONE;
     double t_cur = r->t0, t_event = r->t0;
     for (;;) {
         const int bi = ci >> level, bj = cj >> level;
-        double tx = r->sx ? xcross(r, (bi + (r->sx > 0)) << level) : INFINITY;
-        double ty = r->sy ? ycross(r, (bj + (r->sy > 0)) << level) : INFINITY;
+        double tx = sx ? ((double)((bi + x_ahead) << level) * cell - ox) * inv_dx : INFINITY;
+        double ty = sy ? ((double)((bj + y_ahead) << level) * cell - oy) * inv_dy : INFINITY;
         double tc = tx <= ty ? tx : ty;
         double t_out = tc < t1 ? tc : t1;
         if (t_out < t_cur)
             t_out = t_cur;
         size_t idx = (size_t)bj * (size_t)(cells >> level) + (size_t)bi;
         if (!culled(oz + t_cur * dz, oz + t_out * dz, hf->maxgrid[level][idx],
-                    hf->mingrid[level][idx], r->margin)) {
+                    hf->mingrid[level][idx], margin)) {
             if (level == 0) {
                 if (test_cell(r, ci, cj, tx, ty, best))
                     return 1;
@@ -405,23 +409,22 @@ static int walk_hier(const ray_ctx *r, candidate *best)
         t_event = tc;
         int boundary; /* the grid line crossed, in units of level-L blocks */
         if (tx <= ty) {
-            boundary = bi + (r->sx > 0);
-            ci = r->sx > 0 ? boundary << level : (boundary << level) - 1;
+            boundary = bi + x_ahead;
+            ci = x_ahead ? boundary << level : (boundary << level) - 1;
             if ((unsigned)ci >= (unsigned)cells)
                 return 0;
-            stale = level > 0 && r->sy ? STALE_Y : STALE_NONE;
+            stale = level > 0 && sy ? STALE_Y : STALE_NONE;
         } else {
-            boundary = bj + (r->sy > 0);
-            cj = r->sy > 0 ? boundary << level : (boundary << level) - 1;
+            boundary = bj + y_ahead;
+            cj = y_ahead ? boundary << level : (boundary << level) - 1;
             if ((unsigned)cj >= (unsigned)cells)
                 return 0;
-            stale = level > 0 && r->sx ? STALE_X : STALE_NONE;
+            stale = level > 0 && sx ? STALE_X : STALE_NONE;
         }
-        /* A line that also bounds bigger blocks lets the walk climb back up. */
-        while (level < top && !(boundary & 1)) {
+        /* A line that also bounds the parent block lets the walk climb back up, one level per
+         * step (climbing straight to the largest aligned block costs more re-descents). */
+        if (level < top && !(boundary & 1))
             level++;
-            boundary >>= 1;
-        }
     }
 }
 

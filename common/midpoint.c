@@ -24,9 +24,9 @@
  *    be "proportional to grid separations times a surface roughness factor".  We split the
  *    mismatch C - A into the envelope's own bend C - A_c (A_c: the same average taken over the
  *    control elevations), followed fully, and the inherited deviation A - A_c, of which a
- *    fraction P = 0.1 is pulled back per level:
- *        mu = (C - A) - (1 - P)(A - A_c),   sigma = S |mu| + a_l,   height = A + mu + sigma g
- *    with S = 0.1 (the paper's results section), a_l = tolerance * 2^-(roughness * l) / 2 and
+ *    fraction P (MP_PULL, now 0: see there) is pulled back per level:
+ *        mu = (C - A) + (1 - P)(A - A_c),   sigma = S |C - A_c| + a_l,   height = A + mu + sigma g
+ *    with S = 0.1 (the paper's results section) and |mu| taken as the bend |C - A_c| alone, a_l = tolerance * 2^-(roughness * l) / 2 and
  *    g ~ N(0, 1).  The deviation from the envelope is then itself a midpoint-displacement
  *    fractal of roughness H.  Finally the height is limited to C +- envelope_tolerance, which
  *    makes "every sample within tolerance of the envelope" a guarantee; with these constants
@@ -49,7 +49,11 @@
 #include "terrain.h"
 
 #define MP_KMAX 13
-#define MP_PULL 0.1          /* P: fraction of the inherited deviation pulled back per level */
+/* P: fraction of the inherited deviation pulled back per level.  0: any pull leaves each
+ * coarser sample standing (P x its deviation) above its finer neighbours, level after level,
+ * which shows as a lattice of single-sample spikes; the final clamp to C +- tolerance is what
+ * keeps the surface inside the envelope. */
+#define MP_PULL 0.0
 #define MP_SIGMA_SCALE 0.1   /* S: Koh & Hearn's scaling factor s of eq. (11) */
 #define MP_ROUGH_SCALE 0.5   /* a_l = tolerance * MP_ROUGH_SCALE * 2^-(H l) */
 #define MP_FREE_AMP 0.5      /* amplitude of corners and level 0 without an envelope */
@@ -147,10 +151,13 @@ static void mp_displace(mp_ctx *c, int i, int j, double avg, double avg_ctl)
         return;
     }
     double ctl = mp_envelope(c, i, j);
-    /* mu = (C - A) - (1 - P) (A - A_c): all of the envelope's own bend C - A_c is followed,
+    /* mu = (C - A) + (1 - P) (A - A_c): all of the envelope's own bend C - A_c is followed,
      * a fraction P of the inherited deviation A - A_c is pulled back. */
     double mu = (ctl - avg) + (1.0 - MP_PULL) * (avg - avg_ctl);
-    double sigma = MP_SIGMA_SCALE * fabs(mu) + c->amp;
+    /* sigma follows the envelope's own bend, not the inherited deviation: the deviation does
+     * not shrink with the level, so s |mu| would add white noise of a fixed size at every
+     * level and leave single-sample spikes on the finest grid. */
+    double sigma = MP_SIGMA_SCALE * fabs(ctl - avg_ctl) + c->amp;
     mp_store(c, i, j, avg + mu + sigma * g);
 }
 

@@ -40,7 +40,7 @@ tf_heightfield *tf_heightfield_from_heights(const float *h, int k, double extent
 tf_heightfield *tf_heightfield_wrap(float *h, int k, double extent, int threads);
 void tf_heightfield_free(tf_heightfield *hf);
 
-/* Height and surface normal at world (x, y) by the same two-triangle interpolation the tracer
+/* Height at world (x, y) by the same two-triangle interpolation the tracer
  * uses (clamped to the terrain's edge). */
 double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y);
 

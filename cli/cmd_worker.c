@@ -1,7 +1,11 @@
 /* cmd_worker.c: `terrafarm worker --connect HOST:PORT [-j N]`: a networked worker (the tsnet
  * model).  It reads the scene from the coordinator's tuple space, builds the terrain itself
  * (once, on all cores), then runs N worker processes that share it copy-on-write, each with
- * its own connection, until the render is finished. */
+ * its own connection, until the render is finished.
+ *
+ * With --simulate MODEL it joins as N synthetic workers instead (worker/simulate.h): threads
+ * that sleep each task's modelled cost from a cost map, to measure the coordinator with far
+ * more workers than there are cores. */
 #include <getopt.h>
 #include <signal.h>
 #include <stdio.h>
@@ -16,6 +20,7 @@
 #include "heightfield.h"
 #include "log.h"
 #include "scene.h"
+#include "simulate.h"
 #include "tsclient.h"
 #include "worker.h"
 
@@ -30,6 +35,10 @@ static const char usage[] =
     "      --backend c|opencl    rendering backend (default c)\n"
     "  -j, --workers N           worker processes on this machine (default: online CPUs)\n"
     "      --timeout MS          give up connecting after MS milliseconds (default 10000)\n"
+    "      --simulate MODEL      synthetic workers: sleep each task's modelled cost from the cost\n"
+    "                            map MODEL (terrafarm bench SCENE --cost-map MODEL) instead of\n"
+    "                            rendering; -j N threads in this process; prints a report line\n"
+    "      --pixel-us U          with --simulate: modelled cost of an average pixel (default 50)\n"
     "  -q, --quiet / -v, --verbose\n"
     "  -h, --help\n";
 
@@ -47,21 +56,55 @@ static int run_one(const char *connect, const uint8_t *key, int timeout_ms, cons
     return status;
 }
 
+/* --simulate: n synthetic workers on the cost map at path; prints one report line on stdout
+ * (key=value pairs, for scripts such as bench/scale_sim.sh). */
+static int run_simulated(const char *connect, const uint8_t *key, int timeout_ms,
+                         const tf_scene *s, const char *path, int n, double pixel_us)
+{
+    char err[1024];
+    tf_cost_map map;
+    if (tf_cost_map_load(path, &map, err, sizeof err)) {
+        tf_error("%s", err);
+        return TF_EXIT_FAIL;
+    }
+    tf_info("joining %s as %d simulated workers: %dx%d render, %.1f us per average pixel",
+            connect, n, s->width, s->height, pixel_us);
+    tf_sim_config cfg = {connect, key, timeout_ms, n, pixel_us, &map, s->width, s->height};
+    tf_sim_report r;
+    int rc = tf_simulate_run(&cfg, &r, err, sizeof err);
+    tf_cost_map_free(&map);
+    printf("simulated workers=%d tasks=%lld ops=%lld wall_s=%.3f modelled_s=%.3f "
+           "efficiency=%.4f ops_per_s=%.0f take_mean_ms=%.3f take_p50_ms=%.3f "
+           "take_p99_ms=%.3f take_max_ms=%.3f oversleep_ms=%.3f\n",
+           r.workers, (long long)r.tasks, (long long)r.ops, r.wall_s, r.modelled_s,
+           r.efficiency, r.wall_s > 0 ? (double)r.ops / r.wall_s : 0.0, r.take_mean_ms,
+           r.take_p50_ms, r.take_p99_ms, r.take_max_ms, r.slept_over_ms);
+    fflush(stdout);
+    if (rc) {
+        tf_error("%s", err);
+        return TF_EXIT_FAIL;
+    }
+    return TF_EXIT_OK;
+}
+
 int cmd_worker(int argc, char **argv)
 {
-    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT };
+    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US };
     static const struct option longopts[] = {
         {"connect", required_argument, NULL, 'c'},
         {"secret-file", required_argument, NULL, O_SECRET},
         {"backend", required_argument, NULL, O_BACKEND},
         {"workers", required_argument, NULL, 'j'},
         {"timeout", required_argument, NULL, O_TIMEOUT},
+        {"simulate", required_argument, NULL, O_SIMULATE},
+        {"pixel-us", required_argument, NULL, O_PIXEL_US},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
-    const char *connect = NULL, *secret = NULL, *backend = "c";
+    const char *connect = NULL, *secret = NULL, *backend = "c", *model = NULL;
+    double pixel_us = 50.0;
     int nproc = 0, timeout_ms = 10000, ch;
     char *end;
     optind = 1;
@@ -88,6 +131,14 @@ int cmd_worker(int argc, char **argv)
             timeout_ms = (int)strtol(optarg, &end, 10);
             if (end == optarg || *end || timeout_ms < 1) {
                 tf_error("--timeout '%s': expected a positive number of milliseconds", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        case O_SIMULATE: model = optarg; break;
+        case O_PIXEL_US:
+            pixel_us = strtod(optarg, &end);
+            if (end == optarg || *end || !(pixel_us >= 0 && pixel_us <= 1e9)) {
+                tf_error("--pixel-us '%s': expected a number of microseconds >= 0", optarg);
                 return TF_EXIT_USAGE;
             }
             break;
@@ -128,6 +179,13 @@ int cmd_worker(int argc, char **argv)
         tf_error("%s", err);
         ts_client_close(c);
         return TF_EXIT_FAIL;
+    }
+    if (model) {
+        ts_client_close(c);
+        int status = run_simulated(connect, k, timeout_ms, s, model, nproc ? nproc : 16,
+                                   pixel_us);
+        tf_scene_free(s);
+        return status;
     }
     if (nproc == 0)
         nproc = tf_thread_count(0);

@@ -1,0 +1,514 @@
+/* simulate.c: see simulate.h.  The cost map (measure, save, load, integrate over a rectangle),
+ * then the simulated workers: one thread per worker, each with its own tuple-space connection,
+ * all released together from a start line so the measured wall time starts with a full farm. */
+#include "simulate.h"
+
+#include <errno.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "farmproto.h"
+#include "log.h"
+#include "tsclient.h"
+
+static int64_t clock_ns(clockid_t id)
+{
+    struct timespec ts;
+    clock_gettime(id, &ts);
+    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+/* ---- the cost map --------------------------------------------------------------------------- */
+
+/* Cell i of n over a side of `size` pixels covers [cell_edge(i), cell_edge(i + 1)). */
+static int cell_edge(int i, int n, int size) { return (int)((int64_t)i * size / n); }
+
+int tf_cost_map_measure(const tf_scene *s, const tf_heightfield *hf, int gw, int gh,
+                        tf_cost_map *m, char *err, size_t errlen)
+{
+    memset(m, 0, sizeof *m);
+    if (gw < 1 || gh < 1 || gw > TF_COST_MAP_MAX || gh > TF_COST_MAP_MAX || gw > s->width ||
+        gh > s->height) {
+        snprintf(err, errlen, "cost map grid %dx%d: expected 1..%d cells a side, at most one per "
+                 "pixel of the %dx%d image", gw, gh, TF_COST_MAP_MAX, s->width, s->height);
+        return -1;
+    }
+    tf_renderer *r = tf_renderer_new(s, hf, err, errlen);
+    if (!r)
+        return -1;
+    int maxw = cell_edge(1, gw, s->width) + s->width / gw + 1;
+    int maxh = cell_edge(1, gh, s->height) + s->height / gh + 1;
+    tf_pixel *px = malloc((size_t)maxw * (size_t)maxh * sizeof *px);
+    m->density = calloc((size_t)gw * (size_t)gh, sizeof *m->density);
+    if (!px || !m->density) {
+        snprintf(err, errlen, "out of memory measuring the cost map");
+        free(px);
+        tf_renderer_free(r);
+        tf_cost_map_free(m);
+        return -1;
+    }
+    double total_ns = 0;
+    for (int j = 0; j < gh; j++)
+        for (int i = 0; i < gw; i++) {
+            tf_rect c = {cell_edge(i, gw, s->width), cell_edge(j, gh, s->height), 0, 0};
+            c.w = cell_edge(i + 1, gw, s->width) - c.x;
+            c.h = cell_edge(j + 1, gh, s->height) - c.y;
+            int64_t t0 = clock_ns(CLOCK_THREAD_CPUTIME_ID);
+            tf_render_rect(r, c, px, NULL);
+            double ns = (double)(clock_ns(CLOCK_THREAD_CPUTIME_ID) - t0);
+            total_ns += ns;
+            m->density[j * gw + i] = ns / ((double)c.w * c.h); /* ns per pixel, for now */
+        }
+    free(px);
+    tf_renderer_free(r);
+    m->gw = gw;
+    m->gh = gh;
+    m->measured_w = s->width;
+    m->measured_h = s->height;
+    m->pixel_ns = total_ns / ((double)s->width * s->height);
+    /* Normalise: density = (ns per pixel in the cell) / (mean ns per pixel), whose
+     * area-weighted mean is exactly 1 by construction. */
+    for (int k = 0; k < gw * gh; k++)
+        m->density[k] = m->pixel_ns > 0 ? m->density[k] / m->pixel_ns : 1.0;
+    return 0;
+}
+
+int tf_cost_map_save(const char *path, const tf_cost_map *m, char *err, size_t errlen)
+{
+    FILE *f = fopen(path, "w");
+    if (!f) {
+        snprintf(err, errlen, "%s: cannot write the cost map: %s", path, strerror(errno));
+        return -1;
+    }
+    fprintf(f, "terrafarm-cost-map 1 %d %d %d %d %.1f\n", m->gw, m->gh, m->measured_w,
+            m->measured_h, m->pixel_ns);
+    for (int j = 0; j < m->gh; j++)
+        for (int i = 0; i < m->gw; i++)
+            fprintf(f, "%.4f%c", m->density[j * m->gw + i], i + 1 == m->gw ? '\n' : ' ');
+    int bad = ferror(f);
+    bad |= fclose(f) != 0;
+    if (bad) {
+        snprintf(err, errlen, "%s: cannot write the cost map: %s", path, strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
+int tf_cost_map_load(const char *path, tf_cost_map *m, char *err, size_t errlen)
+{
+    memset(m, 0, sizeof *m);
+    FILE *f = fopen(path, "r");
+    if (!f) {
+        snprintf(err, errlen, "%s: cannot read the cost map: %s", path, strerror(errno));
+        return -1;
+    }
+    int version = 0;
+    if (fscanf(f, "terrafarm-cost-map %d %d %d %d %d %lf", &version, &m->gw, &m->gh,
+               &m->measured_w, &m->measured_h, &m->pixel_ns) != 6 || version != 1) {
+        snprintf(err, errlen, "%s: not a terrafarm cost map (expected 'terrafarm-cost-map 1 GW "
+                 "GH W H PIXEL_NS' on the first line)", path);
+        fclose(f);
+        return -1;
+    }
+    if (m->gw < 1 || m->gh < 1 || m->gw > TF_COST_MAP_MAX || m->gh > TF_COST_MAP_MAX) {
+        snprintf(err, errlen, "%s: cost map grid %dx%d out of range 1..%d", path, m->gw, m->gh,
+                 TF_COST_MAP_MAX);
+        fclose(f);
+        return -1;
+    }
+    m->density = malloc((size_t)m->gw * (size_t)m->gh * sizeof *m->density);
+    if (!m->density) {
+        snprintf(err, errlen, "%s: out of memory", path);
+        fclose(f);
+        return -1;
+    }
+    for (int k = 0; k < m->gw * m->gh; k++) {
+        double d;
+        if (fscanf(f, "%lf", &d) != 1 || !isfinite(d) || d < 0) {
+            snprintf(err, errlen, "%s: cost map cell %d: expected a finite non-negative number",
+                     path, k);
+            fclose(f);
+            tf_cost_map_free(m);
+            return -1;
+        }
+        m->density[k] = d;
+    }
+    fclose(f);
+    return 0;
+}
+
+void tf_cost_map_free(tf_cost_map *m)
+{
+    free(m->density);
+    m->density = NULL;
+}
+
+/* Overlap of [a0, a1) and [b0, b1), or 0. */
+static double overlap(double a0, double a1, double b0, double b1)
+{
+    double lo = a0 > b0 ? a0 : b0, hi = a1 < b1 ? a1 : b1;
+    return hi > lo ? hi - lo : 0.0;
+}
+
+double tf_cost_map_rect(const tf_cost_map *m, int image_w, int image_h, tf_rect r)
+{
+    /* Cell i spans [i * image_w / gw, (i + 1) * image_w / gw) in the target image's pixels:
+     * the map is stretched, so its cells need not fall on pixel boundaries. */
+    double sx = (double)image_w / m->gw, sy = (double)image_h / m->gh;
+    int i0 = (int)(r.x / sx), i1 = (int)ceil((r.x + r.w) / sx);
+    int j0 = (int)(r.y / sy), j1 = (int)ceil((r.y + r.h) / sy);
+    if (i1 > m->gw)
+        i1 = m->gw;
+    if (j1 > m->gh)
+        j1 = m->gh;
+    double sum = 0;
+    for (int j = j0 < 0 ? 0 : j0; j < j1; j++) {
+        double oy = overlap(r.y, r.y + r.h, j * sy, (j + 1) * sy);
+        for (int i = i0 < 0 ? 0 : i0; i < i1; i++)
+            sum += m->density[j * m->gw + i] * oy * overlap(r.x, r.x + r.w, i * sx, (i + 1) * sx);
+    }
+    return sum;
+}
+
+/* ---- simulated workers ------------------------------------------------------------------- */
+
+typedef struct sim_shared {
+    const tf_sim_config *cfg;
+    pthread_cond_t gate;            /* the start line: workers wait here until released */
+    int arrived, released;          /* guarded by lock */
+    int64_t start_ns;               /* set by the releasing thread before it opens the gate */
+    _Atomic int64_t first_stop_ns;  /* 0 until a worker sees the stop tuple */
+    pthread_mutex_t lock;           /* guards everything below */
+    int joined, failed;
+    int64_t tasks, ops;
+    double modelled_ns, oversleep_ns;
+    float *take_ms;                 /* dealing latencies of every worker */
+    size_t ntake, cap_take;
+    char error[512];
+} sim_shared;
+
+typedef struct sim_worker {
+    sim_shared *sh;
+    ts_client *client;
+    pthread_t thread;
+    int64_t id;
+    int64_t tasks, ops;
+    double modelled_ns, oversleep_ns;
+    float *take_ms;
+    size_t ntake, cap_take;
+} sim_worker;
+
+static void shared_fail(sim_shared *sh, const char *what, const ts_client *c)
+{
+    pthread_mutex_lock(&sh->lock);
+    sh->failed++;
+    if (!sh->error[0])
+        snprintf(sh->error, sizeof sh->error, "%s: %s", what, ts_client_error(c));
+    pthread_mutex_unlock(&sh->lock);
+}
+
+/* Linda's counter idiom, as in worker.c: in ("next_worker", ?n), out ("next_worker", n + 1). */
+static int sim_take_worker_id(ts_client *c, int64_t *id)
+{
+    tf_tuple tmpl, got, next;
+    tf_tuple_init(&tmpl);
+    tf_tuple_init(&got);
+    tf_tuple_init(&next);
+    int rc = tf_tuple_pack(&tmpl, "sI", "next_worker") || ts_in(c, &tmpl, &got) ||
+                     tf_tuple_get_int(&got, 1, id) ||
+                     tf_tuple_pack(&next, "si", "next_worker", *id + 1) || ts_out(c, &next)
+                 ? -1
+                 : 0;
+    tf_tuple_clear(&tmpl);
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&next);
+    return rc;
+}
+
+static int sim_join(sim_worker *w)
+{
+    if (sim_take_worker_id(w->client, &w->id))
+        return -1;
+    char host[64] = "";
+    gethostname(host, sizeof host - 1);
+    tf_tuple t;
+    tf_tuple_init(&t);
+    int rc = tf_tuple_pack(&t, "sissis", "hello", w->id, "networked", host,
+                           (int64_t)getpid(), "simulated") || ts_out(w->client, &t)
+                 ? -1
+                 : 0;
+    tf_tuple_clear(&t);
+    return rc;
+}
+
+static void note_latency(sim_worker *w, double ms)
+{
+    if (w->ntake == w->cap_take) {
+        size_t cap = w->cap_take ? 2 * w->cap_take : 256;
+        float *n = realloc(w->take_ms, cap * sizeof *n);
+        if (!n)
+            return; /* a lost sample skews nothing but the percentile's sample size */
+        w->take_ms = n;
+        w->cap_take = cap;
+    }
+    w->take_ms[w->ntake++] = (float)ms;
+}
+
+/* Sleep until the modelled cost has elapsed from t0; returns the oversleep in ns. */
+static int64_t sleep_cost(int64_t t0, int64_t cost_ns)
+{
+    int64_t until = t0 + cost_ns;
+    struct timespec ts = {(time_t)(until / 1000000000), (long)(until % 1000000000)};
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR)
+        ;
+    return clock_ns(CLOCK_MONOTONIC) - until;
+}
+
+/* Render one task the simulated way: sleep its modelled cost, put back zero pixels. */
+static int sim_task(sim_worker *w, const tf_task_msg *m, tf_pixel **px, size_t *cap)
+{
+    const tf_sim_config *cfg = w->sh->cfg;
+    size_t n = (size_t)m->rect.w * (size_t)m->rect.h;
+    if (n > *cap) {
+        tf_pixel *np = realloc(*px, n * sizeof *np);
+        if (!np)
+            return -1;
+        memset(np, 0, n * sizeof *np);
+        *px = np;
+        *cap = n;
+    }
+    double cost = cfg->pixel_us * 1000.0 *
+                  tf_cost_map_rect(cfg->map, cfg->image_w, cfg->image_h, m->rect);
+    int64_t cost_ns = (int64_t)cost;
+    int64_t t0 = clock_ns(CLOCK_MONOTONIC);
+    w->oversleep_ns += (double)sleep_cost(t0, cost_ns);
+    w->modelled_ns += (double)cost_ns;
+    tf_render_counts counts = {0, 0, 0, (uint64_t)n};
+    tf_tuple result;
+    int rc = tf_result_pack(&result, m->id, w->id, &counts, cost_ns, *px, n) ||
+                     ts_out(w->client, &result)
+                 ? -1
+                 : 0;
+    tf_tuple_clear(&result);
+    w->ops++;
+    w->tasks += rc == 0;
+    return rc;
+}
+
+static void sim_serve(sim_worker *w)
+{
+    tf_tuple tmpl;
+    tf_task_template(&tmpl, TF_TASK_ANY);
+    tf_pixel *px = NULL;
+    size_t cap = 0;
+    for (;;) {
+        tf_tuple task;
+        tf_task_msg m;
+        tf_tuple_init(&task);
+        int64_t t0 = clock_ns(CLOCK_MONOTONIC);
+        int rc = ts_in(w->client, &tmpl, &task);
+        int64_t t1 = clock_ns(CLOCK_MONOTONIC);
+        w->ops++;
+        if (rc) {
+            shared_fail(w->sh, "lost the coordinator", w->client);
+            break;
+        }
+        if (tf_task_unpack(&task, &m)) {
+            tf_tuple_clear(&task);
+            continue;
+        }
+        if (m.id == TF_TASK_STOP) {
+            int64_t zero = 0;
+            atomic_compare_exchange_strong(&w->sh->first_stop_ns, &zero, t1);
+            ts_out(w->client, &task); /* so every other worker sees it too */
+            tf_tuple_clear(&task);
+            break;
+        }
+        if (tf_task_excludes(&m, w->id)) {
+            ts_out(w->client, &task);
+            w->ops++;
+            tf_tuple_clear(&task);
+            usleep(200 * 1000);
+            continue;
+        }
+        tf_tuple_clear(&task);
+        note_latency(w, (double)(t1 - t0) * 1e-6);
+        if (sim_task(w, &m, &px, &cap)) {
+            shared_fail(w->sh, "cannot deliver a result", w->client);
+            break;
+        }
+    }
+    free(px);
+    tf_tuple_clear(&tmpl);
+}
+
+static void merge(sim_shared *sh, sim_worker *w)
+{
+    pthread_mutex_lock(&sh->lock);
+    sh->tasks += w->tasks;
+    sh->ops += w->ops;
+    sh->modelled_ns += w->modelled_ns;
+    sh->oversleep_ns += w->oversleep_ns;
+    if (sh->ntake + w->ntake > sh->cap_take) {
+        size_t cap = 2 * (sh->ntake + w->ntake);
+        float *n = realloc(sh->take_ms, cap * sizeof *n);
+        if (n) {
+            sh->take_ms = n;
+            sh->cap_take = cap;
+        }
+    }
+    if (sh->ntake + w->ntake <= sh->cap_take) {
+        memcpy(sh->take_ms + sh->ntake, w->take_ms, w->ntake * sizeof *w->take_ms);
+        sh->ntake += w->ntake;
+    }
+    pthread_mutex_unlock(&sh->lock);
+    free(w->take_ms);
+    w->take_ms = NULL;
+}
+
+static void *sim_thread(void *arg)
+{
+    sim_worker *w = arg;
+    sim_shared *sh = w->sh;
+    int ok = sim_join(w) == 0;
+    if (!ok)
+        shared_fail(sh, "cannot join the render", w->client);
+    else {
+        pthread_mutex_lock(&sh->lock);
+        sh->joined++;
+        pthread_mutex_unlock(&sh->lock);
+    }
+    /* Every worker, joined or not, reaches the start line; run_workers opens it. */
+    pthread_mutex_lock(&sh->lock);
+    sh->arrived++;
+    pthread_cond_broadcast(&sh->gate);
+    while (!sh->released)
+        pthread_cond_wait(&sh->gate, &sh->lock);
+    pthread_mutex_unlock(&sh->lock);
+    if (ok)
+        sim_serve(w);
+    merge(sh, w);
+    return NULL;
+}
+
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+static void summarise(sim_shared *sh, tf_sim_report *rep)
+{
+    rep->workers = sh->joined;
+    rep->tasks = sh->tasks;
+    rep->ops = sh->ops;
+    int64_t end = atomic_load(&sh->first_stop_ns);
+    rep->wall_s = end > sh->start_ns ? (double)(end - sh->start_ns) * 1e-9 : 0.0;
+    rep->modelled_s = sh->modelled_ns * 1e-9;
+    rep->efficiency = rep->wall_s > 0 && rep->workers > 0
+                          ? rep->modelled_s / rep->workers / rep->wall_s
+                          : 0.0;
+    rep->slept_over_ms = sh->tasks ? sh->oversleep_ns / (double)sh->tasks * 1e-6 : 0.0;
+    if (sh->ntake == 0)
+        return;
+    qsort(sh->take_ms, sh->ntake, sizeof *sh->take_ms, cmp_float);
+    double sum = 0;
+    for (size_t i = 0; i < sh->ntake; i++)
+        sum += sh->take_ms[i];
+    rep->take_mean_ms = sum / (double)sh->ntake;
+    rep->take_p50_ms = sh->take_ms[sh->ntake / 2];
+    rep->take_p99_ms = sh->take_ms[(size_t)((double)(sh->ntake - 1) * 0.99)];
+    rep->take_max_ms = sh->take_ms[sh->ntake - 1];
+}
+
+/* Hundreds of connections need hundreds of descriptors: lift the soft limit to the hard one. */
+static void raise_fd_limit(void)
+{
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur < rl.rlim_max) {
+        rl.rlim_cur = rl.rlim_max;
+        setrlimit(RLIMIT_NOFILE, &rl);
+    }
+}
+
+/* Connect every worker from this thread, one after another, before any thread starts: the
+ * coordinator's single event loop then sees an orderly queue of handshakes, not a storm. */
+static int connect_all(const tf_sim_config *cfg, sim_worker *ws, char *err, size_t errlen)
+{
+    for (int i = 0; i < cfg->workers; i++) {
+        char e[512];
+        ws[i].client = ts_client_connect(cfg->connect, cfg->key, cfg->timeout_ms, e, sizeof e);
+        if (!ws[i].client) {
+            snprintf(err, errlen, "simulated worker %d of %d: %s", i + 1, cfg->workers, e);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, size_t errlen)
+{
+    memset(rep, 0, sizeof *rep);
+    if (cfg->workers < 1 || cfg->workers > 4096 || !(cfg->pixel_us >= 0) || !cfg->map ||
+        cfg->image_w < 1 || cfg->image_h < 1) {
+        snprintf(err, errlen, "simulation: need 1..4096 workers, a cost map, pixel cost >= 0");
+        return -1;
+    }
+    raise_fd_limit();
+    sim_shared sh;
+    memset(&sh, 0, sizeof sh);
+    sh.cfg = cfg;
+    sim_worker *ws = calloc((size_t)cfg->workers, sizeof *ws);
+    if (!ws) {
+        snprintf(err, errlen, "out of memory");
+        return -1;
+    }
+    int rc = -1;
+    int started = 0;
+    pthread_mutex_init(&sh.lock, NULL);
+    pthread_cond_init(&sh.gate, NULL);
+    if (connect_all(cfg, ws, err, errlen))
+        goto out;
+    pthread_attr_t attr;
+    pthread_attr_init(&attr);
+    pthread_attr_setstacksize(&attr, 256 * 1024); /* a worker's frames are small; 1024 fit */
+    for (; started < cfg->workers; started++) {
+        ws[started].sh = &sh;
+        if (pthread_create(&ws[started].thread, &attr, sim_thread, &ws[started])) {
+            snprintf(err, errlen, "cannot start simulated worker thread %d of %d", started + 1,
+                     cfg->workers);
+            break;
+        }
+    }
+    pthread_attr_destroy(&attr);
+    /* Open the start line once every started worker has joined (or failed to). */
+    pthread_mutex_lock(&sh.lock);
+    while (sh.arrived < started)
+        pthread_cond_wait(&sh.gate, &sh.lock);
+    sh.start_ns = clock_ns(CLOCK_MONOTONIC);
+    sh.released = 1;
+    pthread_cond_broadcast(&sh.gate);
+    pthread_mutex_unlock(&sh.lock);
+    for (int i = 0; i < started; i++)
+        pthread_join(ws[i].thread, NULL);
+    summarise(&sh, rep);
+    if (started == cfg->workers && sh.failed == 0)
+        rc = 0;
+    else if (sh.error[0])
+        snprintf(err, errlen, "%s", sh.error);
+out:
+    for (int i = 0; i < cfg->workers; i++)
+        ts_client_close(ws[i].client);
+    free(ws);
+    free(sh.take_ms);
+    pthread_cond_destroy(&sh.gate);
+    pthread_mutex_destroy(&sh.lock);
+    return rc;
+}

@@ -317,7 +317,9 @@ static void sim_serve(sim_worker *w)
         int64_t t1 = clock_ns(CLOCK_MONOTONIC);
         w->ops++;
         if (rc) {
-            shared_fail(w->sh, "lost the coordinator", w->client);
+            /* After the stop tuple a closing coordinator is the end of the render (see below). */
+            if (atomic_load(&w->sh->first_stop_ns) == 0)
+                shared_fail(w->sh, "lost the coordinator", w->client);
             break;
         }
         if (tf_task_unpack(&task, &m)) {
@@ -341,7 +343,11 @@ static void sim_serve(sim_worker *w)
         tf_tuple_clear(&task);
         note_latency(w, (double)(t1 - t0) * 1e-6);
         if (sim_task(w, &m, &px, &cap)) {
-            shared_fail(w->sh, "cannot deliver a result", w->client);
+            /* Once the stop tuple is out the coordinator may finish and close while this
+             * worker still sleeps on a straggler's duplicate: losing it then is the end of
+             * the render, not a failure. */
+            if (atomic_load(&w->sh->first_stop_ns) == 0)
+                shared_fail(w->sh, "cannot deliver a result", w->client);
             break;
         }
     }
@@ -411,7 +417,12 @@ static void summarise(sim_shared *sh, tf_sim_report *rep)
     rep->ops = sh->ops;
     int64_t end = atomic_load(&sh->first_stop_ns);
     rep->wall_s = end > sh->start_ns ? (double)(end - sh->start_ns) * 1e-9 : 0.0;
-    rep->modelled_s = sh->modelled_ns * 1e-9;
+    rep->slept_s = sh->modelled_ns * 1e-9;
+    /* Useful work is the whole image's modelled cost, once: a straggler's duplicate is not. */
+    const tf_sim_config *cfg = sh->cfg;
+    tf_rect all = {0, 0, cfg->image_w, cfg->image_h};
+    rep->modelled_s = cfg->pixel_us * 1e-6 *
+                      tf_cost_map_rect(cfg->map, cfg->image_w, cfg->image_h, all);
     rep->efficiency = rep->wall_s > 0 && rep->workers > 0
                           ? rep->modelled_s / rep->workers / rep->wall_s
                           : 0.0;

@@ -62,7 +62,8 @@ typedef struct tf_sim_report {
     int64_t tasks;           /* results delivered */
     int64_t ops;             /* tuple operations issued after the start line */
     double wall_s;           /* start line (all joined) -> first stop tuple seen */
-    double modelled_s;       /* sum of modelled task costs */
+    double modelled_s;       /* the whole image's modelled cost (useful work, once) */
+    double slept_s;          /* modelled cost of every task served, duplicates included */
     double efficiency;       /* (modelled_s / workers) / wall_s */
     double take_mean_ms, take_p50_ms, take_p99_ms, take_max_ms; /* dealing latency: in(task) */
     double slept_over_ms;    /* mean oversleep beyond the modelled cost (timer slack) */

@@ -1,0 +1,91 @@
+#!/bin/bash
+# scale_sim.sh: the coordinator with 16..1024 simulated workers (issue 7, "beyond one machine").
+#
+# For each worker count W, modelled task cost and watermark it starts a real coordinator
+# (`terrafarm render -j 0`, networked workers only, output in /dev/shm) and one process of W
+# simulated workers (`terrafarm worker --simulate MODEL -j W`), each a thread with its own
+# connection that sleeps its task's modelled cost (from the cost map MODEL) and puts back a
+# result of the right size.  Tasks are 8x8-pixel stamps; the image is sized so every worker gets
+# TPW tasks on average (near 16:9), and --pixel-us is chosen so the average task costs TASK_MS.
+# Watermark = F * W + one band of tasks, for each F.
+#
+# Prints one CSV line per run (and writes them to $OUT/scale_sim.csv), then plots modelled
+# efficiency against workers for each task size (best watermark) to $OUT/scale_sim.svg.
+#
+# usage: bench/scale_sim.sh [MODEL]   (default: bench/default.cost)
+# env:   WORKERS="16 64 256 1024" TASK_MS="1 10 30 100" WM="1 2 4" TPW=16 OUT=bench/results
+set -eu
+cd "$(dirname "$0")/.."
+TF=${TF:-bin/terrafarm}
+MODEL=${1:-bench/default.cost}
+WORKERS=${WORKERS:-"16 64 256 1024"}
+TASK_MS=${TASK_MS:-"1 10 30 100"}
+WM=${WM:-"1 2 4"}
+TPW=${TPW:-16}
+OUT=${OUT:-bench/results}
+SCENE=${SCENE:-scenes/default.scene}
+mkdir -p "$OUT"
+CSV="$OUT/scale_sim.csv"
+PORT=$((20000 + $$ % 20000))
+EXR=/dev/shm/terrafarm-scale-sim-$$.exr
+LOG=$(mktemp)
+trap 'rm -f "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats"' EXIT
+
+[ -x "$TF" ] || { echo "scale_sim.sh: build first (make)" >&2; exit 1; }
+[ -r "$MODEL" ] || { echo "scale_sim.sh: no cost map $MODEL (terrafarm bench SCENE --cost-map $MODEL)" >&2; exit 1; }
+
+echo "workers,task_ms,watermark,tasks,width,height,wall_s,modelled_s,efficiency,ops_per_s,take_mean_ms,take_p50_ms,take_p99_ms,redealt,duplicated,coord_wall_s" >"$CSV"
+for ms in $TASK_MS; do
+  for w in $WORKERS; do
+    n=$((w * TPW))
+    cols=$(awk -v n="$n" 'BEGIN { c = int(sqrt(n * 16 / 9) + 0.5); print c < 1 ? 1 : c }')
+    bands=$(( (n + cols - 1) / cols ))
+    width=$((cols * 8)); height=$((bands * 8))
+    pixel_us=$(awk -v ms="$ms" 'BEGIN { printf "%.4f", ms * 1000 / 64 }')
+    for f in $WM; do
+      wm=$((f * w + cols))
+      PORT=$((PORT + 1))
+      "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:$PORT --size ${width}x$height \
+        --tasks stamps:8x8 --watermark $wm -o "$EXR" --overwrite --lease-timeout 600000 -q \
+        --stats "$LOG.stats" &
+      coord=$!
+      # wait until the coordinator listens (a refused connect is not retried by the client)
+      i=0
+      until ss -Hltn "sport = :$PORT" | grep -q .; do
+        i=$((i + 1)); [ $i -lt 200 ] || { echo "scale_sim.sh: coordinator did not start" >&2; exit 1; }
+        sleep 0.05
+      done
+      "$TF" worker --connect 127.0.0.1:$PORT --simulate "$MODEL" -j $w --pixel-us "$pixel_us" \
+        -q --timeout 30000 >"$LOG"
+      wait $coord
+      line=$(cat "$LOG")
+      get() { echo "$line" | tr ' ' '\n' | sed -n "s/^$1=//p"; }
+      js() { sed -n "s/^ *\"$1\": *\([0-9.]*\).*/\1/p" "$LOG.stats" | head -1; }
+      row="$w,$ms,$wm,$(get tasks),$width,$height,$(get wall_s),$(get modelled_s),$(get efficiency),$(get ops_per_s),$(get take_mean_ms),$(get take_p50_ms),$(get take_p99_ms),$(js tasks_redealt),$(js tasks_duplicated),$(js wall_s)"
+      echo "$row" | tee -a "$CSV"
+    done
+  done
+done
+
+if command -v gnuplot >/dev/null 2>&1; then
+  # best watermark per (task size, workers)
+  awk -F, 'NR > 1 { k = $2 " " $1; if (!(k in best) || $9 > best[k]) best[k] = $9 }
+           END { for (k in best) print k, best[k] }' "$CSV" | sort -n -k1,1 -k2,2 >"$OUT/scale_sim.dat"
+  plot=""
+  for ms in $TASK_MS; do
+    plot="$plot${plot:+, }'$OUT/scale_sim.dat' using (\$1 == $ms ? \$2 : 1/0):3 with linespoints lw 2 title '$ms ms tasks'"
+  done
+  gnuplot <<EOF
+set terminal svg size 800,500 dynamic
+set output '$OUT/scale_sim.svg'
+set title 'terrafarm coordinator: modelled efficiency with simulated workers (best watermark)'
+set xlabel 'simulated workers'
+set ylabel 'modelled parallel efficiency'
+set logscale x 2
+set yrange [0:1.05]
+set key right bottom
+set grid
+plot 0.95 title '95% target' with lines dt 2 lc rgb 'gray', $plot
+EOF
+  echo "plot: $OUT/scale_sim.svg"
+fi

@@ -1,27 +1,663 @@
-/* backend_opencl.c: NOT IMPLEMENTED YET.  The OpenCL backend is being written (issue: OpenCL
- * worker backend on PoCL); until then --backend opencl fails with a clear message. */
+/* backend_opencl.c: the OpenCL backend (backend_opencl.h): the C renderer's adaptive
+ * antialiasing, tracing and shading as the kernels of worker/kernels/terrafarm.cl, run on any
+ * OpenCL 1.2 device with cl_khr_fp64 (PoCL on the CPU here, a vendor ICD on a GPU machine).
+ *
+ * Life of a backend (one per worker process, created after fork, so no OpenCL state ever
+ * crosses a fork):
+ *   1. tf_renderer_new computes the camera basis, sun, sky, mist and texture setup exactly as
+ *      the C backend does; those values are copied into the P[] / I[] blocks of
+ *      tf_cl_params.h, so the device never re-derives a scene constant.
+ *   2. A device is chosen (choose_device): TERRAFARM_CL_DEVICE ("P:D" indices or a substring
+ *      of the device name) or else the first GPU with fp64, else the first device with fp64.
+ *   3. The kernel source is read at run time (find_kernel_dir) and built; on failure the build
+ *      log goes to stderr and the error is one line.  PoCL caches compiled programs in
+ *      POCL_CACHE_DIR, which defaults here to a per-user cache directory (set_pocl_cache_dir).
+ *   4. The height field, all max/min grid levels (concatenated, offsets in I[]) and the texture
+ *      permutation are uploaded once.
+ * Each tf_cl_backend_render then runs tf_corners over the (w+1) x (h+1) corners (the
+ * external-sample rule: the far row and column are computed here) and tf_pixels over the
+ * pixels in batches bounded by the scratch memory of the per-pixel sample caches. */
+#define CL_TARGET_OPENCL_VERSION 120
 #include "backend_opencl.h"
 
+#include <CL/cl.h>
+#include <ctype.h>
+#include <errno.h>
+#include <limits.h>
+#include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "kernels/tf_cl_params.h"
+#include "render_internal.h"
+
+#define KERNEL_FILE "terrafarm.cl"
+#define PARAMS_FILE "tf_cl_params.h"
+#define MAX_SOURCE_BYTES (1 << 20)        /* a kernel file larger than this is not ours */
+#define SCRATCH_BUDGET ((size_t)64 << 20) /* bytes of per-pixel sample caches per batch */
+
+struct tf_cl_backend {
+    tf_renderer *renderer; /* the C setup the parameters are copied from */
+    cl_context ctx;
+    cl_command_queue queue;
+    cl_program program;
+    cl_kernel k_corners, k_pixels;
+    cl_mem P, I, h, mx, mn, perm;
+    /* per-render buffers, grown as needed */
+    cl_mem corners, corner_shadow, cache, have, out, pixel_shadow;
+    size_t corners_cap, corner_shadow_cap, cache_cap, have_cap, out_cap, pixel_shadow_cap;
+    cl_ulong jitter_key;
+    int lattice;
+    char device_name[256];
+    double build_seconds;
+};
+
+static double now_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* ---------------------------------------------------------------- environment */
+
+static int make_dirs(const char *path)
+{
+    char buf[PATH_MAX];
+    if (snprintf(buf, sizeof buf, "%s", path) >= (int)sizeof buf)
+        return -1;
+    for (char *p = buf + 1; *p; p++) {
+        if (*p != '/')
+            continue;
+        *p = 0;
+        if (mkdir(buf, 0700) != 0 && errno != EEXIST)
+            return -1;
+        *p = '/';
+    }
+    if (mkdir(buf, 0700) != 0 && errno != EEXIST)
+        return -1;
+    return access(buf, W_OK) == 0 ? 0 : -1;
+}
+
+/* PoCL keeps compiled programs in POCL_CACHE_DIR.  If the user set none, use
+ * $XDG_CACHE_HOME/terrafarm/pocl, else $HOME/.cache/terrafarm/pocl, else /tmp/terrafarm-pocl-UID,
+ * whichever can be created and written.  Must run before the first OpenCL call. */
+static void set_pocl_cache_dir(void)
+{
+    if (getenv("POCL_CACHE_DIR"))
+        return;
+    char dir[PATH_MAX];
+    const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
+    if (xdg && *xdg && snprintf(dir, sizeof dir, "%s/terrafarm/pocl", xdg) < (int)sizeof dir &&
+        make_dirs(dir) == 0) {
+        setenv("POCL_CACHE_DIR", dir, 0);
+        return;
+    }
+    if (home && *home && snprintf(dir, sizeof dir, "%s/.cache/terrafarm/pocl", home) <
+                             (int)sizeof dir &&
+        make_dirs(dir) == 0) {
+        setenv("POCL_CACHE_DIR", dir, 0);
+        return;
+    }
+    snprintf(dir, sizeof dir, "/tmp/terrafarm-pocl-%u", (unsigned)getuid());
+    if (make_dirs(dir) == 0)
+        setenv("POCL_CACHE_DIR", dir, 0);
+}
+
+/* Read a whole file of at most MAX_SOURCE_BYTES.  NULL if absent, unreadable or too big. */
+static char *read_text(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    char *buf = malloc(MAX_SOURCE_BYTES + 1);
+    size_t n = buf ? fread(buf, 1, MAX_SOURCE_BYTES + 1, f) : 0;
+    int bad = !buf || ferror(f) || n > MAX_SOURCE_BYTES;
+    fclose(f);
+    if (bad) {
+        free(buf);
+        return NULL;
+    }
+    buf[n] = 0;
+    *len = n;
+    return buf;
+}
+
+static int has_kernel(const char *dir)
+{
+    char path[PATH_MAX];
+    return snprintf(path, sizeof path, "%s/" KERNEL_FILE, dir) < (int)sizeof path &&
+           access(path, R_OK) == 0;
+}
+
+/* The kernel directory, in order: $TERRAFARM_KERNELS (an explicit choice wins), next to the
+ * executable (bin/../worker/kernels, and build/tests/../../worker/kernels for test programs),
+ * the installed copies, then ./worker/kernels.  0, or -1 with a message listing the search. */
+static int find_kernel_dir(char *dir, size_t len, char *err, size_t errlen)
+{
+    const char *env = getenv("TERRAFARM_KERNELS");
+    if (env && *env) {
+        snprintf(dir, len, "%s", env);
+        if (has_kernel(dir))
+            return 0;
+        snprintf(err, errlen, "TERRAFARM_KERNELS=%s has no " KERNEL_FILE, env);
+        return -1;
+    }
+    char exe[PATH_MAX];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    if (n > 0) {
+        exe[n] = 0;
+        char *slash = strrchr(exe, '/');
+        if (slash)
+            *slash = 0;
+        const char *rel[] = {"/../worker/kernels", "/../../worker/kernels",
+                             "/../share/terrafarm/kernels"};
+        for (size_t i = 0; i < sizeof rel / sizeof rel[0]; i++)
+            if (snprintf(dir, len, "%s%s", exe, rel[i]) < (int)len && has_kernel(dir))
+                return 0;
+    }
+    const char *fixed[] = {"/usr/local/share/terrafarm/kernels", "/usr/share/terrafarm/kernels",
+                           "worker/kernels"};
+    for (size_t i = 0; i < sizeof fixed / sizeof fixed[0]; i++) {
+        snprintf(dir, len, "%s", fixed[i]);
+        if (has_kernel(dir))
+            return 0;
+    }
+    snprintf(err, errlen,
+             "OpenCL kernels not found (looked in $TERRAFARM_KERNELS, <exe>/../worker/kernels, "
+             "/usr/local/share/terrafarm/kernels, ./worker/kernels)");
+    return -1;
+}
+
+/* ---------------------------------------------------------------- device choice */
+
+static int device_has_fp64(cl_device_id d)
+{
+    char ext[8192] = "";
+    clGetDeviceInfo(d, CL_DEVICE_EXTENSIONS, sizeof ext - 1, ext, NULL);
+    return strstr(ext, "cl_khr_fp64") != NULL;
+}
+
+static int contains_ci(const char *hay, const char *needle)
+{
+    size_t n = strlen(needle);
+    for (; *hay; hay++) {
+        size_t i = 0;
+        while (i < n && hay[i] && tolower((unsigned char)hay[i]) == tolower((unsigned char)needle[i]))
+            i++;
+        if (i == n)
+            return 1;
+    }
+    return n == 0;
+}
+
+#define MAX_PLATFORMS 16
+#define MAX_DEVICES 32
+
+/* Choose the device (see the top of the file).  0, or -1 with a message. */
+static int choose_device(cl_device_id *out, char *name, size_t namelen, char *err, size_t errlen)
+{
+    cl_platform_id plats[MAX_PLATFORMS];
+    cl_uint np = 0;
+    if (clGetPlatformIDs(MAX_PLATFORMS, plats, &np) != CL_SUCCESS || np == 0) {
+        snprintf(err, errlen, "no OpenCL platform found (install an OpenCL ICD, e.g. "
+                              "pocl-opencl-icd, or use --backend c)");
+        return -1;
+    }
+    if (np > MAX_PLATFORMS)
+        np = MAX_PLATFORMS;
+    const char *want = getenv("TERRAFARM_CL_DEVICE");
+    int want_p = -1, want_d = -1;
+    if (want && *want) {
+        char tail;
+        if (sscanf(want, "%d:%d%c", &want_p, &want_d, &tail) != 2)
+            want_p = want_d = -1;
+    } else {
+        want = NULL;
+    }
+    cl_device_id best = NULL;
+    int best_rank = 0; /* 2: GPU with fp64, 1: other device with fp64 */
+    for (cl_uint p = 0; p < np; p++) {
+        cl_device_id devs[MAX_DEVICES];
+        cl_uint nd = 0;
+        if (clGetDeviceIDs(plats[p], CL_DEVICE_TYPE_ALL, MAX_DEVICES, devs, &nd) != CL_SUCCESS)
+            continue;
+        if (nd > MAX_DEVICES)
+            nd = MAX_DEVICES;
+        for (cl_uint d = 0; d < nd; d++) {
+            char dname[256] = "";
+            clGetDeviceInfo(devs[d], CL_DEVICE_NAME, sizeof dname - 1, dname, NULL);
+            if (want) {
+                int match = want_p >= 0 ? (int)p == want_p && (int)d == want_d
+                                        : contains_ci(dname, want);
+                if (!match)
+                    continue;
+                if (!device_has_fp64(devs[d])) {
+                    snprintf(err, errlen,
+                             "OpenCL device '%s' (TERRAFARM_CL_DEVICE=%s) lacks double "
+                             "precision (cl_khr_fp64)", dname, want);
+                    return -1;
+                }
+                *out = devs[d];
+                snprintf(name, namelen, "%s", dname);
+                return 0;
+            }
+            if (!device_has_fp64(devs[d]))
+                continue;
+            cl_device_type type = 0;
+            clGetDeviceInfo(devs[d], CL_DEVICE_TYPE, sizeof type, &type, NULL);
+            int rank = (type & CL_DEVICE_TYPE_GPU) ? 2 : 1;
+            if (rank > best_rank) {
+                best_rank = rank;
+                best = devs[d];
+                snprintf(name, namelen, "%s", dname);
+            }
+        }
+    }
+    if (want) {
+        snprintf(err, errlen, "TERRAFARM_CL_DEVICE=%s matches no OpenCL device", want);
+        return -1;
+    }
+    if (!best) {
+        snprintf(err, errlen, "no OpenCL device with double precision (cl_khr_fp64)");
+        return -1;
+    }
+    *out = best;
+    return 0;
+}
+
+/* ---------------------------------------------------------------- program */
+
+/* Build the program from tf_cl_params.h + terrafarm.cl.  On failure the build log goes to
+ * stderr (it is many lines; the error itself stays one line). */
+static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t errlen)
+{
+    char dir[PATH_MAX], path[PATH_MAX + 32];
+    if (find_kernel_dir(dir, sizeof dir, err, errlen))
+        return -1;
+    size_t len[2];
+    char *src[2];
+    snprintf(path, sizeof path, "%s/" PARAMS_FILE, dir);
+    src[0] = read_text(path, &len[0]);
+    snprintf(path, sizeof path, "%s/" KERNEL_FILE, dir);
+    src[1] = read_text(path, &len[1]);
+    if (!src[0] || !src[1]) {
+        snprintf(err, errlen, "cannot read the OpenCL kernels in %s", dir);
+        free(src[0]);
+        free(src[1]);
+        return -1;
+    }
+    cl_int rc;
+    double t0 = now_seconds();
+    b->program = clCreateProgramWithSource(b->ctx, 2, (const char **)src, len, &rc);
+    free(src[0]);
+    free(src[1]);
+    if (rc != CL_SUCCESS) {
+        snprintf(err, errlen, "OpenCL: cannot create the program (error %d)", rc);
+        return -1;
+    }
+    rc = clBuildProgram(b->program, 1, &dev, "-cl-std=CL1.2", NULL, NULL);
+    b->build_seconds = now_seconds() - t0;
+    if (rc != CL_SUCCESS) {
+        size_t loglen = 0;
+        clGetProgramBuildInfo(b->program, dev, CL_PROGRAM_BUILD_LOG, 0, NULL, &loglen);
+        if (loglen > 0 && loglen < ((size_t)16 << 20)) {
+            char *log = malloc(loglen + 1);
+            if (log && clGetProgramBuildInfo(b->program, dev, CL_PROGRAM_BUILD_LOG, loglen, log,
+                                             NULL) == CL_SUCCESS) {
+                log[loglen] = 0;
+                fprintf(stderr, "--- OpenCL build log (%s/" KERNEL_FILE ") ---\n%s\n---\n", dir,
+                        log);
+            }
+            free(log);
+        }
+        snprintf(err, errlen, "OpenCL: building %s/" KERNEL_FILE " failed (error %d; build log "
+                 "above)", dir, rc);
+        return -1;
+    }
+    b->k_corners = clCreateKernel(b->program, "tf_corners", &rc);
+    if (rc == CL_SUCCESS)
+        b->k_pixels = clCreateKernel(b->program, "tf_pixels", &rc);
+    if (rc != CL_SUCCESS) {
+        snprintf(err, errlen, "OpenCL: kernel missing from %s/" KERNEL_FILE " (error %d)", dir,
+                 rc);
+        return -1;
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------- parameters and uploads */
+
+static void put3(double *P, int k, tf_vec3 v)
+{
+    P[k] = v.x;
+    P[k + 1] = v.y;
+    P[k + 2] = v.z;
+}
+
+/* Copy what tf_renderer_new derived into the P[] / I[] blocks. */
+static void fill_params(const tf_renderer *r, double *P, int *I)
+{
+    const tf_scene *s = r->scene;
+    const tf_heightfield *hf = r->hf;
+    const tf_camera *cam = &r->camera;
+    const tf_shader *sh = &r->shader;
+    P[TFP_CELL] = hf->cell;
+    P[TFP_EXTENT] = hf->extent;
+    P[TFP_HMIN] = hf->hmin;
+    P[TFP_HMAX] = hf->hmax;
+    put3(P, TFP_CAM_POS, cam->position);
+    put3(P, TFP_CAM_FORWARD, cam->forward);
+    put3(P, TFP_CAM_RIGHT, cam->right);
+    put3(P, TFP_CAM_UP, cam->up);
+    P[TFP_HALF_W] = cam->half_w;
+    P[TFP_HALF_H] = cam->half_h;
+    put3(P, TFP_PANO_FORWARD, cam->pano_forward);
+    put3(P, TFP_PANO_RIGHT, cam->pano_right);
+    put3(P, TFP_PANO_UP, cam->pano_up);
+    P[TFP_SWEEP] = cam->sweep;
+    P[TFP_V_CENTRE] = cam->v_centre;
+    P[TFP_V_HALF] = cam->v_half;
+    put3(P, TFP_SUN_DIR, sh->sun_dir);
+    put3(P, TFP_SUN_LIGHT, sh->sun_light);
+    put3(P, TFP_SKY_LIGHT, sh->sky_light);
+    P[TFP_MIST_K] = sh->mist_k;
+    P[TFP_BAND] = sh->band;
+    P[TFP_BUMP_SCALE] = sh->bump_scale;
+    P[TFP_RIPPLE_SCALE] = sh->ripple_scale;
+    P[TFP_SHADOW_LIFT] = sh->shadow_lift;
+    P[TFP_PIXEL_ANGLE] = sh->pixel_angle;
+    P[TFP_SEA_LEVEL] = s->materials.sea_level;
+    P[TFP_TREE_LINE] = s->materials.tree_line;
+    P[TFP_SNOW_LINE] = s->materials.snow_line;
+    P[TFP_SNOW_JITTER] = s->materials.snow_jitter;
+    P[TFP_ROCK_SLOPE] = s->materials.rock_slope_deg;
+    P[TFP_BUMP] = s->materials.bump;
+    P[TFP_MIST_DENSITY] = s->mist.density;
+    put3(P, TFP_MIST_COLOR, s->mist.color);
+    put3(P, TFP_MIST_EXT, s->mist.extinction);
+    put3(P, TFP_SKY_HORIZON, s->sky.horizon);
+    put3(P, TFP_SKY_ZENITH, s->sky.zenith);
+    P[TFP_THRESHOLD] = r->threshold;
+
+    I[TFI_N] = hf->n;
+    I[TFI_CELLS] = hf->cells;
+    I[TFI_LEVELS] = hf->levels;
+    I[TFI_WIDTH] = cam->width;
+    I[TFI_HEIGHT] = cam->height;
+    I[TFI_CAM_KIND] = cam->kind == TF_CAMERA_PANORAMA;
+    I[TFI_TEXTURED] = sh->textured;
+    I[TFI_MIST_ENABLED] = s->mist.enabled;
+    I[TFI_MIST_HOMOG] = s->mist.homogeneous;
+    I[TFI_LATTICE] = r->lattice;
+    I[TFI_DEPTH] = r->depth;
+}
+
+static cl_mem upload(tf_cl_backend *b, const void *data, size_t bytes, cl_int *rc)
+{
+    return clCreateBuffer(b->ctx, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, (void *)data,
+                          rc);
+}
+
+/* Upload the parameters, heights, the max/min mipmap (levels concatenated) and the noise
+ * permutation.  The grid level offsets go into I[] before I is uploaded. */
+static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
+{
+    const tf_heightfield *hf = b->renderer->hf;
+    double P[TFP_COUNT] = {0};
+    int I[TFI_COUNT] = {0};
+    if (hf->levels > TF_CL_MAX_LEVELS) {
+        snprintf(err, errlen, "OpenCL: height field with %d grid levels (at most %d)", hf->levels,
+                 TF_CL_MAX_LEVELS);
+        return -1;
+    }
+    fill_params(b->renderer, P, I);
+    size_t total = 0;
+    for (int L = 0; L < hf->levels; L++) {
+        size_t side = (size_t)(hf->cells >> L);
+        if (total > (size_t)INT_MAX - side * side) {
+            snprintf(err, errlen, "OpenCL: height field too large for the grid offsets");
+            return -1;
+        }
+        I[TFI_LEVEL_OFFSET + L] = (int)total;
+        total += side * side;
+    }
+    float *mx = malloc(total * sizeof *mx), *mn = malloc(total * sizeof *mn);
+    if (!mx || !mn) {
+        free(mx);
+        free(mn);
+        snprintf(err, errlen, "OpenCL: out of memory for the max grids");
+        return -1;
+    }
+    for (int L = 0; L < hf->levels; L++) {
+        size_t side = (size_t)(hf->cells >> L);
+        memcpy(mx + I[TFI_LEVEL_OFFSET + L], hf->maxgrid[L], side * side * sizeof *mx);
+        memcpy(mn + I[TFI_LEVEL_OFFSET + L], hf->mingrid[L], side * side * sizeof *mn);
+    }
+    cl_int rc[6];
+    b->P = upload(b, P, sizeof P, &rc[0]);
+    b->I = upload(b, I, sizeof I, &rc[1]);
+    b->h = upload(b, hf->h, (size_t)hf->n * (size_t)hf->n * sizeof(float), &rc[2]);
+    b->mx = upload(b, mx, total * sizeof *mx, &rc[3]);
+    b->mn = upload(b, mn, total * sizeof *mn, &rc[4]);
+    b->perm = upload(b, b->renderer->shader.noise.perm, sizeof b->renderer->shader.noise.perm,
+                     &rc[5]);
+    free(mx);
+    free(mn);
+    for (int i = 0; i < 6; i++)
+        if (rc[i] != CL_SUCCESS) {
+            snprintf(err, errlen, "OpenCL: cannot upload the height field (error %d)", rc[i]);
+            return -1;
+        }
+    return 0;
+}
+
+/* ---------------------------------------------------------------- public */
 
 tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, char *err,
                                  size_t errlen)
 {
-    (void)s;
-    (void)hf;
-    snprintf(err, errlen, "the OpenCL backend is not implemented yet; use --backend c");
+    tf_cl_backend *b = calloc(1, sizeof *b);
+    if (!b) {
+        snprintf(err, errlen, "out of memory");
+        return NULL;
+    }
+    b->renderer = tf_renderer_new(s, hf, err, errlen);
+    if (!b->renderer) {
+        free(b);
+        return NULL;
+    }
+    b->jitter_key = b->renderer->jitter_key;
+    b->lattice = b->renderer->lattice;
+    set_pocl_cache_dir();
+    cl_device_id dev;
+    cl_int rc;
+    if (choose_device(&dev, b->device_name, sizeof b->device_name, err, errlen))
+        goto fail;
+    b->ctx = clCreateContext(NULL, 1, &dev, NULL, NULL, &rc);
+    if (rc != CL_SUCCESS) {
+        snprintf(err, errlen, "OpenCL: cannot create a context on '%s' (error %d)",
+                 b->device_name, rc);
+        goto fail;
+    }
+    b->queue = clCreateCommandQueue(b->ctx, dev, 0, &rc);
+    if (rc != CL_SUCCESS) {
+        snprintf(err, errlen, "OpenCL: cannot create a queue on '%s' (error %d)", b->device_name,
+                 rc);
+        goto fail;
+    }
+    if (build_program(b, dev, err, errlen) || upload_world(b, err, errlen))
+        goto fail;
+    return b;
+fail:
+    tf_cl_backend_free(b);
     return NULL;
+}
+
+const char *tf_cl_backend_device(const tf_cl_backend *b) { return b->device_name; }
+double tf_cl_backend_build_seconds(const tf_cl_backend *b) { return b->build_seconds; }
+
+/* Make *buf hold at least `bytes` (read-write, device-side), growing it in place. */
+static int ensure(tf_cl_backend *b, cl_mem *buf, size_t *cap, size_t bytes)
+{
+    if (*buf && *cap >= bytes)
+        return 0;
+    if (*buf)
+        clReleaseMemObject(*buf);
+    cl_int rc;
+    *buf = clCreateBuffer(b->ctx, CL_MEM_READ_WRITE, bytes, NULL, &rc);
+    *cap = rc == CL_SUCCESS ? bytes : 0;
+    return rc == CL_SUCCESS ? 0 : -1;
+}
+
+/* The arguments both kernels share, in the order they take them. */
+static cl_int set_common_args(tf_cl_backend *b, cl_kernel k, tf_rect rect)
+{
+    cl_int rc = clSetKernelArg(k, 0, sizeof(cl_mem), &b->P);
+    rc |= clSetKernelArg(k, 1, sizeof(cl_mem), &b->I);
+    rc |= clSetKernelArg(k, 2, sizeof(cl_ulong), &b->jitter_key);
+    rc |= clSetKernelArg(k, 3, sizeof(cl_mem), &b->h);
+    rc |= clSetKernelArg(k, 4, sizeof(cl_mem), &b->mx);
+    rc |= clSetKernelArg(k, 5, sizeof(cl_mem), &b->mn);
+    rc |= clSetKernelArg(k, 6, sizeof(cl_mem), &b->perm);
+    rc |= clSetKernelArg(k, 7, sizeof(cl_int), &rect.x);
+    rc |= clSetKernelArg(k, 8, sizeof(cl_int), &rect.y);
+    return rc;
+}
+
+static uint64_t sum_u32(const cl_uint *v, size_t n)
+{
+    uint64_t s = 0;
+    for (size_t i = 0; i < n; i++)
+        s += v[i];
+    return s;
 }
 
 int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
                          char *err, size_t errlen)
 {
-    (void)b;
-    (void)rect;
-    (void)out;
-    (void)counts;
-    snprintf(err, errlen, "the OpenCL backend is not implemented yet");
-    return -1;
+    const tf_scene *s = b->renderer->scene;
+    if (rect.w <= 0 || rect.h <= 0 || rect.x < 0 || rect.y < 0 || rect.x > s->width - rect.w ||
+        rect.y > s->height - rect.h) {
+        snprintf(err, errlen, "rectangle %dx%d+%d+%d outside the %dx%d image", rect.w, rect.h,
+                 rect.x, rect.y, s->width, s->height);
+        return -1;
+    }
+    const size_t ncorners = (size_t)(rect.w + 1) * (size_t)(rect.h + 1);
+    const size_t npixels = (size_t)rect.w * (size_t)rect.h;
+    const size_t side = (size_t)b->lattice + 1;
+    const size_t per_pixel = side * side * (TF_CL_SAMPLE_FLOATS * sizeof(float) + 1);
+    size_t batch = SCRATCH_BUDGET / per_pixel;
+    if (batch < 1)
+        batch = 1;
+    if (batch > npixels)
+        batch = npixels;
+    cl_uint *corner_shadow = malloc(ncorners * sizeof *corner_shadow);
+    cl_uint *pixel_shadow = malloc(npixels * sizeof *pixel_shadow);
+    float *pix = malloc(npixels * TF_CL_PIXEL_FLOATS * sizeof *pix);
+    int failed = !corner_shadow || !pixel_shadow || !pix ||
+                 ensure(b, &b->corners, &b->corners_cap,
+                        ncorners * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
+                 ensure(b, &b->corner_shadow, &b->corner_shadow_cap, ncorners * sizeof(cl_uint)) ||
+                 ensure(b, &b->cache, &b->cache_cap,
+                        batch * side * side * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
+                 ensure(b, &b->have, &b->have_cap, batch * side * side) ||
+                 ensure(b, &b->out, &b->out_cap, npixels * TF_CL_PIXEL_FLOATS * sizeof(float)) ||
+                 ensure(b, &b->pixel_shadow, &b->pixel_shadow_cap, npixels * sizeof(cl_uint));
+    if (failed) {
+        free(corner_shadow);
+        free(pixel_shadow);
+        free(pix);
+        snprintf(err, errlen, "OpenCL: out of memory for a %dx%d rectangle", rect.w, rect.h);
+        return -1;
+    }
+
+    cl_int rc;
+    cl_int cw = rect.w + 1, ch = rect.h + 1;
+    rc = set_common_args(b, b->k_corners, rect);
+    rc |= clSetKernelArg(b->k_corners, 9, sizeof cw, &cw);
+    rc |= clSetKernelArg(b->k_corners, 10, sizeof ch, &ch);
+    rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corners);
+    rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_shadow);
+    size_t global = ncorners;
+    if (rc == CL_SUCCESS)
+        rc = clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, NULL, 0, NULL,
+                                    NULL);
+    cl_int rw = rect.w;
+    for (size_t first = 0; rc == CL_SUCCESS && first < npixels; first += batch) {
+        cl_int f = (cl_int)first, count = (cl_int)(npixels - first < batch ? npixels - first : batch);
+        rc = set_common_args(b, b->k_pixels, rect);
+        rc |= clSetKernelArg(b->k_pixels, 9, sizeof rw, &rw);
+        rc |= clSetKernelArg(b->k_pixels, 10, sizeof f, &f);
+        rc |= clSetKernelArg(b->k_pixels, 11, sizeof count, &count);
+        rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->corners);
+        rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->cache);
+        rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->have);
+        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->out);
+        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->pixel_shadow);
+        global = (size_t)count;
+        if (rc == CL_SUCCESS)
+            rc = clEnqueueNDRangeKernel(b->queue, b->k_pixels, 1, NULL, &global, NULL, 0, NULL,
+                                        NULL);
+    }
+    if (rc == CL_SUCCESS)
+        rc = clEnqueueReadBuffer(b->queue, b->out, CL_TRUE, 0,
+                                 npixels * TF_CL_PIXEL_FLOATS * sizeof(float), pix, 0, NULL, NULL);
+    if (rc == CL_SUCCESS)
+        rc = clEnqueueReadBuffer(b->queue, b->corner_shadow, CL_TRUE, 0,
+                                 ncorners * sizeof(cl_uint), corner_shadow, 0, NULL, NULL);
+    if (rc == CL_SUCCESS)
+        rc = clEnqueueReadBuffer(b->queue, b->pixel_shadow, CL_TRUE, 0,
+                                 npixels * sizeof(cl_uint), pixel_shadow, 0, NULL, NULL);
+    if (rc != CL_SUCCESS) {
+        free(corner_shadow);
+        free(pixel_shadow);
+        free(pix);
+        snprintf(err, errlen, "OpenCL: rendering %dx%d+%d+%d failed (error %d)", rect.w, rect.h,
+                 rect.x, rect.y, rc);
+        return -1;
+    }
+    uint64_t inner = 0; /* samples traced inside pixels beyond their 4 corners */
+    for (size_t k = 0; k < npixels; k++) {
+        const float *p = pix + k * TF_CL_PIXEL_FLOATS;
+        out[k] = (tf_pixel){p[0], p[1], p[2], p[3], p[4], p[5]};
+        inner += (uint64_t)p[5] - 4;
+    }
+    if (counts) {
+        counts->primary_rays += ncorners + inner;
+        counts->shadow_rays += sum_u32(corner_shadow, ncorners) + sum_u32(pixel_shadow, npixels);
+        counts->external_rays += (uint64_t)rect.w + (uint64_t)rect.h + 1;
+        counts->pixels += npixels;
+    }
+    free(corner_shadow);
+    free(pixel_shadow);
+    free(pix);
+    return 0;
 }
 
-void tf_cl_backend_free(tf_cl_backend *b) { (void)b; }
+void tf_cl_backend_free(tf_cl_backend *b)
+{
+    if (!b)
+        return;
+    cl_mem bufs[] = {b->P,      b->I,     b->h,     b->mx,  b->mn,  b->perm,
+                     b->corners, b->corner_shadow, b->cache, b->have, b->out, b->pixel_shadow};
+    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
+        if (bufs[i])
+            clReleaseMemObject(bufs[i]);
+    if (b->k_corners)
+        clReleaseKernel(b->k_corners);
+    if (b->k_pixels)
+        clReleaseKernel(b->k_pixels);
+    if (b->program)
+        clReleaseProgram(b->program);
+    if (b->queue)
+        clReleaseCommandQueue(b->queue);
+    if (b->ctx)
+        clReleaseContext(b->ctx);
+    tf_renderer_free(b->renderer);
+    free(b);
+}

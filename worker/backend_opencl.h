@@ -18,5 +18,8 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
 int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
                          char *err, size_t errlen);
 void tf_cl_backend_free(tf_cl_backend *b);
+/* The chosen device's name, and the seconds clBuildProgram took (a PoCL cache hit is fast). */
+const char *tf_cl_backend_device(const tf_cl_backend *b);
+double tf_cl_backend_build_seconds(const tf_cl_backend *b);
 
 #endif

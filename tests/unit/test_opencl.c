@@ -1,0 +1,273 @@
+/* test_opencl.c: the OpenCL backend (worker/backend_opencl.c + worker/kernels/terrafarm.cl)
+ * against the C renderer, on PoCL.
+ *
+ *   match_c_backend     scenes/default.scene at 160x90, rendered in-process both ways
+ *                       (tf_render_rect vs tf_cl_backend_render): PSNR >= 45 dB over linear RGB
+ *                       in [0, 1], per-pixel sample counts equal for >= 99% of pixels, alpha
+ *                       equal for >= 99%, ray counts within 1%, external rays identical.
+ *   rect_invariance     the decomposition invariant on the device: stamps of the image give
+ *                       memcmp-identical pixels to the whole-image render.
+ *   mixed_backends      an image whose rectangles alternate between the backends (what a render
+ *                       with mixed workers assembles) meets the same tolerance.
+ *   bad_device / bad_kernel_dir / bad_rect   one-line errors, no crash.
+ * Every test skips (cmocka skip()) with a message when no OpenCL platform exists. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define CL_TARGET_OPENCL_VERSION 120
+#include <CL/cl.h>
+
+#include "backend_opencl.h"
+#include "heightfield.h"
+#include "render.h"
+#include "scene.h"
+
+#define W 160
+#define H 90
+
+typedef struct fixture {
+    tf_scene *scene;
+    tf_heightfield *hf;
+    tf_renderer *r;
+    tf_cl_backend *cl;
+    tf_pixel c_img[W * H];
+    tf_render_counts c_counts;
+} fixture;
+
+static fixture fx;
+
+static int have_platform(void)
+{
+    cl_uint n = 0;
+    return clGetPlatformIDs(0, NULL, &n) == CL_SUCCESS && n > 0;
+}
+
+static void skip_without_opencl(void)
+{
+    if (!have_platform()) {
+        print_message("no OpenCL platform: skipping the OpenCL backend tests\n");
+        skip();
+    }
+}
+
+static int setup(void **state)
+{
+    (void)state;
+    char err[1024], path[4096];
+    const char *root = getenv("TF_ROOT");
+    snprintf(path, sizeof path, "%s/scenes/default.scene", root ? root : ".");
+    fx.scene = tf_scene_load(path, err, sizeof err);
+    if (!fx.scene) {
+        fprintf(stderr, "%s\n", err);
+        return -1;
+    }
+    tf_scene_set_size(fx.scene, W, H);
+    fx.hf = tf_heightfield_build(fx.scene, 0, err, sizeof err);
+    fx.r = fx.hf ? tf_renderer_new(fx.scene, fx.hf, err, sizeof err) : NULL;
+    if (!fx.r) {
+        fprintf(stderr, "%s\n", err);
+        return -1;
+    }
+    tf_render_rect(fx.r, (tf_rect){0, 0, W, H}, fx.c_img, &fx.c_counts);
+    if (have_platform()) {
+        fx.cl = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+        if (!fx.cl) {
+            fprintf(stderr, "OpenCL backend: %s\n", err);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    (void)state;
+    tf_cl_backend_free(fx.cl);
+    tf_renderer_free(fx.r);
+    tf_heightfield_free(fx.hf);
+    tf_scene_free(fx.scene);
+    return 0;
+}
+
+static double clamp01(double v) { return v < 0 ? 0 : v > 1 ? 1 : v; }
+
+/* PSNR of b against a over the RGB channels, values clamped to [0, 1], peak 1. */
+static double psnr(const tf_pixel *a, const tf_pixel *b, size_t n)
+{
+    double se = 0;
+    for (size_t i = 0; i < n; i++) {
+        double d[3] = {clamp01(a[i].r) - clamp01(b[i].r), clamp01(a[i].g) - clamp01(b[i].g),
+                       clamp01(a[i].b) - clamp01(b[i].b)};
+        se += d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    }
+    double mse = se / (3.0 * (double)n);
+    return mse > 0 ? 10.0 * log10(1.0 / mse) : INFINITY;
+}
+
+static size_t count_equal_spp(const tf_pixel *a, const tf_pixel *b, size_t n)
+{
+    size_t same = 0;
+    for (size_t i = 0; i < n; i++)
+        same += a[i].spp == b[i].spp;
+    return same;
+}
+
+/* The tolerance of the issue: PSNR >= 45 dB, sample counts and alpha equal for >= 99%. */
+static void assert_close_to_c(const tf_pixel *img, const char *what)
+{
+    size_t n = (size_t)W * H, alpha_same = 0;
+    for (size_t i = 0; i < n; i++)
+        alpha_same += img[i].a == fx.c_img[i].a;
+    double p = psnr(fx.c_img, img, n);
+    size_t spp_same = count_equal_spp(fx.c_img, img, n);
+    print_message("%s: PSNR %.1f dB, spp equal %zu/%zu, alpha equal %zu/%zu\n", what, p, spp_same,
+                  n, alpha_same, n);
+    assert_true(p >= 45.0);
+    assert_true(spp_same * 100 >= n * 99);
+    assert_true(alpha_same * 100 >= n * 99);
+}
+
+static void match_c_backend(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    static tf_pixel img[W * H];
+    tf_render_counts counts = {0};
+    char err[1024];
+    assert_int_equal(tf_cl_backend_render(fx.cl, (tf_rect){0, 0, W, H}, img, &counts, err,
+                                          sizeof err), 0);
+    assert_close_to_c(img, "whole image");
+    assert_int_equal(counts.pixels, fx.c_counts.pixels);
+    assert_int_equal(counts.external_rays, fx.c_counts.external_rays);
+    double dp = fabs((double)counts.primary_rays - (double)fx.c_counts.primary_rays);
+    double ds = fabs((double)counts.shadow_rays - (double)fx.c_counts.shadow_rays);
+    print_message("primary rays %llu (C %llu), shadow rays %llu (C %llu)\n",
+                  (unsigned long long)counts.primary_rays,
+                  (unsigned long long)fx.c_counts.primary_rays,
+                  (unsigned long long)counts.shadow_rays,
+                  (unsigned long long)fx.c_counts.shadow_rays);
+    assert_true(dp <= 0.01 * (double)fx.c_counts.primary_rays);
+    assert_true(ds <= 0.01 * (double)fx.c_counts.shadow_rays);
+    /* Z is the nearest sample's distance: equal wherever the same samples were taken */
+    size_t z_close = 0;
+    for (size_t i = 0; i < (size_t)W * H; i++)
+        z_close += fabs(img[i].z - fx.c_img[i].z) <= 1e-3f * fx.c_img[i].z;
+    assert_true(z_close * 100 >= (size_t)W * H * 99);
+}
+
+/* Copy rect's pixels (row-major in rect) into the whole-image array dst. */
+static void paste(tf_pixel *dst, tf_rect rect, const tf_pixel *src)
+{
+    for (int y = 0; y < rect.h; y++)
+        memcpy(&dst[(size_t)(rect.y + y) * W + rect.x], &src[(size_t)y * rect.w],
+               sizeof *src * (size_t)rect.w);
+}
+
+static void rect_invariance(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    static tf_pixel whole[W * H], tiled[W * H], part[W * H];
+    char err[1024];
+    assert_int_equal(tf_cl_backend_render(fx.cl, (tf_rect){0, 0, W, H}, whole, NULL, err,
+                                          sizeof err), 0);
+    memset(tiled, 0xff, sizeof tiled);
+    /* odd stamps that do not divide the image: 37x23 with ragged edges */
+    for (int y = 0; y < H; y += 23)
+        for (int x = 0; x < W; x += 37) {
+            tf_rect r = {x, y, x + 37 <= W ? 37 : W - x, y + 23 <= H ? 23 : H - y};
+            assert_int_equal(tf_cl_backend_render(fx.cl, r, part, NULL, err, sizeof err), 0);
+            paste(tiled, r, part);
+        }
+    assert_memory_equal(whole, tiled, sizeof whole);
+}
+
+static void mixed_backends(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    static tf_pixel mixed[W * H], part[W * H];
+    char err[1024];
+    int k = 0;
+    for (int y = 0; y < H; y += 15, k++) {
+        tf_rect r = {0, y, W, y + 15 <= H ? 15 : H - y};
+        if (k % 2)
+            assert_int_equal(tf_cl_backend_render(fx.cl, r, part, NULL, err, sizeof err), 0);
+        else
+            tf_render_rect(fx.r, r, part, NULL);
+        paste(mixed, r, part);
+    }
+    assert_close_to_c(mixed, "mixed backends");
+}
+
+static void bad_device(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    char err[1024] = "";
+    setenv("TERRAFARM_CL_DEVICE", "no-such-device-xyzzy", 1);
+    tf_cl_backend *b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    unsetenv("TERRAFARM_CL_DEVICE");
+    assert_null(b);
+    assert_non_null(strstr(err, "no-such-device-xyzzy"));
+    assert_null(strchr(err, '\n'));
+    setenv("TERRAFARM_CL_DEVICE", "7:7", 1);
+    b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    unsetenv("TERRAFARM_CL_DEVICE");
+    assert_null(b);
+    assert_non_null(strstr(err, "matches no OpenCL device"));
+}
+
+static void good_device_override(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    char err[1024] = "";
+    setenv("TERRAFARM_CL_DEVICE", "0:0", 1);
+    tf_cl_backend *b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    unsetenv("TERRAFARM_CL_DEVICE");
+    assert_non_null(b);
+    assert_string_equal(tf_cl_backend_device(b), tf_cl_backend_device(fx.cl));
+    tf_cl_backend_free(b);
+}
+
+static void bad_kernel_dir(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    char err[1024] = "";
+    setenv("TERRAFARM_KERNELS", "/nonexistent/terrafarm-kernels", 1);
+    tf_cl_backend *b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    unsetenv("TERRAFARM_KERNELS");
+    assert_null(b);
+    assert_non_null(strstr(err, "/nonexistent/terrafarm-kernels"));
+    assert_null(strchr(err, '\n'));
+}
+
+static void bad_rect(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    tf_pixel px[4];
+    char err[1024] = "";
+    assert_int_equal(tf_cl_backend_render(fx.cl, (tf_rect){W - 1, 0, 2, 2}, px, NULL, err,
+                                          sizeof err), -1);
+    assert_non_null(strstr(err, "outside"));
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(match_c_backend), cmocka_unit_test(rect_invariance),
+        cmocka_unit_test(mixed_backends),  cmocka_unit_test(bad_device),
+        cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
+        cmocka_unit_test(bad_rect),
+    };
+    return cmocka_run_group_tests(tests, setup, teardown);
+}

@@ -1,0 +1,73 @@
+/* tf_cl_params.h: the parameter block the host (worker/backend_opencl.c) fills and the kernels
+ * (worker/kernels/terrafarm.cl) read.  Plain C preprocessor only, so the same file is compiled
+ * into the host and prepended to the kernel source at run time: the indices can never drift.
+ *
+ * Two arrays carry everything derived from the scene, the camera and the shader setup (the very
+ * values tf_renderer_new computes, copied, never recomputed on the device):
+ *   P[] doubles, indexed by TFP_*   (vectors take three consecutive slots x, y, z)
+ *   I[] ints,    indexed by TFI_*   (TFI_LEVEL_OFFSET + L: start of mip level L in the
+ *                                    concatenated max/min grid buffers) */
+#ifndef TF_CL_PARAMS_H
+#define TF_CL_PARAMS_H
+
+/* doubles */
+#define TFP_CELL          0
+#define TFP_EXTENT        1
+#define TFP_HMIN          2
+#define TFP_HMAX          3
+#define TFP_CAM_POS       4   /* 3 */
+#define TFP_CAM_FORWARD   7   /* 3 */
+#define TFP_CAM_RIGHT    10   /* 3 */
+#define TFP_CAM_UP       13   /* 3 */
+#define TFP_HALF_W       16
+#define TFP_HALF_H       17
+#define TFP_PANO_FORWARD 18   /* 3 */
+#define TFP_PANO_RIGHT   21   /* 3 */
+#define TFP_PANO_UP      24   /* 3 */
+#define TFP_SWEEP        27
+#define TFP_V_CENTRE     28
+#define TFP_V_HALF       29
+#define TFP_SUN_DIR      30   /* 3 */
+#define TFP_SUN_LIGHT    33   /* 3 */
+#define TFP_SKY_LIGHT    36   /* 3 */
+#define TFP_MIST_K       39
+#define TFP_BAND         40
+#define TFP_BUMP_SCALE   41
+#define TFP_RIPPLE_SCALE 42
+#define TFP_SHADOW_LIFT  43
+#define TFP_PIXEL_ANGLE  44
+#define TFP_SEA_LEVEL    45
+#define TFP_TREE_LINE    46
+#define TFP_SNOW_LINE    47
+#define TFP_SNOW_JITTER  48
+#define TFP_ROCK_SLOPE   49
+#define TFP_BUMP         50
+#define TFP_MIST_DENSITY 51
+#define TFP_MIST_COLOR   52   /* 3 */
+#define TFP_MIST_EXT     55   /* 3 */
+#define TFP_SKY_HORIZON  58   /* 3 */
+#define TFP_SKY_ZENITH   61   /* 3 */
+#define TFP_THRESHOLD    64
+#define TFP_COUNT        65
+
+/* ints */
+#define TFI_N             0   /* samples per side */
+#define TFI_CELLS         1
+#define TFI_LEVELS        2
+#define TFI_WIDTH         3
+#define TFI_HEIGHT        4
+#define TFI_CAM_KIND      5   /* 0 pinhole, 1 panorama (enum tf_camera_kind) */
+#define TFI_TEXTURED      6
+#define TFI_MIST_ENABLED  7
+#define TFI_MIST_HOMOG    8
+#define TFI_LATTICE       9   /* N = 2^depth */
+#define TFI_DEPTH        10
+#define TFI_LEVEL_OFFSET 11   /* up to TF_CL_MAX_LEVELS entries */
+#define TF_CL_MAX_LEVELS 18
+#define TFI_COUNT        (TFI_LEVEL_OFFSET + TF_CL_MAX_LEVELS)
+
+/* Floats per stored sample (r, g, b, a, dist) and per output pixel (r, g, b, a, z, spp). */
+#define TF_CL_SAMPLE_FLOATS 5
+#define TF_CL_PIXEL_FLOATS  6
+
+#endif

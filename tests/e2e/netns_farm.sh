@@ -1,0 +1,297 @@
+#!/bin/sh
+# tests/e2e/netns_farm.sh: a render across "machines" that share nothing but a network.
+#
+# Builds a small LAN out of Linux network namespaces: a switch (a bridge in its own namespace,
+# tf-PID-lan) and three hosts plugged into it with veth cables: the coordinator (tf-PID-coord,
+# 10.77.0.1) and two workers (tf-PID-w1, tf-PID-w2, 10.77.0.2 and .3).  Each host sees only its
+# own loopback and its cable, so the workers reach the coordinator over the "network" alone,
+# authenticated by a shared secret file, exactly as on separate machines.
+#
+#   1. A wrong secret is refused with one clear line.
+#   2. Coordinator (-j 0, networked workers only) + two workers (-j 1 each) render
+#      scenes/default.scene at 240x135; both workers take tasks; the image is bit-identical
+#      (cmp) to a local render of the same scene and size.
+#   3. The same at a larger size with --tasks rows:4, --lease-timeout 2000 and a watermark that
+#      lets every task be dealt (see below why); once both workers are rendering, worker 2's
+#      cable is pulled at the switch (ip link set down).  The coordinator hears nothing more
+#      from it, drops it after the lease timeout and deals its task again (tasks_redealt >= 1
+#      in --stats); worker 1 finishes the render and the image still equals the local render.
+#
+# Needs root and `ip netns`; otherwise exits 77 (skipped) with the reason on its last line.
+# Every namespace and process it makes is removed on exit, even on failure or interrupt.
+# Usage: sh tests/e2e/netns_farm.sh   (or tests/run.sh netns; TF_BIN / TF_ROOT as run.sh sets;
+#        TF_KEEP_LOGS=1 keeps the logs, images and stats of the run)
+set -u
+
+ROOT=${TF_ROOT:-$(cd "$(dirname "$0")/../.." && pwd)}
+TF=${TF_BIN:-$ROOT/bin/terrafarm}
+SCENE=$ROOT/scenes/default.scene
+PORT=7878
+COORD_IP=10.77.0.1
+SMALL=240x135
+LARGE=1440x810         # ~7 s of one core here: after the cut, worker 1 alone still needs well
+                       # over the 2 s lease, so the lease expires (a re-deal) before the
+                       # straggler policy could cover the lost task with a duplicate
+LIMIT=45               # seconds any one process may run before `timeout` stops it
+
+NS_LAN=tf-$$-lan
+NS_COORD=tf-$$-coord
+NS_W1=tf-$$-w1
+NS_W2=tf-$$-w2
+
+skip() { echo "skipped: $*"; exit 77; }
+fail() { echo "FAIL: $*"; exit 1; }
+note() { echo "netns_farm: $*"; }
+
+# ---- preconditions: skip (77) with a reason, never fail, when the host cannot do this ----
+[ "$(id -u)" -eq 0 ] || skip "needs root to create network namespaces"
+command -v ip >/dev/null 2>&1 || skip "ip (iproute2) is not installed"
+command -v timeout >/dev/null 2>&1 || skip "timeout (coreutils) is not installed"
+[ -x "$TF" ] || fail "$TF is not built (run make)"
+
+# ---- cleanup: every process we started (by pid), then every namespace, then the temp dir ----
+PIDS=""
+NAMESPACES=""
+TMP=""
+STOPPED=""             # a worker paused by cut_while_rendering, continued before anything else
+cleanup() {
+    [ -n "$STOPPED" ] && kill -CONT "$STOPPED" 2>/dev/null
+    for pid in $PIDS; do
+        kill "$pid" 2>/dev/null
+    done
+    for pid in $PIDS; do
+        wait "$pid" 2>/dev/null
+    done
+    for ns in $NAMESPACES; do
+        ip netns delete "$ns" 2>/dev/null
+    done
+    if [ -n "${TF_KEEP_LOGS:-}" ]; then
+        echo "netns_farm: logs kept in $TMP"
+    elif [ -n "$TMP" ]; then
+        rm -rf "$TMP"
+    fi
+}
+trap cleanup EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/tf-netns.XXXXXX") || fail "mktemp failed"
+
+# ---- the network ----
+make_ns() {
+    ip netns add "$1" 2>"$TMP/ip.err" || skip "ip netns add $1 failed: $(head -1 "$TMP/ip.err")"
+    NAMESPACES="$NAMESPACES $1"
+    ip -n "$1" link set lo up || fail "cannot bring up lo in $1"
+}
+
+# plug HOST_NS ADDRESS: a veth cable from the switch port p-HOST to eth0 in HOST_NS.
+plug() {
+    port=p-${1##*-}
+    if ! { ip -n "$NS_LAN" link add "$port" type veth peer name eth0 netns "$1" &&
+        ip -n "$NS_LAN" link set "$port" master br0 &&
+        ip -n "$NS_LAN" link set "$port" up &&
+        ip -n "$1" addr add "$2/24" dev eth0 &&
+        ip -n "$1" link set eth0 up; }; then
+        fail "cannot plug $1 into the switch"
+    fi
+}
+
+make_ns "$NS_LAN"
+make_ns "$NS_COORD"
+make_ns "$NS_W1"
+make_ns "$NS_W2"
+if ! { ip -n "$NS_LAN" link add br0 type bridge && ip -n "$NS_LAN" link set br0 up; }; then
+    skip "cannot create a bridge in a network namespace"
+fi
+plug "$NS_COORD" "$COORD_IP"
+plug "$NS_W1" 10.77.0.2
+plug "$NS_W2" 10.77.0.3
+note "LAN up: $NS_COORD=$COORD_IP, $NS_W1=10.77.0.2, $NS_W2=10.77.0.3 on a bridge in $NS_LAN"
+
+# The shared secret, readable by its owner only (the farm warns about looser modes).
+umask 077
+head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$TMP/secret"
+echo "not the secret" >"$TMP/wrong-secret"
+
+# ---- helpers ----
+# start NS LOG CMD...: run CMD in namespace NS in the background, bounded by $LIMIT seconds;
+# the pid (of `timeout`, which passes signals on) is in $LAST and is killed on exit.
+start() {
+    ns=$1 log=$2
+    shift 2
+    ip netns exec "$ns" timeout "$LIMIT" "$@" >"$log" 2>&1 &
+    LAST=$!
+    PIDS="$PIDS $LAST"
+}
+
+# wait_for_line FILE TEXT SECONDS PID: until FILE contains TEXT; fails if PID dies first.
+wait_for_line() {
+    i=0
+    while ! grep -q "$2" "$1" 2>/dev/null; do
+        kill -0 "$4" 2>/dev/null || { cat "$1"; fail "process exited before '$2' appeared in $1"; }
+        i=$((i + 1))
+        [ "$i" -le $(($3 * 10)) ] || { cat "$1"; fail "no '$2' in $1 after $3 s"; }
+        sleep 0.1
+    done
+}
+
+# count_lines FILE TEXT: how many lines of FILE contain TEXT (0 when none).
+count_lines() {
+    grep -c "$2" "$1" 2>/dev/null || true
+}
+
+# json_int FILE KEY: the integer value of the first "KEY": N in a stats file.
+json_int() {
+    sed -n "s/.*\"$2\": *\\([0-9][0-9]*\\).*/\\1/p" "$1" | head -1
+}
+
+# start_coordinator TAG SIZE EXTRA...: the coordinator of a networked-only render into
+# $TMP/TAG.exr; returns once it is listening.  Its pid is $COORD, its log $TMP/TAG.coord.log.
+start_coordinator() {
+    tag=$1 size=$2
+    shift 2
+    start "$NS_COORD" "$TMP/$tag.coord.log" "$TF" render "$SCENE" --size "$size" -j 0 \
+        --listen "$COORD_IP:$PORT" --secret-file "$TMP/secret" -o "$TMP/$tag.exr" \
+        --stats "$TMP/$tag.json" -v "$@"
+    COORD=$LAST
+    wait_for_line "$TMP/$tag.coord.log" "may join at $COORD_IP:$PORT" 20 "$COORD"
+}
+
+# forget PID: it has been reaped, so cleanup must not signal it (the number may be reused).
+forget() {
+    kept=""
+    for pid in $PIDS; do
+        [ "$pid" = "$1" ] || kept="$kept $pid"
+    done
+    PIDS=$kept
+}
+
+# finish PID WHAT: wait for PID and fail unless it exited 0.
+finish() {
+    wait "$1"
+    rc=$?
+    forget "$1"
+    [ "$rc" -eq 0 ] || fail "$2 exited with status $rc"
+}
+
+# local_reference SIZE: a plain local render of the same scene and size, in the root namespace.
+local_reference() {
+    "$TF" render "$SCENE" --size "$1" -j 2 -q -o "$TMP/local-$1.exr" ||
+        fail "local reference render at $1 failed"
+}
+
+# child_of PID: the first child of PID (`timeout` runs the farm command as its child).
+child_of() {
+    first=""
+    read -r first _ <"/proc/$1/task/$1/children" 2>/dev/null # no newline: read says 1 at EOF
+    echo "$first"
+}
+
+# cut_while_rendering PID PORT: pull the cable at switch port PORT while the worker under PID
+# (a `timeout` started by start) is rendering a task, so it surely holds a lease.  A worker
+# between tasks holds none: the coordinator may already have its result and the `in` for the
+# next task be lost with the cable, and then nothing is there to re-deal.  So: stop the worker
+# for a moment (SIGSTOP), look where its main thread is (/proc/PID/syscall is "-1 ..." when it
+# was stopped in user space, i.e. tracing rays; a syscall number when it was waiting on the
+# network), and cut only then; it is continued a few milliseconds later either way, well
+# inside the 2 s lease, so the cut, not the pause, is what silences it.
+cut_while_rendering() {
+    wpid=$(child_of "$1")
+    [ -n "$wpid" ] || fail "cannot find the worker process under pid $1"
+    tries=0
+    while :; do
+        kill -STOP "$wpid" 2>/dev/null || fail "worker 2 exited before the cut"
+        STOPPED=$wpid
+        nr=-1
+        if [ -r "/proc/$wpid/syscall" ]; then
+            read -r nr _ <"/proc/$wpid/syscall" || nr=-1
+        fi
+        [ "$nr" = "-1" ] && break
+        kill -CONT "$wpid"
+        STOPPED=""
+        tries=$((tries + 1))
+        [ "$tries" -le 500 ] || fail "worker 2 was never caught rendering"
+        sleep 0.01
+    done
+    ip -n "$NS_LAN" link set "$2" down
+    rc=$?
+    kill -CONT "$wpid"
+    STOPPED=""
+    [ "$rc" -eq 0 ] || fail "cannot cut the cable at $2"
+    note "worker 2 caught mid-task after $tries look(s)"
+}
+
+# ---- 1. the secret is checked across the network ----
+start_coordinator small "$SMALL"
+if ip netns exec "$NS_W1" timeout 20 "$TF" worker --connect "$COORD_IP:$PORT" \
+    --secret-file "$TMP/wrong-secret" -j 1 --timeout 5000 >"$TMP/wrong.log" 2>&1; then
+    fail "a worker with the wrong secret was accepted"
+fi
+[ "$(wc -l <"$TMP/wrong.log")" -eq 1 ] || { cat "$TMP/wrong.log"; fail "refusal is not one line"; }
+note "wrong secret refused: $(cat "$TMP/wrong.log")"
+
+# ---- 2. a render across the two worker hosts equals a local render ----
+start "$NS_W1" "$TMP/small.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
+    --secret-file "$TMP/secret" -j 1
+W1=$LAST
+start "$NS_W2" "$TMP/small.w2.log" "$TF" worker --connect "$COORD_IP:$PORT" \
+    --secret-file "$TMP/secret" -j 1
+W2=$LAST
+finish "$COORD" "coordinator (small render)"
+finish "$W1" "worker 1 (small render)"
+finish "$W2" "worker 2 (small render)"
+
+local_reference "$SMALL"
+cmp "$TMP/local-$SMALL.exr" "$TMP/small.exr" ||
+    fail "the networked render differs from the local render at $SMALL"
+workers=$(count_lines "$TMP/small.json" '"kind": "networked"')
+[ "$workers" -eq 2 ] || { cat "$TMP/small.json"; fail "expected 2 networked workers, stats list $workers"; }
+idle=$(count_lines "$TMP/small.json" '"kind": "networked".*"tasks": 0,')
+[ "$idle" -eq 0 ] || { cat "$TMP/small.json"; fail "a worker host rendered no task"; }
+note "$SMALL across 2 hosts: identical to the local render; tasks per worker:" \
+    "$(sed -n 's/.*"kind": "networked".*"tasks": \([0-9]*\),.*/\1/p' "$TMP/small.json" | tr '\n' ' ')"
+
+# ---- 3. cut worker 2's cable mid-render: its task is dealt again ----
+# --watermark above the task count: with the default watermark, worker 1 would soon reach the
+# watermark behind the lost task and sit idle, and the straggler policy would deal it a duplicate
+# of that task well before the lease expires (the render recovers, tasks_duplicated counts it,
+# but nothing is re-dealt).  Here worker 1 keeps rendering fresh tasks, so it is the lease that
+# notices the silent worker and deals its task again.
+start_coordinator cut "$LARGE" --tasks rows:4 --lease-timeout 2000 --watermark 1000
+start "$NS_W1" "$TMP/cut.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
+    --secret-file "$TMP/secret" -j 1
+W1=$LAST
+start "$NS_W2" "$TMP/cut.w2.log" "$TF" worker --connect "$COORD_IP:$PORT" \
+    --secret-file "$TMP/secret" -j 1
+W2=$LAST
+# Both have said hello (the coordinator logs each join at -v); let worker 2 get into its tasks.
+i=0
+while [ "$(count_lines "$TMP/cut.coord.log" 'joined: networked')" -lt 2 ]; do
+    kill -0 "$COORD" 2>/dev/null || { cat "$TMP/cut.coord.log"; fail "coordinator exited early"; }
+    i=$((i + 1))
+    [ "$i" -le 200 ] || { cat "$TMP/cut.coord.log"; fail "the two workers did not join"; }
+    sleep 0.1
+done
+sleep 0.3
+kill -0 "$COORD" 2>/dev/null || fail "the render finished before the cut (make LARGE bigger)"
+cut_while_rendering "$W2" p-w2
+cut_at=$(date +%s)
+note "cut worker 2's cable (p-w2 down) mid-render"
+finish "$COORD" "coordinator (render with a cut cable)"
+after=$(($(date +%s) - cut_at))
+finish "$W1" "worker 1 (render with a cut cable)"
+
+redealt=$(json_int "$TMP/cut.json" tasks_redealt)
+if [ "${redealt:-0}" -lt 1 ]; then
+    cat "$TMP/cut.json"
+    [ "$after" -ge 3 ] || fail "the render ended ${after} s after the cut, before the 2 s lease" \
+        "could expire (the machine is faster than expected: raise LARGE)"
+    fail "tasks_redealt is ${redealt:-missing}, expected >= 1"
+fi
+grep -q "re-dealing task" "$TMP/cut.coord.log" || fail "the coordinator did not log a re-deal"
+local_reference "$LARGE"
+cmp "$TMP/local-$LARGE.exr" "$TMP/cut.exr" ||
+    fail "the render with a cut cable differs from the local render at $LARGE"
+note "$LARGE with worker 2 cut off: tasks_redealt=$redealt, identical to the local render"
+note "$(grep -m1 're-dealing task' "$TMP/cut.coord.log")"
+echo "netns_farm: ok"

@@ -1,5 +1,5 @@
 /* tsserver.c: the tuple-space server event loop (see tsserver.h for the contract, proto.h for
- * the wire format).  One thread, poll(), non-blocking sockets, per-connection buffers.
+ * the wire format).  One thread, epoll, non-blocking sockets, per-connection buffers.
  *
  * Life of a connection: accepted (HELLO queued; if a key is set, state NEED_AUTH until a valid
  * AUTH) or added by fd (trusted, READY at once) -> frames are parsed from its input buffer in
@@ -23,7 +23,7 @@
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
-#include <poll.h>
+#include <sys/epoll.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -56,6 +56,8 @@ typedef struct conn {
     int pending_take;      /* ... and whether it is an IN */
     uint32_t pending_req;  /* ... and its request id */
     uint64_t waiter_id;    /* ... and its waiter id (0 once served) */
+    uint32_t ep_events;    /* events registered with the server's epoll set */
+    int ep_added;          /* registered at all (EPOLL_CTL_ADD done) */
     struct ts_server *srv;
     struct conn *next, *prev;
 } conn;
@@ -75,9 +77,14 @@ struct ts_server {
     size_t nconns;
     uint64_t next_id;
     int in_loop;
-    struct pollfd *pfds;
-    conn **pconns;
-    size_t pcap;
+    /* epoll, not poll: with a thousand connections poll() spent the coordinator's time
+     * re-registering every socket on every iteration (bench/README.md); epoll costs O(ready).
+     * A connection's interest set is kept in step lazily (sync_interest); a listener event
+     * carries data.ptr == NULL. */
+    int epfd;
+    int listen_added;
+    struct epoll_event *evs;
+    size_t evcap;
 };
 
 static int64_t now_ms(void)
@@ -186,12 +193,19 @@ ts_server *ts_server_new(ts_space *space, const ts_server_config *cfg,
     srv->max_conns = cfg->max_connections > 0 ? cfg->max_connections : 4096;
     srv->listen_fd = -1;
     srv->next_id = 1;
+    srv->epfd = epoll_create1(EPOLL_CLOEXEC);
+    if (srv->epfd < 0) {
+        snprintf(err, errlen, "epoll_create1: %s", strerror(errno));
+        free(srv);
+        return NULL;
+    }
     int rc = 0;
     if (cfg->listen && strncmp(cfg->listen, "unix:", 5) == 0)
         rc = listen_unix(srv, cfg->listen + 5, err, errlen);
     else if (cfg->listen)
         rc = listen_tcp(srv, cfg->listen, err, errlen);
     if (rc != 0) {
+        close(srv->epfd);
         free(srv);
         return NULL;
     }
@@ -238,6 +252,10 @@ static void conn_close(conn *c)
         return;
     ts_server *srv = c->srv;
     c->dead = 1;
+    /* Deregister explicitly: a forked child may briefly hold a copy of this fd, and epoll
+     * only forgets a file when every copy is closed. */
+    if (c->ep_added)
+        epoll_ctl(srv->epfd, EPOLL_CTL_DEL, c->fd, NULL);
     close(c->fd);
     c->fd = -1;
     if (c->waiting && c->waiter_id)
@@ -616,37 +634,43 @@ static void enforce_timeouts(ts_server *srv)
     }
 }
 
-/* Build the pollfd array: the listener, then every connection. */
-static size_t build_pollset(ts_server *srv)
+/* Bring the epoll interest set in line with what each connection wants now: readable unless
+ * its pipeline is full behind a blocked request, writable while replies are queued.  Costs a
+ * syscall only for connections whose interest changed.  Returns the capacity needed for
+ * epoll_wait's event array, or 0 if it cannot be allocated. */
+static size_t sync_interest(ts_server *srv)
 {
-    size_t need = srv->nconns + 1;
-    if (need > srv->pcap) {
-        size_t cap = need * 2;
-        struct pollfd *p = realloc(srv->pfds, cap * sizeof *p);
-        if (p)
-            srv->pfds = p;
-        conn **q = realloc(srv->pconns, cap * sizeof *q);
-        if (q)
-            srv->pconns = q;
-        if (!p || !q)
-            return 0;
-        srv->pcap = cap;
+    if (srv->listen_fd >= 0 && !srv->listen_added) {
+        struct epoll_event ev = {.events = EPOLLIN, .data.ptr = NULL};
+        if (epoll_ctl(srv->epfd, EPOLL_CTL_ADD, srv->listen_fd, &ev) == 0)
+            srv->listen_added = 1;
     }
-    size_t n = 0;
-    if (srv->listen_fd >= 0) {
-        srv->pfds[n] = (struct pollfd){.fd = srv->listen_fd, .events = POLLIN};
-        srv->pconns[n++] = NULL;
-    }
-    for (conn *c = srv->conns; c; c = c->next) {
-        short ev = 0;
+    for (conn *c = srv->conns, *next; c; c = next) {
+        next = c->next; /* conn_drop moves c to the graveyard list */
+        uint32_t want = 0;
         if (!(c->waiting && c->in.len >= TS_MAX_PIPELINE))
-            ev |= POLLIN;
+            want |= EPOLLIN;
         if (c->out.len > 0)
-            ev |= POLLOUT;
-        srv->pfds[n] = (struct pollfd){.fd = c->fd, .events = ev};
-        srv->pconns[n++] = c;
+            want |= EPOLLOUT;
+        if (c->ep_added && want == c->ep_events)
+            continue;
+        struct epoll_event ev = {.events = want, .data.ptr = c};
+        if (epoll_ctl(srv->epfd, c->ep_added ? EPOLL_CTL_MOD : EPOLL_CTL_ADD, c->fd, &ev) == 0) {
+            c->ep_added = 1;
+            c->ep_events = want;
+        } else {
+            conn_drop(c, strerror(errno));
+        }
     }
-    return n;
+    size_t need = srv->nconns + 1;
+    if (need > srv->evcap) {
+        struct epoll_event *e = realloc(srv->evs, 2 * need * sizeof *e);
+        if (!e)
+            return 0;
+        srv->evs = e;
+        srv->evcap = 2 * need;
+    }
+    return srv->evcap;
 }
 
 int ts_server_run_once(ts_server *srv, int timeout_ms)
@@ -656,26 +680,31 @@ int ts_server_run_once(ts_server *srv, int timeout_ms)
     int needs_timer = srv->silence_ms > 0 || srv->has_key;
     if (needs_timer && (timeout_ms < 0 || timeout_ms > TS_POLL_CAP_MS))
         timeout_ms = TS_POLL_CAP_MS;
-    size_t n = build_pollset(srv);
-    int ready = poll(srv->pfds, (nfds_t)n, timeout_ms);
+    size_t n = sync_interest(srv);
+    if (n == 0) {
+        srv->in_loop = 0;
+        errno = ENOMEM;
+        return -1;
+    }
+    int ready = epoll_wait(srv->epfd, srv->evs, (int)(n < 65536 ? n : 65536), timeout_ms);
     if (ready < 0 && errno != EINTR) {
         srv->in_loop = 0;
         return -1;
     }
-    for (size_t i = 0; ready > 0 && i < n; i++) {
-        short re = srv->pfds[i].revents;
-        conn *c = srv->pconns[i];
-        if (!re)
-            continue;
+    /* Connections closed while serving this batch stay in the graveyard (not freed) until the
+     * batch is done, so a later event's data.ptr is never dangling. */
+    for (int i = 0; i < ready; i++) {
+        uint32_t re = srv->evs[i].events;
+        conn *c = srv->evs[i].data.ptr;
         if (!c) {
             accept_all(srv);
             continue;
         }
         if (c->dead)
             continue;
-        if (re & (POLLIN | POLLHUP | POLLERR))
+        if (re & (EPOLLIN | EPOLLHUP | EPOLLERR))
             conn_readable(c);
-        if (!c->dead && (re & POLLOUT) && conn_flush(c) != 0)
+        if (!c->dead && (re & EPOLLOUT) && conn_flush(c) != 0)
             conn_drop(c, strerror(errno));
     }
     flush_all(srv);
@@ -734,7 +763,7 @@ void ts_server_free(ts_server *srv)
         close(srv->listen_fd);
     if (srv->unix_path[0])
         unlink(srv->unix_path);
-    free(srv->pfds);
-    free(srv->pconns);
+    close(srv->epfd);
+    free(srv->evs);
     free(srv);
 }

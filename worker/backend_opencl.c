@@ -24,6 +24,7 @@
 #include <ctype.h>
 #include <errno.h>
 #include <limits.h>
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -52,8 +53,10 @@ struct tf_cl_backend {
     size_t corners_cap, corner_shadow_cap, cache_cap, have_cap, out_cap, pixel_shadow_cap;
     cl_ulong jitter_key;
     int lattice;
+    size_t local;          /* work-group size: fixed, so PoCL specialises each kernel once */
     char device_name[256];
     double build_seconds;
+    double corner_seconds, pixel_seconds; /* device time of each kernel, from profiling events */
 };
 
 static double now_seconds(void)
@@ -339,6 +342,17 @@ static void put3(double *P, int k, tf_vec3 v)
     P[k + 2] = v.z;
 }
 
+/* pow(2^i, -H) for i < TF_CL_AMP_TABLE, as tf_octaves_plan computes it for lacunarity 2. */
+static void fill_amp_table(double *amp, double H)
+{
+    double frequency = 1.0;
+    amp[0] = 1.0;
+    for (int i = 1; i < TF_CL_AMP_TABLE; i++) {
+        frequency *= 2.0;
+        amp[i] = pow(frequency, -H);
+    }
+}
+
 /* Copy what tf_renderer_new derived into the P[] / I[] blocks. */
 static void fill_params(const tf_renderer *r, double *P, int *I)
 {
@@ -383,6 +397,13 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     put3(P, TFP_SKY_HORIZON, s->sky.horizon);
     put3(P, TFP_SKY_ZENITH, s->sky.zenith);
     P[TFP_THRESHOLD] = r->threshold;
+    fill_amp_table(P + TFP_AMP_H08, 0.8); /* shade.c: BUMP_H */
+    fill_amp_table(P + TFP_AMP_H05, 0.5); /* shade.c: snow line and ripples */
+    /* shade.c make_snow_plan: SNOW_OCTAVES = 5 whole octaves of the H 0.5 table */
+    double snow_sum = 0;
+    for (int i = 0; i < 5; i++)
+        snow_sum += fabs(P[TFP_AMP_H05 + i]);
+    P[TFP_SNOW_BOUND] = snow_sum * (1.0 + 1e-9);
 
     I[TFI_N] = hf->n;
     I[TFI_CELLS] = hf->cells;
@@ -473,6 +494,8 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
     }
     b->jitter_key = b->renderer->jitter_key;
     b->lattice = b->renderer->lattice;
+    const char *local = getenv("TERRAFARM_CL_LOCAL");
+    b->local = local && atoi(local) > 0 && atoi(local) <= 1024 ? (size_t)atoi(local) : 8;
     set_pocl_cache_dir();
     cl_device_id dev;
     cl_int rc;
@@ -484,7 +507,7 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
                  b->device_name, rc);
         goto fail;
     }
-    b->queue = clCreateCommandQueue(b->ctx, dev, 0, &rc);
+    b->queue = clCreateCommandQueue(b->ctx, dev, CL_QUEUE_PROFILING_ENABLE, &rc);
     if (rc != CL_SUCCESS) {
         snprintf(err, errlen, "OpenCL: cannot create a queue on '%s' (error %d)", b->device_name,
                  rc);
@@ -501,6 +524,25 @@ fail:
 const char *tf_cl_backend_device(const tf_cl_backend *b) { return b->device_name; }
 double tf_cl_backend_build_seconds(const tf_cl_backend *b) { return b->build_seconds; }
 
+void tf_cl_backend_kernel_seconds(const tf_cl_backend *b, double *corners, double *pixels)
+{
+    *corners = b->corner_seconds;
+    *pixels = b->pixel_seconds;
+}
+
+/* Add the device time of a finished kernel's event to *acc, and release the event. */
+static void account(cl_event ev, double *acc)
+{
+    cl_ulong start = 0, end = 0;
+    if (clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_START, sizeof start, &start, NULL) ==
+            CL_SUCCESS &&
+        clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_END, sizeof end, &end, NULL) ==
+            CL_SUCCESS &&
+        end >= start)
+        *acc += 1e-9 * (double)(end - start);
+    clReleaseEvent(ev);
+}
+
 /* Make *buf hold at least `bytes` (read-write, device-side), growing it in place. */
 static int ensure(tf_cl_backend *b, cl_mem *buf, size_t *cap, size_t bytes)
 {
@@ -513,6 +555,9 @@ static int ensure(tf_cl_backend *b, cl_mem *buf, size_t *cap, size_t bytes)
     *cap = rc == CL_SUCCESS ? bytes : 0;
     return rc == CL_SUCCESS ? 0 : -1;
 }
+
+/* n rounded up to a multiple of the work-group size (kernels ignore the surplus items). */
+static size_t round_up(size_t n, size_t local) { return (n + local - 1) / local * local; }
 
 /* The arguments both kernels share, in the order they take them. */
 static cl_int set_common_args(tf_cl_backend *b, cl_kernel k, tf_rect rect)
@@ -583,10 +628,11 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     rc |= clSetKernelArg(b->k_corners, 10, sizeof ch, &ch);
     rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corners);
     rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_shadow);
-    size_t global = ncorners;
+    size_t global = round_up(ncorners, b->local);
+    cl_event corner_ev = NULL, pixel_ev[1] = {NULL};
     if (rc == CL_SUCCESS)
-        rc = clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, NULL, 0, NULL,
-                                    NULL);
+        rc = clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, &b->local, 0, NULL,
+                                    &corner_ev);
     cl_int rw = rect.w;
     for (size_t first = 0; rc == CL_SUCCESS && first < npixels; first += batch) {
         cl_int f = (cl_int)first, count = (cl_int)(npixels - first < batch ? npixels - first : batch);
@@ -599,10 +645,16 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
         rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->have);
         rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->out);
         rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->pixel_shadow);
-        global = (size_t)count;
+        global = round_up((size_t)count, b->local);
+        /* keep the last batch's event; earlier ones are waited for and accounted here */
+        if (pixel_ev[0]) {
+            clWaitForEvents(1, &pixel_ev[0]);
+            account(pixel_ev[0], &b->pixel_seconds);
+            pixel_ev[0] = NULL;
+        }
         if (rc == CL_SUCCESS)
-            rc = clEnqueueNDRangeKernel(b->queue, b->k_pixels, 1, NULL, &global, NULL, 0, NULL,
-                                        NULL);
+            rc = clEnqueueNDRangeKernel(b->queue, b->k_pixels, 1, NULL, &global, &b->local, 0, NULL,
+                                        &pixel_ev[0]);
     }
     if (rc == CL_SUCCESS)
         rc = clEnqueueReadBuffer(b->queue, b->out, CL_TRUE, 0,
@@ -613,6 +665,11 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     if (rc == CL_SUCCESS)
         rc = clEnqueueReadBuffer(b->queue, b->pixel_shadow, CL_TRUE, 0,
                                  npixels * sizeof(cl_uint), pixel_shadow, 0, NULL, NULL);
+    clFinish(b->queue);
+    if (corner_ev)
+        account(corner_ev, &b->corner_seconds);
+    if (pixel_ev[0])
+        account(pixel_ev[0], &b->pixel_seconds);
     if (rc != CL_SUCCESS) {
         free(corner_shadow);
         free(pixel_shadow);

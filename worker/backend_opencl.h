@@ -21,5 +21,7 @@ void tf_cl_backend_free(tf_cl_backend *b);
 /* The chosen device's name, and the seconds clBuildProgram took (a PoCL cache hit is fast). */
 const char *tf_cl_backend_device(const tf_cl_backend *b);
 double tf_cl_backend_build_seconds(const tf_cl_backend *b);
+/* Device seconds spent so far in the corner and the pixel kernels (profiling events). */
+void tf_cl_backend_kernel_seconds(const tf_cl_backend *b, double *corners, double *pixels);
 
 #endif

@@ -31,7 +31,7 @@
 #define ROCK_BLEND_DEG 6.0
 #define SNOW_SLIDE_DEG 15.0
 #define BUMP_OCTAVES 4.0
-#define BUMP_H 0.8
+#define BUMP_H 0.8        /* host side: TFP_AMP_H08 */
 #define SNOW_OCTAVES 5.0
 #define RIPPLE_OCTAVES 3.0
 #define RIPPLE_STRENGTH 0.06
@@ -149,31 +149,29 @@ double noise2_axis(__global const ushort *p, double x, const noise_axis *ay)
     return (l + u * (r - l)) * TF_NOISE2_SCALE;
 }
 
-/* tf_fbm2: the octave plan (tf_octaves_plan), the y axes (tf_octave_axes) and the sum
- * (tf_fbm2_axes) fused into one loop; the same values meet in the same operations. */
-double tf_fbm2(__global const ushort *p, double x, double y, double H, double lacunarity,
+/* tf_fbm2 with lacunarity 2 (the only one the textures use): the octave plan
+ * (tf_octaves_plan), the y axes (tf_octave_axes) and the sum (tf_fbm2_axes) fused into one
+ * loop; the same values meet in the same operations.  amp[] is the host's table of
+ * pow(2^i, -H) (TFP_AMP_*), so no pow runs on the device. */
+double tf_fbm2(__global const ushort *p, __global const double *amp, double x, double y,
                double octaves)
 {
     if (!(octaves >= 1.0))
         octaves = 1.0;
-    if (octaves > TF_MAX_OCTAVES)
-        octaves = TF_MAX_OCTAVES;
+    if (octaves > TF_CL_AMP_TABLE - 1)
+        octaves = TF_CL_AMP_TABLE - 1;
     int whole = (int)octaves;
     double remainder = octaves - whole;
     int count = whole + (remainder > 0.0);
-    double frequency = 1.0, result = 0.0;
+    double result = 0.0;
     for (int i = 0; i < count; i++) {
-        double amp = 1.0;
-        if (i > 0) {
-            frequency *= lacunarity;
-            amp = pow(frequency, -H);
-        }
+        double a = amp[i];
         if (remainder > 0.0 && i == whole)
-            amp *= remainder;
+            a *= remainder;
         noise_axis ay = noise_axis_set(y);
-        result += amp * noise2_axis(p, x, &ay);
-        x *= lacunarity;
-        y *= lacunarity;
+        result += a * noise2_axis(p, x, &ay);
+        x *= 2.0;
+        y *= 2.0;
     }
     return result;
 }
@@ -486,10 +484,9 @@ int walk_hier(const world *w, const ray_ctx *r, candidate *best)
                 return 0;
             stale = level > 0 && r->sx ? STALE_X : STALE_NONE;
         }
-        while (level < top && !(boundary & 1)) {
+        /* climb one level per step, as trace.c does (db8307b) */
+        if (level < top && !(boundary & 1))
             level++;
-            boundary >>= 1;
-        }
     }
 }
 
@@ -563,15 +560,50 @@ vec3 smooth_normal(const world *w, int ci, int cj, vec3 p)
     return v3_norm(n);
 }
 
-double fbm_with_gradient(const world *w, double x, double y, double scale, double H,
+/* shade.c's fbm_with_gradient: the value and the x-offset sum share their y axes (computed
+ * once per octave here), the y-offset sum has its own; each sum accumulates in the C order, so
+ * the bits are tf_fbm2's.  amp_table: TFP_AMP_H08 or TFP_AMP_H05, the H of the C call. */
+double fbm_with_gradient(const world *w, double x, double y, double scale, int amp_table,
                          double octaves, double salt, double *gx, double *gy)
 {
     const double eps = 1e-3;
+    __global const double *amp = w->P + amp_table;
     double qx = x / scale + salt, qy = y / scale - salt;
-    double f = tf_fbm2(w->perm, qx, qy, H, 2.0, octaves);
-    *gx = (tf_fbm2(w->perm, qx + eps, qy, H, 2.0, octaves) - f) / eps;
-    *gy = (tf_fbm2(w->perm, qx, qy + eps, H, 2.0, octaves) - f) / eps;
+    if (!(octaves >= 1.0))
+        octaves = 1.0;
+    if (octaves > TF_CL_AMP_TABLE - 1)
+        octaves = TF_CL_AMP_TABLE - 1;
+    int whole = (int)octaves;
+    double remainder = octaves - whole;
+    int count = whole + (remainder > 0.0);
+    double f = 0.0, fx = 0.0, fy = 0.0;
+    double x0 = qx, x1 = qx + eps, y0 = qy, y1 = qy + eps;
+    for (int i = 0; i < count; i++) {
+        double a = amp[i];
+        if (remainder > 0.0 && i == whole)
+            a *= remainder;
+        noise_axis ay = noise_axis_set(y0), ay1 = noise_axis_set(y1);
+        f += a * noise2_axis(w->perm, x0, &ay);
+        fx += a * noise2_axis(w->perm, x1, &ay);
+        fy += a * noise2_axis(w->perm, x0, &ay1);
+        x0 *= 2.0;
+        x1 *= 2.0;
+        y0 *= 2.0;
+        y1 *= 2.0;
+    }
+    *gx = (fx - f) / eps;
+    *gy = (fy - f) / eps;
     return f;
+}
+
+/* shade.c's snow_line_matters: outside [line - reach, line + reach] the snow weight is 0 or 1
+ * whatever the fBm, so the fBm is skipped (same bits).  TFP_SNOW_BOUND: the host's bound. */
+int snow_line_matters(const world *w, double z)
+{
+    double reach = w->P[TFP_SNOW_JITTER] * w->P[TFP_SNOW_BOUND] + w->P[TFP_BAND];
+    double lo = w->P[TFP_SNOW_LINE] - reach, hi = w->P[TFP_SNOW_LINE] + reach;
+    double slack = 1e-9 * (fabs(lo) + fabs(hi) + reach);
+    return z >= lo - slack && z <= hi + slack;
 }
 
 vec3 sky_color(const world *w, vec3 dir)
@@ -660,10 +692,10 @@ vec3 terrain_albedo(const world *w, vec3 p, vec3 n, double variation)
     double w_sand = smoothstep_(sea_level + 0.8 * band, sea_level + 0.2 * band, p.z);
     double w_rock = smoothstep_(rock_deg - ROCK_BLEND_DEG, rock_deg + ROCK_BLEND_DEG, slope);
     double snow_line = w->P[TFP_SNOW_LINE];
-    if (w->P[TFP_SNOW_JITTER] > 0)
+    if (w->P[TFP_SNOW_JITTER] > 0 && snow_line_matters(w, p.z))
         snow_line += w->P[TFP_SNOW_JITTER] *
-                     tf_fbm2(w->perm, p.x / (extent / 12.0) + 37.5,
-                             p.y / (extent / 12.0) - 11.25, 0.5, 2.0, SNOW_OCTAVES);
+                     tf_fbm2(w->perm, w->P + TFP_AMP_H05, p.x / (extent / 12.0) + 37.5,
+                             p.y / (extent / 12.0) - 11.25, SNOW_OCTAVES);
     double w_snow = smoothstep_(snow_line - band, snow_line + band, p.z) *
                     (1.0 - smoothstep_(rock_deg, rock_deg + SNOW_SLIDE_DEG, slope));
 
@@ -682,7 +714,7 @@ vec3 shade_terrain(const world *w, const hit_t *hit, uint *shadow_rays)
     double octaves = visible_octaves(w, w->P[TFP_BUMP_SCALE], hit->t, BUMP_OCTAVES);
     if (w->I[TFI_TEXTURED] && w->P[TFP_BUMP] > 0 && octaves > 0) {
         double gx, gy;
-        variation = fbm_with_gradient(w, hit->p.x, hit->p.y, w->P[TFP_BUMP_SCALE], BUMP_H,
+        variation = fbm_with_gradient(w, hit->p.x, hit->p.y, w->P[TFP_BUMP_SCALE], TFP_AMP_H08,
                                       octaves, 0.0, &gx, &gy);
         double amp = w->P[TFP_BUMP];
         nb = v3_norm(v3_add(n, v3(-amp * gx, -amp * gy, 0.0)));
@@ -704,7 +736,7 @@ vec3 shade_water(const world *w, vec3 p, vec3 dir, double dist, uint *shadow_ray
     double octaves = visible_octaves(w, w->P[TFP_RIPPLE_SCALE], dist, RIPPLE_OCTAVES);
     if (w->I[TFI_TEXTURED] && w->P[TFP_BUMP] > 0 && octaves > 0) {
         double gx, gy;
-        fbm_with_gradient(w, p.x, p.y, w->P[TFP_RIPPLE_SCALE], 0.5, octaves, 71.0, &gx, &gy);
+        fbm_with_gradient(w, p.x, p.y, w->P[TFP_RIPPLE_SCALE], TFP_AMP_H05, octaves, 71.0, &gx, &gy);
         n = v3_norm(v3(-RIPPLE_STRENGTH * gx, -RIPPLE_STRENGTH * gy, 1.0));
     }
     double cos_i = -v3_dot(dir, n);

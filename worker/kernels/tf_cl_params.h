@@ -48,7 +48,13 @@
 #define TFP_SKY_HORIZON  58   /* 3 */
 #define TFP_SKY_ZENITH   61   /* 3 */
 #define TFP_THRESHOLD    64
-#define TFP_COUNT        65
+/* fBm octave weights pow(2^i, -H) for the two H the textures use (lacunarity 2), computed on
+ * the host exactly as tf_octaves_plan does: the device's pow was the kernels' hottest call. */
+#define TF_CL_AMP_TABLE   8   /* octaves per table (textures use at most 5) */
+#define TFP_AMP_H08      65   /* H = 0.8: bump */
+#define TFP_AMP_H05      73   /* H = 0.5: snow line, water ripples */
+#define TFP_SNOW_BOUND   81   /* strict bound on |snow fBm| (shade.c snow_fbm_bound) */
+#define TFP_COUNT        82
 
 /* ints */
 #define TFI_N             0   /* samples per side */

@@ -1,0 +1,259 @@
+/* bench_opencl.c: the C backend against the OpenCL backend on the same cores, in one run
+ * (DESIGN.md section 6: "OpenCL on PoCL >= 1.3x the C backend's throughput on the same cores").
+ *
+ *   C        T threads (T = online CPUs) take stamp tasks off a shared counter and call
+ *            tf_render_rect: the throughput of T forked C workers without the farm around them.
+ *   OpenCL   one backend (PoCL spreads each kernel over the same T cores) renders the same
+ *            stamps one after another, as one OpenCL worker would; then the whole image as a
+ *            single task (the launch overhead per task is the difference).
+ * Also: the kernel build time cold (a fresh, empty POCL_CACHE_DIR) and cached (the same
+ * directory again), device time per kernel (corners vs adaptive pixels), rays per second, and
+ * the image match (PSNR, equal sample counts, bit-identical pixels).
+ *
+ *   build/bench/bench_opencl SCENE [WxH] [STAMP]     (defaults: the scene's size, 64) */
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "backend_opencl.h"
+#include "heightfield.h"
+#include "render.h"
+#include "scene.h"
+
+#define MAX_THREADS 64
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* CPU seconds of the whole process (all threads, PoCL's included): robust on a shared machine. */
+static double cpu_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+typedef struct job {
+    const tf_renderer *r;
+    int width, height, stamp, across, total;
+    tf_pixel *img;
+    atomic_int next;
+    tf_render_counts counts[MAX_THREADS];
+} job;
+
+typedef struct targ { job *j; int id; } targ;
+
+static tf_rect stamp_rect(const job *j, int k)
+{
+    int sx = k % j->across, sy = k / j->across;
+    tf_rect r = {sx * j->stamp, sy * j->stamp, j->stamp, j->stamp};
+    if (r.x + r.w > j->width)
+        r.w = j->width - r.x;
+    if (r.y + r.h > j->height)
+        r.h = j->height - r.y;
+    return r;
+}
+
+static void paste(tf_pixel *img, int width, tf_rect r, const tf_pixel *src)
+{
+    for (int y = 0; y < r.h; y++)
+        memcpy(&img[(size_t)(r.y + y) * width + r.x], &src[(size_t)y * r.w],
+               sizeof *src * (size_t)r.w);
+}
+
+static void *c_worker(void *arg)
+{
+    targ *a = arg;
+    job *j = a->j;
+    tf_pixel *buf = malloc(sizeof *buf * (size_t)j->stamp * (size_t)j->stamp);
+    for (int k; (k = atomic_fetch_add(&j->next, 1)) < j->total;) {
+        tf_rect r = stamp_rect(j, k);
+        tf_render_rect(j->r, r, buf, &j->counts[a->id]);
+        paste(j->img, j->width, r, buf);
+    }
+    free(buf);
+    return NULL;
+}
+
+static double clamp01(double v) { return v < 0 ? 0 : v > 1 ? 1 : v; }
+
+static void compare(const tf_pixel *a, const tf_pixel *b, size_t n)
+{
+    double se = 0;
+    size_t spp_same = 0, identical = 0;
+    for (size_t i = 0; i < n; i++) {
+        double d[3] = {clamp01(a[i].r) - clamp01(b[i].r), clamp01(a[i].g) - clamp01(b[i].g),
+                       clamp01(a[i].b) - clamp01(b[i].b)};
+        se += d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        spp_same += a[i].spp == b[i].spp;
+        identical += !memcmp(&a[i], &b[i], sizeof a[i]);
+    }
+    double mse = se / (3.0 * (double)n);
+    printf("match      PSNR %s%.1f dB, spp equal %.3f%%, bit-identical pixels %.3f%%\n",
+           mse > 0 ? "" : "inf (", mse > 0 ? 10 * log10(1 / mse) : 0.0,
+           100.0 * (double)spp_same / (double)n, 100.0 * (double)identical / (double)n);
+}
+
+/* A fresh empty directory for the cold build. */
+static int fresh_cache_dir(char *dir, size_t len)
+{
+    snprintf(dir, len, "%s/tf-bench-pocl-XXXXXX", getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
+    return mkdtemp(dir) ? 0 : -1;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        fprintf(stderr, "usage: %s SCENE [WxH] [STAMP]\n", argv[0]);
+        return 2;
+    }
+    char err[1024];
+    tf_scene *s = tf_scene_load(argv[1], err, sizeof err);
+    if (!s) {
+        fprintf(stderr, "%s\n", err);
+        return 1;
+    }
+    int w, h;
+    if (argc > 2 && sscanf(argv[2], "%dx%d", &w, &h) == 2)
+        tf_scene_set_size(s, w, h);
+    int stamp = argc > 3 ? atoi(argv[3]) : 64;
+    if (stamp < 1)
+        stamp = 64;
+    int threads = tf_thread_count(0);
+    if (threads > MAX_THREADS)
+        threads = MAX_THREADS;
+    tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
+    tf_renderer *r = hf ? tf_renderer_new(s, hf, err, sizeof err) : NULL;
+    if (!r) {
+        fprintf(stderr, "%s\n", err);
+        return 1;
+    }
+    size_t n = (size_t)s->width * (size_t)s->height;
+    tf_pixel *c_img = calloc(n, sizeof *c_img), *cl_img = calloc(n, sizeof *cl_img);
+    tf_pixel *whole = calloc(n, sizeof *whole);
+    tf_pixel *buf = malloc(sizeof *buf * (size_t)stamp * (size_t)stamp);
+    if (!c_img || !cl_img || !whole || !buf) {
+        fprintf(stderr, "out of memory\n");
+        return 1;
+    }
+    printf("scene      %s %dx%d, stamps %dx%d, %d cores\n", argv[1], s->width, s->height, stamp,
+           stamp, threads);
+
+    /* kernel build: cold in a fresh cache directory, then cached in the same one */
+    char dir[4096];
+    const char *user_cache = getenv("POCL_CACHE_DIR");
+    char *saved = user_cache ? strdup(user_cache) : NULL;
+    if (fresh_cache_dir(dir, sizeof dir) == 0)
+        setenv("POCL_CACHE_DIR", dir, 1);
+    double t0 = now();
+    tf_cl_backend *cold = tf_cl_backend_new(s, hf, err, sizeof err);
+    double cold_total = now() - t0;
+    if (!cold) {
+        fprintf(stderr, "OpenCL backend: %s\n", err);
+        return 1;
+    }
+    double cold_build = tf_cl_backend_build_seconds(cold);
+    tf_cl_backend_free(cold);
+    t0 = now();
+    tf_cl_backend *cl = tf_cl_backend_new(s, hf, err, sizeof err);
+    double warm_total = now() - t0;
+    if (!cl) {
+        fprintf(stderr, "OpenCL backend: %s\n", err);
+        return 1;
+    }
+    printf("device     %s\n", tf_cl_backend_device(cl));
+    printf("build      cold %.2f s (backend ready in %.2f s), cached %.3f s (ready in %.3f s)\n",
+           cold_build, cold_total, tf_cl_backend_build_seconds(cl), warm_total);
+    (void)saved;
+
+    /* C: threads over stamps */
+    job j = {.r = r, .width = s->width, .height = s->height, .stamp = stamp, .img = c_img};
+    j.across = (s->width + stamp - 1) / stamp;
+    j.total = j.across * ((s->height + stamp - 1) / stamp);
+    atomic_init(&j.next, 0);
+    pthread_t tid[MAX_THREADS];
+    targ args[MAX_THREADS];
+    double cpu0 = cpu_now();
+    t0 = now();
+    for (int i = 0; i < threads; i++) {
+        args[i] = (targ){&j, i};
+        pthread_create(&tid[i], NULL, c_worker, &args[i]);
+    }
+    for (int i = 0; i < threads; i++)
+        pthread_join(tid[i], NULL);
+    double c_s = now() - t0, c_cpu = cpu_now() - cpu0;
+    tf_render_counts cc = {0};
+    for (int i = 0; i < threads; i++) {
+        cc.primary_rays += j.counts[i].primary_rays;
+        cc.shadow_rays += j.counts[i].shadow_rays;
+    }
+
+    /* OpenCL: the first launches compile PoCL's work-group functions (cached on disk too):
+     * timed apart, then the same stamps one by one, then the whole image at once */
+    t0 = now();
+    if (tf_cl_backend_render(cl, (tf_rect){0, 0, stamp < s->width ? stamp : s->width,
+                                           stamp < s->height ? stamp : s->height},
+                             buf, NULL, err, sizeof err)) {
+        fprintf(stderr, "%s\n", err);
+        return 1;
+    }
+    printf("first task %.3f s (includes PoCL's work-group function compile on a cold cache)\n",
+           now() - t0);
+    double corner0, pixel0;
+    tf_cl_backend_kernel_seconds(cl, &corner0, &pixel0);
+    tf_render_counts clc = {0};
+    cpu0 = cpu_now();
+    t0 = now();
+    for (int k = 0; k < j.total; k++) {
+        tf_rect rr = stamp_rect(&j, k);
+        if (tf_cl_backend_render(cl, rr, buf, &clc, err, sizeof err)) {
+            fprintf(stderr, "%s\n", err);
+            return 1;
+        }
+        paste(cl_img, s->width, rr, buf);
+    }
+    double cl_s = now() - t0, cl_cpu = cpu_now() - cpu0;
+    double corner_s, pixel_s;
+    tf_cl_backend_kernel_seconds(cl, &corner_s, &pixel_s);
+    corner_s -= corner0;
+    pixel_s -= pixel0;
+    t0 = now();
+    if (tf_cl_backend_render(cl, (tf_rect){0, 0, s->width, s->height}, whole, NULL, err,
+                             sizeof err)) {
+        fprintf(stderr, "%s\n", err);
+        return 1;
+    }
+    double whole_s = now() - t0;
+
+    double c_rays = (double)(cc.primary_rays + cc.shadow_rays);
+    double cl_rays = (double)(clc.primary_rays + clc.shadow_rays);
+    printf("C          %.3f s  %.2f Mrays/s  (%d threads)\n", c_s, c_rays / c_s * 1e-6, threads);
+    printf("OpenCL     %.3f s  %.2f Mrays/s  (stamps; device time: corners %.3f s, pixels "
+           "%.3f s, host+launch %.3f s)\n",
+           cl_s, cl_rays / cl_s * 1e-6, corner_s, pixel_s, cl_s - corner_s - pixel_s);
+    printf("OpenCL     %.3f s  (whole image as one task)\n", whole_s);
+    printf("CPU time   C %.3f s, OpenCL %.3f s: OpenCL/C throughput per CPU second %.2fx\n",
+           c_cpu, cl_cpu, c_cpu / cl_cpu);
+    printf("ratio      OpenCL/C throughput %.2fx with stamps, %.2fx whole image (target >= 1.3x)\n",
+           c_s / cl_s, c_s / whole_s);
+    compare(c_img, cl_img, n);
+    tf_cl_backend_free(cl);
+    tf_renderer_free(r);
+    tf_heightfield_free(hf);
+    tf_scene_free(s);
+    free(c_img);
+    free(cl_img);
+    free(whole);
+    free(buf);
+    free(saved);
+    return 0;
+}

@@ -1,0 +1,57 @@
+#!/bin/sh
+# farm_security.sh: DESIGN.md section 3, Security.
+#  1. With --secret-file, a worker with the right secret renders while one with a wrong secret
+#     is refused: it exits non-zero with a clear message; the coordinator logs "authentication
+#     failed from ..."; the render completes, identical to the reference.
+#  2. Garbage and oversized frames (tests/tools/garbage.py: random bytes, a 0xffffffff length,
+#     an unknown op, a half frame then close, ...) sent to the port of a render in progress,
+#     with and without a secret, each close only their own connection; the render completes
+#     and its image is identical.
+. "$(dirname "$0")/lib.sh"
+e2e_init
+SIZE=480x270
+GARBAGE="$TF_ROOT/tests/tools/garbage.py"
+
+render -q -j 2 --size $SIZE -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
+head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/good.key"
+head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/bad.key"
+chmod 600 "$T/good.key" "$T/bad.key"
+
+say "1. --secret-file: a right and a wrong worker, plus garbage before authentication"
+"$TF_BIN" render "$SCENE" -j 0 --size $SIZE --tasks rows:4 --secret-file "$T/good.key" \
+    --listen 127.0.0.1:0 -o "$T/auth.exr" 2>"$T/auth.err" &
+coord=$!; e2e_track $coord
+port=$(e2e_port "$T/auth.err") || fail "coordinator printed no port: $(cat "$T/auth.err")"
+grep -q 'secret required' "$T/auth.err" || fail "coordinator does not say a secret is required"
+"$TF_BIN" worker --connect 127.0.0.1:$port --secret-file "$T/bad.key" -j 1 2>"$T/bad.err" &
+bad=$!; e2e_track $bad
+wait_exit $bad 20
+[ $rc -ne 0 ] || fail "the worker with a wrong secret exited 0"
+say "wrong-secret worker exited $rc: $(tail -1 "$T/bad.err")"
+grep -qi 'authentication failed\|secret' "$T/bad.err" || fail "unclear refusal: $(cat "$T/bad.err")"
+python3 "$GARBAGE" 127.0.0.1 $port || fail "garbage before authentication was not dropped"
+"$TF_BIN" worker --connect 127.0.0.1:$port --secret-file "$T/good.key" -j 1 -q 2>"$T/good.err" &
+good=$!; e2e_track $good
+wait_exit $coord 60
+[ $rc -eq 0 ] || fail "render with a secret exited $rc: $(tail -5 "$T/auth.err")"
+wait_exit $good 20
+[ $rc -eq 0 ] || fail "right-secret worker exited $rc: $(cat "$T/good.err")"
+grep -q 'authentication failed from ' "$T/auth.err" || fail "coordinator did not log the failed authentication"
+say "coordinator: $(grep 'authentication failed from ' "$T/auth.err" | head -1)"
+same "$T/ref.exr" "$T/auth.exr" "render with a refused worker and garbage"
+
+say "2. garbage frames during a render (no secret: frames reach the decoder)"
+"$TF_BIN" render "$SCENE" -j 1 --size $SIZE --tasks rows:1 --listen 127.0.0.1:0 \
+    -o "$T/garbage.exr" 2>"$T/garbage.err" &
+coord=$!; e2e_track $coord
+port=$(e2e_port "$T/garbage.err") || fail "coordinator printed no port: $(cat "$T/garbage.err")"
+python3 "$GARBAGE" 127.0.0.1 $port || fail "some garbage connection was not dropped"
+kill -0 $coord 2>/dev/null || fail "the render ended before the garbage was all sent: make it slower"
+say "render still in progress after the garbage"
+wait_exit $coord 60
+[ $rc -eq 0 ] || fail "render under garbage exited $rc: $(tail -5 "$T/garbage.err")"
+n=$(grep -c 'dropping tuple-space connection' "$T/garbage.err")
+say "coordinator dropped $n bad connections"
+[ "$n" -ge 6 ] || fail "expected at least 6 dropped connections: $(cat "$T/garbage.err")"
+same "$T/ref.exr" "$T/garbage.exr" "render under garbage"
+echo "farm_security: wrong secret refused, garbage dropped, renders intact"

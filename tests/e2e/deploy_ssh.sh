@@ -83,7 +83,10 @@ COORD=$!
 i=0
 until port=$(sed -n 's/.*may join at 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$T/coord.log") && [ -n "$port" ]; do
     i=$((i + 1))
-    [ $i -le 100 ] && kill -0 "$COORD" 2>/dev/null || { cat "$T/coord.log"; fail "coordinator did not start"; }
+    if [ $i -gt 100 ] || ! kill -0 "$COORD" 2>/dev/null; then
+        cat "$T/coord.log"
+        fail "coordinator did not start"
+    fi
     sleep 0.1
 done
 printf 'hostA 1\nhostB 1\n' >"$T/real-hosts"

@@ -40,7 +40,7 @@ BENCHES   := $(BENCH_SRC:bench/%.c=$(BUILD)/bench/%)
 LIB       := $(BUILD)/libterrafarm.a
 PROG      := $(BIN)/terrafarm
 
-.PHONY: all test asan bench fuzz deps clean install check-warnings
+.PHONY: all test asan bench bench-deps fuzz deps clean install
 all: $(PROG)
 
 $(BUILD)/%.o: %.c
@@ -91,13 +91,18 @@ bench: $(PROG) $(BENCHES)
 # Every Debian package the build, the tests and the benchmarks use.
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
-            iproute2 python3
+            iproute2 python3 gnuplot-nox
+# Only the benchmarks' peers need these (make bench-deps).
+BENCH_PKGS := povray redis-server hyperfine linux-perf valgrind
 deps:
 	@missing=""; for p in $(DEB_PKGS); do dpkg-query -W -f='$${Status}' $$p 2>/dev/null | \
 	  grep -q 'ok installed' || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then echo "installing:$$missing"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
 	else echo "all build and test packages present"; fi
+
+bench-deps:
+	@$(MAKE) --no-print-directory deps DEB_PKGS="$(BENCH_PKGS)"
 
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)/usr/local/bin/terrafarm

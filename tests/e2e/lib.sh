@@ -81,7 +81,7 @@ same() {
 # stopped right after it (its stderr is the only thing used; the copy is thrown away).
 # Prints N, or nothing if the file is not resumable.
 rows_on_disk() {
-    mkdir -p "$T/probe" && cp "$1" "$T/probe/p.exr" || return 1
+    mkdir -p "$T/probe" && cp "$1" "$T/probe/p.exr" && : >"$T/probe/out" || return 1
     "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 -j 0 --resume -o "$T/probe/p.exr" \
         $PROBE_ARGS >"$T/probe/out" 2>&1 &
     pp=$!

@@ -103,3 +103,18 @@ no_leftovers() {
     done
     return 0
 }
+
+# make_partial OUT MINBYTES ARGS...: start a render of $SCENE (or $PARTIAL_SCENE) into OUT and
+# SIGKILL it once OUT holds at least MINBYTES: an interrupted render, as a crash leaves it.
+make_partial() {
+    mp_out=$1 mp_min=$2; shift 2
+    "$TF_BIN" render "${PARTIAL_SCENE:-$SCENE}" --listen 127.0.0.1:0 -o "$mp_out" "$@" 2>"$T/partial.err" &
+    mp_pid=$!; e2e_track $mp_pid
+    i=0
+    while [ "$(wc -c 2>/dev/null <"$mp_out" || echo 0)" -lt "$mp_min" ]; do
+        kill -0 $mp_pid 2>/dev/null || fail "the render to interrupt ended first: $(cat "$T/partial.err")"
+        sleep 0.01; i=$((i + 1)); [ $i -lt 3000 ] || fail "$mp_out never reached $mp_min bytes"
+    done
+    kill -KILL $mp_pid; wait $mp_pid 2>/dev/null
+    sleep 0.1   # its forked workers follow it (PR_SET_PDEATHSIG)
+}

@@ -43,7 +43,7 @@ for pct in early 0 30 60 90; do
     else
         want=$((full * pct / 100))
         i=0
-        while [ "$(wc -c <"$OUT" 2>/dev/null || echo 0)" -lt $want ] && kill -0 $coord 2>/dev/null; do
+        while [ "$(wc -c 2>/dev/null <"$OUT" || echo 0)" -lt $want ] && kill -0 $coord 2>/dev/null; do
             sleep 0.01; i=$((i + 1)); [ $i -lt 3000 ] || fail "run $run: the output never reached $want bytes"
         done
         jitter=$(rand_ms 40)

@@ -10,6 +10,7 @@ SIZE=480x270
 
 say "reference: -j 2, $SIZE"
 render -q -j 2 --size $SIZE -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
+full=$(wc -c <"$T/ref.exr")
 
 
 say "1. kill -KILL one forked worker mid-render (rows:8, -j 2)"
@@ -21,8 +22,13 @@ kill_attempt() {
         -o "$T/kill.exr" --stats "$T/kill.json" 2>"$T/kill.err" &
     coord=$!; e2e_track $coord
     e2e_port "$T/kill.err" >/dev/null || fail "coordinator printed no port: $(cat "$T/kill.err")"
-    i=0; while [ $(grep -c 'joined' "$T/kill.err") -lt 2 ] && [ $i -lt 100 ]; do sleep 0.05; i=$((i+1)); done
-    sleep 0.3   # into the terrain rows, where a worker is nearly always inside a task
+    # Into the terrain rows (a quarter of the file: the sky rows at the top render faster than
+    # a round trip, so there a worker is as often between tasks as inside one).
+    i=0
+    while [ "$(wc -c 2>/dev/null <"$T/kill.exr" || echo 0)" -lt $((full / 4)) ]; do
+        kill -0 $coord 2>/dev/null || fail "the render ended before the kill"
+        sleep 0.01; i=$((i + 1)); [ $i -lt 3000 ] || fail "the render made no progress"
+    done
     victim=$(pgrep -P $coord | head -1)
     [ -n "$victim" ] || fail "no forked worker found under coordinator $coord"
     kill -KILL "$victim"
@@ -57,9 +63,12 @@ stop_attempt() {
     wa=$!; e2e_track $wa
     i=0; while ! grep -q 'joined: .*networked' "$T/stop.err" && [ $i -lt 500 ]; do sleep 0.02; i=$((i+1)); done
     grep -q 'joined: .*networked' "$T/stop.err" || fail "networked worker never joined: $(cat "$T/workerA.err")"
-    # Into the terrain rows (the sky rows at the top take less time to render than a round
-    # trip, so a worker there is as often between tasks as inside one), far from the end.
-    sleep 0.4
+    # into the terrain rows, as above, and far from the end
+    i=0
+    while [ "$(wc -c 2>/dev/null <"$T/stop.exr" || echo 0)" -lt $((full / 4)) ]; do
+        kill -0 $coord 2>/dev/null || fail "the render ended before the stop"
+        sleep 0.01; i=$((i + 1)); [ $i -lt 3000 ] || fail "the render made no progress"
+    done
     stopped="$wa $(pgrep -P $wa)"
     kill -STOP $stopped
     say "stopped networked worker A (pids $stopped)"

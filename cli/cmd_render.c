@@ -25,6 +25,8 @@ static const char usage[] =
     "                            of tasks plus three per worker)\n"
     "      --size WxH            override the scene's image size\n"
     "      --backend c|opencl    backend of the local workers (default c)\n"
+    "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
+    "                            (sets TERRAFARM_CL_DEVICE for the workers)\n"
     "      --listen HOST:PORT    accept networked workers there (default 127.0.0.1:7878, loopback)\n"
     "      --secret-file FILE    shared secret; required to listen on a non-loopback address\n"
     "      --resume              continue an interrupted render of the same scene into the same output\n"
@@ -68,7 +70,7 @@ bad:
 int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
-           O_OVERWRITE, O_STATS, O_LEASE };
+           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -82,6 +84,7 @@ int cmd_render(int argc, char **argv)
         {"overwrite", no_argument, NULL, O_OVERWRITE},
         {"stats", required_argument, NULL, O_STATS},
         {"lease-timeout", required_argument, NULL, O_LEASE},
+        {"cl-device", required_argument, NULL, O_CL_DEVICE},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -127,6 +130,7 @@ int cmd_render(int argc, char **argv)
         case O_RESUME: o.resume = 1; break;
         case O_OVERWRITE: o.overwrite = 1; break;
         case O_STATS: o.stats_path = optarg; break;
+        case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
         case O_LEASE:
             if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))
                 return TF_EXIT_USAGE;

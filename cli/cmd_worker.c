@@ -33,6 +33,8 @@ static const char usage[] =
     "  -c, --connect HOST:PORT   the coordinator (terrafarm render ... --listen HOST:PORT)\n"
     "      --secret-file FILE    shared secret, if the coordinator requires one\n"
     "      --backend c|opencl    rendering backend (default c)\n"
+    "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
+    "                            (same as TERRAFARM_CL_DEVICE)\n"
     "  -j, --workers N           worker processes on this machine (default: online CPUs)\n"
     "      --timeout MS          give up connecting after MS milliseconds (default 10000)\n"
     "      --simulate MODEL      synthetic workers: sleep each task's modelled cost from the cost\n"
@@ -89,7 +91,7 @@ static int run_simulated(const char *connect, const uint8_t *key, int timeout_ms
 
 int cmd_worker(int argc, char **argv)
 {
-    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US };
+    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE };
     static const struct option longopts[] = {
         {"connect", required_argument, NULL, 'c'},
         {"secret-file", required_argument, NULL, O_SECRET},
@@ -98,6 +100,7 @@ int cmd_worker(int argc, char **argv)
         {"timeout", required_argument, NULL, O_TIMEOUT},
         {"simulate", required_argument, NULL, O_SIMULATE},
         {"pixel-us", required_argument, NULL, O_PIXEL_US},
+        {"cl-device", required_argument, NULL, O_CL_DEVICE},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -135,6 +138,7 @@ int cmd_worker(int argc, char **argv)
             }
             break;
         case O_SIMULATE: model = optarg; break;
+        case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
         case O_PIXEL_US:
             pixel_us = strtod(optarg, &end);
             if (end == optarg || *end || !(pixel_us >= 0 && pixel_us <= 1e9)) {

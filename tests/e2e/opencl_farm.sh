@@ -1,0 +1,82 @@
+#!/bin/sh
+# opencl_farm.sh: --backend opencl end to end (worker/backend_opencl.c).  The default scene at
+# 160x90 rendered by forked OpenCL workers, and by a farm mixing a C and an OpenCL worker
+# (both must take tasks), against the C backend's image.  The contract is a tolerance (PSNR
+# >= 45 dB, sample counts equal for nearly all pixels: tests/unit/test_opencl.c measures it per
+# pixel); here the images are compared byte for byte when they can be (PoCL gives identical
+# bits), else by the statistics' ray and sample counts within 1%.  A bad --cl-device gives a
+# one-line error from the worker.  Skipped (77) without an OpenCL platform.
+. "$(dirname "$0")/lib.sh"
+e2e_init
+SIZE=160x90
+
+say "probe: a tiny OpenCL render"
+render -q -j 1 --size 16x9 --backend opencl -o "$T/probe.exr"; rc=$?
+if [ $rc -ne 0 ]; then
+    grep -q 'no OpenCL platform\|no OpenCL device' "$T/last.err" &&
+        skip "no usable OpenCL platform: $(head -1 "$T/last.err")"
+    fail "tiny OpenCL render exited $rc: $(cat "$T/last.err")"
+fi
+
+say "reference: C backend, -j 1, $SIZE"
+render -q -j 1 --size $SIZE -o "$T/ref.exr" --stats "$T/ref.json" ||
+    fail "C render: $(cat "$T/last.err")"
+
+# close A.json B.json WHAT: images identical, or rays and samples within 1%.
+close() {
+    if cmp -s "$T/ref.exr" "$2"; then
+        say "$3: byte-identical to the C backend's image"
+        return 0
+    fi
+    python3 - "$1" "$4" "$3" <<'PY' || fail "$3: statistics differ from the C backend's by more than 1%"
+import json, sys
+a, b = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+for k in ("rays_total", "samples_per_pixel_avg"):
+    if abs(a[k] - b[k]) > 0.01 * abs(a[k]):
+        print("%s: %s %s vs C %s" % (sys.argv[3], k, b[k], a[k])); sys.exit(1)
+print("-- %s: not byte-identical; rays and samples within 1%% of the C backend" % sys.argv[3])
+PY
+}
+
+say "forked OpenCL workers: -j 2 --backend opencl"
+render -q -j 2 --size $SIZE --backend opencl -o "$T/cl.exr" --stats "$T/cl.json" ||
+    fail "OpenCL render: $(cat "$T/last.err")"
+close "$T/ref.json" "$T/cl.exr" "-j 2 --backend opencl" "$T/cl.json"
+
+say "mixed backends: a networked OpenCL worker and a networked C worker, one task per row"
+"$TF_BIN" render "$SCENE" -j 0 --size $SIZE --tasks rows:1 --listen 127.0.0.1:0 -v \
+    -o "$T/mixed.exr" --stats "$T/mixed.json" 2>"$T/coord.err" &
+coord=$!; e2e_track $coord
+port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/coord.err")"
+"$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --backend opencl -q 2>"$T/worker.err" &
+wk=$!; e2e_track $wk
+# the C worker joins only once the OpenCL worker has (it takes a task right after joining)
+i=0
+until grep -q 'joined: .*opencl backend' "$T/coord.err"; do
+    i=$((i + 1)); [ $i -lt 600 ] || fail "the OpenCL worker never joined: $(cat "$T/worker.err")"
+    sleep 0.05
+done
+"$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --backend c -q 2>"$T/cworker.err" &
+cwk=$!; e2e_track $cwk
+wait_exit $coord 120
+[ $rc -eq 0 ] || fail "mixed render exited $rc: $(cat "$T/coord.err")"
+wait_exit $wk 30
+[ $rc -eq 0 ] || fail "OpenCL worker exited $rc: $(cat "$T/worker.err")"
+wait_exit $cwk 30
+[ $rc -eq 0 ] || fail "C worker exited $rc: $(cat "$T/cworker.err")"
+close "$T/ref.json" "$T/mixed.exr" "C + OpenCL workers" "$T/mixed.json"
+by=$(python3 -c 'import json,sys; w=json.load(open(sys.argv[1]))["workers"]; print(" ".join("%s:%d" % (b, sum(x["tasks"] for x in w if x["backend"]==b)) for b in ("c","opencl")))' "$T/mixed.json")
+say "tasks by backend: $by"
+case "$by" in *"c:0"*|*"opencl:0"*) fail "one backend rendered no task ($by): not a mixed render" ;; esac
+
+say "a bad --cl-device: the worker refuses with one line"
+"$TF_BIN" render "$SCENE" -j 0 --size $SIZE --listen 127.0.0.1:0 -o "$T/bad.exr" 2>"$T/coord2.err" &
+coord=$!; e2e_track $coord
+port=$(e2e_port "$T/coord2.err") || fail "coordinator printed no port: $(cat "$T/coord2.err")"
+"$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --backend opencl --cl-device no-such-gpu-xyzzy \
+    2>"$T/bad.err"; rc=$?
+[ $rc -ne 0 ] || fail "a worker with --cl-device no-such-gpu-xyzzy exited 0"
+grep -q 'no-such-gpu-xyzzy matches no OpenCL device' "$T/bad.err" ||
+    fail "unexpected error: $(cat "$T/bad.err")"
+say "worker error: $(grep xyzzy "$T/bad.err" | head -1)"
+echo "opencl_farm: ok"

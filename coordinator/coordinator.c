@@ -18,6 +18,7 @@
 #include "log.h"
 #include "preview.h"
 #include "progress.h"
+#include "rowwriter.h"
 #include "proto.h"
 #include "scene.h"
 #include "spawn.h"
@@ -25,6 +26,7 @@
 #include "supervisor.h"
 #include "tsserver.h"
 #include "tuplespace.h"
+#include "worker.h"
 
 #define DEFAULT_LISTEN "127.0.0.1:7878"
 #define MAX_RESPAWNS_PER_WORKER 3
@@ -144,6 +146,10 @@ static int check_output(const tf_render_opts *o, const char *output, const tf_ex
         return 0;
     }
     if (!o->resume) {
+        if (!complete && rows == 0) {
+            tf_info("%s: replacing a partial render with no rows on disk", output);
+            return 0;
+        }
         if (complete) {
             tf_info("%s: replacing a finished render", output);
             return 0;
@@ -207,6 +213,7 @@ typedef struct local_workers {
     int n;
     pid_t *pid;
     int *respawns;
+    int gave_up;       /* workers that could not start or kept dying: not restarted */
 } local_workers;
 
 static void reap_workers(local_workers *lw, ts_server *srv, const tf_scene *s,
@@ -223,12 +230,18 @@ static void reap_workers(local_workers *lw, ts_server *srv, const tf_scene *s,
         int clean = WIFEXITED(status) && WEXITSTATUS(status) == 0;
         if (clean || !respawn)
             continue;
+        if (WIFEXITED(status) && WEXITSTATUS(status) == TF_WORKER_EXIT_NOSTART) {
+            lw->gave_up++; /* it said why; restarting would say it again */
+            continue;
+        }
         if (WIFSIGNALED(status))
             tf_warn("local worker %d killed by signal %d", i, WTERMSIG(status));
         else
             tf_warn("local worker %d exited with status %d", i, WEXITSTATUS(status));
-        if (lw->respawns[i] >= MAX_RESPAWNS_PER_WORKER)
+        if (lw->respawns[i] >= MAX_RESPAWNS_PER_WORKER) {
+            lw->gave_up++;
             continue;
+        }
         lw->respawns[i]++;
         char err[512];
         pid_t p = tf_spawn_worker(srv, s, hf, backend, i, err, sizeof err);
@@ -286,10 +299,10 @@ int tf_coordinator_run(const tf_render_opts *o)
     ts_server *srv = NULL;
     tf_supervisor *sup = NULL;
     tf_exr_writer *writer = NULL;
+    tf_rowwriter *rows_out = NULL; /* owns writer once started */
     char *output = NULL, *preview = NULL;
-    local_workers lw = {0, NULL, NULL};
+    local_workers lw = {0, NULL, NULL, 0};
     tf_progress prog;
-    int writer_done = 0;
 
     signal(SIGPIPE, SIG_IGN);
     struct sigaction sa;
@@ -395,6 +408,13 @@ int tf_coordinator_run(const tf_render_opts *o)
         tf_error("%s", err);
         goto out;
     }
+    rows_out = tf_rowwriter_start(writer, scene->width, scene->height, tf_exr_chunk_rows(), 4,
+                                  o->fsync_interval_ms, preview, output, err, sizeof err);
+    if (!rows_out) {
+        tf_error("%s", err);
+        goto out;
+    }
+    writer = NULL;
 
     /* 4. The tuple space, the supervisor, the server, the local workers. */
     space = ts_space_new();
@@ -403,7 +423,7 @@ int tf_coordinator_run(const tf_render_opts *o)
         goto out;
     }
     tf_supervisor_config scfg = {scene->width, scene->height, first_row, spec, watermark,
-                                 o->max_task_failures, o->fsync_interval_ms, writer};
+                                 o->max_task_failures, rows_out};
     sup = tf_supervisor_new(space, &scfg, err, sizeof err);
     if (!sup) {
         tf_error("%s", err);
@@ -462,6 +482,7 @@ int tf_coordinator_run(const tf_render_opts *o)
     /* 5. Supervise until every row is on disk. */
     tf_progress_init(&prog, scene->height, first_row, o->quiet, now_s());
     double last_wait_note = now_s();
+    int no_workers = 0;
     while (!interrupted && !tf_supervisor_done(sup) && !tf_supervisor_error(sup)) {
         if (ts_server_run_once(srv, 50) < 0) {
             tf_error("event loop failed: %s", strerror(errno));
@@ -472,8 +493,15 @@ int tf_coordinator_run(const tf_render_opts *o)
         reap_workers(&lw, srv, scene, hf, o->backend, 1);
         const tf_farm_stats *st = tf_supervisor_stats(sup);
         int live = tf_supervisor_live_workers(sup);
-        tf_progress_update(&prog, t, tf_supervisor_rows_written(sup),
+        tf_progress_update(&prog, t, tf_rowwriter_rows_written(rows_out),
                            st->primary_rays + st->shadow_rays, live, 0);
+        if (nworkers > 0 && lw.gave_up == nworkers && live == 0) {
+            tf_progress_clear(&prog);
+            tf_error("no local worker could run (see above) and no networked worker is "
+                     "connected; stopping");
+            no_workers = 1;
+            break;
+        }
         if (live == 0 && workers_alive(&lw) == 0 && t - last_wait_note > 30) {
             tf_progress_clear(&prog);
             tf_info("waiting for workers to join (terrafarm worker --connect HOST:%d)",
@@ -485,34 +513,34 @@ int tf_coordinator_run(const tf_render_opts *o)
 
     if (!tf_supervisor_done(sup)) {
         const char *why = tf_supervisor_error(sup);
-        int rows = tf_supervisor_rows_written(sup);
+        int rows = tf_supervisor_rows_written(sup); /* abandon writes every queued row */
         tf_supervisor_stop_workers(sup);
         drain_workers(&lw, srv, 1.0);
-        tf_exr_abandon(writer);
-        writer = NULL;
+        tf_rowwriter_abandon(rows_out);
+        rows_out = NULL;
         if (why)
             tf_error("%s", why);
+        else if (no_workers)
+            tf_error("%d of %d rows are on disk in %s; continue with --resume", rows,
+                     scene->height, output);
         else
             tf_error("interrupted: %d of %d rows are on disk in %s; continue with --resume", rows,
                      scene->height, output);
-        status = why ? 1 : 130;
+        status = why || no_workers ? 1 : 130;
         goto out;
     }
 
     /* 6. Finish: the file, the workers, the preview, the statistics. */
     tf_supervisor_stop_workers(sup);
-    if (tf_exr_finish(writer, err, sizeof err)) {
-        writer = NULL;
+    int finished = tf_rowwriter_finish(rows_out, err, sizeof err);
+    rows_out = NULL;
+    if (finished) {
         tf_error("%s", err);
         goto out;
     }
-    writer = NULL;
-    writer_done = 1;
     drain_workers(&lw, srv, 5.0);
     for (int i = 0; i < 10 && ts_server_conn_count(srv) > 0; i++)
         ts_server_run_once(srv, 20); /* let networked workers read the stop tuple */
-    if (tf_preview_from_exr(output, preview, err, sizeof err))
-        tf_warn("%s", err);
     double wall = now_s() - t_start;
     const tf_farm_stats *st = tf_supervisor_stats(sup);
     uint64_t rays = st->primary_rays + st->shadow_rays;
@@ -534,7 +562,9 @@ int tf_coordinator_run(const tf_render_opts *o)
 out:
     if (lw.pid && srv)
         drain_workers(&lw, srv, 0);
-    if (writer && !writer_done)
+    if (rows_out)
+        tf_rowwriter_abandon(rows_out);
+    if (writer)
         tf_exr_abandon(writer);
     free(lw.pid);
     free(lw.respawns);

@@ -55,8 +55,6 @@ struct tf_supervisor {
     tf_pixel *chunk;         /* accumulator: chunk_rows rows of width pixels */
     int chunk_fill;          /* rows in the accumulator */
     int rows_written;        /* rows handed to the writer by this run (plus first_row) */
-    double last_sync_ms;
-    int dirty;               /* written since the last sync */
     int stop_sent;
     char error[512];
     tf_farm_stats stats;
@@ -217,14 +215,14 @@ static int flush_chunk(tf_supervisor *s, int final)
 {
     if (s->chunk_fill == 0 || (s->chunk_fill < s->chunk_rows && !final))
         return 0;
-    char err[512];
-    if (tf_exr_write_rows(s->cfg.writer, s->chunk_fill, s->chunk, err, sizeof err)) {
+    if (tf_rowwriter_put(s->cfg.writer, s->chunk, s->chunk_fill)) {
+        char err[512];
+        tf_rowwriter_error(s->cfg.writer, err, sizeof err);
         fail(s, "%s", err);
         return -1;
     }
     s->rows_written += s->chunk_fill;
     s->chunk_fill = 0;
-    s->dirty = 1;
     return 0;
 }
 
@@ -421,7 +419,9 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     s->stats.primary_rays += m.counts.primary_rays;
     s->stats.shadow_rays += m.counts.shadow_rays;
     s->stats.external_rays += m.counts.external_rays;
-    write_ready_bands(s);
+    /* Rows are written by tf_supervisor_step, after the server has flushed its replies: writing
+     * here would make the worker wait for the OK of its out while the coordinator compresses
+     * and writes the band. */
 }
 
 static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
@@ -594,19 +594,17 @@ void tf_supervisor_attach(tf_supervisor *s, ts_server *srv) { s->srv = srv; }
 
 void tf_supervisor_step(tf_supervisor *s, double now_ms)
 {
+    (void)now_ms;
     if (s->error[0])
         return;
+    char err[512];
+    if (tf_rowwriter_error(s->cfg.writer, err, sizeof err)) {
+        fail(s, "%s", err);
+        return;
+    }
     write_ready_bands(s);
     deal_new_tasks(s);
     deal_duplicate(s);
-    if (s->dirty && (now_ms - s->last_sync_ms >= s->cfg.fsync_interval_ms ||
-                     tf_supervisor_done(s))) {
-        char err[512];
-        if (tf_exr_sync(s->cfg.writer, err, sizeof err))
-            fail(s, "%s", err);
-        s->dirty = 0;
-        s->last_sync_ms = now_ms;
-    }
 }
 
 int tf_supervisor_done(const tf_supervisor *s)

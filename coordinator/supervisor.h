@@ -5,7 +5,7 @@
  * front (the first task whose rows are not yet on disk), so the space holds a bounded number of
  * bytes whatever the image size.  Results wait in the space until their whole band is done;
  * then it takes them out in order, writes the band's rows to the OpenEXR checkpoint and makes
- * them durable at a bounded interval.
+ * them durable at a bounded interval (through the writer thread, rowwriter.h).
  *
  * Faults.  Every take of a task by a connection is a lease (server hook on_take).  When a
  * connection closes (worker killed, link cut, silence timeout) while it holds leases, those
@@ -22,7 +22,7 @@
 
 #include <stdint.h>
 
-#include "exrfile.h"
+#include "rowwriter.h"
 #include "tasks.h"
 #include "tsserver.h"
 #include "tuplespace.h"
@@ -59,8 +59,7 @@ typedef struct tf_supervisor_config {
     tf_task_spec spec;
     int watermark;            /* >= tasks per band (checked) */
     int max_task_failures;
-    int fsync_interval_ms;
-    tf_exr_writer *writer;    /* positioned at first_row; the supervisor writes, syncs */
+    tf_rowwriter *writer;     /* positioned at first_row; the supervisor queues rows to it */
 } tf_supervisor_config;
 
 /* NULL with a message on error (e.g. watermark smaller than a band). */
@@ -80,7 +79,7 @@ int tf_supervisor_done(const tf_supervisor *sup);
 const char *tf_supervisor_error(const tf_supervisor *sup);
 /* Put the stop tuple out so workers leave. */
 void tf_supervisor_stop_workers(tf_supervisor *sup);
-/* Rows durably... written so far (first_row + rows written by this run). */
+/* Rows handed to the writer so far (first_row + rows finished by this run). */
 int tf_supervisor_rows_written(const tf_supervisor *sup);
 /* Live statistics (pointers valid until the next call into the supervisor). */
 const tf_farm_stats *tf_supervisor_stats(tf_supervisor *sup);

@@ -85,7 +85,7 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     tf_backend *b = tf_backend_new(backend_name, s, hf, err, sizeof err);
     if (!b) {
         tf_error("%s", err);
-        return 1;
+        return TF_WORKER_EXIT_NOSTART;
     }
     if (say_hello(c, id, kind, tf_backend_name(b))) {
         tf_error("cannot join the render: %s", ts_client_error(c));

@@ -13,6 +13,10 @@
 /* Heartbeat interval: well under the coordinator's default 15 s silence timeout. */
 #define TF_WORKER_HEARTBEAT_MS 2000
 
+/* Exit status of a worker that could not start at all (e.g. no OpenCL device): the coordinator
+ * does not restart it. */
+#define TF_WORKER_EXIT_NOSTART 3
+
 /* Serve tasks until told to stop.  kind is "forked" or "networked".  Returns an exit status
  * (0 when the render finished); prints one line on failure.  Closes nothing: the caller owns c. */
 int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, const char *kind,

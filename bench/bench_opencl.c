@@ -226,25 +226,29 @@ int main(int argc, char **argv)
     tf_cl_backend_kernel_seconds(cl, &corner_s, &pixel_s);
     corner_s -= corner0;
     pixel_s -= pixel0;
-    t0 = now();
-    if (tf_cl_backend_render(cl, (tf_rect){0, 0, s->width, s->height}, whole, NULL, err,
-                             sizeof err)) {
-        fprintf(stderr, "%s\n", err);
-        return 1;
+    /* twice: PoCL specialises its work-group function for a large grid on first sight */
+    double whole_s[2];
+    for (int pass = 0; pass < 2; pass++) {
+        t0 = now();
+        if (tf_cl_backend_render(cl, (tf_rect){0, 0, s->width, s->height}, whole, NULL, err,
+                                 sizeof err)) {
+            fprintf(stderr, "%s\n", err);
+            return 1;
+        }
+        whole_s[pass] = now() - t0;
     }
-    double whole_s = now() - t0;
-
     double c_rays = (double)(cc.primary_rays + cc.shadow_rays);
     double cl_rays = (double)(clc.primary_rays + clc.shadow_rays);
     printf("C          %.3f s  %.2f Mrays/s  (%d threads)\n", c_s, c_rays / c_s * 1e-6, threads);
     printf("OpenCL     %.3f s  %.2f Mrays/s  (stamps; device time: corners %.3f s, pixels "
            "%.3f s, host+launch %.3f s)\n",
            cl_s, cl_rays / cl_s * 1e-6, corner_s, pixel_s, cl_s - corner_s - pixel_s);
-    printf("OpenCL     %.3f s  (whole image as one task)\n", whole_s);
+    printf("OpenCL     %.3f s  (whole image as one task; %.3f s the first time)\n", whole_s[1],
+           whole_s[0]);
     printf("CPU time   C %.3f s, OpenCL %.3f s: OpenCL/C throughput per CPU second %.2fx\n",
            c_cpu, cl_cpu, c_cpu / cl_cpu);
     printf("ratio      OpenCL/C throughput %.2fx with stamps, %.2fx whole image (target >= 1.3x)\n",
-           c_s / cl_s, c_s / whole_s);
+           c_s / cl_s, c_s / whole_s[1]);
     compare(c_img, cl_img, n);
     tf_cl_backend_free(cl);
     tf_renderer_free(r);

@@ -439,9 +439,19 @@ int walk_hier(const world *w, const ray_ctx *r, candidate *best)
 {
     const int cells = w->cells, top = w->levels - 1;
     const double oz = r->o[2], dz = r->d[2], t1 = r->t1;
-    int ci = r->ci, cj = r->cj, level = top;
+    int ci = r->ci, cj = r->cj;
     int stale = STALE_NONE;
     double t_cur = r->t0, t_event = r->t0;
+    /* trace.c (b19dfb3): a ray starting at or under the surface of its level-1 block (shadow
+     * rays, valley cameras) starts at level 0; same hits, fewer steps. */
+    int level = top;
+    if (top > 0) {
+        const double z0 = oz + t_cur * dz;
+        const size_t i1 = (size_t)w->I[TFI_LEVEL_OFFSET + 1] +
+                          (size_t)(cj >> 1) * (size_t)(cells >> 1) + (size_t)(ci >> 1);
+        if (z0 <= w->mx[i1] + r->margin && z0 >= w->mn[i1] - r->margin)
+            level = 0;
+    }
     for (;;) {
         const int bi = ci >> level, bj = cj >> level;
         double tx = r->sx ? xcross(w, r, (bi + (r->sx > 0)) << level) : INFINITY;

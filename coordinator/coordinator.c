@@ -364,13 +364,8 @@ int tf_coordinator_run(const tf_render_opts *o)
     int first_row = resume_rows > 0 ? resume_rows : 0;
     tf_tasks tasks;
     tf_tasks_init(&tasks, scene->width, scene->height, first_row, spec);
-    int watermark = o->watermark;
-    if (watermark <= 0) {
-        int per = nworkers > 0 ? nworkers : 4;
-        watermark = tasks.cols + 3 * per;
-        if (watermark < 2 * tasks.cols)
-            watermark = 2 * tasks.cols;
-    }
+    int watermark = o->watermark; /* 0: auto, following the connected workers */
+    int expected_workers = nworkers > 0 ? nworkers : 4;
 
     /* 2. The terrain, built once before forking so every local worker shares it. */
     double hf_s = 0;
@@ -422,8 +417,9 @@ int tf_coordinator_run(const tf_render_opts *o)
         tf_error("out of memory");
         goto out;
     }
-    tf_supervisor_config scfg = {scene->width, scene->height, first_row, spec, watermark,
-                                 o->max_task_failures, rows_out};
+    tf_supervisor_config scfg = {scene->width,     scene->height,        first_row, spec,
+                                 watermark,         expected_workers,     o->max_task_failures,
+                                 rows_out};
     sup = tf_supervisor_new(space, &scfg, err, sizeof err);
     if (!sup) {
         tf_error("%s", err);
@@ -462,21 +458,25 @@ int tf_coordinator_run(const tf_render_opts *o)
             goto out;
         }
     }
-    char tdesc[64];
+    char tdesc[64], wdesc[32];
     describe_tasks(&spec, tdesc, sizeof tdesc);
+    if (watermark > 0)
+        snprintf(wdesc, sizeof wdesc, "%d", watermark);
+    else
+        snprintf(wdesc, sizeof wdesc, "auto (%d now)", tf_supervisor_stats(sup)->watermark);
     if (ts_server_port(srv) > 0) {
         char host[256], port[32];
         char e[128];
         if (tf_split_hostport(cfg.listen, host, sizeof host, port, sizeof port, e, sizeof e))
             snprintf(host, sizeof host, "?");
-        tf_info("rendering %s %dx%d: %d tasks (%s), watermark %d, %d local worker%s, workers "
+        tf_info("rendering %s %dx%d: %d tasks (%s), watermark %s, %d local worker%s, workers "
                 "may join at %s:%d%s",
-                scene->path, scene->width, scene->height, tasks.count, tdesc, watermark, nworkers,
+                scene->path, scene->width, scene->height, tasks.count, tdesc, wdesc, nworkers,
                 nworkers == 1 ? "" : "s", host, ts_server_port(srv),
                 have_key ? " (secret required)" : "");
     } else {
-        tf_info("rendering %s %dx%d: %d tasks (%s), watermark %d, %d local workers", scene->path,
-                scene->width, scene->height, tasks.count, tdesc, watermark, nworkers);
+        tf_info("rendering %s %dx%d: %d tasks (%s), watermark %s, %d local workers", scene->path,
+                scene->width, scene->height, tasks.count, tdesc, wdesc, nworkers);
     }
 
     /* 5. Supervise until every row is on disk. */

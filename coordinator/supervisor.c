@@ -4,8 +4,11 @@
  *     write_task <= next_deal <= tasks.count
  * Tasks below write_task are on disk; tasks in [write_task, next_deal) are "outstanding"
  * (dealt, in the space, leased to a worker, or done and waiting for their band); tasks from
- * next_deal on have not been dealt.  INVARIANT: next_deal - write_task <= watermark, so the
- * ring of watermark slots holds the state of every outstanding task, at slot id % ring_size.
+ * next_deal on have not been dealt.  INVARIANT: next_deal - write_task <= watermark <=
+ * ring_size, so the ring holds the state of every outstanding task, at slot id % ring_size.
+ *
+ * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
+ * following the number of workers connected: workers may join at any time.
  *
  * A task's copies: `in_space` task tuples sit in the space, `leased` are held by workers (one
  * lease record each in `leases`).  When both reach zero before a result arrived, the task is
@@ -18,17 +21,24 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "farmproto.h"
 #include "log.h"
 
-#define MAX_FAILED_WORKERS 16 /* per task: distinct workers that failed it */
+#define MAX_FAILED_WORKERS 8  /* per task: distinct workers that failed it */
+#define AUTO_WM_PER_WORKER 3   /* auto watermark: tasks dealt ahead per worker, beyond a band */
+#define AUTO_WM_MAX_WORKERS 4096
+#define MAX_DUPLICATES_IN_FLIGHT 2
+#define STRAGGLER_FACTOR 3.0   /* a task is a straggler when held this many mean task times */
+#define STRAGGLER_MIN_MS 500.0
 #define FAILURES_TO_EXCLUDE 2 /* failures of one task on one worker before it is excluded */
 
 typedef struct task_slot {
     int64_t id;          /* task in this slot, -1 if none */
     int has_result;
     int duplicated;      /* a straggler copy was dealt */
+    double taken_ms;     /* when a worker first took it (0: not yet) */
     int in_space;        /* task tuples in the space */
     int leased;          /* copies held by workers */
     int nfailed;
@@ -48,6 +58,11 @@ struct tf_supervisor {
     tf_supervisor_config cfg;
     int64_t write_task, next_deal;
     int ring_size;
+    int auto_watermark;      /* watermark follows the connected workers */
+    int watermark;           /* in force now */
+    int dups_in_flight;      /* duplicate copies dealt whose task has no result yet */
+    double mean_task_ms;     /* running mean of task render times (busy_ns of results) */
+    int64_t results_seen;
     task_slot *ring;
     lease *leases;
     int nleases, cap_leases;
@@ -62,6 +77,13 @@ struct tf_supervisor {
 };
 
 /* ---- small helpers ---------------------------------------------------------------------- */
+
+static double clock_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
 
 static task_slot *slot_of(tf_supervisor *s, int64_t id)
 {
@@ -141,7 +163,7 @@ static int deal_copy(tf_supervisor *s, task_slot *t)
 static void deal_new_tasks(tf_supervisor *s)
 {
     while (!s->error[0] && s->next_deal < s->tasks.count &&
-           s->next_deal - s->write_task < s->cfg.watermark) {
+           s->next_deal - s->write_task < s->watermark) {
         int64_t id = s->next_deal++;
         task_slot *t = &s->ring[id % s->ring_size];
         memset(t, 0, sizeof *t);
@@ -344,6 +366,8 @@ static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)
     }
     s->leases[s->nleases++] = (lease){conn, m.id};
     t->leased++;
+    if (t->taken_ms == 0)
+        t->taken_ms = clock_ms();
 }
 
 /* A worker put a task back (it is excluded from it): the copy is in the space again. */
@@ -407,7 +431,11 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         return;
     }
     t->has_result = 1;
+    if (t->duplicated)
+        s->dups_in_flight--;
     withdraw_copies(s, t);
+    s->results_seen++;
+    s->mean_task_ms += ((double)m.busy_ns * 1e-6 - s->mean_task_ms) / (double)s->results_seen;
     tf_worker_stats *w = worker_by_id(s, m.worker);
     if (!w)
         w = add_worker(s, m.worker);
@@ -511,31 +539,61 @@ ts_server_hooks tf_supervisor_hooks(tf_supervisor *sup)
 
 /* ---- stragglers ------------------------------------------------------------------------------- */
 
-/* Nothing left to deal and workers idle: deal a second copy of the oldest outstanding task. */
+/* Workers are idle and nothing fresh can be dealt (the image is all dealt, or the watermark
+ * holds dealing back behind a slow task): deal a second copy of the oldest task that has been
+ * held for several mean task times.  Bounded (MAX_DUPLICATES_IN_FLIGHT), because a worker busy
+ * on a duplicate cannot take the fresh tasks that appear once the original comes back. */
 static void deal_duplicate(tf_supervisor *s)
 {
+    if (s->dups_in_flight >= MAX_DUPLICATES_IN_FLIGHT || s->results_seen == 0)
+        return;
     ts_space_stats st;
     ts_space_get_stats(s->space, &st);
     if (st.waiters == 0)
         return;
-    if (s->next_deal < s->tasks.count && s->next_deal - s->write_task < s->cfg.watermark)
+    if (s->next_deal < s->tasks.count && s->next_deal - s->write_task < s->watermark)
         return; /* fresh work can still be dealt */
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
         task_slot *t = slot_of(s, id);
         if (t && t->in_space > 0 && !t->has_result)
             return; /* an undealt copy is waiting: idle workers will take it */
     }
+    double now = clock_ms(), patience = STRAGGLER_FACTOR * s->mean_task_ms;
+    if (patience < STRAGGLER_MIN_MS)
+        patience = STRAGGLER_MIN_MS;
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
         task_slot *t = slot_of(s, id);
-        if (!t || t->has_result || t->duplicated || t->leased == 0)
+        if (!t || t->has_result || t->duplicated || t->leased == 0 || now - t->taken_ms < patience)
             continue;
         t->duplicated = 1;
         t->in_space++;
+        s->dups_in_flight++;
         s->stats.tasks_duplicated++;
-        tf_debug("straggler: dealing a second copy of task %" PRId64, id);
+        tf_debug("straggler: task %" PRId64 " held %.0f ms (mean task %.0f ms); dealing a second "
+                 "copy", id, now - t->taken_ms, s->mean_task_ms);
         deal_copy(s, t);
         return;
     }
+}
+
+/* The auto watermark: one band plus a few tasks per connected (or expected) worker. */
+static void update_watermark(tf_supervisor *s)
+{
+    if (!s->auto_watermark)
+        return;
+    int workers = tf_supervisor_live_workers(s);
+    if (workers < s->cfg.expected_workers)
+        workers = s->cfg.expected_workers;
+    if (workers > AUTO_WM_MAX_WORKERS)
+        workers = AUTO_WM_MAX_WORKERS;
+    int wm = s->tasks.cols + AUTO_WM_PER_WORKER * workers;
+    if (wm < 2 * s->tasks.cols)
+        wm = 2 * s->tasks.cols;
+    if (wm > s->ring_size)
+        wm = s->ring_size;
+    s->watermark = wm;
+    if (wm > s->stats.watermark)
+        s->stats.watermark = wm;
 }
 
 /* ---- public --------------------------------------------------------------------------------- */
@@ -553,7 +611,8 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     if (s->cfg.max_task_failures < 1)
         s->cfg.max_task_failures = 3;
     tf_tasks_init(&s->tasks, cfg->width, cfg->height, cfg->first_row, cfg->spec);
-    if (cfg->watermark < s->tasks.cols) {
+    s->auto_watermark = cfg->watermark <= 0;
+    if (!s->auto_watermark && cfg->watermark < s->tasks.cols) {
         snprintf(err, errlen,
                  "--watermark %d is smaller than the %d tasks of one row band: the first band "
                  "could never be written; use at least %d",
@@ -561,7 +620,10 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         free(s);
         return NULL;
     }
-    s->ring_size = cfg->watermark;
+    s->ring_size = s->auto_watermark
+                       ? 2 * s->tasks.cols + AUTO_WM_PER_WORKER * AUTO_WM_MAX_WORKERS
+                       : cfg->watermark;
+    s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
     s->chunk_rows = tf_exr_chunk_rows();
     s->chunk = calloc((size_t)s->chunk_rows * (size_t)cfg->width, sizeof *s->chunk);
@@ -575,7 +637,8 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     s->rows_written = cfg->first_row;
     s->stats.tasks_total = s->tasks.count;
     s->stats.rows_resumed = cfg->first_row;
-    s->stats.watermark = cfg->watermark;
+    s->stats.watermark = s->watermark;
+    update_watermark(s);
     return s;
 }
 
@@ -603,6 +666,7 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
         return;
     }
     write_ready_bands(s);
+    update_watermark(s);
     deal_new_tasks(s);
     deal_duplicate(s);
 }

@@ -13,10 +13,12 @@
  * dying, counts against that worker; after two failures there the worker is excluded from it
  * (the task tuple carries the exclusion list), and a task that fails on max_task_failures
  * distinct workers stops the render (rows already written remain valid for --resume).
- * Stragglers: when no task is left to deal and workers are idle, the oldest outstanding task
- * is dealt once more; the first result wins and later ones are dropped.
+ * Stragglers: when no fresh task can be dealt and workers are idle, a task held for several
+ * mean task times is dealt once more (a few at a time); the first result wins and later ones
+ * are dropped.
  *
- * Memory is O(watermark): per-task state lives in a ring indexed by task id modulo its size. */
+ * Memory is O(watermark): per-task state lives in a ring indexed by task id modulo its size
+ * (sized for the largest auto watermark, 4096 workers: a few MB, whatever the image size). */
 #ifndef TF_SUPERVISOR_H
 #define TF_SUPERVISOR_H
 
@@ -57,7 +59,8 @@ typedef struct tf_supervisor_config {
     int width, height;
     int first_row;            /* rows [0, first_row) are already on disk */
     tf_task_spec spec;
-    int watermark;            /* >= tasks per band (checked) */
+    int watermark;            /* >= tasks per band (checked); 0 = auto (follows the workers) */
+    int expected_workers;     /* auto watermark: workers to plan for before they connect */
     int max_task_failures;
     tf_rowwriter *writer;     /* positioned at first_row; the supervisor queues rows to it */
 } tf_supervisor_config;

@@ -7,6 +7,7 @@
 
 #include <math.h>
 #include <pthread.h>
+#include <string.h>
 
 #include "noise_impl.h"
 
@@ -144,6 +145,63 @@ static void noise_triple(const tf_noise *nz, double x, double x_dx, const tf_noi
                            tf_noise_column_at(nz, xi + 1, ay_dy));
 }
 
+/* ---- octave plans without pow() per call
+ *
+ * tf_octaves_plan(H, lacunarity 2, octaves) gives amp[i] = pow(2^i, -H) (2^i is exact) for
+ * i < count, then scales amp[whole] by the fractional remainder: every plan of a given H is a
+ * prefix of the 32-octave plan with at most its last weight scaled.  The texture H values
+ * (BUMP_H, 0.5) get their full plan once; texture_plan cuts the prefix.  Made once per process
+ * (pthread_once) and checked there against tf_octaves_plan itself on sample octave counts; if
+ * noise_impl.h ever plans differently, texture_plan just calls tf_octaves_plan. */
+static tf_octaves full_plan_bump, full_plan_half;
+static int prefix_plans_exact;
+static pthread_once_t full_plans_once = PTHREAD_ONCE_INIT;
+
+static void prefix_plan(tf_octaves *o, const tf_octaves *full, double octaves)
+{
+    if (!(octaves >= 1.0))
+        octaves = 1.0;
+    if (octaves > TF_MAX_OCTAVES)
+        octaves = TF_MAX_OCTAVES;
+    int whole = (int)octaves;
+    double remainder = octaves - whole;
+    *o = *full;
+    o->count = whole + (remainder > 0.0);
+    if (remainder > 0.0)
+        o->amp[whole] *= remainder;
+}
+
+static void make_full_plans(void)
+{
+    static const double samples[] = {0.0, 0.4, 1.0, 1.3, 2.0, 2.71, 3.5, 4.0, 5.9, 40.0};
+    tf_octaves_plan(&full_plan_bump, BUMP_H, 2.0, TF_MAX_OCTAVES);
+    tf_octaves_plan(&full_plan_half, 0.5, 2.0, TF_MAX_OCTAVES);
+    int exact = 1;
+    for (size_t i = 0; i < sizeof samples / sizeof samples[0]; i++) {
+        for (int which = 0; which < 2; which++) {
+            tf_octaves fast, slow;
+            const tf_octaves *full = which ? &full_plan_half : &full_plan_bump;
+            prefix_plan(&fast, full, samples[i]);
+            tf_octaves_plan(&slow, which ? 0.5 : BUMP_H, 2.0, samples[i]);
+            exact &= fast.count == slow.count && fast.lacunarity == slow.lacunarity &&
+                     memcmp(fast.amp, slow.amp, (size_t)slow.count * sizeof slow.amp[0]) == 0;
+        }
+    }
+    prefix_plans_exact = exact;
+}
+
+/* The plan of tf_octaves_plan(H, 2.0, octaves), from the table when H is a texture's. */
+static void texture_plan(tf_octaves *o, double H, double octaves)
+{
+    pthread_once(&full_plans_once, make_full_plans);
+    if (prefix_plans_exact && H == BUMP_H)
+        prefix_plan(o, &full_plan_bump, octaves);
+    else if (prefix_plans_exact && H == 0.5)
+        prefix_plan(o, &full_plan_half, octaves);
+    else
+        tf_octaves_plan(o, H, 2.0, octaves);
+}
+
 /* fBm value and gradient (per world unit, scaled by 1/scale) at (x, y) / scale, by forward
  * differences.  `salt` shifts the domain so different textures are uncorrelated.
  *
@@ -160,7 +218,7 @@ static double fbm_with_gradient(const tf_noise *nz, double x, double y, double s
     double qx = x / scale + salt, qy = y / scale - salt;
     tf_octaves plan;
     tf_noise_axis axes[TF_MAX_OCTAVES + 1], axes_dy[TF_MAX_OCTAVES + 1];
-    tf_octaves_plan(&plan, H, 2.0, octaves);
+    texture_plan(&plan, H, octaves);
     tf_octave_axes(&plan, qy, axes);
     tf_octave_axes(&plan, qy + eps, axes_dy);
     double f = 0.0, f_dx = 0.0, f_dy = 0.0;

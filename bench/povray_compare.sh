@@ -20,9 +20,10 @@
 #      parsing the PNG included).
 #   4. prints the medians of whole-process CPU time (user + sys, children included: robust on
 #      a shared machine) and of wall time; the CPU time of the render proper: for POV-Ray its
-#      own trace CPU-seconds, for terrafarm its whole-process CPU minus that of the same command
-#      at --size 1x1 (terrain synthesis, fork, output: everything but the pixels); the camera
-#      rays per pixel of each; and the ratios terrafarm / POV-Ray (target <= 0.333).
+#      own trace CPU-seconds, for terrafarm the thread CPU time of one tf_render_rect over the
+#      whole image (build/bench/povray_tf_render: a worker's task, without terrain synthesis,
+#      tuple traffic or file output); the camera rays per pixel of each; and the ratios
+#      terrafarm / POV-Ray (target <= 0.333).
 #
 # Coordinates: terrafarm is right-handed with z up; POV-Ray is left-handed with y up.  The map
 # (x, y, z) -> (x, z, y) swaps two axes, which is exactly a change of handedness, so the view is
@@ -73,7 +74,8 @@ fi
 SCENE=$(cd "$(dirname "$SCENE")" && pwd)/$(basename "$SCENE")
 
 # Build what we run (quietly; a failure shows make's own message).
-make -s -C "$ROOT" bin/terrafarm >/dev/null || die "build failed"
+make -s -C "$ROOT" bin/terrafarm build/bench/povray_tf_render >/dev/null || die "build failed"
+TF_RENDER="$ROOT/build/bench/povray_tf_render"
 TF="$ROOT/bin/terrafarm"
 
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/povcmp.XXXXXX") || die "mktemp failed"
@@ -225,15 +227,6 @@ for k in "${SIZE_LIST[@]}"; do
     "$TF" heightfield "$SCENE" -k "$k" -t 1 -o "$WORK/hf_$k.png" >"$WORK/hf_$k.txt" 2>&1 ||
         { cat "$WORK/hf_$k.txt" >&2; die "terrafarm heightfield failed"; }
     pov_file "$k" "hf_$k.png" "$WORK/hf_$k.pov"
-    # terrafarm's fixed cost at this size: the same command rendering one pixel.
-    derived_scene "$k" "$WORK/tf_${k}_setup.scene" 0
-    : >"$WORK/tf_setup"
-    for ((r = 0; r < RUNS; r++)); do
-        set -- $(run_timed "$WORK/tf.log" "$TF" render "$WORK/tf_${k}_setup.scene" -j 1 -q \
-            --size 1x1 -o "$WORK/tf_${k}_setup.exr")
-        echo "$2" >>"$WORK/tf_setup"
-    done
-    tf_setup=$(median <"$WORK/tf_setup")
     for mode in "${MODE_LIST[@]}"; do
         case "$mode" in
         aa) depth=""; pov_args=(+A0.3 +AM1 +R3) ;;
@@ -249,7 +242,9 @@ for k in "${SIZE_LIST[@]}"; do
             set -- $(run_timed "$WORK/tf.log" "$TF" render "$WORK/tf_${k}_$mode.scene" -j 1 -q \
                 --size "$IMAGE" -o "$WORK/tf_${k}_$mode.exr" --stats "$WORK/tf.json")
             echo "$1" >>"$WORK/tf_wall"; echo "$2" >>"$WORK/tf_cpu"
-            awk -v a="$2" -v b="$tf_setup" 'BEGIN { printf "%.3f\n", a - b }' >>"$WORK/tf_rend"
+            "$TF_RENDER" "$WORK/tf_${k}_$mode.scene" "$WORK/tf_rect.png" "$IMAGE" >"$WORK/tf_rect.log" 2>&1 ||
+                { cat "$WORK/tf_rect.log" >&2; die "povray_tf_render failed"; }
+            sed -n 's/^render_cpu_s=\([0-9.]*\) .*/\1/p' "$WORK/tf_rect.log" >>"$WORK/tf_rend"
             set -- $(cd "$WORK" && run_timed "$WORK/pov.log" povray +I"hf_$k.pov" +O"pov_${k}_$mode.png" \
                 +FN +W"$W" +H"$H" +WT1 -D -P +V "${pov_args[@]}")
             echo "$1" >>"$WORK/pov_wall"; echo "$2" >>"$WORK/pov_cpu"
@@ -259,7 +254,7 @@ for k in "${SIZE_LIST[@]}"; do
         pc=$(median <"$WORK/pov_cpu"); pw=$(median <"$WORK/pov_wall"); pt=$(median <"$WORK/pov_trc")
         ratio=$(awk -v a="$tc" -v b="$pc" 'BEGIN { if (b > 0) printf "%.3f", a / b; else print "?" }')
         tratio=$(awk -v a="$tr" -v b="$pt" 'BEGIN { if (b > 0) printf "%.3f", a / b; else print "?" }')
-        printf "%-6s %-5s | %9s %9s %8s %6s | %9s %9s %8s %6s | %7s %7s\n" \
+        printf "%-6s %-5s | %9s %9s %8.4f %6s | %9s %9s %8s %6s | %7s %7s\n" \
             "$n" "$mode" "$tc" "$tw" "$tr" "$(tf_rays_pp "$WORK/tf.json")" \
             "$pc" "$pw" "${pt:-?}" "$(pov_rays_pp "$WORK/pov.log")" "$ratio" "$tratio"
         if [ -n "$KEEP" ]; then
@@ -272,6 +267,6 @@ for k in "${SIZE_LIST[@]}"; do
         fi
     done
 done
-echo "rays = camera rays per pixel; tf rend = terrafarm CPU minus its 1x1-pixel run (terrain, fork, output);"
-echo "pov trc = POV-Ray's trace CPU-seconds; cpu x = whole-process CPU ratio; trace x = tf rend / pov trc"
-echo "(target: <= 0.333)"
+echo "rays = camera rays per pixel; tf rend = CPU of terrafarm's render proper (one tf_render_rect over"
+echo "the image); pov trc = POV-Ray's trace CPU-seconds; cpu x = whole-process CPU ratio;"
+echo "trace x = tf rend / pov trc (target: <= 0.333)"

@@ -104,8 +104,13 @@ deps:
 bench-deps:
 	@$(MAKE) --no-print-directory deps DEB_PKGS="$(BENCH_PKGS)"
 
+# The OpenCL backend reads its kernels at run time: beside the executable (bin/../worker/kernels)
+# in a checkout, from PREFIX/share/terrafarm/kernels once installed.
+PREFIX ?= /usr/local
 install: $(PROG)
-	install -D -m 755 $(PROG) $(DESTDIR)/usr/local/bin/terrafarm
+	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
+	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels
+	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
 
 clean:
 	rm -rf build build-asan bin

@@ -22,9 +22,9 @@ CFLAGS   ?= -O2 -g
 SAN      ?=
 ALL_CFLAGS := $(CFLAGS) $(SAN) -std=c11 -D_GNU_SOURCE -Wall -Wextra -ffp-contract=off -pthread \
             -I. -Icommon -Icoordinator -Iworker -DTF_VERSION='"$(VERSION)"' \
-            $(shell pkg-config --cflags $(PKGS)) $(EXR_CFLAGS)
-LDLIBS   := $(shell pkg-config --libs $(PKGS)) $(EXR_LIBS) $(CL_LIBS) -lm -pthread
-TEST_LIBS := $(shell pkg-config --libs cmocka)
+            $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS)
+LDLIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXR_LIBS) $(CL_LIBS) -lm -pthread
+TEST_LIBS := $(shell pkg-config --libs cmocka 2>/dev/null)
 
 LIB_SRC   := $(wildcard common/*.c coordinator/*.c worker/*.c)
 CLI_SRC   := $(wildcard cli/*.c)
@@ -69,7 +69,7 @@ FUZZ_LIB_SRC := $(LIB_SRC)
 $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB_SRC)
 	@mkdir -p $(dir $@)
 	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon -Icoordinator -Iworker \
-	  -DTF_VERSION='"$(VERSION)"' $(shell pkg-config --cflags $(PKGS)) $(EXR_CFLAGS) \
+	  -DTF_VERSION='"$(VERSION)"' $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS) \
 	  -o $@ $< $(FUZZ_LIB_SRC) $(LDLIBS)
 $(BUILD)/replay/%: tests/fuzz/%.c tests/fuzz/replay_main.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)

@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 
 /* JSON string with the escapes RFC 8259 requires. */
 static void json_string(FILE *f, const char *s)
@@ -70,6 +71,12 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
     fprintf(f, "  \"max_tuple_bytes\": %zu,\n", st->max_tuple_bytes);
     fprintf(f, "  \"local_workers\": %d,\n  \"heightfield_s\": %.3f,\n", run->local_workers,
             run->heightfield_s);
+    struct rusage ru;
+    if (getrusage(RUSAGE_SELF, &ru) == 0) /* the coordinator alone: workers are other processes */
+        fprintf(f, "  \"coordinator_max_rss_kb\": %ld,\n  \"coordinator_cpu_s\": %.3f,\n",
+                ru.ru_maxrss,
+                (double)ru.ru_utime.tv_sec + ru.ru_utime.tv_usec * 1e-6 +
+                    (double)ru.ru_stime.tv_sec + ru.ru_stime.tv_usec * 1e-6);
     fprintf(f, "  \"workers\": [");
     for (int i = 0; i < st->nworkers; i++) {
         const tf_worker_stats *w = &st->workers[i];

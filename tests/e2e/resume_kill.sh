@@ -24,14 +24,35 @@ rand_ms() { echo $(( $(od -An -N2 -tu2 /dev/urandom | tr -d ' ') % $1 )); }
 
 prev_rows=0
 run=0
-for pct in early 0 30 60 90; do
+lost=""   # per interruption: rows on disk after the kill that the next run did not keep
+for pct in early 0 30 copy 60 90; do
     run=$((run + 1))
     had_file=no; [ -e "$OUT" ] && had_file=yes
+    : >"$T/run$run.err"
     "$TF_BIN" render "$SCENE" $ARGS --resume --listen 127.0.0.1:0 -o "$OUT" 2>"$T/run$run.err" &
     coord=$!; e2e_track $coord
+    netw=""
+    if [ $pct = 60 ]; then
+        # this run also has a networked worker: it must leave when its coordinator dies
+        port=$(e2e_port "$T/run$run.err") || fail "run $run printed no port"
+        "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 2>"$T/netw.err" &
+        netw=$!; e2e_track $netw
+    fi
     if [ $pct = early ]; then
-        # while the coordinator builds the terrain, before its output file exists
-        jitter=$(rand_ms 30)
+        # the instant the output file appears (its header being written, no row yet): a busy
+        # wait on the shell's built-in test, no sleep, so the kill follows within microseconds
+        i=0
+        while [ ! -e "$OUT" ]; do
+            i=$((i + 1)); [ $i -lt 2000000 ] || fail "run $run: no output file appeared"
+        done
+        jitter=0
+    elif [ $pct = copy ]; then
+        # while --resume copies the verified chunks into OUT.resume.tmp, before its rename
+        i=0
+        while [ ! -e "$OUT.resume.tmp" ]; do
+            i=$((i + 1)); [ $i -lt 2000000 ] || fail "run $run: no $OUT.resume.tmp appeared"
+        done
+        jitter=0
     elif [ $pct -eq 0 ]; then
         # before this run writes its first row: as soon as it says it is rendering (workers
         # forked, tasks dealt)
@@ -48,9 +69,9 @@ for pct in early 0 30 60 90; do
         done
         jitter=$(rand_ms 40)
     fi
-    sleep "0.$(printf %03d $jitter)"
+    [ $jitter -gt 0 ] && sleep "0.$(printf %03d $jitter)"
     kids=$(pgrep -P $coord)
-    kill -0 $coord 2>/dev/null || fail "run $run finished before the kill at ${pct}: make the render slower"
+    kill -0 $coord 2>/dev/null || fail "run $run ended before the kill at ${pct}: $(cat "$T/run$run.err")"
     kill -KILL $coord
     wait $coord 2>/dev/null
     # the forked workers must follow their coordinator
@@ -59,9 +80,18 @@ for pct in early 0 30 60 90; do
         [ -z "$alive" ] && break; sleep 0.1; i=$((i + 1))
     done
     no_leftovers $kids
-    if [ $had_file = yes ]; then
+    if [ -n "$netw" ]; then
+        wait_exit $netw 10
+        [ $rc -ne 0 ] || fail "the networked worker exited 0 after its coordinator was killed"
+        say "networked worker left with status $rc: $(tail -1 "$T/netw.err")"
+    fi
+    if [ $pct = copy ]; then
+        :   # killed inside the copy, before it could say what it resumes
+    elif [ $had_file = yes ]; then
+        [ -n "$lost" ] && lost="$lost, "
         got=$(sed -n 's/.*resuming .*: \([0-9]*\) of [0-9]* rows already on disk.*/\1/p' "$T/run$run.err")
         [ "$got" = "$prev_rows" ] || fail "run $run resumed '$got' rows, but $prev_rows were on disk after the previous kill: $(cat "$T/run$run.err")"
+        lost="$lost$((prev_rows - got))"
     else
         grep -q 'nothing to resume, starting a fresh render' "$T/run$run.err" ||
             fail "run $run: --resume with no file did not say it starts afresh: $(cat "$T/run$run.err")"
@@ -72,6 +102,13 @@ for pct in early 0 30 60 90; do
     fi
     rows=$(rows_on_disk "$OUT")
     [ -n "$rows" ] || fail "after kill $run the partial file cannot be resumed"
+    if [ "$rows" = complete ]; then
+        # the kill landed after the file was finished (while the preview was written)
+        [ $pct = 90 ] || fail "kill $run at $pct%: the file is already complete"
+        say "kill $run at $pct% + ${jitter} ms: landed after the last row; the file is complete"
+        prev_rows=$H
+        break
+    fi
     [ "$rows" -ge "$prev_rows" ] || fail "rows on disk went down: $prev_rows -> $rows"
     say "kill $run at $pct% of the file + ${jitter} ms ($(echo $kids | wc -w) workers died with it): $rows of $H rows on disk"
     prev_rows=$rows
@@ -80,16 +117,22 @@ done
 say "final run: --resume to the end"
 "$TF_BIN" render "$SCENE" $ARGS --resume --listen 127.0.0.1:0 -o "$OUT" --stats "$T/final.json" 2>"$T/final.err" ||
     fail "final resume failed: $(cat "$T/final.err")"
+if [ $prev_rows -eq $H ]; then
+    grep -q 'already complete' "$T/final.err" || fail "a complete file was not recognised: $(cat "$T/final.err")"
+    echo '{"rows_resumed": '$H', "rows_rendered": 0}' >"$T/final.json"
+fi
 resumed=$(jstat rows_resumed "$T/final.json")
 rendered=$(jstat rows_rendered "$T/final.json")
 say "final run: rows_resumed $resumed, rows_rendered $rendered ($(grep -o 'resuming .*' "$T/final.err"))"
 [ "$resumed" -eq "$prev_rows" ] || fail "rows_resumed $resumed but $prev_rows rows were on disk"
+lost="$lost, $((prev_rows - resumed))"
+say "rows on disk lost per interruption (on disk after the kill - resumed by the next run): $lost"
 [ $((resumed + rendered)) -eq $H ] || fail "rows_resumed + rows_rendered = $((resumed + rendered)), not $H"
-same "$T/ref.exr" "$OUT" "after 5 kills and resumes"
+same "$T/ref.exr" "$OUT" "after 6 kills and resumes"
 left=$(ls "$T/out" | grep -v '^img\.exr$\|^img\.png$' || true)
 [ -z "$left" ] || fail "stray files beside the output: $left"
 if command -v exrheader >/dev/null 2>&1; then
     exrheader "$OUT" >/dev/null 2>&1 || fail "exrheader cannot read the resumed file"
     say "exrheader reads the resumed file"
 fi
-echo "resume_kill: 5 interruptions, 0 rows on disk lost, image identical"
+echo "resume_kill: 6 interruptions, 0 rows on disk lost, image identical"

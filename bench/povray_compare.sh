@@ -28,7 +28,8 @@
 # Coordinates: terrafarm is right-handed with z up; POV-Ray is left-handed with y up.  The map
 # (x, y, z) -> (x, z, y) swaps two axes, which is exactly a change of handedness, so the view is
 # the same picture, not a mirror image.  The height field's own mirror in z (row 0 = near edge)
-# is in the transform printed by `terrafarm heightfield`.
+# is in the transform printed by `terrafarm heightfield`.  terrafarm's sea (an infinite plane at
+# materials.sea_level) is a plain POV-Ray plane.
 #
 # usage: bench/povray_compare.sh [--scene FILE] [--sizes 9,11] [--image WxH] [--runs N]
 #                                [--modes aa,aa-eq,noaa] [--pov-eq A] [--plain] [--keep DIR]
@@ -126,6 +127,7 @@ SUN_I=$(ini_get sun intensity); SUN_I=${SUN_I:-1}
 SKY_HOR=$(vec3 "$(ini_get sky horizon)" sky.horizon)
 SKY_ZEN=$(vec3 "$(ini_get sky zenith)" sky.zenith)
 SKY_I=$(ini_get sky intensity); SKY_I=${SKY_I:-0.3}
+SEA=$(ini_get materials sea_level); SEA=${SEA:-0}
 if [ -z "$IMAGE" ]; then
     W=$(ini_get image width); H=$(ini_get image height)
     IMAGE="${W}x${H}"
@@ -180,6 +182,8 @@ camera {
 light_source { $sun * 1e7 color rgb $sun_rgb parallel point_at <0, 0, 0> }
 // The sky: terrafarm's zenith/horizon gradient (no sun glow).
 sky_sphere { pigment { function { max(0, y) } color_map { [0 color rgb $hor] [1 color rgb $zen] } } }
+// terrafarm's water: an infinite plane at sea_level (plain, no ripples or reflection).
+plane { y, $SEA pigment { color rgb <0.02, 0.05, 0.08> } finish { ambient rgb $zen * $SKY_I diffuse 0.3 } }
 height_field {
   png "$png" smooth
   scale $scale

@@ -88,15 +88,6 @@ static inline double exit_y(const ray_ctx *r, int cj)
 
 /* ---- triangle tests ----------------------------------------------------------------------- */
 
-static inline sheared shear_vertex(const ray_ctx *r, int i, int j)
-{
-    const tf_heightfield *hf = r->hf;
-    double a[3] = {(double)i * hf->cell - r->o[0], (double)j * hf->cell - r->o[1],
-                   (double)hf->h[(size_t)j * hf->n + i] - r->o[2]};
-    sheared s = {a[r->kx] - r->shx * a[r->kz], a[r->ky] - r->shy * a[r->kz], r->shz * a[r->kz]};
-    return s;
-}
-
 /* Twice the signed area of (origin, p, q) in ray space.  edge_fn(q, p) == -edge_fn(p, q)
  * exactly (the two products just trade places), and a value within the rounding error of the
  * subtraction is returned as 0, so no sign is ever wrong, only undecided. */
@@ -127,11 +118,40 @@ static inline void try_triangle(const ray_ctx *r, double u, double v, double w, 
     }
 }
 
-/* Both triangles of cell (ci, cj). */
+/* A vertex sheared into ray space, given its offsets from the ray origin already permuted to
+ * ray-space order (ax = offset on axis kx, ay on ky, az on kz):
+ * (ax - shx * az, ay - shy * az, shz * az). */
+static inline sheared shear_rel(double ax, double ay, double az, double shx, double shy,
+                                double shz)
+{
+    sheared s = {ax - shx * az, ay - shy * az, shz * az};
+    return s;
+}
+
+/* Both triangles of cell (ci, cj).  The four corners' offsets from the origin are
+ * (i * cell - ox, j * cell - oy, h - oz); they share two x and two y offsets, computed once
+ * each, and the branch on kz spells out the permutation (no indexing by kx/ky/kz). */
 static void test_triangles(const ray_ctx *r, int ci, int cj, candidate *best)
 {
-    sheared a = shear_vertex(r, ci, cj), b = shear_vertex(r, ci + 1, cj);
-    sheared c = shear_vertex(r, ci + 1, cj + 1), d = shear_vertex(r, ci, cj + 1);
+    const tf_heightfield *hf = r->hf;
+    const double x0 = (double)ci * hf->cell - r->o[0], x1 = (double)(ci + 1) * hf->cell - r->o[0];
+    const double y0 = (double)cj * hf->cell - r->o[1], y1 = (double)(cj + 1) * hf->cell - r->o[1];
+    const float *h = hf->h + (size_t)cj * hf->n + ci;
+    const double za = (double)h[0] - r->o[2], zb = (double)h[1] - r->o[2];
+    const double zd = (double)h[hf->n] - r->o[2], zc = (double)h[hf->n + 1] - r->o[2];
+    const double shx = r->shx, shy = r->shy, shz = r->shz;
+    sheared a, b, c, d;
+    /* (kx, ky, kz) is (1, 2, 0), (2, 0, 1) or (0, 1, 2) (setup_ray). */
+    if (r->kz == 0) {
+        a = shear_rel(y0, za, x0, shx, shy, shz), b = shear_rel(y0, zb, x1, shx, shy, shz);
+        c = shear_rel(y1, zc, x1, shx, shy, shz), d = shear_rel(y1, zd, x0, shx, shy, shz);
+    } else if (r->kz == 1) {
+        a = shear_rel(za, x0, y0, shx, shy, shz), b = shear_rel(zb, x1, y0, shx, shy, shz);
+        c = shear_rel(zc, x1, y1, shx, shy, shz), d = shear_rel(zd, x0, y1, shx, shy, shz);
+    } else {
+        a = shear_rel(x0, y0, za, shx, shy, shz), b = shear_rel(x1, y0, zb, shx, shy, shz);
+        c = shear_rel(x1, y1, zc, shx, shy, shz), d = shear_rel(x0, y1, zd, shx, shy, shz);
+    }
     double e_ab = edge_fn(a, b), e_bc = edge_fn(b, c), e_ca = edge_fn(c, a);
     double e_cd = edge_fn(c, d), e_da = edge_fn(d, a);
     /* T1 = (A, B, C): A's weight is the area across from it, edge BC; and so on. */

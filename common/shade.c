@@ -9,6 +9,9 @@
 #include <pthread.h>
 #include <string.h>
 
+/* The inline kernels tf_fbm2 is made of (noise_impl.h calls itself private to noise.c and
+ * fractal.c): shading reuses an octave plan and lattice lookups across its three bump sums
+ * and must give exactly tf_fbm2's bits, which only the same kernels guarantee. */
 #include "noise_impl.h"
 
 #define DEG2RAD (3.14159265358979323846 / 180.0)

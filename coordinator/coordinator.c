@@ -288,6 +288,43 @@ static const char *describe_tasks(const tf_task_spec *spec, char *buf, size_t le
     return buf;
 }
 
+/* A fresh output, created atomically.  OpenEXRCore writes a header in many small writes, so a
+ * coordinator killed while creating OUTPUT in place would leave an empty or torn header that no
+ * later --resume can read.  Instead the header goes to OUTPUT.new.tmp, which is renamed over
+ * OUTPUT once whole and then reopened as a resumable render with no rows: at every instant
+ * OUTPUT holds what was there before or a valid zero-row partial, never less. */
+static tf_exr_writer *create_output(const char *output, const tf_exr_meta *meta, char *err,
+                                    size_t errlen)
+{
+    size_t n = strlen(output) + sizeof ".new.tmp";
+    char *tmp = malloc(n);
+    if (!tmp) {
+        snprintf(err, errlen, "%s: out of memory", output);
+        return NULL;
+    }
+    snprintf(tmp, n, "%s.new.tmp", output);
+    tf_exr_writer *w = tf_exr_create(tmp, meta, err, errlen);
+    if (w) {
+        tf_exr_abandon(w); /* closes it, header written, no rows */
+        w = NULL;
+        if (rename(tmp, output) == 0) {
+            int rows_done = -1;
+            w = tf_exr_resume(output, meta, &rows_done, err, errlen);
+            if (w && rows_done != 0) {
+                tf_exr_abandon(w);
+                w = NULL;
+                snprintf(err, errlen, "%s: changed while starting (%d rows, expected 0)", output,
+                         rows_done);
+            }
+        } else {
+            snprintf(err, errlen, "%s: cannot create: %s", output, strerror(errno));
+        }
+    }
+    remove(tmp); /* gone after the rename; a failed create's leftovers otherwise */
+    free(tmp);
+    return w;
+}
+
 int tf_coordinator_run(const tf_render_opts *o)
 {
     double t_start = now_s();
@@ -397,13 +434,15 @@ int tf_coordinator_run(const tf_render_opts *o)
             tf_error("%s", err);
             goto out;
         }
-        writer = tf_exr_create(output, &meta, err, sizeof err);
+        writer = create_output(output, &meta, err, sizeof err);
     }
     if (!writer) {
         tf_error("%s", err);
         goto out;
     }
-    rows_out = tf_rowwriter_start(writer, scene->width, scene->height, tf_exr_chunk_rows(), 4,
+    int queue_chunks = 32 / tf_exr_chunk_rows() > 2 ? 32 / tf_exr_chunk_rows() : 2; /* ~32 rows */
+    rows_out = tf_rowwriter_start(writer, scene->width, scene->height, tf_exr_chunk_rows(),
+                                  queue_chunks,
                                   o->fsync_interval_ms, preview, output, err, sizeof err);
     if (!rows_out) {
         tf_error("%s", err);

@@ -587,8 +587,6 @@ static void update_watermark(tf_supervisor *s)
     if (workers > AUTO_WM_MAX_WORKERS)
         workers = AUTO_WM_MAX_WORKERS;
     int wm = s->tasks.cols + AUTO_WM_PER_WORKER * workers;
-    if (wm < 2 * s->tasks.cols)
-        wm = 2 * s->tasks.cols;
     if (wm > s->ring_size)
         wm = s->ring_size;
     s->watermark = wm;
@@ -621,7 +619,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         return NULL;
     }
     s->ring_size = s->auto_watermark
-                       ? 2 * s->tasks.cols + AUTO_WM_PER_WORKER * AUTO_WM_MAX_WORKERS
+                       ? s->tasks.cols + AUTO_WM_PER_WORKER * AUTO_WM_MAX_WORKERS
                        : cfg->watermark;
     s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);

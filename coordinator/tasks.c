@@ -37,11 +37,16 @@ int tf_task_spec_parse(const char *text, tf_task_spec *spec, char *err, size_t e
     return -1;
 }
 
+/* A band (one row of tasks) waits in the tuple space until its last task is done, so its size
+ * is the coordinator's memory: keep it under this many pixels whatever the image width. */
+#define BAND_PIXEL_BUDGET (128 * 1024)
+
 tf_task_spec tf_task_spec_default(int width, int height, int workers)
 {
     /* Aim for at least 24 tasks per worker, sides between 32 and 128 pixels.  A 64x64 stamp
      * computes (65 * 65) corner samples for 4096 pixels: 3% extra corner rays, well under 1% of
-     * all rays once adaptive subdivision adds its samples. */
+     * all rays once adaptive subdivision adds its samples.  On very wide images the stamps get
+     * flatter (down to 8 rows) so that one band stays within BAND_PIXEL_BUDGET. */
     if (workers < 1)
         workers = 1;
     long pixels = (long)width * height;
@@ -49,6 +54,9 @@ tf_task_spec tf_task_spec_default(int width, int height, int workers)
     while (side > 32 && pixels / ((long)side * side) < 24L * workers)
         side /= 2;
     tf_task_spec s = {TF_TASKS_STAMPS, side, side};
+    long band_rows = BAND_PIXEL_BUDGET / (width > 0 ? width : 1);
+    if (band_rows < s.h)
+        s.h = band_rows < 8 ? 8 : (int)band_rows;
     if (s.w > width)
         s.w = width;
     if (s.h > height)

@@ -29,7 +29,7 @@ SCENE=$ROOT/scenes/default.scene
 PORT=7878
 COORD_IP=10.77.0.1
 SMALL=240x135
-LARGE=1440x810         # ~7 s of one core here: after the cut, worker 1 alone still needs well
+LARGE=2048x1152        # ~7 s of one core here: after the cut, worker 1 alone still needs well
                        # over the 2 s lease, so the lease expires (a re-deal) before the
                        # straggler policy could cover the lost task with a duplicate
 LIMIT=45               # seconds any one process may run before `timeout` stops it

@@ -440,7 +440,7 @@ int tf_coordinator_run(const tf_render_opts *o)
         tf_error("%s", err);
         goto out;
     }
-    int queue_chunks = 32 / tf_exr_chunk_rows() > 2 ? 32 / tf_exr_chunk_rows() : 2; /* ~32 rows */
+    int queue_chunks = 8 / tf_exr_chunk_rows() > 2 ? 8 / tf_exr_chunk_rows() : 2; /* ~8 rows */
     rows_out = tf_rowwriter_start(writer, scene->width, scene->height, tf_exr_chunk_rows(),
                                   queue_chunks,
                                   o->fsync_interval_ms, preview, output, err, sizeof err);

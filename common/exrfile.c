@@ -613,27 +613,9 @@ static int rows_in_chunks(const exr_reader *r, int chunks)
 }
 
 /* Was the file finished (offset table written by exr_finish)?  Asked of a second context
- * with chunk reconstruction disabled, so only a real offset table can answer yes. */
-static int offset_table_valid(const char *path, int nchunks)
-{
-    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
-    init.error_handler_fn = remember_exr_error;
-    init.flags = EXR_CONTEXT_FLAG_SILENT_HEADER_PARSE |
-                 EXR_CONTEXT_FLAG_DISABLE_CHUNK_RECONSTRUCTION;
-    exr_context_t ctx = NULL;
-    exr_chunk_info_t cinfo;
-    int ok = exr_start_read(&ctx, path, &init) == EXR_ERR_SUCCESS &&
-             exr_read_scanline_chunk_info(ctx, 0, (nchunks - 1) * TF_EXR_CHUNK_ROWS, &cinfo) ==
-                 EXR_ERR_SUCCESS;
-    if (ctx)
-        exr_finish(&ctx);
-    return ok;
-}
-
-/* A finished file whose last chunk lies wholly inside it: every chunk was written before the
- * offset table (exr_finish), so it is complete without decoding each chunk -- which for a
- * large image would cost seconds on every new render over an old output. */
-static int finished_and_whole(const char *path, int nchunks)
+ * with chunk reconstruction disabled, so only a real offset table can answer yes.  With
+ * whole_file set, the last chunk must also end exactly at the end of the file. */
+static int offset_table_valid_ext(const char *path, int nchunks, int whole_file)
 {
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     init.error_handler_fn = remember_exr_error;
@@ -645,10 +627,23 @@ static int finished_and_whole(const char *path, int nchunks)
     int ok = stat(path, &st) == 0 && exr_start_read(&ctx, path, &init) == EXR_ERR_SUCCESS &&
              exr_read_scanline_chunk_info(ctx, 0, (nchunks - 1) * TF_EXR_CHUNK_ROWS, &cinfo) ==
                  EXR_ERR_SUCCESS &&
-             cinfo.data_offset + cinfo.packed_size == (uint64_t)st.st_size;
+             (!whole_file || cinfo.data_offset + cinfo.packed_size == (uint64_t)st.st_size);
     if (ctx)
         exr_finish(&ctx);
     return ok;
+}
+
+static int offset_table_valid(const char *path, int nchunks)
+{
+    return offset_table_valid_ext(path, nchunks, 0);
+}
+
+/* A finished file whose last chunk lies wholly inside it: every chunk was written before the
+ * offset table (exr_finish), so it is complete without decoding each chunk -- which for a
+ * large image would cost seconds on every new render over an old output. */
+static int finished_and_whole(const char *path, int nchunks)
+{
+    return offset_table_valid_ext(path, nchunks, 1);
 }
 
 int tf_exr_probe(const char *path, tf_exr_meta *meta, int *rows_done, int *complete, char *err,

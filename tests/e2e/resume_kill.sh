@@ -2,9 +2,10 @@
 # resume_kill.sh: DESIGN.md sections 2-3, issue 5: the coordinator can be SIGKILLed at any
 # instant, with workers holding tasks, and `render --resume` continues the same render: rows on
 # disk are kept (rows_resumed), never rendered again, and the final image is byte-identical to
-# an uninterrupted render.  Kills land before the first row is written, then at ~30%, ~60% and
-# ~90% of the output file's final size (plus a random few milliseconds, so they fall anywhere,
-# mid-write included).  Forked workers die with their coordinator (PR_SET_PDEATHSIG).
+# an uninterrupted render.  Kills land while the new file's header is written, the instant the
+# file appears, as a resumed run starts, at ~30% of the output file's final size, inside the
+# resume's copy of the verified chunks, and at ~60% and ~90% (plus a random few milliseconds,
+# so they fall anywhere, mid-write included).  Forked workers die with their coordinator (PR_SET_PDEATHSIG).
 # Prints, per interruption, rows on disk after the kill and rows the next run resumed.
 . "$(dirname "$0")/lib.sh"
 e2e_init
@@ -25,7 +26,7 @@ rand_ms() { echo $(( $(od -An -N2 -tu2 /dev/urandom | tr -d ' ') % $1 )); }
 prev_rows=0
 run=0
 lost=""   # per interruption: rows on disk after the kill that the next run did not keep
-for pct in early 0 30 copy 60 90; do
+for pct in create early 0 30 copy 60 90; do
     run=$((run + 1))
     had_file=no; [ -e "$OUT" ] && had_file=yes
     : >"$T/run$run.err"
@@ -38,7 +39,15 @@ for pct in early 0 30 copy 60 90; do
         "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 2>"$T/netw.err" &
         netw=$!; e2e_track $netw
     fi
-    if [ $pct = early ]; then
+    if [ $pct = create ]; then
+        # while the header is written to OUT.new.tmp, before it is renamed into place (that
+        # lasts microseconds: the kill may land just after, which is fine too)
+        i=0
+        while [ ! -e "$OUT.new.tmp" ] && [ ! -e "$OUT" ]; do
+            i=$((i + 1)); [ $i -lt 2000000 ] || fail "run $run: no $OUT.new.tmp appeared"
+        done
+        jitter=0
+    elif [ $pct = early ]; then
         # the instant the output file appears (its header being written, no row yet): a busy
         # wait on the shell's built-in test, no sleep, so the kill follows within microseconds
         i=0
@@ -85,8 +94,9 @@ for pct in early 0 30 copy 60 90; do
         [ $rc -ne 0 ] || fail "the networked worker exited 0 after its coordinator was killed"
         say "networked worker left with status $rc: $(tail -1 "$T/netw.err")"
     fi
-    if [ $pct = copy ]; then
-        :   # killed inside the copy, before it could say what it resumes
+    said=$(grep -c 'resuming .* rows already on disk\|nothing to resume' "$T/run$run.err")
+    if [ $said -eq 0 ] && { [ $pct = copy ] || [ $pct = create ] || [ $pct = early ]; }; then
+        :   # killed in its first instants, before it could say what it resumes
     elif [ $had_file = yes ]; then
         [ -n "$lost" ] && lost="$lost, "
         got=$(sed -n 's/.*resuming .*: \([0-9]*\) of [0-9]* rows already on disk.*/\1/p' "$T/run$run.err")
@@ -128,11 +138,11 @@ say "final run: rows_resumed $resumed, rows_rendered $rendered ($(grep -o 'resum
 lost="$lost, $((prev_rows - resumed))"
 say "rows on disk lost per interruption (on disk after the kill - resumed by the next run): $lost"
 [ $((resumed + rendered)) -eq $H ] || fail "rows_resumed + rows_rendered = $((resumed + rendered)), not $H"
-same "$T/ref.exr" "$OUT" "after 6 kills and resumes"
+same "$T/ref.exr" "$OUT" "after 7 kills and resumes"
 left=$(ls "$T/out" | grep -v '^img\.exr$\|^img\.png$' || true)
 [ -z "$left" ] || fail "stray files beside the output: $left"
 if command -v exrheader >/dev/null 2>&1; then
     exrheader "$OUT" >/dev/null 2>&1 || fail "exrheader cannot read the resumed file"
     say "exrheader reads the resumed file"
 fi
-echo "resume_kill: 6 interruptions, 0 rows on disk lost, image identical"
+echo "resume_kill: 7 interruptions, 0 rows on disk lost, image identical"

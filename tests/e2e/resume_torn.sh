@@ -24,18 +24,20 @@ fi
 
 # Walk the chunks (header attributes, offset table, then [y, size, data] per chunk) and cut
 # the file in the middle of its last whole chunk; whatever the kill left after it goes too.
-python3 - "$T/p.exr" "$CHUNK" >"$T/cut.txt" <<'PY' || fail "cannot tear the file"
+# Rows per chunk follow from the compression attribute (1 for none/RLE/ZIPS, 16 for ZIP, ...).
+python3 - "$T/p.exr" 270 >"$T/cut.txt" <<'PY' || fail "cannot tear the file"
 import os, struct, sys
-p = sys.argv[1]
-chunk = int(sys.argv[2])
+p, height = sys.argv[1], int(sys.argv[2])
 data = open(p, "rb").read()
-pos = 8                                   # magic, version
+pos, attrs = 8, {}                        # after magic and version
 while data[pos] != 0:                     # attributes: name\0 type\0 size value
-    pos = data.index(b"\0", pos) + 1
+    end = data.index(b"\0", pos); name = data[pos:end]; pos = end + 1
     pos = data.index(b"\0", pos) + 1
     (n,) = struct.unpack_from("<i", data, pos)
+    attrs[name] = data[pos + 4:pos + 4 + n]
     pos += 4 + n
-pos += 1 + 8 * ((270 + chunk - 1) // chunk)  # end of header, offset table
+lines = {0: 1, 1: 1, 2: 1, 3: 16, 4: 32, 5: 16, 6: 16, 7: 32, 8: 32, 9: 256}[attrs[b"compression"][0]]
+pos += 1 + 8 * ((height + lines - 1) // lines)   # end of header, offset table
 chunks = []
 while pos + 8 <= len(data):
     y, n = struct.unpack_from("<ii", data, pos)
@@ -46,10 +48,10 @@ while pos + 8 <= len(data):
 start, n, y = chunks[-1]
 with open(p, "r+b") as f:
     f.truncate(start + 8 + n // 2)
-print(len(chunks) * chunk, y)
+print(min(len(chunks) * lines, height), y, lines)
 PY
-read whole_chunks last_y <"$T/cut.txt"
-say "the file had $whole_chunks rows in whole chunks; cut in the middle of the chunk at y=$last_y"
+read whole_chunks last_y lines <"$T/cut.txt"
+say "the file had $whole_chunks rows in whole chunks of $lines rows; cut in the middle of the chunk at y=$last_y"
 [ "$whole_chunks" -eq "$whole" ] || fail "the probe counted $whole rows, the chunk walk $whole_chunks"
 torn=$(rows_on_disk "$T/p.exr")
 say "after the cut: $torn rows in whole chunks"

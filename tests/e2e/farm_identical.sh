@@ -23,7 +23,7 @@ for tasks in rows:1 rows:7 stamps:16x16 stamps:37x23; do
 done
 
 say "forked plus networked: -j 1 and a terrafarm worker --connect -j 1"
-"$TF_BIN" render "$SCENE" -j 1 --size $SIZE --tasks rows:4 --listen 127.0.0.1:0 \
+"$TF_BIN" render "$SCENE" -j 1 --size $SIZE --tasks rows:1 --listen 127.0.0.1:0 \
     -o "$T/mixed.exr" --stats "$T/mixed.json" 2>"$T/coord.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/coord.err")"

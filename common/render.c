@@ -100,12 +100,30 @@ double tf_contrast4(double a, double b, double c, double d)
     return (mx - mn) / (mx + mn + TF_CONTRAST_FLOOR);
 }
 
-static int quad_needs_split(double threshold, const tf_sample *s00, const tf_sample *s10,
-                            const tf_sample *s01, const tf_sample *s11)
+/* A sample channel as the eye sees it: the square root of the linear value (close to the sRGB
+ * curve the preview and the benchmark's PSNR use), clamped to the displayable [0, 1] since
+ * differences above white or below black never show.  sqrt is correctly rounded in IEEE and in
+ * OpenCL C, so the kernel makes the same decisions bit for bit. */
+static double display_level(double v)
 {
-    return tf_contrast4(s00->r, s10->r, s01->r, s11->r) > threshold ||
-           tf_contrast4(s00->g, s10->g, s01->g, s11->g) > threshold ||
-           tf_contrast4(s00->b, s10->b, s01->b, s11->b) > threshold;
+    return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
+}
+
+/* The largest per-channel range of display levels over n samples (n <= 5). */
+static double display_range(const tf_sample *const s[], int n)
+{
+    double widest = 0;
+    for (int ch = 0; ch < 3; ch++) {
+        double lo = 1, hi = 0;
+        for (int k = 0; k < n; k++) {
+            double v = display_level(ch == 0 ? s[k]->r : ch == 1 ? s[k]->g : s[k]->b);
+            lo = fmin(lo, v);
+            hi = fmax(hi, v);
+        }
+        if (hi - lo > widest)
+            widest = hi - lo;
+    }
+    return widest;
 }
 
 /* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice. */
@@ -155,29 +173,42 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
     double sum_r = 0, sum_g = 0, sum_b = 0, sum_a = 0;
     while (sp > 0) {
         quad q = stack[--sp];
-        const tf_sample *s00 = cached_sample(r, pc, px, py, q.i, q.j, &spp, tally);
-        const tf_sample *s10 = cached_sample(r, pc, px, py, q.i + q.size, q.j, &spp, tally);
-        const tf_sample *s01 = cached_sample(r, pc, px, py, q.i, q.j + q.size, &spp, tally);
-        const tf_sample *s11 =
-            cached_sample(r, pc, px, py, q.i + q.size, q.j + q.size, &spp, tally);
-        /* A quad's error weighs in the pixel by its share of the pixel's area, so the
-         * threshold grows with depth by the inverse of that share (4x per level): busy
-         * texture stops early, a strong edge still goes deep. */
-        double area_share = ((double)q.size * q.size) / ((double)N * N);
-        if (q.size > 1 && quad_needs_split(r->threshold / area_share, s00, s10, s01, s11)) {
-            int h = q.size / 2;
-            stack[sp++] = (quad){q.i + h, q.j + h, h};
-            stack[sp++] = (quad){q.i, q.j + h, h};
-            stack[sp++] = (quad){q.i + h, q.j, h};
-            stack[sp++] = (quad){q.i, q.j, h};
-            continue;
+        const tf_sample *s[5];
+        s[0] = cached_sample(r, pc, px, py, q.i, q.j, &spp, tally);
+        s[1] = cached_sample(r, pc, px, py, q.i + q.size, q.j, &spp, tally);
+        s[2] = cached_sample(r, pc, px, py, q.i, q.j + q.size, &spp, tally);
+        s[3] = cached_sample(r, pc, px, py, q.i + q.size, q.j + q.size, &spp, tally);
+        if (q.size > 1) {
+            /* The threshold grows 8x per level (N/size cubed, exact in double): a quad's error
+             * weighs in the pixel by its share of the area (4x per level) and its 5-sample
+             * estimate is already better than the corners' (another 2x). */
+            double ratio = (double)(N / q.size);
+            double split_threshold = r->threshold * ratio * ratio * ratio;
+            if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
+                int h = q.size / 2;
+                s[4] = cached_sample(r, pc, px, py, q.i + h, q.j + h, &spp, tally);
+                if (display_range(s, 5) > split_threshold) {
+                    stack[sp++] = (quad){q.i + h, q.j + h, h};
+                    stack[sp++] = (quad){q.i, q.j + h, h};
+                    stack[sp++] = (quad){q.i + h, q.j, h};
+                    stack[sp++] = (quad){q.i, q.j, h};
+                    continue;
+                }
+                /* probed leaf: area (size^2 lattice cells) times corners/8 + centre/2 */
+                double w = 0.125 * (double)q.size * (double)q.size;
+                sum_r += w * ((double)s[0]->r + s[1]->r + s[2]->r + s[3]->r + 4.0 * s[4]->r);
+                sum_g += w * ((double)s[0]->g + s[1]->g + s[2]->g + s[3]->g + 4.0 * s[4]->g);
+                sum_b += w * ((double)s[0]->b + s[1]->b + s[2]->b + s[3]->b + 4.0 * s[4]->b);
+                sum_a += w * ((double)s[0]->a + s[1]->a + s[2]->a + s[3]->a + 4.0 * s[4]->a);
+                continue;
+            }
         }
-        /* leaf: area (size^2 lattice cells) times the mean of its corners */
+        /* flat (or smallest) leaf: area (size^2 lattice cells) times the mean of its corners */
         double w = 0.25 * (double)q.size * (double)q.size;
-        sum_r += w * ((double)s00->r + s10->r + s01->r + s11->r);
-        sum_g += w * ((double)s00->g + s10->g + s01->g + s11->g);
-        sum_b += w * ((double)s00->b + s10->b + s01->b + s11->b);
-        sum_a += w * ((double)s00->a + s10->a + s01->a + s11->a);
+        sum_r += w * ((double)s[0]->r + s[1]->r + s[2]->r + s[3]->r);
+        sum_g += w * ((double)s[0]->g + s[1]->g + s[2]->g + s[3]->g);
+        sum_b += w * ((double)s[0]->b + s[1]->b + s[2]->b + s[3]->b);
+        sum_a += w * ((double)s[0]->a + s[1]->a + s[2]->a + s[3]->a);
     }
 
     float zmin = TF_SKY_DIST;

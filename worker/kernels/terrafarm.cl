@@ -19,7 +19,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #define TF_AA_MAX_DEPTH 6
-#define TF_CONTRAST_FLOOR 0.01
+#define TF_AA_PROBE_FRACTION 0.25 /* render_internal.h */
 #define TF_SKY_DIST 1e30f
 #define FAR_AWAY 1e30
 #define DEG2RAD (3.14159265358979323846 / 180.0)
@@ -869,15 +869,27 @@ __global float *cached_sample(const world *w, ulong jitter_key, __global float *
     return slot;
 }
 
-int channel_split(double threshold, __global const float *s00, __global const float *s10,
-                  __global const float *s01, __global const float *s11, int ch)
+/* display_level / display_range of render.c: sqrt of the linear value clamped to [0, 1], and the
+ * largest per-channel range of those levels over n samples (n <= 5). */
+double display_level(double v)
 {
-    double a = s00[ch], b = s10[ch], c = s01[ch], d = s11[ch];
-    double mxv = fmax(fmax(a, b), fmax(c, d));
-    double mnv = fmin(fmin(a, b), fmin(c, d));
-    if (mnv < 0)
-        mnv = 0;
-    return (mxv - mnv) / (mxv + mnv + TF_CONTRAST_FLOOR) > threshold;
+    return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
+}
+
+double display_range(__global const float *const s[], int n)
+{
+    double widest = 0;
+    for (int ch = 0; ch < 3; ch++) {
+        double lo = 1, hi = 0;
+        for (int k = 0; k < n; k++) {
+            double v = display_level(s[k][ch]);
+            lo = fmin(lo, v);
+            hi = fmax(hi, v);
+        }
+        if (hi - lo > widest)
+            widest = hi - lo;
+    }
+    return widest;
 }
 
 void copy_corner(__global float *dst, __global const float *src)
@@ -927,31 +939,39 @@ __kernel void tf_pixels(__global const double *P, __global const int *I, ulong j
     double sum_r = 0, sum_g = 0, sum_b = 0, sum_a = 0;
     while (sp > 0) {
         quad q = stack[--sp];
-        __global const float *s00 =
-            cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i, q.j, &spp, &rays);
-        __global const float *s10 =
-            cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i + q.size, q.j, &spp, &rays);
-        __global const float *s01 =
-            cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i, q.j + q.size, &spp, &rays);
-        __global const float *s11 = cached_sample(&w, jitter_key, pc, ph, side, px, py,
-                                                  q.i + q.size, q.j + q.size, &spp, &rays);
-        double area_share = ((double)q.size * q.size) / ((double)N * N);
-        double th = threshold / area_share;
-        if (q.size > 1 && (channel_split(th, s00, s10, s01, s11, 0) ||
-                           channel_split(th, s00, s10, s01, s11, 1) ||
-                           channel_split(th, s00, s10, s01, s11, 2))) {
-            int hs = q.size / 2;
-            stack[sp].i = q.i + hs, stack[sp].j = q.j + hs, stack[sp].size = hs, sp++;
-            stack[sp].i = q.i, stack[sp].j = q.j + hs, stack[sp].size = hs, sp++;
-            stack[sp].i = q.i + hs, stack[sp].j = q.j, stack[sp].size = hs, sp++;
-            stack[sp].i = q.i, stack[sp].j = q.j, stack[sp].size = hs, sp++;
-            continue;
+        __global const float *s[5];
+        s[0] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i, q.j, &spp, &rays);
+        s[1] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i + q.size, q.j, &spp, &rays);
+        s[2] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i, q.j + q.size, &spp, &rays);
+        s[3] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i + q.size, q.j + q.size,
+                             &spp, &rays);
+        if (q.size > 1) {
+            double ratio = (double)(N / q.size);
+            double split_threshold = threshold * ratio * ratio * ratio;
+            if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
+                int hs = q.size / 2;
+                s[4] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i + hs, q.j + hs,
+                                     &spp, &rays);
+                if (display_range(s, 5) > split_threshold) {
+                    stack[sp].i = q.i + hs, stack[sp].j = q.j + hs, stack[sp].size = hs, sp++;
+                    stack[sp].i = q.i, stack[sp].j = q.j + hs, stack[sp].size = hs, sp++;
+                    stack[sp].i = q.i + hs, stack[sp].j = q.j, stack[sp].size = hs, sp++;
+                    stack[sp].i = q.i, stack[sp].j = q.j, stack[sp].size = hs, sp++;
+                    continue;
+                }
+                double wt = 0.125 * (double)q.size * (double)q.size;
+                sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0] + 4.0 * s[4][0]);
+                sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1] + 4.0 * s[4][1]);
+                sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2] + 4.0 * s[4][2]);
+                sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3] + 4.0 * s[4][3]);
+                continue;
+            }
         }
         double wt = 0.25 * (double)q.size * (double)q.size;
-        sum_r += wt * ((double)s00[0] + s10[0] + s01[0] + s11[0]);
-        sum_g += wt * ((double)s00[1] + s10[1] + s01[1] + s11[1]);
-        sum_b += wt * ((double)s00[2] + s10[2] + s01[2] + s11[2]);
-        sum_a += wt * ((double)s00[3] + s10[3] + s01[3] + s11[3]);
+        sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0]);
+        sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1]);
+        sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2]);
+        sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3]);
     }
 
     float zmin = TF_SKY_DIST;

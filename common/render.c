@@ -6,9 +6,14 @@
  * computed here rather than borrowed from a neighbour, so tasks never wait on each other.
  *
  * Each pixel then refines itself (render_pixel): starting from its 4 corners it pops quads off a
- * small explicit stack; a quad whose corners differ in contrast (Mitchell: per channel,
- * (max-min)/(max+min)) by more than the threshold divided by the quad's share of the pixel's
- * area is split into four, down to quads of one lattice step.  Samples inside the pixel
+ * small explicit stack.  A quad's contrast is the widest per-channel range of its samples'
+ * display levels (sqrt of the linear value, clamped to [0, 1]: close to the sRGB curve a viewer
+ * sees).  A quad of size S lattice steps has split threshold T * (N/S)^3 (T =
+ * antialias.threshold); if its corners' range passes a quarter of that, its centre is traced
+ * (the probe), and if the range of all five passes the threshold it splits into four, down to
+ * quads of one lattice step.  A probed leaf is worth corners/8 + centre/2 (the quincunx
+ * estimate, much closer to the pixel's area average than the corners' mean); a flat leaf is
+ * worth its corners' mean.  Samples inside the pixel
  * are cached on the pixel's (N+1)^2 lattice so shared quad corners are traced once.  Because
  * every sample is a function of its lattice point only (render_internal.h) and the pixel's
  * refinement looks at nothing but its own samples, a pixel's bits do not depend on the

@@ -45,7 +45,9 @@ void tf_render_point(const tf_renderer *r, double x, double y, tf_sample *out,
 void tf_render_pixel_uniform(const tf_renderer *r, int px, int py, int n, tf_pixel *out,
                              tf_render_counts *counts);
 
-/* Mitchell-style contrast of four values: (max - min) / (max + min + TF_CONTRAST_FLOOR). */
+/* Mitchell-style contrast of four values: (max - min) / (max + min + TF_CONTRAST_FLOOR).  No
+ * longer what drives subdivision (render.c's display range does: it tracks the displayed error
+ * better); kept as the documented relative measure that tests/unit/test_render.c checks. */
 double tf_contrast4(double a, double b, double c, double d);
 
 #endif

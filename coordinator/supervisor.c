@@ -394,6 +394,13 @@ static void drop_result(tf_supervisor *s, int64_t id, int64_t worker)
     tf_tuple_clear(&tmpl);
 }
 
+/* A connection's peer, for messages only (the lookup scans the connections). */
+static const char *peer_name(const tf_supervisor *s, uint64_t conn)
+{
+    const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
+    return peer ? peer : "?";
+}
+
 /* Take this very tuple (all fields actual) out of the space. */
 static void remove_exact(tf_supervisor *s, const tf_tuple *tuple)
 {
@@ -408,9 +415,8 @@ static void remove_exact(tf_supervisor *s, const tf_tuple *tuple)
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
     tf_result_msg m;
-    const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
     if (tf_result_unpack(tuple, &m)) {
-        tf_warn("malformed result tuple from %s dropped", peer ? peer : "?");
+        tf_warn("malformed result tuple from %s dropped", peer_name(s, conn));
         remove_exact(s, tuple);
         return;
     }
@@ -423,7 +429,7 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
     if (m.pixels_len != (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES) {
         tf_warn("result of task %" PRId64 " from %s has %zu pixel bytes, expected %zu; dropped",
-                m.id, peer ? peer : "?", m.pixels_len,
+                m.id, peer_name(s, conn), m.pixels_len,
                 (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES);
         drop_result(s, m.id, m.worker);
         if (!note_failure(s, t, m.worker))

@@ -58,6 +58,8 @@ typedef struct conn {
     uint64_t waiter_id;    /* ... and its waiter id (0 once served) */
     uint32_t ep_events;    /* events registered with the server's epoll set */
     int ep_added;          /* registered at all (EPOLL_CTL_ADD done) */
+    int dirty;             /* on the server's dirty list (see conn_touch) */
+    struct conn *dirty_next;
     struct ts_server *srv;
     struct conn *next, *prev;
 } conn;
@@ -73,6 +75,8 @@ struct ts_server {
     int port;
     char unix_path[sizeof(((struct sockaddr_un *)0)->sun_path)];
     conn *conns; /* live connections, newest first */
+    conn *dirty; /* connections whose output or epoll interest may have changed */
+    int64_t last_timeout_check_ms;
     conn *graveyard;
     size_t nconns;
     uint64_t next_id;
@@ -216,6 +220,8 @@ int ts_server_port(const ts_server *srv) { return srv->port; }
 ts_space *ts_server_space(const ts_server *srv) { return srv->space; }
 
 /* ---- connections ---- */
+static void conn_touch(conn *c);
+
 static conn *conn_new(ts_server *srv, int fd, const char *peer, int trusted)
 {
     conn *c = calloc(1, sizeof *c);
@@ -235,11 +241,31 @@ static conn *conn_new(ts_server *srv, int fd, const char *peer, int trusted)
         srv->conns->prev = c;
     srv->conns = c;
     srv->nconns++;
+    conn_touch(c); /* to be registered with epoll */
     return c;
+}
+
+/* Put c on the dirty list: its queued output or its epoll interest may have changed.  Only
+ * dirty connections are visited by flush_dirty, so an event-loop iteration costs time in
+ * proportion to the connections that did something, not to all of them (1024 workers). */
+static void conn_touch(conn *c)
+{
+    if (c->dirty || c->dead)
+        return;
+    c->dirty = 1;
+    c->dirty_next = c->srv->dirty;
+    c->srv->dirty = c;
 }
 
 static void conn_destroy(conn *c)
 {
+    if (c->dirty) { /* unlink: a dead connection may still sit on the list */
+        conn **pp = &c->srv->dirty;
+        while (*pp && *pp != c)
+            pp = &(*pp)->dirty_next;
+        if (*pp)
+            *pp = c->dirty_next;
+    }
     tf_buf_free(&c->in);
     tf_buf_free(&c->out);
     free(c);
@@ -317,6 +343,7 @@ static int conn_check_out(conn *c, int append_rc)
         conn_drop(c, "too many unread replies (client not reading)");
         return -1;
     }
+    conn_touch(c);
     return 0;
 }
 
@@ -418,6 +445,7 @@ static void on_waiter_served(void *ctx, uint64_t waiter_id, tf_tuple *t)
     c->waiter_id = 0;
     if (c->dead)
         return;
+    conn_touch(c); /* readable again, and a reply is coming */
     ts_server *srv = c->srv;
     if (c->pending_take && srv->hooks.on_take)
         srv->hooks.on_take(srv->hooks.ctx, c->id, t);
@@ -577,6 +605,7 @@ static void conn_process_input(conn *c)
 /* Read what is available (bounded), then serve it. */
 static void conn_readable(conn *c)
 {
+    conn_touch(c); /* input, replies and interest may all change */
     for (;;) {
         if (c->waiting && c->in.len >= TS_MAX_PIPELINE)
             break;
@@ -613,18 +642,50 @@ static void conn_readable(conn *c)
     }
 }
 
-static void flush_all(ts_server *srv)
+/* Keep c's epoll interest in line with what it wants now: readable unless its pipeline is full
+ * behind a blocked request, writable while replies are queued.  A syscall only on a change. */
+static void sync_conn_interest(conn *c)
 {
-    for (conn *c = srv->conns, *next; c; c = next) {
-        next = c->next;
-        if (c->out.len > 0 && conn_flush(c) != 0)
+    uint32_t want = 0;
+    if (!(c->waiting && c->in.len >= TS_MAX_PIPELINE))
+        want |= EPOLLIN;
+    if (c->out.len > 0)
+        want |= EPOLLOUT;
+    if (c->ep_added && want == c->ep_events)
+        return;
+    struct epoll_event ev = {.events = want, .data.ptr = c};
+    if (epoll_ctl(c->srv->epfd, c->ep_added ? EPOLL_CTL_MOD : EPOLL_CTL_ADD, c->fd, &ev) == 0) {
+        c->ep_added = 1;
+        c->ep_events = want;
+    } else {
+        conn_drop(c, strerror(errno));
+    }
+}
+
+/* Send what the dirty connections have queued and bring their interest up to date.  Dropping
+ * a connection may run hooks that touch others: they join the list and are served here too. */
+static void flush_dirty(ts_server *srv)
+{
+    while (srv->dirty) {
+        conn *c = srv->dirty;
+        srv->dirty = c->dirty_next;
+        c->dirty = 0;
+        if (c->dead)
+            continue;
+        if (c->out.len > 0 && conn_flush(c) != 0) {
             conn_drop(c, strerror(errno));
+            continue;
+        }
+        sync_conn_interest(c);
     }
 }
 
 static void enforce_timeouts(ts_server *srv)
 {
     int64_t now = now_ms();
+    if (now - srv->last_timeout_check_ms < 100) /* timeouts are seconds: check 10 times a second */
+        return;
+    srv->last_timeout_check_ms = now;
     for (conn *c = srv->conns, *next; c; c = next) {
         next = c->next;
         if (c->state == NEED_AUTH && now - c->created_ms > srv->handshake_ms)
@@ -645,23 +706,7 @@ static size_t sync_interest(ts_server *srv)
         if (epoll_ctl(srv->epfd, EPOLL_CTL_ADD, srv->listen_fd, &ev) == 0)
             srv->listen_added = 1;
     }
-    for (conn *c = srv->conns, *next; c; c = next) {
-        next = c->next; /* conn_drop moves c to the graveyard list */
-        uint32_t want = 0;
-        if (!(c->waiting && c->in.len >= TS_MAX_PIPELINE))
-            want |= EPOLLIN;
-        if (c->out.len > 0)
-            want |= EPOLLOUT;
-        if (c->ep_added && want == c->ep_events)
-            continue;
-        struct epoll_event ev = {.events = want, .data.ptr = c};
-        if (epoll_ctl(srv->epfd, c->ep_added ? EPOLL_CTL_MOD : EPOLL_CTL_ADD, c->fd, &ev) == 0) {
-            c->ep_added = 1;
-            c->ep_events = want;
-        } else {
-            conn_drop(c, strerror(errno));
-        }
-    }
+    flush_dirty(srv); /* per-connection interest */
     size_t need = srv->nconns + 1;
     if (need > srv->evcap) {
         struct epoll_event *e = realloc(srv->evs, 2 * need * sizeof *e);
@@ -676,7 +721,7 @@ static size_t sync_interest(ts_server *srv)
 int ts_server_run_once(ts_server *srv, int timeout_ms)
 {
     srv->in_loop = 1;
-    flush_all(srv); /* replies produced by in-process outs since the last iteration */
+    flush_dirty(srv); /* replies produced by in-process outs since the last iteration */
     int needs_timer = srv->silence_ms > 0 || srv->has_key;
     if (needs_timer && (timeout_ms < 0 || timeout_ms > TS_POLL_CAP_MS))
         timeout_ms = TS_POLL_CAP_MS;
@@ -704,10 +749,14 @@ int ts_server_run_once(ts_server *srv, int timeout_ms)
             continue;
         if (re & (EPOLLIN | EPOLLHUP | EPOLLERR))
             conn_readable(c);
-        if (!c->dead && (re & EPOLLOUT) && conn_flush(c) != 0)
-            conn_drop(c, strerror(errno));
+        if (!c->dead && (re & EPOLLOUT)) {
+            if (conn_flush(c) != 0)
+                conn_drop(c, strerror(errno));
+            else
+                conn_touch(c); /* maybe no longer wants EPOLLOUT */
+        }
     }
-    flush_all(srv);
+    flush_dirty(srv);
     enforce_timeouts(srv);
     while (srv->graveyard) {
         conn *g = srv->graveyard;

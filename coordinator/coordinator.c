@@ -440,7 +440,11 @@ int tf_coordinator_run(const tf_render_opts *o)
         tf_error("%s", err);
         goto out;
     }
-    int queue_chunks = 8 / tf_exr_chunk_rows() > 2 ? 8 / tf_exr_chunk_rows() : 2; /* ~8 rows */
+    /* Room for two bands of rows: handing a finished band to the writer must not block the
+     * event loop (every worker waiting for a reply would wait for the compression).  Bands are
+     * capped in pixels (tasks.c), so this stays a few MB whatever the image size. */
+    int queue_rows = 2 * tasks.th + 8;
+    int queue_chunks = queue_rows / tf_exr_chunk_rows() > 2 ? queue_rows / tf_exr_chunk_rows() : 2;
     rows_out = tf_rowwriter_start(writer, scene->width, scene->height, tf_exr_chunk_rows(),
                                   queue_chunks,
                                   o->fsync_interval_ms, preview, output, err, sizeof err);

@@ -96,20 +96,11 @@ void tf_render_lattice_sample(const tf_renderer *r, int64_t X, int64_t Y, tf_sam
     tf_render_point(r, x, y, out, shadow_rays);
 }
 
-double tf_contrast4(double a, double b, double c, double d)
-{
-    double mx = fmax(fmax(a, b), fmax(c, d));
-    double mn = fmin(fmin(a, b), fmin(c, d));
-    if (mn < 0) /* colours are never negative; be safe for the denominator */
-        mn = 0;
-    return (mx - mn) / (mx + mn + TF_CONTRAST_FLOOR);
-}
-
 /* A sample channel as the eye sees it: the square root of the linear value (close to the sRGB
  * curve the preview and the benchmark's PSNR use), clamped to the displayable [0, 1] since
  * differences above white or below black never show.  sqrt is correctly rounded in IEEE and in
  * OpenCL C, so the kernel makes the same decisions bit for bit. */
-static double display_level(double v)
+double tf_display_level(double v)
 {
     return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
 }
@@ -121,7 +112,7 @@ static double display_range(const tf_sample *const s[], int n)
     for (int ch = 0; ch < 3; ch++) {
         double lo = 1, hi = 0;
         for (int k = 0; k < n; k++) {
-            double v = display_level(ch == 0 ? s[k]->r : ch == 1 ? s[k]->g : s[k]->b);
+            double v = tf_display_level(ch == 0 ? s[k]->r : ch == 1 ? s[k]->g : s[k]->b);
             lo = fmin(lo, v);
             hi = fmax(hi, v);
         }

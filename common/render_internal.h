@@ -16,7 +16,6 @@
 #include "shade.h"
 
 #define TF_AA_MAX_DEPTH 6        /* 64x64 quads, 4225 samples: the most a pixel can take */
-#define TF_CONTRAST_FLOOR 0.01   /* keeps contrast finite in black: (max-min)/(max+min+floor) */
 /* A quad whose corners' display range exceeds this fraction of its split threshold gets its
  * centre sample (the probe) before the split decision; below it the corners are trusted. */
 #define TF_AA_PROBE_FRACTION 0.25
@@ -45,9 +44,9 @@ void tf_render_point(const tf_renderer *r, double x, double y, tf_sample *out,
 void tf_render_pixel_uniform(const tf_renderer *r, int px, int py, int n, tf_pixel *out,
                              tf_render_counts *counts);
 
-/* Mitchell-style contrast of four values: (max - min) / (max + min + TF_CONTRAST_FLOOR).  No
- * longer what drives subdivision (render.c's display range does: it tracks the displayed error
- * better); kept as the documented relative measure that tests/unit/test_render.c checks. */
-double tf_contrast4(double a, double b, double c, double d);
+/* A sample channel as the eye sees it, for the subdivision decision: sqrt of the linear value
+ * (close to the sRGB curve), clamped to the displayable [0, 1].  A quad's contrast is the widest
+ * per-channel range of these over its samples. */
+double tf_display_level(double v);
 
 #endif

@@ -248,19 +248,24 @@ static void test_bad_settings_refused(void **state)
     assert_non_null(strstr(err, "fov"));
 }
 
-static void test_contrast_is_relative(void **state)
+static void test_contrast_is_perceptual(void **state)
 {
     (void)state;
-    assert_true(tf_contrast4(0.5, 0.5, 0.5, 0.5) == 0);
+    assert_true(tf_display_level(0) == 0 && tf_display_level(1) == 1);
+    assert_true(tf_display_level(-0.5) == 0);   /* nothing below black shows */
+    assert_true(tf_display_level(7.0) == 1);    /* nor anything above white */
+    assert_true(fabs(tf_display_level(0.25) - 0.5) < 1e-15);
+    for (double v = 0; v < 1; v += 0.01)
+        assert_true(tf_display_level(v + 0.01) > tf_display_level(v));
     /* the same absolute step is more visible in the dark */
-    assert_true(tf_contrast4(0.02, 0.04, 0.02, 0.02) > tf_contrast4(0.8, 0.82, 0.8, 0.8));
-    assert_true(fabs(tf_contrast4(1, 0, 0, 0) - 1 / (1 + TF_CONTRAST_FLOOR)) < 1e-15);
+    assert_true(tf_display_level(0.04) - tf_display_level(0.02) >
+                tf_display_level(0.82) - tf_display_level(0.80));
 }
 
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_contrast_is_relative),
+        cmocka_unit_test(test_contrast_is_perceptual),
         cmocka_unit_test(test_rows_identical_to_whole),
         cmocka_unit_test(test_columns_identical_to_whole),
         cmocka_unit_test(test_stamps_7x5_identical_to_whole),

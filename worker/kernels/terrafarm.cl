@@ -869,7 +869,7 @@ __global float *cached_sample(const world *w, ulong jitter_key, __global float *
     return slot;
 }
 
-/* display_level / display_range of render.c: sqrt of the linear value clamped to [0, 1], and the
+/* tf_display_level / display_range of render.c: sqrt of the linear value clamped to [0, 1], and the
  * largest per-channel range of those levels over n samples (n <= 5). */
 double display_level(double v)
 {

@@ -13,6 +13,7 @@
 #include <string.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "auth.h"
@@ -36,7 +37,8 @@ static const char usage[] =
     "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
     "                            (same as TERRAFARM_CL_DEVICE)\n"
     "  -j, --workers N           worker processes on this machine (default: online CPUs)\n"
-    "      --timeout MS          give up connecting after MS milliseconds (default 10000)\n"
+    "      --timeout MS          keep trying to reach the coordinator for MS milliseconds\n"
+    "                            (default 10000)\n"
     "      --simulate MODEL      synthetic workers: sleep each task's modelled cost from the cost\n"
     "                            map MODEL (terrafarm bench SCENE --cost-map MODEL) instead of\n"
     "                            rendering; -j N threads in this process; prints a report line\n"
@@ -44,11 +46,31 @@ static const char usage[] =
     "  -q, --quiet / -v, --verbose\n"
     "  -h, --help\n";
 
+/* Connect, retrying while the coordinator is not (yet) listening, for at most timeout_ms: a
+ * worker started before its coordinator (a boot script, a batch job) simply waits for it.
+ * Any other failure (refused secret, bad address) is final at once. */
+static ts_client *connect_patiently(const char *hostport, const uint8_t *key, int timeout_ms,
+                                    char *err, size_t errlen)
+{
+    struct timespec t0, now;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    for (;;) {
+        ts_client *c = ts_client_connect(hostport, key, timeout_ms, err, errlen);
+        if (c || !strstr(err, "Connection refused"))
+            return c;
+        clock_gettime(CLOCK_MONOTONIC, &now);
+        double waited_ms = (now.tv_sec - t0.tv_sec) * 1e3 + (now.tv_nsec - t0.tv_nsec) * 1e-6;
+        if (waited_ms + 250 > timeout_ms)
+            return NULL;
+        usleep(250 * 1000);
+    }
+}
+
 static int run_one(const char *connect, const uint8_t *key, int timeout_ms, const tf_scene *s,
                    const tf_heightfield *hf, const char *backend)
 {
     char err[1024];
-    ts_client *c = ts_client_connect(connect, key, timeout_ms, err, sizeof err);
+    ts_client *c = connect_patiently(connect, key, timeout_ms, err, sizeof err);
     if (!c) {
         tf_error("%s", err);
         return 1;
@@ -173,7 +195,7 @@ int cmd_worker(int argc, char **argv)
     const uint8_t *k = secret ? key : NULL;
 
     /* The scene, from the coordinator (tsnet model): the first connection only reads it. */
-    ts_client *c = ts_client_connect(connect, k, timeout_ms, err, sizeof err);
+    ts_client *c = connect_patiently(connect, k, timeout_ms, err, sizeof err);
     if (!c) {
         tf_error("%s", err);
         return TF_EXIT_FAIL;

@@ -227,8 +227,8 @@ static void test_defaults(void **state)
     assert_int_equal(s->terrain.envelope_n, 0);
     assert_int_equal(s->terrain.thermal_iterations, 0);
     assert_int_equal(s->mist.enabled, 0);
-    assert_int_equal(s->antialias.max_depth, 2);
-    assert_true(s->antialias.threshold == 0.05);
+    assert_int_equal(s->antialias.max_depth, 3);
+    assert_true(s->antialias.threshold == 0.02);
     assert_true(s->sun.elevation_deg == 25 && s->sun.azimuth_deg == 135);
     assert_string_equal(s->path, "t.scene");
     assert_int_equal(s->text_len, strlen(MINIMAL));
@@ -287,7 +287,7 @@ static const char *const SAME_SCENE[] = {
     MINIMAL "size_exp = 9\nextent = 1000.0\nH = 8e-1\nlacunarity = 2\n",
     "\xEF\xBB\xBF[image]\r\nwidth = 64\r\nheight = 32\r\n[camera]\r\nposition = 0 0 10\r\n"
     "look_at = 100 100 0\r\nup = 0 0 1\r\ntype = pinhole\r\n[terrain]\r\ngenerator = fbm\r\n"
-    "seed = 5\r\n[mist]\r\nenabled = no\r\n[antialias]\r\nmax_depth = 2\r\n",
+    "seed = 5\r\n[mist]\r\nenabled = no\r\n[antialias]\r\nmax_depth = 3\r\n",
 };
 
 static void test_canonical_invariance(void **state)
@@ -378,7 +378,7 @@ static void test_hash_changes_with_each_field(void **state)
         {"materials", "rock_slope", "1"}, {"materials", "bump", "1"},
         {"mist", "enabled", "yes"}, {"mist", "homogeneous", "1"}, {"mist", "density", "1"},
         {"mist", "falloff", "1"}, {"mist", "color", "0 0 0"}, {"mist", "extinction", "1 1 1"},
-        {"antialias", "threshold", "1"}, {"antialias", "max_depth", "3"},
+        {"antialias", "threshold", "1"}, {"antialias", "max_depth", "4"},
     };
     size_t count = sizeof changes / sizeof changes[0];
     char (*hashes)[65] = calloc(count + 1, 65);

@@ -24,7 +24,8 @@ static const char usage[] =
     "      --watermark N         at most N tasks dealt beyond the write front (default: one band\n"
     "                            of tasks plus three per worker)\n"
     "      --size WxH            override the scene's image size\n"
-    "      --backend c|opencl    backend of the local workers (default c)\n"
+    "      --backend c|opencl|auto  backend of the local workers (default c; auto: OpenCL if\n"
+    "                            a device works, else C with a warning)\n"
     "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
     "                            (sets TERRAFARM_CL_DEVICE for the workers)\n"
     "      --listen HOST:PORT    accept networked workers there (default 127.0.0.1:7878, loopback)\n"
@@ -119,8 +120,8 @@ int cmd_render(int argc, char **argv)
                 return TF_EXIT_USAGE;
             break;
         case O_BACKEND:
-            if (strcmp(optarg, "c") && strcmp(optarg, "opencl")) {
-                tf_error("--backend '%s': expected c or opencl", optarg);
+            if (strcmp(optarg, "c") && strcmp(optarg, "opencl") && strcmp(optarg, "auto")) {
+                tf_error("--backend '%s': expected c, opencl or auto", optarg);
                 return TF_EXIT_USAGE;
             }
             o.backend = optarg;

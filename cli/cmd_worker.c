@@ -33,7 +33,8 @@ static const char usage[] =
     "\n"
     "  -c, --connect HOST:PORT   the coordinator (terrafarm render ... --listen HOST:PORT)\n"
     "      --secret-file FILE    shared secret, if the coordinator requires one\n"
-    "      --backend c|opencl    rendering backend (default c)\n"
+    "      --backend c|opencl|auto  rendering backend (default c; auto: OpenCL if a device\n"
+    "                            works, else C with a warning)\n"
     "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
     "                            (same as TERRAFARM_CL_DEVICE)\n"
     "  -j, --workers N           worker processes on this machine (default: online CPUs)\n"
@@ -139,8 +140,8 @@ int cmd_worker(int argc, char **argv)
         case 'c': connect = optarg; break;
         case O_SECRET: secret = optarg; break;
         case O_BACKEND:
-            if (strcmp(optarg, "c") && strcmp(optarg, "opencl")) {
-                tf_error("--backend '%s': expected c or opencl", optarg);
+            if (strcmp(optarg, "c") && strcmp(optarg, "opencl") && strcmp(optarg, "auto")) {
+                tf_error("--backend '%s': expected c, opencl or auto", optarg);
                 return TF_EXIT_USAGE;
             }
             backend = optarg;

@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "backend_opencl.h"
+#include "log.h"
 
 enum backend_kind { BACKEND_C, BACKEND_OPENCL };
 
@@ -29,13 +30,20 @@ tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightf
         b->renderer = tf_renderer_new(s, hf, err, errlen);
         if (b->renderer)
             return b;
-    } else if (!strcmp(name, "opencl")) {
+    } else if (!strcmp(name, "opencl") || !strcmp(name, "auto")) {
         b->kind = BACKEND_OPENCL;
         b->cl = tf_cl_backend_new(s, hf, err, errlen);
         if (b->cl)
             return b;
+        if (!strcmp(name, "auto")) { /* asked for: fall back to C, and say so */
+            tf_warn("OpenCL unavailable (%s); this worker uses the C backend", err);
+            b->kind = BACKEND_C;
+            b->renderer = tf_renderer_new(s, hf, err, errlen);
+            if (b->renderer)
+                return b;
+        }
     } else {
-        snprintf(err, errlen, "unknown backend '%s' (expected c or opencl)", name);
+        snprintf(err, errlen, "unknown backend '%s' (expected c, opencl or auto)", name);
     }
     free(b);
     return NULL;

@@ -11,7 +11,8 @@
 
 typedef struct tf_backend tf_backend;
 
-/* name: "c" or "opencl".  NULL with a one-line message on failure. */
+/* name: "c", "opencl", or "auto" (OpenCL if a usable device exists, else C with a warning).
+ * NULL with a one-line message on failure. */
 tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightfield *hf,
                            char *err, size_t errlen);
 /* Render rect into out (rect.w * rect.h pixels); adds to counts.  0, or -1 with a message. */

@@ -79,4 +79,15 @@ port=$(e2e_port "$T/coord2.err") || fail "coordinator printed no port: $(cat "$T
 grep -q 'no-such-gpu-xyzzy matches no OpenCL device' "$T/bad.err" ||
     fail "unexpected error: $(cat "$T/bad.err")"
 say "worker error: $(grep xyzzy "$T/bad.err" | head -1)"
+
+say "--backend auto without a usable device: a warning, the C backend, the same image"
+TERRAFARM_CL_DEVICE=no-such-gpu-xyzzy "$TF_BIN" render "$SCENE" -j 1 --size $SIZE \
+    --listen 127.0.0.1:0 --backend auto -o "$T/auto.exr" --stats "$T/auto.json" 2>"$T/auto.err" ||
+    fail "--backend auto did not fall back: $(cat "$T/auto.err")"
+grep -q 'OpenCL unavailable.*uses the C backend' "$T/auto.err" ||
+    fail "no fallback warning: $(cat "$T/auto.err")"
+"$TF_BIN" render "$SCENE" -j 1 --size $SIZE --listen 127.0.0.1:0 -o "$T/c.exr" 2>/dev/null ||
+    fail "C render failed"
+cmp -s "$T/c.exr" "$T/auto.exr" || fail "the fallback image differs from the C backend's"
+say "$(grep 'OpenCL unavailable' "$T/auto.err")"
 echo "opencl_farm: ok"

@@ -9,7 +9,8 @@
  * small explicit stack.  A quad's contrast is the widest per-channel range of its samples'
  * display levels (sqrt of the linear value, clamped to [0, 1]: close to the sRGB curve a viewer
  * sees).  A quad of size S lattice steps has split threshold T * (N/S)^3 (T =
- * antialias.threshold); if its corners' range passes a quarter of that, its centre is traced
+ * antialias.threshold); if its corners' range passes TF_AA_PROBE_FRACTION (1/10) of that, its
+ * centre is traced
  * (the probe), and if the range of all five passes the threshold it splits into four, down to
  * quads of one lattice step.  A probed leaf is worth corners/8 + centre/2 (the quincunx
  * estimate, much closer to the pixel's area average than the corners' mean); a flat leaf is

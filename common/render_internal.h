@@ -18,7 +18,7 @@
 #define TF_AA_MAX_DEPTH 6        /* 64x64 quads, 4225 samples: the most a pixel can take */
 /* A quad whose corners' display range exceeds this fraction of its split threshold gets its
  * centre sample (the probe) before the split decision; below it the corners are trusted. */
-#define TF_AA_PROBE_FRACTION 0.25
+#define TF_AA_PROBE_FRACTION 0.1
 
 struct tf_renderer {
     const tf_scene *scene;

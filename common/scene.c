@@ -140,7 +140,7 @@ static const struct key_def KEYS[] = {
     {SEC_MIST, "color", KT_VEC3, F(mist.color), 0, 1000, 0, 0, {0.75, 0.8, 0.9}},
     {SEC_MIST, "extinction", KT_VEC3, F(mist.extinction), 0, 1000, 0, 0, {0.6, 0.8, 1.0}},
 
-    {SEC_ANTIALIAS, "threshold", KT_DOUBLE, F(antialias.threshold), 0, 1000, 0, 0, {0.02}},
+    {SEC_ANTIALIAS, "threshold", KT_DOUBLE, F(antialias.threshold), 0, 1000, 0, 0, {0.028}},
     {SEC_ANTIALIAS, "max_depth", KT_INT, F(antialias.max_depth), 0, 6, 0, 0, {3}},
 };
 #define KEY_COUNT ((int)(sizeof KEYS / sizeof KEYS[0]))

@@ -1,8 +1,8 @@
 /* test_render.c: tf_render_rect (common/render.c) on a small synthetic terrain built by hand.
  * The decomposition invariant: the whole image, single rows, single columns, odd stamps (7x5,
  * 13x11) and two threads give memcmp-identical pixels.  Adaptive antialiasing: uniform sky is
- * not subdivided (spp 4), a silhouette is; ray counts add up; max_depth 0 never subdivides; Z
- * and alpha; bad settings are refused. */
+ * not subdivided (spp 4, or 5 with its centre probed), a silhouette is; ray counts add up;
+ * max_depth 0 never subdivides; Z and alpha; bad settings are refused. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <setjmp.h>
@@ -156,7 +156,9 @@ static void test_sky_not_subdivided_edges_are(void **state)
     fixture *f = *state;
     const tf_pixel *sky = &f->whole[W / 2]; /* top row, centre: open sky */
     assert_true(sky->a == 0.0f);
-    assert_true(sky->spp == 4.0f);
+    /* smooth sky: at most its centre is probed (the gradient may pass the probe's low bar);
+     * it is never split */
+    assert_true(sky->spp == 4.0f || sky->spp == 5.0f);
     assert_true(sky->z == 1e30f);
     int silhouettes = 0, refined_silhouettes = 0;
     float max_spp = 0;

@@ -228,7 +228,7 @@ static void test_defaults(void **state)
     assert_int_equal(s->terrain.thermal_iterations, 0);
     assert_int_equal(s->mist.enabled, 0);
     assert_int_equal(s->antialias.max_depth, 3);
-    assert_true(s->antialias.threshold == 0.02);
+    assert_true(s->antialias.threshold == 0.028);
     assert_true(s->sun.elevation_deg == 25 && s->sun.azimuth_deg == 135);
     assert_string_equal(s->path, "t.scene");
     assert_int_equal(s->text_len, strlen(MINIMAL));

@@ -19,7 +19,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #define TF_AA_MAX_DEPTH 6
-#define TF_AA_PROBE_FRACTION 0.25 /* render_internal.h */
+#define TF_AA_PROBE_FRACTION 0.1 /* render_internal.h */
 #define TF_SKY_DIST 1e30f
 #define FAR_AWAY 1e30
 #define DEG2RAD (3.14159265358979323846 / 180.0)

@@ -147,11 +147,11 @@ static int check_output(const tf_render_opts *o, const char *output, const tf_ex
     }
     if (!o->resume) {
         if (!complete && rows == 0) {
-            tf_info("%s: replacing a partial render with no rows on disk", output);
+            tf_info("%s: a partial render with no rows is there; it will be replaced", output);
             return 0;
         }
         if (complete) {
-            tf_info("%s: replacing a finished render", output);
+            tf_info("%s: a finished render is there; it will be replaced", output);
             return 0;
         }
         tf_error("%s holds a partial render (%d of %d rows on disk): use --resume to continue it "
@@ -363,6 +363,23 @@ int tf_coordinator_run(const tf_render_opts *o)
         goto out;
     }
 
+    /* Settings that can be refused are refused before the output is looked at. */
+    int nworkers = o->workers >= 0 ? o->workers : tf_thread_count(0);
+    tf_task_spec spec = o->tasks_given ? o->tasks
+                                       : tf_task_spec_default(scene->width, scene->height,
+                                                              nworkers > 0 ? nworkers : 4);
+    {
+        tf_tasks all;
+        tf_tasks_init(&all, scene->width, scene->height, 0, spec);
+        if (o->watermark > 0 && o->watermark < all.cols) {
+            tf_error("--watermark %d is smaller than the %d tasks of one row band: the first "
+                     "band could never be written; use at least %d",
+                     o->watermark, all.cols, all.cols);
+            status = 2;
+            goto out;
+        }
+    }
+
     /* 1. The output: fresh, resume, or refuse -- before any expensive work. */
     tf_exr_meta meta;
     fill_meta(&meta, scene, o->scene_path);
@@ -394,10 +411,6 @@ int tf_coordinator_run(const tf_render_opts *o)
         goto out;
     }
 
-    int nworkers = o->workers >= 0 ? o->workers : tf_thread_count(0);
-    tf_task_spec spec = o->tasks_given ? o->tasks
-                                       : tf_task_spec_default(scene->width, scene->height,
-                                                              nworkers > 0 ? nworkers : 4);
     int first_row = resume_rows > 0 ? resume_rows : 0;
     tf_tasks tasks;
     tf_tasks_init(&tasks, scene->width, scene->height, first_row, spec);
@@ -417,7 +430,41 @@ int tf_coordinator_run(const tf_render_opts *o)
         tf_debug("height field %dx%d built in %.2f s", hf->n, hf->n, hf_s);
     }
 
-    /* 3. The output file. */
+    /* 3. The tuple space, the supervisor and the server (listening) -- before the output is
+     *    created, so a busy port cannot cost an old image at the output path. */
+    space = ts_space_new();
+    if (!space || put_scene_tuples(space, scene)) {
+        tf_error("out of memory");
+        goto out;
+    }
+    tf_supervisor_config scfg = {scene->width,     scene->height,        first_row, spec,
+                                 watermark,         expected_workers,     o->max_task_failures,
+                                 NULL /* the writer comes once the output exists */};
+    sup = tf_supervisor_new(space, &scfg, err, sizeof err);
+    if (!sup) {
+        tf_error("%s", err);
+        status = 2;
+        goto out;
+    }
+    ts_server_config cfg;
+    memset(&cfg, 0, sizeof cfg);
+    cfg.listen = listen;
+    cfg.key = have_key ? key : NULL;
+    cfg.silence_timeout_ms = o->lease_timeout_ms;
+    ts_server_hooks hooks = tf_supervisor_hooks(sup);
+    srv = ts_server_new(space, &cfg, &hooks, err, sizeof err);
+    if (!srv && !o->listen && nworkers > 0) {
+        /* The default port is taken (another render?): local workers do not need it. */
+        cfg.listen = "127.0.0.1:0";
+        srv = ts_server_new(space, &cfg, &hooks, err, sizeof err);
+    }
+    if (!srv) {
+        tf_error("%s", err);
+        goto out;
+    }
+    tf_supervisor_attach(sup, srv);
+
+    /* 4. The output file, then the local workers. */
     if (resume_rows >= 0) {
         int rows_done = 0;
         writer = tf_exr_resume(output, &meta, &rows_done, err, sizeof err);
@@ -453,39 +500,8 @@ int tf_coordinator_run(const tf_render_opts *o)
         goto out;
     }
     writer = NULL;
+    tf_supervisor_set_writer(sup, rows_out);
 
-    /* 4. The tuple space, the supervisor, the server, the local workers. */
-    space = ts_space_new();
-    if (!space || put_scene_tuples(space, scene)) {
-        tf_error("out of memory");
-        goto out;
-    }
-    tf_supervisor_config scfg = {scene->width,     scene->height,        first_row, spec,
-                                 watermark,         expected_workers,     o->max_task_failures,
-                                 rows_out};
-    sup = tf_supervisor_new(space, &scfg, err, sizeof err);
-    if (!sup) {
-        tf_error("%s", err);
-        status = 2;
-        goto out;
-    }
-    ts_server_config cfg;
-    memset(&cfg, 0, sizeof cfg);
-    cfg.listen = listen;
-    cfg.key = have_key ? key : NULL;
-    cfg.silence_timeout_ms = o->lease_timeout_ms;
-    ts_server_hooks hooks = tf_supervisor_hooks(sup);
-    srv = ts_server_new(space, &cfg, &hooks, err, sizeof err);
-    if (!srv && !o->listen && nworkers > 0) {
-        /* The default port is taken (another render?): local workers do not need it. */
-        cfg.listen = "127.0.0.1:0";
-        srv = ts_server_new(space, &cfg, &hooks, err, sizeof err);
-    }
-    if (!srv) {
-        tf_error("%s", err);
-        goto out;
-    }
-    tf_supervisor_attach(sup, srv);
     lw.n = nworkers;
     lw.pid = calloc((size_t)(nworkers > 0 ? nworkers : 1), sizeof *lw.pid);
     lw.respawns = calloc((size_t)(nworkers > 0 ? nworkers : 1), sizeof *lw.respawns);

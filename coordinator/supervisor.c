@@ -659,6 +659,8 @@ void tf_supervisor_free(tf_supervisor *s)
 
 void tf_supervisor_attach(tf_supervisor *s, ts_server *srv) { s->srv = srv; }
 
+void tf_supervisor_set_writer(tf_supervisor *s, tf_rowwriter *writer) { s->cfg.writer = writer; }
+
 void tf_supervisor_step(tf_supervisor *s, double now_ms)
 {
     (void)now_ms;

@@ -62,13 +62,16 @@ typedef struct tf_supervisor_config {
     int watermark;            /* >= tasks per band (checked); 0 = auto (follows the workers) */
     int expected_workers;     /* auto watermark: workers to plan for before they connect */
     int max_task_failures;
-    tf_rowwriter *writer;     /* positioned at first_row; the supervisor queues rows to it */
+    tf_rowwriter *writer;     /* positioned at first_row (or set later with
+                               * tf_supervisor_set_writer); the supervisor queues rows to it */
 } tf_supervisor_config;
 
 /* NULL with a message on error (e.g. watermark smaller than a band). */
 tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cfg, char *err,
                                  size_t errlen);
 void tf_supervisor_free(tf_supervisor *sup);
+/* The writer of the output, once it exists (before the first tf_supervisor_step). */
+void tf_supervisor_set_writer(tf_supervisor *sup, tf_rowwriter *writer);
 /* The server the workers use; needed to name peers.  Call once after ts_server_new. */
 void tf_supervisor_attach(tf_supervisor *sup, ts_server *srv);
 /* Hooks for ts_server_new (ctx = the supervisor). */

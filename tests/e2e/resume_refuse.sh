@@ -83,4 +83,19 @@ grep -q 'nothing to resume, starting a fresh render' "$T/fresh.err" ||
 [ "$(jstat rows_resumed "$T/fresh.json")" -eq 0 ] || fail "rows_resumed is not 0"
 say "$(grep 'nothing to resume' "$T/fresh.err")"
 same "$T/ref.exr" "$T/fresh.exr" "--resume from nothing"
+say "a refused setting or a busy port leaves a finished image at the output untouched"
+sum2=$(cksum <"$T/fresh.exr")
+"$TF_BIN" render "$T/hills.scene" $ARGS --tasks stamps:16x16 --watermark 1 --listen 127.0.0.1:0 -o "$T/fresh.exr" \
+    2>"$T/wm.err" && fail "--watermark 1 was accepted"
+[ "$(cksum <"$T/fresh.exr")" = "$sum2" ] || fail "a refused --watermark modified the output"
+say "$(cat "$T/wm.err")"
+python3 -c 'import socket, sys, time
+s = socket.socket(); s.bind(("127.0.0.1", 0)); s.listen(); print(s.getsockname()[1], flush=True)
+time.sleep(20)' >"$T/busy.port" &
+busy=$!; e2e_track $busy
+i=0; while [ ! -s "$T/busy.port" ]; do sleep 0.05; i=$((i + 1)); [ $i -lt 100 ] || fail "no busy port"; done
+"$TF_BIN" render "$T/hills.scene" $ARGS --listen 127.0.0.1:$(cat "$T/busy.port") -o "$T/fresh.exr" \
+    2>"$T/busy.err" && fail "a busy --listen port was accepted"
+[ "$(cksum <"$T/fresh.exr")" = "$sum2" ] || fail "a failed listen modified the output"
+say "$(grep -v 'will be replaced' "$T/busy.err")"
 echo "resume_refuse: every refusal clear and harmless"

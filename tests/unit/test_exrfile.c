@@ -10,6 +10,8 @@
 #include <stdint.h>
 #include <cmocka.h>
 
+#include "scratch_dir.h"
+
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
@@ -28,31 +30,7 @@
 #define W 37
 #define H 53 /* an odd height: with chunks of 16 rows, a last partial chunk of 5 */
 
-static char dir[256];
 
-static int make_dir(void **state)
-{
-    (void)state;
-    snprintf(dir, sizeof dir, "%s/tf-exr-XXXXXX", getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
-    return mkdtemp(dir) ? 0 : -1;
-}
-
-static int remove_dir(void **state)
-{
-    (void)state;
-    char cmd[300];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-    return system(cmd) == 0 ? 0 : -1;
-}
-
-static const char *path_in_dir(const char *name)
-{
-    static char buf[4][320];
-    static int next;
-    char *p = buf[next++ % 4];
-    snprintf(p, 320, "%s/%s", dir, name);
-    return p;
-}
 
 static tf_exr_meta test_meta(int w, int h)
 {
@@ -196,7 +174,7 @@ static long chunk_start(const char *path, int index)
 static void test_round_trip_is_bit_exact(void **state)
 {
     (void)state;
-    const char *path = path_in_dir("round.exr");
+    const char *path = scratch_path("round.exr");
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = random_image(W, H, 1);
     char err[512] = "";
@@ -220,8 +198,8 @@ static void test_round_trip_is_bit_exact(void **state)
 static void test_same_pixels_give_same_bytes(void **state)
 {
     (void)state;
-    const char *a = path_in_dir("same_a.exr");
-    const char *b = path_in_dir("same_b.exr");
+    const char *a = scratch_path("same_a.exr");
+    const char *b = scratch_path("same_b.exr");
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = random_image(W, H, 6);
     write_file(a, &m, px, H, 1); /* one chunk per call */
@@ -239,7 +217,7 @@ static void test_same_pixels_give_same_bytes(void **state)
 static void test_attributes_read_back(void **state)
 {
     (void)state;
-    const char *path = path_in_dir("attrs.exr");
+    const char *path = scratch_path("attrs.exr");
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = smooth_image(W, H);
     write_file(path, &m, px, H, 1);
@@ -292,8 +270,8 @@ static void test_exrheader_parses_the_file(void **state)
         print_message("exrheader not installed (package openexr): skipping\n");
         skip();
     }
-    const char *path = path_in_dir("hdr.exr");
-    const char *out = path_in_dir("hdr.txt");
+    const char *path = scratch_path("hdr.exr");
+    const char *out = scratch_path("hdr.txt");
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = smooth_image(W, H);
     write_file(path, &m, px, H, 1);
@@ -326,7 +304,7 @@ static void quiet(exr_const_context_t ctxt, exr_result_t code, const char *msg)
 static void test_core_rebuilds_zero_offset_table(void **state)
 {
     (void)state;
-    const char *path = path_in_dir("killed.exr");
+    const char *path = scratch_path("killed.exr");
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = smooth_image(W, H);
     write_file(path, &m, px, 32, 0);
@@ -358,7 +336,7 @@ static void test_partial_file_probes_rows_done(void **state)
     tf_pixel *px = random_image(W, H, 2);
     const int stops[] = {0, 16, 32, 48, H};
     for (size_t i = 0; i < sizeof stops / sizeof stops[0]; i++) {
-        const char *path = path_in_dir("partial.exr");
+        const char *path = scratch_path("partial.exr");
         write_file(path, &m, px, stops[i], 0);
         tf_exr_meta got;
         int rows = -1, complete = -1;
@@ -386,7 +364,7 @@ static void test_all_rows_without_offset_table_is_not_complete(void **state)
     (void)state;
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = random_image(W, H, 5);
-    const char *path = path_in_dir("notable.exr");
+    const char *path = scratch_path("notable.exr");
     write_file(path, &m, px, H, 0);
     int c = tf_exr_chunk_rows();
     int nchunks = (H + c - 1) / c;
@@ -443,7 +421,7 @@ static void test_torn_last_chunk_dropped_at_every_offset(void **state)
     (void)state;
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = smooth_image(W, H);
-    const char *path = path_in_dir("torn.exr");
+    const char *path = scratch_path("torn.exr");
     /* A finished file (valid offset table) whose last chunk is cut... */
     int c = tf_exr_chunk_rows(), last = (H + c - 1) / c - 1;
     write_file(path, &m, px, H, 1);
@@ -460,8 +438,8 @@ static void test_resume_equals_uninterrupted_write(void **state)
     (void)state;
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = random_image(W, H, 3);
-    const char *whole = path_in_dir("whole.exr");
-    const char *part = path_in_dir("resumed.exr");
+    const char *whole = scratch_path("whole.exr");
+    const char *part = scratch_path("resumed.exr");
     write_file(whole, &m, px, H, 1);
     /* Killed while writing the third chunk: cut 10 bytes into it. */
     int c = tf_exr_chunk_rows();
@@ -524,7 +502,7 @@ static void test_resume_refuses_changes_and_touches_nothing(void **state)
     (void)state;
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = smooth_image(W, H);
-    const char *path = path_in_dir("refuse.exr");
+    const char *path = scratch_path("refuse.exr");
     write_file(path, &m, px, 32, 0);
     free(px);
 
@@ -540,7 +518,7 @@ static void test_resume_refuses_changes_and_touches_nothing(void **state)
 
     char err[512] = "";
     int rows = -1;
-    assert_null(tf_exr_resume(path_in_dir("absent.exr"), &m, &rows, err, sizeof err));
+    assert_null(tf_exr_resume(scratch_path("absent.exr"), &m, &rows, err, sizeof err));
     assert_non_null(strstr(err, "absent.exr"));
 }
 
@@ -550,9 +528,9 @@ static void test_probe_missing_and_foreign_files(void **state)
     tf_exr_meta got;
     int rows, complete;
     char err[512] = "";
-    assert_int_equal(tf_exr_probe(path_in_dir("nothing.exr"), &got, &rows, &complete, err,
+    assert_int_equal(tf_exr_probe(scratch_path("nothing.exr"), &got, &rows, &complete, err,
                                   sizeof err), 1);
-    const char *junk = path_in_dir("junk.exr");
+    const char *junk = scratch_path("junk.exr");
     FILE *f = fopen(junk, "wb");
     assert_non_null(f);
     fputs("this is not an EXR file at all", f);
@@ -561,7 +539,7 @@ static void test_probe_missing_and_foreign_files(void **state)
     assert_non_null(strstr(err, junk));
     assert_null(strchr(err, '\n'));
     /* A plain EXR without our attributes (the height field export) is not resumable. */
-    const char *gray = path_in_dir("gray.exr");
+    const char *gray = scratch_path("gray.exr");
     float data[4 * 3] = {0};
     assert_int_equal(tf_exr_write_gray(gray, 4, 3, data, err, sizeof err), 0);
     assert_int_equal(tf_exr_probe(gray, &got, &rows, &complete, err, sizeof err), -1);
@@ -574,7 +552,7 @@ static void test_write_rows_rejects_misaligned_rows(void **state)
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = smooth_image(W, H);
     char err[512] = "";
-    tf_exr_writer *w = tf_exr_create(path_in_dir("align.exr"), &m, err, sizeof err);
+    tf_exr_writer *w = tf_exr_create(scratch_path("align.exr"), &m, err, sizeof err);
     assert_non_null(w);
     if (tf_exr_chunk_rows() > 1) { /* a part of a chunk is refused */
         assert_int_equal(tf_exr_write_rows(w, tf_exr_chunk_rows() - 1, px, err, sizeof err), -1);
@@ -608,7 +586,7 @@ static void test_full_device_gives_clear_error(void **state)
 static void test_mid_render_write_error_is_reported(void **state)
 {
     (void)state;
-    const char *path = path_in_dir("limited.exr");
+    const char *path = scratch_path("limited.exr");
     tf_exr_meta m = test_meta(W, H);
     tf_pixel *px = random_image(W, H, 4);
     struct rlimit old;
@@ -645,7 +623,7 @@ static void test_write_gray_round_trip(void **state)
     for (int i = 0; i < gw * gh; i++)
         data[i] = (float)i * 0.37f - 11.0f;
     data[5] = 1.0e-40f; /* a denormal */
-    const char *path = path_in_dir("height.exr");
+    const char *path = scratch_path("height.exr");
     char err[512] = "";
     assert_int_equal(tf_exr_write_gray(path, gw, gh, data, err, sizeof err), 0);
 
@@ -693,5 +671,5 @@ int main(void)
         cmocka_unit_test(test_mid_render_write_error_is_reported),
         cmocka_unit_test(test_write_gray_round_trip),
     };
-    return cmocka_run_group_tests(tests, make_dir, remove_dir);
+    return cmocka_run_group_tests(tests, scratch_dir_make, scratch_dir_remove);
 }

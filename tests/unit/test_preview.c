@@ -7,6 +7,8 @@
 #include <stdint.h>
 #include <cmocka.h>
 
+#include "scratch_dir.h"
+
 #include <math.h>
 #include <png.h>
 #include <stdio.h>
@@ -20,32 +22,7 @@
 #define W 37
 #define H 53
 
-static char dir[256];
 
-static int make_dir(void **state)
-{
-    (void)state;
-    snprintf(dir, sizeof dir, "%s/tf-preview-XXXXXX",
-             getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
-    return mkdtemp(dir) ? 0 : -1;
-}
-
-static int remove_dir(void **state)
-{
-    (void)state;
-    char cmd[300];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-    return system(cmd) == 0 ? 0 : -1;
-}
-
-static const char *path_in_dir(const char *name)
-{
-    static char buf[4][320];
-    static int next;
-    char *p = buf[next++ % 4];
-    snprintf(p, 320, "%s/%s", dir, name);
-    return p;
-}
 
 static tf_pixel test_pixel(int x, int y)
 {
@@ -134,8 +111,8 @@ static void test_srgb8_is_monotonic_and_reaches_every_code(void **state)
 static void test_preview_png_has_size_and_pixels(void **state)
 {
     (void)state;
-    const char *exr = path_in_dir("img.exr");
-    const char *png = path_in_dir("img.png");
+    const char *exr = scratch_path("img.exr");
+    const char *png = scratch_path("img.png");
     write_exr(exr, H);
     char err[512] = "";
     assert_int_equal(tf_preview_from_exr(exr, png, err, sizeof err), 0);
@@ -158,8 +135,8 @@ static void test_preview_png_has_size_and_pixels(void **state)
 static void test_preview_of_partial_render_is_full_size_with_black_rest(void **state)
 {
     (void)state;
-    const char *exr = path_in_dir("part.exr");
-    const char *png = path_in_dir("part.png");
+    const char *exr = scratch_path("part.exr");
+    const char *png = scratch_path("part.png");
     write_exr(exr, 32);
     char err[512] = "";
     assert_int_equal(tf_preview_from_exr(exr, png, err, sizeof err), 0);
@@ -176,9 +153,9 @@ static void test_preview_of_partial_render_is_full_size_with_black_rest(void **s
 static void test_preview_of_missing_exr_fails_clearly(void **state)
 {
     (void)state;
-    const char *png = path_in_dir("none.png");
+    const char *png = scratch_path("none.png");
     char err[512] = "";
-    assert_int_equal(tf_preview_from_exr(path_in_dir("none.exr"), png, err, sizeof err), -1);
+    assert_int_equal(tf_preview_from_exr(scratch_path("none.exr"), png, err, sizeof err), -1);
     assert_non_null(strstr(err, "none.exr"));
     assert_null(strchr(err, '\n'));
     assert_int_equal(access(png, F_OK), -1);
@@ -193,5 +170,5 @@ int main(void)
         cmocka_unit_test(test_preview_of_partial_render_is_full_size_with_black_rest),
         cmocka_unit_test(test_preview_of_missing_exr_fails_clearly),
     };
-    return cmocka_run_group_tests(tests, make_dir, remove_dir);
+    return cmocka_run_group_tests(tests, scratch_dir_make, scratch_dir_remove);
 }

@@ -15,6 +15,7 @@
 #include "heightfield.h"
 #include "noise.h"
 #include "trace.h"
+#include "test_terrains.h"
 
 #define assert_near(a, b, tol) assert_near_at((a), (b), (tol), __FILE__, __LINE__)
 static void assert_near_at(double a, double b, double tol, const char *file, int line)
@@ -32,34 +33,10 @@ static void assert_near_at(double a, double b, double tol, const char *file, int
 
 /* ---- terrains -------------------------------------------------------------------------------- */
 
-typedef double (*height_fn)(int i, int j, int n);
-
 static double flat5(int i, int j, int n) { (void)i; (void)j; (void)n; return 5; }
 static double tilted(int i, int j, int n) { (void)n; return 0.5 * i - 0.25 * j + 3; }
 static double spike(int i, int j, int n) { return i == n / 2 && j == n / 2 ? 10 : 0; }
-/* White noise: every cell steep and different. */
-static double rough(int i, int j, int n) { return tf_hash_unit((uint64_t)j * n + i) * 40 - 20; }
-/* Smooth hills with ridges. */
-static double hills(int i, int j, int n)
-{
-    double x = (double)i / (n - 1), y = (double)j / (n - 1);
-    return 8 * sin(6.1 * x) * cos(4.3 * y) + 3 * sin(17.0 * x + 11.0 * y) + 2 * fabs(sin(23.0 * y));
-}
-/* Terraces: many equal heights, flat cells and exact ties with the max grids. */
-static double terraces(int i, int j, int n) { return floor(hills(i, j, n) / 3) * 3; }
-
-static tf_heightfield *make_field(height_fn f, int k, double extent)
-{
-    int n = (1 << k) + 1;
-    float *h = malloc((size_t)n * n * sizeof *h);
-    assert_non_null(h);
-    for (int j = 0; j < n; j++)
-        for (int i = 0; i < n; i++)
-            h[(size_t)j * n + i] = (float)f(i, j, n);
-    tf_heightfield *hf = tf_heightfield_wrap(h, k, extent, 1);
-    assert_non_null(hf);
-    return hf;
-}
+/* rough, hills, terraces and make_field: test_terrains.h */
 
 /* ---- brute force: every triangle, textbook Moller-Trumbore --------------------------------- */
 

@@ -14,8 +14,8 @@
  *      POCL_CACHE_DIR, which defaults here to a per-user cache directory (set_pocl_cache_dir).
  *   4. The height field, all max/min grid levels (concatenated, offsets in I[]) and the texture
  *      permutation are uploaded once.
- * Each tf_cl_backend_render then runs tf_corners over the (w+1) x (h+1) corners (the
- * external-sample rule: the far row and column are computed here) and tf_pixels over the
+ * Each tf_cl_backend_render then runs tf_corners8 over the (w+1) x (h+1) corners (the
+ * external-sample rule: the far row and column are computed here) and tf_pixels8 over the
  * pixels in batches bounded by the scratch memory of the per-pixel sample caches. */
 #define CL_TARGET_OPENCL_VERSION 120
 #include "backend_opencl.h"
@@ -36,8 +36,13 @@
 #include "kernels/tf_cl_params.h"
 #include "render_internal.h"
 
-#define KERNEL_FILE "terrafarm.cl"
-#define PARAMS_FILE "tf_cl_params.h"
+#define KERNEL_FILE "terrafarm.cl" /* the file that marks a kernel directory */
+#define SOURCE_FILES                                                                            \
+    {"tf_cl_params.h", "terrafarm.cl", "packet.cl", "packet_trace.cl", "packet_shade.cl",       \
+     "packet_render.cl"}
+#define PACKET_LANES 8     /* packet.cl TF_LANES: corners per tf_corners8 work-item */
+#define PIXELS_PER_ITEM 16 /* packet_render.cl TF_PIX: pixels per tf_pixels8 work-item */
+#define EPOCH_LIMIT 0x7fffffffu /* packet_render.cl: epochs stay below TF_QUEUED */
 #define MAX_SOURCE_BYTES (1 << 20)        /* a kernel file larger than this is not ours */
 #define SCRATCH_BUDGET ((size_t)64 << 20) /* bytes of per-pixel sample caches per batch */
 
@@ -52,6 +57,7 @@ struct tf_cl_backend {
     cl_mem corners, corner_shadow, cache, have, out, pixel_shadow;
     size_t corners_cap, corner_shadow_cap, cache_cap, have_cap, out_cap, pixel_shadow_cap;
     cl_ulong jitter_key;
+    cl_uint epoch; /* tf_pixels8's mark for the slots of the launch (packet_render.cl) */
     int lattice;
     size_t local;          /* work-group size: fixed, so PoCL specialises each kernel once */
     char device_name[256];
@@ -275,35 +281,42 @@ static int choose_device(cl_device_id *out, char *name, size_t namelen, char *er
 
 /* ---------------------------------------------------------------- program */
 
-/* Build the program from tf_cl_params.h + terrafarm.cl.  On failure the build log goes to
- * stderr (it is many lines; the error itself stays one line). */
+/* Build the program from SOURCE_FILES, concatenated in that order.  On failure the build log
+ * goes to stderr (it is many lines; the error itself stays one line). */
 static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t errlen)
 {
     char dir[PATH_MAX], path[PATH_MAX + 32];
     if (find_kernel_dir(dir, sizeof dir, err, errlen))
         return -1;
-    size_t len[2];
-    char *src[2];
-    snprintf(path, sizeof path, "%s/" PARAMS_FILE, dir);
-    src[0] = read_text(path, &len[0]);
-    snprintf(path, sizeof path, "%s/" KERNEL_FILE, dir);
-    src[1] = read_text(path, &len[1]);
-    if (!src[0] || !src[1]) {
-        snprintf(err, errlen, "cannot read the OpenCL kernels in %s", dir);
-        free(src[0]);
-        free(src[1]);
+    const char *names[] = SOURCE_FILES;
+    enum { NSRC = sizeof names / sizeof names[0] };
+    size_t len[NSRC];
+    char *src[NSRC];
+    int missing = -1;
+    for (int i = 0; i < NSRC; i++) {
+        snprintf(path, sizeof path, "%s/%s", dir, names[i]);
+        src[i] = read_text(path, &len[i]);
+        if (!src[i] && missing < 0)
+            missing = i;
+    }
+    if (missing >= 0) {
+        snprintf(err, errlen, "cannot read the OpenCL kernel source %s/%s", dir, names[missing]);
+        for (int i = 0; i < NSRC; i++)
+            free(src[i]);
         return -1;
     }
     cl_int rc;
     double t0 = now_seconds();
-    b->program = clCreateProgramWithSource(b->ctx, 2, (const char **)src, len, &rc);
-    free(src[0]);
-    free(src[1]);
+    b->program = clCreateProgramWithSource(b->ctx, NSRC, (const char **)src, len, &rc);
+    for (int i = 0; i < NSRC; i++)
+        free(src[i]);
     if (rc != CL_SUCCESS) {
         snprintf(err, errlen, "OpenCL: cannot create the program (error %d)", rc);
         return -1;
     }
-    rc = clBuildProgram(b->program, 1, &dev, "-cl-std=CL1.2", NULL, NULL);
+    char options[128];
+    snprintf(options, sizeof options, "-cl-std=CL1.2 -DTF_PIX=%d", PIXELS_PER_ITEM);
+    rc = clBuildProgram(b->program, 1, &dev, options, NULL, NULL);
     b->build_seconds = now_seconds() - t0;
     if (rc != CL_SUCCESS) {
         size_t loglen = 0;
@@ -313,20 +326,20 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
             if (log && clGetProgramBuildInfo(b->program, dev, CL_PROGRAM_BUILD_LOG, loglen, log,
                                              NULL) == CL_SUCCESS) {
                 log[loglen] = 0;
-                fprintf(stderr, "--- OpenCL build log (%s/" KERNEL_FILE ") ---\n%s\n---\n", dir,
+                fprintf(stderr, "--- OpenCL build log (%s) ---\n%s\n---\n", dir,
                         log);
             }
             free(log);
         }
-        snprintf(err, errlen, "OpenCL: building %s/" KERNEL_FILE " failed (error %d; build log "
+        snprintf(err, errlen, "OpenCL: building the kernels in %s failed (error %d; build log "
                  "above)", dir, rc);
         return -1;
     }
-    b->k_corners = clCreateKernel(b->program, "tf_corners", &rc);
+    b->k_corners = clCreateKernel(b->program, "tf_corners8", &rc);
     if (rc == CL_SUCCESS)
-        b->k_pixels = clCreateKernel(b->program, "tf_pixels", &rc);
+        b->k_pixels = clCreateKernel(b->program, "tf_pixels8", &rc);
     if (rc != CL_SUCCESS) {
-        snprintf(err, errlen, "OpenCL: kernel missing from %s/" KERNEL_FILE " (error %d)", dir,
+        snprintf(err, errlen, "OpenCL: kernel missing from the sources in %s (error %d)", dir,
                  rc);
         return -1;
     }
@@ -556,6 +569,35 @@ static int ensure(tf_cl_backend *b, cl_mem *buf, size_t *cap, size_t bytes)
     return rc == CL_SUCCESS ? 0 : -1;
 }
 
+/* The slot states of the sample caches: zeroed whenever (re)allocated, which no epoch equals. */
+static int ensure_have(tf_cl_backend *b, size_t slots)
+{
+    if (b->have && b->have_cap >= slots * sizeof(cl_uint))
+        return 0;
+    if (ensure(b, &b->have, &b->have_cap, slots * sizeof(cl_uint)))
+        return -1;
+    cl_uint zero = 0;
+    b->epoch = 0;
+    return clEnqueueFillBuffer(b->queue, b->have, &zero, sizeof zero, 0, b->have_cap, 0, NULL,
+                               NULL) == CL_SUCCESS ? 0 : -1;
+}
+
+/* A new epoch for the next tf_pixels8 launch; after 2^31 - 1 launches the slot states are
+ * zeroed again so an old mark can never pass for a new one. */
+static cl_int next_epoch(tf_cl_backend *b)
+{
+    if (b->epoch + 1 >= EPOCH_LIMIT) {
+        cl_uint zero = 0;
+        cl_int rc = clEnqueueFillBuffer(b->queue, b->have, &zero, sizeof zero, 0, b->have_cap, 0,
+                                        NULL, NULL);
+        if (rc != CL_SUCCESS)
+            return rc;
+        b->epoch = 0;
+    }
+    b->epoch++;
+    return CL_SUCCESS;
+}
+
 /* n rounded up to a multiple of the work-group size (kernels ignore the surplus items). */
 static size_t round_up(size_t n, size_t local) { return (n + local - 1) / local * local; }
 
@@ -595,10 +637,10 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     const size_t ncorners = (size_t)(rect.w + 1) * (size_t)(rect.h + 1);
     const size_t npixels = (size_t)rect.w * (size_t)rect.h;
     const size_t side = (size_t)b->lattice + 1;
-    const size_t per_pixel = side * side * (TF_CL_SAMPLE_FLOATS * sizeof(float) + 1);
-    size_t batch = SCRATCH_BUDGET / per_pixel;
-    if (batch < 1)
-        batch = 1;
+    const size_t per_pixel = side * side * (TF_CL_SAMPLE_FLOATS * sizeof(float) + sizeof(cl_uint));
+    size_t batch = SCRATCH_BUDGET / per_pixel / PIXELS_PER_ITEM * PIXELS_PER_ITEM;
+    if (batch < PIXELS_PER_ITEM)
+        batch = PIXELS_PER_ITEM;
     if (batch > npixels)
         batch = npixels;
     cl_uint *corner_shadow = malloc(ncorners * sizeof *corner_shadow);
@@ -610,7 +652,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
                  ensure(b, &b->corner_shadow, &b->corner_shadow_cap, ncorners * sizeof(cl_uint)) ||
                  ensure(b, &b->cache, &b->cache_cap,
                         batch * side * side * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
-                 ensure(b, &b->have, &b->have_cap, batch * side * side) ||
+                 ensure_have(b, batch * side * side) ||
                  ensure(b, &b->out, &b->out_cap, npixels * TF_CL_PIXEL_FLOATS * sizeof(float)) ||
                  ensure(b, &b->pixel_shadow, &b->pixel_shadow_cap, npixels * sizeof(cl_uint));
     if (failed) {
@@ -628,7 +670,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     rc |= clSetKernelArg(b->k_corners, 10, sizeof ch, &ch);
     rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corners);
     rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_shadow);
-    size_t global = round_up(ncorners, b->local);
+    size_t global = round_up((ncorners + PACKET_LANES - 1) / PACKET_LANES, b->local);
     cl_event corner_ev = NULL, pixel_ev[1] = {NULL};
     if (rc == CL_SUCCESS)
         rc = clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, &b->local, 0, NULL,
@@ -643,9 +685,11 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
         rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->corners);
         rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->cache);
         rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->have);
-        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->out);
-        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->pixel_shadow);
-        global = round_up((size_t)count, b->local);
+        rc |= next_epoch(b);
+        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_uint), &b->epoch);
+        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->out);
+        rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_mem), &b->pixel_shadow);
+        global = round_up(((size_t)count + PIXELS_PER_ITEM - 1) / PIXELS_PER_ITEM, b->local);
         /* keep the last batch's event; earlier ones are waited for and accounted here */
         if (pixel_ev[0]) {
             clWaitForEvents(1, &pixel_ev[0]);

@@ -8,13 +8,9 @@
  * rarely moves a subdivision decision (see tests/unit/test_opencl.c for the measured match).
  * When the C renderer changes, change the function of the same name here.
  *
- * Two kernels per rectangle, as in tf_render_rect:
- *   tf_corners  one work-item per pixel-corner lattice point of the (w+1) x (h+1) corners,
- *               external row and column included (the external-sample rule of render.h);
- *   tf_pixels   one work-item per pixel: the adaptive subdivision of render_pixel with an
- *               explicit quad stack (no recursion), its lattice cache in a global scratch
- *               slice of (N+1)^2 samples per work-item.
- * Each work-item also writes how many shadow rays it cast; the host sums them. */
+ * This file is the scalar renderer: one sample at a time.  The host builds it followed by
+ * packet.cl, packet_trace.cl, packet_shade.cl and packet_render.cl, which run it eight samples
+ * at a time and hold the kernels the host launches (see packet_render.cl). */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -827,48 +823,6 @@ world make_world(__global const double *P, __global const int *I, __global const
     return w;
 }
 
-/* Corner samples of the rectangle at (rx, ry): cw x ch = (w+1) x (h+1) lattice points, row-major.
- * out: TF_CL_SAMPLE_FLOATS per corner; shadow: rays cast per corner. */
-__kernel void tf_corners(__global const double *P, __global const int *I, ulong jitter_key,
-                         __global const float *h, __global const float *mx,
-                         __global const float *mn, __global const ushort *perm, int rx, int ry,
-                         int cw, int ch, __global float *out, __global uint *shadow)
-{
-    int gid = (int)get_global_id(0);
-    if (gid >= cw * ch)
-        return;
-    world w = make_world(P, I, h, mx, mn, perm);
-    int c = gid % cw, row = gid / cw;
-    long N = I[TFI_LATTICE];
-    float s[TF_CL_SAMPLE_FLOATS];
-    uint rays = 0;
-    lattice_sample(&w, jitter_key, (long)(rx + c) * N, (long)(ry + row) * N, s, &rays);
-    for (int k = 0; k < TF_CL_SAMPLE_FLOATS; k++)
-        out[(size_t)gid * TF_CL_SAMPLE_FLOATS + k] = s[k];
-    shadow[gid] = rays;
-}
-
-typedef struct quad { int i, j, size; } quad;
-
-/* Sample at local lattice point (i, j) of pixel (px, py), traced on first use (cached_sample). */
-__global float *cached_sample(const world *w, ulong jitter_key, __global float *cache,
-                              __global uchar *have, int side, int px, int py, int i, int j,
-                              int *spp, uint *shadow_rays)
-{
-    size_t k = (size_t)j * (size_t)side + (size_t)i;
-    __global float *slot = cache + k * TF_CL_SAMPLE_FLOATS;
-    if (!have[k]) {
-        long N = w->I[TFI_LATTICE];
-        float s[TF_CL_SAMPLE_FLOATS];
-        lattice_sample(w, jitter_key, (long)px * N + i, (long)py * N + j, s, shadow_rays);
-        for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
-            slot[m] = s[m];
-        have[k] = 1;
-        (*spp)++;
-    }
-    return slot;
-}
-
 /* tf_display_level / display_range of render.c: sqrt of the linear value clamped to [0, 1], and the
  * largest per-channel range of those levels over n samples (n <= 5). */
 double display_level(double v)
@@ -890,101 +844,4 @@ double display_range(__global const float *const s[], int n)
             widest = hi - lo;
     }
     return widest;
-}
-
-void copy_corner(__global float *dst, __global const float *src)
-{
-    for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
-        dst[m] = src[m];
-}
-
-/* Pixels first .. first+count-1 (row-major in the rw-wide rectangle at (rx, ry)); work-item g
- * uses scratch slice g of cache / have ((N+1)^2 samples).  corners: tf_corners' output. */
-__kernel void tf_pixels(__global const double *P, __global const int *I, ulong jitter_key,
-                        __global const float *h, __global const float *mx,
-                        __global const float *mn, __global const ushort *perm, int rx, int ry,
-                        int rw, int first, int count, __global const float *corners,
-                        __global float *cache, __global uchar *have, __global float *out,
-                        __global uint *shadow)
-{
-    int gid = (int)get_global_id(0);
-    if (gid >= count)
-        return;
-    world w = make_world(P, I, h, mx, mn, perm);
-    const int N = I[TFI_LATTICE], side = N + 1;
-    const double threshold = P[TFP_THRESHOLD];
-    int k = first + gid, c = k % rw, row = k / rw;
-    int px = rx + c, py = ry + row;
-    __global float *pc = cache + (size_t)gid * (size_t)side * (size_t)side * TF_CL_SAMPLE_FLOATS;
-    __global uchar *ph = have + (size_t)gid * (size_t)side * (size_t)side;
-    for (int m = 0; m < side * side; m++)
-        ph[m] = 0;
-    const int cw = rw + 1;
-    copy_corner(pc, corners + ((size_t)row * cw + c) * TF_CL_SAMPLE_FLOATS);
-    copy_corner(pc + (size_t)N * TF_CL_SAMPLE_FLOATS,
-                corners + ((size_t)row * cw + c + 1) * TF_CL_SAMPLE_FLOATS);
-    copy_corner(pc + (size_t)N * side * TF_CL_SAMPLE_FLOATS,
-                corners + ((size_t)(row + 1) * cw + c) * TF_CL_SAMPLE_FLOATS);
-    copy_corner(pc + ((size_t)N * side + N) * TF_CL_SAMPLE_FLOATS,
-                corners + ((size_t)(row + 1) * cw + c + 1) * TF_CL_SAMPLE_FLOATS);
-    ph[0] = ph[N] = 1;
-    ph[(size_t)N * side] = ph[(size_t)N * side + N] = 1;
-    int spp = 4;
-    uint rays = 0;
-
-    quad stack[3 * TF_AA_MAX_DEPTH + 1];
-    int sp = 0;
-    stack[sp].i = 0, stack[sp].j = 0, stack[sp].size = N;
-    sp++;
-    double sum_r = 0, sum_g = 0, sum_b = 0, sum_a = 0;
-    while (sp > 0) {
-        quad q = stack[--sp];
-        __global const float *s[5];
-        s[0] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i, q.j, &spp, &rays);
-        s[1] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i + q.size, q.j, &spp, &rays);
-        s[2] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i, q.j + q.size, &spp, &rays);
-        s[3] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i + q.size, q.j + q.size,
-                             &spp, &rays);
-        if (q.size > 1) {
-            double ratio = (double)(N / q.size);
-            double split_threshold = threshold * ratio * ratio * ratio;
-            if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
-                int hs = q.size / 2;
-                s[4] = cached_sample(&w, jitter_key, pc, ph, side, px, py, q.i + hs, q.j + hs,
-                                     &spp, &rays);
-                if (display_range(s, 5) > split_threshold) {
-                    stack[sp].i = q.i + hs, stack[sp].j = q.j + hs, stack[sp].size = hs, sp++;
-                    stack[sp].i = q.i, stack[sp].j = q.j + hs, stack[sp].size = hs, sp++;
-                    stack[sp].i = q.i + hs, stack[sp].j = q.j, stack[sp].size = hs, sp++;
-                    stack[sp].i = q.i, stack[sp].j = q.j, stack[sp].size = hs, sp++;
-                    continue;
-                }
-                double wt = 0.125 * (double)q.size * (double)q.size;
-                sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0] + 4.0 * s[4][0]);
-                sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1] + 4.0 * s[4][1]);
-                sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2] + 4.0 * s[4][2]);
-                sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3] + 4.0 * s[4][3]);
-                continue;
-            }
-        }
-        double wt = 0.25 * (double)q.size * (double)q.size;
-        sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0]);
-        sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1]);
-        sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2]);
-        sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3]);
-    }
-
-    float zmin = TF_SKY_DIST;
-    for (int m = 0; m < side * side; m++)
-        if (ph[m] && pc[(size_t)m * TF_CL_SAMPLE_FLOATS + 4] < zmin)
-            zmin = pc[(size_t)m * TF_CL_SAMPLE_FLOATS + 4];
-    double area = (double)N * (double)N;
-    __global float *o = out + (size_t)k * TF_CL_PIXEL_FLOATS;
-    o[0] = (float)(sum_r / area);
-    o[1] = (float)(sum_g / area);
-    o[2] = (float)(sum_b / area);
-    o[3] = (float)(sum_a / area);
-    o[4] = zmin;
-    o[5] = (float)spp;
-    shadow[k] = rays;
 }

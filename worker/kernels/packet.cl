@@ -1,0 +1,79 @@
+/* packet.cl: the types of the packet renderer -- eight samples at a time, one per lane of
+ * OpenCL's 8-wide vector types, so the compiler (PoCL on the CPU) runs them in SIMD registers.
+ *
+ * A work-item of packet_render.cl gathers eight lattice samples (from neighbouring pixels, so
+ * their rays are coherent) and hands them to lattice_sample8 (packet_shade.cl), which traces
+ * them with trace8 / occluded8 (packet_trace.cl).  Every packet function computes, in each
+ * active lane, exactly what its scalar twin in terrafarm.cl computes for that lane's sample:
+ * the same operations in the same order, so the packet renderer's pixels are the scalar
+ * renderer's to the bit (tests/unit/test_opencl.c checks it against the C backend).
+ *
+ * Conventions:
+ *   - A lane mask is an lv (long8): -1 for active lanes, 0 for idle ones -- what comparisons of
+ *     dv (double8) values give.  Use select(a, b, mask) to merge (b where the mask is set).
+ *   - Idle lanes still execute (that is what SIMD means) but their results are discarded; every
+ *     memory access of an idle lane goes through a clamped index (gather_* below), so an idle
+ *     lane never reads outside a buffer.
+ *   - Integer per-lane values that index buffers are iv (int8); convert_long8 / convert_int8
+ *     move between the two widths. */
+
+#define TF_LANES 8
+
+typedef double8 dv; /* a double per lane */
+typedef long8 lv;   /* a 64-bit integer or mask per lane */
+typedef int8 iv;    /* a 32-bit integer per lane */
+
+typedef struct v3p { dv x, y, z; } v3p; /* a vec3 per lane */
+
+/* What trace8 reports per lane (the scalar hit_t). */
+typedef struct hitp { dv t; v3p p, n; iv ci, cj; } hitp;
+
+v3p v3p_make(dv x, dv y, dv z) { v3p r = {x, y, z}; return r; }
+v3p v3p_splat(vec3 a) { v3p r = {(dv)(a.x), (dv)(a.y), (dv)(a.z)}; return r; }
+v3p v3p_add(v3p a, v3p b) { return v3p_make(a.x + b.x, a.y + b.y, a.z + b.z); }
+v3p v3p_sub(v3p a, v3p b) { return v3p_make(a.x - b.x, a.y - b.y, a.z - b.z); }
+v3p v3p_mul(v3p a, v3p b) { return v3p_make(a.x * b.x, a.y * b.y, a.z * b.z); }
+v3p v3p_scale(v3p a, dv s) { return v3p_make(a.x * s, a.y * s, a.z * s); }
+dv v3p_dot(v3p a, v3p b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+v3p v3p_select(v3p a, v3p b, lv m)
+{
+    return v3p_make(select(a.x, b.x, m), select(a.y, b.y, m), select(a.z, b.z, m));
+}
+
+/* Lane l of a packet as a scalar vec3, and back. */
+vec3 v3p_lane(v3p a, int l) { return v3(a.x[l], a.y[l], a.z[l]); }
+void v3p_set_lane(v3p *a, int l, vec3 v)
+{
+    a->x[l] = v.x;
+    a->y[l] = v.y;
+    a->z[l] = v.z;
+}
+
+/* Loads of p[idx] for the active lanes; idle lanes read p[0] (which every buffer has) and get
+ * whatever is there: callers discard them. */
+dv gather_f(__global const float *p, lv idx, lv mask)
+{
+    lv k = select((lv)(0), idx, mask);
+    dv r;
+    for (int l = 0; l < TF_LANES; l++)
+        r[l] = (double)p[k[l]];
+    return r;
+}
+
+dv gather_d(__global const double *p, lv idx, lv mask)
+{
+    lv k = select((lv)(0), idx, mask);
+    dv r;
+    for (int l = 0; l < TF_LANES; l++)
+        r[l] = p[k[l]];
+    return r;
+}
+
+iv gather_u16(__global const ushort *p, lv idx, lv mask)
+{
+    lv k = select((lv)(0), idx, mask);
+    iv r;
+    for (int l = 0; l < TF_LANES; l++)
+        r[l] = (int)p[k[l]];
+    return r;
+}

@@ -1,0 +1,262 @@
+/* packet_render.cl: the two kernels the host runs per rectangle, feeding lattice_sample8 full
+ * packets of eight samples.
+ *
+ *   tf_corners8  work-item g samples corners 8g .. 8g+7 of the (w+1) x (h+1) pixel-corner
+ *                lattice points (row-major, external row and column included: the
+ *                external-sample rule of render.h).  Neighbouring corners, coherent rays.
+ *   tf_pixels8   work-item g runs the adaptive subdivision of render.c's render_pixel for
+ *                TF_PIX neighbouring pixels at once.  Each pixel is a small state machine over
+ *                its own quad stack (the scalar kernel's, no recursion); whenever a pixel needs a
+ *                lattice sample it does not have, the sample is queued and the pixel waits.
+ *                The queue is traced eight at a time, and the pixels resume.
+ *
+ * Why the pixels give the scalar renderer's bits: a pixel pops its quads in the scalar order and
+ * sums their samples in the scalar order; only *when* a sample is traced changes, never its
+ * value (a sample is a function of its lattice point alone).  A pixel only ever queues samples
+ * the scalar loop would trace: the corners of the quad on top of its stack, the probe centre
+ * of that quad once its corners show the contrast that asks for it, and -- to keep the packets
+ * full -- the corners of the quads further down its stack, which the scalar loop will reach
+ * and need whatever happens.  So the samples traced, the sample count and the nearest distance
+ * are the scalar ones too.
+ *
+ * Sample cache: each pixel owns a slice of (N+1)^2 samples of `cache`; `have` marks a slot
+ * ready (== epoch) or queued (== epoch | TF_QUEUED).  The host gives every launch a new epoch,
+ * so slices need no clearing between pixels. */
+
+#ifndef TF_PIX
+#define TF_PIX 16          /* pixels per work-item */
+#endif
+#define TF_QUEUE 64        /* queued samples per work-item: eight packets */
+#define TF_QUEUED 0x80000000u
+#define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
+
+__kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
+                          __global const float *h, __global const float *mx,
+                          __global const float *mn, __global const ushort *perm, int rx, int ry,
+                          int cw, int ch, __global float *out, __global uint *shadow)
+{
+    const int base = (int)get_global_id(0) * TF_LANES, total = cw * ch;
+    if (base >= total)
+        return;
+    world w = make_world(P, I, h, mx, mn, perm);
+    const long N = I[TFI_LATTICE];
+    lv X, Y, mask;
+    for (int l = 0; l < TF_LANES; l++) {
+        int k = base + l < total ? base + l : total - 1;
+        mask[l] = base + l < total ? -1 : 0;
+        X[l] = (long)(rx + k % cw) * N;
+        Y[l] = (long)(ry + k / cw) * N;
+    }
+    float8 s[5];
+    iv rays = (iv)(0);
+    lattice_sample8(&w, jitter_key, X, Y, mask, s, &rays);
+    for (int l = 0; l < TF_LANES && base + l < total; l++) {
+        for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
+            out[(size_t)(base + l) * TF_CL_SAMPLE_FLOATS + m] = s[m][l];
+        shadow[base + l] = (uint)rays[l];
+    }
+}
+
+typedef struct quad { int i, j, size; } quad;
+
+/* One pixel's place in the adaptive subdivision. */
+typedef struct pixel_state {
+    quad stack[TF_STACK];
+    int sp, spp, px, py;
+    uint rays;
+    float zmin;
+    double sum_r, sum_g, sum_b, sum_a;
+    __global float *cache; /* (N+1)^2 samples */
+    __global uint *have;   /* (N+1)^2 slot states */
+} pixel_state;
+
+typedef struct sample_queue {
+    int n;
+    uchar pixel[TF_QUEUE]; /* which of the work-item's pixels asked */
+    short slot[TF_QUEUE];  /* its lattice slot j * (N+1) + i */
+} sample_queue;
+
+/* Is slot k of pixel p ready?  If it is neither ready nor queued, queue it (room permitting;
+ * a pixel that finds the queue full simply asks again in the next round). */
+int want(pixel_state *ps, int p, int k, uint epoch, sample_queue *q)
+{
+    uint st = ps->have[k];
+    if (st == epoch)
+        return 1;
+    if (st != (epoch | TF_QUEUED) && q->n < TF_QUEUE) {
+        ps->have[k] = epoch | TF_QUEUED;
+        q->pixel[q->n] = (uchar)p;
+        q->slot[q->n] = (short)k;
+        q->n++;
+    }
+    return 0;
+}
+
+/* The four corners of quad t of pixel p: all ready?  Queues the missing ones either way. */
+int want_corners(pixel_state *ps, int p, quad t, int side, uint epoch, sample_queue *q)
+{
+    int a = want(ps, p, t.j * side + t.i, epoch, q);
+    int b = want(ps, p, t.j * side + t.i + t.size, epoch, q);
+    int c = want(ps, p, (t.j + t.size) * side + t.i, epoch, q);
+    int d = want(ps, p, (t.j + t.size) * side + t.i + t.size, epoch, q);
+    return a && b && c && d;
+}
+
+__global const float *slot_of(const pixel_state *ps, int side, int i, int j)
+{
+    return ps->cache + ((size_t)j * (size_t)side + (size_t)i) * TF_CL_SAMPLE_FLOATS;
+}
+
+/* render_pixel's loop for pixel p, run until its stack is empty or it needs a sample it does
+ * not have; then the corners of the quads further down its stack are queued too. */
+void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample_queue *q)
+{
+    const int side = N + 1;
+    while (ps->sp > 0) {
+        quad t = ps->stack[ps->sp - 1];
+        if (!want_corners(ps, p, t, side, epoch, q))
+            break;
+        __global const float *s[5];
+        s[0] = slot_of(ps, side, t.i, t.j);
+        s[1] = slot_of(ps, side, t.i + t.size, t.j);
+        s[2] = slot_of(ps, side, t.i, t.j + t.size);
+        s[3] = slot_of(ps, side, t.i + t.size, t.j + t.size);
+        if (t.size > 1) {
+            double ratio = (double)(N / t.size);
+            double split_threshold = threshold * ratio * ratio * ratio;
+            if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
+                int hs = t.size / 2;
+                if (!want(ps, p, (t.j + hs) * side + t.i + hs, epoch, q))
+                    break;
+                s[4] = slot_of(ps, side, t.i + hs, t.j + hs);
+                ps->sp--;
+                if (display_range(s, 5) > split_threshold) {
+                    quad *st = ps->stack + ps->sp;
+                    st[0].i = t.i + hs, st[0].j = t.j + hs, st[0].size = hs;
+                    st[1].i = t.i, st[1].j = t.j + hs, st[1].size = hs;
+                    st[2].i = t.i + hs, st[2].j = t.j, st[2].size = hs;
+                    st[3].i = t.i, st[3].j = t.j, st[3].size = hs;
+                    ps->sp += 4;
+                    continue;
+                }
+                double wt = 0.125 * (double)t.size * (double)t.size;
+                ps->sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0] + 4.0 * s[4][0]);
+                ps->sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1] + 4.0 * s[4][1]);
+                ps->sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2] + 4.0 * s[4][2]);
+                ps->sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3] + 4.0 * s[4][3]);
+                continue;
+            }
+        }
+        ps->sp--;
+        double wt = 0.25 * (double)t.size * (double)t.size;
+        ps->sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0]);
+        ps->sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1]);
+        ps->sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2]);
+        ps->sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3]);
+    }
+    for (int e = ps->sp - 2; e >= 0 && q->n < TF_QUEUE; e--)
+        want_corners(ps, p, ps->stack[e], side, epoch, q);
+}
+
+/* Pixels first .. first+count-1 (row-major in the rw-wide rectangle at (rx, ry)); pixel
+ * first + m uses scratch slice m of cache / have ((N+1)^2 samples each).  corners: the output
+ * of tf_corners8.  epoch: this launch's mark (host: never 0, never with TF_QUEUED set). */
+__kernel void tf_pixels8(__global const double *P, __global const int *I, ulong jitter_key,
+                         __global const float *h, __global const float *mx,
+                         __global const float *mn, __global const ushort *perm, int rx, int ry,
+                         int rw, int first, int count, __global const float *corners,
+                         __global float *cache, __global uint *have, uint epoch,
+                         __global float *out, __global uint *shadow)
+{
+    const int m0 = (int)get_global_id(0) * TF_PIX;
+    if (m0 >= count)
+        return;
+    const int np = count - m0 < TF_PIX ? count - m0 : TF_PIX;
+    world w = make_world(P, I, h, mx, mn, perm);
+    const int N = I[TFI_LATTICE], side = N + 1, cw = rw + 1;
+    const long LN = N;
+    const double threshold = P[TFP_THRESHOLD];
+
+    pixel_state ps[TF_PIX];
+    for (int p = 0; p < np; p++) {
+        pixel_state *s = &ps[p];
+        int k = first + m0 + p, c = k % rw, row = k / rw;
+        s->px = rx + c;
+        s->py = ry + row;
+        s->cache = cache + (size_t)(m0 + p) * (size_t)side * (size_t)side * TF_CL_SAMPLE_FLOATS;
+        s->have = have + (size_t)(m0 + p) * (size_t)side * (size_t)side;
+        const int slot[4] = {0, N, N * side, N * side + N};
+        const size_t from[4] = {(size_t)row * cw + c, (size_t)row * cw + c + 1,
+                                (size_t)(row + 1) * cw + c, (size_t)(row + 1) * cw + c + 1};
+        s->zmin = TF_SKY_DIST;
+        for (int e = 0; e < 4; e++) {
+            __global const float *src = corners + from[e] * TF_CL_SAMPLE_FLOATS;
+            __global float *dst = s->cache + (size_t)slot[e] * TF_CL_SAMPLE_FLOATS;
+            for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)
+                dst[f] = src[f];
+            s->have[slot[e]] = epoch;
+            if (src[4] < s->zmin)
+                s->zmin = src[4];
+        }
+        s->stack[0].i = 0, s->stack[0].j = 0, s->stack[0].size = N;
+        s->sp = 1;
+        s->spp = 4;
+        s->rays = 0;
+        s->sum_r = s->sum_g = s->sum_b = s->sum_a = 0;
+    }
+
+    sample_queue q;
+    for (;;) {
+        q.n = 0;
+        int active = 0;
+        for (int p = 0; p < np; p++) {
+            if (ps[p].sp == 0)
+                continue;
+            advance(&ps[p], p, N, threshold, epoch, &q);
+            active |= ps[p].sp > 0;
+        }
+        if (!active)
+            break;
+        /* every pixel still active waits on a queued sample, so q.n > 0 here */
+        for (int b = 0; b < q.n; b += TF_LANES) {
+            lv X, Y, mask;
+            for (int l = 0; l < TF_LANES; l++) {
+                int e = b + l < q.n ? b + l : q.n - 1;
+                const pixel_state *s = &ps[q.pixel[e]];
+                int k = q.slot[e];
+                mask[l] = b + l < q.n ? -1 : 0;
+                X[l] = (long)s->px * LN + k % side;
+                Y[l] = (long)s->py * LN + k / side;
+            }
+            float8 smp[5];
+            iv rays = (iv)(0);
+            lattice_sample8(&w, jitter_key, X, Y, mask, smp, &rays);
+            for (int l = 0; l < TF_LANES && b + l < q.n; l++) {
+                pixel_state *s = &ps[q.pixel[b + l]];
+                int k = q.slot[b + l];
+                __global float *dst = s->cache + (size_t)k * TF_CL_SAMPLE_FLOATS;
+                for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)
+                    dst[f] = smp[f][l];
+                s->have[k] = epoch;
+                s->spp++;
+                s->rays += (uint)rays[l];
+                if (smp[4][l] < s->zmin)
+                    s->zmin = smp[4][l];
+            }
+        }
+    }
+
+    const double area = (double)N * (double)N;
+    for (int p = 0; p < np; p++) {
+        const pixel_state *s = &ps[p];
+        int k = first + m0 + p;
+        __global float *o = out + (size_t)k * TF_CL_PIXEL_FLOATS;
+        o[0] = (float)(s->sum_r / area);
+        o[1] = (float)(s->sum_g / area);
+        o[2] = (float)(s->sum_b / area);
+        o[3] = (float)(s->sum_a / area);
+        o[4] = s->zmin;
+        o[5] = (float)s->spp;
+        shadow[k] = s->rays;
+    }
+}

@@ -54,26 +54,19 @@ void v3p_set_lane(v3p *a, int l, vec3 v)
 dv gather_f(__global const float *p, lv idx, lv mask)
 {
     lv k = select((lv)(0), idx, mask);
-    dv r;
-    for (int l = 0; l < TF_LANES; l++)
-        r[l] = (double)p[k[l]];
-    return r;
+    return convert_double8((float8)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5],
+                                     p[k.s6], p[k.s7]));
 }
 
 dv gather_d(__global const double *p, lv idx, lv mask)
 {
     lv k = select((lv)(0), idx, mask);
-    dv r;
-    for (int l = 0; l < TF_LANES; l++)
-        r[l] = p[k[l]];
-    return r;
+    return (dv)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5], p[k.s6], p[k.s7]);
 }
 
 iv gather_u16(__global const ushort *p, lv idx, lv mask)
 {
     lv k = select((lv)(0), idx, mask);
-    iv r;
-    for (int l = 0; l < TF_LANES; l++)
-        r[l] = (int)p[k[l]];
-    return r;
+    return convert_int8((ushort8)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5],
+                                  p[k.s6], p[k.s7]));
 }

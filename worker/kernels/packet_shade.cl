@@ -1,22 +1,521 @@
-/* packet_shade.cl: lattice_sample8, the packet twin of terrafarm.cl's lattice_sample: the
- * camera ray of each active lane's lattice point, traced and shaded.
+/* packet_shade.cl: lattice_sample8, the packet twin of terrafarm.cl's lattice_sample -- the
+ * camera rays of eight lattice points, traced (trace8 / occluded8 of packet_trace.cl) and
+ * shaded in SIMD, one sample per lane of the dv / lv / iv types of packet.cl.
  *
- * FALLBACK: for now each active lane runs the scalar lattice_sample; the SIMD shading replaces
- * this body without changing its interface. */
+ * Every function NAME8 here is the packet twin of the scalar NAME in terrafarm.cl (which is
+ * itself the port of common/shade.c, camera.c, render.c and noise.c).  The one rule, on which
+ * the bit-identity of the OpenCL and C backends rests:
+ *
+ *   In every active lane, a packet function performs exactly the floating-point operations of
+ *   its scalar twin, in the same order, on the same operands.
+ *
+ * So: FP contraction stays off (terrafarm.cl's pragma), no fma / mad / native_ / half_
+ * functions, no reassociation (a scalar a * b * c stays (a * b) * c, a constant difference
+ * like (b.x - a.x) of v3_lerp stays a separate subtraction).  The vector built-ins used (sqrt,
+ * exp, expm1, log2, acos, cos, sin, fabs, fmin) compute per lane the function the scalar
+ * built-in computes; bench_opencl's "bit-identical pixels" line is the check.
+ *
+ * How the scalar control flow becomes lanes:
+ *   - A branch becomes a lane mask (lv: -1 active, 0 idle): both sides are evaluated for the
+ *     lanes that need them and merged with select().  A side no active lane needs is skipped
+ *     altogether with `if (any(mask))` -- that is where the time is saved: the terrain, water
+ *     and sky shaders run only for the lanes that hit terrain, water or sky; the bump fBm, the
+ *     snow-line fBm and the shadow rays only for the lanes that need them.
+ *   - A loop whose trip count differs per lane (the fBm octaves, which follow each sample's
+ *     distance) runs to the largest count over the active lanes; a lane adds an octave to its
+ *     sums only while the octave is one of its own, so each lane's sums are the scalar ones.
+ *   - Lookups (the height field, the noise permutation, the gradient table) are per-lane
+ *     gathers through indices that are always in range, also for idle lanes: heights through
+ *     clamped cell indices, the permutation through indices masked to 0..511, the gradients
+ *     through indices masked to 0..15.  Idle lanes' values are computed and discarded.
+ *   - A scalar counter (shadow_rays) becomes an iv, bumped by the lanes that cast a ray. */
+
+/* ---------------------------------------------------------------- small packet helpers */
+
+/* v3_norm per lane: lanes of length 0 (or NaN) keep their vector, as in the scalar code. */
+v3p v3p_norm(v3p a)
+{
+    dv l = sqrt(v3p_dot(a, a));
+    return v3p_select(a, v3p_scale(a, 1.0 / l), l > 0.0);
+}
+
+/* v3_lerp per lane: a + (b - a) t, each component in the scalar order. */
+v3p v3p_lerp(v3p a, v3p b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
+}
+
+/* v3_lerp between two constant colours: (b - a) is the scalar difference, then per lane. */
+v3p v3p_lerp_ss(vec3 a, vec3 b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
+}
+
+/* v3_lerp from a packet colour to a constant one. */
+v3p v3p_lerp_ps(v3p a, vec3 b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
+}
+
+/* The same mask as an iv (for select on int8 / float8). */
+iv mask_i(lv m) { return convert_int8(m); }
+
+/* The height field at clamped vertex (i, j) of each lane (height_sample). */
+dv height_sample8(const world *w, iv i, iv j)
+{
+    i = select(i, (iv)(0), i < 0);
+    i = select(i, (iv)(w->n - 1), i >= w->n);
+    j = select(j, (iv)(0), j < 0);
+    j = select(j, (iv)(w->n - 1), j >= w->n);
+    lv k = convert_long8(j) * (long)w->n + convert_long8(i);
+    return gather_f(w->h, k, (lv)(-1));
+}
+
+/* ---------------------------------------------------------------- hashing (tf_hash64) */
+
+ulong8 tf_hash64_8(ulong8 x)
+{
+    x += 0x9e3779b97f4a7c15UL;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9UL;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebUL;
+    return x ^ (x >> 31);
+}
+
+dv tf_hash_unit8(ulong8 x) { return convert_double8(tf_hash64_8(x) >> 11) * 0x1.0p-53; }
+
+/* ---------------------------------------------------------------- noise (noise_impl.h) */
+
+dv tf_fade8(dv t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }
+
+/* tf_floor_split per lane.  Only called on lanes whose |x| < 2^52 matter; the caller zeroes
+ * the others first so every conversion is in range. */
+lv tf_floor_split8(dv x, dv *fraction)
+{
+    lv i = convert_long8(x); /* rounds toward zero, as the C cast */
+    dv d = convert_double8(i);
+    lv below = x < d; /* -1 where below */
+    *fraction = x - (d - select((dv)(0.0), (dv)(1.0), below));
+    return i + below;
+}
+
+typedef struct noise_axis8 { iv lattice; lv ok; dv f0, f1, fade; } noise_axis8;
+
+noise_axis8 noise_axis_set8(dv y)
+{
+    noise_axis8 a;
+    dv unused;
+    a.ok = fabs(y) < TF_NOISE_COORD_LIMIT;
+    lv yi = tf_floor_split8(select((dv)(0.0), y, a.ok), &unused);
+    yi = select((lv)(0), yi, a.ok);
+    a.lattice = convert_int8(yi & 255);
+    a.f0 = select((dv)(0.0), y - convert_double8(yi), a.ok);
+    a.f1 = a.f0 - 1.0;
+    a.fade = tf_fade8(a.f0);
+    return a;
+}
+
+/* p[k] per lane, k in 0..511 (the permutation has 512 entries). */
+iv perm8(__global const ushort *p, iv k)
+{
+    iv r;
+    for (int l = 0; l < TF_LANES; l++)
+        r[l] = p[k[l] & 511];
+    return r;
+}
+
+/* noise_column per lane: the column line slope * (x - X) + intercept. */
+void noise_column8(__global const ushort *p, iv xi, const noise_axis8 *ay, dv *slope,
+                   dv *intercept)
+{
+    iv a = perm8(p, xi & 255) + ay->lattice;
+    iv g0 = perm8(p, a) & 15, g1 = perm8(p, a + 1) & 15;
+    dv g0x, g0y, g1x, g1y;
+    for (int l = 0; l < TF_LANES; l++) {
+        g0x[l] = tf_grad2[g0[l]][0];
+        g0y[l] = tf_grad2[g0[l]][1];
+        g1x[l] = tf_grad2[g1[l]][0];
+        g1y[l] = tf_grad2[g1[l]][1];
+    }
+    dv e0 = g0y * ay->f0, e1 = g1y * ay->f1;
+    *slope = g0x + ay->fade * (g1x - g0x);
+    *intercept = e0 + ay->fade * (e1 - e0);
+}
+
+dv noise2_axis8(__global const ushort *p, dv x, const noise_axis8 *ay)
+{
+    lv valid = (fabs(x) < TF_NOISE_COORD_LIMIT) & ay->ok;
+    dv fx, ls, li, rs, ri;
+    lv xl = tf_floor_split8(select((dv)(0.0), x, valid), &fx);
+    iv xi = convert_int8(xl & 255); /* noise_column only uses xi & 255 (and xi + 1) */
+    noise_column8(p, xi, ay, &ls, &li);
+    noise_column8(p, xi + 1, ay, &rs, &ri);
+    dv u = tf_fade8(fx);
+    dv l = ls * fx + li;
+    dv r = rs * (fx - 1.0) + ri;
+    return select((dv)(0.0), (l + u * (r - l)) * TF_NOISE2_SCALE, valid);
+}
+
+/* tf_fbm2 per lane, for an octave count shared by all lanes (the snow line's constant). */
+dv tf_fbm2_8(__global const ushort *p, __global const double *amp, dv x, dv y, double octaves)
+{
+    if (!(octaves >= 1.0))
+        octaves = 1.0;
+    if (octaves > TF_CL_AMP_TABLE - 1)
+        octaves = TF_CL_AMP_TABLE - 1;
+    int whole = (int)octaves;
+    double remainder = octaves - whole;
+    int count = whole + (remainder > 0.0);
+    dv result = 0.0;
+    for (int i = 0; i < count; i++) {
+        double a = amp[i];
+        if (remainder > 0.0 && i == whole)
+            a *= remainder;
+        noise_axis8 ay = noise_axis_set8(y);
+        result += a * noise2_axis8(p, x, &ay);
+        x *= 2.0;
+        y *= 2.0;
+    }
+    return result;
+}
+
+/* fbm_with_gradient per lane, with per-lane octave counts: the loop runs to the largest count
+ * over `mask`; a lane adds octave i only while i < its own count. */
+dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, dv octaves,
+                      double salt, lv mask, dv *gx, dv *gy)
+{
+    const double eps = 1e-3;
+    __global const double *amp = w->P + amp_table;
+    dv qx = x / scale + salt, qy = y / scale - salt;
+    octaves = select((dv)(1.0), octaves, octaves >= 1.0);
+    octaves = select(octaves, (dv)(TF_CL_AMP_TABLE - 1), octaves > TF_CL_AMP_TABLE - 1);
+    iv whole = convert_int8(octaves);
+    dv remainder = octaves - convert_double8(whole);
+    lv partial = remainder > 0.0;
+    iv count = whole - mask_i(partial);
+    int most = 0;
+    for (int l = 0; l < TF_LANES; l++)
+        if (mask[l] && count[l] > most)
+            most = count[l];
+    dv f = 0.0, fx = 0.0, fy = 0.0;
+    dv x0 = qx, x1 = qx + eps, y0 = qy, y1 = qy + eps;
+    for (int i = 0; i < most; i++) {
+        lv in = convert_long8(count > i);
+        dv a = (dv)(amp[i]);
+        a = select(a, a * remainder, partial & convert_long8(whole == i));
+        noise_axis8 ay = noise_axis_set8(y0), ay1 = noise_axis_set8(y1);
+        f = select(f, f + a * noise2_axis8(w->perm, x0, &ay), in);
+        fx = select(fx, fx + a * noise2_axis8(w->perm, x1, &ay), in);
+        fy = select(fy, fy + a * noise2_axis8(w->perm, x0, &ay1), in);
+        x0 *= 2.0;
+        x1 *= 2.0;
+        y0 *= 2.0;
+        y1 *= 2.0;
+    }
+    *gx = (fx - f) / eps;
+    *gy = (fy - f) / eps;
+    return f;
+}
+
+/* ---------------------------------------------------------------- camera (camera_dir) */
+
+v3p camera_dir8(const world *w, dv x, dv y)
+{
+    dv u = x / (double)w->I[TFI_WIDTH] - 0.5;
+    dv v = 0.5 - y / (double)w->I[TFI_HEIGHT];
+    if (w->I[TFI_CAM_KIND] == 1) {
+        dv theta = u * w->P[TFP_SWEEP];
+        v3p horizontal = v3p_add(v3p_scale(v3p_splat(pvec(w, TFP_PANO_FORWARD)), cos(theta)),
+                                 v3p_scale(v3p_splat(pvec(w, TFP_PANO_RIGHT)), sin(theta)));
+        dv height = w->P[TFP_V_CENTRE] + 2.0 * v * w->P[TFP_V_HALF];
+        return v3p_norm(v3p_add(horizontal, v3p_scale(v3p_splat(pvec(w, TFP_PANO_UP)), height)));
+    }
+    v3p d = v3p_add(v3p_splat(pvec(w, TFP_CAM_FORWARD)),
+                    v3p_scale(v3p_splat(pvec(w, TFP_CAM_RIGHT)), 2.0 * u * w->P[TFP_HALF_W]));
+    d = v3p_add(d, v3p_scale(v3p_splat(pvec(w, TFP_CAM_UP)), 2.0 * v * w->P[TFP_HALF_H]));
+    return v3p_norm(d);
+}
+
+/* ---------------------------------------------------------------- shading (shade.c) */
+
+dv smoothstep8(dv e0, dv e1, dv x)
+{
+    dv t = (x - e0) / (e1 - e0);
+    t = select(select(t, (dv)(1.0), t > 1.0), (dv)(0.0), t < 0.0);
+    return t * t * (3.0 - 2.0 * t);
+}
+
+dv visible_octaves8(const world *w, double scale, dv dist, double max_octaves)
+{
+    dv footprint = 2.0 * dist * w->P[TFP_PIXEL_ANGLE];
+    dv octaves = log2(scale / footprint) + 1.0;
+    octaves = select(select(octaves, (dv)(max_octaves), octaves > max_octaves), (dv)(0.0),
+                     octaves < 0.0);
+    return select((dv)(max_octaves), octaves, footprint > 0.0);
+}
+
+v3p vertex_normal8(const world *w, iv i, iv j)
+{
+    const int n = w->n;
+    iv hi_i = select(i, i + 1, i + 1 < n), lo_i = select(i, i - 1, i > 0);
+    iv hi_j = select(j, j + 1, j + 1 < n), lo_j = select(j, j - 1, j > 0);
+    dv span_x = convert_double8(hi_i - lo_i) * w->cell;
+    dv span_y = convert_double8(hi_j - lo_j) * w->cell;
+    dv dzdx = (height_sample8(w, i + 1, j) - height_sample8(w, i - 1, j)) / span_x;
+    dv dzdy = (height_sample8(w, i, j + 1) - height_sample8(w, i, j - 1)) / span_y;
+    return v3p_norm(v3p_make(-dzdx, -dzdy, (dv)(1.0)));
+}
+
+/* smooth_normal: the triangle of the cell that holds p picks n10 or n01; both cases are the
+ * same sum with the weights and the third vertex chosen per lane. */
+v3p smooth_normal8(const world *w, iv ci, iv cj, v3p p)
+{
+    ci = select(select(ci, (iv)(w->cells - 1), ci >= w->cells), (iv)(0), ci < 0);
+    cj = select(select(cj, (iv)(w->cells - 1), cj >= w->cells), (iv)(0), cj < 0);
+    dv fx = p.x / w->cell - convert_double8(ci), fy = p.y / w->cell - convert_double8(cj);
+    fx = select(select(fx, (dv)(1.0), fx > 1.0), (dv)(0.0), fx < 0.0);
+    fy = select(select(fy, (dv)(1.0), fy > 1.0), (dv)(0.0), fy < 0.0);
+    v3p n00 = vertex_normal8(w, ci, cj), n11 = vertex_normal8(w, ci + 1, cj + 1);
+    lv lower = fx >= fy; /* n10 side */
+    iv lower_i = mask_i(lower);
+    v3p nside = vertex_normal8(w, select(ci, ci + 1, lower_i), select(cj + 1, cj, lower_i));
+    dv big = select(fy, fx, lower), small = select(fx, fy, lower);
+    v3p n = v3p_add(v3p_add(v3p_scale(n00, 1 - big), v3p_scale(nside, big - small)),
+                    v3p_scale(n11, small));
+    return v3p_norm(n);
+}
+
+lv snow_line_matters8(const world *w, dv z)
+{
+    double reach = w->P[TFP_SNOW_JITTER] * w->P[TFP_SNOW_BOUND] + w->P[TFP_BAND];
+    double lo = w->P[TFP_SNOW_LINE] - reach, hi = w->P[TFP_SNOW_LINE] + reach;
+    double slack = 1e-9 * (fabs(lo) + fabs(hi) + reach);
+    return (z >= lo - slack) & (z <= hi + slack);
+}
+
+v3p sky_color8(const world *w, v3p dir)
+{
+    dv up = select((dv)(0.0), dir.z, dir.z > 0.0);
+    dv wt = 1.0 - (1.0 - up) * (1.0 - up) * (1.0 - up);
+    v3p c = v3p_lerp_ss(pvec(w, TFP_SKY_HORIZON), pvec(w, TFP_SKY_ZENITH), wt);
+    dv cg = v3p_dot(dir, v3p_splat(pvec(w, TFP_SUN_DIR)));
+    lv glowing = cg > 0.0;
+    if (any(glowing)) {
+        dv c2 = cg * cg, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16;
+        dv c64 = c32 * c32, c256 = c64 * c64 * c64 * c64;
+        dv glow = 0.03 * c8 + 0.08 * c64 + 0.25 * c256;
+        c = v3p_select(c, v3p_add(c, v3p_scale(v3p_splat(pvec(w, TFP_SUN_LIGHT)), glow)),
+                       glowing);
+    }
+    return c;
+}
+
+/* mist_depth per lane (len may be INFINITY in some lanes: the sky). */
+dv mist_depth8(const world *w, v3p origin, v3p dir, dv len)
+{
+    double density = w->P[TFP_MIST_DENSITY], k = w->P[TFP_MIST_K];
+    lv inf = isinf(len);
+    if (w->I[TFI_MIST_HOMOG] || k == 0)
+        return select(density * len, (dv)(INFINITY), inf);
+    /* finite lanes: mist_depth_exp (k != 0 here) */
+    dv z1 = origin.z, z2 = origin.z + dir.z * len;
+    dv x = k * fabs(z2 - z1);
+    lv thin = x < 1e-5;
+    dv mean_density = exp(-k * 0.5 * (z1 + z2));
+    lv thick = ~inf & ~thin;
+    if (any(thick))
+        mean_density = select(mean_density, exp(-k * fmin(z1, z2)) * (-expm1(-x) / x), thick);
+    dv finite = density * len * mean_density;
+    /* infinite lanes */
+    dv endless = select(density * exp(-k * origin.z) / (k * dir.z), (dv)(INFINITY),
+                        dir.z <= 1e-12);
+    return select(finite, endless, inf);
+}
+
+dv transparency8(dv tau, double extinction)
+{
+    if (extinction <= 0)
+        return (dv)(1.0);
+    return exp(-tau * extinction);
+}
+
+v3p mist_apply8(const world *w, v3p c, v3p origin, v3p dir, dv len)
+{
+    if (!w->I[TFI_MIST_ENABLED] || w->P[TFP_MIST_DENSITY] <= 0)
+        return c;
+    dv tau = mist_depth8(w, origin, dir, len);
+    vec3 ext = pvec(w, TFP_MIST_EXT), mc = pvec(w, TFP_MIST_COLOR);
+    dv sr = transparency8(tau, ext.x);
+    dv sg = transparency8(tau, ext.y);
+    dv sb = transparency8(tau, ext.z);
+    return v3p_make(sr * c.x + (1 - sr) * mc.x, sg * c.y + (1 - sg) * mc.y,
+                    sb * c.z + (1 - sb) * mc.z);
+}
+
+/* sunlit for the lanes of `mask`: the lanes that see the sun; each lane that casts a shadow
+ * ray counts it in *shadow_rays. */
+lv sunlit8(const world *w, v3p p, v3p ng, lv mask, iv *shadow_rays)
+{
+    vec3 sun = pvec(w, TFP_SUN_DIR);
+    if (sun.z <= -1.0)
+        return (lv)(0);
+    lv cast = mask & (v3p_dot(ng, v3p_splat(sun)) > 0.0);
+    if (!any(cast))
+        return (lv)(0);
+    v3p start = v3p_add(p, v3p_scale(ng, (dv)(w->P[TFP_SHADOW_LIFT])));
+    *shadow_rays -= mask_i(cast);
+    lv blocked = occluded8(w, start, v3p_splat(sun), (dv)(0.0), (dv)(FAR_AWAY), cast);
+    return cast & ~blocked;
+}
+
+v3p terrain_albedo8(const world *w, v3p p, v3p n, dv variation, lv mask)
+{
+    const vec3 ALBEDO_VEGETATION = {0.040, 0.075, 0.022};
+    const vec3 ALBEDO_ALPINE = {0.120, 0.105, 0.070};
+    const vec3 ALBEDO_ROCK = {0.200, 0.180, 0.160};
+    const vec3 ALBEDO_SNOW = {0.800, 0.820, 0.860};
+    const vec3 ALBEDO_SAND = {0.330, 0.290, 0.200};
+    dv slope = acos(select(n.z, (dv)(1.0), n.z > 1.0)) / DEG2RAD;
+    double rock_deg = w->P[TFP_ROCK_SLOPE];
+    double band = w->P[TFP_BAND];
+    double tree_line = w->P[TFP_TREE_LINE], sea_level = w->P[TFP_SEA_LEVEL];
+    double extent = w->P[TFP_EXTENT];
+
+    dv w_veg = smoothstep8((dv)(tree_line + band), (dv)(tree_line - band), p.z);
+    dv w_sand = smoothstep8((dv)(sea_level + 0.8 * band), (dv)(sea_level + 0.2 * band), p.z);
+    dv w_rock = smoothstep8((dv)(rock_deg - ROCK_BLEND_DEG), (dv)(rock_deg + ROCK_BLEND_DEG),
+                            slope);
+    dv snow_line = (dv)(w->P[TFP_SNOW_LINE]);
+    if (w->P[TFP_SNOW_JITTER] > 0) {
+        lv snowy = mask & snow_line_matters8(w, p.z);
+        if (any(snowy)) {
+            dv f = tf_fbm2_8(w->perm, w->P + TFP_AMP_H05, p.x / (extent / 12.0) + 37.5,
+                             p.y / (extent / 12.0) - 11.25, SNOW_OCTAVES);
+            snow_line = select(snow_line, snow_line + w->P[TFP_SNOW_JITTER] * f, snowy);
+        }
+    }
+    dv w_snow = smoothstep8(snow_line - band, snow_line + band, p.z) *
+                (1.0 - smoothstep8((dv)(rock_deg), (dv)(rock_deg + SNOW_SLIDE_DEG), slope));
+
+    v3p c = v3p_lerp_ss(ALBEDO_ALPINE, ALBEDO_VEGETATION, w_veg);
+    c = v3p_lerp_ps(c, ALBEDO_SAND, w_sand);
+    c = v3p_lerp_ps(c, ALBEDO_ROCK, w_rock);
+    c = v3p_scale(c, 1.0 + COLOUR_VARIATION * variation);
+    return v3p_lerp_ps(c, ALBEDO_SNOW, w_snow);
+}
+
+/* shade_terrain for the lanes of `mask` (the lanes whose ray hit the terrain). */
+v3p shade_terrain8(const world *w, const hitp *hit, lv mask, iv *shadow_rays)
+{
+    v3p n = smooth_normal8(w, hit->ci, hit->cj, hit->p);
+    v3p nb = n;
+    dv variation = 0.0;
+    dv octaves = visible_octaves8(w, w->P[TFP_BUMP_SCALE], hit->t, BUMP_OCTAVES);
+    if (w->I[TFI_TEXTURED] && w->P[TFP_BUMP] > 0) {
+        lv bumped = mask & (octaves > 0.0);
+        if (any(bumped)) {
+            dv gx, gy;
+            dv var = fbm_with_gradient8(w, hit->p.x, hit->p.y, w->P[TFP_BUMP_SCALE],
+                                        TFP_AMP_H08, octaves, 0.0, bumped, &gx, &gy);
+            double amp = w->P[TFP_BUMP];
+            v3p nbump = v3p_norm(v3p_add(n, v3p_make(-amp * gx, -amp * gy, (dv)(0.0))));
+            variation = select(variation, var, bumped);
+            nb = v3p_select(nb, nbump, bumped & ~(nbump.z < 0.05));
+        }
+    }
+    v3p albedo = terrain_albedo8(w, hit->p, n, variation, mask);
+    dv cos_sun = v3p_dot(nb, v3p_splat(pvec(w, TFP_SUN_DIR)));
+    v3p light = v3p_scale(v3p_splat(pvec(w, TFP_SKY_LIGHT)), 0.5 + 0.5 * nb.z);
+    lv lit = sunlit8(w, hit->p, hit->n, mask & (cos_sun > 0.0), shadow_rays);
+    light = v3p_select(light, v3p_add(light, v3p_scale(v3p_splat(pvec(w, TFP_SUN_LIGHT)), cos_sun)),
+                       lit);
+    return v3p_mul(albedo, light);
+}
+
+/* shade_water for the lanes of `mask` (the lanes whose ray reached the sea first). */
+v3p shade_water8(const world *w, v3p p, v3p dir, dv dist, lv mask, iv *shadow_rays)
+{
+    const vec3 WATER_BODY = {0.010, 0.028, 0.040};
+    v3p n = v3p_splat(v3(0, 0, 1));
+    dv octaves = visible_octaves8(w, w->P[TFP_RIPPLE_SCALE], dist, RIPPLE_OCTAVES);
+    if (w->I[TFI_TEXTURED] && w->P[TFP_BUMP] > 0) {
+        lv rippled = mask & (octaves > 0.0);
+        if (any(rippled)) {
+            dv gx, gy;
+            fbm_with_gradient8(w, p.x, p.y, w->P[TFP_RIPPLE_SCALE], TFP_AMP_H05, octaves, 71.0,
+                               rippled, &gx, &gy);
+            v3p nr = v3p_norm(v3p_make(-RIPPLE_STRENGTH * gx, -RIPPLE_STRENGTH * gy, (dv)(1.0)));
+            n = v3p_select(n, nr, rippled);
+        }
+    }
+    dv cos_i = -v3p_dot(dir, n);
+    cos_i = select(cos_i, (dv)(1e-3), cos_i < 1e-3);
+    v3p refl = v3p_add(dir, v3p_scale(n, 2.0 * cos_i));
+    refl.z = select(refl.z, -refl.z, refl.z < 0.0);
+    dv m = 1.0 - cos_i, m2 = m * m;
+    dv fresnel = FRESNEL_R0 + (1.0 - FRESNEL_R0) * m2 * m2 * m;
+    v3p light = v3p_splat(pvec(w, TFP_SKY_LIGHT));
+    vec3 sun = pvec(w, TFP_SUN_DIR);
+    if (sun.z > 0) {
+        lv lit = sunlit8(w, p, v3p_splat(v3(0, 0, 1)), mask, shadow_rays);
+        light = v3p_select(light, v3p_add(light, v3p_scale(v3p_splat(pvec(w, TFP_SUN_LIGHT)),
+                                                           (dv)(sun.z))),
+                           lit);
+    }
+    v3p body = v3p_mul(v3p_splat(WATER_BODY), light);
+    return v3p_lerp(body, sky_color8(w, v3p_norm(refl)), fresnel);
+}
+
+/* shade_ray per lane: out[0..4] get r, g, b, a and distance of the active lanes. */
+void shade_ray8(const world *w, v3p origin, v3p dir, lv mask, float8 out[5], iv *shadow_rays)
+{
+    double sea = w->P[TFP_SEA_LEVEL];
+    dv t_water = (dv)(FAR_AWAY);
+    t_water = select(t_water, (sea - origin.z) / dir.z, (dir.z < 0.0) & (origin.z > sea));
+
+    hitp hit;
+    hit.t = (dv)(0.0);
+    hit.p = hit.n = v3p_splat(v3(0, 0, 0));
+    hit.ci = hit.cj = (iv)(0);
+    lv terrain = mask & trace8(w, origin, dir, (dv)(0.0), t_water, mask, &hit);
+    lv water = mask & ~terrain & (t_water < FAR_AWAY);
+    lv sky = mask & ~terrain & ~water;
+
+    v3p c = v3p_splat(v3(0, 0, 0));
+    dv dist = (dv)(INFINITY); /* the sky lanes' mist length */
+    if (any(terrain)) {
+        c = v3p_select(c, shade_terrain8(w, &hit, terrain, shadow_rays), terrain);
+        dist = select(dist, hit.t, terrain);
+    }
+    if (any(water)) {
+        v3p p = v3p_add(origin, v3p_scale(dir, t_water));
+        c = v3p_select(c, shade_water8(w, p, dir, t_water, water, shadow_rays), water);
+        dist = select(dist, t_water, water);
+    }
+    if (any(sky))
+        c = v3p_select(c, sky_color8(w, dir), sky);
+    c = mist_apply8(w, c, origin, dir, dist);
+    iv sky_i = mask_i(sky);
+    out[0] = convert_float8(c.x);
+    out[1] = convert_float8(c.y);
+    out[2] = convert_float8(c.z);
+    out[3] = select((float8)(1.0f), (float8)(0.0f), sky_i);
+    out[4] = select(convert_float8(dist), (float8)(TF_SKY_DIST), sky_i);
+}
+
+/* ---------------------------------------------------------------- the lattice (render.c) */
 
 /* Samples at lattice points (X, Y) of the active lanes: out[0..4] get r, g, b, a and distance
  * per lane (idle lanes: undefined); *shadow_rays[l] grows by the shadow rays lane l cast. */
 void lattice_sample8(const world *w, ulong jitter_key, lv X, lv Y, lv mask, float8 out[5],
                      iv *shadow_rays)
 {
-    for (int l = 0; l < TF_LANES; l++) {
-        if (!mask[l])
-            continue;
-        float s[TF_CL_SAMPLE_FLOATS];
-        uint rays = 0;
-        lattice_sample(w, jitter_key, X[l], Y[l], s, &rays);
-        for (int k = 0; k < 5; k++)
-            out[k][l] = s[k];
-        (*shadow_rays)[l] += (int)rays;
-    }
+    ulong8 h = tf_hash64_8((ulong8)(jitter_key) ^ as_ulong8(X));
+    h = tf_hash64_8(h ^ (as_ulong8(Y) * 0x9e3779b97f4a7c15UL));
+    dv jx = tf_hash_unit8(h) - 0.5;
+    dv jy = tf_hash_unit8(h ^ 0xd1b54a32d192ed03UL) - 0.5;
+    double N = (double)w->I[TFI_LATTICE];
+    dv x = (convert_double8(X) + jx) / N;
+    dv y = (convert_double8(Y) + jy) / N;
+    v3p dir = camera_dir8(w, x, y);
+    shade_ray8(w, v3p_splat(pvec(w, TFP_CAM_POS)), dir, mask, out, shadow_rays);
 }

@@ -1,33 +1,372 @@
-/* packet_trace.cl: trace8 and occluded8, the packet twins of terrafarm.cl's trace and occluded.
+/* packet_trace.cl: trace8 and occluded8, the packet twins of terrafarm.cl's trace and occluded:
+ * eight rays walk the max/min grid hierarchy together, one per lane.
  *
- * FALLBACK: for now each active lane runs the scalar trace; the SIMD walk of the max/min grids
- * replaces this file's bodies without changing its interface. */
+ * Each lane runs its own walk (its own level, cell, stale axis and event time), so the lanes
+ * need not agree on anything: a step is computed for all lanes, and each lane takes the branch
+ * its scalar twin would take, merged with select.  The costly branches -- the triangle tests of
+ * a level-0 cell, the re-entry search after a descent (fix_stale_axis) -- run only when some
+ * lane takes them.  Every lane performs the scalar operations in the scalar order, so a lane's
+ * hit is the scalar hit to the bit (ties between triangles of neighbouring cells included: the
+ * cells are tested in the scalar order).
+ *
+ * Integers that index buffers or are shifted by the level are lv (long8): the same width as
+ * the masks double8 comparisons produce, so no mask ever needs widening. */
+
+#define STALE_NONE8 0
+#define STALE_X8 1
+#define STALE_Y8 2
+
+/* Per-lane setup_ray: everything the walk reads about each lane's ray. */
+typedef struct rayp {
+    v3p o, d;
+    dv inv_dx, inv_dy, tmin, tmax, t0, t1, margin, tie_tol;
+    lv sx, sy, ci, cj;
+    lv kx, ky, kz;      /* the watertight test's axis permutation */
+    dv shx, shy, shz;
+} rayp;
+
+typedef struct candp { dv t; lv ci, cj, tri; } candp;
+
+lv gather_i(__global const int *p, lv idx, lv mask)
+{
+    lv k = select((lv)(0), idx, mask);
+    return convert_long8((int8)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5], p[k.s6],
+                                p[k.s7]));
+}
+
+dv to_d(lv v) { return convert_double8(v); }
+
+/* Component k (0, 1, 2 per lane) of (a0, a1, a2). */
+dv pick3(dv a0, dv a1, dv a2, lv k) { return select(select(a0, a1, k == 1), a2, k == 2); }
+
+dv xcross8(const world *w, const rayp *r, lv X) { return (to_d(X) * w->cell - r->o.x) * r->inv_dx; }
+dv ycross8(const world *w, const rayp *r, lv Y) { return (to_d(Y) * w->cell - r->o.y) * r->inv_dy; }
+
+/* cell_of per lane; the two correction loops run while some lane still moves. */
+lv cell_of8(const world *w, dv v)
+{
+    dv g = v / w->cell;
+    lv i = select(select((lv)(w->cells - 1), convert_long8_rtz(g), g < (dv)(w->cells)), (lv)(0),
+                  !(g > 0));
+    lv m = (i > 0) & (to_d(i) * w->cell > v);
+    while (any(m)) {
+        i = select(i, i - 1, m);
+        m &= (i > 0) & (to_d(i) * w->cell > v);
+    }
+    m = (i < w->cells - 1) & (to_d(i + 1) * w->cell <= v);
+    while (any(m)) {
+        i = select(i, i + 1, m);
+        m &= (i < w->cells - 1) & (to_d(i + 1) * w->cell <= v);
+    }
+    return i;
+}
+
+/* clip_slab per lane: narrows [*t0, *t1]; the lanes whose interval stays non-empty. */
+lv clip_slab8(dv o, dv d, double lo, double hi, dv *t0, dv *t1)
+{
+    lv flat = d == 0;
+    dv ta = (lo - o) / d, tb = (hi - o) / d;
+    lv swap = ta > tb;
+    dv a = select(ta, tb, swap), b = select(tb, ta, swap);
+    dv n0 = select(*t0, a, a > *t0), n1 = select(*t1, b, b < *t1);
+    *t0 = select(n0, *t0, flat);
+    *t1 = select(n1, *t1, flat);
+    return select(n0 <= n1, (o >= lo) & (o <= hi), flat);
+}
+
+dv safe_inverse8(dv v)
+{
+    dv inv = 1.0 / v;
+    return select(inv, copysign((dv)(DBL_MAX), v), isinf(inv));
+}
+
+/* setup_ray per lane: the lanes of `mask` whose ray can meet the height field. */
+lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
+{
+    mask &= isfinite(o.x) & isfinite(o.y) & isfinite(o.z) & isfinite(d.x) & isfinite(d.y) &
+            isfinite(d.z) & ~((d.x == 0) & (d.y == 0) & (d.z == 0)) & (tmin < tmax);
+    r->o = o;
+    r->d = d;
+    r->tmin = tmin;
+    r->tmax = tmax;
+
+    const double top = (double)w->cells * w->cell;
+    const double hmin = w->P[TFP_HMIN], hmax = w->P[TFP_HMAX];
+    const dv zpad = 1e-9 * (fabs(hmin) + fabs(hmax) + fabs(o.z) + (hmax - hmin)) + DBL_MIN;
+    dv t0 = tmin, t1 = tmax;
+    mask &= clip_slab8(o.x, d.x, 0, top, &t0, &t1);
+    mask &= clip_slab8(o.y, d.y, 0, top, &t0, &t1);
+    dv zlo = hmin - zpad, zhi = hmax + zpad;
+    {
+        /* clip_slab8 with per-lane bounds (the z slab's padding depends on o.z) */
+        lv flat = d.z == 0;
+        dv ta = (zlo - o.z) / d.z, tb = (zhi - o.z) / d.z;
+        lv swap = ta > tb;
+        dv a = select(ta, tb, swap), b = select(tb, ta, swap);
+        dv n0 = select(t0, a, a > t0), n1 = select(t1, b, b < t1);
+        t0 = select(n0, t0, flat);
+        t1 = select(n1, t1, flat);
+        mask &= select(n0 <= n1, (o.z >= zlo) & (o.z <= zhi), flat);
+    }
+    mask &= isfinite(t0) & isfinite(t1);
+    r->t0 = t0;
+    r->t1 = t1;
+
+    r->sx = select(select((lv)(0), (lv)(-1), d.x < 0), (lv)(1), d.x > 0);
+    r->sy = select(select((lv)(0), (lv)(-1), d.y < 0), (lv)(1), d.y > 0);
+    r->inv_dx = select((dv)(0), safe_inverse8(d.x), r->sx != 0);
+    r->inv_dy = select((dv)(0), safe_inverse8(d.y), r->sy != 0);
+    /* idle lanes get harmless positions so the correction loops stay short */
+    r->ci = cell_of8(w, select((dv)(0), o.x + t0 * d.x, mask));
+    r->cj = cell_of8(w, select((dv)(0), o.y + t0 * d.y, mask));
+
+    dv tie = 0;
+    tie = select(tie, tie + (top + fabs(o.x)) * fabs(r->inv_dx), r->sx != 0);
+    tie = select(tie, tie + (top + fabs(o.y)) * fabs(r->inv_dy), r->sy != 0);
+    tie *= 1e-12;
+    dv tabs = select(fabs(t1), fabs(t0), fabs(t0) > fabs(t1));
+    const double hscale = fabs(hmin) > fabs(hmax) ? fabs(hmin) : fabs(hmax);
+    const double slope = (hmax - hmin) / w->cell;
+    dv margin = 1e-9 * (fabs(o.z) + fabs(d.z) * tabs + hscale + (hmax - hmin)) +
+                2 * tie * (fabs(d.z) + 2 * slope * (fabs(d.x) + fabs(d.y)));
+    r->tie_tol = select((dv)(INFINITY), tie, isfinite(tie));
+    r->margin = select((dv)(INFINITY), margin, isfinite(margin));
+
+    dv ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
+    r->kz = select(select((lv)(2), (lv)(1), ay >= az), select((lv)(2), (lv)(0), ax >= az),
+                   ax >= ay);
+    r->kx = (r->kz + 1) % 3;
+    r->ky = (r->kx + 1) % 3;
+    dv dkz = pick3(d.x, d.y, d.z, r->kz);
+    r->shx = pick3(d.x, d.y, d.z, r->kx) / dkz;
+    r->shy = pick3(d.x, d.y, d.z, r->ky) / dkz;
+    r->shz = 1.0 / dkz;
+    return mask;
+}
+
+typedef struct shearedp { dv x, y, z; } shearedp;
+
+shearedp shear_vertex8(const world *w, const rayp *r, lv i, lv j, lv mask)
+{
+    dv hz = gather_f(w->h, j * w->n + i, mask);
+    dv a0 = to_d(i) * w->cell - r->o.x, a1 = to_d(j) * w->cell - r->o.y, a2 = hz - r->o.z;
+    dv az = pick3(a0, a1, a2, r->kz);
+    shearedp s = {pick3(a0, a1, a2, r->kx) - r->shx * az, pick3(a0, a1, a2, r->ky) - r->shy * az,
+                  r->shz * az};
+    return s;
+}
+
+dv edge_fn8(shearedp p, shearedp q)
+{
+    dv a = p.x * q.y, b = p.y * q.x, e = a - b;
+    return select(e, (dv)(0), fabs(e) <= 8 * DBL_EPSILON * (fabs(a) + fabs(b)));
+}
+
+void try_triangle8(const rayp *r, dv u, dv v, dv w, dv za, dv zb, dv zc, lv ci, lv cj, int tri,
+                   lv mask, candp *best)
+{
+    lv mixed = ((u < 0) | (v < 0) | (w < 0)) & ((u > 0) | (v > 0) | (w > 0));
+    dv det = u + v + w;
+    dv t = (u * za + v * zb + w * zc) / det;
+    lv take = mask & ~mixed & (det != 0) & (t > r->tmin) & (t < r->tmax) & (t < best->t);
+    best->t = select(best->t, t, take);
+    best->ci = select(best->ci, ci, take);
+    best->cj = select(best->cj, cj, take);
+    best->tri = select(best->tri, (lv)(tri), take);
+}
+
+void test_triangles8(const world *w, const rayp *r, lv ci, lv cj, lv mask, candp *best)
+{
+    shearedp a = shear_vertex8(w, r, ci, cj, mask), b = shear_vertex8(w, r, ci + 1, cj, mask);
+    shearedp c = shear_vertex8(w, r, ci + 1, cj + 1, mask), d = shear_vertex8(w, r, ci, cj + 1, mask);
+    dv e_ab = edge_fn8(a, b), e_bc = edge_fn8(b, c), e_ca = edge_fn8(c, a);
+    dv e_cd = edge_fn8(c, d), e_da = edge_fn8(d, a);
+    try_triangle8(r, e_bc, e_ca, e_ab, a.z, b.z, c.z, ci, cj, 0, mask, best);
+    try_triangle8(r, e_cd, e_da, -e_ca, a.z, c.z, d.z, ci, cj, 1, mask, best);
+}
+
+void test_if_inside8(const world *w, const rayp *r, lv ci, lv cj, lv mask, candp *best)
+{
+    mask &= (ci >= 0) & (ci < w->cells) & (cj >= 0) & (cj < w->cells);
+    if (any(mask))
+        test_triangles8(w, r, ci, cj, mask, best);
+}
+
+/* test_cell for the lanes of mask: the lanes that found a hit (best holds it). */
+lv test_cell8(const world *w, const rayp *r, lv ci, lv cj, dv tx, dv ty, lv mask, candp *best)
+{
+    test_triangles8(w, r, ci, cj, mask, best);
+    lv diag = mask & (r->sx != 0) & (r->sy != 0);
+    if (any(diag)) {
+        lv tie_out = diag & (fabs(tx - ty) <= r->tie_tol);
+        if (any(tie_out)) {
+            test_if_inside8(w, r, ci + r->sx, cj, tie_out, best);
+            test_if_inside8(w, r, ci, cj + r->sy, tie_out, best);
+        }
+        dv tx_in = xcross8(w, r, ci + select((lv)(0), (lv)(1), r->sx < 0));
+        dv ty_in = ycross8(w, r, cj + select((lv)(0), (lv)(1), r->sy < 0));
+        lv tie_in = diag & (fabs(tx_in - ty_in) <= r->tie_tol);
+        if (any(tie_in)) {
+            test_if_inside8(w, r, ci - r->sx, cj, tie_in, best);
+            test_if_inside8(w, r, ci, cj - r->sy, tie_in, best);
+        }
+    }
+    return mask & (best->t < INFINITY);
+}
+
+/* entered / entry_t of one axis per lane: o, inv, s are that axis's origin, inverse direction
+ * and step sign per lane. */
+lv entered8(const world *w, dv o, dv inv, lv s, lv j, dv t_event, lv strict)
+{
+    dv t = (to_d(j + select((lv)(0), (lv)(1), s < 0)) * w->cell - o) * inv;
+    return select(t <= t_event, t < t_event, strict);
+}
+
+/* fix_stale_axis for the lanes of mask; axis per lane (0 x, 1 y), strict as the walk asks. */
+lv fix_stale8(const world *w, const rayp *r, lv axis, lv stale, lv level, dv t_event, lv strict,
+              lv mask)
+{
+    lv y = axis == 1;
+    lv s = select(r->sx, r->sy, y);
+    dv o = select(r->o.x, r->o.y, y), dd = select(r->d.x, r->d.y, y);
+    dv inv = select(r->inv_dx, r->inv_dy, y);
+    lv lo = (stale >> level) << level, hi = lo + ((lv)(1) << level) - 1;
+    dv g = (o + t_event * dd) / w->cell;
+    lv j = select(lo, select(hi, convert_long8_rtz(g), g < to_d(hi)), g > to_d(lo));
+    lv up = s > 0;
+    /* s > 0: no lower than stale; back off while not entered; then on while the next is.
+     * s < 0: the mirror image. */
+    j = select(j, stale, mask & select(j > stale, j < stale, up));
+    lv back = select((lv)(1), (lv)(-1), up);
+    lv m = mask & select(j < stale, j > stale, up);
+    m &= ~entered8(w, o, inv, s, j, t_event, strict);
+    while (any(m)) {
+        j = select(j, j + back, m);
+        m &= select(j < stale, j > stale, up);
+        m &= ~entered8(w, o, inv, s, j, t_event, strict);
+    }
+    m = mask & select(j > lo, j < hi, up);
+    m &= entered8(w, o, inv, s, j - back, t_event, strict);
+    while (any(m)) {
+        j = select(j, j - back, m);
+        m &= select(j > lo, j < hi, up);
+        m &= entered8(w, o, inv, s, j - back, t_event, strict);
+    }
+    return j;
+}
+
+lv one_if(lv m) { return -m; } /* a vector comparison's -1 as C's 1 */
+
+/* walk_hier per lane: the lanes of mask whose ray hits (best holds the hit). */
+lv walk_hier8(const world *w, const rayp *r, lv mask, candp *best)
+{
+    const int cells = w->cells, top = w->levels - 1;
+    __global const int *offsets = w->I + TFI_LEVEL_OFFSET;
+    const dv oz = r->o.z, dz = r->d.z, t1 = r->t1;
+    lv ci = r->ci, cj = r->cj;
+    lv stale = (lv)(STALE_NONE8);
+    dv t_cur = r->t0, t_event = r->t0;
+    lv level = (lv)(top);
+    if (top > 0) {
+        const dv z0 = oz + t_cur * dz;
+        lv i1 = (lv)(offsets[1]) + (cj >> 1) * (cells >> 1) + (ci >> 1);
+        dv hi = gather_f(w->mx, i1, mask), lo = gather_f(w->mn, i1, mask);
+        level = select(level, (lv)(0), (z0 <= hi + r->margin) & (z0 >= lo - r->margin));
+    }
+    lv active = mask, found = (lv)(0);
+    const lv step_x = one_if(r->sx > 0), step_y = one_if(r->sy > 0);
+    while (any(active)) {
+        const lv bi = ci >> level, bj = cj >> level;
+        dv tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
+        dv ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
+        lv x_first = tx <= ty;
+        dv tc = select(ty, tx, x_first);
+        dv t_out = select(t1, tc, tc < t1);
+        t_out = select(t_out, t_cur, t_out < t_cur);
+        lv idx = gather_i(offsets, level, active) + bj * ((lv)(cells) >> level) + bi;
+        dv hi = gather_f(w->mx, idx, active), lo = gather_f(w->mn, idx, active);
+        dv z_in = oz + t_cur * dz, z_out = oz + t_out * dz;
+        dv zlo = select(z_out, z_in, z_in < z_out), zhi = select(z_in, z_out, z_in < z_out);
+        lv culled = (zlo > hi + r->margin) | (zhi < lo - r->margin);
+        lv keep = active & ~culled;
+
+        lv at_cell = keep & (level == 0);
+        if (any(at_cell)) {
+            lv hit = test_cell8(w, r, ci, cj, tx, ty, at_cell, best);
+            found |= hit;
+            active &= ~hit;
+        }
+        lv down = keep & (level > 0);
+        if (any(down)) {
+            lv fix_y = down & (stale == STALE_Y8), fix_x = down & (stale == STALE_X8);
+            if (any(fix_y | fix_x)) {
+                lv j = fix_stale8(w, r, one_if(fix_y), select(ci, cj, fix_y), level, t_event,
+                                  fix_y, fix_y | fix_x);
+                cj = select(cj, j, fix_y);
+                ci = select(ci, j, fix_x);
+            }
+            stale = select(stale, (lv)(STALE_NONE8), down);
+            level = select(level, level - 1, down);
+        }
+
+        lv adv = active & ~down;
+        lv ends = adv & ~(tc < t1);
+        active &= ~ends;
+        adv &= ~ends;
+        t_cur = select(t_cur, t_out, adv);
+        t_event = select(t_event, tc, adv);
+        lv xs = adv & x_first, ys = adv & ~x_first;
+        lv bx = bi + step_x, by = bj + step_y;
+        ci = select(ci, select((bx << level) - 1, bx << level, r->sx > 0), xs);
+        cj = select(cj, select((by << level) - 1, by << level, r->sy > 0), ys);
+        lv out = (xs & ((ci < 0) | (ci >= cells))) | (ys & ((cj < 0) | (cj >= cells)));
+        active &= ~out;
+        xs &= ~out;
+        ys &= ~out;
+        stale = select(stale, select((lv)(STALE_NONE8), (lv)(STALE_Y8), (level > 0) & (r->sy != 0)),
+                       xs);
+        stale = select(stale, select((lv)(STALE_NONE8), (lv)(STALE_X8), (level > 0) & (r->sx != 0)),
+                       ys);
+        lv boundary = select(by, bx, xs);
+        level = select(level, level + 1, (xs | ys) & (level < top) & ((boundary & 1) == 0));
+    }
+    return found;
+}
+
+void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *hit)
+{
+    lv base = c->cj * w->n + c->ci;
+    dv ha = gather_f(w->h, base, mask), hb = gather_f(w->h, base + 1, mask);
+    dv hd = gather_f(w->h, base + w->n, mask), hc = gather_f(w->h, base + w->n + 1, mask);
+    lv first = c->tri == 0;
+    v3p n = v3p_make(select(-(hc - hd), -(hb - ha), first), select(-(hd - ha), -(hc - hb), first),
+                     (dv)(w->cell));
+    hit->t = c->t;
+    hit->p = v3p_make(r->o.x + c->t * r->d.x, r->o.y + c->t * r->d.y, r->o.z + c->t * r->d.z);
+    dv len = sqrt(v3p_dot(n, n));
+    hit->n = v3p_select(n, v3p_scale(n, 1.0 / len), len > 0);
+    hit->ci = convert_int8(c->ci);
+    hit->cj = convert_int8(c->cj);
+}
 
 /* First hit of each active lane's ray o + t d, t in (tmin, tmax): returns the lanes that hit,
  * with their hits in *hit (lanes that miss or are idle: *hit undefined there). */
 lv trace8(const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask, hitp *hit)
 {
-    lv found = (lv)(0);
-    for (int l = 0; l < TF_LANES; l++) {
-        hit_t h;
-        if (mask[l] && trace(w, v3p_lane(o, l), v3p_lane(d, l), tmin[l], tmax[l], &h)) {
-            found[l] = -1;
-            hit->t[l] = h.t;
-            v3p_set_lane(&hit->p, l, h.p);
-            v3p_set_lane(&hit->n, l, h.n);
-            hit->ci[l] = h.ci;
-            hit->cj[l] = h.cj;
-        }
-    }
+    rayp r;
+    candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
+    mask = setup_ray8(&r, w, o, d, tmin, tmax, mask);
+    lv found = any(mask) ? walk_hier8(w, &r, mask, &best) : (lv)(0);
+    if (any(found))
+        finish_hit8(w, &r, &best, found, hit);
     return found;
 }
 
 /* The active lanes whose ray meets the terrain in (tmin, tmax). */
 lv occluded8(const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
 {
-    lv blocked = (lv)(0);
-    for (int l = 0; l < TF_LANES; l++)
-        if (mask[l] && occluded(w, v3p_lane(o, l), v3p_lane(d, l), tmin[l], tmax[l]))
-            blocked[l] = -1;
-    return blocked;
+    rayp r;
+    candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
+    mask = setup_ray8(&r, w, o, d, tmin, tmax, mask);
+    return any(mask) ? walk_hier8(w, &r, mask, &best) : (lv)(0);
 }

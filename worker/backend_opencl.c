@@ -52,7 +52,7 @@ struct tf_cl_backend {
     cl_command_queue queue;
     cl_program program;
     cl_kernel k_corners, k_pixels;
-    cl_mem P, I, h, mx, mn, perm;
+    cl_mem P, I, h, minmax, perm;
     /* per-render buffers, grown as needed */
     cl_mem corners, corner_shadow, cache, have, out, pixel_shadow;
     size_t corners_cap, corner_shadow_cap, cache_cap, have_cap, out_cap, pixel_shadow_cap;
@@ -437,8 +437,8 @@ static cl_mem upload(tf_cl_backend *b, const void *data, size_t bytes, cl_int *r
                           rc);
 }
 
-/* Upload the parameters, heights, the max/min mipmap (levels concatenated) and the noise
- * permutation.  The grid level offsets go into I[] before I is uploaded. */
+/* Upload the parameters, heights, the max/min mipmap (levels concatenated, each cell's max and
+ * min side by side) and the noise permutation.  The grid level offsets go into I[] before I is uploaded. */
 static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
 {
     const tf_heightfield *hf = b->renderer->hf;
@@ -460,29 +460,28 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
         I[TFI_LEVEL_OFFSET + L] = (int)total;
         total += side * side;
     }
-    float *mx = malloc(total * sizeof *mx), *mn = malloc(total * sizeof *mn);
-    if (!mx || !mn) {
-        free(mx);
-        free(mn);
+    /* (max, min) interleaved: the walk reads both of a cell at once (packet_trace.cl) */
+    float *mm = total <= SIZE_MAX / (2 * sizeof *mm) ? malloc(total * 2 * sizeof *mm) : NULL;
+    if (!mm) {
         snprintf(err, errlen, "OpenCL: out of memory for the max grids");
         return -1;
     }
     for (int L = 0; L < hf->levels; L++) {
-        size_t side = (size_t)(hf->cells >> L);
-        memcpy(mx + I[TFI_LEVEL_OFFSET + L], hf->maxgrid[L], side * side * sizeof *mx);
-        memcpy(mn + I[TFI_LEVEL_OFFSET + L], hf->mingrid[L], side * side * sizeof *mn);
+        size_t side = (size_t)(hf->cells >> L), at = (size_t)I[TFI_LEVEL_OFFSET + L];
+        for (size_t k = 0; k < side * side; k++) {
+            mm[2 * (at + k)] = hf->maxgrid[L][k];
+            mm[2 * (at + k) + 1] = hf->mingrid[L][k];
+        }
     }
-    cl_int rc[6];
+    cl_int rc[5];
     b->P = upload(b, P, sizeof P, &rc[0]);
     b->I = upload(b, I, sizeof I, &rc[1]);
     b->h = upload(b, hf->h, (size_t)hf->n * (size_t)hf->n * sizeof(float), &rc[2]);
-    b->mx = upload(b, mx, total * sizeof *mx, &rc[3]);
-    b->mn = upload(b, mn, total * sizeof *mn, &rc[4]);
+    b->minmax = upload(b, mm, total * 2 * sizeof *mm, &rc[3]);
     b->perm = upload(b, b->renderer->shader.noise.perm, sizeof b->renderer->shader.noise.perm,
-                     &rc[5]);
-    free(mx);
-    free(mn);
-    for (int i = 0; i < 6; i++)
+                     &rc[4]);
+    free(mm);
+    for (int i = 0; i < 5; i++)
         if (rc[i] != CL_SUCCESS) {
             snprintf(err, errlen, "OpenCL: cannot upload the height field (error %d)", rc[i]);
             return -1;
@@ -608,11 +607,10 @@ static cl_int set_common_args(tf_cl_backend *b, cl_kernel k, tf_rect rect)
     rc |= clSetKernelArg(k, 1, sizeof(cl_mem), &b->I);
     rc |= clSetKernelArg(k, 2, sizeof(cl_ulong), &b->jitter_key);
     rc |= clSetKernelArg(k, 3, sizeof(cl_mem), &b->h);
-    rc |= clSetKernelArg(k, 4, sizeof(cl_mem), &b->mx);
-    rc |= clSetKernelArg(k, 5, sizeof(cl_mem), &b->mn);
-    rc |= clSetKernelArg(k, 6, sizeof(cl_mem), &b->perm);
-    rc |= clSetKernelArg(k, 7, sizeof(cl_int), &rect.x);
-    rc |= clSetKernelArg(k, 8, sizeof(cl_int), &rect.y);
+    rc |= clSetKernelArg(k, 4, sizeof(cl_mem), &b->minmax);
+    rc |= clSetKernelArg(k, 5, sizeof(cl_mem), &b->perm);
+    rc |= clSetKernelArg(k, 6, sizeof(cl_int), &rect.x);
+    rc |= clSetKernelArg(k, 7, sizeof(cl_int), &rect.y);
     return rc;
 }
 
@@ -666,10 +664,10 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     cl_int rc;
     cl_int cw = rect.w + 1, ch = rect.h + 1;
     rc = set_common_args(b, b->k_corners, rect);
-    rc |= clSetKernelArg(b->k_corners, 9, sizeof cw, &cw);
-    rc |= clSetKernelArg(b->k_corners, 10, sizeof ch, &ch);
-    rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corners);
-    rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_shadow);
+    rc |= clSetKernelArg(b->k_corners, 8, sizeof cw, &cw);
+    rc |= clSetKernelArg(b->k_corners, 9, sizeof ch, &ch);
+    rc |= clSetKernelArg(b->k_corners, 10, sizeof(cl_mem), &b->corners);
+    rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corner_shadow);
     size_t global = round_up((ncorners + PACKET_LANES - 1) / PACKET_LANES, b->local);
     cl_event corner_ev = NULL, pixel_ev[1] = {NULL};
     if (rc == CL_SUCCESS)
@@ -679,16 +677,16 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     for (size_t first = 0; rc == CL_SUCCESS && first < npixels; first += batch) {
         cl_int f = (cl_int)first, count = (cl_int)(npixels - first < batch ? npixels - first : batch);
         rc = set_common_args(b, b->k_pixels, rect);
-        rc |= clSetKernelArg(b->k_pixels, 9, sizeof rw, &rw);
-        rc |= clSetKernelArg(b->k_pixels, 10, sizeof f, &f);
-        rc |= clSetKernelArg(b->k_pixels, 11, sizeof count, &count);
-        rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->corners);
-        rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->cache);
-        rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->have);
+        rc |= clSetKernelArg(b->k_pixels, 8, sizeof rw, &rw);
+        rc |= clSetKernelArg(b->k_pixels, 9, sizeof f, &f);
+        rc |= clSetKernelArg(b->k_pixels, 10, sizeof count, &count);
+        rc |= clSetKernelArg(b->k_pixels, 11, sizeof(cl_mem), &b->corners);
+        rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->cache);
+        rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->have);
         rc |= next_epoch(b);
-        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_uint), &b->epoch);
-        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->out);
-        rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_mem), &b->pixel_shadow);
+        rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_uint), &b->epoch);
+        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->out);
+        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->pixel_shadow);
         global = round_up(((size_t)count + PIXELS_PER_ITEM - 1) / PIXELS_PER_ITEM, b->local);
         /* keep the last batch's event; earlier ones are waited for and accounted here */
         if (pixel_ev[0]) {
@@ -744,7 +742,7 @@ void tf_cl_backend_free(tf_cl_backend *b)
 {
     if (!b)
         return;
-    cl_mem bufs[] = {b->P,      b->I,     b->h,     b->mx,  b->mn,  b->perm,
+    cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm,
                      b->corners, b->corner_shadow, b->cache, b->have, b->out, b->pixel_shadow};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         if (bufs[i])

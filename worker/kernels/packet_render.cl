@@ -31,14 +31,14 @@
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
 
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
-                          __global const float *h, __global const float *mx,
-                          __global const float *mn, __global const ushort *perm, int rx, int ry,
+                          __global const float *h, __global const float2 *mm,
+                          __global const ushort *perm, int rx, int ry,
                           int cw, int ch, __global float *out, __global uint *shadow)
 {
     const int base = (int)get_global_id(0) * TF_LANES, total = cw * ch;
     if (base >= total)
         return;
-    world w = make_world(P, I, h, mx, mn, perm);
+    world w = make_world(P, I, h, mm, perm);
     const long N = I[TFI_LATTICE];
     lv X, Y, mask;
     for (int l = 0; l < TF_LANES; l++) {
@@ -162,8 +162,8 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
  * first + m uses scratch slice m of cache / have ((N+1)^2 samples each).  corners: the output
  * of tf_corners8.  epoch: this launch's mark (host: never 0, never with TF_QUEUED set). */
 __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong jitter_key,
-                         __global const float *h, __global const float *mx,
-                         __global const float *mn, __global const ushort *perm, int rx, int ry,
+                         __global const float *h, __global const float2 *mm,
+                         __global const ushort *perm, int rx, int ry,
                          int rw, int first, int count, __global const float *corners,
                          __global float *cache, __global uint *have, uint epoch,
                          __global float *out, __global uint *shadow)
@@ -172,7 +172,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
     if (m0 >= count)
         return;
     const int np = count - m0 < TF_PIX ? count - m0 : TF_PIX;
-    world w = make_world(P, I, h, mx, mn, perm);
+    world w = make_world(P, I, h, mm, perm);
     const int N = I[TFI_LATTICE], side = N + 1, cw = rw + 1;
     const long LN = N;
     const double threshold = P[TFP_THRESHOLD];

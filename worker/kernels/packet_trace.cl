@@ -34,6 +34,15 @@ lv gather_i(__global const int *p, lv idx, lv mask)
                                 p[k.s7]));
 }
 
+/* The (max, min) pair of grid cell idx per lane: one 64-bit load a lane, one cache line. */
+void gather_minmax(__global const float2 *p, lv idx, lv mask, dv *hi, dv *lo)
+{
+    lv k = select((lv)(0), idx, mask);
+    float16 v = (float16)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5], p[k.s6], p[k.s7]);
+    *hi = convert_double8(v.even);
+    *lo = convert_double8(v.odd);
+}
+
 dv to_d(lv v) { return convert_double8(v); }
 
 /* Component k (0, 1, 2 per lane) of (a0, a1, a2). */
@@ -270,7 +279,8 @@ lv walk_hier8(const world *w, const rayp *r, lv mask, candp *best)
     if (top > 0) {
         const dv z0 = oz + t_cur * dz;
         lv i1 = (lv)(offsets[1]) + (cj >> 1) * (cells >> 1) + (ci >> 1);
-        dv hi = gather_f(w->mx, i1, mask), lo = gather_f(w->mn, i1, mask);
+        dv hi, lo;
+        gather_minmax(w->mm, i1, mask, &hi, &lo);
         level = select(level, (lv)(0), (z0 <= hi + r->margin) & (z0 >= lo - r->margin));
     }
     lv active = mask, found = (lv)(0);
@@ -284,7 +294,8 @@ lv walk_hier8(const world *w, const rayp *r, lv mask, candp *best)
         dv t_out = select(t1, tc, tc < t1);
         t_out = select(t_out, t_cur, t_out < t_cur);
         lv idx = gather_i(offsets, level, active) + bj * ((lv)(cells) >> level) + bi;
-        dv hi = gather_f(w->mx, idx, active), lo = gather_f(w->mn, idx, active);
+        dv hi, lo;
+        gather_minmax(w->mm, idx, active, &hi, &lo);
         dv z_in = oz + t_cur * dz, z_out = oz + t_out * dz;
         dv zlo = select(z_out, z_in, z_in < z_out), zhi = select(z_in, z_out, z_in < z_out);
         lv culled = (zlo > hi + r->margin) | (zhi < lo - r->margin);

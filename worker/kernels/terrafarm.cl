@@ -62,8 +62,8 @@ typedef struct world {
     __global const double *P;
     __global const int *I;
     __global const float *h;      /* n * n heights */
-    __global const float *mx;     /* all max-grid levels, concatenated (I[TFI_LEVEL_OFFSET+L]) */
-    __global const float *mn;     /* min-grid twin */
+    __global const float2 *mm;    /* (max, min) of every cell of every grid level, levels
+                                   * concatenated (level L starts at I[TFI_LEVEL_OFFSET+L]) */
     __global const ushort *perm;  /* texture noise permutation, 512 entries */
     int n, cells, levels;
     double cell;
@@ -445,7 +445,7 @@ int walk_hier(const world *w, const ray_ctx *r, candidate *best)
         const double z0 = oz + t_cur * dz;
         const size_t i1 = (size_t)w->I[TFI_LEVEL_OFFSET + 1] +
                           (size_t)(cj >> 1) * (size_t)(cells >> 1) + (size_t)(ci >> 1);
-        if (z0 <= w->mx[i1] + r->margin && z0 >= w->mn[i1] - r->margin)
+        if (z0 <= w->mm[i1].x + r->margin && z0 >= w->mm[i1].y - r->margin)
             level = 0;
     }
     for (;;) {
@@ -458,7 +458,7 @@ int walk_hier(const world *w, const ray_ctx *r, candidate *best)
             t_out = t_cur;
         size_t idx = (size_t)w->I[TFI_LEVEL_OFFSET + level] +
                      (size_t)bj * (size_t)(cells >> level) + (size_t)bi;
-        if (!culled(oz + t_cur * dz, oz + t_out * dz, w->mx[idx], w->mn[idx], r->margin)) {
+        if (!culled(oz + t_cur * dz, oz + t_out * dz, w->mm[idx].x, w->mm[idx].y, r->margin)) {
             if (level == 0) {
                 if (test_cell(w, r, ci, cj, tx, ty, best))
                     return 1;
@@ -806,15 +806,14 @@ void lattice_sample(const world *w, ulong jitter_key, long X, long Y, float *out
 }
 
 world make_world(__global const double *P, __global const int *I, __global const float *h,
-                 __global const float *mx, __global const float *mn,
+                 __global const float2 *mm,
                  __global const ushort *perm)
 {
     world w;
     w.P = P;
     w.I = I;
     w.h = h;
-    w.mx = mx;
-    w.mn = mn;
+    w.mm = mm;
     w.perm = perm;
     w.n = I[TFI_N];
     w.cells = I[TFI_CELLS];

@@ -9,6 +9,11 @@
  *                       memcmp-identical pixels to the whole-image render.
  *   mixed_backends      an image whose rectangles alternate between the backends (what a render
  *                       with mixed workers assembles) meets the same tolerance.
+ *   other_scenes        mesa (water, eroded terrain) and alps (panorama camera, ridged) at
+ *                       small sizes: the same tolerance.
+ *   On PoCL's CPU device the packet kernels compute every sample with the C operations in the
+ *   C order, so match_c_backend and other_scenes also demand memcmp-identical pixels there (a
+ *   wrong lane mask that touched a few pixels would still pass the tolerance).
  *   bad_device / bad_kernel_dir / bad_rect   one-line errors, no crash.
  * Every test skips (cmocka skip()) with a message when no OpenCL platform exists. */
 #include <stdarg.h>
@@ -133,6 +138,12 @@ static void assert_close_to_c(const tf_pixel *img, const char *what)
     assert_true(alpha_same * 100 >= n * 99);
 }
 
+/* PoCL's CPU device ("pthread-..."): where the kernels must match the C backend to the bit. */
+static int on_pocl_cpu(const tf_cl_backend *b)
+{
+    return strncmp(tf_cl_backend_device(b), "pthread", 7) == 0;
+}
+
 static void match_c_backend(void **state)
 {
     (void)state;
@@ -143,6 +154,8 @@ static void match_c_backend(void **state)
     assert_int_equal(tf_cl_backend_render(fx.cl, (tf_rect){0, 0, W, H}, img, &counts, err,
                                           sizeof err), 0);
     assert_close_to_c(img, "whole image");
+    if (on_pocl_cpu(fx.cl))
+        assert_memory_equal(img, fx.c_img, sizeof img);
     assert_int_equal(counts.pixels, fx.c_counts.pixels);
     assert_int_equal(counts.external_rays, fx.c_counts.external_rays);
     double dp = fabs((double)counts.primary_rays - (double)fx.c_counts.primary_rays);
@@ -206,6 +219,50 @@ static void mixed_backends(void **state)
     assert_close_to_c(mixed, "mixed backends");
 }
 
+/* Render scenes/NAME.scene at w x h with both backends; compare. */
+static void check_scene(const char *name, int w, int h)
+{
+    char err[1024], path[4096];
+    const char *root = getenv("TF_ROOT");
+    snprintf(path, sizeof path, "%s/scenes/%s.scene", root ? root : ".", name);
+    tf_scene *s = tf_scene_load(path, err, sizeof err);
+    assert_non_null(s);
+    tf_scene_set_size(s, w, h);
+    tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
+    assert_non_null(hf);
+    tf_renderer *r = tf_renderer_new(s, hf, err, sizeof err);
+    tf_cl_backend *b = tf_cl_backend_new(s, hf, err, sizeof err);
+    assert_non_null(r);
+    assert_non_null(b);
+    size_t n = (size_t)w * (size_t)h;
+    tf_pixel *c = calloc(n, sizeof *c), *g = calloc(n, sizeof *g);
+    assert_non_null(c);
+    assert_non_null(g);
+    tf_render_rect(r, (tf_rect){0, 0, w, h}, c, NULL);
+    assert_int_equal(tf_cl_backend_render(b, (tf_rect){0, 0, w, h}, g, NULL, err, sizeof err), 0);
+    double p = psnr(c, g, n);
+    size_t spp_same = count_equal_spp(c, g, n);
+    print_message("%s %dx%d: PSNR %.1f dB, spp equal %zu/%zu\n", name, w, h, p, spp_same, n);
+    assert_true(p >= 45.0);
+    assert_true(spp_same * 100 >= n * 99);
+    if (on_pocl_cpu(b))
+        assert_memory_equal(g, c, n * sizeof *c);
+    free(c);
+    free(g);
+    tf_cl_backend_free(b);
+    tf_renderer_free(r);
+    tf_heightfield_free(hf);
+    tf_scene_free(s);
+}
+
+static void other_scenes(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    check_scene("mesa", 96, 54);
+    check_scene("alps", 120, 40);
+}
+
 static void bad_device(void **state)
 {
     (void)state;
@@ -265,7 +322,8 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(match_c_backend), cmocka_unit_test(rect_invariance),
-        cmocka_unit_test(mixed_backends),  cmocka_unit_test(bad_device),
+        cmocka_unit_test(mixed_backends),  cmocka_unit_test(other_scenes),
+        cmocka_unit_test(bad_device),
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
         cmocka_unit_test(bad_rect),
     };

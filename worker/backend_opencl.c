@@ -1,6 +1,7 @@
 /* backend_opencl.c: the OpenCL backend (backend_opencl.h): the C renderer's adaptive
  * antialiasing, tracing and shading as the kernels in worker/kernels (SOURCE_FILES below; see
- * worker/kernels/README.md), run on any OpenCL 1.2 device with cl_khr_fp64 (PoCL on the CPU here, a vendor ICD on a GPU machine).
+ * worker/kernels/README.md), run on any OpenCL 1.2 device with cl_khr_fp64 (PoCL on the CPU
+ * here, a vendor ICD on a GPU machine).
  *
  * Life of a backend (one per worker process, created after fork, so no OpenCL state ever
  * crosses a fork):

@@ -114,45 +114,76 @@ noise_axis8 noise_axis_set8(dv y)
     return a;
 }
 
-/* p[k] per lane, k in 0..511 (the permutation has 512 entries). */
+/* p[k] per lane, k in 0..511 (the permutation has 512 entries); written out lane by lane,
+ * which PoCL turns into straight loads (a lane loop stays a loop through memory). */
 iv perm8(__global const ushort *p, iv k)
 {
-    iv r;
-    for (int l = 0; l < TF_LANES; l++)
-        r[l] = p[k[l] & 511];
-    return r;
+    k &= 511;
+    return convert_int8((ushort8)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5],
+                                  p[k.s6], p[k.s7]));
 }
 
-/* noise_column per lane: the column line slope * (x - X) + intercept. */
-void noise_column8(__global const ushort *p, iv xi, const noise_axis8 *ay, dv *slope,
+/* tf_grad2[g & 15][0] per lane, without a table lookup (a per-lane lookup is a loop through
+ * memory on PoCL).  The table's x column is cos(g * 22.5 deg): magnitude TF_GRAD_MAG[k] with
+ * k = min(g & 7, 8 - (g & 7)), negative for g in 5..11.  The values are the table's constants
+ * (a negation is exact), and the two zeros (g = 4, 12) stay +0 as in the table.  The y column
+ * is sin(g * 22.5 deg) = the x column at g + 12. */
+dv grad_x8(iv g)
+{
+    iv m = g & 7;
+    iv k = select(m, 8 - m, m > 4);
+    iv g15 = g & 15;
+    dv mag = select((dv)(1.0), (dv)(TF_C1), convert_long8(k == 1));
+    mag = select(mag, (dv)(TF_H1), convert_long8(k == 2));
+    mag = select(mag, (dv)(TF_S1), convert_long8(k == 3));
+    mag = select(mag, (dv)(0.0), convert_long8(k == 4));
+    return select(mag, -mag, convert_long8((g15 >= 5) & (g15 <= 11)));
+}
+
+dv grad_y8(iv g) { return grad_x8(g + 12); }
+
+/* noise_column per lane: the column line slope * (x - X) + intercept.  px: p[xi & 255] of
+ * the column (the caller's, as two columns of the same x share it). */
+void noise_column8(__global const ushort *p, iv px, const noise_axis8 *ay, dv *slope,
                    dv *intercept)
 {
-    iv a = perm8(p, xi & 255) + ay->lattice;
-    iv g0 = perm8(p, a) & 15, g1 = perm8(p, a + 1) & 15;
-    dv g0x, g0y, g1x, g1y;
-    for (int l = 0; l < TF_LANES; l++) {
-        g0x[l] = tf_grad2[g0[l]][0];
-        g0y[l] = tf_grad2[g0[l]][1];
-        g1x[l] = tf_grad2[g1[l]][0];
-        g1y[l] = tf_grad2[g1[l]][1];
-    }
+    iv a = px + ay->lattice;
+    iv g0 = perm8(p, a), g1 = perm8(p, a + 1);
+    dv g0x = grad_x8(g0), g0y = grad_y8(g0), g1x = grad_x8(g1), g1y = grad_y8(g1);
     dv e0 = g0y * ay->f0, e1 = g1y * ay->f1;
     *slope = g0x + ay->fade * (g1x - g0x);
     *intercept = e0 + ay->fade * (e1 - e0);
 }
 
-dv noise2_axis8(__global const ushort *p, dv x, const noise_axis8 *ay)
+/* noise2_axis's x side, which depends on x alone: a lookup shared by the noise values at
+ * the same x on two y axes (fbm_with_gradient's value and y-offset sums). */
+typedef struct noise_xaxis8 {
+    lv ok;     /* |x| < TF_NOISE_COORD_LIMIT */
+    dv f, u;   /* fraction and its fade */
+    iv pl, pr; /* p[xi & 255], p[(xi + 1) & 255]: the left and right columns */
+} noise_xaxis8;
+
+noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
 {
-    lv valid = (fabs(x) < TF_NOISE_COORD_LIMIT) & ay->ok;
-    dv fx, ls, li, rs, ri;
-    lv xl = tf_floor_split8(select((dv)(0.0), x, valid), &fx);
-    iv xi = convert_int8(xl & 255); /* noise_column only uses xi & 255 (and xi + 1) */
-    noise_column8(p, xi, ay, &ls, &li);
-    noise_column8(p, xi + 1, ay, &rs, &ri);
-    dv u = tf_fade8(fx);
-    dv l = ls * fx + li;
-    dv r = rs * (fx - 1.0) + ri;
-    return select((dv)(0.0), (l + u * (r - l)) * TF_NOISE2_SCALE, valid);
+    noise_xaxis8 a;
+    a.ok = fabs(x) < TF_NOISE_COORD_LIMIT;
+    lv xl = tf_floor_split8(select((dv)(0.0), x, a.ok), &a.f);
+    iv xi = convert_int8(xl & 255);
+    a.pl = perm8(p, xi);
+    a.pr = perm8(p, (xi + 1) & 255);
+    a.u = tf_fade8(a.f);
+    return a;
+}
+
+/* noise2_axis per lane, from its two axes. */
+dv noise2_axes8(__global const ushort *p, const noise_xaxis8 *ax, const noise_axis8 *ay)
+{
+    dv ls, li, rs, ri;
+    noise_column8(p, ax->pl, ay, &ls, &li);
+    noise_column8(p, ax->pr, ay, &rs, &ri);
+    dv l = ls * ax->f + li;
+    dv r = rs * (ax->f - 1.0) + ri;
+    return select((dv)(0.0), (l + ax->u * (r - l)) * TF_NOISE2_SCALE, ax->ok & ay->ok);
 }
 
 /* tf_fbm2 per lane, for an octave count shared by all lanes (the snow line's constant). */
@@ -171,7 +202,8 @@ dv tf_fbm2_8(__global const ushort *p, __global const double *amp, dv x, dv y, d
         if (remainder > 0.0 && i == whole)
             a *= remainder;
         noise_axis8 ay = noise_axis_set8(y);
-        result += a * noise2_axis8(p, x, &ay);
+        noise_xaxis8 ax = noise_xaxis_set8(p, x);
+        result += a * noise2_axes8(p, &ax, &ay);
         x *= 2.0;
         y *= 2.0;
     }
@@ -203,9 +235,10 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
         dv a = (dv)(amp[i]);
         a = select(a, a * remainder, partial & convert_long8(whole == i));
         noise_axis8 ay = noise_axis_set8(y0), ay1 = noise_axis_set8(y1);
-        f = select(f, f + a * noise2_axis8(w->perm, x0, &ay), in);
-        fx = select(fx, fx + a * noise2_axis8(w->perm, x1, &ay), in);
-        fy = select(fy, fy + a * noise2_axis8(w->perm, x0, &ay1), in);
+        noise_xaxis8 ax = noise_xaxis_set8(w->perm, x0), ax1 = noise_xaxis_set8(w->perm, x1);
+        f = select(f, f + a * noise2_axes8(w->perm, &ax, &ay), in);
+        fx = select(fx, fx + a * noise2_axes8(w->perm, &ax1, &ay), in);
+        fy = select(fy, fy + a * noise2_axes8(w->perm, &ax, &ay1), in);
         x0 *= 2.0;
         x1 *= 2.0;
         y0 *= 2.0;

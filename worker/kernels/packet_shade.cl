@@ -32,6 +32,10 @@
 
 /* ---------------------------------------------------------------- small packet helpers */
 
+/* The noise functions run a dozen times per sample and per octave; PoCL leaves them as calls
+ * (their packets passed through memory) unless told. */
+#define TF_INLINE __attribute__((always_inline))
+
 /* v3_norm per lane: lanes of length 0 (or NaN) keep their vector, as in the scalar code. */
 v3p v3p_norm(v3p a)
 {
@@ -100,7 +104,7 @@ lv tf_floor_split8(dv x, dv *fraction)
 
 typedef struct noise_axis8 { iv lattice; lv ok; dv f0, f1, fade; } noise_axis8;
 
-noise_axis8 noise_axis_set8(dv y)
+TF_INLINE noise_axis8 noise_axis_set8(dv y)
 {
     noise_axis8 a;
     dv unused;
@@ -144,8 +148,8 @@ dv grad_y8(iv g) { return grad_x8(g + 12); }
 
 /* noise_column per lane: the column line slope * (x - X) + intercept.  px: p[xi & 255] of
  * the column (the caller's, as two columns of the same x share it). */
-void noise_column8(__global const ushort *p, iv px, const noise_axis8 *ay, dv *slope,
-                   dv *intercept)
+TF_INLINE void noise_column8(__global const ushort *p, iv px, const noise_axis8 *ay, dv *slope,
+                             dv *intercept)
 {
     iv a = px + ay->lattice;
     iv g0 = perm8(p, a), g1 = perm8(p, a + 1);
@@ -163,7 +167,7 @@ typedef struct noise_xaxis8 {
     iv pl, pr; /* p[xi & 255], p[(xi + 1) & 255]: the left and right columns */
 } noise_xaxis8;
 
-noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
+TF_INLINE noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
 {
     noise_xaxis8 a;
     a.ok = fabs(x) < TF_NOISE_COORD_LIMIT;
@@ -176,7 +180,8 @@ noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
 }
 
 /* noise2_axis per lane, from its two axes. */
-dv noise2_axes8(__global const ushort *p, const noise_xaxis8 *ax, const noise_axis8 *ay)
+TF_INLINE dv noise2_axes8(__global const ushort *p, const noise_xaxis8 *ax,
+                           const noise_axis8 *ay)
 {
     dv ls, li, rs, ri;
     noise_column8(p, ax->pl, ay, &ls, &li);

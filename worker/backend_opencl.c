@@ -55,8 +55,9 @@ struct tf_cl_backend {
     cl_kernel k_corners, k_pixels;
     cl_mem P, I, h, minmax, perm;
     /* per-render buffers, grown as needed */
-    cl_mem corners, corner_shadow, cache, have, out, pixel_shadow;
-    size_t corners_cap, corner_shadow_cap, cache_cap, have_cap, out_cap, pixel_shadow_cap;
+    cl_mem corners, corner_shadow, cache, levels, have, out, pixel_shadow;
+    size_t corners_cap, corner_shadow_cap, cache_cap, levels_cap, have_cap, out_cap,
+        pixel_shadow_cap;
     cl_ulong jitter_key;
     cl_uint epoch; /* tf_pixels8's mark for the slots of the launch (packet_render.cl) */
     int lattice;
@@ -636,7 +637,8 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     const size_t ncorners = (size_t)(rect.w + 1) * (size_t)(rect.h + 1);
     const size_t npixels = (size_t)rect.w * (size_t)rect.h;
     const size_t side = (size_t)b->lattice + 1;
-    const size_t per_pixel = side * side * (TF_CL_SAMPLE_FLOATS * sizeof(float) + sizeof(cl_uint));
+    const size_t per_pixel =
+        side * side * (TF_CL_SAMPLE_FLOATS * sizeof(float) + 3 * sizeof(double) + sizeof(cl_uint));
     size_t batch = SCRATCH_BUDGET / per_pixel / PIXELS_PER_ITEM * PIXELS_PER_ITEM;
     if (batch < PIXELS_PER_ITEM)
         batch = PIXELS_PER_ITEM;
@@ -651,6 +653,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
                  ensure(b, &b->corner_shadow, &b->corner_shadow_cap, ncorners * sizeof(cl_uint)) ||
                  ensure(b, &b->cache, &b->cache_cap,
                         batch * side * side * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
+                 ensure(b, &b->levels, &b->levels_cap, batch * side * side * 3 * sizeof(double)) ||
                  ensure_have(b, batch * side * side) ||
                  ensure(b, &b->out, &b->out_cap, npixels * TF_CL_PIXEL_FLOATS * sizeof(float)) ||
                  ensure(b, &b->pixel_shadow, &b->pixel_shadow_cap, npixels * sizeof(cl_uint));
@@ -683,11 +686,12 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
         rc |= clSetKernelArg(b->k_pixels, 10, sizeof count, &count);
         rc |= clSetKernelArg(b->k_pixels, 11, sizeof(cl_mem), &b->corners);
         rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->cache);
-        rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->have);
+        rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->levels);
+        rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->have);
         rc |= next_epoch(b);
-        rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_uint), &b->epoch);
-        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->out);
-        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->pixel_shadow);
+        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_uint), &b->epoch);
+        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->out);
+        rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_mem), &b->pixel_shadow);
         global = round_up(((size_t)count + PIXELS_PER_ITEM - 1) / PIXELS_PER_ITEM, b->local);
         /* keep the last batch's event; earlier ones are waited for and accounted here */
         if (pixel_ev[0]) {
@@ -744,7 +748,8 @@ void tf_cl_backend_free(tf_cl_backend *b)
     if (!b)
         return;
     cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm,
-                     b->corners, b->corner_shadow, b->cache, b->have, b->out, b->pixel_shadow};
+                     b->corners, b->corner_shadow, b->cache, b->levels, b->have, b->out,
+                     b->pixel_shadow};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         if (bufs[i])
             clReleaseMemObject(bufs[i]);

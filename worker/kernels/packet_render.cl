@@ -19,8 +19,10 @@
  * and need whatever happens.  So the samples traced, the sample count and the nearest distance
  * are the scalar ones too.
  *
- * Sample cache: each pixel owns a slice of (N+1)^2 samples of `cache`; `have` marks a slot
- * ready (== epoch) or queued (== epoch | TF_QUEUED).  The host gives every launch a new epoch,
+ * Sample cache: each pixel owns a slice of (N+1)^2 samples of `cache`, with the samples'
+ * display levels (render.c tf_display_level of r, g, b: what the contrast test compares, so
+ * each is computed once per sample, not once per quad that looks at it) in `levels`; `have`
+ * marks a slot ready (== epoch) or queued (== epoch | TF_QUEUED).  The host gives every launch a new epoch,
  * so slices need no clearing between pixels. */
 
 #ifndef TF_PIX
@@ -57,6 +59,35 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
     }
 }
 
+/* render.c's tf_display_level: sqrt of the linear value clamped to [0, 1]; never NaN. */
+double display_level(double v)
+{
+    return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
+}
+
+dv display_level8(dv v)
+{
+    return select(select((dv)(1), sqrt(v), v < 1), (dv)(0), !(v > 0));
+}
+
+/* render.c's display_range over the levels of n samples (n <= 5): the largest per-channel
+ * range.  render.c takes fmin/fmax; levels are never NaN, so comparisons give the same. */
+double display_range(__global const double *const lvl[], int n)
+{
+    double widest = 0;
+    for (int ch = 0; ch < 3; ch++) {
+        double lo = 1, hi = 0;
+        for (int k = 0; k < n; k++) {
+            double v = lvl[k][ch];
+            lo = v < lo ? v : lo;
+            hi = v > hi ? v : hi;
+        }
+        if (hi - lo > widest)
+            widest = hi - lo;
+    }
+    return widest;
+}
+
 typedef struct quad { int i, j, size; } quad;
 
 /* One pixel's place in the adaptive subdivision. */
@@ -66,8 +97,9 @@ typedef struct pixel_state {
     uint rays;
     float zmin;
     double sum_r, sum_g, sum_b, sum_a;
-    __global float *cache; /* (N+1)^2 samples */
-    __global uint *have;   /* (N+1)^2 slot states */
+    __global float *cache;   /* (N+1)^2 samples */
+    __global double *levels; /* (N+1)^2 x 3 display levels */
+    __global uint *have;     /* (N+1)^2 slot states */
 } pixel_state;
 
 typedef struct sample_queue {
@@ -107,6 +139,11 @@ __global const float *slot_of(const pixel_state *ps, int side, int i, int j)
     return ps->cache + ((size_t)j * (size_t)side + (size_t)i) * TF_CL_SAMPLE_FLOATS;
 }
 
+__global const double *levels_of(const pixel_state *ps, int side, int i, int j)
+{
+    return ps->levels + ((size_t)j * (size_t)side + (size_t)i) * 3;
+}
+
 /* render_pixel's loop for pixel p, run until its stack is empty or it needs a sample it does
  * not have; then the corners of the quads further down its stack are queued too. */
 void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample_queue *q)
@@ -117,6 +154,7 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
         if (!want_corners(ps, p, t, side, epoch, q))
             break;
         __global const float *s[5];
+        __global const double *lvl[5];
         s[0] = slot_of(ps, side, t.i, t.j);
         s[1] = slot_of(ps, side, t.i + t.size, t.j);
         s[2] = slot_of(ps, side, t.i, t.j + t.size);
@@ -124,13 +162,18 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
         if (t.size > 1) {
             double ratio = (double)(N / t.size);
             double split_threshold = threshold * ratio * ratio * ratio;
-            if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
+            lvl[0] = levels_of(ps, side, t.i, t.j);
+            lvl[1] = levels_of(ps, side, t.i + t.size, t.j);
+            lvl[2] = levels_of(ps, side, t.i, t.j + t.size);
+            lvl[3] = levels_of(ps, side, t.i + t.size, t.j + t.size);
+            if (display_range(lvl, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
                 int hs = t.size / 2;
                 if (!want(ps, p, (t.j + hs) * side + t.i + hs, epoch, q))
                     break;
                 s[4] = slot_of(ps, side, t.i + hs, t.j + hs);
+                lvl[4] = levels_of(ps, side, t.i + hs, t.j + hs);
                 ps->sp--;
-                if (display_range(s, 5) > split_threshold) {
+                if (display_range(lvl, 5) > split_threshold) {
                     quad *st = ps->stack + ps->sp;
                     st[0].i = t.i + hs, st[0].j = t.j + hs, st[0].size = hs;
                     st[1].i = t.i, st[1].j = t.j + hs, st[1].size = hs;
@@ -159,13 +202,14 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
 }
 
 /* Pixels first .. first+count-1 (row-major in the rw-wide rectangle at (rx, ry)); pixel
- * first + m uses scratch slice m of cache / have ((N+1)^2 samples each).  corners: the output
+ * first + m uses scratch slice m of cache / levels / have ((N+1)^2 samples each).  corners: the output
  * of tf_corners8.  epoch: this launch's mark (host: never 0, never with TF_QUEUED set). */
 __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong jitter_key,
                          __global const float *h, __global const float2 *mm,
                          __global const ushort *perm, int rx, int ry,
                          int rw, int first, int count, __global const float *corners,
-                         __global float *cache, __global uint *have, uint epoch,
+                         __global float *cache, __global double *levels,
+                         __global uint *have, uint epoch,
                          __global float *out, __global uint *shadow)
 {
     const int m0 = (int)get_global_id(0) * TF_PIX;
@@ -184,6 +228,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         s->px = rx + c;
         s->py = ry + row;
         s->cache = cache + (size_t)(m0 + p) * (size_t)side * (size_t)side * TF_CL_SAMPLE_FLOATS;
+        s->levels = levels + (size_t)(m0 + p) * (size_t)side * (size_t)side * 3;
         s->have = have + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         const int slot[4] = {0, N, N * side, N * side + N};
         const size_t from[4] = {(size_t)row * cw + c, (size_t)row * cw + c + 1,
@@ -194,6 +239,8 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
             __global float *dst = s->cache + (size_t)slot[e] * TF_CL_SAMPLE_FLOATS;
             for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)
                 dst[f] = src[f];
+            for (int ch = 0; ch < 3; ch++)
+                s->levels[(size_t)slot[e] * 3 + ch] = display_level(src[ch]);
             s->have[slot[e]] = epoch;
             if (src[4] < s->zmin)
                 s->zmin = src[4];
@@ -231,12 +278,17 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
             float8 smp[5];
             iv rays = (iv)(0);
             lattice_sample8(&w, jitter_key, X, Y, mask, smp, &rays);
+            dv lvl[3];
+            for (int ch = 0; ch < 3; ch++)
+                lvl[ch] = display_level8(convert_double8(smp[ch]));
             for (int l = 0; l < TF_LANES && b + l < q.n; l++) {
                 pixel_state *s = &ps[q.pixel[b + l]];
                 int k = q.slot[b + l];
                 __global float *dst = s->cache + (size_t)k * TF_CL_SAMPLE_FLOATS;
                 for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)
                     dst[f] = smp[f][l];
+                for (int ch = 0; ch < 3; ch++)
+                    s->levels[(size_t)k * 3 + ch] = lvl[ch][l];
                 s->have[k] = epoch;
                 s->spp++;
                 s->rays += (uint)rays[l];

@@ -821,26 +821,3 @@ world make_world(__global const double *P, __global const int *I, __global const
     w.cell = P[TFP_CELL];
     return w;
 }
-
-/* tf_display_level / display_range of render.c: sqrt of the linear value clamped to [0, 1], and the
- * largest per-channel range of those levels over n samples (n <= 5). */
-double display_level(double v)
-{
-    return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
-}
-
-double display_range(__global const float *const s[], int n)
-{
-    double widest = 0;
-    for (int ch = 0; ch < 3; ch++) {
-        double lo = 1, hi = 0;
-        for (int k = 0; k < n; k++) {
-            double v = display_level(s[k][ch]);
-            lo = fmin(lo, v);
-            hi = fmax(hi, v);
-        }
-        if (hi - lo > widest)
-            widest = hi - lo;
-    }
-    return widest;
-}

@@ -19,6 +19,10 @@
 
 #define TF_LANES 8
 
+/* For functions that take or return packets and run often: PoCL leaves such functions as
+ * calls with their packets passed through memory unless told to inline them. */
+#define TF_INLINE __attribute__((always_inline))
+
 typedef double8 dv; /* a double per lane */
 typedef long8 lv;   /* a 64-bit integer or mask per lane */
 typedef int8 iv;    /* a 32-bit integer per lane */

@@ -266,80 +266,112 @@ lv fix_stale8(const world *w, const rayp *r, lv axis, lv stale, lv level, dv t_e
 
 lv one_if(lv m) { return -m; } /* a vector comparison's -1 as C's 1 */
 
-/* walk_hier per lane: the lanes of mask whose ray hits (best holds the hit). */
-lv walk_hier8(const world *w, const rayp *r, lv mask, candp *best)
+/* Where each lane's walk stands (walk_hier's locals). */
+typedef struct walkp {
+    lv ci, cj, level, stale;
+    dv t_cur, t_event;
+} walkp;
+
+/* walk_hier's start, for the lanes of mask (the other lanes of *s are kept). */
+TF_INLINE void walk_start8(const world *w, const rayp *r, lv mask, walkp *s)
 {
     const int cells = w->cells, top = w->levels - 1;
-    __global const int *offsets = w->I + TFI_LEVEL_OFFSET;
-    const dv oz = r->o.z, dz = r->d.z, t1 = r->t1;
-    lv ci = r->ci, cj = r->cj;
-    lv stale = (lv)(STALE_NONE8);
-    dv t_cur = r->t0, t_event = r->t0;
     lv level = (lv)(top);
+    /* trace.c (b19dfb3): a ray starting at or under the surface of its level-1 block (shadow
+     * rays, valley cameras) starts at level 0 */
     if (top > 0) {
-        const dv z0 = oz + t_cur * dz;
-        lv i1 = (lv)(offsets[1]) + (cj >> 1) * (cells >> 1) + (ci >> 1);
+        const dv z0 = r->o.z + r->t0 * r->d.z;
+        lv i1 = (lv)(w->I[TFI_LEVEL_OFFSET + 1]) + (r->cj >> 1) * (cells >> 1) + (r->ci >> 1);
         dv hi, lo;
         gather_minmax(w->mm, i1, mask, &hi, &lo);
         level = select(level, (lv)(0), (z0 <= hi + r->margin) & (z0 >= lo - r->margin));
     }
-    lv active = mask, found = (lv)(0);
+    s->ci = select(s->ci, r->ci, mask);
+    s->cj = select(s->cj, r->cj, mask);
+    s->level = select(s->level, level, mask);
+    s->stale = select(s->stale, (lv)(STALE_NONE8), mask);
+    s->t_cur = select(s->t_cur, r->t0, mask);
+    s->t_event = select(s->t_event, r->t0, mask);
+}
+
+/* One step of walk_hier for the lanes of `active`: *hit gets the lanes that found their hit
+ * (best holds it), *missed the lanes whose ray left the grid or its interval. */
+TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, candp *best, lv *hit,
+                lv *missed)
+{
+    const int cells = w->cells, top = w->levels - 1;
+    __global const int *offsets = w->I + TFI_LEVEL_OFFSET;
+    const dv oz = r->o.z, dz = r->d.z, t1 = r->t1;
     const lv step_x = one_if(r->sx > 0), step_y = one_if(r->sy > 0);
+    lv ci = s->ci, cj = s->cj, level = s->level, stale = s->stale;
+    const lv bi = ci >> level, bj = cj >> level;
+    dv tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
+    dv ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
+    lv x_first = tx <= ty;
+    dv tc = select(ty, tx, x_first);
+    dv t_out = select(t1, tc, tc < t1);
+    t_out = select(t_out, s->t_cur, t_out < s->t_cur);
+    lv idx = gather_i(offsets, level, active) + bj * ((lv)(cells) >> level) + bi;
+    dv hi, lo;
+    gather_minmax(w->mm, idx, active, &hi, &lo);
+    dv z_in = oz + s->t_cur * dz, z_out = oz + t_out * dz;
+    dv zlo = select(z_out, z_in, z_in < z_out), zhi = select(z_in, z_out, z_in < z_out);
+    lv culled = (zlo > hi + r->margin) | (zhi < lo - r->margin);
+    lv keep = active & ~culled;
+
+    *hit = (lv)(0);
+    lv at_cell = keep & (level == 0);
+    if (any(at_cell)) {
+        *hit = test_cell8(w, r, ci, cj, tx, ty, at_cell, best);
+        active &= ~*hit;
+    }
+    lv down = keep & (level > 0);
+    lv fix_y = down & (stale == STALE_Y8), fix_x = down & (stale == STALE_X8);
+    if (any(fix_y | fix_x)) {
+        lv j = fix_stale8(w, r, one_if(fix_y), select(ci, cj, fix_y), level, s->t_event, fix_y,
+                          fix_y | fix_x);
+        cj = select(cj, j, fix_y);
+        ci = select(ci, j, fix_x);
+    }
+    stale = select(stale, (lv)(STALE_NONE8), down);
+    level = select(level, level - 1, down);
+
+    lv adv = active & ~down;
+    lv ends = adv & ~(tc < t1);
+    adv &= ~ends;
+    s->t_cur = select(s->t_cur, t_out, adv);
+    s->t_event = select(s->t_event, tc, adv);
+    lv xs = adv & x_first, ys = adv & ~x_first;
+    lv bx = bi + step_x, by = bj + step_y;
+    ci = select(ci, select((bx << level) - 1, bx << level, r->sx > 0), xs);
+    cj = select(cj, select((by << level) - 1, by << level, r->sy > 0), ys);
+    lv out = (xs & ((ci < 0) | (ci >= cells))) | (ys & ((cj < 0) | (cj >= cells)));
+    xs &= ~out;
+    ys &= ~out;
+    stale = select(stale, select((lv)(STALE_NONE8), (lv)(STALE_Y8), (level > 0) & (r->sy != 0)),
+                   xs);
+    stale = select(stale, select((lv)(STALE_NONE8), (lv)(STALE_X8), (level > 0) & (r->sx != 0)),
+                   ys);
+    lv boundary = select(by, bx, xs);
+    level = select(level, level + 1, (xs | ys) & (level < top) & ((boundary & 1) == 0));
+    *missed = ends | out;
+    s->ci = ci;
+    s->cj = cj;
+    s->level = level;
+    s->stale = stale;
+}
+
+/* walk_hier per lane: the lanes of mask whose ray hits (best holds the hit). */
+lv walk_hier8(const world *w, const rayp *r, lv mask, candp *best)
+{
+    walkp s;
+    walk_start8(w, r, mask, &s);
+    lv active = mask, found = (lv)(0);
     while (any(active)) {
-        const lv bi = ci >> level, bj = cj >> level;
-        dv tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
-        dv ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
-        lv x_first = tx <= ty;
-        dv tc = select(ty, tx, x_first);
-        dv t_out = select(t1, tc, tc < t1);
-        t_out = select(t_out, t_cur, t_out < t_cur);
-        lv idx = gather_i(offsets, level, active) + bj * ((lv)(cells) >> level) + bi;
-        dv hi, lo;
-        gather_minmax(w->mm, idx, active, &hi, &lo);
-        dv z_in = oz + t_cur * dz, z_out = oz + t_out * dz;
-        dv zlo = select(z_out, z_in, z_in < z_out), zhi = select(z_in, z_out, z_in < z_out);
-        lv culled = (zlo > hi + r->margin) | (zhi < lo - r->margin);
-        lv keep = active & ~culled;
-
-        lv at_cell = keep & (level == 0);
-        if (any(at_cell)) {
-            lv hit = test_cell8(w, r, ci, cj, tx, ty, at_cell, best);
-            found |= hit;
-            active &= ~hit;
-        }
-        lv down = keep & (level > 0);
-        if (any(down)) {
-            lv fix_y = down & (stale == STALE_Y8), fix_x = down & (stale == STALE_X8);
-            if (any(fix_y | fix_x)) {
-                lv j = fix_stale8(w, r, one_if(fix_y), select(ci, cj, fix_y), level, t_event,
-                                  fix_y, fix_y | fix_x);
-                cj = select(cj, j, fix_y);
-                ci = select(ci, j, fix_x);
-            }
-            stale = select(stale, (lv)(STALE_NONE8), down);
-            level = select(level, level - 1, down);
-        }
-
-        lv adv = active & ~down;
-        lv ends = adv & ~(tc < t1);
-        active &= ~ends;
-        adv &= ~ends;
-        t_cur = select(t_cur, t_out, adv);
-        t_event = select(t_event, tc, adv);
-        lv xs = adv & x_first, ys = adv & ~x_first;
-        lv bx = bi + step_x, by = bj + step_y;
-        ci = select(ci, select((bx << level) - 1, bx << level, r->sx > 0), xs);
-        cj = select(cj, select((by << level) - 1, by << level, r->sy > 0), ys);
-        lv out = (xs & ((ci < 0) | (ci >= cells))) | (ys & ((cj < 0) | (cj >= cells)));
-        active &= ~out;
-        xs &= ~out;
-        ys &= ~out;
-        stale = select(stale, select((lv)(STALE_NONE8), (lv)(STALE_Y8), (level > 0) & (r->sy != 0)),
-                       xs);
-        stale = select(stale, select((lv)(STALE_NONE8), (lv)(STALE_X8), (level > 0) & (r->sx != 0)),
-                       ys);
-        lv boundary = select(by, bx, xs);
-        level = select(level, level + 1, (xs | ys) & (level < top) & ((boundary & 1) == 0));
+        lv hit, missed;
+        walk_step8(w, r, &s, active, best, &hit, &missed);
+        found |= hit;
+        active &= ~(hit | missed);
     }
     return found;
 }

@@ -128,10 +128,11 @@ iv perm8(__global const ushort *p, iv k)
 }
 
 /* tf_grad2[g & 15][0] per lane, without a table lookup (a per-lane lookup is a loop through
- * memory on PoCL).  The table's x column is cos(g * 22.5 deg): magnitude TF_GRAD_MAG[k] with
- * k = min(g & 7, 8 - (g & 7)), negative for g in 5..11.  The values are the table's constants
- * (a negation is exact), and the two zeros (g = 4, 12) stay +0 as in the table.  The y column
- * is sin(g * 22.5 deg) = the x column at g + 12. */
+ * memory on PoCL).  The table's x column is cos(g * 22.5 deg): the magnitude is 1, TF_C1,
+ * TF_H1, TF_S1 or 0 for k = min(g & 7, 8 - (g & 7)) = 0..4, the sign negative for g in
+ * 5..11.  The values are the table's constants (a negation is exact), and the two zeros
+ * (g = 4, 12) stay +0 as in the table.  The y column, sin(g * 22.5 deg), is the x column at
+ * g + 12.  All 512 g of the permutation's range checked against the table, bit for bit. */
 dv grad_x8(iv g)
 {
     iv m = g & 7;
@@ -146,49 +147,82 @@ dv grad_x8(iv g)
 
 dv grad_y8(iv g) { return grad_x8(g + 12); }
 
-/* noise_column per lane: the column line slope * (x - X) + intercept.  px: p[xi & 255] of
- * the column (the caller's, as two columns of the same x share it). */
-TF_INLINE void noise_column8(__global const ushort *p, iv px, const noise_axis8 *ay, dv *slope,
-                             dv *intercept)
+/* noise_column per lane, in two steps.  The gradients at the column's two lattice corners
+ * depend only on the column's p[xi & 255] (px) and the y lattice: two noise values whose x and
+ * y fall in the same lattice cells share them (fbm_with_gradient's offset samples mostly do). */
+typedef struct column_grads8 { dv g0x, g0y, g1x, g1y; } column_grads8;
+
+TF_INLINE column_grads8 column_grads8_at(__global const ushort *p, iv px, iv lattice)
 {
-    iv a = px + ay->lattice;
+    iv a = px + lattice;
     iv g0 = perm8(p, a), g1 = perm8(p, a + 1);
-    dv g0x = grad_x8(g0), g0y = grad_y8(g0), g1x = grad_x8(g1), g1y = grad_y8(g1);
-    dv e0 = g0y * ay->f0, e1 = g1y * ay->f1;
-    *slope = g0x + ay->fade * (g1x - g0x);
-    *intercept = e0 + ay->fade * (e1 - e0);
+    column_grads8 g = {grad_x8(g0), grad_y8(g0), grad_x8(g1), grad_y8(g1)};
+    return g;
 }
 
-/* noise2_axis's x side, which depends on x alone: a lookup shared by the noise values at
- * the same x on two y axes (fbm_with_gradient's value and y-offset sums). */
+TF_INLINE column_grads8 column_grads8_select(column_grads8 a, column_grads8 b, lv m)
+{
+    column_grads8 r = {select(a.g0x, b.g0x, m), select(a.g0y, b.g0y, m),
+                       select(a.g1x, b.g1x, m), select(a.g1y, b.g1y, m)};
+    return r;
+}
+
+/* The column line slope * (x - X) + intercept from its gradients and the y axis. */
+typedef struct column_line8 { dv slope, intercept; } column_line8;
+
+TF_INLINE column_line8 column_line8_of(const column_grads8 *g, const noise_axis8 *ay)
+{
+    column_line8 c;
+    dv e0 = g->g0y * ay->f0, e1 = g->g1y * ay->f1;
+    c.slope = g->g0x + ay->fade * (g->g1x - g->g0x);
+    c.intercept = e0 + ay->fade * (e1 - e0);
+    return c;
+}
+
+/* noise2_axis's x side, which depends on x alone. */
 typedef struct noise_xaxis8 {
     lv ok;     /* |x| < TF_NOISE_COORD_LIMIT */
     dv f, u;   /* fraction and its fade */
-    iv pl, pr; /* p[xi & 255], p[(xi + 1) & 255]: the left and right columns */
+    iv xi;     /* the lattice column, & 255 */
+    iv pl, pr; /* p[xi], p[(xi + 1) & 255]: the left and right columns */
 } noise_xaxis8;
 
-TF_INLINE noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
+/* Everything but the permutation loads pl, pr. */
+TF_INLINE noise_xaxis8 noise_xaxis_frac8(dv x)
 {
     noise_xaxis8 a;
     a.ok = fabs(x) < TF_NOISE_COORD_LIMIT;
     lv xl = tf_floor_split8(select((dv)(0.0), x, a.ok), &a.f);
-    iv xi = convert_int8(xl & 255);
-    a.pl = perm8(p, xi);
-    a.pr = perm8(p, (xi + 1) & 255);
+    a.xi = convert_int8(xl & 255);
     a.u = tf_fade8(a.f);
     return a;
+}
+
+TF_INLINE noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
+{
+    noise_xaxis8 a = noise_xaxis_frac8(x);
+    a.pl = perm8(p, a.xi);
+    a.pr = perm8(p, (a.xi + 1) & 255);
+    return a;
+}
+
+/* noise2_axis per lane from the x axis, the two column lines and the y axis's ok. */
+TF_INLINE dv noise2_lines8(const noise_xaxis8 *ax, const column_line8 *left,
+                           const column_line8 *right, lv ok_y)
+{
+    dv l = left->slope * ax->f + left->intercept;
+    dv r = right->slope * (ax->f - 1.0) + right->intercept;
+    return select((dv)(0.0), (l + ax->u * (r - l)) * TF_NOISE2_SCALE, ax->ok & ok_y);
 }
 
 /* noise2_axis per lane, from its two axes. */
 TF_INLINE dv noise2_axes8(__global const ushort *p, const noise_xaxis8 *ax,
                            const noise_axis8 *ay)
 {
-    dv ls, li, rs, ri;
-    noise_column8(p, ax->pl, ay, &ls, &li);
-    noise_column8(p, ax->pr, ay, &rs, &ri);
-    dv l = ls * ax->f + li;
-    dv r = rs * (ax->f - 1.0) + ri;
-    return select((dv)(0.0), (l + ax->u * (r - l)) * TF_NOISE2_SCALE, ax->ok & ay->ok);
+    column_grads8 gl = column_grads8_at(p, ax->pl, ay->lattice);
+    column_grads8 gr = column_grads8_at(p, ax->pr, ay->lattice);
+    column_line8 left = column_line8_of(&gl, ay), right = column_line8_of(&gr, ay);
+    return noise2_lines8(ax, &left, &right, ay->ok);
 }
 
 /* tf_fbm2 per lane, for an octave count shared by all lanes (the snow line's constant). */
@@ -216,12 +250,19 @@ dv tf_fbm2_8(__global const ushort *p, __global const double *amp, dv x, dv y, d
 }
 
 /* fbm_with_gradient per lane, with per-lane octave counts: the loop runs to the largest count
- * over `mask`; a lane adds octave i only while i < its own count. */
+ * over `mask`; a lane adds octave i only while i < its own count.
+ *
+ * Per octave three noise values: (x0, y0), (x1, y0) and (x0, y1), x1 = x0 + eps, y1 = y0 + eps.
+ * Their column gradients are functions of (lattice column, lattice row) alone, so a lane whose
+ * x1 is in x0's column reuses (x0, y0)'s gradients -- and, the y axis being the same, its very
+ * column lines; a lane whose y1 is in y0's row reuses the gradients.  The loads and gradients
+ * of the other lanes are computed only when some lane needs them. */
 dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, dv octaves,
                       double salt, lv mask, dv *gx, dv *gy)
 {
     const double eps = 1e-3;
     __global const double *amp = w->P + amp_table;
+    __global const ushort *p = w->perm;
     dv qx = x / scale + salt, qy = y / scale - salt;
     octaves = select((dv)(1.0), octaves, octaves >= 1.0);
     octaves = select(octaves, (dv)(TF_CL_AMP_TABLE - 1), octaves > TF_CL_AMP_TABLE - 1);
@@ -240,10 +281,43 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
         dv a = (dv)(amp[i]);
         a = select(a, a * remainder, partial & convert_long8(whole == i));
         noise_axis8 ay = noise_axis_set8(y0), ay1 = noise_axis_set8(y1);
-        noise_xaxis8 ax = noise_xaxis_set8(w->perm, x0), ax1 = noise_xaxis_set8(w->perm, x1);
-        f = select(f, f + a * noise2_axes8(w->perm, &ax, &ay), in);
-        fx = select(fx, fx + a * noise2_axes8(w->perm, &ax1, &ay), in);
-        fy = select(fy, fy + a * noise2_axes8(w->perm, &ax, &ay1), in);
+        noise_xaxis8 ax = noise_xaxis_set8(p, x0), ax1 = noise_xaxis_frac8(x1);
+
+        /* (x0, y0) */
+        column_grads8 gl = column_grads8_at(p, ax.pl, ay.lattice);
+        column_grads8 gr = column_grads8_at(p, ax.pr, ay.lattice);
+        column_line8 left = column_line8_of(&gl, &ay), right = column_line8_of(&gr, &ay);
+
+        /* (x1, y0): the lanes whose x1 left x0's column get their own loads and lines */
+        column_line8 left1 = left, right1 = right;
+        lv xmoved = convert_long8(ax1.xi != ax.xi);
+        ax1.pl = ax.pl;
+        ax1.pr = ax.pr;
+        if (any(xmoved)) {
+            iv moved = mask_i(xmoved);
+            ax1.pl = select(ax.pl, perm8(p, ax1.xi), moved);
+            ax1.pr = select(ax.pr, perm8(p, (ax1.xi + 1) & 255), moved);
+            column_grads8 gl1 = column_grads8_at(p, ax1.pl, ay.lattice);
+            column_grads8 gr1 = column_grads8_at(p, ax1.pr, ay.lattice);
+            column_line8 l1 = column_line8_of(&gl1, &ay), r1 = column_line8_of(&gr1, &ay);
+            left1.slope = select(left.slope, l1.slope, xmoved);
+            left1.intercept = select(left.intercept, l1.intercept, xmoved);
+            right1.slope = select(right.slope, r1.slope, xmoved);
+            right1.intercept = select(right.intercept, r1.intercept, xmoved);
+        }
+
+        /* (x0, y1): the lanes whose y1 left y0's row get their own gradients */
+        column_grads8 gly = gl, gry = gr;
+        lv ymoved = convert_long8(ay1.lattice != ay.lattice);
+        if (any(ymoved)) {
+            gly = column_grads8_select(gl, column_grads8_at(p, ax.pl, ay1.lattice), ymoved);
+            gry = column_grads8_select(gr, column_grads8_at(p, ax.pr, ay1.lattice), ymoved);
+        }
+        column_line8 lefty = column_line8_of(&gly, &ay1), righty = column_line8_of(&gry, &ay1);
+
+        f = select(f, f + a * noise2_lines8(&ax, &left, &right, ay.ok), in);
+        fx = select(fx, fx + a * noise2_lines8(&ax1, &left1, &right1, ay.ok), in);
+        fy = select(fy, fy + a * noise2_lines8(&ax, &lefty, &righty, ay1.ok), in);
         x0 *= 2.0;
         x1 *= 2.0;
         y0 *= 2.0;

@@ -41,8 +41,8 @@
 #define SOURCE_FILES                                                                            \
     {"tf_cl_params.h", "terrafarm.cl", "packet.cl", "packet_trace.cl", "packet_shade.cl",       \
      "packet_render.cl"}
-#define PACKET_LANES 8     /* packet.cl TF_LANES: corners per tf_corners8 work-item */
-#define PIXELS_PER_ITEM 16 /* packet_render.cl TF_PIX: pixels per tf_pixels8 work-item */
+#define CORNERS_PER_ITEM 64 /* packet_trace.cl TF_STREAM: corners per tf_corners8 work-item */
+#define PIXELS_PER_ITEM 32 /* packet_render.cl TF_PIX: pixels per tf_pixels8 work-item */
 #define EPOCH_LIMIT 0x7fffffffu /* packet_render.cl: epochs stay below TF_QUEUED */
 #define MAX_SOURCE_BYTES (1 << 20)        /* a kernel file larger than this is not ours */
 #define SCRATCH_BUDGET ((size_t)64 << 20) /* bytes of per-pixel sample caches per batch */
@@ -672,7 +672,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     rc |= clSetKernelArg(b->k_corners, 9, sizeof ch, &ch);
     rc |= clSetKernelArg(b->k_corners, 10, sizeof(cl_mem), &b->corners);
     rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corner_shadow);
-    size_t global = round_up((ncorners + PACKET_LANES - 1) / PACKET_LANES, b->local);
+    size_t global = round_up((ncorners + CORNERS_PER_ITEM - 1) / CORNERS_PER_ITEM, b->local);
     cl_event corner_ev = NULL, pixel_ev[1] = {NULL};
     if (rc == CL_SUCCESS)
         rc = clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, &b->local, 0, NULL,

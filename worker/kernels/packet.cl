@@ -44,6 +44,11 @@ v3p v3p_select(v3p a, v3p b, lv m)
     return v3p_make(select(a.x, b.x, m), select(a.y, b.y, m), select(a.z, b.z, m));
 }
 
+/* Is some lane of mask m set?  OpenCL's any() tests every lane's sign bit; PoCL compiles that
+ * to a chain of extracts and ORs.  Narrowing the lanes to bytes and testing the 64-bit word is
+ * three instructions, and the same answer for masks (every lane 0 or -1). */
+int any_lane(lv m) { return as_ulong(convert_char8(m)) != 0; }
+
 /* Lane l of a packet as a scalar vec3, and back. */
 vec3 v3p_lane(v3p a, int l) { return v3(a.x[l], a.y[l], a.z[l]); }
 void v3p_set_lane(v3p *a, int l, vec3 v)

@@ -1,20 +1,21 @@
-/* packet_render.cl: the two kernels the host runs per rectangle, feeding lattice_sample8 full
- * packets of eight samples.
+/* packet_render.cl: the two kernels the host runs per rectangle, feeding lattice_samples
+ * (packet_shade.cl) batches of up to TF_STREAM samples, traced eight at a time.
  *
- *   tf_corners8  work-item g samples corners 8g .. 8g+7 of the (w+1) x (h+1) pixel-corner
+ *   tf_corners8  work-item g samples corners 64g .. 64g+63 of the (w+1) x (h+1) pixel-corner
  *                lattice points (row-major, external row and column included: the
  *                external-sample rule of render.h).  Neighbouring corners, coherent rays.
  *   tf_pixels8   work-item g runs the adaptive subdivision of render.c's render_pixel for
  *                TF_PIX neighbouring pixels at once.  Each pixel is a small state machine over
  *                its own quad stack (the scalar kernel's, no recursion); whenever a pixel needs a
  *                lattice sample it does not have, the sample is queued and the pixel waits.
- *                The queue is traced eight at a time, and the pixels resume.
+ *                The queue (up to TF_STREAM samples) is sampled as one batch, and the pixels
+ *                resume.
  *
  * Why the pixels give the scalar renderer's bits: a pixel pops its quads in the scalar order and
  * sums their samples in the scalar order; only *when* a sample is traced changes, never its
  * value (a sample is a function of its lattice point alone).  A pixel only ever queues samples
  * the scalar loop would trace: the corners of the quad on top of its stack, the probe centre
- * of that quad once its corners show the contrast that asks for it, and -- to keep the packets
+ * of that quad once its corners show the contrast that asks for it, and -- to keep the batches
  * full -- the corners of the quads further down its stack, which the scalar loop will reach
  * and need whatever happens.  So the samples traced, the sample count and the nearest distance
  * are the scalar ones too.
@@ -22,40 +23,42 @@
  * Sample cache: each pixel owns a slice of (N+1)^2 samples of `cache`, with the samples'
  * display levels (render.c tf_display_level of r, g, b: what the contrast test compares, so
  * each is computed once per sample, not once per quad that looks at it) in `levels`; `have`
- * marks a slot ready (== epoch) or queued (== epoch | TF_QUEUED).  The host gives every launch a new epoch,
- * so slices need no clearing between pixels. */
+ * marks a slot ready (== epoch) or queued (== epoch | TF_QUEUED).  The host gives every
+ * launch a new epoch, so slices need no clearing between pixels. */
 
 #ifndef TF_PIX
 #define TF_PIX 16          /* pixels per work-item */
 #endif
-#define TF_QUEUE 64        /* queued samples per work-item: eight packets */
+#define TF_QUEUE TF_STREAM /* queued samples per work-item: one stream */
 #define TF_QUEUED 0x80000000u
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
 
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
                           __global const float *h, __global const float2 *mm,
-                          __global const ushort *perm, int rx, int ry,
-                          int cw, int ch, __global float *out, __global uint *shadow)
+                          __global const ushort *perm, int rx, int ry, int cw, int ch,
+                          __global float *out, __global uint *shadow)
 {
-    const int base = (int)get_global_id(0) * TF_LANES, total = cw * ch;
+    const int base = (int)get_global_id(0) * TF_STREAM, total = cw * ch;
     if (base >= total)
         return;
     world w = make_world(P, I, h, mm, perm);
     const long N = I[TFI_LATTICE];
-    lv X, Y, mask;
-    for (int l = 0; l < TF_LANES; l++) {
-        int k = base + l < total ? base + l : total - 1;
-        mask[l] = base + l < total ? -1 : 0;
-        X[l] = (long)(rx + k % cw) * N;
-        Y[l] = (long)(ry + k / cw) * N;
+    const int n = total - base < TF_STREAM ? total - base : TF_STREAM;
+    lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
+    for (int e = 0; e < TF_STREAM; e++) {
+        int k = base + (e < n ? e : n - 1);
+        X[e / TF_LANES][e % TF_LANES] = (long)(rx + k % cw) * N;
+        Y[e / TF_LANES][e % TF_LANES] = (long)(ry + k / cw) * N;
     }
-    float8 s[5];
-    iv rays = (iv)(0);
-    lattice_sample8(&w, jitter_key, X, Y, mask, s, &rays);
-    for (int l = 0; l < TF_LANES && base + l < total; l++) {
+    float8 s[TF_STREAM_PACKETS][5];
+    iv rays[TF_STREAM_PACKETS];
+    for (int p = 0; p < TF_STREAM_PACKETS; p++)
+        rays[p] = (iv)(0);
+    lattice_samples(&w, jitter_key, X, Y, n, s, rays);
+    for (int e = 0; e < n; e++) {
         for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
-            out[(size_t)(base + l) * TF_CL_SAMPLE_FLOATS + m] = s[m][l];
-        shadow[base + l] = (uint)rays[l];
+            out[(size_t)(base + e) * TF_CL_SAMPLE_FLOATS + m] = s[e / TF_LANES][m][e % TF_LANES];
+        shadow[base + e] = (uint)rays[e / TF_LANES][e % TF_LANES];
     }
 }
 
@@ -265,35 +268,40 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         if (!active)
             break;
         /* every pixel still active waits on a queued sample, so q.n > 0 here */
-        for (int b = 0; b < q.n; b += TF_LANES) {
-            lv X, Y, mask;
-            for (int l = 0; l < TF_LANES; l++) {
-                int e = b + l < q.n ? b + l : q.n - 1;
-                const pixel_state *s = &ps[q.pixel[e]];
-                int k = q.slot[e];
-                mask[l] = b + l < q.n ? -1 : 0;
-                X[l] = (long)s->px * LN + k % side;
-                Y[l] = (long)s->py * LN + k / side;
-            }
-            float8 smp[5];
-            iv rays = (iv)(0);
-            lattice_sample8(&w, jitter_key, X, Y, mask, smp, &rays);
+        lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
+        for (int e = 0; e < q.n; e++) {
+            const pixel_state *s = &ps[q.pixel[e]];
+            int k = q.slot[e];
+            X[e / TF_LANES][e % TF_LANES] = (long)s->px * LN + k % side;
+            Y[e / TF_LANES][e % TF_LANES] = (long)s->py * LN + k / side;
+        }
+        for (int e = q.n; e < (q.n + TF_LANES - 1) / TF_LANES * TF_LANES; e++) {
+            X[e / TF_LANES][e % TF_LANES] = X[0][0];
+            Y[e / TF_LANES][e % TF_LANES] = Y[0][0];
+        }
+        float8 smp[TF_STREAM_PACKETS][5];
+        iv rays[TF_STREAM_PACKETS];
+        for (int b = 0; b < TF_STREAM_PACKETS; b++)
+            rays[b] = (iv)(0);
+        lattice_samples(&w, jitter_key, X, Y, q.n, smp, rays);
+        for (int b = 0; b * TF_LANES < q.n; b++) {
             dv lvl[3];
             for (int ch = 0; ch < 3; ch++)
-                lvl[ch] = display_level8(convert_double8(smp[ch]));
-            for (int l = 0; l < TF_LANES && b + l < q.n; l++) {
-                pixel_state *s = &ps[q.pixel[b + l]];
-                int k = q.slot[b + l];
+                lvl[ch] = display_level8(convert_double8(smp[b][ch]));
+            for (int l = 0; l < TF_LANES && b * TF_LANES + l < q.n; l++) {
+                int e = b * TF_LANES + l;
+                pixel_state *s = &ps[q.pixel[e]];
+                int k = q.slot[e];
                 __global float *dst = s->cache + (size_t)k * TF_CL_SAMPLE_FLOATS;
                 for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)
-                    dst[f] = smp[f][l];
+                    dst[f] = smp[b][f][l];
                 for (int ch = 0; ch < 3; ch++)
                     s->levels[(size_t)k * 3 + ch] = lvl[ch][l];
                 s->have[k] = epoch;
                 s->spp++;
-                s->rays += (uint)rays[l];
-                if (smp[4][l] < s->zmin)
-                    s->zmin = smp[4][l];
+                s->rays += (uint)rays[b][l];
+                if (smp[b][4][l] < s->zmin)
+                    s->zmin = smp[b][4][l];
             }
         }
     }

@@ -17,7 +17,7 @@
  *
  * How the scalar control flow becomes lanes:
  *   - A branch becomes a lane mask (lv: -1 active, 0 idle): both sides are evaluated and merged
- *     with select().  A side no active lane needs is skipped altogether with `if (any(mask))`
+ *     with select().  A side no active lane needs is skipped altogether with `if (any_lane(mask))`
  *     -- that is where the time is saved: the terrain, water and sky shaders, the bump fBm, the
  *     snow-line fBm and the shadow rays run only for packets in which some lane needs them.
  *   - A loop whose trip count differs per lane (the fBm octaves, which follow each sample's
@@ -298,7 +298,7 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
         lv xmoved = convert_long8(ax1.xi != ax.xi);
         ax1.pl = ax.pl;
         ax1.pr = ax.pr;
-        if (any(xmoved)) {
+        if (any_lane(xmoved)) {
             iv moved = mask_i(xmoved);
             ax1.pl = select(ax.pl, perm8(p, ax1.xi), moved);
             ax1.pr = select(ax.pr, perm8(p, (ax1.xi + 1) & 255), moved);
@@ -314,7 +314,7 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
         /* (x0, y1): the lanes whose y1 left y0's row get their own gradients */
         column_grads8 gly = gl, gry = gr;
         lv ymoved = convert_long8(ay1.lattice != ay.lattice);
-        if (any(ymoved)) {
+        if (any_lane(ymoved)) {
             gly = column_grads8_select(gl, column_grads8_at(p, ax.pl, ay1.lattice), ymoved);
             gry = column_grads8_select(gr, column_grads8_at(p, ax.pr, ay1.lattice), ymoved);
         }
@@ -416,7 +416,7 @@ v3p sky_color8(const world *w, v3p dir)
     v3p c = v3p_lerp_ss(pvec(w, TFP_SKY_HORIZON), pvec(w, TFP_SKY_ZENITH), wt);
     dv cg = v3p_dot(dir, v3p_splat(pvec(w, TFP_SUN_DIR)));
     lv glowing = cg > 0.0;
-    if (any(glowing)) {
+    if (any_lane(glowing)) {
         dv c2 = cg * cg, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16;
         dv c64 = c32 * c32, c256 = c64 * c64 * c64 * c64;
         dv glow = 0.03 * c8 + 0.08 * c64 + 0.25 * c256;
@@ -439,7 +439,7 @@ dv mist_depth8(const world *w, v3p origin, v3p dir, dv len)
     lv thin = x < 1e-5;
     dv mean_density = exp(-k * 0.5 * (z1 + z2));
     lv thick = ~inf & ~thin;
-    if (any(thick))
+    if (any_lane(thick))
         mean_density = select(mean_density, exp(-k * fmin(z1, z2)) * (-expm1(-x) / x), thick);
     dv finite = density * len * mean_density;
     /* infinite lanes */
@@ -468,20 +468,17 @@ v3p mist_apply8(const world *w, v3p c, v3p origin, v3p dir, dv len)
                     sb * c.z + (1 - sb) * mc.z);
 }
 
-/* sunlit for the lanes of `mask`: the lanes that see the sun; each lane that casts a shadow
- * ray counts it in *shadow_rays. */
-lv sunlit8(const world *w, v3p p, v3p ng, lv mask, iv *shadow_rays)
+/* sunlit's first half for the lanes of `mask`: the lanes that cast a shadow ray (sunlit's
+ * occluded call), and where their rays start.  The rays are walked later, with the batch's. */
+lv sunlit_cast8(const world *w, v3p p, v3p ng, lv mask, v3p *start)
 {
     vec3 sun = pvec(w, TFP_SUN_DIR);
     if (sun.z <= -1.0)
         return (lv)(0);
     lv cast = mask & (v3p_dot(ng, v3p_splat(sun)) > 0.0);
-    if (!any(cast))
-        return (lv)(0);
-    v3p start = v3p_add(p, v3p_scale(ng, (dv)(w->P[TFP_SHADOW_LIFT])));
-    *shadow_rays -= mask_i(cast);
-    lv blocked = occluded8(w, start, v3p_splat(sun), (dv)(0.0), (dv)(FAR_AWAY), cast);
-    return cast & ~blocked;
+    if (any_lane(cast))
+        *start = v3p_select(*start, v3p_add(p, v3p_scale(ng, (dv)(w->P[TFP_SHADOW_LIFT]))), cast);
+    return cast;
 }
 
 v3p terrain_albedo8(const world *w, v3p p, v3p n, dv variation, lv mask)
@@ -504,7 +501,7 @@ v3p terrain_albedo8(const world *w, v3p p, v3p n, dv variation, lv mask)
     dv snow_line = (dv)(w->P[TFP_SNOW_LINE]);
     if (w->P[TFP_SNOW_JITTER] > 0) {
         lv snowy = mask & snow_line_matters8(w, p.z);
-        if (any(snowy)) {
+        if (any_lane(snowy)) {
             dv f = tf_fbm2_8(w->perm, w->P + TFP_AMP_H05, p.x / (extent / 12.0) + 37.5,
                              p.y / (extent / 12.0) - 11.25, SNOW_OCTAVES);
             snow_line = select(snow_line, snow_line + w->P[TFP_SNOW_JITTER] * f, snowy);
@@ -520,8 +517,27 @@ v3p terrain_albedo8(const world *w, v3p p, v3p n, dv variation, lv mask)
     return v3p_lerp_ps(c, ALBEDO_SNOW, w_snow);
 }
 
-/* shade_terrain for the lanes of `mask` (the lanes whose ray hit the terrain). */
-v3p shade_terrain8(const world *w, const hitp *hit, lv mask, iv *shadow_rays)
+/* ---------------------------------------------------------------- shading around the shadows
+ *
+ * The shadow ray cuts shade_terrain and shade_water in two.  The first halves (NAME_before8)
+ * do everything up to the sunlit test and say which lanes cast a shadow ray from where; the
+ * shadow rays of the whole batch are then walked as one stream (walk_stream); the second half
+ * (shading_finish8) adds the sun where the ray got through.  Each lane's operations and their
+ * order are shade_terrain's and shade_water's: only the time between the halves changes. */
+
+/* What a terrain or water lane carries across the shadow walk. */
+typedef struct shading8 {
+    v3p albedo;   /* terrain */
+    v3p light;    /* the light before the sun's share */
+    dv sun_gain;  /* the sun's share where lit: cos_sun (terrain), sun.z (water) */
+    v3p refl_sky; /* water: the sky the ripples reflect */
+    dv fresnel;   /* water */
+    v3p start;    /* the shadow ray's origin */
+    lv cast;      /* the lanes that cast a shadow ray */
+} shading8;
+
+/* shade_terrain up to its sunlit call, for the lanes of `mask` (their ray hit the terrain). */
+void terrain_before8(const world *w, const hitp *hit, lv mask, shading8 *sh)
 {
     v3p n = smooth_normal8(w, hit->ci, hit->cj, hit->p);
     v3p nb = n;
@@ -529,7 +545,7 @@ v3p shade_terrain8(const world *w, const hitp *hit, lv mask, iv *shadow_rays)
     dv octaves = visible_octaves8(w, w->P[TFP_BUMP_SCALE], hit->t, BUMP_OCTAVES);
     if (w->I[TFI_TEXTURED] && w->P[TFP_BUMP] > 0) {
         lv bumped = mask & (octaves > 0.0);
-        if (any(bumped)) {
+        if (any_lane(bumped)) {
             dv gx, gy;
             dv var = fbm_with_gradient8(w, hit->p.x, hit->p.y, w->P[TFP_BUMP_SCALE],
                                         TFP_AMP_H08, octaves, 0.0, bumped, &gx, &gy);
@@ -542,21 +558,20 @@ v3p shade_terrain8(const world *w, const hitp *hit, lv mask, iv *shadow_rays)
     v3p albedo = terrain_albedo8(w, hit->p, n, variation, mask);
     dv cos_sun = v3p_dot(nb, v3p_splat(pvec(w, TFP_SUN_DIR)));
     v3p light = v3p_scale(v3p_splat(pvec(w, TFP_SKY_LIGHT)), 0.5 + 0.5 * nb.z);
-    lv lit = sunlit8(w, hit->p, hit->n, mask & (cos_sun > 0.0), shadow_rays);
-    light = v3p_select(light, v3p_add(light, v3p_scale(v3p_splat(pvec(w, TFP_SUN_LIGHT)), cos_sun)),
-                       lit);
-    return v3p_mul(albedo, light);
+    sh->albedo = v3p_select(sh->albedo, albedo, mask);
+    sh->light = v3p_select(sh->light, light, mask);
+    sh->sun_gain = select(sh->sun_gain, cos_sun, mask);
+    sh->cast |= sunlit_cast8(w, hit->p, hit->n, mask & (cos_sun > 0.0), &sh->start);
 }
 
-/* shade_water for the lanes of `mask` (the lanes whose ray reached the sea first). */
-v3p shade_water8(const world *w, v3p p, v3p dir, dv dist, lv mask, iv *shadow_rays)
+/* shade_water up to its sunlit call, for the lanes of `mask` (their ray reached the sea). */
+void water_before8(const world *w, v3p p, v3p dir, dv dist, lv mask, shading8 *sh)
 {
-    const vec3 WATER_BODY = {0.010, 0.028, 0.040};
     v3p n = v3p_splat(v3(0, 0, 1));
     dv octaves = visible_octaves8(w, w->P[TFP_RIPPLE_SCALE], dist, RIPPLE_OCTAVES);
     if (w->I[TFI_TEXTURED] && w->P[TFP_BUMP] > 0) {
         lv rippled = mask & (octaves > 0.0);
-        if (any(rippled)) {
+        if (any_lane(rippled)) {
             dv gx, gy;
             fbm_with_gradient8(w, p.x, p.y, w->P[TFP_RIPPLE_SCALE], TFP_AMP_H05, octaves, 71.0,
                                rippled, &gx, &gy);
@@ -570,61 +585,38 @@ v3p shade_water8(const world *w, v3p p, v3p dir, dv dist, lv mask, iv *shadow_ra
     refl.z = select(refl.z, -refl.z, refl.z < 0.0);
     dv m = 1.0 - cos_i, m2 = m * m;
     dv fresnel = FRESNEL_R0 + (1.0 - FRESNEL_R0) * m2 * m2 * m;
-    v3p light = v3p_splat(pvec(w, TFP_SKY_LIGHT));
     vec3 sun = pvec(w, TFP_SUN_DIR);
-    if (sun.z > 0) {
-        lv lit = sunlit8(w, p, v3p_splat(v3(0, 0, 1)), mask, shadow_rays);
-        light = v3p_select(light, v3p_add(light, v3p_scale(v3p_splat(pvec(w, TFP_SUN_LIGHT)),
-                                                           (dv)(sun.z))),
-                           lit);
-    }
-    v3p body = v3p_mul(v3p_splat(WATER_BODY), light);
-    return v3p_lerp(body, sky_color8(w, v3p_norm(refl)), fresnel);
+    sh->light = v3p_select(sh->light, v3p_splat(pvec(w, TFP_SKY_LIGHT)), mask);
+    sh->sun_gain = select(sh->sun_gain, (dv)(sun.z), mask);
+    sh->refl_sky = v3p_select(sh->refl_sky, sky_color8(w, v3p_norm(refl)), mask);
+    sh->fresnel = select(sh->fresnel, fresnel, mask);
+    if (sun.z > 0)
+        sh->cast |= sunlit_cast8(w, p, v3p_splat(v3(0, 0, 1)), mask, &sh->start);
 }
 
-/* shade_ray per lane: out[0..4] get r, g, b, a and distance of the active lanes. */
-void shade_ray8(const world *w, v3p origin, v3p dir, lv mask, float8 out[5], iv *shadow_rays)
+/* The second halves of shade_terrain (terrain lanes) and shade_water (water lanes): the
+ * colour, the sun added where `lit`. */
+v3p shading_finish8(const world *w, const shading8 *sh, lv terrain, lv water, lv lit)
 {
-    double sea = w->P[TFP_SEA_LEVEL];
-    dv t_water = (dv)(FAR_AWAY);
-    t_water = select(t_water, (sea - origin.z) / dir.z, (dir.z < 0.0) & (origin.z > sea));
-
-    hitp hit;
-    hit.t = (dv)(0.0);
-    hit.p = hit.n = v3p_splat(v3(0, 0, 0));
-    hit.ci = hit.cj = (iv)(0);
-    lv terrain = mask & trace8(w, origin, dir, (dv)(0.0), t_water, mask, &hit);
-    lv water = mask & ~terrain & (t_water < FAR_AWAY);
-    lv sky = mask & ~terrain & ~water;
-
+    const vec3 WATER_BODY = {0.010, 0.028, 0.040};
+    v3p light = v3p_select(sh->light,
+                           v3p_add(sh->light, v3p_scale(v3p_splat(pvec(w, TFP_SUN_LIGHT)),
+                                                        sh->sun_gain)),
+                           lit);
     v3p c = v3p_splat(v3(0, 0, 0));
-    dv dist = (dv)(INFINITY); /* the sky lanes' mist length */
-    if (any(terrain)) {
-        c = v3p_select(c, shade_terrain8(w, &hit, terrain, shadow_rays), terrain);
-        dist = select(dist, hit.t, terrain);
+    if (any_lane(terrain))
+        c = v3p_select(c, v3p_mul(sh->albedo, light), terrain);
+    if (any_lane(water)) {
+        v3p body = v3p_mul(v3p_splat(WATER_BODY), light);
+        c = v3p_select(c, v3p_lerp(body, sh->refl_sky, sh->fresnel), water);
     }
-    if (any(water)) {
-        v3p p = v3p_add(origin, v3p_scale(dir, t_water));
-        c = v3p_select(c, shade_water8(w, p, dir, t_water, water, shadow_rays), water);
-        dist = select(dist, t_water, water);
-    }
-    if (any(sky))
-        c = v3p_select(c, sky_color8(w, dir), sky);
-    c = mist_apply8(w, c, origin, dir, dist);
-    iv sky_i = mask_i(sky);
-    out[0] = convert_float8(c.x);
-    out[1] = convert_float8(c.y);
-    out[2] = convert_float8(c.z);
-    out[3] = select((float8)(1.0f), (float8)(0.0f), sky_i);
-    out[4] = select(convert_float8(dist), (float8)(TF_SKY_DIST), sky_i);
+    return c;
 }
 
 /* ---------------------------------------------------------------- the lattice (render.c) */
 
-/* Samples at lattice points (X, Y) of the active lanes: out[0..4] get r, g, b, a and distance
- * per lane (idle lanes: undefined); *shadow_rays[l] grows by the shadow rays lane l cast. */
-void lattice_sample8(const world *w, ulong jitter_key, lv X, lv Y, lv mask, float8 out[5],
-                     iv *shadow_rays)
+/* The camera ray directions of lattice points (X, Y) (lattice_sample's jitter and camera). */
+v3p lattice_dir8(const world *w, ulong jitter_key, lv X, lv Y)
 {
     ulong8 h = tf_hash64_8((ulong8)(jitter_key) ^ as_ulong8(X));
     h = tf_hash64_8(h ^ (as_ulong8(Y) * 0x9e3779b97f4a7c15UL));
@@ -633,6 +625,101 @@ void lattice_sample8(const world *w, ulong jitter_key, lv X, lv Y, lv mask, floa
     double N = (double)w->I[TFI_LATTICE];
     dv x = (convert_double8(X) + jx) / N;
     dv y = (convert_double8(Y) + jy) / N;
-    v3p dir = camera_dir8(w, x, y);
-    shade_ray8(w, v3p_splat(pvec(w, TFP_CAM_POS)), dir, mask, out, shadow_rays);
+    return camera_dir8(w, x, y);
+}
+
+/* The samples at n <= TF_STREAM lattice points: sample k is lane k % 8 of packet k / 8 of
+ * X[], Y[], out[][0..4] (r, g, b, a, distance) and shadow_rays[] (which grows by the shadow
+ * rays each sample cast).  lattice_sample + shade_ray per sample, with all the camera rays
+ * walked as one stream and all the shadow rays as another. */
+void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[], int n,
+                     float8 out[][5], iv shadow_rays[])
+{
+    const int np = (n + TF_LANES - 1) / TF_LANES;
+    const v3p origin = v3p_splat(pvec(w, TFP_CAM_POS));
+    const double sea = w->P[TFP_SEA_LEVEL];
+    const vec3 sun = pvec(w, TFP_SUN_DIR);
+    const v3p zero = v3p_splat(v3(0, 0, 0));
+    lv mask[TF_STREAM_PACKETS];
+    ray_stream cam; /* d: the directions, tmax: the water distances (FAR_AWAY: none) */
+    cam.n = n;
+    for (int p = 0; p < np; p++) {
+        for (int l = 0; l < TF_LANES; l++)
+            mask[p][l] = p * TF_LANES + l < n ? -1 : 0;
+        v3p dir = lattice_dir8(w, jitter_key, X[p], Y[p]);
+        dv t_water = (dv)(FAR_AWAY);
+        t_water = select(t_water, (sea - origin.z) / dir.z, (dir.z < 0.0) & (origin.z > sea));
+        cam.o[p] = origin;
+        cam.d[p] = dir;
+        cam.tmin[p] = (dv)(0.0);
+        cam.tmax[p] = t_water;
+    }
+    lv found[TF_STREAM_PACKETS];
+    hitp hit[TF_STREAM_PACKETS];
+    for (int p = 0; p < np; p++) {
+        hit[p].t = (dv)(0.0);
+        hit[p].p = hit[p].n = zero;
+        hit[p].ci = hit[p].cj = (iv)(0);
+    }
+    walk_stream(w, &cam, found, hit);
+
+    shading8 sh[TF_STREAM_PACKETS];
+    lv terrain[TF_STREAM_PACKETS], water[TF_STREAM_PACKETS];
+    ray_stream shadow;
+    uchar shadow_of[TF_STREAM]; /* the sample that cast shadow ray m */
+    shadow.n = 0;
+    for (int p = 0; p < np; p++) {
+        terrain[p] = mask[p] & found[p];
+        water[p] = mask[p] & ~terrain[p] & (cam.tmax[p] < FAR_AWAY);
+        shading8 *s = &sh[p];
+        s->albedo = s->light = s->refl_sky = s->start = zero;
+        s->sun_gain = s->fresnel = (dv)(0.0);
+        s->cast = (lv)(0);
+        if (any_lane(terrain[p]))
+            terrain_before8(w, &hit[p], terrain[p], s);
+        if (any_lane(water[p])) {
+            v3p pw = v3p_add(origin, v3p_scale(cam.d[p], cam.tmax[p]));
+            water_before8(w, pw, cam.d[p], cam.tmax[p], water[p], s);
+        }
+        shadow_rays[p] -= mask_i(s->cast);
+        for (int l = 0; l < TF_LANES; l++) {
+            if (!s->cast[l])
+                continue;
+            int m = shadow.n++, q = m / TF_LANES, r = m % TF_LANES;
+            shadow_of[m] = (uchar)(p * TF_LANES + l);
+            shadow.o[q].x[r] = s->start.x[l];
+            shadow.o[q].y[r] = s->start.y[l];
+            shadow.o[q].z[r] = s->start.z[l];
+            shadow.d[q] = v3p_splat(sun);
+            shadow.tmin[q][r] = 0.0;
+            shadow.tmax[q][r] = FAR_AWAY;
+        }
+    }
+    lv blocked[TF_STREAM_PACKETS], lit[TF_STREAM_PACKETS];
+    for (int p = 0; p < np; p++)
+        lit[p] = (lv)(0);
+    if (shadow.n > 0) {
+        walk_stream(w, &shadow, blocked, NULL);
+        for (int m = 0; m < shadow.n; m++) {
+            int k = shadow_of[m];
+            lit[k / TF_LANES][k % TF_LANES] = blocked[m / TF_LANES][m % TF_LANES] ? 0 : -1;
+        }
+    }
+
+    for (int p = 0; p < np; p++) {
+        lv sky = mask[p] & ~terrain[p] & ~water[p];
+        v3p c = shading_finish8(w, &sh[p], terrain[p], water[p], lit[p]);
+        dv dist = (dv)(INFINITY); /* the sky lanes' mist length */
+        dist = select(dist, hit[p].t, terrain[p]);
+        dist = select(dist, cam.tmax[p], water[p]);
+        if (any_lane(sky))
+            c = v3p_select(c, sky_color8(w, cam.d[p]), sky);
+        c = mist_apply8(w, c, origin, cam.d[p], dist);
+        iv sky_i = mask_i(sky);
+        out[p][0] = convert_float8(c.x);
+        out[p][1] = convert_float8(c.y);
+        out[p][2] = convert_float8(c.z);
+        out[p][3] = select((float8)(1.0f), (float8)(0.0f), sky_i);
+        out[p][4] = select(convert_float8(dist), (float8)(TF_SKY_DIST), sky_i);
+    }
 }

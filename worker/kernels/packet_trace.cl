@@ -34,13 +34,17 @@ lv gather_i(__global const int *p, lv idx, lv mask)
                                 p[k.s7]));
 }
 
-/* The (max, min) pair of grid cell idx per lane: one 64-bit load a lane, one cache line. */
+/* The (max, min) pair of grid cell idx per lane: one 64-bit load a lane (a single gather
+ * instruction where the device has one), one cache line.  The grids are read-only, so reading
+ * the float pairs as 64-bit words aliases nothing that changes. */
 void gather_minmax(__global const float2 *p, lv idx, lv mask, dv *hi, dv *lo)
 {
+    __global const ulong *q = (__global const ulong *)p;
     lv k = select((lv)(0), idx, mask);
-    float16 v = (float16)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5], p[k.s6], p[k.s7]);
-    *hi = convert_double8(v.even);
-    *lo = convert_double8(v.odd);
+    ulong8 v = (ulong8)(q[k.s0], q[k.s1], q[k.s2], q[k.s3], q[k.s4], q[k.s5], q[k.s6], q[k.s7]);
+    float16 f = as_float16(v);
+    *hi = convert_double8(f.even);
+    *lo = convert_double8(f.odd);
 }
 
 dv to_d(lv v) { return convert_double8(v); }
@@ -58,12 +62,12 @@ lv cell_of8(const world *w, dv v)
     lv i = select(select((lv)(w->cells - 1), convert_long8_rtz(g), g < (dv)(w->cells)), (lv)(0),
                   !(g > 0));
     lv m = (i > 0) & (to_d(i) * w->cell > v);
-    while (any(m)) {
+    while (any_lane(m)) {
         i = select(i, i - 1, m);
         m &= (i > 0) & (to_d(i) * w->cell > v);
     }
     m = (i < w->cells - 1) & (to_d(i + 1) * w->cell <= v);
-    while (any(m)) {
+    while (any_lane(m)) {
         i = select(i, i + 1, m);
         m &= (i < w->cells - 1) & (to_d(i + 1) * w->cell <= v);
     }
@@ -197,7 +201,7 @@ void test_triangles8(const world *w, const rayp *r, lv ci, lv cj, lv mask, candp
 void test_if_inside8(const world *w, const rayp *r, lv ci, lv cj, lv mask, candp *best)
 {
     mask &= (ci >= 0) & (ci < w->cells) & (cj >= 0) & (cj < w->cells);
-    if (any(mask))
+    if (any_lane(mask))
         test_triangles8(w, r, ci, cj, mask, best);
 }
 
@@ -206,16 +210,16 @@ lv test_cell8(const world *w, const rayp *r, lv ci, lv cj, dv tx, dv ty, lv mask
 {
     test_triangles8(w, r, ci, cj, mask, best);
     lv diag = mask & (r->sx != 0) & (r->sy != 0);
-    if (any(diag)) {
+    if (any_lane(diag)) {
         lv tie_out = diag & (fabs(tx - ty) <= r->tie_tol);
-        if (any(tie_out)) {
+        if (any_lane(tie_out)) {
             test_if_inside8(w, r, ci + r->sx, cj, tie_out, best);
             test_if_inside8(w, r, ci, cj + r->sy, tie_out, best);
         }
         dv tx_in = xcross8(w, r, ci + select((lv)(0), (lv)(1), r->sx < 0));
         dv ty_in = ycross8(w, r, cj + select((lv)(0), (lv)(1), r->sy < 0));
         lv tie_in = diag & (fabs(tx_in - ty_in) <= r->tie_tol);
-        if (any(tie_in)) {
+        if (any_lane(tie_in)) {
             test_if_inside8(w, r, ci - r->sx, cj, tie_in, best);
             test_if_inside8(w, r, ci, cj - r->sy, tie_in, best);
         }
@@ -249,14 +253,14 @@ lv fix_stale8(const world *w, const rayp *r, lv axis, lv stale, lv level, dv t_e
     lv back = select((lv)(1), (lv)(-1), up);
     lv m = mask & select(j < stale, j > stale, up);
     m &= ~entered8(w, o, inv, s, j, t_event, strict);
-    while (any(m)) {
+    while (any_lane(m)) {
         j = select(j, j + back, m);
         m &= select(j < stale, j > stale, up);
         m &= ~entered8(w, o, inv, s, j, t_event, strict);
     }
     m = mask & select(j > lo, j < hi, up);
     m &= entered8(w, o, inv, s, j - back, t_event, strict);
-    while (any(m)) {
+    while (any_lane(m)) {
         j = select(j, j - back, m);
         m &= select(j > lo, j < hi, up);
         m &= entered8(w, o, inv, s, j - back, t_event, strict);
@@ -321,13 +325,13 @@ TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, ca
 
     *hit = (lv)(0);
     lv at_cell = keep & (level == 0);
-    if (any(at_cell)) {
+    if (any_lane(at_cell)) {
         *hit = test_cell8(w, r, ci, cj, tx, ty, at_cell, best);
         active &= ~*hit;
     }
     lv down = keep & (level > 0);
     lv fix_y = down & (stale == STALE_Y8), fix_x = down & (stale == STALE_X8);
-    if (any(fix_y | fix_x)) {
+    if (any_lane(fix_y | fix_x)) {
         lv j = fix_stale8(w, r, one_if(fix_y), select(ci, cj, fix_y), level, s->t_event, fix_y,
                           fix_y | fix_x);
         cj = select(cj, j, fix_y);
@@ -367,7 +371,7 @@ lv walk_hier8(const world *w, const rayp *r, lv mask, candp *best)
     walkp s;
     walk_start8(w, r, mask, &s);
     lv active = mask, found = (lv)(0);
-    while (any(active)) {
+    while (any_lane(active)) {
         lv hit, missed;
         walk_step8(w, r, &s, active, best, &hit, &missed);
         found |= hit;
@@ -399,8 +403,8 @@ lv trace8(const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask, hitp *hit)
     rayp r;
     candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
     mask = setup_ray8(&r, w, o, d, tmin, tmax, mask);
-    lv found = any(mask) ? walk_hier8(w, &r, mask, &best) : (lv)(0);
-    if (any(found))
+    lv found = any_lane(mask) ? walk_hier8(w, &r, mask, &best) : (lv)(0);
+    if (any_lane(found))
         finish_hit8(w, &r, &best, found, hit);
     return found;
 }
@@ -411,5 +415,122 @@ lv occluded8(const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
     rayp r;
     candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
     mask = setup_ray8(&r, w, o, d, tmin, tmax, mask);
-    return any(mask) ? walk_hier8(w, &r, mask, &best) : (lv)(0);
+    return any_lane(mask) ? walk_hier8(w, &r, mask, &best) : (lv)(0);
+}
+
+/* ---------------------------------------------------------------- streams of rays
+ *
+ * trace8 walks one packet: its lanes are whatever eight rays the caller had, and a packet of
+ * shadow rays is often half empty (only lit lanes cast one).  walk_stream takes all the rays of
+ * a batch (up to TF_STREAM: the camera rays of a pixel round, or all their shadow rays) and
+ * deals them to the eight lanes, so every packet is full but the last.  A lane whose ray is
+ * done can be given the next ray before the others finish (TF_REFILL free lanes trigger a
+ * refill); measured on default.scene, refilling mid-walk (TF_REFILL 4..7) was 3-10% slower
+ * than waiting for the whole packet (8): a ray's setup costs more than the idle steps it
+ * saves.  Each ray is walked exactly as trace8 walks it, so its hit is the same to the bit. */
+
+#define TF_STREAM 64 /* rays per stream */
+#define TF_STREAM_PACKETS (TF_STREAM / TF_LANES)
+#ifndef TF_REFILL
+#define TF_REFILL 8 /* deal new rays once this many lanes are free */
+#endif
+
+/* Up to TF_STREAM rays; ray k is lane k % 8 of packet k / 8. */
+typedef struct ray_stream {
+    int n;
+    v3p o[TF_STREAM_PACKETS], d[TF_STREAM_PACKETS];
+    dv tmin[TF_STREAM_PACKETS], tmax[TF_STREAM_PACKETS];
+} ray_stream;
+
+TF_INLINE void rayp_merge(rayp *r, const rayp *f, lv m)
+{
+    r->o = v3p_select(r->o, f->o, m);
+    r->d = v3p_select(r->d, f->d, m);
+    r->inv_dx = select(r->inv_dx, f->inv_dx, m);
+    r->inv_dy = select(r->inv_dy, f->inv_dy, m);
+    r->tmin = select(r->tmin, f->tmin, m);
+    r->tmax = select(r->tmax, f->tmax, m);
+    r->t0 = select(r->t0, f->t0, m);
+    r->t1 = select(r->t1, f->t1, m);
+    r->margin = select(r->margin, f->margin, m);
+    r->tie_tol = select(r->tie_tol, f->tie_tol, m);
+    r->sx = select(r->sx, f->sx, m);
+    r->sy = select(r->sy, f->sy, m);
+    r->ci = select(r->ci, f->ci, m);
+    r->cj = select(r->cj, f->cj, m);
+    r->kx = select(r->kx, f->kx, m);
+    r->ky = select(r->ky, f->ky, m);
+    r->kz = select(r->kz, f->kz, m);
+    r->shx = select(r->shx, f->shx, m);
+    r->shy = select(r->shy, f->shy, m);
+    r->shz = select(r->shz, f->shz, m);
+}
+
+/* Walk every ray of the stream: found[k / 8] lane k % 8 says whether ray k hit; if hits is
+ * not NULL, hits[k / 8] lane k % 8 holds that hit (finish_hit8's record). */
+void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
+{
+    for (int p = 0; p < TF_STREAM_PACKETS; p++)
+        found[p] = (lv)(0);
+    const v3p zero = v3p_splat(v3(0, 0, 0));
+    rayp r;
+    walkp s = {(lv)(0), (lv)(0), (lv)(0), (lv)(0), (dv)(0), (dv)(0)};
+    candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
+    /* a harmless ray in every lane until the lane gets a real one */
+    setup_ray8(&r, w, zero, v3p_splat(v3(0, 0, 1)), (dv)(0), (dv)(1), (lv)(0));
+    lv active = (lv)(0), ray = (lv)(0);
+    int next = 0;
+    for (;;) {
+        int idle = 0;
+        for (int l = 0; l < TF_LANES; l++)
+            idle += active[l] == 0;
+        if (next < in->n && (idle >= TF_REFILL || idle == TF_LANES)) {
+            v3p o = zero, d = zero;
+            dv tmin = (dv)(0), tmax = (dv)(0);
+            lv fresh = (lv)(0);
+            for (int l = 0; l < TF_LANES && next < in->n; l++) {
+                if (active[l])
+                    continue;
+                int k = next++, p = k / TF_LANES, q = k % TF_LANES;
+                ray[l] = k;
+                fresh[l] = -1;
+                o.x[l] = in->o[p].x[q], o.y[l] = in->o[p].y[q], o.z[l] = in->o[p].z[q];
+                d.x[l] = in->d[p].x[q], d.y[l] = in->d[p].y[q], d.z[l] = in->d[p].z[q];
+                tmin[l] = in->tmin[p][q];
+                tmax[l] = in->tmax[p][q];
+            }
+            rayp f;
+            lv ok = setup_ray8(&f, w, o, d, tmin, tmax, fresh);
+            rayp_merge(&r, &f, ok);
+            walk_start8(w, &r, ok, &s);
+            best.t = select(best.t, (dv)(INFINITY), ok);
+            active |= ok;
+        }
+        if (!any_lane(active)) {
+            if (next >= in->n)
+                break;
+            continue;
+        }
+        lv hit, missed;
+        walk_step8(w, &r, &s, active, &best, &hit, &missed);
+        if (any_lane(hit)) {
+            hitp h;
+            if (hits)
+                finish_hit8(w, &r, &best, hit, &h);
+            for (int l = 0; l < TF_LANES; l++) {
+                if (!hit[l])
+                    continue;
+                int k = (int)ray[l], p = k / TF_LANES, q = k % TF_LANES;
+                found[p][q] = -1;
+                if (hits) {
+                    hits[p].t[q] = h.t[l];
+                    hits[p].p.x[q] = h.p.x[l], hits[p].p.y[q] = h.p.y[l], hits[p].p.z[q] = h.p.z[l];
+                    hits[p].n.x[q] = h.n.x[l], hits[p].n.y[q] = h.n.y[l], hits[p].n.z[q] = h.n.z[l];
+                    hits[p].ci[q] = h.ci[l];
+                    hits[p].cj[q] = h.cj[l];
+                }
+            }
+        }
+        active &= ~(hit | missed);
+    }
 }

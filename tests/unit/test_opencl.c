@@ -1,4 +1,4 @@
-/* test_opencl.c: the OpenCL backend (worker/backend_opencl.c + worker/kernels/terrafarm.cl)
+/* test_opencl.c: the OpenCL backend (worker/backend_opencl.c + worker/kernels)
  * against the C renderer, on PoCL.
  *
  *   match_c_backend     scenes/default.scene at 160x90, rendered in-process both ways

@@ -1,12 +1,13 @@
 /* packet.cl: the types of the packet renderer -- eight samples at a time, one per lane of
  * OpenCL's 8-wide vector types, so the compiler (PoCL on the CPU) runs them in SIMD registers.
  *
- * A work-item of packet_render.cl gathers eight lattice samples (from neighbouring pixels, so
- * their rays are coherent) and hands them to lattice_sample8 (packet_shade.cl), which traces
- * them with trace8 / occluded8 (packet_trace.cl).  Every packet function computes, in each
- * active lane, exactly what its scalar twin in terrafarm.cl computes for that lane's sample:
- * the same operations in the same order, so the packet renderer's pixels are the scalar
- * renderer's to the bit (tests/unit/test_opencl.c checks it against the C backend).
+ * A work-item of packet_render.cl gathers up to 64 lattice samples (from neighbouring pixels,
+ * so their rays are coherent) and hands them to lattice_samples (packet_shade.cl), which
+ * shades them eight at a time and walks their rays with walk_stream (packet_trace.cl).  Every
+ * packet function NAME8 computes, in each active lane, exactly what its C twin NAME in
+ * common/ (trace.c, shade.c, camera.c, render.c, noise.c: the scalar renderer of the C
+ * backend) computes for that lane's sample: the same operations in the same order, so the
+ * OpenCL pixels are the C pixels to the bit (tests/unit/test_opencl.c checks it).
  *
  * Conventions:
  *   - A lane mask is an lv (long8): -1 for active lanes, 0 for idle ones -- what comparisons of
@@ -29,7 +30,7 @@ typedef int8 iv;    /* a 32-bit integer per lane */
 
 typedef struct v3p { dv x, y, z; } v3p; /* a vec3 per lane */
 
-/* What trace8 reports per lane (the scalar hit_t). */
+/* A hit per lane (trace.c's tf_hit). */
 typedef struct hitp { dv t; v3p p, n; iv ci, cj; } hitp;
 
 v3p v3p_make(dv x, dv y, dv z) { v3p r = {x, y, z}; return r; }

@@ -1,13 +1,14 @@
-/* packet_shade.cl: lattice_sample8, the packet twin of terrafarm.cl's lattice_sample -- the
- * camera rays of eight lattice points, traced (trace8 / occluded8 of packet_trace.cl) and
- * shaded in SIMD, one sample per lane of the dv / lv / iv types of packet.cl.
+/* packet_shade.cl: lattice_samples -- render.c's lattice samples for a batch of up to 64
+ * lattice points: their camera rays, walked as one stream (walk_stream, packet_trace.cl), and
+ * shaded in SIMD eight at a time, one sample per lane of the dv / lv / iv types of packet.cl,
+ * with all their shadow rays walked as a second stream.
  *
- * Every function NAME8 here is the packet twin of the scalar NAME in terrafarm.cl (which is
- * itself the port of common/shade.c, camera.c, render.c and noise.c).  The one rule, on which
- * the bit-identity of the OpenCL and C backends rests:
+ * Every function NAME8 here is the packet twin of NAME in common/shade.c, camera.c, render.c
+ * or noise.c (the scalar renderer of the C backend).  The one rule, on which the bit-identity
+ * of the OpenCL and C backends rests:
  *
  *   In every active lane, a packet function performs exactly the floating-point operations of
- *   its scalar twin, in the same order, on the same operands.
+ *   its C twin, in the same order, on the same operands.
  *
  * So: FP contraction stays off (terrafarm.cl's pragma), no fma / mad / native_ / half_
  * functions, no reassociation (a scalar a * b * c stays (a * b) * c, a constant difference

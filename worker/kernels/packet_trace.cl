@@ -1,13 +1,14 @@
-/* packet_trace.cl: trace8 and occluded8, the packet twins of terrafarm.cl's trace and occluded:
- * eight rays walk the max/min grid hierarchy together, one per lane.
+/* packet_trace.cl: trace.c's hierarchical grid walk (tf_trace / tf_occluded with walk_hier,
+ * setup_ray, test_cell, fix_stale_axis) for eight rays at a time, one per lane, and
+ * walk_stream, which deals a batch of rays to the eight lanes.
  *
  * Each lane runs its own walk (its own level, cell, stale axis and event time), so the lanes
  * need not agree on anything: a step is computed for all lanes, and each lane takes the branch
- * its scalar twin would take, merged with select.  The costly branches -- the triangle tests of
- * a level-0 cell, the re-entry search after a descent (fix_stale_axis) -- run only when some
- * lane takes them.  Every lane performs the scalar operations in the scalar order, so a lane's
- * hit is the scalar hit to the bit (ties between triangles of neighbouring cells included: the
- * cells are tested in the scalar order).
+ * trace.c would take for its ray, merged with select.  The costly branches -- the triangle
+ * tests of a level-0 cell, the re-entry search after a descent (fix_stale8) -- run only when
+ * some lane takes them.  Every lane performs trace.c's operations in trace.c's order, so a
+ * lane's hit is the C hit to the bit (ties between triangles of neighbouring cells included:
+ * the cells are tested in the C order).
  *
  * Integers that index buffers or are shifted by the level are lv (long8): the same width as
  * the masks double8 comparisons produce, so no mask ever needs widening. */
@@ -365,21 +366,6 @@ TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, ca
     s->stale = stale;
 }
 
-/* walk_hier per lane: the lanes of mask whose ray hits (best holds the hit). */
-lv walk_hier8(const world *w, const rayp *r, lv mask, candp *best)
-{
-    walkp s;
-    walk_start8(w, r, mask, &s);
-    lv active = mask, found = (lv)(0);
-    while (any_lane(active)) {
-        lv hit, missed;
-        walk_step8(w, r, &s, active, best, &hit, &missed);
-        found |= hit;
-        active &= ~(hit | missed);
-    }
-    return found;
-}
-
 void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *hit)
 {
     lv base = c->cj * w->n + c->ci;
@@ -396,38 +382,16 @@ void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *h
     hit->cj = convert_int8(c->cj);
 }
 
-/* First hit of each active lane's ray o + t d, t in (tmin, tmax): returns the lanes that hit,
- * with their hits in *hit (lanes that miss or are idle: *hit undefined there). */
-lv trace8(const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask, hitp *hit)
-{
-    rayp r;
-    candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
-    mask = setup_ray8(&r, w, o, d, tmin, tmax, mask);
-    lv found = any_lane(mask) ? walk_hier8(w, &r, mask, &best) : (lv)(0);
-    if (any_lane(found))
-        finish_hit8(w, &r, &best, found, hit);
-    return found;
-}
-
-/* The active lanes whose ray meets the terrain in (tmin, tmax). */
-lv occluded8(const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
-{
-    rayp r;
-    candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
-    mask = setup_ray8(&r, w, o, d, tmin, tmax, mask);
-    return any_lane(mask) ? walk_hier8(w, &r, mask, &best) : (lv)(0);
-}
-
 /* ---------------------------------------------------------------- streams of rays
  *
- * trace8 walks one packet: its lanes are whatever eight rays the caller had, and a packet of
- * shadow rays is often half empty (only lit lanes cast one).  walk_stream takes all the rays of
+ * Eight rays taken as they come make ragged packets: a packet of eight samples' shadow rays is
+ * often half empty (only lit lanes cast one).  walk_stream takes all the rays of
  * a batch (up to TF_STREAM: the camera rays of a pixel round, or all their shadow rays) and
  * deals them to the eight lanes, so every packet is full but the last.  A lane whose ray is
  * done can be given the next ray before the others finish (TF_REFILL free lanes trigger a
  * refill); measured on default.scene, refilling mid-walk (TF_REFILL 4..7) was 3-10% slower
  * than waiting for the whole packet (8): a ray's setup costs more than the idle steps it
- * saves.  Each ray is walked exactly as trace8 walks it, so its hit is the same to the bit. */
+ * saves. */
 
 #define TF_STREAM 64 /* rays per stream */
 #define TF_STREAM_PACKETS (TF_STREAM / TF_LANES)

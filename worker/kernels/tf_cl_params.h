@@ -1,5 +1,5 @@
 /* tf_cl_params.h: the parameter block the host (worker/backend_opencl.c) fills and the kernels
- * (worker/kernels/terrafarm.cl) read.  Plain C preprocessor only, so the same file is compiled
+ * in worker/kernels read.  Plain C preprocessor only, so the same file is compiled
  * into the host and prepended to the kernel source at run time: the indices can never drift.
  *
  * Two arrays carry everything derived from the scene, the camera and the shader setup (the very

@@ -396,7 +396,7 @@ void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *h
 #define TF_STREAM 64 /* rays per stream */
 #define TF_STREAM_PACKETS (TF_STREAM / TF_LANES)
 #ifndef TF_REFILL
-#define TF_REFILL 8 /* deal new rays once this many lanes are free */
+#define TF_REFILL 8 /* deal new rays once this many lanes are free (1..8) */
 #endif
 
 /* Up to TF_STREAM rays; ray k is lane k % 8 of packet k / 8. */
@@ -445,10 +445,9 @@ void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
     lv active = (lv)(0), ray = (lv)(0);
     int next = 0;
     for (;;) {
-        int idle = 0;
-        for (int l = 0; l < TF_LANES; l++)
-            idle += active[l] == 0;
-        if (next < in->n && (idle >= TF_REFILL || idle == TF_LANES)) {
+        /* idle lanes: each active lane is one 0xff byte of the narrowed mask */
+        int idle = TF_LANES - (int)popcount(as_ulong(convert_char8(active))) / 8;
+        if (next < in->n && idle >= TF_REFILL) {
             v3p o = zero, d = zero;
             dv tmin = (dv)(0), tmax = (dv)(0);
             lv fresh = (lv)(0);

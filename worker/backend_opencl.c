@@ -55,9 +55,9 @@ struct tf_cl_backend {
     cl_kernel k_corners, k_pixels;
     cl_mem P, I, h, minmax, perm;
     /* per-render buffers, grown as needed */
-    cl_mem corners, corner_shadow, cache, levels, have, out, pixel_shadow;
-    size_t corners_cap, corner_shadow_cap, cache_cap, levels_cap, have_cap, out_cap,
-        pixel_shadow_cap;
+    cl_mem corners, corner_levels, corner_shadow, cache, levels, have, out, pixel_shadow;
+    size_t corners_cap, corner_levels_cap, corner_shadow_cap, cache_cap, levels_cap, have_cap,
+        out_cap, pixel_shadow_cap;
     cl_ulong jitter_key;
     cl_uint epoch; /* tf_pixels8's mark for the slots of the launch (packet_render.cl) */
     int lattice;
@@ -650,6 +650,8 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     int failed = !corner_shadow || !pixel_shadow || !pix ||
                  ensure(b, &b->corners, &b->corners_cap,
                         ncorners * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
+                 ensure(b, &b->corner_levels, &b->corner_levels_cap,
+                        ncorners * 3 * sizeof(double)) ||
                  ensure(b, &b->corner_shadow, &b->corner_shadow_cap, ncorners * sizeof(cl_uint)) ||
                  ensure(b, &b->cache, &b->cache_cap,
                         batch * side * side * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
@@ -671,7 +673,8 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     rc |= clSetKernelArg(b->k_corners, 8, sizeof cw, &cw);
     rc |= clSetKernelArg(b->k_corners, 9, sizeof ch, &ch);
     rc |= clSetKernelArg(b->k_corners, 10, sizeof(cl_mem), &b->corners);
-    rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corner_shadow);
+    rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corner_levels);
+    rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_shadow);
     size_t global = round_up((ncorners + CORNERS_PER_ITEM - 1) / CORNERS_PER_ITEM, b->local);
     cl_event corner_ev = NULL, pixel_ev[1] = {NULL};
     if (rc == CL_SUCCESS)
@@ -685,13 +688,14 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
         rc |= clSetKernelArg(b->k_pixels, 9, sizeof f, &f);
         rc |= clSetKernelArg(b->k_pixels, 10, sizeof count, &count);
         rc |= clSetKernelArg(b->k_pixels, 11, sizeof(cl_mem), &b->corners);
-        rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->cache);
-        rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->levels);
-        rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->have);
+        rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->corner_levels);
+        rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->cache);
+        rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->levels);
+        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->have);
         rc |= next_epoch(b);
-        rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_uint), &b->epoch);
-        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->out);
-        rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_mem), &b->pixel_shadow);
+        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_uint), &b->epoch);
+        rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_mem), &b->out);
+        rc |= clSetKernelArg(b->k_pixels, 18, sizeof(cl_mem), &b->pixel_shadow);
         global = round_up(((size_t)count + PIXELS_PER_ITEM - 1) / PIXELS_PER_ITEM, b->local);
         /* keep the last batch's event; earlier ones are waited for and accounted here */
         if (pixel_ev[0]) {
@@ -748,8 +752,8 @@ void tf_cl_backend_free(tf_cl_backend *b)
     if (!b)
         return;
     cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm,
-                     b->corners, b->corner_shadow, b->cache, b->levels, b->have, b->out,
-                     b->pixel_shadow};
+                     b->corners, b->corner_levels, b->corner_shadow, b->cache, b->levels,
+                     b->have, b->out, b->pixel_shadow};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         if (bufs[i])
             clReleaseMemObject(bufs[i]);

@@ -33,10 +33,18 @@
 #define TF_QUEUED 0x80000000u
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
 
+/* render.c's tf_display_level per lane: sqrt of the linear value clamped to [0, 1]; never
+ * NaN. */
+dv display_level8(dv v)
+{
+    return select(select((dv)(1), sqrt(v), v < 1), (dv)(0), !(v > 0));
+}
+
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
                           __global const float *h, __global const float2 *mm,
                           __global const ushort *perm, int rx, int ry, int cw, int ch,
-                          __global float *out, __global uint *shadow)
+                          __global float *out, __global double *out_levels,
+                          __global uint *shadow)
 {
     const int base = (int)get_global_id(0) * TF_STREAM, total = cw * ch;
     if (base >= total)
@@ -55,22 +63,17 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
     for (int p = 0; p < TF_STREAM_PACKETS; p++)
         rays[p] = (iv)(0);
     lattice_samples(&w, jitter_key, X, Y, n, s, rays);
+    dv lvl[TF_STREAM_PACKETS][3];
+    for (int p = 0; p * TF_LANES < n; p++)
+        for (int ch = 0; ch < 3; ch++)
+            lvl[p][ch] = display_level8(convert_double8(s[p][ch]));
     for (int e = 0; e < n; e++) {
         for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
             out[(size_t)(base + e) * TF_CL_SAMPLE_FLOATS + m] = s[e / TF_LANES][m][e % TF_LANES];
+        for (int ch = 0; ch < 3; ch++)
+            out_levels[(size_t)(base + e) * 3 + ch] = lvl[e / TF_LANES][ch][e % TF_LANES];
         shadow[base + e] = (uint)rays[e / TF_LANES][e % TF_LANES];
     }
-}
-
-/* render.c's tf_display_level: sqrt of the linear value clamped to [0, 1]; never NaN. */
-double display_level(double v)
-{
-    return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
-}
-
-dv display_level8(dv v)
-{
-    return select(select((dv)(1), sqrt(v), v < 1), (dv)(0), !(v > 0));
 }
 
 /* render.c's display_range over the levels of n samples (n <= 5): the largest per-channel
@@ -103,6 +106,10 @@ typedef struct pixel_state {
     __global float *cache;   /* (N+1)^2 samples */
     __global double *levels; /* (N+1)^2 x 3 display levels */
     __global uint *have;     /* (N+1)^2 slot states */
+    /* the four corner samples stay where tf_corners8 put them (shared with the neighbours):
+     * slots 0, N, N (N+1), N (N+1) + N of the cache are never written */
+    __global const float *corner[4];
+    __global const double *corner_levels[4];
 } pixel_state;
 
 typedef struct sample_queue {
@@ -137,14 +144,24 @@ int want_corners(pixel_state *ps, int p, quad t, int side, uint epoch, sample_qu
     return a && b && c && d;
 }
 
+/* Which pixel corner lattice point (i, j) is (0..3: (0,0), (N,0), (0,N), (N,N)), or -1. */
+int corner_of(int side, int i, int j)
+{
+    const int N = side - 1;
+    return (i == 0 || i == N) && (j == 0 || j == N) ? (j ? 2 : 0) + (i ? 1 : 0) : -1;
+}
+
 __global const float *slot_of(const pixel_state *ps, int side, int i, int j)
 {
-    return ps->cache + ((size_t)j * (size_t)side + (size_t)i) * TF_CL_SAMPLE_FLOATS;
+    int c = corner_of(side, i, j);
+    return c >= 0 ? ps->corner[c]
+                  : ps->cache + ((size_t)j * (size_t)side + (size_t)i) * TF_CL_SAMPLE_FLOATS;
 }
 
 __global const double *levels_of(const pixel_state *ps, int side, int i, int j)
 {
-    return ps->levels + ((size_t)j * (size_t)side + (size_t)i) * 3;
+    int c = corner_of(side, i, j);
+    return c >= 0 ? ps->corner_levels[c] : ps->levels + ((size_t)j * (size_t)side + (size_t)i) * 3;
 }
 
 /* render_pixel's loop for pixel p, run until its stack is empty or it needs a sample it does
@@ -205,13 +222,14 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
 }
 
 /* Pixels first .. first+count-1 (row-major in the rw-wide rectangle at (rx, ry)); pixel
- * first + m uses scratch slice m of cache / levels / have ((N+1)^2 samples each).  corners: the output
- * of tf_corners8.  epoch: this launch's mark (host: never 0, never with TF_QUEUED set). */
+ * first + m uses scratch slice m of cache / levels / have ((N+1)^2 samples each).  corners,
+ * corner_levels: the output of tf_corners8.  epoch: this launch's mark (host: never 0, never
+ * with TF_QUEUED set). */
 __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong jitter_key,
                          __global const float *h, __global const float2 *mm,
                          __global const ushort *perm, int rx, int ry,
                          int rw, int first, int count, __global const float *corners,
-                         __global float *cache, __global double *levels,
+                         __global const double *corner_levels, __global float *cache, __global double *levels,
                          __global uint *have, uint epoch,
                          __global float *out, __global uint *shadow)
 {
@@ -238,15 +256,11 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
                                 (size_t)(row + 1) * cw + c, (size_t)(row + 1) * cw + c + 1};
         s->zmin = TF_SKY_DIST;
         for (int e = 0; e < 4; e++) {
-            __global const float *src = corners + from[e] * TF_CL_SAMPLE_FLOATS;
-            __global float *dst = s->cache + (size_t)slot[e] * TF_CL_SAMPLE_FLOATS;
-            for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)
-                dst[f] = src[f];
-            for (int ch = 0; ch < 3; ch++)
-                s->levels[(size_t)slot[e] * 3 + ch] = display_level(src[ch]);
+            s->corner[e] = corners + from[e] * TF_CL_SAMPLE_FLOATS;
+            s->corner_levels[e] = corner_levels + from[e] * 3;
             s->have[slot[e]] = epoch;
-            if (src[4] < s->zmin)
-                s->zmin = src[4];
+            if (s->corner[e][4] < s->zmin)
+                s->zmin = s->corner[e][4];
         }
         s->stack[0].i = 0, s->stack[0].j = 0, s->stack[0].size = N;
         s->sp = 1;

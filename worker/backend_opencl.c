@@ -55,9 +55,9 @@ struct tf_cl_backend {
     cl_kernel k_corners, k_pixels;
     cl_mem P, I, h, minmax, perm;
     /* per-render buffers, grown as needed */
-    cl_mem corners, corner_levels, corner_shadow, cache, levels, have, out, pixel_shadow;
+    cl_mem corners, corner_levels, corner_shadow, cache, levels, have, where, out, pixel_shadow;
     size_t corners_cap, corner_levels_cap, corner_shadow_cap, cache_cap, levels_cap, have_cap,
-        out_cap, pixel_shadow_cap;
+        where_cap, out_cap, pixel_shadow_cap;
     cl_ulong jitter_key;
     cl_uint epoch; /* tf_pixels8's mark for the slots of the launch (packet_render.cl) */
     int lattice;
@@ -637,8 +637,9 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     const size_t ncorners = (size_t)(rect.w + 1) * (size_t)(rect.h + 1);
     const size_t npixels = (size_t)rect.w * (size_t)rect.h;
     const size_t side = (size_t)b->lattice + 1;
-    const size_t per_pixel =
-        side * side * (TF_CL_SAMPLE_FLOATS * sizeof(float) + 3 * sizeof(double) + sizeof(cl_uint));
+    const size_t per_pixel = side * side *
+                             (TF_CL_SAMPLE_FLOATS * sizeof(float) + 3 * sizeof(double) +
+                              sizeof(cl_uint) + sizeof(cl_ushort));
     size_t batch = SCRATCH_BUDGET / per_pixel / PIXELS_PER_ITEM * PIXELS_PER_ITEM;
     if (batch < PIXELS_PER_ITEM)
         batch = PIXELS_PER_ITEM;
@@ -657,6 +658,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
                         batch * side * side * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
                  ensure(b, &b->levels, &b->levels_cap, batch * side * side * 3 * sizeof(double)) ||
                  ensure_have(b, batch * side * side) ||
+                 ensure(b, &b->where, &b->where_cap, batch * side * side * sizeof(cl_ushort)) ||
                  ensure(b, &b->out, &b->out_cap, npixels * TF_CL_PIXEL_FLOATS * sizeof(float)) ||
                  ensure(b, &b->pixel_shadow, &b->pixel_shadow_cap, npixels * sizeof(cl_uint));
     if (failed) {
@@ -692,10 +694,11 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
         rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->cache);
         rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->levels);
         rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->have);
+        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->where);
         rc |= next_epoch(b);
-        rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_uint), &b->epoch);
-        rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_mem), &b->out);
-        rc |= clSetKernelArg(b->k_pixels, 18, sizeof(cl_mem), &b->pixel_shadow);
+        rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_uint), &b->epoch);
+        rc |= clSetKernelArg(b->k_pixels, 18, sizeof(cl_mem), &b->out);
+        rc |= clSetKernelArg(b->k_pixels, 19, sizeof(cl_mem), &b->pixel_shadow);
         global = round_up(((size_t)count + PIXELS_PER_ITEM - 1) / PIXELS_PER_ITEM, b->local);
         /* keep the last batch's event; earlier ones are waited for and accounted here */
         if (pixel_ev[0]) {
@@ -753,7 +756,7 @@ void tf_cl_backend_free(tf_cl_backend *b)
         return;
     cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm,
                      b->corners, b->corner_levels, b->corner_shadow, b->cache, b->levels,
-                     b->have, b->out, b->pixel_shadow};
+                     b->have, b->where, b->out, b->pixel_shadow};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         if (bufs[i])
             clReleaseMemObject(bufs[i]);

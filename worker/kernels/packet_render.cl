@@ -20,11 +20,14 @@
  * and need whatever happens.  So the samples traced, the sample count and the nearest distance
  * are the scalar ones too.
  *
- * Sample cache: each pixel owns a slice of (N+1)^2 samples of `cache`, with the samples'
+ * Sample cache: each pixel owns a slice of (N+1)^2 entries of `cache`, with the samples'
  * display levels (render.c tf_display_level of r, g, b: what the contrast test compares, so
- * each is computed once per sample, not once per quad that looks at it) in `levels`; `have`
+ * each is computed once per sample, not once per quad that looks at it) in `levels`.  Entries
+ * are filled from the front in the order samples arrive -- a pixel takes a handful, so its
+ * samples share a few cache lines -- and `where` maps a lattice slot to its entry.  `have`
  * marks a slot ready (== epoch) or queued (== epoch | TF_QUEUED).  The host gives every
- * launch a new epoch, so slices need no clearing between pixels. */
+ * launch a new epoch, so slices need no clearing between pixels.  The four pixel corners
+ * stay where tf_corners8 wrote them. */
 
 #ifndef TF_PIX
 #define TF_PIX 16          /* pixels per work-item */
@@ -100,12 +103,14 @@ typedef struct quad { int i, j, size; } quad;
 typedef struct pixel_state {
     quad stack[TF_STACK];
     int sp, spp, px, py;
+    int used;                /* cache entries filled */
     uint rays;
     float zmin;
     double sum_r, sum_g, sum_b, sum_a;
     __global float *cache;   /* (N+1)^2 samples */
     __global double *levels; /* (N+1)^2 x 3 display levels */
     __global uint *have;     /* (N+1)^2 slot states */
+    __global ushort *where;  /* (N+1)^2 slots: their cache entry, where have says ready */
     /* the four corner samples stay where tf_corners8 put them (shared with the neighbours):
      * slots 0, N, N (N+1), N (N+1) + N of the cache are never written */
     __global const float *corner[4];
@@ -155,13 +160,13 @@ __global const float *slot_of(const pixel_state *ps, int side, int i, int j)
 {
     int c = corner_of(side, i, j);
     return c >= 0 ? ps->corner[c]
-                  : ps->cache + ((size_t)j * (size_t)side + (size_t)i) * TF_CL_SAMPLE_FLOATS;
+                  : ps->cache + (size_t)ps->where[j * side + i] * TF_CL_SAMPLE_FLOATS;
 }
 
 __global const double *levels_of(const pixel_state *ps, int side, int i, int j)
 {
     int c = corner_of(side, i, j);
-    return c >= 0 ? ps->corner_levels[c] : ps->levels + ((size_t)j * (size_t)side + (size_t)i) * 3;
+    return c >= 0 ? ps->corner_levels[c] : ps->levels + (size_t)ps->where[j * side + i] * 3;
 }
 
 /* render_pixel's loop for pixel p, run until its stack is empty or it needs a sample it does
@@ -222,7 +227,7 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
 }
 
 /* Pixels first .. first+count-1 (row-major in the rw-wide rectangle at (rx, ry)); pixel
- * first + m uses scratch slice m of cache / levels / have ((N+1)^2 samples each).  corners,
+ * first + m uses scratch slice m of cache / levels / have / where ((N+1)^2 entries each).  corners,
  * corner_levels: the output of tf_corners8.  epoch: this launch's mark (host: never 0, never
  * with TF_QUEUED set). */
 __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong jitter_key,
@@ -230,7 +235,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
                          __global const ushort *perm, int rx, int ry,
                          int rw, int first, int count, __global const float *corners,
                          __global const double *corner_levels, __global float *cache, __global double *levels,
-                         __global uint *have, uint epoch,
+                         __global uint *have, __global ushort *where, uint epoch,
                          __global float *out, __global uint *shadow)
 {
     const int m0 = (int)get_global_id(0) * TF_PIX;
@@ -251,6 +256,8 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         s->cache = cache + (size_t)(m0 + p) * (size_t)side * (size_t)side * TF_CL_SAMPLE_FLOATS;
         s->levels = levels + (size_t)(m0 + p) * (size_t)side * (size_t)side * 3;
         s->have = have + (size_t)(m0 + p) * (size_t)side * (size_t)side;
+        s->where = where + (size_t)(m0 + p) * (size_t)side * (size_t)side;
+        s->used = 0;
         const int slot[4] = {0, N, N * side, N * side + N};
         const size_t from[4] = {(size_t)row * cw + c, (size_t)row * cw + c + 1,
                                 (size_t)(row + 1) * cw + c, (size_t)(row + 1) * cw + c + 1};
@@ -305,12 +312,13 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
             for (int l = 0; l < TF_LANES && b * TF_LANES + l < q.n; l++) {
                 int e = b * TF_LANES + l;
                 pixel_state *s = &ps[q.pixel[e]];
-                int k = q.slot[e];
-                __global float *dst = s->cache + (size_t)k * TF_CL_SAMPLE_FLOATS;
+                int k = q.slot[e], at = s->used++;
+                __global float *dst = s->cache + (size_t)at * TF_CL_SAMPLE_FLOATS;
                 for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)
                     dst[f] = smp[b][f][l];
                 for (int ch = 0; ch < 3; ch++)
-                    s->levels[(size_t)k * 3 + ch] = lvl[ch][l];
+                    s->levels[(size_t)at * 3 + ch] = lvl[ch][l];
+                s->where[k] = (ushort)at;
                 s->have[k] = epoch;
                 s->spp++;
                 s->rays += (uint)rays[b][l];

@@ -430,70 +430,113 @@ TF_INLINE void rayp_merge(rayp *r, const rayp *f, lv m)
     r->shz = select(r->shz, f->shz, m);
 }
 
+/* One packet walking a stream: its rays (rayp), where their walks stand, their best hits, the
+ * lanes at work and which ray of the stream each lane holds. */
+typedef struct walker {
+    rayp r;
+    walkp s;
+    candp best;
+    lv active, ray;
+} walker;
+
+#ifndef TF_WALKERS
+#define TF_WALKERS 2 /* packets walked side by side */
+#endif
+
+void walker_init(const world *w, walker *k)
+{
+    const v3p zero = v3p_splat(v3(0, 0, 0));
+    walkp s = {(lv)(0), (lv)(0), (lv)(0), (lv)(0), (dv)(0), (dv)(0)};
+    candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
+    /* a harmless ray in every lane until the lane gets a real one */
+    setup_ray8(&k->r, w, zero, v3p_splat(v3(0, 0, 1)), (dv)(0), (dv)(1), (lv)(0));
+    k->s = s;
+    k->best = best;
+    k->active = k->ray = (lv)(0);
+}
+
+/* Deal rays *next, *next + 1, ... of the stream to the walker's idle lanes, if TF_REFILL of
+ * its lanes are idle. */
+TF_INLINE void walker_deal(const world *w, const ray_stream *in, int *next, walker *k)
+{
+    /* idle lanes: each active lane is one 0xff byte of the narrowed mask */
+    int idle = TF_LANES - (int)popcount(as_ulong(convert_char8(k->active))) / 8;
+    if (*next >= in->n || idle < TF_REFILL)
+        return;
+    const v3p zero = v3p_splat(v3(0, 0, 0));
+    v3p o = zero, d = zero;
+    dv tmin = (dv)(0), tmax = (dv)(0);
+    lv fresh = (lv)(0);
+    for (int l = 0; l < TF_LANES && *next < in->n; l++) {
+        if (k->active[l])
+            continue;
+        int r = (*next)++, p = r / TF_LANES, q = r % TF_LANES;
+        k->ray[l] = r;
+        fresh[l] = -1;
+        o.x[l] = in->o[p].x[q], o.y[l] = in->o[p].y[q], o.z[l] = in->o[p].z[q];
+        d.x[l] = in->d[p].x[q], d.y[l] = in->d[p].y[q], d.z[l] = in->d[p].z[q];
+        tmin[l] = in->tmin[p][q];
+        tmax[l] = in->tmax[p][q];
+    }
+    rayp f;
+    lv ok = setup_ray8(&f, w, o, d, tmin, tmax, fresh);
+    rayp_merge(&k->r, &f, ok);
+    walk_start8(w, &k->r, ok, &k->s);
+    k->best.t = select(k->best.t, (dv)(INFINITY), ok);
+    k->active |= ok;
+}
+
+/* One step of the walker's lanes; the rays that end are reported in found / hits. */
+TF_INLINE void walker_step(const world *w, walker *k, lv found[], hitp *hits)
+{
+    lv hit, missed;
+    walk_step8(w, &k->r, &k->s, k->active, &k->best, &hit, &missed);
+    if (any_lane(hit)) {
+        hitp h;
+        if (hits)
+            finish_hit8(w, &k->r, &k->best, hit, &h);
+        for (int l = 0; l < TF_LANES; l++) {
+            if (!hit[l])
+                continue;
+            int r = (int)k->ray[l], p = r / TF_LANES, q = r % TF_LANES;
+            found[p][q] = -1;
+            if (hits) {
+                hits[p].t[q] = h.t[l];
+                hits[p].p.x[q] = h.p.x[l], hits[p].p.y[q] = h.p.y[l], hits[p].p.z[q] = h.p.z[l];
+                hits[p].n.x[q] = h.n.x[l], hits[p].n.y[q] = h.n.y[l], hits[p].n.z[q] = h.n.z[l];
+                hits[p].ci[q] = h.ci[l];
+                hits[p].cj[q] = h.cj[l];
+            }
+        }
+    }
+    k->active &= ~(hit | missed);
+}
+
 /* Walk every ray of the stream: found[k / 8] lane k % 8 says whether ray k hit; if hits is
- * not NULL, hits[k / 8] lane k % 8 holds that hit (finish_hit8's record). */
+ * not NULL, hits[k / 8] lane k % 8 holds that hit (finish_hit8's record).  TF_WALKERS packets
+ * walk side by side: a step waits on its grid loads (a gather the next step depends on), and
+ * the other packet's step fills that wait. */
 void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
 {
     for (int p = 0; p < TF_STREAM_PACKETS; p++)
         found[p] = (lv)(0);
-    const v3p zero = v3p_splat(v3(0, 0, 0));
-    rayp r;
-    walkp s = {(lv)(0), (lv)(0), (lv)(0), (lv)(0), (dv)(0), (dv)(0)};
-    candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
-    /* a harmless ray in every lane until the lane gets a real one */
-    setup_ray8(&r, w, zero, v3p_splat(v3(0, 0, 1)), (dv)(0), (dv)(1), (lv)(0));
-    lv active = (lv)(0), ray = (lv)(0);
+    walker k[TF_WALKERS];
+    for (int g = 0; g < TF_WALKERS; g++)
+        walker_init(w, &k[g]);
     int next = 0;
     for (;;) {
-        /* idle lanes: each active lane is one 0xff byte of the narrowed mask */
-        int idle = TF_LANES - (int)popcount(as_ulong(convert_char8(active))) / 8;
-        if (next < in->n && idle >= TF_REFILL) {
-            v3p o = zero, d = zero;
-            dv tmin = (dv)(0), tmax = (dv)(0);
-            lv fresh = (lv)(0);
-            for (int l = 0; l < TF_LANES && next < in->n; l++) {
-                if (active[l])
-                    continue;
-                int k = next++, p = k / TF_LANES, q = k % TF_LANES;
-                ray[l] = k;
-                fresh[l] = -1;
-                o.x[l] = in->o[p].x[q], o.y[l] = in->o[p].y[q], o.z[l] = in->o[p].z[q];
-                d.x[l] = in->d[p].x[q], d.y[l] = in->d[p].y[q], d.z[l] = in->d[p].z[q];
-                tmin[l] = in->tmin[p][q];
-                tmax[l] = in->tmax[p][q];
-            }
-            rayp f;
-            lv ok = setup_ray8(&f, w, o, d, tmin, tmax, fresh);
-            rayp_merge(&r, &f, ok);
-            walk_start8(w, &r, ok, &s);
-            best.t = select(best.t, (dv)(INFINITY), ok);
-            active |= ok;
+        int busy = 0;
+        for (int g = 0; g < TF_WALKERS; g++) {
+            walker_deal(w, in, &next, &k[g]);
+            busy |= any_lane(k[g].active);
         }
-        if (!any_lane(active)) {
+        if (!busy) {
             if (next >= in->n)
                 break;
             continue;
         }
-        lv hit, missed;
-        walk_step8(w, &r, &s, active, &best, &hit, &missed);
-        if (any_lane(hit)) {
-            hitp h;
-            if (hits)
-                finish_hit8(w, &r, &best, hit, &h);
-            for (int l = 0; l < TF_LANES; l++) {
-                if (!hit[l])
-                    continue;
-                int k = (int)ray[l], p = k / TF_LANES, q = k % TF_LANES;
-                found[p][q] = -1;
-                if (hits) {
-                    hits[p].t[q] = h.t[l];
-                    hits[p].p.x[q] = h.p.x[l], hits[p].p.y[q] = h.p.y[l], hits[p].p.z[q] = h.p.z[l];
-                    hits[p].n.x[q] = h.n.x[l], hits[p].n.y[q] = h.n.y[l], hits[p].n.z[q] = h.n.z[l];
-                    hits[p].ci[q] = h.ci[l];
-                    hits[p].cj[q] = h.cj[l];
-                }
-            }
-        }
-        active &= ~(hit | missed);
+        for (int g = 0; g < TF_WALKERS; g++)
+            if (any_lane(k[g].active))
+                walker_step(w, &k[g], found, hits);
     }
 }

@@ -6,11 +6,14 @@
  *   OpenCL   one backend (PoCL spreads each kernel over the same T cores) renders the same
  *            stamps one after another, as one OpenCL worker would; then the whole image as a
  *            single task (the launch overhead per task is the difference).
+ * The C and OpenCL stamp renders alternate REPEATS times; the ratios printed are the medians
+ * of the per-round ratios (each round's C and OpenCL run back to back, so a slow spell of a
+ * shared machine hits both), with the spread.
  * Also: the kernel build time cold (a fresh, empty POCL_CACHE_DIR) and cached (the same
  * directory again), device time per kernel (corners vs adaptive pixels), rays per second, and
  * the image match (PSNR, equal sample counts, bit-identical pixels).
  *
- *   build/bench/bench_opencl SCENE [WxH] [STAMP]     (defaults: the scene's size, 64) */
+ *   build/bench/bench_opencl SCENE [WxH] [STAMP] [REPEATS]   (defaults: the scene's size, 64, 5) */
 #include <ftw.h>
 #include <math.h>
 #include <pthread.h>
@@ -27,6 +30,7 @@
 #include "scene.h"
 
 #define MAX_THREADS 64
+#define MAX_REPEATS 99
 
 static double now(void)
 {
@@ -85,6 +89,19 @@ static void *c_worker(void *arg)
     return NULL;
 }
 
+static int by_value(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* Median of v[0..n-1] (sorts v). */
+static double median(double *v, int n)
+{
+    qsort(v, (size_t)n, sizeof *v, by_value);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
 static double clamp01(double v) { return v < 0 ? 0 : v > 1 ? 1 : v; }
 
 static void compare(const tf_pixel *a, const tf_pixel *b, size_t n)
@@ -122,7 +139,7 @@ static int fresh_cache_dir(char *dir, size_t len)
 int main(int argc, char **argv)
 {
     if (argc < 2) {
-        fprintf(stderr, "usage: %s SCENE [WxH] [STAMP]\n", argv[0]);
+        fprintf(stderr, "usage: %s SCENE [WxH] [STAMP] [REPEATS]\n", argv[0]);
         return 2;
     }
     char err[1024];
@@ -137,6 +154,11 @@ int main(int argc, char **argv)
     int stamp = argc > 3 ? atoi(argv[3]) : 64;
     if (stamp < 1)
         stamp = 64;
+    int repeats = argc > 4 ? atoi(argv[4]) : 5;
+    if (repeats < 1 || repeats > MAX_REPEATS) {
+        fprintf(stderr, "REPEATS: 1 to %d\n", MAX_REPEATS);
+        return 2;
+    }
     int threads = tf_thread_count(0);
     if (threads > MAX_THREADS)
         threads = MAX_THREADS;
@@ -183,30 +205,7 @@ int main(int argc, char **argv)
     printf("build      cold %.2f s (backend ready in %.2f s), cached %.3f s (ready in %.3f s)\n",
            cold_build, cold_total, tf_cl_backend_build_seconds(cl), warm_total);
 
-    /* C: threads over stamps */
-    job j = {.r = r, .width = s->width, .height = s->height, .stamp = stamp, .img = c_img};
-    j.across = (s->width + stamp - 1) / stamp;
-    j.total = j.across * ((s->height + stamp - 1) / stamp);
-    atomic_init(&j.next, 0);
-    pthread_t tid[MAX_THREADS];
-    targ args[MAX_THREADS];
-    double cpu0 = cpu_now();
-    t0 = now();
-    for (int i = 0; i < threads; i++) {
-        args[i] = (targ){&j, i};
-        pthread_create(&tid[i], NULL, c_worker, &args[i]);
-    }
-    for (int i = 0; i < threads; i++)
-        pthread_join(tid[i], NULL);
-    double c_s = now() - t0, c_cpu = cpu_now() - cpu0;
-    tf_render_counts cc = {0};
-    for (int i = 0; i < threads; i++) {
-        cc.primary_rays += j.counts[i].primary_rays;
-        cc.shadow_rays += j.counts[i].shadow_rays;
-    }
-
-    /* OpenCL: the first launches compile PoCL's work-group functions (cached on disk too):
-     * timed apart, then the same stamps one by one, then the whole image at once */
+    /* the first launches compile PoCL's work-group functions (cached on disk too): timed apart */
     t0 = now();
     if (tf_cl_backend_render(cl, (tf_rect){0, 0, stamp < s->width ? stamp : s->width,
                                            stamp < s->height ? stamp : s->height},
@@ -216,24 +215,57 @@ int main(int argc, char **argv)
     }
     printf("first task %.3f s (includes PoCL's work-group function compile on a cold cache)\n",
            now() - t0);
-    double corner0, pixel0;
-    tf_cl_backend_kernel_seconds(cl, &corner0, &pixel0);
-    tf_render_counts clc = {0};
-    cpu0 = cpu_now();
-    t0 = now();
-    for (int k = 0; k < j.total; k++) {
-        tf_rect rr = stamp_rect(&j, k);
-        if (tf_cl_backend_render(cl, rr, buf, &clc, err, sizeof err)) {
-            fprintf(stderr, "%s\n", err);
-            return 1;
+
+    /* rounds: C (threads over stamps), then OpenCL (the same stamps one by one) */
+    job j = {.r = r, .width = s->width, .height = s->height, .stamp = stamp, .img = c_img};
+    j.across = (s->width + stamp - 1) / stamp;
+    j.total = j.across * ((s->height + stamp - 1) / stamp);
+    double c_wall[MAX_REPEATS], c_cpus[MAX_REPEATS], cl_wall[MAX_REPEATS], cl_cpus[MAX_REPEATS];
+    double wall_ratio[MAX_REPEATS], cpu_ratio[MAX_REPEATS];
+    double corner_s = 0, pixel_s = 0;
+    tf_render_counts cc = {0}, clc = {0};
+    for (int round = 0; round < repeats; round++) {
+        memset(j.counts, 0, sizeof j.counts);
+        atomic_init(&j.next, 0);
+        pthread_t tid[MAX_THREADS];
+        targ args[MAX_THREADS];
+        double cpu0 = cpu_now();
+        t0 = now();
+        for (int i = 0; i < threads; i++) {
+            args[i] = (targ){&j, i};
+            pthread_create(&tid[i], NULL, c_worker, &args[i]);
         }
-        paste(cl_img, s->width, rr, buf);
+        for (int i = 0; i < threads; i++)
+            pthread_join(tid[i], NULL);
+        c_wall[round] = now() - t0;
+        c_cpus[round] = cpu_now() - cpu0;
+        cc = (tf_render_counts){0};
+        for (int i = 0; i < threads; i++) {
+            cc.primary_rays += j.counts[i].primary_rays;
+            cc.shadow_rays += j.counts[i].shadow_rays;
+        }
+
+        double corner0, pixel0, corner1, pixel1;
+        tf_cl_backend_kernel_seconds(cl, &corner0, &pixel0);
+        clc = (tf_render_counts){0};
+        cpu0 = cpu_now();
+        t0 = now();
+        for (int k = 0; k < j.total; k++) {
+            tf_rect rr = stamp_rect(&j, k);
+            if (tf_cl_backend_render(cl, rr, buf, &clc, err, sizeof err)) {
+                fprintf(stderr, "%s\n", err);
+                return 1;
+            }
+            paste(cl_img, s->width, rr, buf);
+        }
+        cl_wall[round] = now() - t0;
+        cl_cpus[round] = cpu_now() - cpu0;
+        tf_cl_backend_kernel_seconds(cl, &corner1, &pixel1);
+        corner_s += (corner1 - corner0) / repeats;
+        pixel_s += (pixel1 - pixel0) / repeats;
+        wall_ratio[round] = c_wall[round] / cl_wall[round];
+        cpu_ratio[round] = c_cpus[round] / cl_cpus[round];
     }
-    double cl_s = now() - t0, cl_cpu = cpu_now() - cpu0;
-    double corner_s, pixel_s;
-    tf_cl_backend_kernel_seconds(cl, &corner_s, &pixel_s);
-    corner_s -= corner0;
-    pixel_s -= pixel0;
     /* twice: PoCL specialises its work-group function for a large grid on first sight */
     double whole_s[2];
     for (int pass = 0; pass < 2; pass++) {
@@ -247,16 +279,22 @@ int main(int argc, char **argv)
     }
     double c_rays = (double)(cc.primary_rays + cc.shadow_rays);
     double cl_rays = (double)(clc.primary_rays + clc.shadow_rays);
+    double c_s = median(c_wall, repeats), cl_s = median(cl_wall, repeats);
+    double c_cpu = median(c_cpus, repeats), cl_cpu = median(cl_cpus, repeats);
+    printf("rounds     %d (medians below)\n", repeats);
     printf("C          %.3f s  %.2f Mrays/s  (%d threads)\n", c_s, c_rays / c_s * 1e-6, threads);
     printf("OpenCL     %.3f s  %.2f Mrays/s  (stamps; device time: corners %.3f s, pixels "
            "%.3f s, host+launch %.3f s)\n",
            cl_s, cl_rays / cl_s * 1e-6, corner_s, pixel_s, cl_s - corner_s - pixel_s);
     printf("OpenCL     %.3f s  (whole image as one task; %.3f s the first time)\n", whole_s[1],
            whole_s[0]);
-    printf("CPU time   C %.3f s, OpenCL %.3f s: OpenCL/C throughput per CPU second %.2fx\n",
-           c_cpu, cl_cpu, c_cpu / cl_cpu);
-    printf("ratio      OpenCL/C throughput %.2fx with stamps, %.2fx whole image (target >= 1.3x)\n",
-           c_s / cl_s, c_s / whole_s[1]);
+    double cpu_r = median(cpu_ratio, repeats), wall_r = median(wall_ratio, repeats);
+    printf("CPU time   C %.3f s, OpenCL %.3f s: OpenCL/C throughput per CPU second %.2fx "
+           "(rounds %.2f-%.2f)\n",
+           c_cpu, cl_cpu, cpu_r, cpu_ratio[0], cpu_ratio[repeats - 1]);
+    printf("ratio      OpenCL/C throughput %.2fx with stamps (rounds %.2f-%.2f), %.2fx whole "
+           "image (target >= 1.3x)\n",
+           wall_r, wall_ratio[0], wall_ratio[repeats - 1], c_s / whole_s[1]);
     compare(c_img, cl_img, n);
     tf_cl_backend_free(cl);
     tf_renderer_free(r);

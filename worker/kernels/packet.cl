@@ -1,7 +1,7 @@
 /* packet.cl: the types of the packet renderer -- eight samples at a time, one per lane of
  * OpenCL's 8-wide vector types, so the compiler (PoCL on the CPU) runs them in SIMD registers.
  *
- * A work-item of packet_render.cl gathers up to 64 lattice samples (from neighbouring pixels,
+ * A work-item of packet_render.cl gathers up to 128 lattice samples (from neighbouring pixels,
  * so their rays are coherent) and hands them to lattice_samples (packet_shade.cl), which
  * shades them eight at a time and walks their rays with walk_stream (packet_trace.cl).  Every
  * packet function NAME8 computes, in each active lane, exactly what its C twin NAME in

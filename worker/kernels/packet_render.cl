@@ -1,7 +1,7 @@
 /* packet_render.cl: the two kernels the host runs per rectangle, feeding lattice_samples
  * (packet_shade.cl) batches of up to TF_STREAM samples, traced eight at a time.
  *
- *   tf_corners8  work-item g samples corners 64g .. 64g+63 of the (w+1) x (h+1) pixel-corner
+ *   tf_corners8  work-item g samples corners 128g .. 128g+127 of the (w+1) x (h+1) pixel-corner
  *                lattice points (row-major, external row and column included: the
  *                external-sample rule of render.h).  Neighbouring corners, coherent rays.
  *   tf_pixels8   work-item g runs the adaptive subdivision of render.c's render_pixel for
@@ -30,7 +30,10 @@
  * stay where tf_corners8 wrote them. */
 
 #ifndef TF_PIX
-#define TF_PIX 16          /* pixels per work-item */
+#define TF_PIX 64          /* pixels per work-item (the host passes -DTF_PIX) */
+#endif
+#if TF_PIX > 256
+#error "TF_PIX: at most 256 (the queue names pixels with a uchar)"
 #endif
 #define TF_QUEUE TF_STREAM /* queued samples per work-item: one stream */
 #define TF_QUEUED 0x80000000u

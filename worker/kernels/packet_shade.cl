@@ -1,4 +1,4 @@
-/* packet_shade.cl: lattice_samples -- render.c's lattice samples for a batch of up to 64
+/* packet_shade.cl: lattice_samples -- render.c's lattice samples for a batch of up to 128
  * lattice points: their camera rays, walked as one stream (walk_stream, packet_trace.cl), and
  * shaded in SIMD eight at a time, one sample per lane of the dv / lv / iv types of packet.cl,
  * with all their shadow rays walked as a second stream.

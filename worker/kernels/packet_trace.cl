@@ -393,7 +393,10 @@ void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *h
  * than waiting for the whole packet (8): a ray's setup costs more than the idle steps it
  * saves. */
 
-#define TF_STREAM 64 /* rays per stream */
+#define TF_STREAM 128 /* rays per stream */
+#if TF_STREAM > 256 || TF_STREAM % TF_LANES
+#error "TF_STREAM: a multiple of TF_LANES, at most 256 (streams index rays with a uchar)"
+#endif
 #define TF_STREAM_PACKETS (TF_STREAM / TF_LANES)
 #ifndef TF_REFILL
 #define TF_REFILL 8 /* deal new rays once this many lanes are free (1..8) */

@@ -107,6 +107,7 @@ typedef struct pixel_state {
     quad stack[TF_STACK];
     int sp, spp, px, py;
     int used;                /* cache entries filled */
+    int asked;               /* stack[0 .. asked-1] have had their corners queued */
     uint rays;
     float zmin;
     double sum_r, sum_g, sum_b, sum_a;
@@ -201,6 +202,7 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
                 s[4] = slot_of(ps, side, t.i + hs, t.j + hs);
                 lvl[4] = levels_of(ps, side, t.i + hs, t.j + hs);
                 ps->sp--;
+                ps->asked = min(ps->asked, ps->sp);
                 if (display_range(lvl, 5) > split_threshold) {
                     quad *st = ps->stack + ps->sp;
                     st[0].i = t.i + hs, st[0].j = t.j + hs, st[0].size = hs;
@@ -219,14 +221,21 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
             }
         }
         ps->sp--;
+        ps->asked = min(ps->asked, ps->sp);
         double wt = 0.25 * (double)t.size * (double)t.size;
         ps->sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0]);
         ps->sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1]);
         ps->sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2]);
         ps->sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3]);
     }
-    for (int e = ps->sp - 2; e >= 0 && q->n < TF_QUEUE; e--)
-        want_corners(ps, p, ps->stack[e], side, epoch, q);
+    /* an entry below the top changes only by being popped (asked follows every pop down), so
+     * each is asked once */
+    for (; ps->asked < ps->sp - 1; ps->asked++) {
+        int room = TF_QUEUE - q->n;
+        if (room < 4)
+            break; /* this entry may not fit whole: ask again next round */
+        want_corners(ps, p, ps->stack[ps->asked], side, epoch, q);
+    }
 }
 
 /* Pixels first .. first+count-1 (row-major in the rw-wide rectangle at (rx, ry)); pixel
@@ -274,6 +283,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         }
         s->stack[0].i = 0, s->stack[0].j = 0, s->stack[0].size = N;
         s->sp = 1;
+        s->asked = 0;
         s->spp = 4;
         s->rays = 0;
         s->sum_r = s->sum_g = s->sum_b = s->sum_a = 0;

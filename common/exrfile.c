@@ -39,6 +39,11 @@
  * a killed render loses no finished row to an incomplete chunk. */
 #define TF_EXR_CHUNK_ROWS 1
 #define TF_EXR_COMPRESSION EXR_COMPRESSION_ZIPS
+/* zlib level 1, not zlib's default 6: the coordinator shares the cores with the workers, and
+ * on float pixels level 6 buys 1.4% of file size for 13% more of the coordinator's CPU
+ * (alps.scene 1920x640: 17.97 -> 18.22 MB, coordinator 1.05 -> 0.92 CPU-s).  Any level reads
+ * back the same; a resumed file may mix levels. */
+#define TF_EXR_ZIP_LEVEL 1
 #define TF_EXR_MAX_DIM 65536 /* refuse absurd sizes before allocating anything */
 
 static const char ATTR_HASH[] = "terrafarm.scene_hash";
@@ -229,6 +234,8 @@ static tf_exr_writer *writer_open(const char *path, int width, int height,
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_initialize_required_attr_simple(w->ctx, part, width, height,
                                                  TF_EXR_COMPRESSION);
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_set_zip_compression_level(w->ctx, part, TF_EXR_ZIP_LEVEL);
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_set_lineorder(w->ctx, part, EXR_LINEORDER_INCREASING_Y);
     for (int i = 0; i < nchannels && rv == EXR_ERR_SUCCESS; i++)

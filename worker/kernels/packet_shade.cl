@@ -28,7 +28,8 @@
  *     through memory) through indices that are in range for every lane, idle or not: heights
  *     through clamped vertex indices, the permutation through indices masked to 0..511.  The
  *     16-entry gradient table is computed from its constants instead (grad_x8).  Hit fields of
- *     lanes trace8 does not report are zeroed beforehand, so nothing is read uninitialised.
+ *     rays walk_stream reports no hit for are zeroed beforehand, so nothing is read
+ *     uninitialised.
  *   - Work may be shared between lanes' computations only where their inputs are equal, so
  *     the outputs are too (fbm_with_gradient8's offset samples in the same lattice cell).
  *   - A scalar counter (shadow_rays) becomes an iv, bumped by the lanes that cast a ray.
@@ -37,10 +38,6 @@
  * time, the bump fBm the largest part of it; tracing (packet_trace.cl) is most of the rest. */
 
 /* ---------------------------------------------------------------- small packet helpers */
-
-/* The noise functions run a dozen times per sample and per octave; PoCL leaves them as calls
- * (their packets passed through memory) unless told. */
-#define TF_INLINE __attribute__((always_inline))
 
 /* v3_norm per lane: lanes of length 0 (or NaN) keep their vector, as in the scalar code. */
 v3p v3p_norm(v3p a)

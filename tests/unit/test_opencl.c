@@ -11,6 +11,7 @@
  *                       with mixed workers assembles) meets the same tolerance.
  *   other_scenes        mesa (water, eroded terrain) and alps (panorama camera, ridged) at
  *                       small sizes: the same tolerance.
+ *   aa_depths_and_tiny_images   AA depth 0 and 6, a 1x1 image, a 7x3 one: the same.
  *   On PoCL's CPU device the packet kernels compute every sample with the C operations in the
  *   C order, so match_c_backend and other_scenes also demand memcmp-identical pixels there (a
  *   wrong lane mask that touched a few pixels would still pass the tolerance).
@@ -219,8 +220,9 @@ static void mixed_backends(void **state)
     assert_close_to_c(mixed, "mixed backends");
 }
 
-/* Render scenes/NAME.scene at w x h with both backends; compare. */
-static void check_scene(const char *name, int w, int h)
+/* Render scenes/NAME.scene at w x h with both backends (AA depth `depth`, or the scene's if
+ * negative); compare. */
+static void check_scene(const char *name, int w, int h, int depth)
 {
     char err[1024], path[4096];
     const char *root = getenv("TF_ROOT");
@@ -228,6 +230,8 @@ static void check_scene(const char *name, int w, int h)
     tf_scene *s = tf_scene_load(path, err, sizeof err);
     assert_non_null(s);
     tf_scene_set_size(s, w, h);
+    if (depth >= 0)
+        s->antialias.max_depth = depth;
     tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
     assert_non_null(hf);
     tf_renderer *r = tf_renderer_new(s, hf, err, sizeof err);
@@ -242,7 +246,8 @@ static void check_scene(const char *name, int w, int h)
     assert_int_equal(tf_cl_backend_render(b, (tf_rect){0, 0, w, h}, g, NULL, err, sizeof err), 0);
     double p = psnr(c, g, n);
     size_t spp_same = count_equal_spp(c, g, n);
-    print_message("%s %dx%d: PSNR %.1f dB, spp equal %zu/%zu\n", name, w, h, p, spp_same, n);
+    print_message("%s %dx%d depth %d: PSNR %.1f dB, spp equal %zu/%zu\n", name, w, h,
+                  s->antialias.max_depth, p, spp_same, n);
     assert_true(p >= 45.0);
     assert_true(spp_same * 100 >= n * 99);
     if (on_pocl_cpu(b))
@@ -259,8 +264,20 @@ static void other_scenes(void **state)
 {
     (void)state;
     skip_without_opencl();
-    check_scene("mesa", 96, 54);
-    check_scene("alps", 120, 40);
+    check_scene("mesa", 96, 54, -1);
+    check_scene("alps", 120, 40, -1);
+}
+
+/* The edges of the packet kernels: no subdivision at all, the deepest one (a 65 x 65 lattice
+ * per pixel, 128-sample batches that fill), and images smaller than a work-item. */
+static void aa_depths_and_tiny_images(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    check_scene("default", 33, 17, 0);
+    check_scene("default", 40, 24, 6);
+    check_scene("default", 1, 1, -1);
+    check_scene("valley", 7, 3, -1);
 }
 
 static void bad_device(void **state)
@@ -323,6 +340,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(match_c_backend), cmocka_unit_test(rect_invariance),
         cmocka_unit_test(mixed_backends),  cmocka_unit_test(other_scenes),
+        cmocka_unit_test(aa_depths_and_tiny_images),
         cmocka_unit_test(bad_device),
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
         cmocka_unit_test(bad_rect),

@@ -299,26 +299,38 @@ TF_INLINE void walk_start8(const world *w, const rayp *r, lv mask, walkp *s)
     s->t_event = select(s->t_event, r->t0, mask);
 }
 
-/* One step of walk_hier for the lanes of `active`: *hit gets the lanes that found their hit
- * (best holds it), *missed the lanes whose ray left the grid or its interval. */
-TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, candp *best, lv *hit,
-                lv *missed)
+/* The first half of a walk_hier step: where each lane's block ends (tx, ty) and the block's
+ * max and min, loaded.  Split from the second half so that a caller with two packets can
+ * start both packets' loads before it waits on either. */
+typedef struct fetchp { dv tx, ty, hi, lo; } fetchp;
+
+TF_INLINE void walk_fetch8(const world *w, const rayp *r, const walkp *s, lv active, fetchp *f)
+{
+    const int cells = w->cells;
+    __global const int *offsets = w->I + TFI_LEVEL_OFFSET;
+    const lv step_x = one_if(r->sx > 0), step_y = one_if(r->sy > 0);
+    const lv level = s->level, bi = s->ci >> level, bj = s->cj >> level;
+    f->tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
+    f->ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
+    lv idx = gather_i(offsets, level, active) + bj * ((lv)(cells) >> level) + bi;
+    gather_minmax(w->mm, idx, active, &f->hi, &f->lo);
+}
+
+/* The second half of the step, for the lanes of `active`: *hit gets the lanes that found
+ * their hit (best holds it), *missed the lanes whose ray left the grid or its interval. */
+TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, const fetchp *f,
+                          candp *best, lv *hit, lv *missed)
 {
     const int cells = w->cells, top = w->levels - 1;
-    __global const int *offsets = w->I + TFI_LEVEL_OFFSET;
     const dv oz = r->o.z, dz = r->d.z, t1 = r->t1;
     const lv step_x = one_if(r->sx > 0), step_y = one_if(r->sy > 0);
     lv ci = s->ci, cj = s->cj, level = s->level, stale = s->stale;
     const lv bi = ci >> level, bj = cj >> level;
-    dv tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
-    dv ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
+    const dv tx = f->tx, ty = f->ty, hi = f->hi, lo = f->lo;
     lv x_first = tx <= ty;
     dv tc = select(ty, tx, x_first);
     dv t_out = select(t1, tc, tc < t1);
     t_out = select(t_out, s->t_cur, t_out < s->t_cur);
-    lv idx = gather_i(offsets, level, active) + bj * ((lv)(cells) >> level) + bi;
-    dv hi, lo;
-    gather_minmax(w->mm, idx, active, &hi, &lo);
     dv z_in = oz + s->t_cur * dz, z_out = oz + t_out * dz;
     dv zlo = select(z_out, z_in, z_in < z_out), zhi = select(z_in, z_out, z_in < z_out);
     lv culled = (zlo > hi + r->margin) | (zhi < lo - r->margin);
@@ -489,11 +501,12 @@ TF_INLINE void walker_deal(const world *w, const ray_stream *in, int *next, walk
     k->active |= ok;
 }
 
-/* One step of the walker's lanes; the rays that end are reported in found / hits. */
-TF_INLINE void walker_step(const world *w, walker *k, lv found[], hitp *hits)
+/* One step of the walker's lanes, its fetch done; the rays that end are reported in found /
+ * hits. */
+TF_INLINE void walker_step(const world *w, walker *k, const fetchp *f, lv found[], hitp *hits)
 {
     lv hit, missed;
-    walk_step8(w, &k->r, &k->s, k->active, &k->best, &hit, &missed);
+    walk_step8(w, &k->r, &k->s, k->active, f, &k->best, &hit, &missed);
     if (any_lane(hit)) {
         hitp h;
         if (hits)
@@ -517,8 +530,8 @@ TF_INLINE void walker_step(const world *w, walker *k, lv found[], hitp *hits)
 
 /* Walk every ray of the stream: found[k / 8] lane k % 8 says whether ray k hit; if hits is
  * not NULL, hits[k / 8] lane k % 8 holds that hit (finish_hit8's record).  TF_WALKERS packets
- * walk side by side: a step waits on its grid loads (a gather the next step depends on), and
- * the other packet's step fills that wait. */
+ * walk side by side: a step waits on its grid loads (a gather the next step depends on), so
+ * every packet's loads are started (walk_fetch8) before any packet's step goes on with them. */
 void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
 {
     for (int p = 0; p < TF_STREAM_PACKETS; p++)
@@ -538,8 +551,12 @@ void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
                 break;
             continue;
         }
+        fetchp f[TF_WALKERS];
         for (int g = 0; g < TF_WALKERS; g++)
             if (any_lane(k[g].active))
-                walker_step(w, &k[g], found, hits);
+                walk_fetch8(w, &k[g].r, &k[g].s, k[g].active, &f[g]);
+        for (int g = 0; g < TF_WALKERS; g++)
+            if (any_lane(k[g].active))
+                walker_step(w, &k[g], &f[g], found, hits);
     }
 }

@@ -35,14 +35,19 @@ lv gather_i(__global const int *p, lv idx, lv mask)
                                 p[k.s7]));
 }
 
-/* The (max, min) pair of grid cell idx per lane: one 64-bit load a lane (a single gather
- * instruction where the device has one), one cache line.  The grids are read-only, so reading
- * the float pairs as 64-bit words aliases nothing that changes. */
-void gather_minmax(__global const float2 *p, lv idx, lv mask, dv *hi, dv *lo)
+/* The (max, min) pairs of grid cells idx per lane, as loaded: one 64-bit load a lane (a single
+ * gather instruction where the device has one), one cache line; minmax_split8 makes doubles of
+ * them.  The grids are read-only, so reading the float pairs as 64-bit words aliases nothing
+ * that changes. */
+ulong8 gather_minmax(__global const float2 *p, lv idx, lv mask)
 {
     __global const ulong *q = (__global const ulong *)p;
     lv k = select((lv)(0), idx, mask);
-    ulong8 v = (ulong8)(q[k.s0], q[k.s1], q[k.s2], q[k.s3], q[k.s4], q[k.s5], q[k.s6], q[k.s7]);
+    return (ulong8)(q[k.s0], q[k.s1], q[k.s2], q[k.s3], q[k.s4], q[k.s5], q[k.s6], q[k.s7]);
+}
+
+void minmax_split8(ulong8 v, dv *hi, dv *lo)
+{
     float16 f = as_float16(v);
     *hi = convert_double8(f.even);
     *lo = convert_double8(f.odd);
@@ -288,7 +293,7 @@ TF_INLINE void walk_start8(const world *w, const rayp *r, lv mask, walkp *s)
         const dv z0 = r->o.z + r->t0 * r->d.z;
         lv i1 = (lv)(w->I[TFI_LEVEL_OFFSET + 1]) + (r->cj >> 1) * (cells >> 1) + (r->ci >> 1);
         dv hi, lo;
-        gather_minmax(w->mm, i1, mask, &hi, &lo);
+        minmax_split8(gather_minmax(w->mm, i1, mask), &hi, &lo);
         level = select(level, (lv)(0), (z0 <= hi + r->margin) & (z0 >= lo - r->margin));
     }
     s->ci = select(s->ci, r->ci, mask);
@@ -302,7 +307,10 @@ TF_INLINE void walk_start8(const world *w, const rayp *r, lv mask, walkp *s)
 /* The first half of a walk_hier step: where each lane's block ends (tx, ty) and the block's
  * max and min, loaded.  Split from the second half so that a caller with two packets can
  * start both packets' loads before it waits on either. */
-typedef struct fetchp { dv tx, ty, hi, lo; } fetchp;
+typedef struct fetchp {
+    dv tx, ty;
+    ulong8 minmax; /* not yet converted: nothing in the fetch waits for the loads */
+} fetchp;
 
 TF_INLINE void walk_fetch8(const world *w, const rayp *r, const walkp *s, lv active, fetchp *f)
 {
@@ -313,7 +321,7 @@ TF_INLINE void walk_fetch8(const world *w, const rayp *r, const walkp *s, lv act
     f->tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
     f->ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
     lv idx = gather_i(offsets, level, active) + bj * ((lv)(cells) >> level) + bi;
-    gather_minmax(w->mm, idx, active, &f->hi, &f->lo);
+    f->minmax = gather_minmax(w->mm, idx, active);
 }
 
 /* The second half of the step, for the lanes of `active`: *hit gets the lanes that found
@@ -326,7 +334,9 @@ TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, co
     const lv step_x = one_if(r->sx > 0), step_y = one_if(r->sy > 0);
     lv ci = s->ci, cj = s->cj, level = s->level, stale = s->stale;
     const lv bi = ci >> level, bj = cj >> level;
-    const dv tx = f->tx, ty = f->ty, hi = f->hi, lo = f->lo;
+    const dv tx = f->tx, ty = f->ty;
+    dv hi, lo;
+    minmax_split8(f->minmax, &hi, &lo);
     lv x_first = tx <= ty;
     dv tc = select(ty, tx, x_first);
     dv t_out = select(t1, tc, tc < t1);

@@ -53,6 +53,16 @@ void minmax_split8(ulong8 v, dv *hi, dv *lo)
     *lo = convert_double8(f.odd);
 }
 
+/* I[TFI_LEVEL_OFFSET + level] per lane: a permute of the world's offset vectors (a gather's
+ * latency sat on every walk step's critical path), for height fields of up to 16 levels
+ * (65536^2 cells); the gather beyond. */
+TF_INLINE lv level_offset8(const world *w, lv level, lv mask)
+{
+    if (w->levels <= 16)
+        return shuffle2(w->offset_lo, w->offset_hi, as_ulong8(level));
+    return gather_i(w->I + TFI_LEVEL_OFFSET, level, mask);
+}
+
 dv to_d(lv v) { return convert_double8(v); }
 
 /* Component k (0, 1, 2 per lane) of (a0, a1, a2). */
@@ -315,12 +325,11 @@ typedef struct fetchp {
 TF_INLINE void walk_fetch8(const world *w, const rayp *r, const walkp *s, lv active, fetchp *f)
 {
     const int cells = w->cells;
-    __global const int *offsets = w->I + TFI_LEVEL_OFFSET;
     const lv step_x = one_if(r->sx > 0), step_y = one_if(r->sy > 0);
     const lv level = s->level, bi = s->ci >> level, bj = s->cj >> level;
     f->tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
     f->ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
-    lv idx = gather_i(offsets, level, active) + bj * ((lv)(cells) >> level) + bi;
+    lv idx = level_offset8(w, level, active) + bj * ((lv)(cells) >> level) + bi;
     f->minmax = gather_minmax(w->mm, idx, active);
 }
 

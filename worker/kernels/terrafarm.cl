@@ -50,6 +50,9 @@ typedef struct world {
     __global const ushort *perm;  /* texture noise permutation, 512 entries */
     int n, cells, levels;
     double cell;
+    /* I[TFI_LEVEL_OFFSET + L] for L < 16 in two vectors: the walk looks a level's offset up with
+     * one permute instead of a gather (packet_trace.cl level_offset8) */
+    long8 offset_lo, offset_hi;
 } world;
 
 vec3 pvec(const world *w, int k) { return v3(w->P[k], w->P[k + 1], w->P[k + 2]); }
@@ -68,5 +71,10 @@ world make_world(__global const double *P, __global const int *I, __global const
     w.cells = I[TFI_CELLS];
     w.levels = I[TFI_LEVELS];
     w.cell = P[TFP_CELL];
+    long off[16];
+    for (int L = 0; L < 16; L++)
+        off[L] = L < w.levels ? I[TFI_LEVEL_OFFSET + L] : 0;
+    w.offset_lo = vload8(0, off);
+    w.offset_hi = vload8(1, off);
     return w;
 }

@@ -6,19 +6,19 @@
  *                external-sample rule of render.h).  Neighbouring corners, coherent rays.
  *   tf_pixels8   work-item g runs the adaptive subdivision of render.c's render_pixel for
  *                TF_PIX neighbouring pixels at once.  Each pixel is a small state machine over
- *                its own quad stack (the scalar kernel's, no recursion); whenever a pixel needs a
- *                lattice sample it does not have, the sample is queued and the pixel waits.
+ *                its own quad stack (render.c recurses; the stack pops the quads in the same
+ *                order); whenever a pixel needs a lattice sample it does not have, the sample
+ *                is queued and the pixel waits.
  *                The queue (up to TF_STREAM samples) is sampled as one batch, and the pixels
  *                resume.
  *
- * Why the pixels give the scalar renderer's bits: a pixel pops its quads in the scalar order and
- * sums their samples in the scalar order; only *when* a sample is traced changes, never its
+ * Why the pixels give the C renderer's bits: a pixel takes its quads in render.c's order and
+ * sums their samples in render.c's order; only *when* a sample is traced changes, never its
  * value (a sample is a function of its lattice point alone).  A pixel only ever queues samples
- * the scalar loop would trace: the corners of the quad on top of its stack, the probe centre
- * of that quad once its corners show the contrast that asks for it, and -- to keep the batches
- * full -- the corners of the quads further down its stack, which the scalar loop will reach
- * and need whatever happens.  So the samples traced, the sample count and the nearest distance
- * are the scalar ones too.
+ * render.c would trace: the corners of the quad on top of its stack, the probe centre of that
+ * quad once its corners show the contrast that asks for it, and -- to keep the batches full --
+ * the corners of the quads further down its stack, which render.c reaches and needs whatever
+ * happens.  So the samples traced, the sample count and the nearest distance are C's too.
  *
  * Sample cache: each pixel owns a slice of (N+1)^2 entries of `cache`, with the samples'
  * display levels (render.c tf_display_level of r, g, b: what the contrast test compares, so

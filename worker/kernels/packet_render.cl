@@ -6,9 +6,9 @@
  *                external-sample rule of render.h).  Neighbouring corners, coherent rays.
  *   tf_pixels8   work-item g runs the adaptive subdivision of render.c's render_pixel for
  *                TF_PIX neighbouring pixels at once.  Each pixel is a small state machine over
- *                its own quad stack (render.c recurses; the stack pops the quads in the same
- *                order); whenever a pixel needs a lattice sample it does not have, the sample
- *                is queued and the pixel waits.
+ *                its own quad stack (render_pixel's, popped in the same order); whenever a
+ *                pixel needs a lattice sample it does not have, the sample is queued and the
+ *                pixel waits.
  *                The queue (up to TF_STREAM samples) is sampled as one batch, and the pixels
  *                resume.
  *

@@ -416,21 +416,18 @@ void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *h
 /* ---------------------------------------------------------------- streams of rays
  *
  * Eight rays taken as they come make ragged packets: a packet of eight samples' shadow rays is
- * often half empty (only lit lanes cast one).  walk_stream takes all the rays of
- * a batch (up to TF_STREAM: the camera rays of a pixel round, or all their shadow rays) and
- * deals them to the eight lanes, so every packet is full but the last.  A lane whose ray is
- * done can be given the next ray before the others finish (TF_REFILL free lanes trigger a
- * refill); measured on default.scene, refilling mid-walk (TF_REFILL 4..7) was 3-10% slower
- * than waiting for the whole packet (8): a ray's setup costs more than the idle steps it
- * saves. */
+ * often half empty (only lit lanes cast one).  walk_stream takes all the rays of a batch (up
+ * to TF_STREAM: the camera rays of a pixel round, or all their shadow rays) and deals them to
+ * the lanes eight at a time, so every packet is full but the last.  A packet gets new rays
+ * once all its lanes are done: handing a lane its next ray as soon as it finished measured
+ * 3-10% slower on default.scene (a ray's setup costs more than the idle steps it saves). */
 
-#define TF_STREAM 128 /* rays per stream */
-#if TF_STREAM > 256 || TF_STREAM % TF_LANES
-#error "TF_STREAM: a multiple of TF_LANES, at most 256 (streams index rays with a uchar)"
+#ifndef TF_STREAM
+#define TF_STREAM 128 /* rays per stream (the host passes -DTF_STREAM) */
 #endif
 #define TF_STREAM_PACKETS (TF_STREAM / TF_LANES)
-#ifndef TF_REFILL
-#define TF_REFILL 8 /* deal new rays once this many lanes are free (1..8) */
+#if TF_STREAM > 256 || TF_STREAM % TF_LANES
+#error "TF_STREAM: a multiple of TF_LANES, at most 256 (streams index rays with a uchar)"
 #endif
 
 /* Up to TF_STREAM rays; ray k is lane k % 8 of packet k / 8. */
@@ -439,30 +436,6 @@ typedef struct ray_stream {
     v3p o[TF_STREAM_PACKETS], d[TF_STREAM_PACKETS];
     dv tmin[TF_STREAM_PACKETS], tmax[TF_STREAM_PACKETS];
 } ray_stream;
-
-TF_INLINE void rayp_merge(rayp *r, const rayp *f, lv m)
-{
-    r->o = v3p_select(r->o, f->o, m);
-    r->d = v3p_select(r->d, f->d, m);
-    r->inv_dx = select(r->inv_dx, f->inv_dx, m);
-    r->inv_dy = select(r->inv_dy, f->inv_dy, m);
-    r->tmin = select(r->tmin, f->tmin, m);
-    r->tmax = select(r->tmax, f->tmax, m);
-    r->t0 = select(r->t0, f->t0, m);
-    r->t1 = select(r->t1, f->t1, m);
-    r->margin = select(r->margin, f->margin, m);
-    r->tie_tol = select(r->tie_tol, f->tie_tol, m);
-    r->sx = select(r->sx, f->sx, m);
-    r->sy = select(r->sy, f->sy, m);
-    r->ci = select(r->ci, f->ci, m);
-    r->cj = select(r->cj, f->cj, m);
-    r->kx = select(r->kx, f->kx, m);
-    r->ky = select(r->ky, f->ky, m);
-    r->kz = select(r->kz, f->kz, m);
-    r->shx = select(r->shx, f->shx, m);
-    r->shy = select(r->shy, f->shy, m);
-    r->shz = select(r->shz, f->shz, m);
-}
 
 /* One packet walking a stream: its rays (rayp), where their walks stand, their best hits, the
  * lanes at work and which ray of the stream each lane holds. */
@@ -477,33 +450,26 @@ typedef struct walker {
 #define TF_WALKERS 2 /* packets walked side by side */
 #endif
 
-void walker_init(const world *w, walker *k)
+void walker_init(walker *k)
 {
-    const v3p zero = v3p_splat(v3(0, 0, 0));
     walkp s = {(lv)(0), (lv)(0), (lv)(0), (lv)(0), (dv)(0), (dv)(0)};
     candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
-    /* a harmless ray in every lane until the lane gets a real one */
-    setup_ray8(&k->r, w, zero, v3p_splat(v3(0, 0, 1)), (dv)(0), (dv)(1), (lv)(0));
     k->s = s;
     k->best = best;
     k->active = k->ray = (lv)(0);
 }
 
-/* Deal rays *next, *next + 1, ... of the stream to the walker's idle lanes, if TF_REFILL of
- * its lanes are idle. */
+/* Once all the walker's lanes are done, deal it rays *next, *next + 1, ... of the stream (up
+ * to eight).  k->r is read only after a deal has set it. */
 TF_INLINE void walker_deal(const world *w, const ray_stream *in, int *next, walker *k)
 {
-    /* idle lanes: each active lane is one 0xff byte of the narrowed mask */
-    int idle = TF_LANES - (int)popcount(as_ulong(convert_char8(k->active))) / 8;
-    if (*next >= in->n || idle < TF_REFILL)
+    if (*next >= in->n || any_lane(k->active))
         return;
     const v3p zero = v3p_splat(v3(0, 0, 0));
     v3p o = zero, d = zero;
     dv tmin = (dv)(0), tmax = (dv)(0);
     lv fresh = (lv)(0);
     for (int l = 0; l < TF_LANES && *next < in->n; l++) {
-        if (k->active[l])
-            continue;
         int r = (*next)++, p = r / TF_LANES, q = r % TF_LANES;
         k->ray[l] = r;
         fresh[l] = -1;
@@ -512,12 +478,9 @@ TF_INLINE void walker_deal(const world *w, const ray_stream *in, int *next, walk
         tmin[l] = in->tmin[p][q];
         tmax[l] = in->tmax[p][q];
     }
-    rayp f;
-    lv ok = setup_ray8(&f, w, o, d, tmin, tmax, fresh);
-    rayp_merge(&k->r, &f, ok);
-    walk_start8(w, &k->r, ok, &k->s);
-    k->best.t = select(k->best.t, (dv)(INFINITY), ok);
-    k->active |= ok;
+    k->active = setup_ray8(&k->r, w, o, d, tmin, tmax, fresh);
+    walk_start8(w, &k->r, k->active, &k->s);
+    k->best.t = (dv)(INFINITY);
 }
 
 /* One step of the walker's lanes, its fetch done; the rays that end are reported in found /
@@ -557,7 +520,7 @@ void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
         found[p] = (lv)(0);
     walker k[TF_WALKERS];
     for (int g = 0; g < TF_WALKERS; g++)
-        walker_init(w, &k[g]);
+        walker_init(&k[g]);
     int next = 0;
     for (;;) {
         int busy = 0;

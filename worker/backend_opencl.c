@@ -41,8 +41,9 @@
 #define SOURCE_FILES                                                                            \
     {"tf_cl_params.h", "terrafarm.cl", "packet.cl", "packet_trace.cl", "packet_shade.cl",       \
      "packet_render.cl"}
-#define CORNERS_PER_ITEM 128 /* packet_trace.cl TF_STREAM: corners per tf_corners8 work-item */
-#define PIXELS_PER_ITEM 64 /* packet_render.cl TF_PIX: pixels per tf_pixels8 work-item */
+/* passed to the kernels as -DTF_STREAM and -DTF_PIX, so host and device cannot disagree */
+#define CORNERS_PER_ITEM 128 /* TF_STREAM: the batch of samples, the corners per tf_corners8 item */
+#define PIXELS_PER_ITEM 64   /* TF_PIX: pixels per tf_pixels8 work-item */
 #define EPOCH_LIMIT 0x7fffffffu /* packet_render.cl: epochs stay below TF_QUEUED */
 #define MAX_SOURCE_BYTES (1 << 20)        /* a kernel file larger than this is not ours */
 #define SCRATCH_BUDGET ((size_t)64 << 20) /* bytes of per-pixel sample caches per batch */
@@ -317,7 +318,8 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
         return -1;
     }
     char options[128];
-    snprintf(options, sizeof options, "-cl-std=CL1.2 -DTF_PIX=%d", PIXELS_PER_ITEM);
+    snprintf(options, sizeof options, "-cl-std=CL1.2 -DTF_STREAM=%d -DTF_PIX=%d",
+             CORNERS_PER_ITEM, PIXELS_PER_ITEM);
     rc = clBuildProgram(b->program, 1, &dev, options, NULL, NULL);
     b->build_seconds = now_seconds() - t0;
     if (rc != CL_SUCCESS) {
@@ -578,30 +580,33 @@ static int ensure(tf_cl_backend *b, cl_mem *buf, size_t *cap, size_t bytes)
     return rc == CL_SUCCESS ? 0 : -1;
 }
 
-/* The slot states of the sample caches: zeroed whenever (re)allocated, which no epoch equals. */
+/* Zero the slot states of the sample caches (a state no epoch equals) and restart the epochs. */
+static cl_int reset_have(tf_cl_backend *b)
+{
+    cl_uint zero = 0;
+    b->epoch = 0;
+    return clEnqueueFillBuffer(b->queue, b->have, &zero, sizeof zero, 0, b->have_cap, 0, NULL,
+                               NULL);
+}
+
+/* The slot states: reset whenever (re)allocated. */
 static int ensure_have(tf_cl_backend *b, size_t slots)
 {
     if (b->have && b->have_cap >= slots * sizeof(cl_uint))
         return 0;
     if (ensure(b, &b->have, &b->have_cap, slots * sizeof(cl_uint)))
         return -1;
-    cl_uint zero = 0;
-    b->epoch = 0;
-    return clEnqueueFillBuffer(b->queue, b->have, &zero, sizeof zero, 0, b->have_cap, 0, NULL,
-                               NULL) == CL_SUCCESS ? 0 : -1;
+    return reset_have(b) == CL_SUCCESS ? 0 : -1;
 }
 
 /* A new epoch for the next tf_pixels8 launch; after 2^31 - 1 launches the slot states are
- * zeroed again so an old mark can never pass for a new one. */
+ * reset so an old mark can never pass for a new one. */
 static cl_int next_epoch(tf_cl_backend *b)
 {
     if (b->epoch + 1 >= EPOCH_LIMIT) {
-        cl_uint zero = 0;
-        cl_int rc = clEnqueueFillBuffer(b->queue, b->have, &zero, sizeof zero, 0, b->have_cap, 0,
-                                        NULL, NULL);
+        cl_int rc = reset_have(b);
         if (rc != CL_SUCCESS)
             return rc;
-        b->epoch = 0;
     }
     b->epoch++;
     return CL_SUCCESS;

@@ -36,7 +36,6 @@ typedef struct hitp { dv t; v3p p, n; iv ci, cj; } hitp;
 v3p v3p_make(dv x, dv y, dv z) { v3p r = {x, y, z}; return r; }
 v3p v3p_splat(vec3 a) { v3p r = {(dv)(a.x), (dv)(a.y), (dv)(a.z)}; return r; }
 v3p v3p_add(v3p a, v3p b) { return v3p_make(a.x + b.x, a.y + b.y, a.z + b.z); }
-v3p v3p_sub(v3p a, v3p b) { return v3p_make(a.x - b.x, a.y - b.y, a.z - b.z); }
 v3p v3p_mul(v3p a, v3p b) { return v3p_make(a.x * b.x, a.y * b.y, a.z * b.z); }
 v3p v3p_scale(v3p a, dv s) { return v3p_make(a.x * s, a.y * s, a.z * s); }
 dv v3p_dot(v3p a, v3p b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
@@ -50,15 +49,6 @@ v3p v3p_select(v3p a, v3p b, lv m)
  * three instructions, and the same answer for masks (every lane 0 or -1). */
 int any_lane(lv m) { return as_ulong(convert_char8(m)) != 0; }
 
-/* Lane l of a packet as a scalar vec3, and back. */
-vec3 v3p_lane(v3p a, int l) { return v3(a.x[l], a.y[l], a.z[l]); }
-void v3p_set_lane(v3p *a, int l, vec3 v)
-{
-    a->x[l] = v.x;
-    a->y[l] = v.y;
-    a->z[l] = v.z;
-}
-
 /* Loads of p[idx] for the active lanes; idle lanes read p[0] (which every buffer has) and get
  * whatever is there: callers discard them. */
 dv gather_f(__global const float *p, lv idx, lv mask)
@@ -68,15 +58,3 @@ dv gather_f(__global const float *p, lv idx, lv mask)
                                      p[k.s6], p[k.s7]));
 }
 
-dv gather_d(__global const double *p, lv idx, lv mask)
-{
-    lv k = select((lv)(0), idx, mask);
-    return (dv)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5], p[k.s6], p[k.s7]);
-}
-
-iv gather_u16(__global const ushort *p, lv idx, lv mask)
-{
-    lv k = select((lv)(0), idx, mask);
-    return convert_int8((ushort8)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5],
-                                  p[k.s6], p[k.s7]));
-}

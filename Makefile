@@ -1,10 +1,13 @@
 # terrafarm build.  `make` builds bin/terrafarm; `make test` builds and runs every test;
-# `make asan` builds an AddressSanitizer+UBSan tree under build-asan/ and runs the tests with it;
-# `make deps` installs the Debian packages the build and tests need; `make bench` builds benchmarks.
+# `make asan` builds an AddressSanitizer+UBSan tree under build-asan/ (assertions on) and runs
+# the tests with it; `make deps` installs the Debian packages the build and tests need;
+# `make bench` builds the benchmarks.
 #
-# Sources are found by wildcard: every common/*.c, coordinator/*.c, worker/*.c goes into
-# libterrafarm.a; cli/*.c is linked with it into bin/terrafarm; each tests/unit/test_*.c is its
-# own cmocka program (objects are linked directly, not through an archive); each bench/*.c its own benchmark; each tests/fuzz/fuzz_*.c a fuzz target.
+# The objects are listed by layer, lowest first, as Lua's makefile lists its core and its
+# libraries: a layer uses only the layers above it in this list, never one below.  Headers are
+# included by folder ("render/trace.h", "coordinator/supervisor.h").  Every unit test
+# tests/unit/test_*.c is its own cmocka program, every bench/*.c its own benchmark, every
+# tests/fuzz/fuzz_*.c a fuzz target; all of them link the same objects as bin/terrafarm.
 
 CC      ?= cc
 BUILD   ?= build
@@ -21,12 +24,30 @@ CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
 CFLAGS   ?= -O2 -g
 SAN      ?=
 ALL_CFLAGS := $(CFLAGS) $(SAN) -std=c11 -D_GNU_SOURCE -Wall -Wextra -ffp-contract=off -pthread \
-            -I. -Icommon -Icoordinator -Iworker -DTF_VERSION='"$(VERSION)"' \
+            -I. -Icommon -DTF_VERSION='"$(VERSION)"' \
             $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS)
 LDLIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXR_LIBS) $(CL_LIBS) -lm -pthread
 TEST_LIBS := $(shell pkg-config --libs cmocka 2>/dev/null)
 
-LIB_SRC   := $(wildcard common/*.c coordinator/*.c worker/*.c)
+# 0. base: messages, clocks, vectors; the scene file (parsed, validated, hashed)
+BASE_SRC    := common/log.c common/clock.c common/scene.c
+# 1. terrain: noise, fractal and grid generators, erosion, the height field and its max/min grids
+TERRAIN_SRC := $(wildcard common/terrain/*.c)
+# 2. image: the pixel, OpenEXR (OpenEXRCore) checkpoint files, PNG and the preview
+IMAGE_SRC   := $(wildcard common/image/*.c)
+# 3. render: camera, grid tracing, shading and mist, adaptive antialiasing over a rectangle
+RENDER_SRC  := $(wildcard common/render/*.c)
+# 4. linda: tuples, the wire protocol, sockets, authentication, the store, client and server
+LINDA_SRC   := $(wildcard common/linda/*.c)
+# 5. the farm's tuples (task, result, failure, scene), spoken by both sides
+FARM_SRC    := common/farmproto.c
+# 6. worker: the worker loop, its C and OpenCL backends, the simulated worker
+WORKER_SRC  := $(wildcard worker/*.c)
+# 7. coordinator: the farm's policy (dealer and watermark, leases, in-order writer, progress)
+COORD_SRC   := $(wildcard coordinator/*.c)
+LIB_SRC     := $(BASE_SRC) $(TERRAIN_SRC) $(IMAGE_SRC) $(RENDER_SRC) $(LINDA_SRC) $(FARM_SRC) \
+               $(WORKER_SRC) $(COORD_SRC)
+# 8. cli: bin/terrafarm's subcommands
 CLI_SRC   := $(wildcard cli/*.c)
 TEST_SRC  := $(wildcard tests/unit/test_*.c)
 BENCH_SRC := $(wildcard bench/*.c)
@@ -68,7 +89,7 @@ $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 FUZZ_LIB_SRC := $(LIB_SRC)
 $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB_SRC)
 	@mkdir -p $(dir $@)
-	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon -Icoordinator -Iworker \
+	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon \
 	  -DTF_VERSION='"$(VERSION)"' $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS) \
 	  -o $@ $< $(FUZZ_LIB_SRC) $(LDLIBS)
 $(BUILD)/replay/%: tests/fuzz/%.c tests/fuzz/replay_main.c $(LIB_OBJ)

@@ -19,10 +19,10 @@
 #include <string.h>
 #include <time.h>
 
-#include "heightfield.h"
-#include "preview.h"
-#include "render.h"
-#include "render_internal.h"
+#include "terrain/heightfield.h"
+#include "image/preview.h"
+#include "render/render.h"
+#include "render/render_internal.h"
 #include "scene.h"
 
 #define MAX_THREADS 64

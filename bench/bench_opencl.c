@@ -24,9 +24,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "backend_opencl.h"
-#include "heightfield.h"
-#include "render.h"
+#include "worker/backend_opencl.h"
+#include "terrain/heightfield.h"
+#include "render/render.h"
 #include "scene.h"
 
 #define MAX_THREADS 64

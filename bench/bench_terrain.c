@@ -20,9 +20,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "noise.h"
+#include "terrain/noise.h"
 #include "scene.h"
-#include "terrain_build.h"
+#include "terrain/terrain_build.h"
 
 #define TARGET_NS 5.0
 

@@ -13,9 +13,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-#include "heightfield.h"
-#include "noise.h"
-#include "trace.h"
+#include "terrain/heightfield.h"
+#include "terrain/noise.h"
+#include "render/trace.h"
 
 static double now_s(void)
 {

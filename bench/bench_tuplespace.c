@@ -19,9 +19,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "coordinator/tsserver.h"
+#include "linda/tsserver.h"
 #include "log.h"
-#include "tsclient.h"
+#include "linda/tsclient.h"
 
 static int consumers = 4, tasks = 20000, redis_port = 0;
 static char ts_addr[64];

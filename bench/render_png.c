@@ -12,10 +12,10 @@
 #include <string.h>
 #include <time.h>
 
-#include "heightfield.h"
-#include "png_write.h"
-#include "preview.h"
-#include "render.h"
+#include "terrain/heightfield.h"
+#include "image/png_write.h"
+#include "image/preview.h"
+#include "render/render.h"
 #include "scene.h"
 
 typedef struct job {

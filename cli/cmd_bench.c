@@ -20,12 +20,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "commands.h"
-#include "heightfield.h"
+#include "cli/commands.h"
+#include "terrain/heightfield.h"
 #include "log.h"
 #include "scene.h"
-#include "simulate.h"
-#include "tasks.h"
+#include "worker/simulate.h"
+#include "coordinator/tasks.h"
 
 #define MAX_COUNTS 64
 #define MAX_REPEAT 100

@@ -16,12 +16,12 @@
 #include <string.h>
 #include <strings.h>
 
-#include "commands.h"
-#include "exrfile.h"
+#include "cli/commands.h"
+#include "image/exrfile.h"
 #include "log.h"
-#include "png_write.h"
+#include "image/png_write.h"
 #include "scene.h"
-#include "terrain_build.h"
+#include "terrain/terrain_build.h"
 
 static const char usage[] =
     "usage: terrafarm heightfield SCENE -o FILE.png|FILE.exr [--threads N] [--size-exp K]\n"
@@ -140,7 +140,7 @@ static int write_png(const char *path, const float *h, int n, float lo, float hi
 {
     uint16_t *row = malloc((size_t)n * sizeof *row);
     if (!row) {
-        snprintf(err, errlen, "out of memory for a PNG row");
+        tf_seterr(err, errlen, "out of memory for a PNG row");
         return -1;
     }
     tf_png_writer *w = tf_png_create(path, n, n, 16, 1, err, errlen);

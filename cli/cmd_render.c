@@ -5,8 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "commands.h"
-#include "coordinator.h"
+#include "cli/commands.h"
+#include "coordinator/coordinator.h"
 #include "log.h"
 
 static const char usage[] =

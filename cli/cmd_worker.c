@@ -16,14 +16,15 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "auth.h"
-#include "commands.h"
-#include "heightfield.h"
+#include "linda/auth.h"
+#include "clock.h"
+#include "cli/commands.h"
+#include "terrain/heightfield.h"
 #include "log.h"
 #include "scene.h"
-#include "simulate.h"
-#include "tsclient.h"
-#include "worker.h"
+#include "worker/simulate.h"
+#include "linda/tsclient.h"
+#include "worker/worker.h"
 
 static const char usage[] =
     "usage: terrafarm worker --connect HOST:PORT [options]\n"
@@ -53,14 +54,12 @@ static const char usage[] =
 static ts_client *connect_patiently(const char *hostport, const uint8_t *key, int timeout_ms,
                                     char *err, size_t errlen)
 {
-    struct timespec t0, now;
-    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int64_t t0 = tf_now_ms();
     for (;;) {
         ts_client *c = ts_client_connect(hostport, key, timeout_ms, err, errlen);
         if (c || !strstr(err, "Connection refused"))
             return c;
-        clock_gettime(CLOCK_MONOTONIC, &now);
-        double waited_ms = (now.tv_sec - t0.tv_sec) * 1e3 + (now.tv_nsec - t0.tv_nsec) * 1e-6;
+        double waited_ms = (double)(tf_now_ms() - t0);
         if (waited_ms + 250 > timeout_ms)
             return NULL;
         usleep(250 * 1000);

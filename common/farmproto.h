@@ -19,8 +19,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "render.h"
-#include "tuple.h"
+#include "image/pixel.h"
+#include "render/counts.h"
+#include "linda/tuple.h"
 
 #define TF_TASK_STOP (-1)
 #define TF_EXCLUDED_MAX 64

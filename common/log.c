@@ -60,3 +60,19 @@ void tf_die(int status, const char *fmt, ...)
     va_end(ap);
     exit(status);
 }
+
+int tf_vseterr(char *err, size_t errlen, const char *fmt, va_list ap)
+{
+    if (err && errlen > 0)
+        vsnprintf(err, errlen, fmt, ap);
+    return -1;
+}
+
+int tf_seterr(char *err, size_t errlen, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    tf_vseterr(err, errlen, fmt, ap);
+    va_end(ap);
+    return -1;
+}

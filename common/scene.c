@@ -36,6 +36,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include "log.h"
 
 #define SCENE_MAX_BYTES (1024 * 1024) /* bound on a scene file / text */
 #define NUMBER_MAX_CHARS 64           /* longest accepted numeric token */
@@ -233,17 +234,6 @@ static void fail_at(struct parser *p, int line, const char *fmt, ...)
     vsnprintf(what, sizeof what, fmt, ap);
     va_end(ap);
     snprintf(p->err, p->errlen, "%s:%d: %s", p->name, line, what);
-}
-
-static void set_err(char *err, size_t errlen, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static void set_err(char *err, size_t errlen, const char *fmt, ...)
-{
-    if (!err || errlen == 0)
-        return;
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(err, errlen, fmt, ap);
-    va_end(ap);
 }
 
 /* ---------------------------------------------------------------------------------------- */
@@ -895,7 +885,7 @@ tf_scene *tf_scene_parse_text(const char *name, const char *text, size_t len, ch
     if (!name)
         name = "<string>";
     if (len > SCENE_MAX_BYTES) {
-        set_err(err, errlen, "%s: too large (%zu bytes, at most %d)", name, len, SCENE_MAX_BYTES);
+        tf_seterr(err, errlen, "%s: too large (%zu bytes, at most %d)", name, len, SCENE_MAX_BYTES);
         return NULL;
     }
     if (!text) { /* no text at all: an empty scene (which then lacks its required keys) */
@@ -904,7 +894,7 @@ tf_scene *tf_scene_parse_text(const char *name, const char *text, size_t len, ch
     }
     tf_scene *s = scene_new(name, text, len);
     if (!s) {
-        set_err(err, errlen, "%s: out of memory", name);
+        tf_seterr(err, errlen, "%s: out of memory", name);
         return NULL;
     }
     struct parser p = {.name = name, .text = s->text, .len = len, .section = -1,
@@ -928,14 +918,14 @@ tf_scene *tf_scene_load(const char *path, char *err, size_t errlen)
 {
     FILE *f = fopen(path, "rb");
     if (!f) {
-        set_err(err, errlen, "%s: cannot open: %s", path, strerror(errno));
+        tf_seterr(err, errlen, "%s: cannot open: %s", path, strerror(errno));
         return NULL;
     }
     /* read at most one byte past the bound, so "too large" needs no trust in the file size */
     char *buf = malloc(SCENE_MAX_BYTES + 1);
     if (!buf) {
         fclose(f);
-        set_err(err, errlen, "%s: out of memory", path);
+        tf_seterr(err, errlen, "%s: out of memory", path);
         return NULL;
     }
     size_t n = fread(buf, 1, SCENE_MAX_BYTES + 1, f);
@@ -943,9 +933,9 @@ tf_scene *tf_scene_load(const char *path, char *err, size_t errlen)
     fclose(f);
     tf_scene *s = NULL;
     if (read_error)
-        set_err(err, errlen, "%s: cannot read: %s", path, strerror(read_error));
+        tf_seterr(err, errlen, "%s: cannot read: %s", path, strerror(read_error));
     else if (n > SCENE_MAX_BYTES)
-        set_err(err, errlen, "%s: too large (more than %d bytes)", path, SCENE_MAX_BYTES);
+        tf_seterr(err, errlen, "%s: too large (more than %d bytes)", path, SCENE_MAX_BYTES);
     else
         s = tf_scene_parse_text(path, buf, n, err, errlen);
     free(buf);

@@ -1,5 +1,6 @@
 /* coordinator.c: see coordinator.h for the sequence; this file is that sequence, top to bottom. */
-#include "coordinator.h"
+#include "coordinator/coordinator.h"
+#include "clock.h"
 
 #include <errno.h>
 #include <signal.h>
@@ -11,22 +12,23 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "auth.h"
-#include "exrfile.h"
+#include "linda/auth.h"
+#include "image/exrfile.h"
 #include "farmproto.h"
-#include "heightfield.h"
+#include "terrain/heightfield.h"
 #include "log.h"
-#include "preview.h"
-#include "progress.h"
-#include "rowwriter.h"
-#include "proto.h"
+#include "image/preview.h"
+#include "coordinator/progress.h"
+#include "coordinator/rowwriter.h"
+#include "linda/proto.h"
+#include "linda/sock.h"
 #include "scene.h"
-#include "spawn.h"
-#include "stats.h"
-#include "supervisor.h"
-#include "tsserver.h"
-#include "tuplespace.h"
-#include "worker.h"
+#include "coordinator/spawn.h"
+#include "coordinator/stats.h"
+#include "coordinator/supervisor.h"
+#include "linda/tsserver.h"
+#include "linda/tuplespace.h"
+#include "worker/worker.h"
 
 #define DEFAULT_LISTEN "127.0.0.1:7878"
 #define MAX_RESPAWNS_PER_WORKER 3
@@ -34,13 +36,6 @@
 static volatile sig_atomic_t interrupted;
 
 static void on_signal(int sig) { interrupted = sig; }
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
 
 void tf_render_opts_init(tf_render_opts *o)
 {
@@ -97,7 +92,7 @@ static int ensure_parent_dir(const char *path, char *err, size_t errlen)
         *p = '/';
     }
     if (mkdir(dir, 0777) && errno != EEXIST) {
-        snprintf(err, errlen, "%.900s: cannot create directory: %s", dir, strerror(errno));
+        tf_seterr(err, errlen, "%.900s: cannot create directory: %s", dir, strerror(errno));
         return -1;
     }
     return 0;
@@ -198,17 +193,6 @@ static int put_scene_tuples(ts_space *space, const tf_scene *s)
     return 0;
 }
 
-static int is_loopback_listen(const char *listen)
-{
-    char host[256], port[32];
-    if (!strncmp(listen, "unix:", 5))
-        return 1;
-    char e[128];
-    if (tf_split_hostport(listen, host, sizeof host, port, sizeof port, e, sizeof e))
-        return 0;
-    return tf_addr_is_loopback(host);
-}
-
 typedef struct local_workers {
     int n;
     pid_t *pid;
@@ -266,8 +250,8 @@ static int workers_alive(const local_workers *lw)
  * read the stop tuple), then make sure none is left behind. */
 static void drain_workers(local_workers *lw, ts_server *srv, double grace_s)
 {
-    double until = now_s() + grace_s;
-    while (workers_alive(lw) && now_s() < until) {
+    double until = tf_now_s() + grace_s;
+    while (workers_alive(lw) && tf_now_s() < until) {
         ts_server_run_once(srv, 20);
         reap_workers(lw, srv, NULL, NULL, NULL, 0);
     }
@@ -299,7 +283,7 @@ static tf_exr_writer *create_output(const char *output, const tf_exr_meta *meta,
     size_t n = strlen(output) + sizeof ".new.tmp";
     char *tmp = malloc(n);
     if (!tmp) {
-        snprintf(err, errlen, "%s: out of memory", output);
+        tf_seterr(err, errlen, "%s: out of memory", output);
         return NULL;
     }
     snprintf(tmp, n, "%s.new.tmp", output);
@@ -313,11 +297,11 @@ static tf_exr_writer *create_output(const char *output, const tf_exr_meta *meta,
             if (w && rows_done != 0) {
                 tf_exr_abandon(w);
                 w = NULL;
-                snprintf(err, errlen, "%s: changed while starting (%d rows, expected 0)", output,
+                tf_seterr(err, errlen, "%s: changed while starting (%d rows, expected 0)", output,
                          rows_done);
             }
         } else {
-            snprintf(err, errlen, "%s: cannot create: %s", output, strerror(errno));
+            tf_seterr(err, errlen, "%s: cannot create: %s", output, strerror(errno));
         }
     }
     remove(tmp); /* gone after the rename; a failed create's leftovers otherwise */
@@ -327,7 +311,7 @@ static tf_exr_writer *create_output(const char *output, const tf_exr_meta *meta,
 
 int tf_coordinator_run(const tf_render_opts *o)
 {
-    double t_start = now_s();
+    double t_start = tf_now_s();
     char err[1024];
     int status = 1;
     tf_scene *scene = NULL;
@@ -403,7 +387,7 @@ int tf_coordinator_run(const tf_render_opts *o)
             goto out;
         }
         have_key = 1;
-    } else if (!is_loopback_listen(listen)) {
+    } else if (!tf_listen_is_loopback(listen)) {
         tf_error("--listen %s is not a loopback address: networked workers there need "
                  "--secret-file FILE",
                  listen);
@@ -420,13 +404,13 @@ int tf_coordinator_run(const tf_render_opts *o)
     /* 2. The terrain, built once before forking so every local worker shares it. */
     double hf_s = 0;
     if (nworkers > 0) {
-        double t0 = now_s();
+        double t0 = tf_now_s();
         hf = tf_heightfield_build(scene, 0, err, sizeof err);
         if (!hf) {
             tf_error("%s", err);
             goto out;
         }
-        hf_s = now_s() - t0;
+        hf_s = tf_now_s() - t0;
         tf_debug("height field %dx%d built in %.2f s", hf->n, hf->n, hf_s);
     }
 
@@ -539,15 +523,15 @@ int tf_coordinator_run(const tf_render_opts *o)
     }
 
     /* 5. Supervise until every row is on disk. */
-    tf_progress_init(&prog, scene->height, first_row, o->quiet, now_s());
-    double last_wait_note = now_s();
+    tf_progress_init(&prog, scene->height, first_row, o->quiet, tf_now_s());
+    double last_wait_note = tf_now_s();
     int no_workers = 0;
     while (!interrupted && !tf_supervisor_done(sup) && !tf_supervisor_error(sup)) {
         if (ts_server_run_once(srv, 50) < 0) {
             tf_error("event loop failed: %s", strerror(errno));
             break;
         }
-        double t = now_s();
+        double t = tf_now_s();
         tf_supervisor_step(sup, t * 1000.0);
         reap_workers(&lw, srv, scene, hf, o->backend, 1);
         const tf_farm_stats *st = tf_supervisor_stats(sup);
@@ -600,7 +584,7 @@ int tf_coordinator_run(const tf_render_opts *o)
     drain_workers(&lw, srv, 5.0);
     for (int i = 0; i < 10 && ts_server_conn_count(srv) > 0; i++)
         ts_server_run_once(srv, 20); /* let networked workers read the stop tuple */
-    double wall = now_s() - t_start;
+    double wall = tf_now_s() - t_start;
     const tf_farm_stats *st = tf_supervisor_stats(sup);
     uint64_t rays = st->primary_rays + st->shadow_rays;
     tf_info("wrote %s (%dx%d) and %s in %.2f s: %.2f Mrays/s, %.2f samples/pixel, %lld tasks, "

@@ -10,7 +10,7 @@
 #ifndef TF_COORDINATOR_H
 #define TF_COORDINATOR_H
 
-#include "tasks.h"
+#include "coordinator/tasks.h"
 
 typedef struct tf_render_opts {
     const char *scene_path;

@@ -1,16 +1,18 @@
 /* rowwriter.c: see rowwriter.h.  A ring of `depth` chunk buffers between one producer (the
  * supervisor) and one consumer (the writer thread), under one mutex with two condition
  * variables.  INVARIANT: slots [head, head + count) modulo depth hold queued chunks in row order. */
-#include "rowwriter.h"
+#include "coordinator/rowwriter.h"
+#include "clock.h"
 
-#include "png_write.h"
-#include "preview.h"
+#include "image/png_write.h"
+#include "image/preview.h"
 
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include "log.h"
 
 struct tf_rowwriter {
     tf_exr_writer *w;
@@ -28,13 +30,6 @@ struct tf_rowwriter {
     pthread_cond_t nonempty, nonfull;
     pthread_t thread;
 };
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
 
 /* Tone-map rows into the preview; a preview failure only costs the preview. */
 static void preview_rows(tf_rowwriter *rw, const tf_pixel *px, int nrows)
@@ -58,7 +53,7 @@ static void preview_rows(tf_rowwriter *rw, const tf_pixel *px, int nrows)
 static void *writer_main(void *arg)
 {
     tf_rowwriter *rw = arg;
-    double last_sync = now_ms();
+    double last_sync = tf_now_msf();
     int dirty = 0;
     char err[512];
     pthread_mutex_lock(&rw->mu);
@@ -67,14 +62,10 @@ static void *writer_main(void *arg)
             if (dirty) {
                 /* Idle with unsynced rows: wait at most until the next sync is due. */
                 double due = last_sync + rw->fsync_ms;
-                struct timespec ts;
-                clock_gettime(CLOCK_REALTIME, &ts);
-                double wait = due - now_ms();
+                double wait = due - tf_now_msf();
                 if (wait <= 0)
                     break;
-                long ns = ts.tv_nsec + (long)(wait * 1e6);
-                ts.tv_sec += ns / 1000000000L;
-                ts.tv_nsec = ns % 1000000000L;
+                struct timespec ts = tf_realtime_in(wait);
                 pthread_cond_timedwait(&rw->nonempty, &rw->mu, &ts);
             } else {
                 pthread_cond_wait(&rw->nonempty, &rw->mu);
@@ -93,9 +84,9 @@ static void *writer_main(void *arg)
             if (rc == 0)
                 preview_rows(rw, rw->slot[idx], nrows);
         }
-        if (rc == 0 && dirty && now_ms() - last_sync >= rw->fsync_ms) {
+        if (rc == 0 && dirty && tf_now_msf() - last_sync >= rw->fsync_ms) {
             rc = tf_exr_sync(rw->w, err, sizeof err);
-            last_sync = now_ms();
+            last_sync = tf_now_msf();
             dirty = 0;
         }
 
@@ -201,13 +192,13 @@ tf_rowwriter *tf_rowwriter_start(tf_exr_writer *w, int width, int height, int ch
     pthread_cond_init(&rw->nonempty, NULL);
     pthread_cond_init(&rw->nonfull, NULL);
     if (pthread_create(&rw->thread, NULL, writer_main, rw)) {
-        snprintf(err, errlen, "cannot start the writer thread");
+        tf_seterr(err, errlen, "cannot start the writer thread");
         free_rowwriter(rw);
         return NULL;
     }
     return rw;
 oom:
-    snprintf(err, errlen, "out of memory for the row writer");
+    tf_seterr(err, errlen, "out of memory for the row writer");
     free_rowwriter(rw);
     return NULL;
 }
@@ -269,7 +260,7 @@ int tf_rowwriter_finish(tf_rowwriter *rw, char *err, size_t errlen)
     stop_thread(rw);
     int rc = 0;
     if (rw->failed) {
-        snprintf(err, errlen, "%s", rw->error);
+        tf_seterr(err, errlen, "%s", rw->error);
         tf_exr_abandon(rw->w);
         rc = -1;
     } else if (tf_exr_finish(rw->w, err, errlen)) {

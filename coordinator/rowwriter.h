@@ -11,7 +11,7 @@
 
 #include <stddef.h>
 
-#include "exrfile.h"
+#include "image/exrfile.h"
 
 typedef struct tf_rowwriter tf_rowwriter;
 

@@ -1,5 +1,5 @@
 /* spawn.c: see spawn.h. */
-#include "spawn.h"
+#include "coordinator/spawn.h"
 
 #include <errno.h>
 #include <signal.h>
@@ -10,7 +10,7 @@
 #include <unistd.h>
 
 #include "log.h"
-#include "worker.h"
+#include "worker/worker.h"
 
 /* In the child: keep stdin/stdout/stderr and our socket, close every other inherited fd (the
  * listening socket, other workers' sockets, the output file). */
@@ -26,12 +26,12 @@ pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *h
 {
     int sv[2];
     if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv)) {
-        snprintf(err, errlen, "socketpair: %s", strerror(errno));
+        tf_seterr(err, errlen, "socketpair: %s", strerror(errno));
         return -1;
     }
     pid_t pid = fork();
     if (pid < 0) {
-        snprintf(err, errlen, "fork: %s", strerror(errno));
+        tf_seterr(err, errlen, "fork: %s", strerror(errno));
         close(sv[0]);
         close(sv[1]);
         return -1;
@@ -58,7 +58,7 @@ pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *h
     char peer[32];
     snprintf(peer, sizeof peer, "local worker %d", index);
     if (!ts_server_add_fd(srv, sv[0], peer)) {
-        snprintf(err, errlen, "cannot serve local worker %d", index);
+        tf_seterr(err, errlen, "cannot serve local worker %d", index);
         kill(pid, SIGKILL);
         return -1;
     }

@@ -6,9 +6,9 @@
 
 #include <sys/types.h>
 
-#include "heightfield.h"
+#include "terrain/heightfield.h"
 #include "scene.h"
-#include "tsserver.h"
+#include "linda/tsserver.h"
 
 /* Fork worker number `index`; the parent's end of the socketpair is added to srv as a trusted
  * connection.  Returns the child's pid, or -1 with a message in err. */

@@ -1,11 +1,12 @@
 /* stats.c: see stats.h. */
-#include "stats.h"
+#include "coordinator/stats.h"
 
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
+#include "log.h"
 
 /* JSON string with the escapes RFC 8259 requires. */
 static void json_string(FILE *f, const char *s)
@@ -29,13 +30,13 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
     size_t n = strlen(path) + 8;
     char *tmp = malloc(n);
     if (!tmp) {
-        snprintf(err, errlen, "%s: out of memory", path);
+        tf_seterr(err, errlen, "%s: out of memory", path);
         return -1;
     }
     snprintf(tmp, n, "%s.tmp", path);
     FILE *f = fopen(tmp, "w");
     if (!f) {
-        snprintf(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
+        tf_seterr(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
         free(tmp);
         return -1;
     }
@@ -93,7 +94,7 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
     int bad = ferror(f);
     bad |= fclose(f) != 0;
     if (bad || rename(tmp, path)) {
-        snprintf(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
+        tf_seterr(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
         remove(tmp);
         free(tmp);
         return -1;

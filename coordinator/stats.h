@@ -3,7 +3,7 @@
 #define TF_STATS_H
 
 #include <stddef.h>
-#include "supervisor.h"
+#include "coordinator/supervisor.h"
 
 typedef struct tf_run_info {
     double wall_s;

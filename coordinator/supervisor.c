@@ -14,7 +14,8 @@
  * lease record each in `leases`).  When both reach zero before a result arrived, the task is
  * lost and is dealt again.  A result for a task that already has one, or is written, is
  * removed from the space and dropped. */
-#include "supervisor.h"
+#include "coordinator/supervisor.h"
+#include "clock.h"
 
 #include <inttypes.h>
 #include <stdarg.h>
@@ -78,13 +79,6 @@ struct tf_supervisor {
 
 /* ---- small helpers ---------------------------------------------------------------------- */
 
-static double clock_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
 static task_slot *slot_of(tf_supervisor *s, int64_t id)
 {
     if (id < s->write_task || id >= s->next_deal)
@@ -100,7 +94,7 @@ static void fail(tf_supervisor *s, const char *fmt, ...)
         return;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(s->error, sizeof s->error, fmt, ap);
+    tf_vseterr(s->error, sizeof s->error, fmt, ap);
     va_end(ap);
 }
 
@@ -367,7 +361,7 @@ static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)
     s->leases[s->nleases++] = (lease){conn, m.id};
     t->leased++;
     if (t->taken_ms == 0)
-        t->taken_ms = clock_ms();
+        t->taken_ms = tf_now_msf();
 }
 
 /* A worker put a task back (it is excluded from it): the copy is in the space again. */
@@ -564,7 +558,7 @@ static void deal_duplicate(tf_supervisor *s)
         if (t && t->in_space > 0 && !t->has_result)
             return; /* an undealt copy is waiting: idle workers will take it */
     }
-    double now = clock_ms(), patience = STRAGGLER_FACTOR * s->mean_task_ms;
+    double now = tf_now_msf(), patience = STRAGGLER_FACTOR * s->mean_task_ms;
     if (patience < STRAGGLER_MIN_MS)
         patience = STRAGGLER_MIN_MS;
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
@@ -607,7 +601,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
 {
     tf_supervisor *s = calloc(1, sizeof *s);
     if (!s) {
-        snprintf(err, errlen, "out of memory");
+        tf_seterr(err, errlen, "out of memory");
         return NULL;
     }
     s->space = space;
@@ -632,7 +626,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     s->chunk_rows = tf_exr_chunk_rows();
     s->chunk = calloc((size_t)s->chunk_rows * (size_t)cfg->width, sizeof *s->chunk);
     if (!s->ring || !s->chunk) {
-        snprintf(err, errlen, "out of memory");
+        tf_seterr(err, errlen, "out of memory");
         tf_supervisor_free(s);
         return NULL;
     }

@@ -24,10 +24,10 @@
 
 #include <stdint.h>
 
-#include "rowwriter.h"
-#include "tasks.h"
-#include "tsserver.h"
-#include "tuplespace.h"
+#include "coordinator/rowwriter.h"
+#include "coordinator/tasks.h"
+#include "linda/tsserver.h"
+#include "linda/tuplespace.h"
 
 typedef struct tf_supervisor tf_supervisor;
 

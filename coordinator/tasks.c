@@ -1,9 +1,10 @@
 /* tasks.c: see tasks.h. */
-#include "tasks.h"
+#include "coordinator/tasks.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "log.h"
 
 static int parse_positive(const char *s, char **end, int *out)
 {
@@ -32,7 +33,7 @@ int tf_task_spec_parse(const char *text, tf_task_spec *spec, char *err, size_t e
             return 0;
         }
     }
-    snprintf(err, errlen, "--tasks '%s': expected rows:K or stamps:WxH with positive sizes up to 65536",
+    tf_seterr(err, errlen, "--tasks '%s': expected rows:K or stamps:WxH with positive sizes up to 65536",
              text);
     return -1;
 }

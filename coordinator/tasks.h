@@ -9,7 +9,7 @@
 #ifndef TF_TASKS_H
 #define TF_TASKS_H
 
-#include "render.h"
+#include "render/render.h"
 
 enum tf_task_shape { TF_TASKS_ROWS, TF_TASKS_STAMPS };
 

@@ -1,12 +1,12 @@
 /* backend.c: see backend.h.  The C backend is tf_render_rect itself; the OpenCL backend lives in
  * backend_opencl.c behind the same three calls. */
-#include "backend.h"
+#include "worker/backend.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "backend_opencl.h"
+#include "worker/backend_opencl.h"
 #include "log.h"
 
 enum backend_kind { BACKEND_C, BACKEND_OPENCL };
@@ -22,7 +22,7 @@ tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightf
 {
     tf_backend *b = calloc(1, sizeof *b);
     if (!b) {
-        snprintf(err, errlen, "out of memory");
+        tf_seterr(err, errlen, "out of memory");
         return NULL;
     }
     if (!strcmp(name, "c")) {
@@ -43,7 +43,7 @@ tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightf
                 return b;
         }
     } else {
-        snprintf(err, errlen, "unknown backend '%s' (expected c, opencl or auto)", name);
+        tf_seterr(err, errlen, "unknown backend '%s' (expected c, opencl or auto)", name);
     }
     free(b);
     return NULL;

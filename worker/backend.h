@@ -5,8 +5,8 @@
 #define TF_BACKEND_H
 
 #include <stddef.h>
-#include "heightfield.h"
-#include "render.h"
+#include "terrain/heightfield.h"
+#include "render/render.h"
 #include "scene.h"
 
 typedef struct tf_backend tf_backend;

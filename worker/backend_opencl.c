@@ -19,7 +19,8 @@
  * external-sample rule: the far row and column are computed here) and tf_pixels8 over the
  * pixels in batches bounded by the scratch memory of the per-pixel sample caches. */
 #define CL_TARGET_OPENCL_VERSION 120
-#include "backend_opencl.h"
+#include "worker/backend_opencl.h"
+#include "clock.h"
 
 #include <CL/cl.h>
 #include <ctype.h>
@@ -34,8 +35,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "kernels/tf_cl_params.h"
-#include "render_internal.h"
+#include "worker/kernels/tf_cl_params.h"
+#include "render/render_internal.h"
+#include "log.h"
 
 #define KERNEL_FILE "terrafarm.cl" /* the file that marks a kernel directory */
 #define SOURCE_FILES                                                                            \
@@ -67,13 +69,6 @@ struct tf_cl_backend {
     double build_seconds;
     double corner_seconds, pixel_seconds; /* device time of each kernel, from profiling events */
 };
-
-static double now_seconds(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 /* ---------------------------------------------------------------- environment */
 
@@ -156,7 +151,7 @@ static int find_kernel_dir(char *dir, size_t len, char *err, size_t errlen)
         snprintf(dir, len, "%s", env);
         if (has_kernel(dir))
             return 0;
-        snprintf(err, errlen, "TERRAFARM_KERNELS=%s has no " KERNEL_FILE, env);
+        tf_seterr(err, errlen, "TERRAFARM_KERNELS=%s has no " KERNEL_FILE, env);
         return -1;
     }
     char exe[PATH_MAX];
@@ -216,7 +211,7 @@ static int choose_device(cl_device_id *out, char *name, size_t namelen, char *er
     cl_platform_id plats[MAX_PLATFORMS];
     cl_uint np = 0;
     if (clGetPlatformIDs(MAX_PLATFORMS, plats, &np) != CL_SUCCESS || np == 0) {
-        snprintf(err, errlen, "no OpenCL platform found (install an OpenCL ICD, e.g. "
+        tf_seterr(err, errlen, "no OpenCL platform found (install an OpenCL ICD, e.g. "
                               "pocl-opencl-icd, or use --backend c)");
         return -1;
     }
@@ -271,11 +266,11 @@ static int choose_device(cl_device_id *out, char *name, size_t namelen, char *er
         }
     }
     if (want) {
-        snprintf(err, errlen, "TERRAFARM_CL_DEVICE=%s matches no OpenCL device", want);
+        tf_seterr(err, errlen, "TERRAFARM_CL_DEVICE=%s matches no OpenCL device", want);
         return -1;
     }
     if (!best) {
-        snprintf(err, errlen, "no OpenCL device with double precision (cl_khr_fp64)");
+        tf_seterr(err, errlen, "no OpenCL device with double precision (cl_khr_fp64)");
         return -1;
     }
     *out = best;
@@ -303,25 +298,25 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
             missing = i;
     }
     if (missing >= 0) {
-        snprintf(err, errlen, "cannot read the OpenCL kernel source %s/%s", dir, names[missing]);
+        tf_seterr(err, errlen, "cannot read the OpenCL kernel source %s/%s", dir, names[missing]);
         for (int i = 0; i < NSRC; i++)
             free(src[i]);
         return -1;
     }
     cl_int rc;
-    double t0 = now_seconds();
+    double t0 = tf_now_s();
     b->program = clCreateProgramWithSource(b->ctx, NSRC, (const char **)src, len, &rc);
     for (int i = 0; i < NSRC; i++)
         free(src[i]);
     if (rc != CL_SUCCESS) {
-        snprintf(err, errlen, "OpenCL: cannot create the program (error %d)", rc);
+        tf_seterr(err, errlen, "OpenCL: cannot create the program (error %d)", rc);
         return -1;
     }
     char options[128];
     snprintf(options, sizeof options, "-cl-std=CL1.2 -DTF_STREAM=%d -DTF_PIX=%d",
              CORNERS_PER_ITEM, PIXELS_PER_ITEM);
     rc = clBuildProgram(b->program, 1, &dev, options, NULL, NULL);
-    b->build_seconds = now_seconds() - t0;
+    b->build_seconds = tf_now_s() - t0;
     if (rc != CL_SUCCESS) {
         size_t loglen = 0;
         clGetProgramBuildInfo(b->program, dev, CL_PROGRAM_BUILD_LOG, 0, NULL, &loglen);
@@ -335,7 +330,7 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
             }
             free(log);
         }
-        snprintf(err, errlen, "OpenCL: building the kernels in %s failed (error %d; build log "
+        tf_seterr(err, errlen, "OpenCL: building the kernels in %s failed (error %d; build log "
                  "above)", dir, rc);
         return -1;
     }
@@ -343,7 +338,7 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
     if (rc == CL_SUCCESS)
         b->k_pixels = clCreateKernel(b->program, "tf_pixels8", &rc);
     if (rc != CL_SUCCESS) {
-        snprintf(err, errlen, "OpenCL: kernel missing from the sources in %s (error %d)", dir,
+        tf_seterr(err, errlen, "OpenCL: kernel missing from the sources in %s (error %d)", dir,
                  rc);
         return -1;
     }
@@ -449,7 +444,7 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
     double P[TFP_COUNT] = {0};
     int I[TFI_COUNT] = {0};
     if (hf->levels > TF_CL_MAX_LEVELS) {
-        snprintf(err, errlen, "OpenCL: height field with %d grid levels (at most %d)", hf->levels,
+        tf_seterr(err, errlen, "OpenCL: height field with %d grid levels (at most %d)", hf->levels,
                  TF_CL_MAX_LEVELS);
         return -1;
     }
@@ -458,7 +453,7 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
     for (int L = 0; L < hf->levels; L++) {
         size_t side = (size_t)(hf->cells >> L);
         if (total > (size_t)INT_MAX - side * side) {
-            snprintf(err, errlen, "OpenCL: height field too large for the grid offsets");
+            tf_seterr(err, errlen, "OpenCL: height field too large for the grid offsets");
             return -1;
         }
         I[TFI_LEVEL_OFFSET + L] = (int)total;
@@ -467,7 +462,7 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
     /* (max, min) interleaved: the walk reads both of a cell at once (packet_trace.cl) */
     float *mm = total <= SIZE_MAX / (2 * sizeof *mm) ? malloc(total * 2 * sizeof *mm) : NULL;
     if (!mm) {
-        snprintf(err, errlen, "OpenCL: out of memory for the max grids");
+        tf_seterr(err, errlen, "OpenCL: out of memory for the max grids");
         return -1;
     }
     for (int L = 0; L < hf->levels; L++) {
@@ -487,7 +482,7 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
     free(mm);
     for (int i = 0; i < 5; i++)
         if (rc[i] != CL_SUCCESS) {
-            snprintf(err, errlen, "OpenCL: cannot upload the height field (error %d)", rc[i]);
+            tf_seterr(err, errlen, "OpenCL: cannot upload the height field (error %d)", rc[i]);
             return -1;
         }
     return 0;
@@ -500,7 +495,7 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
 {
     tf_cl_backend *b = calloc(1, sizeof *b);
     if (!b) {
-        snprintf(err, errlen, "out of memory");
+        tf_seterr(err, errlen, "out of memory");
         return NULL;
     }
     b->renderer = tf_renderer_new(s, hf, err, errlen);
@@ -527,13 +522,13 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
                                                                : 1;
     b->ctx = clCreateContext(NULL, 1, &dev, NULL, NULL, &rc);
     if (rc != CL_SUCCESS) {
-        snprintf(err, errlen, "OpenCL: cannot create a context on '%s' (error %d)",
+        tf_seterr(err, errlen, "OpenCL: cannot create a context on '%s' (error %d)",
                  b->device_name, rc);
         goto fail;
     }
     b->queue = clCreateCommandQueue(b->ctx, dev, CL_QUEUE_PROFILING_ENABLE, &rc);
     if (rc != CL_SUCCESS) {
-        snprintf(err, errlen, "OpenCL: cannot create a queue on '%s' (error %d)", b->device_name,
+        tf_seterr(err, errlen, "OpenCL: cannot create a queue on '%s' (error %d)", b->device_name,
                  rc);
         goto fail;
     }
@@ -643,7 +638,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     const tf_scene *s = b->renderer->scene;
     if (rect.w <= 0 || rect.h <= 0 || rect.x < 0 || rect.y < 0 || rect.x > s->width - rect.w ||
         rect.y > s->height - rect.h) {
-        snprintf(err, errlen, "rectangle %dx%d+%d+%d outside the %dx%d image", rect.w, rect.h,
+        tf_seterr(err, errlen, "rectangle %dx%d+%d+%d outside the %dx%d image", rect.w, rect.h,
                  rect.x, rect.y, s->width, s->height);
         return -1;
     }
@@ -678,7 +673,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
         free(corner_shadow);
         free(pixel_shadow);
         free(pix);
-        snprintf(err, errlen, "OpenCL: out of memory for a %dx%d rectangle", rect.w, rect.h);
+        tf_seterr(err, errlen, "OpenCL: out of memory for a %dx%d rectangle", rect.w, rect.h);
         return -1;
     }
 
@@ -741,7 +736,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
         free(corner_shadow);
         free(pixel_shadow);
         free(pix);
-        snprintf(err, errlen, "OpenCL: rendering %dx%d+%d+%d failed (error %d)", rect.w, rect.h,
+        tf_seterr(err, errlen, "OpenCL: rendering %dx%d+%d+%d failed (error %d)", rect.w, rect.h,
                  rect.x, rect.y, rc);
         return -1;
     }

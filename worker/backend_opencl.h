@@ -4,8 +4,8 @@
 #define TF_BACKEND_OPENCL_H
 
 #include <stddef.h>
-#include "heightfield.h"
-#include "render.h"
+#include "terrain/heightfield.h"
+#include "render/render.h"
 #include "scene.h"
 
 typedef struct tf_cl_backend tf_cl_backend;

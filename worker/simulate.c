@@ -1,7 +1,8 @@
 /* simulate.c: see simulate.h.  The cost map (measure, save, load, integrate over a rectangle),
  * then the simulated workers: one thread per worker, each with its own tuple-space connection,
  * all released together from a start line so the measured wall time starts with a full farm. */
-#include "simulate.h"
+#include "worker/simulate.h"
+#include "clock.h"
 
 #include <errno.h>
 #include <math.h>
@@ -16,14 +17,7 @@
 
 #include "farmproto.h"
 #include "log.h"
-#include "tsclient.h"
-
-static int64_t clock_ns(clockid_t id)
-{
-    struct timespec ts;
-    clock_gettime(id, &ts);
-    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
-}
+#include "linda/tsclient.h"
 
 /* ---- the cost map --------------------------------------------------------------------------- */
 
@@ -36,7 +30,7 @@ int tf_cost_map_measure(const tf_scene *s, const tf_heightfield *hf, int gw, int
     memset(m, 0, sizeof *m);
     if (gw < 1 || gh < 1 || gw > TF_COST_MAP_MAX || gh > TF_COST_MAP_MAX || gw > s->width ||
         gh > s->height) {
-        snprintf(err, errlen, "cost map grid %dx%d: expected 1..%d cells a side, at most one per "
+        tf_seterr(err, errlen, "cost map grid %dx%d: expected 1..%d cells a side, at most one per "
                  "pixel of the %dx%d image", gw, gh, TF_COST_MAP_MAX, s->width, s->height);
         return -1;
     }
@@ -48,7 +42,7 @@ int tf_cost_map_measure(const tf_scene *s, const tf_heightfield *hf, int gw, int
     tf_pixel *px = malloc((size_t)maxw * (size_t)maxh * sizeof *px);
     m->density = calloc((size_t)gw * (size_t)gh, sizeof *m->density);
     if (!px || !m->density) {
-        snprintf(err, errlen, "out of memory measuring the cost map");
+        tf_seterr(err, errlen, "out of memory measuring the cost map");
         free(px);
         tf_renderer_free(r);
         tf_cost_map_free(m);
@@ -60,9 +54,9 @@ int tf_cost_map_measure(const tf_scene *s, const tf_heightfield *hf, int gw, int
             tf_rect c = {cell_edge(i, gw, s->width), cell_edge(j, gh, s->height), 0, 0};
             c.w = cell_edge(i + 1, gw, s->width) - c.x;
             c.h = cell_edge(j + 1, gh, s->height) - c.y;
-            int64_t t0 = clock_ns(CLOCK_THREAD_CPUTIME_ID);
+            int64_t t0 = tf_clock_ns(CLOCK_THREAD_CPUTIME_ID);
             tf_render_rect(r, c, px, NULL);
-            double ns = (double)(clock_ns(CLOCK_THREAD_CPUTIME_ID) - t0);
+            double ns = (double)(tf_clock_ns(CLOCK_THREAD_CPUTIME_ID) - t0);
             total_ns += ns;
             m->density[j * gw + i] = ns / ((double)c.w * c.h); /* ns per pixel, for now */
         }
@@ -84,7 +78,7 @@ int tf_cost_map_save(const char *path, const tf_cost_map *m, char *err, size_t e
 {
     FILE *f = fopen(path, "w");
     if (!f) {
-        snprintf(err, errlen, "%s: cannot write the cost map: %s", path, strerror(errno));
+        tf_seterr(err, errlen, "%s: cannot write the cost map: %s", path, strerror(errno));
         return -1;
     }
     fprintf(f, "terrafarm-cost-map 1 %d %d %d %d %.1f\n", m->gw, m->gh, m->measured_w,
@@ -95,7 +89,7 @@ int tf_cost_map_save(const char *path, const tf_cost_map *m, char *err, size_t e
     int bad = ferror(f);
     bad |= fclose(f) != 0;
     if (bad) {
-        snprintf(err, errlen, "%s: cannot write the cost map: %s", path, strerror(errno));
+        tf_seterr(err, errlen, "%s: cannot write the cost map: %s", path, strerror(errno));
         return -1;
     }
     return 0;
@@ -106,33 +100,33 @@ int tf_cost_map_load(const char *path, tf_cost_map *m, char *err, size_t errlen)
     memset(m, 0, sizeof *m);
     FILE *f = fopen(path, "r");
     if (!f) {
-        snprintf(err, errlen, "%s: cannot read the cost map: %s", path, strerror(errno));
+        tf_seterr(err, errlen, "%s: cannot read the cost map: %s", path, strerror(errno));
         return -1;
     }
     int version = 0;
     if (fscanf(f, "terrafarm-cost-map %d %d %d %d %d %lf", &version, &m->gw, &m->gh,
                &m->measured_w, &m->measured_h, &m->pixel_ns) != 6 || version != 1) {
-        snprintf(err, errlen, "%s: not a terrafarm cost map (expected 'terrafarm-cost-map 1 GW "
+        tf_seterr(err, errlen, "%s: not a terrafarm cost map (expected 'terrafarm-cost-map 1 GW "
                  "GH W H PIXEL_NS' on the first line)", path);
         fclose(f);
         return -1;
     }
     if (m->gw < 1 || m->gh < 1 || m->gw > TF_COST_MAP_MAX || m->gh > TF_COST_MAP_MAX) {
-        snprintf(err, errlen, "%s: cost map grid %dx%d out of range 1..%d", path, m->gw, m->gh,
+        tf_seterr(err, errlen, "%s: cost map grid %dx%d out of range 1..%d", path, m->gw, m->gh,
                  TF_COST_MAP_MAX);
         fclose(f);
         return -1;
     }
     m->density = malloc((size_t)m->gw * (size_t)m->gh * sizeof *m->density);
     if (!m->density) {
-        snprintf(err, errlen, "%s: out of memory", path);
+        tf_seterr(err, errlen, "%s: out of memory", path);
         fclose(f);
         return -1;
     }
     for (int k = 0; k < m->gw * m->gh; k++) {
         double d;
         if (fscanf(f, "%lf", &d) != 1 || !isfinite(d) || d < 0) {
-            snprintf(err, errlen, "%s: cost map cell %d: expected a finite non-negative number",
+            tf_seterr(err, errlen, "%s: cost map cell %d: expected a finite non-negative number",
                      path, k);
             fclose(f);
             tf_cost_map_free(m);
@@ -268,7 +262,7 @@ static int64_t sleep_cost(int64_t t0, int64_t cost_ns)
     struct timespec ts = {(time_t)(until / 1000000000), (long)(until % 1000000000)};
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR)
         ;
-    return clock_ns(CLOCK_MONOTONIC) - until;
+    return tf_clock_ns(CLOCK_MONOTONIC) - until;
 }
 
 /* Render one task the simulated way: sleep its modelled cost, put back zero pixels. */
@@ -287,7 +281,7 @@ static int sim_task(sim_worker *w, const tf_task_msg *m, tf_pixel **px, size_t *
     double cost = cfg->pixel_us * 1000.0 *
                   tf_cost_map_rect(cfg->map, cfg->image_w, cfg->image_h, m->rect);
     int64_t cost_ns = (int64_t)cost;
-    int64_t t0 = clock_ns(CLOCK_MONOTONIC);
+    int64_t t0 = tf_clock_ns(CLOCK_MONOTONIC);
     w->oversleep_ns += (double)sleep_cost(t0, cost_ns);
     w->modelled_ns += (double)cost_ns;
     tf_render_counts counts = {0, 0, 0, (uint64_t)n};
@@ -312,9 +306,9 @@ static void sim_serve(sim_worker *w)
         tf_tuple task;
         tf_task_msg m;
         tf_tuple_init(&task);
-        int64_t t0 = clock_ns(CLOCK_MONOTONIC);
+        int64_t t0 = tf_clock_ns(CLOCK_MONOTONIC);
         int rc = ts_in(w->client, &tmpl, &task);
-        int64_t t1 = clock_ns(CLOCK_MONOTONIC);
+        int64_t t1 = tf_clock_ns(CLOCK_MONOTONIC);
         w->ops++;
         if (rc) {
             /* After the stop tuple a closing coordinator is the end of the render (see below). */
@@ -457,7 +451,7 @@ static int connect_all(const tf_sim_config *cfg, sim_worker *ws, char *err, size
         char e[512];
         ws[i].client = ts_client_connect(cfg->connect, cfg->key, cfg->timeout_ms, e, sizeof e);
         if (!ws[i].client) {
-            snprintf(err, errlen, "simulated worker %d of %d: %s", i + 1, cfg->workers, e);
+            tf_seterr(err, errlen, "simulated worker %d of %d: %s", i + 1, cfg->workers, e);
             return -1;
         }
     }
@@ -469,7 +463,7 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
     memset(rep, 0, sizeof *rep);
     if (cfg->workers < 1 || cfg->workers > 4096 || !(cfg->pixel_us >= 0) || !cfg->map ||
         cfg->image_w < 1 || cfg->image_h < 1) {
-        snprintf(err, errlen, "simulation: need 1..4096 workers, a cost map, pixel cost >= 0");
+        tf_seterr(err, errlen, "simulation: need 1..4096 workers, a cost map, pixel cost >= 0");
         return -1;
     }
     raise_fd_limit();
@@ -478,7 +472,7 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
     sh.cfg = cfg;
     sim_worker *ws = calloc((size_t)cfg->workers, sizeof *ws);
     if (!ws) {
-        snprintf(err, errlen, "out of memory");
+        tf_seterr(err, errlen, "out of memory");
         return -1;
     }
     int rc = -1;
@@ -493,7 +487,7 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
     for (; started < cfg->workers; started++) {
         ws[started].sh = &sh;
         if (pthread_create(&ws[started].thread, &attr, sim_thread, &ws[started])) {
-            snprintf(err, errlen, "cannot start simulated worker thread %d of %d", started + 1,
+            tf_seterr(err, errlen, "cannot start simulated worker thread %d of %d", started + 1,
                      cfg->workers);
             break;
         }
@@ -503,7 +497,7 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
     pthread_mutex_lock(&sh.lock);
     while (sh.arrived < started)
         pthread_cond_wait(&sh.gate, &sh.lock);
-    sh.start_ns = clock_ns(CLOCK_MONOTONIC);
+    sh.start_ns = tf_clock_ns(CLOCK_MONOTONIC);
     sh.released = 1;
     pthread_cond_broadcast(&sh.gate);
     pthread_mutex_unlock(&sh.lock);
@@ -513,7 +507,7 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
     if (started == cfg->workers && sh.failed == 0)
         rc = 0;
     else if (sh.error[0])
-        snprintf(err, errlen, "%s", sh.error);
+        tf_seterr(err, errlen, "%s", sh.error);
 out:
     for (int i = 0; i < cfg->workers; i++)
         ts_client_close(ws[i].client);

@@ -25,7 +25,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "render.h"
+#include "render/render.h"
 
 #define TF_COST_MAP_MAX 1024
 

@@ -1,5 +1,6 @@
 /* worker.c: see worker.h. */
-#include "worker.h"
+#include "worker/worker.h"
+#include "clock.h"
 
 #include <inttypes.h>
 #include <stdio.h>
@@ -8,16 +9,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "backend.h"
+#include "worker/backend.h"
 #include "farmproto.h"
 #include "log.h"
-
-static int64_t now_ns(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
-}
 
 /* Linda's counter idiom: in ("next_worker", ?n), out ("next_worker", n + 1). */
 static int take_worker_id(ts_client *c, int64_t *id)
@@ -132,7 +126,7 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
             px_cap = n;
         }
         tf_render_counts counts = {0};
-        int64_t t0 = now_ns();
+        int64_t t0 = tf_now_ns();
         if (m.rect.x + m.rect.w > s->width || m.rect.y + m.rect.h > s->height) {
             report_failure(c, m.id, id, "task rectangle outside the image");
             continue;
@@ -143,7 +137,7 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
                 break;
             continue;
         }
-        int64_t busy = now_ns() - t0;
+        int64_t busy = tf_now_ns() - t0;
         tf_tuple result;
         if (tf_result_pack(&result, m.id, id, &counts, busy, px, n) || ts_out(c, &result)) {
             tf_tuple_clear(&result);
@@ -168,19 +162,19 @@ tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err
     const char *text, *hash;
     int64_t w, h;
     if (tf_tuple_pack(&tmpl, "sSIIS", "scene") || ts_rd(c, &tmpl, &got)) {
-        snprintf(err, errlen, "%s: cannot read the scene: %s", coordinator, ts_client_error(c));
+        tf_seterr(err, errlen, "%s: cannot read the scene: %s", coordinator, ts_client_error(c));
         goto fail;
     }
     if (tf_tuple_get_string(&got, 1, &text) || tf_tuple_get_int(&got, 2, &w) ||
         tf_tuple_get_int(&got, 3, &h) || tf_tuple_get_string(&got, 4, &hash) || w < 1 ||
         h < 1 || w > 65536 || h > 65536) {
-        snprintf(err, errlen, "%s: malformed scene tuple", coordinator);
+        tf_seterr(err, errlen, "%s: malformed scene tuple", coordinator);
         goto fail;
     }
     char perr[1024];
     tf_scene *s = tf_scene_parse_text("<coordinator scene>", text, strlen(text), perr, sizeof perr);
     if (!s) {
-        snprintf(err, errlen, "%s: scene does not parse here: %s", coordinator, perr);
+        tf_seterr(err, errlen, "%s: scene does not parse here: %s", coordinator, perr);
         goto fail;
     }
     tf_scene_set_size(s, (int)w, (int)h);

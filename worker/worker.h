@@ -6,9 +6,9 @@
 #ifndef TF_WORKER_H
 #define TF_WORKER_H
 
-#include "heightfield.h"
+#include "terrain/heightfield.h"
 #include "scene.h"
-#include "tsclient.h"
+#include "linda/tsclient.h"
 
 /* Heartbeat interval: well under the coordinator's default 15 s silence timeout. */
 #define TF_WORKER_HEARTBEAT_MS 2000

@@ -7,8 +7,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "proto.h"
-#include "tuple.h"
+#include "linda/proto.h"
+#include "linda/tuple.h"
 
 static void check_tuple_bytes(const uint8_t *p, size_t n)
 {

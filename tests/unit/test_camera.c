@@ -7,7 +7,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "camera.h"
+#include "render/camera.h"
 
 #define DEG (3.14159265358979323846 / 180.0)
 

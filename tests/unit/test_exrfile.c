@@ -25,7 +25,7 @@
 
 #include <openexr.h>
 
-#include "exrfile.h"
+#include "image/exrfile.h"
 
 #define W 37
 #define H 53 /* an odd height: with chunks of 16 rows, a last partial chunk of 5 */

@@ -14,8 +14,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "fractal.h"
-#include "noise.h"
+#include "terrain/fractal.h"
+#include "terrain/noise.h"
 
 static double sample(uint64_t *counter, double lo, double hi)
 {

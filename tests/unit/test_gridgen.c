@@ -12,8 +12,8 @@
 #include <string.h>
 #include <cmocka.h>
 
-#include "gridgen.h"
-#include "terrain.h"
+#include "terrain/gridgen.h"
+#include "terrain/terrain.h"
 
 static size_t side(int k) { return ((size_t)1 << k) + 1; }
 

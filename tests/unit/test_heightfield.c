@@ -11,8 +11,8 @@
 #include <cmocka.h>
 #include <math.h>
 #include <stdio.h>
-#include "heightfield.h"
-#include "noise.h"
+#include "terrain/heightfield.h"
+#include "terrain/noise.h"
 
 /* |a - b| <= tol, printing both values when not. */
 #define assert_near(a, b, tol) assert_near_at((a), (b), (tol), __FILE__, __LINE__)

@@ -13,7 +13,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "noise.h"
+#include "terrain/noise.h"
 
 /* A deterministic stream of doubles in [lo, hi) for sampling (tf_hash_unit of a counter). */
 static double sample(uint64_t *counter, double lo, double hi)

@@ -29,9 +29,9 @@
 #define CL_TARGET_OPENCL_VERSION 120
 #include <CL/cl.h>
 
-#include "backend_opencl.h"
-#include "heightfield.h"
-#include "render.h"
+#include "worker/backend_opencl.h"
+#include "terrain/heightfield.h"
+#include "render/render.h"
 #include "scene.h"
 
 #define W 160

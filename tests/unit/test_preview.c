@@ -16,8 +16,8 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "exrfile.h"
-#include "preview.h"
+#include "image/exrfile.h"
+#include "image/preview.h"
 
 #define W 37
 #define H 53

@@ -12,8 +12,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "render.h"
-#include "render_internal.h"
+#include "render/render.h"
+#include "render/render_internal.h"
 
 #define W 61
 #define H 37

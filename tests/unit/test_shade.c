@@ -11,8 +11,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "shade.h"
-#include "trace.h"
+#include "render/shade.h"
+#include "render/trace.h"
 
 /* Simpson's rule for the optical depth of a straight path (unit speed in t). */
 static double numeric_depth(double density, double k, double z1, double z2, double len)

@@ -17,11 +17,11 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "fractal.h"
-#include "heightfield.h"
-#include "noise.h"
-#include "terrain.h"
-#include "terrain_build.h"
+#include "terrain/fractal.h"
+#include "terrain/heightfield.h"
+#include "terrain/noise.h"
+#include "terrain/terrain.h"
+#include "terrain/terrain_build.h"
 
 static tf_terrain terrain(enum tf_generator g, int size_exp)
 {

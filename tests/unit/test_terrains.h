@@ -9,8 +9,8 @@
 #include <stdint.h>
 #include <stdlib.h>
 
-#include "heightfield.h"
-#include "noise.h"
+#include "terrain/heightfield.h"
+#include "terrain/noise.h"
 
 typedef double (*height_fn)(int i, int j, int n);
 

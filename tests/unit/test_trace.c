@@ -12,9 +12,9 @@
 #include <string.h>
 #include <math.h>
 #include <cmocka.h>
-#include "heightfield.h"
-#include "noise.h"
-#include "trace.h"
+#include "terrain/heightfield.h"
+#include "terrain/noise.h"
+#include "render/trace.h"
 #include "test_terrains.h"
 
 #define assert_near(a, b, tol) assert_near_at((a), (b), (tol), __FILE__, __LINE__)

@@ -14,9 +14,9 @@
 #include <string.h>
 #include <math.h>
 #include <cmocka.h>
-#include "heightfield.h"
-#include "noise.h"
-#include "trace.h"
+#include "terrain/heightfield.h"
+#include "terrain/noise.h"
+#include "render/trace.h"
 #include "test_terrains.h"
 
 typedef struct rng { uint64_t s; } rng;

@@ -21,9 +21,9 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
-#include "coordinator/tsserver.h"
-#include "proto.h"
-#include "tsclient.h"
+#include "linda/tsserver.h"
+#include "linda/proto.h"
+#include "linda/tsclient.h"
 
 typedef struct fixture {
     ts_space *space;

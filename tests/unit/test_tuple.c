@@ -8,9 +8,10 @@
 #include <string.h>
 #include <cmocka.h>
 
-#include "auth.h"
-#include "proto.h"
-#include "tuple.h"
+#include "linda/auth.h"
+#include "linda/proto.h"
+#include "linda/sock.h"
+#include "linda/tuple.h"
 
 static void round_trip(const tf_tuple *t, int allow_formals)
 {

@@ -9,7 +9,7 @@
 #include <string.h>
 #include <cmocka.h>
 
-#include "coordinator/tuplespace.h"
+#include "linda/tuplespace.h"
 
 static void out_task(ts_space *s, const char *name, int64_t id, double v)
 {

@@ -1,0 +1,74 @@
+/* exrfile.h: the render's output and checkpoint, an OpenEXR scanline file written through
+ * OpenEXRCore (openexr.h).
+ *
+ * Channels (all FLOAT): A, B, G, R, Z, spp (samples per pixel), ZIP compression (16 scanlines
+ * per chunk).  Header attributes: terrafarm.scene_hash (SHA-256 hex of the canonical scene,
+ * which includes the image size), terrafarm.scene (scene file name), terrafarm.settings
+ * (render settings that affect pixels), terrafarm.version.
+ *
+ * The writer appends whole chunks in increasing y through a custom write function on our own
+ * file descriptor, so tf_exr_sync can fsync and so a killed process leaves a file whose chunks
+ * up to the last whole one are valid: OpenEXRCore rebuilds the offset table of such a file from
+ * the chunk headers when reading it.  tf_exr_resume reads such a partial file, verifies each
+ * chunk (a torn last chunk is dropped, never trusted), copies the good chunks into a new file
+ * beside it, makes that durable and renames it over the original: at every instant the output
+ * path holds either the old partial file or the new one, never less. */
+#ifndef TF_EXRFILE_H
+#define TF_EXRFILE_H
+
+#include <stddef.h>
+#include "image/pixel.h"
+
+typedef struct tf_exr_meta {
+    int width, height;
+    char scene_hash[65];  /* hex */
+    char scene_name[256];
+    char settings[256];
+} tf_exr_meta;
+
+typedef struct tf_exr_writer tf_exr_writer;
+
+/* Rows per chunk of the compression used (16 for ZIP). */
+int tf_exr_chunk_rows(void);
+
+/* Create (truncate) path and write the header.  The caller decides whether overwriting is
+ * allowed (see tf_exr_probe). */
+tf_exr_writer *tf_exr_create(const char *path, const tf_exr_meta *meta, char *err, size_t errlen);
+
+/* Append nrows rows starting at tf_exr_next_row(w).  nrows must be a whole number of chunks,
+ * or reach the last row of the image.  px holds width * nrows pixels, row-major. */
+int tf_exr_write_rows(tf_exr_writer *w, int nrows, const tf_pixel *px, char *err, size_t errlen);
+int tf_exr_next_row(const tf_exr_writer *w);
+/* Make everything written so far durable (fsync). */
+int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen);
+/* All rows written: finish the file (offset table), fsync, close, free. */
+int tf_exr_finish(tf_exr_writer *w, char *err, size_t errlen);
+/* Close without finishing: the file stays a resumable partial render.  Frees w. */
+void tf_exr_abandon(tf_exr_writer *w);
+
+/* What is at path?  Returns 1 if no file exists; 0 if it is a terrafarm EXR (fills meta,
+ * *rows_done = rows in whole verified chunks, *complete = 1 if every row is there); -1 if it
+ * exists but is not a terrafarm EXR we can resume (message in err).  A file killed after its
+ * last chunk but before tf_exr_finish has every row but no offset table: it reports
+ * *complete = 0 (and rows_done = height), so it is resumed and finished, not taken as done. */
+int tf_exr_probe(const char *path, tf_exr_meta *meta, int *rows_done, int *complete, char *err,
+                 size_t errlen);
+
+/* Continue a partial render.  Fails (and modifies nothing on disk) if the file's meta differs
+ * from `expect`, naming what differs.  On success *rows_done is the first row to render. */
+tf_exr_writer *tf_exr_resume(const char *path, const tf_exr_meta *expect, int *rows_done,
+                             char *err, size_t errlen);
+
+/* Read back rows [0, *rows_valid) of a (possibly partial) file, chunk by chunk, calling
+ * fn(user, y, row_pixels) for each row in order.  *meta is filled before the first call, so fn
+ * may size its output from it.  A nonzero return from fn stops reading (returns -1).
+ * Returns 0 on success. */
+typedef int (*tf_exr_row_fn)(void *user, int y, const tf_pixel *row);
+int tf_exr_read_rows(const char *path, tf_exr_meta *meta, int *rows_valid, tf_exr_row_fn fn,
+                     void *user, char *err, size_t errlen);
+
+/* Write a single-channel FLOAT image (channel "Y"), e.g. height field export. */
+int tf_exr_write_gray(const char *path, int width, int height, const float *data, char *err,
+                      size_t errlen);
+
+#endif

@@ -1,0 +1,123 @@
+/* proto.h: the tuple-space wire protocol: framing, op codes, the frame decoder the server runs
+ * on every connection's input buffer, and a small growable byte buffer for building frames.
+ *
+ * FRAME FORMAT (version 1; every integer little-endian)
+ *   offset  size  field
+ *   0       4     u32 length  = number of bytes that follow this field (6 + body length);
+ *                 6 <= length <= TF_MAX_FRAME, checked as soon as these 4 bytes arrive and
+ *                 before anything is allocated
+ *   4       1     u8  version = TF_PROTO_VERSION (1)
+ *   5       1     u8  op      (enum tf_op below)
+ *   6       4     u32 request id: chosen by the client, echoed in the reply; 0 in unsolicited
+ *                 server frames and in PINGs that want no PONG
+ *   10      ...   body, length - 6 bytes, whose layout depends on op:
+ *
+ *   op            dir   body
+ *   OUT      1    c->s  tuple (tuple.h encoding, no formals)          reply OK
+ *   IN       2    c->s  template (formals allowed)    blocks;         reply TUPLE
+ *   RD       3    c->s  template                      blocks;         reply TUPLE
+ *   INP      4    c->s  template                      non-blocking;   reply TUPLE or NONE
+ *   RDP      5    c->s  template                      non-blocking;   reply TUPLE or NONE
+ *   TUPLE    6    s->c  tuple
+ *   NONE     7    s->c  empty (inp/rdp found nothing)
+ *   OK       8    s->c  empty (out stored)
+ *   PING     9    c->s  empty; a PONG comes back only if the request id is non-zero
+ *   PONG    10    s->c  empty
+ *   HELLO   11    s->c  u8 flags (bit 0: authentication required), then 32-byte server nonce Ns.
+ *                       Sent first, unsolicited, on every connection accepted from the
+ *                       listening socket (never on fds added with ts_server_add_fd).
+ *   AUTH    12    c->s  32-byte client nonce Nc, then 32-byte
+ *                       HMAC-SHA256(key, "terrafarm-client" || Ns || Nc)
+ *   AUTH_OK 13    s->c  32-byte HMAC-SHA256(key, "terrafarm-server" || Ns || Nc): proves the
+ *                       server knows the key too (mutual authentication)
+ *   ERROR   14    s->c  UTF-8 message, at most 256 bytes; the server closes after sending it
+ *
+ * When the HELLO says authentication is required, any frame but AUTH (even a PING) before a
+ * successful AUTH closes the connection.  A wrong MAC gets an ERROR and a close, and the server
+ * logs "authentication failed from PEER".  The key is never sent (see auth.h).
+ * An unknown op, a wrong version, a length out of bounds, a body that does not decode, or a
+ * frame in the wrong direction closes that one connection. */
+#ifndef TF_PROTO_H
+#define TF_PROTO_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "linda/tuple.h"
+
+#define TF_PROTO_VERSION 1
+/* Largest value of the length field: bounds every allocation driven by the peer. */
+#define TF_MAX_FRAME (64u * 1024u * 1024u)
+/* Bytes before the body: length, version, op, request id. */
+#define TF_FRAME_HEADER 10
+/* Smallest legal length field (version + op + request id). */
+#define TF_FRAME_MIN_LENGTH 6
+#define TF_PROTO_ERROR_MAX 256
+
+enum tf_op {
+    TF_OP_OUT = 1,
+    TF_OP_IN = 2,
+    TF_OP_RD = 3,
+    TF_OP_INP = 4,
+    TF_OP_RDP = 5,
+    TF_OP_TUPLE = 6,
+    TF_OP_NONE = 7,
+    TF_OP_OK = 8,
+    TF_OP_PING = 9,
+    TF_OP_PONG = 10,
+    TF_OP_HELLO = 11,
+    TF_OP_AUTH = 12,
+    TF_OP_AUTH_OK = 13,
+    TF_OP_ERROR = 14
+};
+#define TF_OP_MAX TF_OP_ERROR
+
+#define TF_HELLO_AUTH_REQUIRED 0x01
+
+/* A decoded frame header; body points into the caller's buffer (not a copy). */
+typedef struct tf_frame {
+    uint8_t version;
+    uint8_t op;
+    uint32_t request_id;
+    const uint8_t *body;
+    uint32_t body_len;
+} tf_frame;
+
+/* Name of an op for logs ("OUT", ...; "op 77" style text for unknown ones is not produced:
+ * returns "?" for those). */
+const char *tf_op_name(int op);
+
+/* Parse the first frame of buf[0..len).  Returns:
+ *   > 0  a complete valid frame occupies that many bytes; *out describes it
+ *     0  not enough bytes yet (and nothing seen so far is invalid)
+ *    -1  malformed: length out of [TF_FRAME_MIN_LENGTH, TF_MAX_FRAME], bad version or unknown
+ *        op; a one-line reason is written to err.  The connection must be closed.
+ * Only the header is validated here; the body is decoded by tf_tuple_decode (or by the auth
+ * code) according to op.  This is the function the server runs on each connection's input. */
+long tf_frame_parse(const uint8_t *buf, size_t len, tf_frame *out, char *err, size_t errlen);
+
+/* ---- growable byte buffer ------------------------------------------------------------------ */
+typedef struct tf_buf {
+    uint8_t *data;
+    size_t len; /* bytes in use, starting at data + off */
+    size_t off; /* bytes already consumed at the front */
+    size_t cap;
+} tf_buf;
+
+void tf_buf_init(tf_buf *b);
+void tf_buf_free(tf_buf *b);
+/* Make room for n more bytes; 0 or -1 (OOM or size overflow). */
+int tf_buf_reserve(tf_buf *b, size_t n);
+int tf_buf_append(tf_buf *b, const void *p, size_t n);
+/* Drop n bytes from the front (compacts lazily). */
+void tf_buf_consume(tf_buf *b, size_t n);
+/* First unconsumed byte. */
+static inline uint8_t *tf_buf_head(const tf_buf *b) { return b->data + b->off; }
+
+/* Append one frame whose body is the given bytes.  0 or -1 (OOM or body too large). */
+int tf_frame_append_raw(tf_buf *b, uint8_t op, uint32_t request_id, const void *body,
+                        size_t body_len);
+/* Append one frame whose body is the encoding of tuple t (NULL: empty body). */
+int tf_frame_append_tuple(tf_buf *b, uint8_t op, uint32_t request_id, const tf_tuple *t);
+
+#endif

@@ -1,0 +1,719 @@
+/* tsserver.c: the tuple-space server event loop (see tsserver.h for the contract, proto.h for
+ * the wire format).  One thread, epoll, non-blocking sockets, per-connection buffers.
+ *
+ * Life of a connection: accepted (HELLO queued; if a key is set, state NEED_AUTH until a valid
+ * AUTH) or added by fd (trusted, READY at once) -> frames are parsed from its input buffer in
+ * order -> replies are queued on its output buffer and written before the next poll, like
+ * Redis's beforeSleep -> closed on EOF, error, protocol violation or timeout.
+ *
+ * Ordering invariant: a connection has at most one request in progress.  While its blocked
+ * IN/RD waits (c->waiting), later frames stay in its input buffer unparsed -- except heartbeat
+ * PINGs with request id 0, which need no reply and so cannot reorder anything -- and input
+ * reading stops once TS_MAX_PIPELINE bytes are buffered.  So replies always leave in request
+ * order.
+ *
+ * Closing never frees a connection while the loop may still hold a pointer to it: it is marked
+ * dead (fd closed, waiter cancelled, on_disconnect run) and freed by the sweep at the end of
+ * ts_server_run_once, or at once when the close comes from outside the loop. */
+#include "linda/tsserver.h"
+#include "clock.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <arpa/inet.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/epoll.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "log.h"
+#include "linda/proto.h"
+#include "linda/sock.h"
+
+#define TS_READ_CHUNK 65536
+#define TS_MAX_PIPELINE 65536 /* input bytes buffered behind a blocked request */
+#define TS_POLL_CAP_MS 250    /* longest poll when timeouts must be enforced */
+
+enum conn_state { NEED_AUTH, READY };
+
+typedef struct conn {
+    uint64_t id;
+    int fd;
+    char peer[96];
+    int trusted;
+    enum conn_state state;
+    int dead;
+    uint8_t ns[TF_NONCE_BYTES];
+    tf_buf in, out;
+    int64_t created_ms, last_rx_ms;
+    int waiting;           /* a blocked IN/RD is queued in the space */
+    int pending_take;      /* ... and whether it is an IN */
+    uint32_t pending_req;  /* ... and its request id */
+    uint64_t waiter_id;    /* ... and its waiter id (0 once served) */
+    uint32_t ep_events;    /* events registered with the server's epoll set */
+    int ep_added;          /* registered at all (EPOLL_CTL_ADD done) */
+    int dirty;             /* on the server's dirty list (see conn_touch) */
+    struct conn *dirty_next;
+    struct ts_server *srv;
+    struct conn *next, *prev;
+} conn;
+
+struct ts_server {
+    ts_space *space;
+    ts_server_hooks hooks;
+    int has_key;
+    uint8_t key[TF_KEY_BYTES];
+    int silence_ms, handshake_ms, max_conns;
+    size_t max_out;
+    int listen_fd;
+    int port;
+    char unix_path[sizeof(((struct sockaddr_un *)0)->sun_path)];
+    conn *conns; /* live connections, newest first */
+    conn *dirty; /* connections whose output or epoll interest may have changed */
+    int64_t last_timeout_check_ms;
+    conn *graveyard;
+    size_t nconns;
+    uint64_t next_id;
+    int in_loop;
+    /* epoll, not poll: with a thousand connections poll() spent the coordinator's time
+     * re-registering every socket on every iteration (bench/README.md); epoll costs O(ready).
+     * A connection's interest set is kept in step lazily (sync_interest); a listener event
+     * carries data.ptr == NULL. */
+    int epfd;
+    int listen_added;
+    struct epoll_event *evs;
+    size_t evcap;
+};
+
+ts_server *ts_server_new(ts_space *space, const ts_server_config *cfg,
+                         const ts_server_hooks *hooks, char *err, size_t errlen)
+{
+    ts_server_config none = {0};
+    if (!cfg)
+        cfg = &none;
+    if (tf_auth_init() != 0) {
+        tf_seterr(err, errlen, "libsodium failed to initialise");
+        return NULL;
+    }
+    ts_server *srv = calloc(1, sizeof *srv);
+    if (!srv) {
+        tf_seterr(err, errlen, "out of memory");
+        return NULL;
+    }
+    srv->space = space;
+    if (hooks)
+        srv->hooks = *hooks;
+    if (cfg->key) {
+        srv->has_key = 1;
+        memcpy(srv->key, cfg->key, TF_KEY_BYTES);
+    }
+    srv->silence_ms = cfg->silence_timeout_ms > 0 ? cfg->silence_timeout_ms : 0;
+    srv->handshake_ms = cfg->handshake_timeout_ms > 0 ? cfg->handshake_timeout_ms : 5000;
+    srv->max_out = cfg->max_output_bytes > 0 ? cfg->max_output_bytes
+                                             : 2 * (size_t)TF_MAX_FRAME + (1u << 20);
+    srv->max_conns = cfg->max_connections > 0 ? cfg->max_connections : 4096;
+    srv->listen_fd = -1;
+    srv->next_id = 1;
+    srv->epfd = epoll_create1(EPOLL_CLOEXEC);
+    if (srv->epfd < 0) {
+        tf_seterr(err, errlen, "epoll_create1: %s", strerror(errno));
+        free(srv);
+        return NULL;
+    }
+    if (cfg->listen) {
+        srv->listen_fd = tf_sock_listen(cfg->listen, &srv->port, err, errlen);
+        if (srv->listen_fd < 0) {
+            close(srv->epfd);
+            free(srv);
+            return NULL;
+        }
+        if (strncmp(cfg->listen, "unix:", 5) == 0)
+            snprintf(srv->unix_path, sizeof srv->unix_path, "%s", cfg->listen + 5);
+    }
+    return srv;
+}
+
+int ts_server_port(const ts_server *srv) { return srv->port; }
+ts_space *ts_server_space(const ts_server *srv) { return srv->space; }
+
+/* ---- connections ---- */
+static void conn_touch(conn *c);
+
+static conn *conn_new(ts_server *srv, int fd, const char *peer, int trusted)
+{
+    conn *c = calloc(1, sizeof *c);
+    if (!c)
+        return NULL;
+    c->id = srv->next_id++;
+    c->fd = fd;
+    snprintf(c->peer, sizeof c->peer, "%s", peer);
+    c->trusted = trusted;
+    c->state = trusted || !srv->has_key ? READY : NEED_AUTH;
+    c->created_ms = c->last_rx_ms = tf_now_ms();
+    c->srv = srv;
+    tf_buf_init(&c->in);
+    tf_buf_init(&c->out);
+    c->next = srv->conns;
+    if (srv->conns)
+        srv->conns->prev = c;
+    srv->conns = c;
+    srv->nconns++;
+    conn_touch(c); /* to be registered with epoll */
+    return c;
+}
+
+/* Put c on the dirty list: its queued output or its epoll interest may have changed.  Only
+ * dirty connections are visited by flush_dirty, so an event-loop iteration costs time in
+ * proportion to the connections that did something, not to all of them (1024 workers). */
+static void conn_touch(conn *c)
+{
+    if (c->dirty || c->dead)
+        return;
+    c->dirty = 1;
+    c->dirty_next = c->srv->dirty;
+    c->srv->dirty = c;
+}
+
+static void conn_destroy(conn *c)
+{
+    if (c->dirty) { /* unlink: a dead connection may still sit on the list */
+        conn **pp = &c->srv->dirty;
+        while (*pp && *pp != c)
+            pp = &(*pp)->dirty_next;
+        if (*pp)
+            *pp = c->dirty_next;
+    }
+    tf_buf_free(&c->in);
+    tf_buf_free(&c->out);
+    free(c);
+}
+
+/* Close c now: fd, blocked request, hook.  Freed later by the sweep (or now, outside the loop). */
+static void conn_close(conn *c)
+{
+    if (c->dead)
+        return;
+    ts_server *srv = c->srv;
+    c->dead = 1;
+    /* Deregister explicitly: a forked child may briefly hold a copy of this fd, and epoll
+     * only forgets a file when every copy is closed. */
+    if (c->ep_added)
+        epoll_ctl(srv->epfd, EPOLL_CTL_DEL, c->fd, NULL);
+    close(c->fd);
+    c->fd = -1;
+    if (c->waiting && c->waiter_id)
+        ts_cancel(srv->space, c->waiter_id);
+    c->waiting = 0;
+    if (c->prev)
+        c->prev->next = c->next;
+    else
+        srv->conns = c->next;
+    if (c->next)
+        c->next->prev = c->prev;
+    srv->nconns--;
+    c->next = srv->graveyard;
+    srv->graveyard = c;
+    if (srv->hooks.on_disconnect)
+        srv->hooks.on_disconnect(srv->hooks.ctx, c->id, c->peer);
+    if (!srv->in_loop) {
+        while (srv->graveyard) {
+            conn *g = srv->graveyard;
+            srv->graveyard = g->next;
+            conn_destroy(g);
+        }
+    }
+}
+
+/* Log why and close: the one line naming the peer. */
+static void conn_drop(conn *c, const char *why)
+{
+    tf_warn("dropping tuple-space connection from %s: %s", c->peer, why);
+    conn_close(c);
+}
+
+/* Write as much queued output as the socket takes.  -1 if the connection broke. */
+static int conn_flush(conn *c)
+{
+    while (c->out.len > 0) {
+        ssize_t n = send(c->fd, tf_buf_head(&c->out), c->out.len, MSG_NOSIGNAL);
+        if (n > 0) {
+            tf_buf_consume(&c->out, (size_t)n);
+            continue;
+        }
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+            return 0;
+        return -1;
+    }
+    return 0;
+}
+
+/* Check the output bound after queuing; drop a client that does not read its replies. */
+static int conn_check_out(conn *c, int append_rc)
+{
+    if (append_rc != 0) {
+        conn_drop(c, "out of memory queuing a reply");
+        return -1;
+    }
+    if (c->out.len > c->srv->max_out) {
+        conn_drop(c, "too many unread replies (client not reading)");
+        return -1;
+    }
+    conn_touch(c);
+    return 0;
+}
+
+static int reply_tuple(conn *c, uint8_t op, uint32_t req, const tf_tuple *t)
+{
+    return conn_check_out(c, tf_frame_append_tuple(&c->out, op, req, t));
+}
+
+/* Best effort: send ERROR with msg, then close. */
+static void conn_refuse(conn *c, const char *msg)
+{
+    tf_frame_append_raw(&c->out, TF_OP_ERROR, 0, msg, strlen(msg));
+    conn_flush(c);
+    conn_close(c);
+}
+
+static void send_hello(conn *c)
+{
+    uint8_t body[1 + TF_NONCE_BYTES];
+    tf_auth_nonce(c->ns);
+    body[0] = c->srv->has_key ? TF_HELLO_AUTH_REQUIRED : 0;
+    memcpy(body + 1, c->ns, TF_NONCE_BYTES);
+    conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_HELLO, 0, body, sizeof body));
+}
+
+uint64_t ts_server_add_fd(ts_server *srv, int fd, const char *peer)
+{
+    char label[32];
+    if (!peer) {
+        snprintf(label, sizeof label, "fd %d", fd);
+        peer = label;
+    }
+    conn *c = NULL;
+    if (tf_sock_set_nonblocking(fd) != 0 || !(c = conn_new(srv, fd, peer, 1))) {
+        close(fd);
+        return 0;
+    }
+    return c->id;
+}
+
+static void accept_all(ts_server *srv)
+{
+    for (;;) {
+        char peer[96];
+        int fd = tf_sock_accept(srv->listen_fd, peer, sizeof peer);
+        if (fd < 0) {
+            if (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR &&
+                errno != ECONNABORTED)
+                tf_warn("tuple-space accept failed: %s", strerror(errno));
+            return;
+        }
+        if (srv->nconns >= (size_t)srv->max_conns) {
+            tf_warn("refusing tuple-space connection from %s: %d connections open", peer,
+                    srv->max_conns);
+            close(fd);
+            continue;
+        }
+        conn *c = conn_new(srv, fd, peer, 0);
+        if (!c) {
+            close(fd);
+            continue;
+        }
+        send_hello(c);
+    }
+}
+
+/* ---- serving requests ---- */
+
+/* The space delivers a blocked IN/RD's tuple (or an immediate one). */
+static void on_waiter_served(void *ctx, uint64_t waiter_id, tf_tuple *t)
+{
+    (void)waiter_id;
+    conn *c = ctx;
+    c->waiting = 0;
+    c->waiter_id = 0;
+    if (c->dead)
+        return;
+    conn_touch(c); /* readable again, and a reply is coming */
+    ts_server *srv = c->srv;
+    if (c->pending_take && srv->hooks.on_take)
+        srv->hooks.on_take(srv->hooks.ctx, c->id, t);
+    if (!c->dead)
+        reply_tuple(c, TF_OP_TUPLE, c->pending_req, t);
+}
+
+static int handle_out(conn *c, const tf_frame *f, char *err, size_t errlen)
+{
+    tf_tuple t, seen;
+    if (tf_tuple_decode(f->body, f->body_len, &t, 0, err, errlen) != 0)
+        return -1;
+    ts_server *srv = c->srv;
+    int want_copy = srv->hooks.on_out != NULL;
+    if (want_copy && tf_tuple_copy(&seen, &t) != 0) {
+        tf_tuple_clear(&t);
+        tf_seterr(err, errlen, "out of memory");
+        return -1;
+    }
+    uint64_t id = c->id;
+    if (ts_space_out(srv->space, &t) != 0) {
+        if (want_copy)
+            tf_tuple_clear(&seen);
+        tf_seterr(err, errlen, "out of memory storing a tuple");
+        return -1;
+    }
+    if (want_copy) {
+        srv->hooks.on_out(srv->hooks.ctx, id, &seen);
+        tf_tuple_clear(&seen);
+    }
+    if (!c->dead)
+        reply_tuple(c, TF_OP_OK, f->request_id, NULL);
+    return 0;
+}
+
+static int handle_take_or_read(conn *c, const tf_frame *f, char *err, size_t errlen)
+{
+    tf_tuple tmpl;
+    if (tf_tuple_decode(f->body, f->body_len, &tmpl, 1, err, errlen) != 0)
+        return -1;
+    ts_server *srv = c->srv;
+    int take = f->op == TF_OP_IN || f->op == TF_OP_INP;
+    int rc = 0;
+    if (f->op == TF_OP_IN || f->op == TF_OP_RD) {
+        c->waiting = 1;
+        c->pending_take = take;
+        c->pending_req = f->request_id;
+        if (ts_wait(srv->space, &tmpl, take, on_waiter_served, c, &c->waiter_id) < 0) {
+            c->waiting = 0;
+            tf_seterr(err, errlen, "out of memory queuing a request");
+            rc = -1;
+        }
+    } else {
+        tf_tuple got;
+        int found = take ? ts_space_inp(srv->space, &tmpl, &got)
+                         : ts_space_rdp(srv->space, &tmpl, &got);
+        if (found > 0) {
+            if (take && srv->hooks.on_take)
+                srv->hooks.on_take(srv->hooks.ctx, c->id, &got);
+            if (!c->dead)
+                reply_tuple(c, TF_OP_TUPLE, f->request_id, &got);
+            tf_tuple_clear(&got);
+        } else if (found == 0) {
+            reply_tuple(c, TF_OP_NONE, f->request_id, NULL);
+        } else {
+            tf_seterr(err, errlen, "out of memory copying a tuple");
+            rc = -1;
+        }
+    }
+    tf_tuple_clear(&tmpl);
+    return rc;
+}
+
+static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
+{
+    if (c->state != NEED_AUTH) {
+        tf_seterr(err, errlen, "unexpected AUTH");
+        return -1;
+    }
+    if (f->body_len != TF_NONCE_BYTES + TF_MAC_BYTES) {
+        tf_seterr(err, errlen, "AUTH body of %u bytes", f->body_len);
+        return -1;
+    }
+    const uint8_t *nc = f->body, *mac = f->body + TF_NONCE_BYTES;
+    if (!tf_auth_client_mac_ok(c->srv->key, c->ns, nc, mac)) {
+        tf_warn("authentication failed from %s", c->peer);
+        conn_refuse(c, "authentication failed");
+        return 0;
+    }
+    uint8_t proof[TF_MAC_BYTES];
+    tf_auth_server_mac(c->srv->key, c->ns, nc, proof);
+    c->state = READY;
+    conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_AUTH_OK, f->request_id, proof,
+                                          sizeof proof));
+    return 0;
+}
+
+/* Serve one frame.  0 ok (c may have been closed), -1 protocol violation (err set). */
+static int handle_frame(conn *c, const tf_frame *f, char *err, size_t errlen)
+{
+    if (c->state == NEED_AUTH && f->op != TF_OP_AUTH) {
+        tf_warn("unauthenticated %s from %s refused", tf_op_name(f->op), c->peer);
+        conn_refuse(c, "authentication required");
+        return 0;
+    }
+    switch (f->op) {
+    case TF_OP_OUT: return handle_out(c, f, err, errlen);
+    case TF_OP_IN:
+    case TF_OP_RD:
+    case TF_OP_INP:
+    case TF_OP_RDP: return handle_take_or_read(c, f, err, errlen);
+    case TF_OP_PING:
+        if (f->body_len != 0) {
+            tf_seterr(err, errlen, "PING with a body");
+            return -1;
+        }
+        if (f->request_id != 0)
+            reply_tuple(c, TF_OP_PONG, f->request_id, NULL);
+        return 0;
+    case TF_OP_AUTH: return handle_auth(c, f, err, errlen);
+    default:
+        tf_seterr(err, errlen, "client sent server-only op %s", tf_op_name(f->op));
+        return -1;
+    }
+}
+
+/* Parse and serve the complete frames in c's input buffer (see the ordering invariant). */
+static void conn_process_input(conn *c)
+{
+    char err[160];
+    while (!c->dead && c->in.len > 0) {
+        tf_frame f;
+        long n = tf_frame_parse(tf_buf_head(&c->in), c->in.len, &f, err, sizeof err);
+        if (n < 0) {
+            conn_drop(c, err);
+            return;
+        }
+        if (n == 0)
+            return;
+        if (c->waiting) {
+            if (f.op != TF_OP_PING || f.request_id != 0 || f.body_len != 0)
+                return; /* wait until the blocked request is served */
+            tf_buf_consume(&c->in, (size_t)n);
+            continue;
+        }
+        int rc = handle_frame(c, &f, err, sizeof err);
+        if (c->dead)
+            return;
+        tf_buf_consume(&c->in, (size_t)n);
+        if (rc != 0) {
+            conn_drop(c, err);
+            return;
+        }
+    }
+}
+
+/* Read what is available (bounded), then serve it. */
+static void conn_readable(conn *c)
+{
+    conn_touch(c); /* input, replies and interest may all change */
+    for (;;) {
+        if (c->waiting && c->in.len >= TS_MAX_PIPELINE)
+            break;
+        /* Never buffer more than one maximal frame: the parser refuses longer lengths, so a
+         * buffer this full always holds a complete frame to consume first. */
+        size_t room = (size_t)TF_MAX_FRAME + 4 - c->in.len;
+        size_t want = room < TS_READ_CHUNK ? room : TS_READ_CHUNK;
+        if (want == 0)
+            break;
+        if (tf_buf_reserve(&c->in, want) != 0) {
+            conn_drop(c, "out of memory buffering input");
+            return;
+        }
+        ssize_t n = recv(c->fd, c->in.data + c->in.off + c->in.len, want, 0);
+        if (n > 0) {
+            c->in.len += (size_t)n;
+            c->last_rx_ms = tf_now_ms();
+            conn_process_input(c);
+            if (c->dead)
+                return;
+            continue;
+        }
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+            break;
+        if (n == 0 && c->in.len > 0)
+            conn_drop(c, "closed in the middle of a frame");
+        else if (n == 0)
+            conn_close(c);
+        else
+            conn_drop(c, strerror(errno));
+        return;
+    }
+}
+
+/* Keep c's epoll interest in line with what it wants now: readable unless its pipeline is full
+ * behind a blocked request, writable while replies are queued.  A syscall only on a change. */
+static void sync_conn_interest(conn *c)
+{
+    uint32_t want = 0;
+    if (!(c->waiting && c->in.len >= TS_MAX_PIPELINE))
+        want |= EPOLLIN;
+    if (c->out.len > 0)
+        want |= EPOLLOUT;
+    if (c->ep_added && want == c->ep_events)
+        return;
+    struct epoll_event ev = {.events = want, .data.ptr = c};
+    if (epoll_ctl(c->srv->epfd, c->ep_added ? EPOLL_CTL_MOD : EPOLL_CTL_ADD, c->fd, &ev) == 0) {
+        c->ep_added = 1;
+        c->ep_events = want;
+    } else {
+        conn_drop(c, strerror(errno));
+    }
+}
+
+/* Send what the dirty connections have queued and bring their interest up to date.  Dropping
+ * a connection may run hooks that touch others: they join the list and are served here too. */
+static void flush_dirty(ts_server *srv)
+{
+    while (srv->dirty) {
+        conn *c = srv->dirty;
+        srv->dirty = c->dirty_next;
+        c->dirty = 0;
+        if (c->dead)
+            continue;
+        if (c->out.len > 0 && conn_flush(c) != 0) {
+            conn_drop(c, strerror(errno));
+            continue;
+        }
+        sync_conn_interest(c);
+    }
+}
+
+static void enforce_timeouts(ts_server *srv)
+{
+    int64_t now = tf_now_ms();
+    if (now - srv->last_timeout_check_ms < 100) /* timeouts are seconds: check 10 times a second */
+        return;
+    srv->last_timeout_check_ms = now;
+    for (conn *c = srv->conns, *next; c; c = next) {
+        next = c->next;
+        if (c->state == NEED_AUTH && now - c->created_ms > srv->handshake_ms)
+            conn_drop(c, "authentication handshake timed out");
+        else if (srv->silence_ms > 0 && now - c->last_rx_ms > srv->silence_ms)
+            conn_drop(c, "silent for too long (no frame or heartbeat)");
+    }
+}
+
+/* Bring the epoll interest set in line with what each connection wants now: readable unless
+ * its pipeline is full behind a blocked request, writable while replies are queued.  Costs a
+ * syscall only for connections whose interest changed.  Returns the capacity needed for
+ * epoll_wait's event array, or 0 if it cannot be allocated. */
+static size_t sync_interest(ts_server *srv)
+{
+    if (srv->listen_fd >= 0 && !srv->listen_added) {
+        struct epoll_event ev = {.events = EPOLLIN, .data.ptr = NULL};
+        if (epoll_ctl(srv->epfd, EPOLL_CTL_ADD, srv->listen_fd, &ev) == 0)
+            srv->listen_added = 1;
+    }
+    flush_dirty(srv); /* per-connection interest */
+    size_t need = srv->nconns + 1;
+    if (need > srv->evcap) {
+        struct epoll_event *e = realloc(srv->evs, 2 * need * sizeof *e);
+        if (!e)
+            return 0;
+        srv->evs = e;
+        srv->evcap = 2 * need;
+    }
+    return srv->evcap;
+}
+
+int ts_server_run_once(ts_server *srv, int timeout_ms)
+{
+    srv->in_loop = 1;
+    flush_dirty(srv); /* replies produced by in-process outs since the last iteration */
+    int needs_timer = srv->silence_ms > 0 || srv->has_key;
+    if (needs_timer && (timeout_ms < 0 || timeout_ms > TS_POLL_CAP_MS))
+        timeout_ms = TS_POLL_CAP_MS;
+    size_t n = sync_interest(srv);
+    if (n == 0) {
+        srv->in_loop = 0;
+        errno = ENOMEM;
+        return -1;
+    }
+    int ready = epoll_wait(srv->epfd, srv->evs, (int)(n < 65536 ? n : 65536), timeout_ms);
+    if (ready < 0 && errno != EINTR) {
+        srv->in_loop = 0;
+        return -1;
+    }
+    /* Connections closed while serving this batch stay in the graveyard (not freed) until the
+     * batch is done, so a later event's data.ptr is never dangling. */
+    for (int i = 0; i < ready; i++) {
+        uint32_t re = srv->evs[i].events;
+        conn *c = srv->evs[i].data.ptr;
+        if (!c) {
+            accept_all(srv);
+            continue;
+        }
+        if (c->dead)
+            continue;
+        if (re & (EPOLLIN | EPOLLHUP | EPOLLERR))
+            conn_readable(c);
+        if (!c->dead && (re & EPOLLOUT)) {
+            if (conn_flush(c) != 0)
+                conn_drop(c, strerror(errno));
+            else
+                conn_touch(c); /* maybe no longer wants EPOLLOUT */
+        }
+    }
+    flush_dirty(srv);
+    enforce_timeouts(srv);
+    while (srv->graveyard) {
+        conn *g = srv->graveyard;
+        srv->graveyard = g->next;
+        conn_destroy(g);
+    }
+    srv->in_loop = 0;
+    return ready < 0 ? 0 : ready;
+}
+
+size_t ts_server_conn_count(const ts_server *srv) { return srv->nconns; }
+
+size_t ts_server_conn_ids(const ts_server *srv, uint64_t *ids, size_t max)
+{
+    size_t i = 0;
+    for (const conn *c = srv->conns; c; c = c->next, i++)
+        if (i < max)
+            ids[i] = c->id;
+    return i;
+}
+
+static conn *find_conn(const ts_server *srv, uint64_t id)
+{
+    for (conn *c = srv->conns; c; c = c->next)
+        if (c->id == id)
+            return c;
+    return NULL;
+}
+
+const char *ts_server_peer(const ts_server *srv, uint64_t conn_id)
+{
+    conn *c = find_conn(srv, conn_id);
+    return c ? c->peer : NULL;
+}
+
+int ts_server_close_conn(ts_server *srv, uint64_t conn_id)
+{
+    conn *c = find_conn(srv, conn_id);
+    if (!c)
+        return 0;
+    conn_close(c);
+    return 1;
+}
+
+void ts_server_free(ts_server *srv)
+{
+    if (!srv)
+        return;
+    srv->in_loop = 0;
+    while (srv->conns)
+        conn_close(srv->conns);
+    if (srv->listen_fd >= 0)
+        close(srv->listen_fd);
+    if (srv->unix_path[0])
+        unlink(srv->unix_path);
+    close(srv->epfd);
+    free(srv->evs);
+    free(srv);
+}

@@ -1,0 +1,303 @@
+/* render.c: tf_render_rect, adaptive antialiasing over a rectangle of the image.
+ *
+ * A rectangle walks its pixel rows top to bottom, keeping two rows of pixel-corner samples (the
+ * row above and the row below the current pixel row, w+1 samples each).  The last corner row
+ * and column lie outside the rectangle ("external samples", counted in external_rays): they are
+ * computed here rather than borrowed from a neighbour, so tasks never wait on each other.
+ *
+ * Each pixel then refines itself (render_pixel): starting from its 4 corners it pops quads off a
+ * small explicit stack.  A quad's contrast is the widest per-channel range of its samples'
+ * display levels (sqrt of the linear value, clamped to [0, 1]: close to the sRGB curve a viewer
+ * sees).  A quad of size S lattice steps has split threshold T * (N/S)^3 (T =
+ * antialias.threshold); if its corners' range passes TF_AA_PROBE_FRACTION (1/10) of that, its
+ * centre is traced
+ * (the probe), and if the range of all five passes the threshold it splits into four, down to
+ * quads of one lattice step.  A probed leaf is worth corners/8 + centre/2 (the quincunx
+ * estimate, much closer to the pixel's area average than the corners' mean); a flat leaf is
+ * worth its corners' mean.  Samples inside the pixel
+ * are cached on the pixel's (N+1)^2 lattice so shared quad corners are traced once.  Because
+ * every sample is a function of its lattice point only (render_internal.h) and the pixel's
+ * refinement looks at nothing but its own samples, a pixel's bits do not depend on the
+ * rectangle: THE DECOMPOSITION INVARIANT.  No recursion and no function pointers, so the same
+ * loop ports to OpenCL C. */
+#include "render/render.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include "log.h"
+#include "render/render_internal.h"
+
+tf_renderer *tf_renderer_new(const tf_scene *s, const tf_heightfield *hf, char *err, size_t errlen)
+{
+    if (!s || !hf) {
+        tf_seterr(err, errlen, "renderer: no scene or no height field");
+        return NULL;
+    }
+    if (s->antialias.max_depth < 0 || s->antialias.max_depth > TF_AA_MAX_DEPTH) {
+        tf_seterr(err, errlen, "renderer: antialias max_depth %d outside 0..%d",
+                 s->antialias.max_depth, TF_AA_MAX_DEPTH);
+        return NULL;
+    }
+    if (!(s->antialias.threshold >= 0)) {
+        tf_seterr(err, errlen, "renderer: antialias threshold must be >= 0");
+        return NULL;
+    }
+    /* lattice coordinates must fit comfortably in int64 and in a double's integers */
+    if (s->width > (1 << 24) || s->height > (1 << 24)) {
+        tf_seterr(err, errlen, "renderer: image %dx%d too large", s->width, s->height);
+        return NULL;
+    }
+    tf_renderer *r = calloc(1, sizeof *r);
+    if (!r) {
+        tf_seterr(err, errlen, "renderer: out of memory");
+        return NULL;
+    }
+    if (tf_camera_init(&r->camera, s, err, errlen) != 0) {
+        free(r);
+        return NULL;
+    }
+    r->scene = s;
+    r->hf = hf;
+    tf_shader_init(&r->shader, s, hf);
+    r->depth = s->antialias.max_depth;
+    r->lattice = 1 << r->depth;
+    r->threshold = s->antialias.threshold;
+    r->jitter_key = tf_hash64(s->terrain.seed ^ 0x6a69747465724b59ULL);
+    return r;
+}
+
+void tf_renderer_free(tf_renderer *r) { free(r); }
+
+void tf_render_point(const tf_renderer *r, double x, double y, tf_sample *out,
+                     uint64_t *shadow_rays)
+{
+    tf_vec3 dir = tf_camera_dir(&r->camera, x, y);
+    tf_shade_ray(&r->shader, r->camera.position, dir, out, shadow_rays);
+}
+
+/* Jitter of lattice point (X, Y): two values in [-1/2, 1/2), from the seed and (X, Y) only. */
+static void lattice_jitter(const tf_renderer *r, int64_t X, int64_t Y, double *jx, double *jy)
+{
+    uint64_t h = tf_hash64(r->jitter_key ^ (uint64_t)X);
+    h = tf_hash64(h ^ ((uint64_t)Y * 0x9e3779b97f4a7c15ULL));
+    *jx = tf_hash_unit(h) - 0.5;
+    *jy = tf_hash_unit(h ^ 0xd1b54a32d192ed03ULL) - 0.5;
+}
+
+void tf_render_lattice_sample(const tf_renderer *r, int64_t X, int64_t Y, tf_sample *out,
+                              uint64_t *shadow_rays)
+{
+    double jx, jy;
+    lattice_jitter(r, X, Y, &jx, &jy);
+    /* N is a power of two: the divisions are exact scalings, identical everywhere */
+    double x = ((double)X + jx) / (double)r->lattice;
+    double y = ((double)Y + jy) / (double)r->lattice;
+    tf_render_point(r, x, y, out, shadow_rays);
+}
+
+/* A sample channel as the eye sees it: the square root of the linear value (close to the sRGB
+ * curve the preview and the benchmark's PSNR use), clamped to the displayable [0, 1] since
+ * differences above white or below black never show.  sqrt is correctly rounded in IEEE and in
+ * OpenCL C, so the kernel makes the same decisions bit for bit. */
+double tf_display_level(double v)
+{
+    return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
+}
+
+/* The largest per-channel range of display levels over n samples (n <= 5). */
+static double display_range(const tf_sample *const s[], int n)
+{
+    double widest = 0;
+    for (int ch = 0; ch < 3; ch++) {
+        double lo = 1, hi = 0;
+        for (int k = 0; k < n; k++) {
+            double v = tf_display_level(ch == 0 ? s[k]->r : ch == 1 ? s[k]->g : s[k]->b);
+            lo = fmin(lo, v);
+            hi = fmax(hi, v);
+        }
+        if (hi - lo > widest)
+            widest = hi - lo;
+    }
+    return widest;
+}
+
+/* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice. */
+typedef struct pixel_cache {
+    int side;           /* N + 1 */
+    tf_sample *sample;  /* side * side */
+    unsigned char *have;
+} pixel_cache;
+
+typedef struct quad { int i, j, size; } quad;
+
+/* Sample at local lattice point (i, j) of pixel (px, py), tracing it on first use. */
+static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int px, int py,
+                                      int i, int j, int *spp, tf_render_counts *tally)
+{
+    size_t k = (size_t)j * (size_t)pc->side + (size_t)i;
+    if (!pc->have[k]) {
+        int64_t X = (int64_t)px * r->lattice + i, Y = (int64_t)py * r->lattice + j;
+        tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
+        pc->have[k] = 1;
+        tally->primary_rays++;
+        (*spp)++;
+    }
+    return &pc->sample[k];
+}
+
+/* Refine pixel (px, py) whose four corner samples are given; write its value to *out. */
+static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
+                         const tf_sample *c00, const tf_sample *c10, const tf_sample *c01,
+                         const tf_sample *c11, tf_pixel *out, tf_render_counts *tally)
+{
+    const int N = r->lattice;
+    memset(pc->have, 0, (size_t)pc->side * (size_t)pc->side);
+    pc->sample[0] = *c00;
+    pc->sample[N] = *c10;
+    pc->sample[(size_t)N * (size_t)pc->side] = *c01;
+    pc->sample[(size_t)N * (size_t)pc->side + (size_t)N] = *c11;
+    pc->have[0] = pc->have[N] = 1;
+    pc->have[(size_t)N * (size_t)pc->side] = pc->have[(size_t)N * (size_t)pc->side + (size_t)N] = 1;
+    int spp = 4;
+
+    /* Depth-first: each split pops one quad and pushes four, so the stack never holds more than
+     * 3 per level plus one. */
+    quad stack[3 * TF_AA_MAX_DEPTH + 1];
+    int sp = 0;
+    stack[sp++] = (quad){0, 0, N};
+    double sum_r = 0, sum_g = 0, sum_b = 0, sum_a = 0;
+    while (sp > 0) {
+        quad q = stack[--sp];
+        const tf_sample *s[5];
+        s[0] = cached_sample(r, pc, px, py, q.i, q.j, &spp, tally);
+        s[1] = cached_sample(r, pc, px, py, q.i + q.size, q.j, &spp, tally);
+        s[2] = cached_sample(r, pc, px, py, q.i, q.j + q.size, &spp, tally);
+        s[3] = cached_sample(r, pc, px, py, q.i + q.size, q.j + q.size, &spp, tally);
+        if (q.size > 1) {
+            /* The threshold grows 8x per level (N/size cubed, exact in double): a quad's error
+             * weighs in the pixel by its share of the area (4x per level) and its 5-sample
+             * estimate is already better than the corners' (another 2x). */
+            double ratio = (double)(N / q.size);
+            double split_threshold = r->threshold * ratio * ratio * ratio;
+            if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
+                int h = q.size / 2;
+                s[4] = cached_sample(r, pc, px, py, q.i + h, q.j + h, &spp, tally);
+                if (display_range(s, 5) > split_threshold) {
+                    stack[sp++] = (quad){q.i + h, q.j + h, h};
+                    stack[sp++] = (quad){q.i, q.j + h, h};
+                    stack[sp++] = (quad){q.i + h, q.j, h};
+                    stack[sp++] = (quad){q.i, q.j, h};
+                    continue;
+                }
+                /* probed leaf: area (size^2 lattice cells) times corners/8 + centre/2 */
+                double w = 0.125 * (double)q.size * (double)q.size;
+                sum_r += w * ((double)s[0]->r + s[1]->r + s[2]->r + s[3]->r + 4.0 * s[4]->r);
+                sum_g += w * ((double)s[0]->g + s[1]->g + s[2]->g + s[3]->g + 4.0 * s[4]->g);
+                sum_b += w * ((double)s[0]->b + s[1]->b + s[2]->b + s[3]->b + 4.0 * s[4]->b);
+                sum_a += w * ((double)s[0]->a + s[1]->a + s[2]->a + s[3]->a + 4.0 * s[4]->a);
+                continue;
+            }
+        }
+        /* flat (or smallest) leaf: area (size^2 lattice cells) times the mean of its corners */
+        double w = 0.25 * (double)q.size * (double)q.size;
+        sum_r += w * ((double)s[0]->r + s[1]->r + s[2]->r + s[3]->r);
+        sum_g += w * ((double)s[0]->g + s[1]->g + s[2]->g + s[3]->g);
+        sum_b += w * ((double)s[0]->b + s[1]->b + s[2]->b + s[3]->b);
+        sum_a += w * ((double)s[0]->a + s[1]->a + s[2]->a + s[3]->a);
+    }
+
+    float zmin = TF_SKY_DIST;
+    size_t cells = (size_t)pc->side * (size_t)pc->side;
+    for (size_t k = 0; k < cells; k++)
+        if (pc->have[k] && pc->sample[k].dist < zmin)
+            zmin = pc->sample[k].dist;
+    double area = (double)N * (double)N;
+    *out = (tf_pixel){(float)(sum_r / area), (float)(sum_g / area), (float)(sum_b / area),
+                      (float)(sum_a / area), zmin, (float)spp};
+}
+
+/* Corner samples of one corner row (image row of corners cy) for columns rect.x .. rect.x+w. */
+static void corner_row(const tf_renderer *r, tf_rect rect, int cy, int external_row,
+                       tf_sample *row, tf_render_counts *tally)
+{
+    for (int c = 0; c <= rect.w; c++) {
+        int64_t X = (int64_t)(rect.x + c) * r->lattice, Y = (int64_t)cy * r->lattice;
+        tf_render_lattice_sample(r, X, Y, &row[c], &tally->shadow_rays);
+        tally->primary_rays++;
+        if (external_row || c == rect.w)
+            tally->external_rays++;
+    }
+}
+
+void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render_counts *counts)
+{
+    const tf_scene *s = r->scene;
+    if (rect.w <= 0 || rect.h <= 0 || rect.x < 0 || rect.y < 0 || rect.x > s->width - rect.w ||
+        rect.y > s->height - rect.h)
+        tf_die(70, "tf_render_rect: rectangle %dx%d+%d+%d outside the %dx%d image", rect.w,
+               rect.h, rect.x, rect.y, s->width, s->height);
+
+    size_t side = (size_t)r->lattice + 1;
+    tf_sample *above = malloc(sizeof *above * ((size_t)rect.w + 1));
+    tf_sample *below = malloc(sizeof *below * ((size_t)rect.w + 1));
+    pixel_cache pc = {(int)side, malloc(sizeof(tf_sample) * side * side), malloc(side * side)};
+    if (!above || !below || !pc.sample || !pc.have)
+        tf_die(71, "tf_render_rect: out of memory for a %d-pixel row", rect.w);
+
+    tf_render_counts tally = {0};
+    corner_row(r, rect, rect.y, 0, above, &tally);
+    for (int row = 0; row < rect.h; row++) {
+        corner_row(r, rect, rect.y + row + 1, row + 1 == rect.h, below, &tally);
+        for (int c = 0; c < rect.w; c++)
+            render_pixel(r, &pc, rect.x + c, rect.y + row, &above[c], &above[c + 1], &below[c],
+                         &below[c + 1], &out[(size_t)row * (size_t)rect.w + (size_t)c], &tally);
+        tf_sample *t = above;
+        above = below;
+        below = t;
+    }
+    tally.pixels = (uint64_t)rect.w * (uint64_t)rect.h;
+    free(above);
+    free(below);
+    free(pc.sample);
+    free(pc.have);
+    if (counts) {
+        counts->primary_rays += tally.primary_rays;
+        counts->shadow_rays += tally.shadow_rays;
+        counts->external_rays += tally.external_rays;
+        counts->pixels += tally.pixels;
+    }
+}
+
+void tf_render_pixel_uniform(const tf_renderer *r, int px, int py, int n, tf_pixel *out,
+                             tf_render_counts *counts)
+{
+    uint64_t shadow = 0;
+    double sum_r = 0, sum_g = 0, sum_b = 0, sum_a = 0;
+    float zmin = TF_SKY_DIST;
+    uint64_t pixel_key = tf_hash64(r->jitter_key ^ 0x756e69666f726d00ULL ^ (uint64_t)px);
+    pixel_key = tf_hash64(pixel_key ^ ((uint64_t)py * 0x9e3779b97f4a7c15ULL));
+    for (int b = 0; b < n; b++)
+        for (int a = 0; a < n; a++) {
+            uint64_t h = tf_hash64(pixel_key ^ (uint64_t)(b * n + a));
+            double x = px + (a + tf_hash_unit(h)) / n;
+            double y = py + (b + tf_hash_unit(h ^ 0xd1b54a32d192ed03ULL)) / n;
+            tf_sample s;
+            tf_render_point(r, x, y, &s, &shadow);
+            sum_r += s.r;
+            sum_g += s.g;
+            sum_b += s.b;
+            sum_a += s.a;
+            if (s.dist < zmin)
+                zmin = s.dist;
+        }
+    double count = (double)n * (double)n;
+    *out = (tf_pixel){(float)(sum_r / count), (float)(sum_g / count), (float)(sum_b / count),
+                      (float)(sum_a / count), zmin, (float)count};
+    if (counts) {
+        counts->primary_rays += (uint64_t)n * (uint64_t)n;
+        counts->shadow_rays += shadow;
+        counts->pixels++;
+    }
+}

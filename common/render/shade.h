@@ -1,0 +1,87 @@
+/* shade.h: what a camera ray sees: terrain materials and lighting, the water plane, the sky and
+ * the atmosphere between the eye and whatever the ray ends on (DESIGN.md section 4; Musgrave
+ * chapters 4.1 and 5).
+ *
+ *   materials   by altitude and slope: vegetation below the tree line, alpine ground above
+ *               it, bare rock on slopes steeper than rock_slope_deg, snow above a snow line
+ *               perturbed by fBm (snow_jitter); all transitions are smooth blends.  Normals are
+ *               interpolated across each triangle from vertex normals (no faceting), then
+ *               perturbed by fBm bump mapping (materials.bump) whose octaves start where the
+ *               height field's resolution stops ("leave the highest frequencies to the
+ *               texture", Musgrave 5).  Texture octaves finer than the pixel's footprint
+ *               at the hit are faded out (band-limited textures: less aliasing, and the
+ *               adaptive antialiasing is not sent chasing sub-pixel noise).
+ *   light       sun (direct, shadowed through tf_occluded from a point lifted along the
+ *               geometric normal) plus sky light weighted by how much sky the normal sees.
+ *   water       an infinite plane at sea_level, flat with fBm ripples in its normal; reflects
+ *               the sky with Schlick's Fresnel term over a dark, lit water body.
+ *   sky         zenith/horizon gradient plus a soft glow around the sun.
+ *   mist        exponential in altitude, optical depth in closed form (Musgrave 4.1.5, with the
+ *               near-horizontal fallback), per-channel extinction (4.1.7); or homogeneous fog.
+ *
+ * Everything here is a pure function of the scene, the height field and the ray, so shading is
+ * deterministic and thread-safe. */
+#ifndef TF_SHADE_H
+#define TF_SHADE_H
+
+#include <stdint.h>
+#include "terrain/heightfield.h"
+#include "terrain/noise.h"
+#include "scene.h"
+#include "render/trace.h"
+#include "vec.h"
+
+typedef struct tf_shader {
+    const tf_scene *scene;
+    const tf_heightfield *hf;
+    tf_noise noise;          /* texture noise (initialised only when textures need it) */
+    int textured;            /* bump > 0 or snow_jitter > 0 */
+    tf_vec3 sun_dir;         /* unit vector towards the sun */
+    tf_vec3 sun_light;       /* sun colour * intensity */
+    tf_vec3 sky_light;       /* ambient sky radiance on an upward-facing surface */
+    double mist_k;           /* exponential mist: density(z) = density * exp(-mist_k * z) */
+    double band;             /* width of material transitions, world units */
+    double bump_scale;       /* world wavelength of the first bump octave */
+    double ripple_scale;     /* world wavelength of the first water ripple octave */
+    double shadow_lift;      /* shadow ray start offset along the normal */
+    double pixel_angle;      /* angle one pixel subtends at the image centre, radians */
+} tf_shader;
+
+/* One camera sample: linear RGB, alpha (1 = terrain or water), distance to the hit (or
+ * TF_SKY_DIST for sky). */
+typedef struct tf_sample {
+    float r, g, b, a;
+    float dist;
+} tf_sample;
+
+#define TF_SKY_DIST 1e30f
+
+void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
+
+/* Trace and shade one camera ray (dir unit).  Adds the shadow rays it casts to *shadow_rays. */
+void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,
+                  uint64_t *shadow_rays);
+
+/* The two surfaces, before mist (tf_shade_ray calls them; tests call them directly).
+ * tf_shade_terrain: colour at a terrain hit; tf_shade_water: colour of the water plane at p
+ * seen along unit dir from distance dist.  Both cast one shadow ray when the sun is in front of the surface. */
+tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays);
+tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
+                       uint64_t *shadow_rays);
+
+/* Sky radiance in direction dir (unit), before mist. */
+tf_vec3 tf_sky_color(const tf_shader *sh, tf_vec3 dir);
+
+/* Exponential mist: optical depth of a straight path of length `len` from altitude z1 to
+ * altitude z2 through density(z) = density * exp(-k z), in closed form.  When the path is
+ * (nearly) level, uses the density at the mean altitude (Musgrave eq. 4.1.7), which agrees
+ * with the closed form to ~1e-12 relative at the switch-over.  len must be finite (a ray to
+ * the sky is handled by tf_mist_apply). */
+double tf_mist_depth_exp(double density, double k, double z1, double z2, double len);
+
+/* Apply the scene's mist to colour c seen at distance len along the unit ray origin + t dir
+ * (len = INFINITY for the sky): I = sigma * c + (1 - sigma) * mist.color per channel, with
+ * sigma = exp(-tau * extinction[channel]). */
+tf_vec3 tf_mist_apply(const tf_shader *sh, tf_vec3 c, tf_vec3 origin, tf_vec3 dir, double len);
+
+#endif

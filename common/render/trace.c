@@ -1,0 +1,499 @@
+/* trace.c: grid tracing of a height field (Musgrave chapter 3), flat and hierarchical.
+ *
+ * The surface: cell (ci, cj) is split along its diagonal (ci, cj)-(ci+1, cj+1) into
+ * T1 = (A, B, C) and T2 = (A, C, D) with A = (ci, cj), B = (ci+1, cj), C = (ci+1, cj+1),
+ * D = (ci, cj+1).  Triangles are tested exactly and watertight: every vertex is sheared into
+ * ray space once (Woop, Benthin & Wald 2013), and every edge function is computed by the one
+ * function edge_fn() from those vertex images, so an edge shared by two triangles gets values of
+ * exactly opposite sign in both, and a point on it is accepted by at least one (values whose sign
+ * rounding could flip are snapped to 0, which both accept).
+ *
+ * The walk (tf_trace_flat): Musgrave's modified DDA.  The ray, clipped to the terrain's box,
+ * crosses the grid lines x = X*cell and y = Y*cell at parameters
+ *     xcross(X) = (X*cell - ox) * inv_dx,   ycross(Y) = (Y*cell - oy) * inv_dy,
+ * each a pure function of the line index.  The DDA processes these crossings in the order of
+ * the key (t, x-before-y): at a cell it steps x when xcross <= ycross, else y.  Over a cell's
+ * parameter segment [t_in, t_out] the ray's altitude spans z(t_in)..z(t_out) (z(t) = oz + t*dz is
+ * monotone in t even in floating point); the cell is skipped when that span lies wholly above
+ * maxgrid[0] or wholly below mingrid[0] (by a small per-ray margin).  Otherwise its triangles
+ * are tested, and the first cell whose test hits ends the walk.
+ *
+ * The fast path (tf_trace): the same walk on level L of the max/min mipmap, where blocks are
+ * 2^L cells wide and block boundaries are grid lines X = multiple of 2^L.  Their crossings are
+ * the very same xcross(X) values, so the block sequence is the cell sequence grouped by block,
+ * and a block's altitude span contains the span of every cell in it.  Skipping a block therefore
+ * skips only cells the flat walk would skip, and at level 0 both walks test the same cells, in
+ * the same order, with the same inputs: tf_trace returns exactly tf_trace_flat's hit, bit for
+ * bit.  While a block is skipped the cell index on the axis not being stepped is not tracked;
+ * before descending it is recomputed from the crossing order (fix_stale_axis), which gives the
+ * index the flat walk holds at that moment.
+ *
+ * Rounding: the DDA can disagree with the triangle tests by a hair about which of two cells
+ * meeting at a grid corner the ray passes through.  So a cell whose entry or exit crossings
+ * nearly tie (the ray passes within tie_tol of a corner) also tests the two neighbours sharing
+ * that corner.  This is part of the cell's test, a pure function of the cell and the ray, so
+ * both walks still agree.  Rays that would hit a cell after the DDA has left it are covered by
+ * the cull margin, which bounds the altitude error of the crossing parameters. */
+#include <float.h>
+#include <math.h>
+#include "render/trace.h"
+
+/* A triangle hit found so far. */
+typedef struct candidate {
+    double t;
+    int ci, cj;
+    int tri; /* 0: (A, B, C), 1: (A, C, D) */
+} candidate;
+
+/* A vertex sheared into ray space: x, y in the plane across the ray, z scaled along it. */
+typedef struct sheared { double x, y, z; } sheared;
+
+/* Everything a walk needs about one ray, computed once. */
+typedef struct ray_ctx {
+    const tf_heightfield *hf;
+    double o[3], d[3];
+    double inv_dx, inv_dy; /* only used on axes with a nonzero step */
+    int sx, sy;            /* -1, 0, +1: direction of travel across columns / rows */
+    double tmin, tmax;     /* the caller's open interval for hits */
+    double t0, t1;         /* the part of [tmin, tmax] inside the terrain box (widened a hair) */
+    double margin;         /* altitude slack of the culling tests */
+    double tie_tol;        /* crossings closer than this pass "through a corner" */
+    int ci, cj;            /* the cell containing the point at t0 */
+    int kx, ky, kz;        /* ray-space axes (kz: the dominant direction) */
+    double shx, shy, shz;  /* shear constants */
+} ray_ctx;
+
+/* ---- crossings ---------------------------------------------------------------------------- */
+
+static inline double xcross(const ray_ctx *r, int X)
+{
+    return ((double)X * r->hf->cell - r->o[0]) * r->inv_dx;
+}
+
+static inline double ycross(const ray_ctx *r, int Y)
+{
+    return ((double)Y * r->hf->cell - r->o[1]) * r->inv_dy;
+}
+
+/* Crossing of the grid line where the ray leaves column ci (cells), or +inf if it never does. */
+static inline double exit_x(const ray_ctx *r, int ci)
+{
+    return r->sx ? xcross(r, ci + (r->sx > 0)) : INFINITY;
+}
+
+static inline double exit_y(const ray_ctx *r, int cj)
+{
+    return r->sy ? ycross(r, cj + (r->sy > 0)) : INFINITY;
+}
+
+/* ---- triangle tests ----------------------------------------------------------------------- */
+
+/* Twice the signed area of (origin, p, q) in ray space.  edge_fn(q, p) == -edge_fn(p, q)
+ * exactly (the two products just trade places), and a value within the rounding error of the
+ * subtraction is returned as 0, so no sign is ever wrong, only undecided. */
+static inline double edge_fn(sheared p, sheared q)
+{
+    double a = p.x * q.y, b = p.y * q.x, e = a - b;
+    if (fabs(e) <= 8 * DBL_EPSILON * (fabs(a) + fabs(b)))
+        return 0;
+    return e;
+}
+
+/* Triangle with barycentric edge values u, v, w (for vertices with ray-space depths za, zb, zc):
+ * a hit if all three share a sign (either side: rays from below hit the underside). */
+static inline void try_triangle(const ray_ctx *r, double u, double v, double w, double za,
+                                double zb, double zc, int ci, int cj, int tri, candidate *best)
+{
+    if ((u < 0 || v < 0 || w < 0) && (u > 0 || v > 0 || w > 0))
+        return;
+    double det = u + v + w;
+    if (det == 0)
+        return; /* the ray lies in the triangle's plane, or the triangle is edge-on */
+    double t = (u * za + v * zb + w * zc) / det;
+    if (t > r->tmin && t < r->tmax && t < best->t) {
+        best->t = t;
+        best->ci = ci;
+        best->cj = cj;
+        best->tri = tri;
+    }
+}
+
+/* A vertex sheared into ray space, given its offsets from the ray origin already permuted to
+ * ray-space order (ax = offset on axis kx, ay on ky, az on kz):
+ * (ax - shx * az, ay - shy * az, shz * az). */
+static inline sheared shear_rel(double ax, double ay, double az, double shx, double shy,
+                                double shz)
+{
+    sheared s = {ax - shx * az, ay - shy * az, shz * az};
+    return s;
+}
+
+/* Both triangles of cell (ci, cj).  The four corners' offsets from the origin are
+ * (i * cell - ox, j * cell - oy, h - oz); they share two x and two y offsets, computed once
+ * each, and the branch on kz spells out the permutation (no indexing by kx/ky/kz). */
+static void test_triangles(const ray_ctx *r, int ci, int cj, candidate *best)
+{
+    const tf_heightfield *hf = r->hf;
+    const double x0 = (double)ci * hf->cell - r->o[0], x1 = (double)(ci + 1) * hf->cell - r->o[0];
+    const double y0 = (double)cj * hf->cell - r->o[1], y1 = (double)(cj + 1) * hf->cell - r->o[1];
+    const float *h = hf->h + (size_t)cj * hf->n + ci;
+    const double za = (double)h[0] - r->o[2], zb = (double)h[1] - r->o[2];
+    const double zd = (double)h[hf->n] - r->o[2], zc = (double)h[hf->n + 1] - r->o[2];
+    const double shx = r->shx, shy = r->shy, shz = r->shz;
+    sheared a, b, c, d;
+    /* (kx, ky, kz) is (1, 2, 0), (2, 0, 1) or (0, 1, 2) (setup_ray). */
+    if (r->kz == 0) {
+        a = shear_rel(y0, za, x0, shx, shy, shz), b = shear_rel(y0, zb, x1, shx, shy, shz);
+        c = shear_rel(y1, zc, x1, shx, shy, shz), d = shear_rel(y1, zd, x0, shx, shy, shz);
+    } else if (r->kz == 1) {
+        a = shear_rel(za, x0, y0, shx, shy, shz), b = shear_rel(zb, x1, y0, shx, shy, shz);
+        c = shear_rel(zc, x1, y1, shx, shy, shz), d = shear_rel(zd, x0, y1, shx, shy, shz);
+    } else {
+        a = shear_rel(x0, y0, za, shx, shy, shz), b = shear_rel(x1, y0, zb, shx, shy, shz);
+        c = shear_rel(x1, y1, zc, shx, shy, shz), d = shear_rel(x0, y1, zd, shx, shy, shz);
+    }
+    double e_ab = edge_fn(a, b), e_bc = edge_fn(b, c), e_ca = edge_fn(c, a);
+    double e_cd = edge_fn(c, d), e_da = edge_fn(d, a);
+    /* T1 = (A, B, C): A's weight is the area across from it, edge BC; and so on. */
+    try_triangle(r, e_bc, e_ca, e_ab, a.z, b.z, c.z, ci, cj, 0, best);
+    /* T2 = (A, C, D); its diagonal edge AC is T1's CA reversed. */
+    try_triangle(r, e_cd, e_da, -e_ca, a.z, c.z, d.z, ci, cj, 1, best);
+}
+
+static inline void test_if_inside(const ray_ctx *r, int ci, int cj, candidate *best)
+{
+    if ((unsigned)ci < (unsigned)r->hf->cells && (unsigned)cj < (unsigned)r->hf->cells)
+        test_triangles(r, ci, cj, best);
+}
+
+/* The complete test of cell (ci, cj), whose exit crossings are tx, ty: its own triangles, plus
+ * the neighbours sharing its entry or exit corner when the ray passes that corner within
+ * tie_tol (see the top of the file).  Returns 1 if anything was hit. */
+static int test_cell(const ray_ctx *r, int ci, int cj, double tx, double ty, candidate *best)
+{
+    test_triangles(r, ci, cj, best);
+    if (r->sx && r->sy) {
+        if (fabs(tx - ty) <= r->tie_tol) {
+            test_if_inside(r, ci + r->sx, cj, best);
+            test_if_inside(r, ci, cj + r->sy, best);
+        }
+        double tx_in = xcross(r, ci + (r->sx < 0)), ty_in = ycross(r, cj + (r->sy < 0));
+        if (fabs(tx_in - ty_in) <= r->tie_tol) {
+            test_if_inside(r, ci - r->sx, cj, best);
+            test_if_inside(r, ci, cj - r->sy, best);
+        }
+    }
+    return best->t < INFINITY;
+}
+
+/* ---- setup -------------------------------------------------------------------------------- */
+
+/* Index of the cell containing coordinate v along one axis, decided by the same products
+ * (double)i * cell that place the vertices: i*cell <= v < (i+1)*cell, clamped to the grid. */
+static int cell_of(const tf_heightfield *hf, double v)
+{
+    double g = v / hf->cell;
+    int i = g > 0 ? (g < hf->cells ? (int)g : hf->cells - 1) : 0;
+    while (i > 0 && (double)i * hf->cell > v)
+        i--;
+    while (i < hf->cells - 1 && (double)(i + 1) * hf->cell <= v)
+        i++;
+    return i;
+}
+
+/* Narrow [*t0, *t1] to the slab lo <= o + t*d <= hi.  Returns 0 if it becomes empty. */
+static int clip_slab(double o, double d, double lo, double hi, double *t0, double *t1)
+{
+    if (d == 0)
+        return o >= lo && o <= hi;
+    double ta = (lo - o) / d, tb = (hi - o) / d;
+    if (ta > tb) {
+        double s = ta;
+        ta = tb;
+        tb = s;
+    }
+    if (ta > *t0)
+        *t0 = ta;
+    if (tb < *t1)
+        *t1 = tb;
+    return *t0 <= *t1;
+}
+
+static double safe_inverse(double v)
+{
+    double inv = 1.0 / v;
+    return isinf(inv) ? copysign(DBL_MAX, v) : inv;
+}
+
+/* Prepare a walk.  Returns 0 if the ray cannot meet the terrain in (tmin, tmax). */
+static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmin,
+                     double tmax)
+{
+    if (!hf || !isfinite(o.x) || !isfinite(o.y) || !isfinite(o.z) || !isfinite(d.x) ||
+        !isfinite(d.y) || !isfinite(d.z) || (d.x == 0 && d.y == 0 && d.z == 0) || !(tmin < tmax))
+        return 0;
+    r->hf = hf;
+    r->o[0] = o.x, r->o[1] = o.y, r->o[2] = o.z;
+    r->d[0] = d.x, r->d[1] = d.y, r->d[2] = d.z;
+    r->tmin = tmin;
+    r->tmax = tmax;
+
+    /* The box, its top widened so hits at exactly hmin or hmax stay inside after rounding. */
+    const double top = (double)hf->cells * hf->cell;
+    const double hmin = hf->hmin, hmax = hf->hmax;
+    const double zpad = 1e-9 * (fabs(hmin) + fabs(hmax) + fabs(o.z) + (hmax - hmin)) + DBL_MIN;
+    double t0 = tmin, t1 = tmax;
+    if (!clip_slab(o.x, d.x, 0, top, &t0, &t1) || !clip_slab(o.y, d.y, 0, top, &t0, &t1) ||
+        !clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1) || !isfinite(t0) ||
+        !isfinite(t1))
+        return 0;
+    r->t0 = t0;
+    r->t1 = t1;
+
+    r->sx = d.x > 0 ? 1 : d.x < 0 ? -1 : 0;
+    r->sy = d.y > 0 ? 1 : d.y < 0 ? -1 : 0;
+    r->inv_dx = r->sx ? safe_inverse(d.x) : 0;
+    r->inv_dy = r->sy ? safe_inverse(d.y) : 0;
+    r->ci = cell_of(hf, o.x + t0 * d.x);
+    r->cj = cell_of(hf, o.y + t0 * d.y);
+
+    /* Crossing parameters carry an absolute error of a few ulps of (|X*cell| + |ox|) * |inv_dx|;
+     * 1e-12 of that bound is thousands of times the error. */
+    double tie = 0;
+    if (r->sx)
+        tie += (top + fabs(o.x)) * fabs(r->inv_dx);
+    if (r->sy)
+        tie += (top + fabs(o.y)) * fabs(r->inv_dy);
+    tie *= 1e-12;
+    /* Altitude slack: rounding of z(t) itself, plus how far the ray (and the surface under it,
+     * whose slope is at most (hmax - hmin) / cell per axis) moves within tie_tol. */
+    double tabs = fabs(t0) > fabs(t1) ? fabs(t0) : fabs(t1);
+    double hscale = fabs(hmin) > fabs(hmax) ? fabs(hmin) : fabs(hmax);
+    double slope = (hmax - hmin) / hf->cell;
+    double margin = 1e-9 * (fabs(o.z) + fabs(d.z) * tabs + hscale + (hmax - hmin)) +
+                    2 * tie * (fabs(d.z) + 2 * slope * (fabs(d.x) + fabs(d.y)));
+    r->tie_tol = isfinite(tie) ? tie : INFINITY;
+    r->margin = isfinite(margin) ? margin : INFINITY;
+
+    /* Ray space: kz is the dominant axis of d. */
+    double ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
+    r->kz = ax >= ay ? (ax >= az ? 0 : 2) : (ay >= az ? 1 : 2);
+    r->kx = (r->kz + 1) % 3;
+    r->ky = (r->kx + 1) % 3;
+    r->shx = r->d[r->kx] / r->d[r->kz];
+    r->shy = r->d[r->ky] / r->d[r->kz];
+    r->shz = 1.0 / r->d[r->kz];
+    return 1;
+}
+
+/* Is the altitude span z_in..z_out wholly above hi or wholly below lo (by the margin)? */
+static inline int culled(double z_in, double z_out, float hi, float lo, double margin)
+{
+    double zlo = z_in < z_out ? z_in : z_out;
+    if (zlo > hi + margin)
+        return 1;
+    double zhi = z_in < z_out ? z_out : z_in;
+    return zhi < lo - margin;
+}
+
+/* Fill *hit from the winning candidate. */
+static void finish_hit(const ray_ctx *r, const candidate *c, tf_hit *hit)
+{
+    const tf_heightfield *hf = r->hf;
+    const float *h = hf->h + (size_t)c->cj * hf->n + c->ci;
+    double ha = h[0], hb = h[1], hd = h[hf->n], hc = h[hf->n + 1];
+    tf_vec3 n = c->tri == 0 ? v3(-(hb - ha), -(hc - hb), hf->cell)
+                            : v3(-(hc - hd), -(hd - ha), hf->cell);
+    hit->t = c->t;
+    hit->p = v3(r->o[0] + c->t * r->d[0], r->o[1] + c->t * r->d[1], r->o[2] + c->t * r->d[2]);
+    hit->n = v3_norm(n);
+    hit->ci = c->ci;
+    hit->cj = c->cj;
+}
+
+/* ---- the flat walk -------------------------------------------------------------------------- */
+
+static int walk_flat(const ray_ctx *r, candidate *best)
+{
+    const tf_heightfield *hf = r->hf;
+    const float *mx = hf->maxgrid[0], *mn = hf->mingrid[0];
+    const unsigned cells = (unsigned)hf->cells;
+    const double oz = r->o[2], dz = r->d[2], t1 = r->t1;
+    int ci = r->ci, cj = r->cj;
+    double t_cur = r->t0, z_cur = oz + t_cur * dz;
+    for (;;) {
+        double tx = exit_x(r, ci), ty = exit_y(r, cj);
+        double tc = tx <= ty ? tx : ty;
+        double t_out = tc < t1 ? tc : t1;
+        if (t_out < t_cur)
+            t_out = t_cur;
+        double z_out = oz + t_out * dz;
+        size_t idx = (size_t)cj * cells + (unsigned)ci;
+        if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) && test_cell(r, ci, cj, tx, ty, best))
+            return 1;
+        if (!(tc < t1))
+            return 0;
+        t_cur = t_out;
+        z_cur = z_out;
+        if (tx <= ty) {
+            ci += r->sx;
+            if ((unsigned)ci >= cells)
+                return 0;
+        } else {
+            cj += r->sy;
+            if ((unsigned)cj >= cells)
+                return 0;
+        }
+    }
+}
+
+/* ---- the hierarchical walk ---------------------------------------------------------------- */
+
+enum { STALE_NONE, STALE_X, STALE_Y };
+
+/* After a block step the index on the other axis was not followed.  Recompute it inside the
+ * current level-L block as the flat walk has it right after the crossing at t_event: on an x
+ * crossing, the rows whose entry crossing is < t_event have been entered (x goes first on ties);
+ * on a y crossing, the columns whose entry crossing is <= t_event.  `stale` is the old index,
+ * which can only lag behind the true one. */
+static int fix_stale_axis(const ray_ctx *r, int axis, int stale, int level, double t_event,
+                          int strict)
+{
+    const int s = axis == 0 ? r->sx : r->sy;
+    const int lo = (stale >> level) << level, hi = lo + (1 << level) - 1;
+    const double o = r->o[axis], dd = r->d[axis];
+    /* entered(j): was the crossing into index j processed before the event? */
+#define ENTRY_T(j) (axis == 0 ? xcross(r, (j) + (s < 0)) : ycross(r, (j) + (s < 0)))
+#define ENTERED(j) (strict ? ENTRY_T(j) < t_event : ENTRY_T(j) <= t_event)
+    double g = (o + t_event * dd) / r->hf->cell;
+    int j = g > lo ? (g < hi ? (int)g : hi) : lo;
+    if (s > 0) {
+        if (j < stale)
+            j = stale;
+        while (j > stale && !ENTERED(j))
+            j--;
+        while (j < hi && ENTERED(j + 1))
+            j++;
+    } else {
+        if (j > stale)
+            j = stale;
+        while (j < stale && !ENTERED(j))
+            j++;
+        while (j > lo && ENTERED(j - 1))
+            j--;
+    }
+#undef ENTERED
+#undef ENTRY_T
+    return j;
+}
+
+static int walk_hier(const ray_ctx *r, candidate *best)
+{
+    const tf_heightfield *hf = r->hf;
+    const int cells = hf->cells, top = hf->levels - 1;
+    /* Local copies of the hot fields; the crossing expressions are xcross()/ycross() spelled
+     * out, term for term, so they give the same bits. */
+    const double ox = r->o[0], oy = r->o[1], oz = r->o[2], dz = r->d[2], t1 = r->t1;
+    const double cell = hf->cell, inv_dx = r->inv_dx, inv_dy = r->inv_dy, margin = r->margin;
+    const int sx = r->sx, sy = r->sy, x_ahead = sx > 0, y_ahead = sy > 0;
+    int ci = r->ci, cj = r->cj;
+    int stale = STALE_NONE;
+    double t_cur = r->t0, t_event = r->t0;
+    /* Where to start.  A ray that starts at or under the terrain's surface nearby (a shadow
+     * ray leaving the surface, a camera down in a valley) would descend from the top level,
+     * without moving, nearly all the way to level 0: no block around its start can be culled.
+     * Start those at level 0 instead (saving `top` iterations per shadow ray, ~5% of a
+     * default.scene render).  "Nearby" is the level-1 block of the start cell: a shadow ray
+     * starts a hair above its hit point (shadow_lift), often above its own cell's max.
+     * The hit is the same from any start level: every level's walk groups the same cell
+     * sequence and skips only culled blocks (top of the file), and level 0 is the flat walk
+     * itself, from which the usual climbing resumes. */
+    int level = top;
+    if (top > 0) {
+        const double z0 = oz + t_cur * dz;
+        const size_t i1 = (size_t)(cj >> 1) * (size_t)(cells >> 1) + (size_t)(ci >> 1);
+        if (z0 <= hf->maxgrid[1][i1] + margin && z0 >= hf->mingrid[1][i1] - margin)
+            level = 0;
+    }
+    for (;;) {
+        const int bi = ci >> level, bj = cj >> level;
+        double tx = sx ? ((double)((bi + x_ahead) << level) * cell - ox) * inv_dx : INFINITY;
+        double ty = sy ? ((double)((bj + y_ahead) << level) * cell - oy) * inv_dy : INFINITY;
+        double tc = tx <= ty ? tx : ty;
+        double t_out = tc < t1 ? tc : t1;
+        if (t_out < t_cur)
+            t_out = t_cur;
+        size_t idx = (size_t)bj * (size_t)(cells >> level) + (size_t)bi;
+        if (!culled(oz + t_cur * dz, oz + t_out * dz, hf->maxgrid[level][idx],
+                    hf->mingrid[level][idx], margin)) {
+            if (level == 0) {
+                if (test_cell(r, ci, cj, tx, ty, best))
+                    return 1;
+            } else {
+                if (stale == STALE_Y)
+                    cj = fix_stale_axis(r, 1, cj, level, t_event, 1);
+                else if (stale == STALE_X)
+                    ci = fix_stale_axis(r, 0, ci, level, t_event, 0);
+                stale = STALE_NONE;
+                level--;
+                continue;
+            }
+        }
+        if (!(tc < t1))
+            return 0;
+        t_cur = t_out;
+        t_event = tc;
+        int boundary; /* the grid line crossed, in units of level-L blocks */
+        if (tx <= ty) {
+            boundary = bi + x_ahead;
+            ci = x_ahead ? boundary << level : (boundary << level) - 1;
+            if ((unsigned)ci >= (unsigned)cells)
+                return 0;
+            stale = level > 0 && sy ? STALE_Y : STALE_NONE;
+        } else {
+            boundary = bj + y_ahead;
+            cj = y_ahead ? boundary << level : (boundary << level) - 1;
+            if ((unsigned)cj >= (unsigned)cells)
+                return 0;
+            stale = level > 0 && sx ? STALE_X : STALE_NONE;
+        }
+        /* A line that also bounds the parent block lets the walk climb back up, one level per
+         * step (climbing straight to the largest aligned block costs more re-descents). */
+        if (level < top && !(boundary & 1))
+            level++;
+    }
+}
+
+/* ---- public entry points ---------------------------------------------------------------------- */
+
+int tf_trace_flat(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax,
+                  tf_hit *hit)
+{
+    ray_ctx r;
+    candidate best = {INFINITY, 0, 0, 0};
+    if (!setup_ray(&r, hf, origin, dir, tmin, tmax) || !walk_flat(&r, &best))
+        return 0;
+    if (hit)
+        finish_hit(&r, &best, hit);
+    return 1;
+}
+
+int tf_trace(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax,
+             tf_hit *hit)
+{
+    ray_ctx r;
+    candidate best = {INFINITY, 0, 0, 0};
+    if (!setup_ray(&r, hf, origin, dir, tmin, tmax) || !walk_hier(&r, &best))
+        return 0;
+    if (hit)
+        finish_hit(&r, &best, hit);
+    return 1;
+}
+
+/* The first cell whose test hits ends the walk, so this is already an early exit. */
+int tf_occluded(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax)
+{
+    ray_ctx r;
+    candidate best = {INFINITY, 0, 0, 0};
+    return setup_ray(&r, hf, origin, dir, tmin, tmax) && walk_hier(&r, &best);
+}

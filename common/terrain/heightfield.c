@@ -1,0 +1,255 @@
+/* heightfield.c: the height field's shape, its hierarchy of max/min grids, and the exact
+ * two-triangle surface the tracer sees (common/heightfield.h).
+ *
+ * The heights themselves come from elsewhere (tf_heightfield_build in terrain_build.c generates
+ * them from the scene, tests hand them in directly).  This file owns what is built on top of
+ * them: maxgrid[L] / mingrid[L] for L = 0..k, the "A grid" of Musgrave 3.3.1 generalised into a
+ * max mipmap (and its min twin, for rays travelling below the surface), which common/trace.c
+ * walks.  Level 0 holds, per cell, the max/min of its four corner samples; level L holds the
+ * max/min of the 2x2 block of level L-1 entries below it; level k is 1x1 (the whole field).
+ *
+ * Grids are filled by `threads` pthreads splitting rows.  Max and min are exact, so the result
+ * is bit-identical whatever the thread count. */
+#include <errno.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#include "terrain/heightfield.h"
+
+/* Largest supported k: (2^16 + 1)^2 floats is already 16 GiB of heights. */
+#define TF_HF_MAX_K 16
+/* Below this many entries a level is built by the calling thread alone. */
+#define TF_HF_PARALLEL_MIN 65536
+
+int tf_thread_count(int threads)
+{
+    if (threads > 0)
+        return threads > 1024 ? 1024 : threads;
+    long online = sysconf(_SC_NPROCESSORS_ONLN);
+    if (online < 1)
+        return 1;
+    return online > 1024 ? 1024 : (int)online;
+}
+
+/* ---- building one level ------------------------------------------------------------------ */
+
+/* One job: rows [row_begin, row_end) of level `level`, reading the level below (or the samples
+ * for level 0). */
+typedef struct grid_job {
+    tf_heightfield *hf;
+    int level;
+    int row_begin, row_end;
+} grid_job;
+
+static inline float max4(float a, float b, float c, float d)
+{
+    float m = a > b ? a : b;
+    float m2 = c > d ? c : d;
+    return m > m2 ? m : m2;
+}
+
+static inline float min4(float a, float b, float c, float d)
+{
+    float m = a < b ? a : b;
+    float m2 = c < d ? c : d;
+    return m < m2 ? m : m2;
+}
+
+/* Level 0: a cell's four corner samples. */
+static void build_level0_rows(tf_heightfield *hf, int row_begin, int row_end)
+{
+    const int n = hf->n, cells = hf->cells;
+    float *mx = hf->maxgrid[0], *mn = hf->mingrid[0];
+    for (int cj = row_begin; cj < row_end; cj++) {
+        const float *lo = hf->h + (size_t)cj * n;
+        const float *hi = lo + n;
+        float *mxrow = mx + (size_t)cj * cells, *mnrow = mn + (size_t)cj * cells;
+        for (int ci = 0; ci < cells; ci++) {
+            mxrow[ci] = max4(lo[ci], lo[ci + 1], hi[ci], hi[ci + 1]);
+            mnrow[ci] = min4(lo[ci], lo[ci + 1], hi[ci], hi[ci + 1]);
+        }
+    }
+}
+
+/* Level L > 0: the 2x2 block of level L-1 below each entry. */
+static void build_level_rows(tf_heightfield *hf, int level, int row_begin, int row_end)
+{
+    const int side = hf->cells >> level, below = side * 2;
+    const float *bmx = hf->maxgrid[level - 1], *bmn = hf->mingrid[level - 1];
+    float *mx = hf->maxgrid[level], *mn = hf->mingrid[level];
+    for (int bj = row_begin; bj < row_end; bj++) {
+        const size_t r0 = (size_t)(2 * bj) * below, r1 = r0 + below;
+        for (int bi = 0; bi < side; bi++) {
+            const size_t c = (size_t)2 * bi;
+            mx[(size_t)bj * side + bi] = max4(bmx[r0 + c], bmx[r0 + c + 1], bmx[r1 + c], bmx[r1 + c + 1]);
+            mn[(size_t)bj * side + bi] = min4(bmn[r0 + c], bmn[r0 + c + 1], bmn[r1 + c], bmn[r1 + c + 1]);
+        }
+    }
+}
+
+static void run_job(grid_job *job)
+{
+    if (job->level == 0)
+        build_level0_rows(job->hf, job->row_begin, job->row_end);
+    else
+        build_level_rows(job->hf, job->level, job->row_begin, job->row_end);
+}
+
+static void *job_thread(void *arg)
+{
+    run_job(arg);
+    return NULL;
+}
+
+/* Build one level with up to `threads` threads.  Rows are split into contiguous bands; if a
+ * thread cannot be created its band is done by the caller, so the result never depends on how
+ * many threads actually ran. */
+static void build_level(tf_heightfield *hf, int level, int threads)
+{
+    const int rows = hf->cells >> level;
+    const size_t entries = (size_t)rows * rows;
+    if (threads > rows)
+        threads = rows;
+    if (threads <= 1 || entries < TF_HF_PARALLEL_MIN) {
+        grid_job job = {hf, level, 0, rows};
+        run_job(&job);
+        return;
+    }
+    grid_job jobs[threads];
+    pthread_t tids[threads];
+    int started[threads];
+    for (int t = 0; t < threads; t++) {
+        jobs[t] = (grid_job){hf, level, (int)((long)rows * t / threads),
+                             (int)((long)rows * (t + 1) / threads)};
+        started[t] = t > 0 && pthread_create(&tids[t], NULL, job_thread, &jobs[t]) == 0;
+    }
+    run_job(&jobs[0]);
+    for (int t = 1; t < threads; t++) {
+        if (started[t])
+            pthread_join(tids[t], NULL);
+        else
+            run_job(&jobs[t]);
+    }
+}
+
+/* ---- construction and destruction ---------------------------------------------------------- */
+
+static void free_grids(tf_heightfield *hf)
+{
+    if (hf->maxgrid)
+        for (int L = 0; L < hf->levels; L++)
+            free(hf->maxgrid[L]);
+    if (hf->mingrid)
+        for (int L = 0; L < hf->levels; L++)
+            free(hf->mingrid[L]);
+    free(hf->maxgrid);
+    free(hf->mingrid);
+}
+
+void tf_heightfield_free(tf_heightfield *hf)
+{
+    if (!hf)
+        return;
+    free_grids(hf);
+    free(hf->h);
+    free(hf);
+}
+
+/* Allocate every level (calloc: a partial failure frees cleanly). */
+static int alloc_grids(tf_heightfield *hf)
+{
+    hf->maxgrid = calloc((size_t)hf->levels, sizeof *hf->maxgrid);
+    hf->mingrid = calloc((size_t)hf->levels, sizeof *hf->mingrid);
+    if (!hf->maxgrid || !hf->mingrid)
+        return -1;
+    for (int L = 0; L < hf->levels; L++) {
+        size_t side = (size_t)hf->cells >> L;
+        hf->maxgrid[L] = malloc(side * side * sizeof(float));
+        hf->mingrid[L] = malloc(side * side * sizeof(float));
+        if (!hf->maxgrid[L] || !hf->mingrid[L])
+            return -1;
+    }
+    return 0;
+}
+
+tf_heightfield *tf_heightfield_wrap(float *h, int k, double extent, int threads)
+{
+    if (!h || k < 0 || k > TF_HF_MAX_K || !(extent > 0) || extent > 1e300) {
+        free(h);
+        return NULL;
+    }
+    tf_heightfield *hf = calloc(1, sizeof *hf);
+    if (!hf) {
+        free(h);
+        return NULL;
+    }
+    hf->k = k;
+    hf->cells = 1 << k;
+    hf->n = hf->cells + 1;
+    hf->extent = extent;
+    hf->cell = extent / hf->cells;
+    hf->h = h;
+    hf->levels = k + 1;
+    if (alloc_grids(hf) != 0) {
+        tf_heightfield_free(hf);
+        return NULL;
+    }
+    threads = tf_thread_count(threads);
+    for (int L = 0; L < hf->levels; L++)
+        build_level(hf, L, threads);
+    /* The top level is 1x1: the range of every sample. */
+    hf->hmax = hf->maxgrid[hf->levels - 1][0];
+    hf->hmin = hf->mingrid[hf->levels - 1][0];
+    return hf;
+}
+
+tf_heightfield *tf_heightfield_from_heights(const float *h, int k, double extent, int threads)
+{
+    if (!h || k < 0 || k > TF_HF_MAX_K)
+        return NULL;
+    size_t n = ((size_t)1 << k) + 1;
+    float *copy = malloc(n * n * sizeof(float));
+    if (!copy)
+        return NULL;
+    memcpy(copy, h, n * n * sizeof(float));
+    return tf_heightfield_wrap(copy, k, extent, threads);
+}
+
+/* ---- the surface ----------------------------------------------------------------------------- */
+
+/* Clamp world coordinate v to [0, cells * cell] and split it into a cell index in [0, cells-1]
+ * and a fraction in [0, 1].  The cell satisfies i*cell <= v <= (i+1)*cell, the same test the
+ * tracer uses to pick a ray's first cell. */
+static int split_coord(const tf_heightfield *hf, double v, double *frac)
+{
+    const double top = (double)hf->cells * hf->cell;
+    if (!(v > 0))
+        v = 0; /* also catches NaN */
+    if (v > top)
+        v = top;
+    int i = (int)(v / hf->cell);
+    if (i > hf->cells - 1)
+        i = hf->cells - 1;
+    while (i > 0 && (double)i * hf->cell > v)
+        i--;
+    while (i < hf->cells - 1 && (double)(i + 1) * hf->cell <= v)
+        i++;
+    *frac = (v - (double)i * hf->cell) / hf->cell;
+    return i;
+}
+
+double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y)
+{
+    double u, v;
+    int ci = split_coord(hf, x, &u), cj = split_coord(hf, y, &v);
+    const float *row = hf->h + (size_t)cj * hf->n + ci;
+    const double ha = row[0], hb = row[1];             /* (ci, cj), (ci+1, cj) */
+    const double hd = row[hf->n], hc = row[hf->n + 1]; /* (ci, cj+1), (ci+1, cj+1) */
+    /* Lower-right triangle (A, B, C) where u >= v; upper-left (A, C, D) where u < v.  On the
+     * diagonal both formulas agree. */
+    if (u >= v)
+        return ha + (hb - ha) * u + (hc - hb) * v;
+    return ha + (hc - hd) * u + (hd - ha) * v;
+}

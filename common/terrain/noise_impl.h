@@ -1,0 +1,181 @@
+/* noise_impl.h: the inner kernels of gradient noise, shared by noise.c (the public tf_noise2/3
+ * and tf_fbm2/3) and fractal.c (the terrains).  Private to those two files.
+ *
+ * Why a header of static inline functions: the terrain builder evaluates one row of the height
+ * field at a time, and along a row the y coordinate of every octave is the same for all
+ * samples.  tf_noise_axis holds the y half of a 2D noise evaluation (lattice row, fraction,
+ * fade) so it is computed once per row and octave instead of once per sample.  The point
+ * functions go through exactly the same inline code, so a row and a point evaluation perform
+ * the same floating-point operations in the same order and give the same bits.
+ *
+ * Noise definition (Perlin's gradient noise, Musgrave 2.3.1, with Perlin's 2002 quintic fade):
+ * at each lattice point a gradient chosen by hashing the integer coordinates through the seeded
+ * permutation; the value is the fade-weighted blend of the corners' g . (p - corner).  The value
+ * is 0 at every lattice point.  Range: for unit gradients |N| <= sum_c w_c |p - c|, whose
+ * maximum over the cell is at its centre: sqrt(n)/2 (checked numerically for the quintic fade,
+ * 2D and 3D).  The final scales map that bound to slightly less than 1, so |N| < 1 with a margin
+ * far larger than any rounding error. */
+#ifndef TF_NOISE_IMPL_H
+#define TF_NOISE_IMPL_H
+
+#include <math.h>
+#include <stdint.h>
+#include "terrain/noise.h"
+
+/* Beyond 2^52 a double has no fractional part: the lattice is meaningless there (and the
+ * conversion to an integer would overflow for inf / NaN).  Noise is 0 outside this range. */
+#define TF_NOISE_COORD_LIMIT 0x1p52
+
+/* sqrt(2) and sqrt(2/3) rounded down in the 5th digit: see the range note above. */
+#define TF_NOISE2_SCALE 1.41421
+#define TF_NOISE3_SCALE 0.816496
+
+/* 16 unit gradients evenly spaced on the circle (22.5 degrees apart): nearly isotropic, and a
+ * table of constants (not cos/sin at run time) so every libm gives the same bits. */
+#define TF_C1 0.92387953251128674
+#define TF_S1 0.38268343236508977
+#define TF_H1 0.70710678118654752
+static const double tf_grad2[16][2] = {
+    {1, 0},       {TF_C1, TF_S1},   {TF_H1, TF_H1},   {TF_S1, TF_C1},
+    {0, 1},       {-TF_S1, TF_C1},  {-TF_H1, TF_H1},  {-TF_C1, TF_S1},
+    {-1, 0},      {-TF_C1, -TF_S1}, {-TF_H1, -TF_H1}, {-TF_S1, -TF_C1},
+    {0, -1},      {TF_S1, -TF_C1},  {TF_H1, -TF_H1},  {TF_C1, -TF_S1},
+};
+
+static inline double tf_fade(double t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }
+
+/* floor() for |x| < TF_NOISE_COORD_LIMIT without the libm call: truncate, then step down for
+ * negative non-integers.  *fraction = x - floor(x).  One int->double conversion only (the
+ * conversions were the hottest instructions of the row loop), and the step down is done on
+ * the double too, which is exact below 2^53, so the bits equal x - (double)floor(x). */
+static inline int64_t tf_floor_split(double x, double *fraction)
+{
+    int64_t i = (int64_t)x;
+    double d = (double)i;
+    int below = x < d;
+    *fraction = x - (d - (below ? 1.0 : 0.0));
+    return i - below;
+}
+
+static inline int64_t tf_floor_i64(double x)
+{
+    double fraction;
+    return tf_floor_split(x, &fraction);
+}
+
+/* The y half of a 2D noise evaluation.  ok == 0 marks an out-of-range y (noise is then 0). */
+typedef struct tf_noise_axis {
+    int lattice;    /* floor(y) & 255 */
+    int ok;
+    double f0, f1;  /* y - floor(y), and that minus 1 */
+    double fade;    /* tf_fade(f0) */
+} tf_noise_axis;
+
+static inline void tf_noise_axis_set(tf_noise_axis *a, double y)
+{
+    a->ok = fabs(y) < TF_NOISE_COORD_LIMIT;
+    int64_t yi = a->ok ? tf_floor_i64(y) : 0;
+    a->lattice = (int)(yi & 255);
+    a->f0 = a->ok ? y - (double)yi : 0.0;
+    a->f1 = a->f0 - 1.0;
+    a->fade = tf_fade(a->f0);
+}
+
+/* The noise along one lattice column: with the y half fixed, the two corners (X, Y) and
+ * (X, Y + 1) of column X blend (by the y fade) into a linear function of the x offset from X,
+ * slope * (x - X) + intercept.  Both the point kernel and the row evaluator build the noise
+ * from these column lines, so they perform the same operations and agree to the bit. */
+typedef struct tf_noise_column {
+    double slope, intercept;
+} tf_noise_column;
+
+static inline tf_noise_column tf_noise_column_at(const tf_noise *nz, int64_t xi,
+                                                 const tf_noise_axis *ay)
+{
+    const uint16_t *p = nz->perm;
+    /* perm holds 0..255 twice, so perm[X] + Y + 1 <= 511 stays in bounds. */
+    int a = p[xi & 255] + ay->lattice;
+    const double *g0 = tf_grad2[p[a] & 15], *g1 = tf_grad2[p[a + 1] & 15];
+    double e0 = g0[1] * ay->f0, e1 = g1[1] * ay->f1;
+    tf_noise_column c;
+    c.slope = g0[0] + ay->fade * (g1[0] - g0[0]);
+    c.intercept = e0 + ay->fade * (e1 - e0);
+    return c;
+}
+
+/* Noise at x offset fx from the column `left`, with `right` the next column. */
+static inline double tf_noise_blend(double fx, tf_noise_column left, tf_noise_column right)
+{
+    double u = tf_fade(fx);
+    double l = left.slope * fx + left.intercept;
+    double r = right.slope * (fx - 1.0) + right.intercept;
+    return (l + u * (r - l)) * TF_NOISE2_SCALE;
+}
+
+/* 2D noise at (x, y) where `ay` was set from y. */
+static inline double tf_noise2_axis(const tf_noise *nz, double x, const tf_noise_axis *ay)
+{
+    if (!(fabs(x) < TF_NOISE_COORD_LIMIT) || !ay->ok)
+        return 0.0;
+    double fx;
+    int64_t xi = tf_floor_split(x, &fx);
+    return tf_noise_blend(fx, tf_noise_column_at(nz, xi, ay),
+                          tf_noise_column_at(nz, xi + 1, ay));
+}
+
+/* Octave plan shared by every spectral sum: amp[i] is the weight lacunarity^(-H i) of octave i
+ * (amp[0] = 1), computed as pow(frequency, -H) with frequency multiplied up octave by octave as
+ * in Musgrave's fBm(); the last entry carries the fractional remainder of `octaves` (2.3.2.1:
+ * "if (i < 1.0) amplitude *= i").  `count` is the number of noise evaluations (>= 1). */
+#define TF_MAX_OCTAVES 32
+typedef struct tf_octaves {
+    int count;
+    double lacunarity;
+    double amp[TF_MAX_OCTAVES + 1];
+} tf_octaves;
+
+/* octaves is clamped to [1, TF_MAX_OCTAVES]; a NaN counts as 1. */
+static inline void tf_octaves_plan(tf_octaves *o, double H, double lacunarity, double octaves)
+{
+    if (!(octaves >= 1.0))
+        octaves = 1.0;
+    if (octaves > TF_MAX_OCTAVES)
+        octaves = TF_MAX_OCTAVES;
+    int whole = (int)octaves;
+    double remainder = octaves - whole;
+    o->lacunarity = lacunarity;
+    o->count = whole + (remainder > 0.0);
+    double frequency = 1.0;
+    o->amp[0] = 1.0;
+    for (int i = 1; i < o->count; i++) {
+        frequency *= lacunarity;
+        o->amp[i] = pow(frequency, -H);
+    }
+    if (remainder > 0.0)
+        o->amp[whole] *= remainder;
+}
+
+/* Fill axes[0 .. o->count-1] with the y halves of every octave of noise-space y. */
+static inline void tf_octave_axes(const tf_octaves *o, double y, tf_noise_axis *axes)
+{
+    /* count >= 1 always (tf_octaves_plan); the do-while says so to the compiler too. */
+    int i = 0;
+    do {
+        tf_noise_axis_set(&axes[i], y);
+        y *= o->lacunarity;
+    } while (++i < o->count);
+}
+
+/* fBm (Musgrave 2.3.2.1): sum of amp[i] * N(p * lacunarity^i). */
+static inline double tf_fbm2_axes(const tf_noise *nz, const tf_octaves *o, double x,
+                                  const tf_noise_axis *axes)
+{
+    double result = 0.0;
+    for (int i = 0; i < o->count; i++) {
+        result += o->amp[i] * tf_noise2_axis(nz, x, &axes[i]);
+        x *= o->lacunarity;
+    }
+    return result;
+}
+
+#endif

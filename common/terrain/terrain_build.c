@@ -1,0 +1,183 @@
+/* terrain_build.c: builds a scene's height field (tf_heightfield_build, heightfield.h) and its
+ * bare heights (tf_terrain_heights, terrain_build.h).
+ *
+ * Point generators (fractal.c) are evaluated row by row by a small pool of pthreads: thread t
+ * of T computes rows t, t + T, t + 2T, ...  A row's values depend only on its index, never on
+ * which thread computed it, so the result is bit-identical for every thread count.  Interleaved
+ * rows also balance the load for generators whose cost varies across the terrain.  Grid
+ * generators (midpoint.c, fault.c, subdivide.c) own their parallelism; weathering.c likewise. */
+#include "terrain/terrain_build.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "terrain/fractal.h"
+#include "terrain/heightfield.h"
+#include "terrain/noise.h"
+#include "terrain/terrain.h"
+#include "log.h"
+
+/* More threads than this never help a row-interleaved build on any machine we target, and the
+ * bound keeps the thread array on the stack. */
+#define MAX_BUILD_THREADS 256
+
+typedef struct row_job {
+    const tf_fractal *fractal;
+    const tf_noise *noise;
+    float *h;
+    int n;
+    double cell, scale;
+    int first, stride; /* rows first, first + stride, ... */
+} row_job;
+
+static void *run_rows(void *arg)
+{
+    const row_job *job = arg;
+    /* Without scratch memory tf_fractal_row evaluates point by point: same bits, slower. */
+    tf_fractal_rowbuf buf;
+    int have_buf = tf_fractal_rowbuf_init(&buf, job->n) == 0;
+    for (int j = job->first; j < job->n; j += job->stride)
+        tf_fractal_row(job->fractal, job->noise, (double)j * job->cell, job->cell, job->n,
+                       job->scale, job->h + (size_t)j * (size_t)job->n, have_buf ? &buf : NULL);
+    if (have_buf)
+        tf_fractal_rowbuf_free(&buf);
+    return NULL;
+}
+
+/* Evaluate every sample of a point generator with `threads` threads.  If a thread cannot be
+ * created its rows are computed by the calling thread instead: slower, same bits. */
+static void fill_point_generator(const tf_fractal *f, const tf_noise *nz, float *h, int n,
+                                 double cell, double scale, int threads)
+{
+    row_job jobs[MAX_BUILD_THREADS];
+    pthread_t tids[MAX_BUILD_THREADS];
+    int started[MAX_BUILD_THREADS];
+    for (int t = 0; t < threads; t++) {
+        jobs[t] = (row_job){f, nz, h, n, cell, scale, t, threads};
+        started[t] = t > 0 && pthread_create(&tids[t], NULL, run_rows, &jobs[t]) == 0;
+    }
+    for (int t = 0; t < threads; t++)
+        if (!started[t])
+            run_rows(&jobs[t]);
+    for (int t = 1; t < threads; t++)
+        if (started[t])
+            pthread_join(tids[t], NULL);
+}
+
+static int resolve_threads(int threads, int n)
+{
+    if (threads <= 0)
+        threads = tf_thread_count(threads);
+    if (threads < 1)
+        threads = 1;
+    if (threads > MAX_BUILD_THREADS)
+        threads = MAX_BUILD_THREADS;
+    if (threads > n)
+        threads = n;
+    return threads;
+}
+
+static int run_grid_generator(float *h, const tf_terrain *t, int threads, char *err,
+                              size_t errlen)
+{
+    switch (t->generator) {
+    case TF_GEN_MIDPOINT:
+        return tf_gen_midpoint(h, t->size_exp, t, threads, err, errlen);
+    case TF_GEN_FAULT:
+        return tf_gen_fault(h, t->size_exp, t, threads, err, errlen);
+    case TF_GEN_SUBDIVIDE:
+        return tf_gen_subdivide(h, t->size_exp, t, threads, err, errlen);
+    default:
+        tf_seterr(err, errlen, "terrain: unknown generator %d", (int)t->generator);
+        return -1;
+    }
+}
+
+/* Index of the first non-finite height, or -1. */
+static ptrdiff_t first_non_finite(const float *h, size_t count)
+{
+    for (size_t i = 0; i < count; i++)
+        if (!isfinite(h[i]))
+            return (ptrdiff_t)i;
+    return -1;
+}
+
+float *tf_terrain_heights(const tf_terrain *t, int threads, char *err, size_t errlen)
+{
+    if (t->size_exp < 1 || t->size_exp > TF_TERRAIN_MAX_SIZE_EXP) {
+        tf_seterr(err, errlen, "terrain: size_exp %d out of range 1..%d", t->size_exp,
+                 TF_TERRAIN_MAX_SIZE_EXP);
+        return NULL;
+    }
+    if (!(t->extent > 0.0) || !isfinite(t->extent) || !isfinite(t->height_scale)) {
+        tf_seterr(err, errlen, "terrain: extent must be positive and height_scale finite");
+        return NULL;
+    }
+    int n = (1 << t->size_exp) + 1;
+    size_t count = (size_t)n * (size_t)n; /* at most 8193^2: no overflow */
+    double cell = t->extent / (double)(n - 1);
+    threads = resolve_threads(threads, n);
+
+    tf_fractal fractal;
+    int is_point = tf_fractal_prepare(&fractal, t) == 0;
+    if (is_point && !(t->feature_size > 0.0 && isfinite(t->feature_size))) {
+        tf_seterr(err, errlen, "terrain: feature_size must be positive");
+        return NULL;
+    }
+
+    float *h = malloc(count * sizeof *h);
+    if (!h) {
+        tf_seterr(err, errlen, "out of memory: a %dx%d height field needs %zu MB", n, n,
+                 (count * sizeof *h + (1u << 20) - 1) >> 20);
+        return NULL;
+    }
+
+    if (is_point) {
+        tf_noise noise;
+        tf_noise_init(&noise, t->seed);
+        fill_point_generator(&fractal, &noise, h, n, cell, t->height_scale, threads);
+    } else {
+        if (run_grid_generator(h, t, threads, err, errlen) != 0) {
+            free(h);
+            return NULL;
+        }
+        for (size_t i = 0; i < count; i++)
+            h[i] = (float)((double)h[i] * t->height_scale);
+    }
+
+    if (t->thermal_iterations > 0 &&
+        tf_weather_thermal(h, n, cell, t, threads, err, errlen) != 0) {
+        free(h);
+        return NULL;
+    }
+
+    ptrdiff_t bad = first_non_finite(h, count);
+    if (bad >= 0) {
+        snprintf(err, errlen,
+                 "terrain: %s generator produced a non-finite height at sample (%d, %d); "
+                 "check H, lacunarity, offset, gain and height_scale",
+                 tf_generator_name(t->generator), (int)(bad % n), (int)(bad / n));
+        free(h);
+        return NULL;
+    }
+    return h;
+}
+
+tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, size_t errlen)
+{
+    float *h = tf_terrain_heights(&s->terrain, threads, err, errlen);
+    if (!h)
+        return NULL;
+    /* tf_heightfield_wrap owns h from here, and frees it if it fails. */
+    tf_heightfield *hf = tf_heightfield_wrap(h, s->terrain.size_exp, s->terrain.extent, threads);
+    if (!hf) {
+        int n = (1 << s->terrain.size_exp) + 1;
+        tf_seterr(err, errlen, "out of memory: max/min grids of a %dx%d height field", n, n);
+        return NULL;
+    }
+    return hf;
+}

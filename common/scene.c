@@ -50,9 +50,9 @@ _Static_assert(sizeof(enum tf_camera_kind) == sizeof(int), "enums are stored as 
 /* The format: sections and keys                                                            */
 
 enum section { SEC_IMAGE, SEC_CAMERA, SEC_SUN, SEC_SKY, SEC_TERRAIN, SEC_MATERIALS, SEC_MIST,
-               SEC_ANTIALIAS, SEC_COUNT };
+               SEC_ANTIALIAS, SEC_ANIMATION, SEC_COUNT };
 static const char *const SECTION_NAMES[SEC_COUNT] = {
-    "image", "camera", "sun", "sky", "terrain", "materials", "mist", "antialias"};
+    "image", "camera", "sun", "sky", "terrain", "materials", "mist", "antialias", "animation"};
 
 enum key_type {
     KT_INT,       /* int, decimal */
@@ -63,7 +63,15 @@ enum key_type {
     KT_GENERATOR, /* enum tf_generator by name */
     KT_CAMERA,    /* enum tf_camera_kind by name */
     KT_ENVELOPE,  /* list of up to TF_ENVELOPE_MAX^2 doubles, may continue on indented lines */
+    KT_CAMERA_KEY,/* [animation] camera = FRAME position X Y Z look_at X Y Z [fov F] [up X Y Z];
+                   * repeated, one key each; may continue on indented lines */
+    KT_SUN_KEY,   /* [animation] sun = FRAME azimuth A elevation E; repeated */
 };
+/* Keys that may be given more than once (each adds to a list) and continue on indented lines. */
+static int is_list_type(int type)
+{
+    return type == KT_ENVELOPE || type == KT_CAMERA_KEY || type == KT_SUN_KEY;
+}
 
 struct key_def {
     enum section section;
@@ -143,6 +151,12 @@ static const struct key_def KEYS[] = {
 
     {SEC_ANTIALIAS, "threshold", KT_DOUBLE, F(antialias.threshold), 0, 1000, 0, 0, {0.028}},
     {SEC_ANTIALIAS, "max_depth", KT_INT, F(antialias.max_depth), 0, 6, 0, 0, {3}},
+
+    /* frames is required once the section is there (check_animation) */
+    {SEC_ANIMATION, "frames", KT_INT, F(animation.frames), 1, TF_ANIM_MAX_FRAMES, 0, 0, {0}},
+    {SEC_ANIMATION, "fps", KT_DOUBLE, F(animation.fps), 0, 1000, 1, 0, {24}},
+    {SEC_ANIMATION, "camera", KT_CAMERA_KEY, F(animation), -BIG, BIG, 0, 0, {0}},
+    {SEC_ANIMATION, "sun", KT_SUN_KEY, F(animation), -360, 360, 0, 0, {0}},
 };
 #define KEY_COUNT ((int)(sizeof KEYS / sizeof KEYS[0]))
 
@@ -193,6 +207,9 @@ struct parser {
     int section_line[SEC_COUNT]; /* line of each section's header, 0 = absent */
     int key_line[KEY_COUNT];     /* line where each key was set, 0 = not set */
     int envelope_count;          /* numbers read into terrain.envelope so far */
+    /* fields given in each [animation] camera key (the others default to [camera]'s) */
+    unsigned char key_has_fov[TF_ANIM_MAX_KEYS], key_has_up[TF_ANIM_MAX_KEYS];
+    unsigned char key_has_pos[TF_ANIM_MAX_KEYS], key_has_look[TF_ANIM_MAX_KEYS];
     tf_scene *s;
     int failed;
     int err_line;
@@ -497,6 +514,168 @@ static int add_envelope_numbers(struct parser *p, int key, const char *value)
     return 0;
 }
 
+/* ---- [animation] keys: "camera = FRAME field values..." and "sun = FRAME field values..." */
+
+struct key_field {
+    const char *name;
+    int ncomp;              /* 1 number or 3 (a vector) */
+    double *dst;            /* ncomp doubles */
+    unsigned char *given;   /* set once read; a field may appear once per key */
+    double min, max;
+    int min_exclusive;
+};
+
+/* Read "name numbers name numbers ..." up to the end of the value into the fields. */
+static int read_key_fields(struct parser *p, const char *key, int frame, const char *s,
+                           struct key_field *fields, int nfields)
+{
+    char q[64];
+    for (;;) {
+        while (isspace((unsigned char)*s) || *s == ',')
+            s++;
+        if (*s == '\0')
+            return 0;
+        size_t wl = strspn(s, "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_");
+        struct key_field *f = NULL;
+        for (int i = 0; i < nfields && wl > 0; i++)
+            if (strlen(fields[i].name) == wl && strncasecmp(fields[i].name, s, wl) == 0)
+                f = &fields[i];
+        if (!f) {
+            char expected[128] = "";
+            for (int i = 0; i < nfields; i++) {
+                strcat(expected, i == 0 ? "" : i == nfields - 1 ? " or " : ", ");
+                strcat(expected, fields[i].name);
+            }
+            quote(q, sizeof q, s, wl ? wl : strcspn(s, " \t"));
+            fail_at(p, p->line, "%s: expected %s in the key at frame %d, got \"%s\"", key,
+                    expected, frame, q);
+            return -1;
+        }
+        if (*f->given) {
+            fail_at(p, p->line, "%s: %s given twice in the key at frame %d", key, f->name, frame);
+            return -1;
+        }
+        s += wl;
+        for (int c = 0; c < f->ncomp; c++) {
+            int sep = skip_separator(&s), is_int;
+            if (!sep || scan_decimal(s, &is_int) == 0) {
+                if (*s && sep && looks_like_nan_or_inf(s))
+                    return take_double(p, key, &s, &f->dst[c]); /* its NaN message */
+                fail_at(p, p->line, "%s: %s needs %s in the key at frame %d", key, f->name,
+                        f->ncomp == 1 ? "a number" : "3 numbers \"x y z\"", frame);
+                return -1;
+            }
+            double v;
+            if (take_double(p, key, &s, &v) < 0)
+                return -1;
+            int low = f->min_exclusive ? !(v > f->min) : !(v >= f->min);
+            if (low || v > f->max) {
+                fail_at(p, p->line, "%s: %s %.17g is out of range %s%.17g..%.17g in the key at "
+                        "frame %d", key, f->name, v, f->min_exclusive ? "above " : "", f->min,
+                        f->max, frame);
+                return -1;
+            }
+            f->dst[c] = v;
+        }
+        if (*s && !isspace((unsigned char)*s) && *s != ',') {
+            quote(q, sizeof q, s, strcspn(s, " \t"));
+            fail_at(p, p->line, "%s: trailing junk \"%s\" after %s", key, q, f->name);
+            return -1;
+        }
+        *f->given = 1;
+    }
+}
+
+/* The frame number that starts a key; advances *sp past it. */
+static int read_key_frame(struct parser *p, const char *key, const char **sp, int *frame)
+{
+    const char *s = *sp;
+    char q[64];
+    while (isspace((unsigned char)*s))
+        s++;
+    int is_integer;
+    size_t n = scan_decimal(s, &is_integer);
+    if (n == 0 || !is_integer || *s == '+' || (s[n] && !isspace((unsigned char)s[n]))) {
+        quote(q, sizeof q, s, strcspn(s, " \t"));
+        fail_at(p, p->line, "%s: a key starts with its frame number (an integer), got \"%s\"", key,
+                q);
+        return -1;
+    }
+    errno = 0;
+    long long v = strtoll(s, NULL, 10);
+    if (errno == ERANGE || v < 0 || v >= TF_ANIM_MAX_FRAMES) {
+        quote(q, sizeof q, s, n);
+        fail_at(p, p->line, "%s: frame %s is out of range 0..%d", key, q, TF_ANIM_MAX_FRAMES - 1);
+        return -1;
+    }
+    *frame = (int)v;
+    *sp = s + n;
+    return 0;
+}
+
+/* camera = FRAME position X Y Z look_at X Y Z [fov F] [up X Y Z]; an indented continuation
+ * line adds fields to the last key. */
+static int parse_camera_key(struct parser *p, const char *value, int continuation)
+{
+    tf_animation *a = &p->s->animation;
+    const char *s = value;
+    if (!continuation) {
+        int frame;
+        if (a->ncamera == TF_ANIM_MAX_KEYS) {
+            fail_at(p, p->line, "camera: more than %d keys", TF_ANIM_MAX_KEYS);
+            return -1;
+        }
+        if (read_key_frame(p, "camera", &s, &frame) < 0)
+            return -1;
+        int k = a->ncamera++;
+        memset(&a->camera[k], 0, sizeof a->camera[k]);
+        a->camera[k].frame = frame;
+        a->camera[k].line = p->line;
+        p->key_has_pos[k] = p->key_has_look[k] = p->key_has_fov[k] = p->key_has_up[k] = 0;
+    }
+    int k = a->ncamera - 1;
+    tf_camera_key *key = &a->camera[k];
+    struct key_field fields[] = {
+        {"position", 3, &key->position.x, &p->key_has_pos[k], -BIG, BIG, 0},
+        {"look_at", 3, &key->look_at.x, &p->key_has_look[k], -BIG, BIG, 0},
+        {"fov", 1, &key->fov_deg, &p->key_has_fov[k], 0, 360, 1},
+        {"up", 3, &key->up.x, &p->key_has_up[k], -BIG, BIG, 0},
+    };
+    _Static_assert(offsetof(tf_vec3, y) == sizeof(double) && offsetof(tf_vec3, z) ==
+                   2 * sizeof(double), "a tf_vec3 is three consecutive doubles");
+    return read_key_fields(p, "camera", key->frame, s, fields, 4);
+}
+
+/* sun = FRAME azimuth A elevation E */
+static int parse_sun_key(struct parser *p, const char *value, int continuation)
+{
+    tf_animation *a = &p->s->animation;
+    const char *s = value;
+    if (!continuation) {
+        int frame;
+        if (a->nsun == TF_ANIM_MAX_KEYS) {
+            fail_at(p, p->line, "sun: more than %d keys", TF_ANIM_MAX_KEYS);
+            return -1;
+        }
+        if (read_key_frame(p, "sun", &s, &frame) < 0)
+            return -1;
+        int k = a->nsun++;
+        memset(&a->sun[k], 0, sizeof a->sun[k]);
+        a->sun[k].frame = frame;
+        a->sun[k].line = p->line;
+        a->sun[k].azimuth_deg = NAN; /* "not given", checked in check_animation */
+        a->sun[k].elevation_deg = NAN;
+    }
+    int k = a->nsun - 1;
+    tf_sun_key *key = &a->sun[k];
+    unsigned char has_az = !isnan(key->azimuth_deg), has_el = !isnan(key->elevation_deg);
+    struct key_field fields[] = {
+        {"azimuth", 1, &key->azimuth_deg, &has_az, -360, 360, 0},
+        {"elevation", 1, &key->elevation_deg, &has_el, -90, 90, 0},
+    };
+    return read_key_fields(p, "sun", key->frame, s, fields, 2);
+}
+
 /* Store `value` for KEYS[key] in the scene, or fail_at. */
 static int set_value(struct parser *p, int key, const char *value)
 {
@@ -543,6 +722,10 @@ static int set_value(struct parser *p, int key, const char *value)
         return 0;
     case KT_ENVELOPE:
         return add_envelope_numbers(p, key, value);
+    case KT_CAMERA_KEY:
+        return parse_camera_key(p, value, 0);
+    case KT_SUN_KEY:
+        return parse_sun_key(p, value, 0);
     }
     return -1;
 }
@@ -572,7 +755,9 @@ static void set_defaults(tf_scene *s)
             memcpy(dst, &i, sizeof i);
             break;
         case KT_ENVELOPE:
-            break; /* calloc'd: all zero */
+        case KT_CAMERA_KEY:
+        case KT_SUN_KEY:
+            break; /* calloc'd: all zero, no keys */
         }
     }
 }
@@ -640,8 +825,8 @@ static void check_section_header(struct parser *p)
     }
     quote(q, sizeof q, l + 1, name_len);
     fail_at(p, p->line,
-            "[%s]: unknown section (expected image, camera, sun, sky, terrain, materials, mist "
-            "or antialias)", q);
+            "[%s]: unknown section (expected image, camera, sun, sky, terrain, materials, mist, "
+            "antialias or animation)", q);
 }
 
 /* fgets-style reader: hands inih one physical line, checked. */
@@ -679,7 +864,7 @@ static char *read_line(char *buf, int num, void *stream)
 }
 
 /* inih strips inline comments (" ;") from key lines but not from continuation lines. */
-static int continue_envelope(struct parser *p, const char *value)
+static int continue_list(struct parser *p, const char *value)
 {
     char buf[512];
     size_t n = strlen(value);
@@ -692,7 +877,14 @@ static int continue_envelope(struct parser *p, const char *value)
             buf[i] = '\0';
             break;
         }
-    return set_value(p, p->last_key, buf) == 0;
+    switch (KEYS[p->last_key].type) {
+    case KT_CAMERA_KEY:
+        return parse_camera_key(p, buf, 1) == 0;
+    case KT_SUN_KEY:
+        return parse_sun_key(p, buf, 1) == 0;
+    default:
+        return set_value(p, p->last_key, buf) == 0;
+    }
 }
 
 static int on_key(void *user, const char *section, const char *name, const char *value)
@@ -706,11 +898,12 @@ static int on_key(void *user, const char *section, const char *name, const char 
     char q[64];
     if (n > 0 && isspace((unsigned char)l[0])) {
         /* inih passes an indented line as a continuation of the previous key's value */
-        if (p->last_key >= 0 && KEYS[p->last_key].type == KT_ENVELOPE)
-            return continue_envelope(p, value);
+        if (p->last_key >= 0 && is_list_type(KEYS[p->last_key].type))
+            return continue_list(p, value);
         if (p->last_key >= 0)
-            fail_at(p, p->line, "%s: indented line would continue its value (only envelope may "
-                    "span lines; remove the indentation)", KEYS[p->last_key].name);
+            fail_at(p, p->line, "%s: indented line would continue its value (only envelope and "
+                    "[animation] keys may span lines; remove the indentation)",
+                    KEYS[p->last_key].name);
         else
             fail_at(p, p->line, "syntax: indented line (remove the indentation)");
         return 0;
@@ -730,7 +923,7 @@ static int on_key(void *user, const char *section, const char *name, const char 
         fail_at(p, p->line, "%s: unknown key in [%s]", q, SECTION_NAMES[p->section]);
         return 0;
     }
-    if (p->key_line[key]) {
+    if (p->key_line[key] && KEYS[key].type != KT_CAMERA_KEY && KEYS[key].type != KT_SUN_KEY) {
         fail_at(p, p->line, "%s: duplicate key (first set on line %d)", KEYS[key].name,
                 p->key_line[key]);
         return 0;
@@ -749,10 +942,28 @@ static int blame_line(const struct parser *p, int key)
     return p->key_line[key] ? p->key_line[key] : p->section_line[KEYS[key].section];
 }
 
+/* Keys that an animated camera or sun replaces: not required, and not allowed, when animated. */
+static int replaced_by_animation(const tf_scene *s, int key)
+{
+    const struct key_def *k = &KEYS[key];
+    if (k->section == SEC_CAMERA && s->animation.ncamera > 0)
+        return !strcmp(k->name, "position") || !strcmp(k->name, "look_at");
+    if (k->section == SEC_SUN && s->animation.nsun > 0)
+        return !strcmp(k->name, "azimuth") || !strcmp(k->name, "elevation");
+    return 0;
+}
+
 static void check_required(struct parser *p)
 {
     for (int key = 0; key < KEY_COUNT && !p->failed; key++) {
         const struct key_def *k = &KEYS[key];
+        if (replaced_by_animation(p->s, key)) {
+            if (p->key_line[key])
+                fail_at(p, p->key_line[key], "%s: the %s is animated by [animation] %s keys; "
+                        "give %s in those keys instead", k->name, SECTION_NAMES[k->section],
+                        SECTION_NAMES[k->section], k->name);
+            continue;
+        }
         if (!k->required || p->key_line[key])
             continue;
         if (p->section_line[k->section])
@@ -822,11 +1033,54 @@ static void check_camera(struct parser *p)
                 "(above 0, below 180)", s->camera.fov_deg);
 }
 
+/* [animation]: frames given, every key complete (fov and up default to [camera]'s), the keys
+ * in order and every frame's camera and sun well defined (animation.c); then the [camera] and
+ * [sun] fields take frame 0's values. */
+static void check_animation(struct parser *p)
+{
+    tf_scene *s = p->s;
+    tf_animation *a = &s->animation;
+    int kframes = key_index_by_name(SEC_ANIMATION, "frames");
+    if (!p->section_line[SEC_ANIMATION])
+        return;
+    if (!p->key_line[kframes]) {
+        fail_at(p, p->section_line[SEC_ANIMATION], "frames: missing required key in [animation]");
+        return;
+    }
+    for (int k = 0; k < a->ncamera; k++) {
+        tf_camera_key *key = &a->camera[k];
+        if (!p->key_has_pos[k] || !p->key_has_look[k]) {
+            fail_at(p, key->line, "camera: the key at frame %d needs %s", key->frame,
+                    !p->key_has_pos[k] ? "a position" : "a look_at");
+            return;
+        }
+        if (!p->key_has_fov[k])
+            key->fov_deg = s->camera.fov_deg;
+        if (!p->key_has_up[k])
+            key->up = s->camera.up;
+    }
+    for (int k = 0; k < a->nsun; k++)
+        if (isnan(a->sun[k].azimuth_deg) || isnan(a->sun[k].elevation_deg)) {
+            fail_at(p, a->sun[k].line, "sun: the key at frame %d needs %s", a->sun[k].frame,
+                    isnan(a->sun[k].azimuth_deg) ? "an azimuth" : "an elevation");
+            return;
+        }
+    int line = 0;
+    char what[400];
+    if (tf_animation_check(a, s->camera.kind == TF_CAMERA_PINHOLE, &line, what, sizeof what)) {
+        fail_at(p, line, "%s", what);
+        return;
+    }
+    tf_scene_apply_frame(s, 0);
+}
+
 static void check_semantics(struct parser *p)
 {
     check_required(p);
     if (!p->failed)
         check_envelope(p);
+    if (!p->failed)
+        check_animation(p);
     if (!p->failed)
         check_camera(p);
 }
@@ -1038,6 +1292,22 @@ static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
         if (s->terrain.envelope_n > 0)
             canonical_envelope(b, &s->terrain);
         break;
+    case KT_CAMERA_KEY:
+        for (int j = 0; j < s->animation.ncamera; j++) {
+            const tf_camera_key *c = &s->animation.camera[j];
+            sb_printf(b, "camera = %d position %.17g %.17g %.17g\n", c->frame, c->position.x,
+                      c->position.y, c->position.z);
+            sb_printf(b, "    look_at %.17g %.17g %.17g\n", c->look_at.x, c->look_at.y,
+                      c->look_at.z);
+            sb_printf(b, "    up %.17g %.17g %.17g fov %.17g\n", c->up.x, c->up.y, c->up.z,
+                      c->fov_deg);
+        }
+        break;
+    case KT_SUN_KEY:
+        for (int j = 0; j < s->animation.nsun; j++)
+            sb_printf(b, "sun = %d azimuth %.17g elevation %.17g\n", s->animation.sun[j].frame,
+                      s->animation.sun[j].azimuth_deg, s->animation.sun[j].elevation_deg);
+        break;
     }
 }
 
@@ -1046,9 +1316,11 @@ char *tf_scene_canonical(const tf_scene *s)
     struct strbuf b = {0};
     sb_printf(&b, "; terrafarm canonical scene, format 1\n");
     for (int sec = 0; sec < SEC_COUNT; sec++) {
+        if (sec == SEC_ANIMATION && s->animation.frames == 0)
+            continue; /* a still: no section, and the hash of every still scene is unchanged */
         sb_printf(&b, "[%s]\n", SECTION_NAMES[sec]);
         for (int key = 0; key < KEY_COUNT; key++)
-            if (KEYS[key].section == (enum section)sec)
+            if (KEYS[key].section == (enum section)sec && !replaced_by_animation(s, key))
                 canonical_key(&b, s, key);
     }
     if (b.oom) {

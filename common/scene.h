@@ -12,6 +12,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include "animation.h"
 #include "vec.h"
 
 enum tf_camera_kind { TF_CAMERA_PINHOLE, TF_CAMERA_PANORAMA };
@@ -114,6 +115,11 @@ typedef struct tf_scene {
         double threshold;      /* per-channel contrast that triggers subdivision */
         int max_depth;         /* subdivision levels; 3 -> up to 8x8 subpixels, 81 samples */
     } antialias;
+
+    /* [animation]: frames = 0 for a still.  An animated camera or sun replaces the [camera]
+     * position / look_at / up / fov or the [sun] azimuth / elevation frame by frame
+     * (tf_scene_apply_frame); after parsing those fields hold frame 0's values. */
+    tf_animation animation;
 
     uint8_t hash[32];          /* SHA-256 of the canonical form (see tf_scene_canonical) */
     char hash_hex[65];

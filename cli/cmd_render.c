@@ -7,6 +7,7 @@
 
 #include "cli/commands.h"
 #include "coordinator/coordinator.h"
+#include "coordinator/frames.h"
 #include "log.h"
 
 static const char usage[] =
@@ -17,6 +18,13 @@ static const char usage[] =
     "durable, so an interrupted render continues with --resume.\n"
     "\n"
     "  -o, --output FILE.exr     output image (default out/<scene>.exr); a PNG preview goes beside it\n"
+    "                            for an [animation] scene a pattern: its run of '#' becomes the\n"
+    "                            frame number (default out/<scene>.####.exr)\n"
+    "      --frames A-B[:STEP]   frames A to B (every STEP-th) of an [animation] scene (default:\n"
+    "                            all of them); one farm renders them back to back\n"
+    "      --frame N             frame N alone (the same bytes as inside a sequence)\n"
+    "      --movie FILE.mp4|webm after the frames, assemble their PNG previews into a video at\n"
+    "                            the scene's frame rate (needs ffmpeg)\n"
     "  -j, --workers N           local workers to fork (default: online CPUs); 0 = networked only\n"
     "      --tasks rows:K        scanline-block tasks of K rows\n"
     "      --tasks stamps:WxH    postage-stamp tasks of WxH pixels (default: stamps sized from the\n"
@@ -71,7 +79,7 @@ bad:
 int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
-           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE };
+           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -86,6 +94,9 @@ int cmd_render(int argc, char **argv)
         {"stats", required_argument, NULL, O_STATS},
         {"lease-timeout", required_argument, NULL, O_LEASE},
         {"cl-device", required_argument, NULL, O_CL_DEVICE},
+        {"frames", required_argument, NULL, O_FRAMES},
+        {"frame", required_argument, NULL, O_FRAME},
+        {"movie", required_argument, NULL, O_MOVIE},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -132,6 +143,30 @@ int cmd_render(int argc, char **argv)
         case O_OVERWRITE: o.overwrite = 1; break;
         case O_STATS: o.stats_path = optarg; break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
+        case O_FRAMES:
+        case O_FRAME: {
+            const char *flag = c == O_FRAME ? "--frame" : "--frames";
+            tf_frame_range fr;
+            if (o.frames_given) {
+                tf_error("render: give --frames or --frame once");
+                return TF_EXIT_USAGE;
+            }
+            if (tf_frame_range_parse(flag, optarg, &fr, err, sizeof err)) {
+                tf_error("%s", err);
+                return TF_EXIT_USAGE;
+            }
+            if (c == O_FRAME && fr.last != fr.first) {
+                tf_error("--frame '%s': expected one frame number (--frames takes a range)",
+                         optarg);
+                return TF_EXIT_USAGE;
+            }
+            o.frames_given = 1;
+            o.frame_first = fr.first;
+            o.frame_last = fr.last;
+            o.frame_step = fr.step;
+            break;
+        }
+        case O_MOVIE: o.movie = optarg; break;
         case O_LEASE:
             if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))
                 return TF_EXIT_USAGE;

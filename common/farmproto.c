@@ -14,7 +14,8 @@ int tf_task_pack(tf_tuple *t, const tf_task_msg *m)
         memcpy(ex + 8 * i, &le, 8);
     }
     tf_tuple_init(t);
-    return tf_tuple_pack(t, "siiiiib", "task", m->id, (int64_t)m->rect.x, (int64_t)m->rect.y,
+    return tf_tuple_pack(t, "siiiiiib", "task", m->id, (int64_t)m->frame, (int64_t)m->rect.x,
+                         (int64_t)m->rect.y,
                          (int64_t)m->rect.w, (int64_t)m->rect.h, (const void *)ex, (size_t)(8 * n));
 }
 
@@ -25,27 +26,30 @@ int tf_task_template(tf_tuple *t, int64_t id)
         return -1;
     if (id == TF_TASK_ANY ? tf_tuple_add_formal(t, TF_FIELD_INT) : tf_tuple_add_int(t, id))
         return -1;
-    return tf_tuple_pack(t, "IIIIB");
+    return tf_tuple_pack(t, "IIIIIB");
 }
 
 int tf_task_unpack(const tf_tuple *t, tf_task_msg *m)
 {
     const char *name = tf_tuple_name(t);
-    int64_t v[5];
+    int64_t v[6];
     const uint8_t *ex;
     size_t exlen;
-    if (!name || strcmp(name, "task") || t->nfields != 7)
+    if (!name || strcmp(name, "task") || t->nfields != 8)
         return -1;
-    for (int i = 0; i < 5; i++)
+    for (int i = 0; i < 6; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))
             return -1;
-    if (tf_tuple_get_blob(t, 6, &ex, &exlen) || exlen % 8 || exlen / 8 > TF_EXCLUDED_MAX)
+    if (tf_tuple_get_blob(t, 7, &ex, &exlen) || exlen % 8 || exlen / 8 > TF_EXCLUDED_MAX)
         return -1;
-    for (int i = 1; i < 5; i++)
+    if (v[1] < -1 || v[1] >= 1 << 30)
+        return -1;
+    for (int i = 2; i < 6; i++)
         if (v[i] < 0 || v[i] > 1 << 20)
             return -1;
     m->id = v[0];
-    m->rect = (tf_rect){(int)v[1], (int)v[2], (int)v[3], (int)v[4]};
+    m->frame = (int)v[1];
+    m->rect = (tf_rect){(int)v[2], (int)v[3], (int)v[4], (int)v[5]};
     m->nexcluded = (int)(exlen / 8);
     for (int i = 0; i < m->nexcluded; i++) {
         uint64_t le;

@@ -4,10 +4,13 @@
  *   ("scene", text:S, width:I, height:I, hash:S)        rd by networked workers (tsnet model)
  *   ("next_worker", n:I)                                in + out n+1: a worker takes an id
  *   ("hello", worker:I, kind:S, host:S, pid:I, backend:S)  a worker announces itself
- *   ("task", id:I, x:I, y:I, w:I, h:I, excluded:B)     a rectangle to render; id < 0 = stop
+ *   ("task", id:I, frame:I, x:I, y:I, w:I, h:I, excluded:B)  a rectangle of a frame to render;
+ *                                                       id < 0 = stop
  *   ("result", id:I, worker:I, primary:I, shadow:I, external:I, busy_ns:I, pixels:B)
  *   ("failed", id:I, worker:I, message:S)              a worker could not render a task
  *
+ * `frame` is the frame of an [animation] scene whose camera renders the rectangle (0 ..
+ * frames-1), or -1 for a still scene; ids run on across the frames of a sequence.
  * `excluded` is a list of little-endian int64 worker ids that must not render this task (it
  * failed on them repeatedly): such a worker puts the tuple back and waits a little.
  * `pixels` is w*h tf_pixels, row-major, each 6 little-endian IEEE floats (r g b a z spp).
@@ -29,6 +32,7 @@
 
 typedef struct tf_task_msg {
     int64_t id;
+    int frame;          /* -1: a still; else the frame of the scene's animation */
     tf_rect rect;
     int nexcluded;
     int64_t excluded[TF_EXCLUDED_MAX];

@@ -25,7 +25,9 @@
 #include "linda/proto.h"
 #include "linda/sock.h"
 #include "scene.h"
+#include "coordinator/frames.h"
 #include "coordinator/local_workers.h"
+#include "coordinator/movie.h"
 #include "coordinator/output.h"
 #include "coordinator/stats.h"
 #include "coordinator/supervisor.h"
@@ -49,18 +51,29 @@ void tf_render_opts_init(tf_render_opts *o)
     o->fsync_interval_ms = 1000;
 }
 
+/* One output file: a still's, or one frame's of a sequence. */
+typedef struct frame_output {
+    int frame;                   /* -1: a still */
+    char *output, *preview;
+    tf_exr_meta meta;
+    tf_output_plan plan;
+} frame_output;
+
 /* Everything one render owns.  A step that fails logs one line, sets status and returns -1. */
 typedef struct render {
     const tf_render_opts *o;
     int status;                  /* exit status if a step fails */
     double t_start;
     tf_scene *scene;
-    char *output, *preview;
+    int animated;                /* the scene has an [animation]: outputs are frames */
+    char *pattern;               /* -o, or its default */
+    frame_output *outs;          /* every frame asked for (one for a still), in order */
+    int nouts;
+    tf_frame_job *jobs;          /* the outputs still to render, in order */
+    int *job_out;                /* job -> index in outs */
+    int njobs;
     int nworkers;                /* local workers to fork */
     tf_task_spec spec;
-    tf_exr_meta meta;
-    tf_output_plan plan;
-    int first_row;               /* rows already on disk */
     const char *listen;
     uint8_t key[TF_KEY_BYTES];
     int have_key;
@@ -70,7 +83,6 @@ typedef struct render {
     tf_supervisor *sup;
     ts_server_config cfg;
     ts_server *srv;
-    tf_rowwriter *rows_out;      /* owns the EXR writer once started */
     tf_local_workers lw;
     tf_tasks tasks;
     char tdesc[64];
@@ -95,6 +107,66 @@ static void install_signals(void)
     sigaction(SIGTERM, &sa, NULL);
 }
 
+/* The frames asked for and their output names (part of load_scene). */
+static int choose_frames(render *r)
+{
+    const tf_render_opts *o = r->o;
+    const tf_animation *a = &r->scene->animation;
+    r->animated = a->frames > 0;
+    if (o->frames_given && !r->animated) {
+        tf_error("--frame/--frames: %s has no [animation] section: it is a still (render it "
+                 "without them)", o->scene_path);
+        return step_failed(r, 2, NULL);
+    }
+    tf_frame_range range = {0, r->animated ? a->frames - 1 : 0, 1};
+    if (o->frames_given) {
+        range = (tf_frame_range){o->frame_first, o->frame_last, o->frame_step};
+        if (range.last >= a->frames) {
+            tf_error("--frame/--frames: %s has frames 0..%d; frame %d is not one of them",
+                     o->scene_path, a->frames - 1, range.last);
+            return step_failed(r, 2, NULL);
+        }
+    }
+    if (o->movie) {
+        char err[512];
+        if (!r->animated) {
+            tf_error("--movie: %s is a still (a movie needs an [animation] section)",
+                     o->scene_path);
+            return step_failed(r, 2, NULL);
+        }
+        if (tf_movie_check_name(o->movie, err, sizeof err))
+            return step_failed(r, 2, err);
+        if (!tf_movie_available()) {
+            tf_error("--movie: ffmpeg is not installed (apt-get install ffmpeg); render without "
+                     "--movie, or install it first");
+            return step_failed(r, 2, NULL);
+        }
+    }
+    r->pattern = o->output ? strdup(o->output)
+                 : r->animated ? tf_frame_default_pattern(o->scene_path)
+                               : tf_output_default_path(o->scene_path);
+    if (!r->pattern)
+        return step_failed(r, 1, "out of memory");
+    r->nouts = r->animated ? tf_frame_range_count(&range) : 1;
+    if (r->nouts > 1 && !tf_frame_pattern_has_number(r->pattern)) {
+        tf_error("-o %s: a sequence of %d frames needs a run of '#' in the output name for the "
+                 "frame number (e.g. out/flyby.####.exr)", r->pattern, r->nouts);
+        return step_failed(r, 2, NULL);
+    }
+    r->outs = calloc((size_t)r->nouts, sizeof *r->outs);
+    if (!r->outs)
+        return step_failed(r, 1, "out of memory");
+    for (int i = 0; i < r->nouts; i++) {
+        frame_output *fo = &r->outs[i];
+        fo->frame = r->animated ? range.first + i * range.step : -1;
+        fo->output = r->animated ? tf_frame_output_path(r->pattern, fo->frame) : strdup(r->pattern);
+        fo->preview = fo->output ? tf_output_preview_path(fo->output) : NULL;
+        if (!fo->output || !fo->preview)
+            return step_failed(r, 1, "out of memory");
+    }
+    return 0;
+}
+
 /* 1a. The scene and the settings that can be refused, before the output is looked at. */
 static int load_scene(render *r)
 {
@@ -105,10 +177,8 @@ static int load_scene(render *r)
         return step_failed(r, 2, err);
     if (o->width > 0)
         tf_scene_set_size(r->scene, o->width, o->height);
-    r->output = o->output ? strdup(o->output) : tf_output_default_path(o->scene_path);
-    r->preview = r->output ? tf_output_preview_path(r->output) : NULL;
-    if (!r->output || !r->preview)
-        return step_failed(r, 1, "out of memory");
+    if (choose_frames(r))
+        return -1;
     r->nworkers = o->workers >= 0 ? o->workers : tf_thread_count(0);
     r->spec = o->tasks_given ? o->tasks
                              : tf_task_spec_default(r->scene->width, r->scene->height,
@@ -124,14 +194,45 @@ static int load_scene(render *r)
     return 0;
 }
 
-/* 1b. The output: fresh, resume, already complete, or refuse -- before any expensive work. */
+/* 1b. Each output: fresh, resume, already complete, or refuse -- before any expensive work.
+ *     The outputs not complete become the frame jobs. */
 static int plan_output(render *r)
 {
-    tf_output_meta(&r->meta, r->scene, r->o->scene_path);
-    if (tf_output_plan_for(r->output, &r->meta, r->o->resume, r->o->overwrite, &r->plan))
-        return step_failed(r, 1, NULL);
-    r->first_row = r->plan.resume_rows > 0 ? r->plan.resume_rows : 0;
+    r->jobs = calloc((size_t)r->nouts, sizeof *r->jobs);
+    r->job_out = calloc((size_t)r->nouts, sizeof *r->job_out);
+    if (!r->jobs || !r->job_out)
+        return step_failed(r, 1, "out of memory");
+    for (int i = 0; i < r->nouts; i++) {
+        frame_output *fo = &r->outs[i];
+        tf_output_meta(&fo->meta, r->scene, r->o->scene_path);
+        if (fo->frame >= 0) {
+            /* a frame's file names its frame: resuming one into another's file is refused */
+            size_t n = strlen(fo->meta.settings);
+            snprintf(fo->meta.settings + n, sizeof fo->meta.settings - n, " frame=%d", fo->frame);
+        }
+        if (tf_output_plan_for(fo->output, &fo->meta, r->o->resume, r->o->overwrite, &fo->plan))
+            return step_failed(r, 1, NULL);
+        if (fo->plan.complete)
+            continue;
+        r->jobs[r->njobs] = (tf_frame_job){fo->frame, fo->plan.resume_rows > 0
+                                                          ? fo->plan.resume_rows : 0};
+        r->job_out[r->njobs++] = i;
+    }
     return 0;
+}
+
+/* Outputs found complete (nothing to render for them): make sure their previews exist. */
+static void previews_of_complete(render *r)
+{
+    char err[1024];
+    struct stat st;
+    for (int i = 0; i < r->nouts; i++) {
+        frame_output *fo = &r->outs[i];
+        if (!fo->plan.complete || (r->animated && stat(fo->preview, &st) == 0))
+            continue;
+        if (tf_preview_from_exr(fo->output, fo->preview, err, sizeof err))
+            tf_warn("%s", err);
+    }
 }
 
 /* 1c. Who may connect: loopback without a secret, anywhere else only with one. */
@@ -167,6 +268,41 @@ static int build_terrain(render *r)
     return 0;
 }
 
+/* Job `job`'s output, opened as planned, and its writer thread. */
+static tf_rowwriter *open_frame_writer(void *ctx, int job, char *err, size_t errlen)
+{
+    render *r = ctx;
+    frame_output *fo = &r->outs[r->job_out[job]];
+    tf_exr_writer *writer = tf_output_open(fo->output, &fo->meta, &fo->plan, err, errlen);
+    if (!writer)
+        return NULL;
+    /* Room for two bands of rows: handing a finished band to the writer must not block the
+     * event loop (every worker waiting for a reply would wait for the compression).  Bands are
+     * capped in pixels (tasks.c), so this stays a few MB whatever the image size. */
+    int queue_rows = 2 * r->tasks.th + 8;
+    int queue_chunks = queue_rows / tf_exr_chunk_rows() > 2 ? queue_rows / tf_exr_chunk_rows() : 2;
+    tf_rowwriter *w = tf_rowwriter_start(writer, r->scene->width, r->scene->height,
+                                         tf_exr_chunk_rows(), queue_chunks,
+                                         r->o->fsync_interval_ms, fo->preview, fo->output, err,
+                                         errlen);
+    if (!w)
+        tf_exr_abandon(writer);
+    return w;
+}
+
+/* Every row of job `job` is queued: finish its file (offset table, fsync, rename into place
+ * as a complete render) and its preview. */
+static int finish_frame_writer(void *ctx, int job, tf_rowwriter *w, char *err, size_t errlen)
+{
+    render *r = ctx;
+    frame_output *fo = &r->outs[r->job_out[job]];
+    if (tf_rowwriter_finish(w, err, errlen))
+        return -1;
+    if (fo->frame >= 0)
+        tf_debug("frame %d finished: %s", fo->frame, fo->output);
+    return 0;
+}
+
 static int put_scene_tuples(ts_space *space, const tf_scene *s)
 {
     tf_tuple t;
@@ -187,15 +323,15 @@ static int start_space(render *r)
 {
     char err[1024];
     const tf_render_opts *o = r->o;
-    tf_tasks_init(&r->tasks, r->scene->width, r->scene->height, r->first_row, r->spec);
+    tf_tasks_init(&r->tasks, r->scene->width, r->scene->height, r->jobs[0].first_row, r->spec);
     r->space = ts_space_new();
     if (!r->space || put_scene_tuples(r->space, r->scene))
         return step_failed(r, 1, "out of memory");
     int expected_workers = r->nworkers > 0 ? r->nworkers : 4;
-    tf_supervisor_config scfg = {r->scene->width, r->scene->height, r->first_row, r->spec,
+    tf_supervisor_config scfg = {r->scene->width, r->scene->height, r->njobs, r->jobs,
+                                 {r, open_frame_writer, finish_frame_writer}, r->spec,
                                  o->watermark /* 0: auto, following the connected workers */,
-                                 expected_workers, o->max_task_failures,
-                                 NULL /* the writer comes once the output exists */};
+                                 expected_workers, o->max_task_failures};
     r->sup = tf_supervisor_new(r->space, &scfg, err, sizeof err);
     if (!r->sup)
         return step_failed(r, 2, err);
@@ -216,26 +352,15 @@ static int start_space(render *r)
     return 0;
 }
 
-/* 4a. The output file and its writer thread. */
+/* 4a. The first output file and its writer thread (the supervisor opens the others through
+ *     open_frame_writer when it starts dealing their frames). */
 static int open_output(render *r)
 {
     char err[1024];
-    tf_exr_writer *writer = tf_output_open(r->output, &r->meta, &r->plan, err, sizeof err);
-    if (!writer)
+    tf_rowwriter *w = open_frame_writer(r, 0, err, sizeof err);
+    if (!w)
         return step_failed(r, 1, err);
-    /* Room for two bands of rows: handing a finished band to the writer must not block the
-     * event loop (every worker waiting for a reply would wait for the compression).  Bands are
-     * capped in pixels (tasks.c), so this stays a few MB whatever the image size. */
-    int queue_rows = 2 * r->tasks.th + 8;
-    int queue_chunks = queue_rows / tf_exr_chunk_rows() > 2 ? queue_rows / tf_exr_chunk_rows() : 2;
-    r->rows_out = tf_rowwriter_start(writer, r->scene->width, r->scene->height,
-                                     tf_exr_chunk_rows(), queue_chunks, r->o->fsync_interval_ms,
-                                     r->preview, r->output, err, sizeof err);
-    if (!r->rows_out) {
-        tf_exr_abandon(writer);
-        return step_failed(r, 1, err);
-    }
-    tf_supervisor_set_writer(r->sup, r->rows_out);
+    tf_supervisor_set_writer(r->sup, 0, w);
     return 0;
 }
 
@@ -262,27 +387,48 @@ static int start_workers(render *r)
     else
         snprintf(wdesc, sizeof wdesc, "auto (%d now)", tf_supervisor_stats(r->sup)->watermark);
     const tf_scene *s = r->scene;
+    char what[160];
+    long long tasks = (long long)tf_supervisor_stats(r->sup)->tasks_total;
+    if (r->animated)
+        snprintf(what, sizeof what, "frames %d..%d (%d to render) %dx%d: %lld tasks", r->outs[0].frame,
+                 r->outs[r->nouts - 1].frame, r->njobs, s->width, s->height, tasks);
+    else
+        snprintf(what, sizeof what, "%dx%d: %lld tasks", s->width, s->height, tasks);
     if (ts_server_port(r->srv) > 0) {
         char host[256], port[32], e[128];
         if (tf_split_hostport(r->cfg.listen, host, sizeof host, port, sizeof port, e, sizeof e))
             snprintf(host, sizeof host, "?");
-        tf_info("rendering %s %dx%d: %d tasks (%s), watermark %s, %d local worker%s, workers "
+        tf_info("rendering %s %s (%s), watermark %s, %d local worker%s, workers "
                 "may join at %s:%d%s",
-                s->path, s->width, s->height, r->tasks.count, r->tdesc, wdesc, r->nworkers,
+                s->path, what, r->tdesc, wdesc, r->nworkers,
                 r->nworkers == 1 ? "" : "s", host, ts_server_port(r->srv),
                 r->have_key ? " (secret required)" : "");
     } else {
-        tf_info("rendering %s %dx%d: %d tasks (%s), watermark %s, %d local workers", s->path,
-                s->width, s->height, r->tasks.count, r->tdesc, wdesc, r->nworkers);
+        tf_info("rendering %s %s (%s), watermark %s, %d local workers", s->path, what, r->tdesc,
+                wdesc, r->nworkers);
     }
     return 0;
+}
+
+/* Rows on disk or queued over the whole render (resumed rows included), for the progress line;
+ * and the frame being written. */
+static int rows_done(const render *r, int *writing_frame)
+{
+    int h = r->scene->height, done = 0, wj = tf_supervisor_write_job(r->sup);
+    for (int j = 0; j < r->njobs; j++)
+        done += j < wj ? h : tf_supervisor_rows_written(r->sup, j);
+    *writing_frame = wj < r->njobs ? r->jobs[wj].frame : -1;
+    return done;
 }
 
 /* 5. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
 static int supervise(render *r)
 {
     tf_progress prog;
-    tf_progress_init(&prog, r->scene->height, r->first_row, r->o->quiet, tf_now_s());
+    int frame_now, h = r->scene->height;
+    tf_progress_init(&prog, r->njobs * h, rows_done(r, &frame_now), r->o->quiet, tf_now_s());
+    if (r->animated)
+        tf_progress_frames(&prog, r->nouts, r->nouts - r->njobs);
     double last_wait_note = tf_now_s();
     while (!interrupted && !tf_supervisor_done(r->sup) && !tf_supervisor_error(r->sup)) {
         if (ts_server_run_once(r->srv, 50) < 0) {
@@ -294,8 +440,10 @@ static int supervise(render *r)
         tf_local_workers_reap(&r->lw, 1);
         const tf_farm_stats *st = tf_supervisor_stats(r->sup);
         int live = tf_supervisor_live_workers(r->sup);
-        tf_progress_update(&prog, t, tf_rowwriter_rows_written(r->rows_out),
-                           st->primary_rays + st->shadow_rays, live, 0);
+        int rows = rows_done(r, &frame_now);
+        if (r->animated)
+            tf_progress_frame_now(&prog, r->nouts - r->njobs + st->frames_done, frame_now);
+        tf_progress_update(&prog, t, rows, st->primary_rays + st->shadow_rays, live, 0);
         if (r->nworkers > 0 && r->lw.gave_up == r->nworkers && live == 0) {
             tf_progress_clear(&prog);
             tf_error("no local worker could run (see above) and no networked worker is "
@@ -318,49 +466,92 @@ static int supervise(render *r)
 static void stop_unfinished(render *r)
 {
     const char *why = tf_supervisor_error(r->sup);
-    int rows = tf_supervisor_rows_written(r->sup); /* abandon writes every queued row */
+    int wj = tf_supervisor_write_job(r->sup);
+    int rows = wj < r->njobs ? tf_supervisor_rows_written(r->sup, wj) : 0;
     tf_supervisor_stop_workers(r->sup);
     tf_local_workers_drain(&r->lw, 1.0);
-    tf_rowwriter_abandon(r->rows_out);
-    r->rows_out = NULL;
+    /* abandon writes every queued row of every output still open, and keeps it resumable */
+    tf_rowwriter *open[64];
+    int jobs[64], n;
+    while ((n = tf_supervisor_take_open_writers(r->sup, open, jobs, 64)) > 0)
+        for (int i = 0; i < n; i++)
+            tf_rowwriter_abandon(open[i]);
+    const char *where = wj < r->njobs ? r->outs[r->job_out[wj]].output : "?";
+    char frames[128] = "";
+    if (r->animated)
+        snprintf(frames, sizeof frames, "%d of %d frames done, ",
+                 r->nouts - r->njobs + tf_supervisor_stats(r->sup)->frames_done, r->nouts);
     if (why)
         tf_error("%s", why);
     else if (r->no_workers)
-        tf_error("%d of %d rows are on disk in %s; continue with --resume", rows,
-                 r->scene->height, r->output);
+        tf_error("%s%d of %d rows are on disk in %s; continue with --resume", frames, rows,
+                 r->scene->height, where);
     else
-        tf_error("interrupted: %d of %d rows are on disk in %s; continue with --resume", rows,
-                 r->scene->height, r->output);
+        tf_error("interrupted: %s%d of %d rows are on disk in %s; continue with --resume", frames,
+                 rows, r->scene->height, where);
     r->status = why || r->no_workers ? 1 : 130;
 }
 
-/* 6. Finish: the file, the workers, the summary, the statistics. */
+/* The frames rendered (or complete before) as a movie: --movie, once all are on disk. */
+static int make_movie(render *r)
+{
+    if (!r->o->movie)
+        return 0;
+    char err[1024];
+    const char **pngs = calloc((size_t)r->nouts, sizeof *pngs);
+    if (!pngs)
+        return step_failed(r, 1, "out of memory");
+    for (int i = 0; i < r->nouts; i++)
+        pngs[i] = r->outs[i].preview;
+    int rc = tf_movie_make(r->o->movie, pngs, r->nouts, r->scene->animation.fps, err, sizeof err);
+    free(pngs);
+    if (rc)
+        return step_failed(r, 1, err);
+    tf_info("wrote %s: %d frames at %.6g fps", r->o->movie, r->nouts, r->scene->animation.fps);
+    return 0;
+}
+
+/* 6. Finish: the workers, the summary, the statistics, the movie (each output was finished
+ *    by the supervisor the moment its last row was queued). */
 static int finish(render *r)
 {
     char err[1024];
     tf_supervisor_stop_workers(r->sup);
-    int finished = tf_rowwriter_finish(r->rows_out, err, sizeof err);
-    r->rows_out = NULL;
-    if (finished)
-        return step_failed(r, 1, err);
     tf_local_workers_drain(&r->lw, 5.0);
     for (int i = 0; i < 10 && ts_server_conn_count(r->srv) > 0; i++)
         ts_server_run_once(r->srv, 20); /* let networked workers read the stop tuple */
     double wall = tf_now_s() - r->t_start;
     const tf_farm_stats *st = tf_supervisor_stats(r->sup);
     uint64_t rays = st->primary_rays + st->shadow_rays;
+    char what[1024];
+    if (r->animated && r->nouts > 1)
+        snprintf(what, sizeof what, "%d frames %s .. %s (%d rendered now)", r->nouts,
+                 r->outs[0].output, r->outs[r->nouts - 1].output, r->njobs);
+    else
+        snprintf(what, sizeof what, "%s", r->outs[0].output);
     tf_info("wrote %s (%dx%d) and %s in %.2f s: %.2f Mrays/s, %.2f samples/pixel, %lld tasks, "
             "%lld re-dealt",
-            r->output, r->scene->width, r->scene->height, r->preview, wall,
+            what, r->scene->width, r->scene->height,
+            r->animated && r->nouts > 1 ? "their previews" : r->outs[0].preview, wall,
             wall > 0 ? rays / wall / 1e6 : 0,
             st->pixels ? st->spp_sum / (double)st->pixels : 0, (long long)st->tasks_total,
             (long long)st->tasks_redealt);
     if (r->o->stats_path) {
-        tf_run_info run = {wall, r->scene->width, r->scene->height, r->scene->path, r->output,
-                           r->tdesc, r->nworkers, r->hf_s};
-        if (tf_stats_write(r->o->stats_path, &run, st, err, sizeof err))
+        int *skipped = calloc((size_t)r->nouts + 1, sizeof *skipped), nskipped = 0;
+        if (!skipped)
+            return step_failed(r, 1, "out of memory");
+        for (int i = 0; i < r->nouts; i++)
+            if (r->outs[i].plan.complete)
+                skipped[nskipped++] = r->outs[i].frame;
+        tf_run_info run = {wall, r->scene->width, r->scene->height, r->scene->path, r->pattern,
+                           r->tdesc, r->nworkers, r->hf_s, r->animated, skipped, nskipped};
+        int bad = tf_stats_write(r->o->stats_path, &run, st, err, sizeof err);
+        free(skipped);
+        if (bad)
             return step_failed(r, 1, err);
     }
+    if (make_movie(r))
+        return -1;
     r->status = 0;
     return 0;
 }
@@ -369,16 +560,27 @@ static void render_close(render *r)
 {
     if (r->lw.pid && r->srv)
         tf_local_workers_drain(&r->lw, 0);
-    if (r->rows_out)
-        tf_rowwriter_abandon(r->rows_out);
+    if (r->sup) {
+        tf_rowwriter *open[64];
+        int jobs[64], n;
+        while ((n = tf_supervisor_take_open_writers(r->sup, open, jobs, 64)) > 0)
+            for (int i = 0; i < n; i++)
+                tf_rowwriter_abandon(open[i]);
+    }
     tf_local_workers_free(&r->lw);
     ts_server_free(r->srv);
     tf_supervisor_free(r->sup);
     ts_space_free(r->space);
     tf_heightfield_free(r->hf);
     tf_scene_free(r->scene);
-    free(r->output);
-    free(r->preview);
+    for (int i = 0; i < r->nouts; i++) {
+        free(r->outs[i].output);
+        free(r->outs[i].preview);
+    }
+    free(r->outs);
+    free(r->jobs);
+    free(r->job_out);
+    free(r->pattern);
 }
 
 int tf_coordinator_run(const tf_render_opts *o)
@@ -392,14 +594,17 @@ int tf_coordinator_run(const tf_render_opts *o)
 
     if (load_scene(&r) || plan_output(&r))
         goto out;
-    if (r.plan.complete) {
-        char err[1024];
-        tf_info("%s is already complete: nothing to render", r.output);
-        if (tf_preview_from_exr(r.output, r.preview, err, sizeof err))
-            tf_warn("%s", err);
-        r.status = 0;
+    if (r.njobs == 0) {
+        if (r.animated && r.nouts > 1)
+            tf_info("all %d frames (%s .. %s) are already complete: nothing to render", r.nouts,
+                    r.outs[0].output, r.outs[r.nouts - 1].output);
+        else
+            tf_info("%s is already complete: nothing to render", r.outs[0].output);
+        previews_of_complete(&r);
+        r.status = make_movie(&r) ? r.status : 0;
         goto out;
     }
+    previews_of_complete(&r);
     if (load_secret(&r) || build_terrain(&r) || start_space(&r) || open_output(&r) ||
         start_workers(&r))
         goto out;

@@ -6,7 +6,14 @@
  *      (Musgrave's fork model); networked workers join over TCP and build their own (tsnet);
  *   3. supervise (supervisor.h): deal task tuples up to the watermark, lease them, collect
  *      results in order, write finished rows to the OpenEXR checkpoint, re-deal what is lost;
- *   4. finish the file, write the PNG preview and the statistics. */
+ *   4. finish the file, write the PNG preview and the statistics.
+ *
+ * Sequences.  For an [animation] scene the render covers frames (all of them, or --frames /
+ * --frame), each into its own output named by a #### pattern (frames.h).  One terrain, one
+ * tuple space and one pool of workers serve the whole sequence: the supervisor deals the
+ * frames' tasks as one run of ids, and each frame's file is finished and renamed into place as
+ * soon as its last row is on disk.  With --resume, frames already complete are skipped, frames
+ * in progress continue row by row, and the rest render; --movie assembles the previews. */
 #ifndef TF_COORDINATOR_H
 #define TF_COORDINATOR_H
 
@@ -14,7 +21,10 @@
 
 typedef struct tf_render_opts {
     const char *scene_path;
-    const char *output;        /* NULL: out/<scene>.exr */
+    const char *output;        /* NULL: out/<scene>.exr, or out/<scene>.####.exr for a sequence */
+    int frames_given;          /* --frames / --frame: render frames first..last by step */
+    int frame_first, frame_last, frame_step;
+    const char *movie;         /* --movie FILE.mp4|webm: assemble the previews (needs ffmpeg) */
     int workers;               /* forked local workers; -1 = online CPUs */
     int tasks_given;           /* 1 if --tasks was given */
     tf_task_spec tasks;

@@ -16,6 +16,20 @@ void tf_progress_init(tf_progress *p, int rows_total, int rows_at_start, int qui
     p->rows_total = rows_total;
     p->rows_at_start = rows_at_start;
     p->shown = 0;
+    p->frames_total = p->frames_done = 0;
+    p->frame_now = -1;
+}
+
+void tf_progress_frames(tf_progress *p, int frames_total, int frames_done)
+{
+    p->frames_total = frames_total;
+    p->frames_done = frames_done;
+}
+
+void tf_progress_frame_now(tf_progress *p, int frames_done, int frame_now)
+{
+    p->frames_done = frames_done;
+    p->frame_now = frame_now;
 }
 
 static void format_duration(char *buf, size_t len, double s)
@@ -43,10 +57,16 @@ void tf_progress_update(tf_progress *p, double now_s, int rows_done, uint64_t ra
     format_duration(et, sizeof et, eta);
     double pct = p->rows_total ? 100.0 * rows_done / p->rows_total : 100.0;
     double mrays = elapsed > 0 ? (double)rays / elapsed / 1e6 : 0;
-    char line[256];
+    char line[320], frames[64] = "";
+    if (p->frames_total > 0 && p->frame_now >= 0)
+        snprintf(frames, sizeof frames, "frames %d/%d done, frame %d in flight  ", p->frames_done,
+                 p->frames_total, p->frame_now);
+    else if (p->frames_total > 0)
+        snprintf(frames, sizeof frames, "frames %d/%d done  ", p->frames_done, p->frames_total);
     int n = snprintf(line, sizeof line,
-                     "rows %d/%d (%5.1f%%)  elapsed %s  eta %s  %.2f Mrays/s  %d worker%s",
-                     rows_done, p->rows_total, pct, el, et, mrays, workers, workers == 1 ? "" : "s");
+                     "%s%s %d/%d (%5.1f%%)  elapsed %s  eta %s  %.2f Mrays/s  %d worker%s", frames,
+                     p->frames_total > 0 ? "sequence rows" : "rows", rows_done, p->rows_total, pct,
+                     el, et, mrays, workers, workers == 1 ? "" : "s");
     if (n < 0)
         return;
     if (p->tty) {

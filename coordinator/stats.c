@@ -90,7 +90,25 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
         fprintf(f, ", \"tasks\": %lld, \"rays\": %llu, \"busy_s\": %.3f}", (long long)w->tasks,
                 (unsigned long long)w->rays, w->busy_s);
     }
-    fprintf(f, "%s]\n}\n", st->nworkers ? "\n  " : "");
+    fprintf(f, "%s]", st->nworkers ? "\n  " : "");
+    if (run->sequence) {
+        /* one object per frame rendered by this run (wall_s: from its first task dealt to its
+         * last row on disk; frames overlap, so these add up to more than wall_s) */
+        fprintf(f, ",\n  \"frames\": [");
+        for (int i = 0; i < st->nframes; i++) {
+            const tf_frame_stats *fr = &st->frames[i];
+            double wall = fr->done_ms > 0 && fr->start_ms > 0 ? (fr->done_ms - fr->start_ms) / 1e3
+                                                              : 0;
+            fprintf(f, "%s\n    {\"frame\": %d, \"wall_s\": %.3f, \"rays_total\": %llu, "
+                    "\"rows_resumed\": %d, \"rows_rendered\": %d}", i ? "," : "", fr->frame,
+                    wall, (unsigned long long)fr->rays, fr->rows_resumed, fr->rows_rendered);
+        }
+        fprintf(f, "%s],\n  \"frames_skipped\": [", st->nframes ? "\n  " : "");
+        for (int i = 0; i < run->nskipped; i++)
+            fprintf(f, "%s%d", i ? ", " : "", run->frames_skipped[i]);
+        fprintf(f, "]");
+    }
+    fprintf(f, "\n}\n");
     int bad = ferror(f);
     bad |= fclose(f) != 0;
     if (bad || rename(tmp, path)) {

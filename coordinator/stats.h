@@ -13,6 +13,9 @@ typedef struct tf_run_info {
     const char *tasks;       /* e.g. "stamps:64x64" */
     int local_workers;
     double heightfield_s;    /* time to build the height field before forking */
+    int sequence;            /* an [animation] scene: write "frames" and "frames_skipped" */
+    const int *frames_skipped; /* frames asked for that were already complete on disk */
+    int nskipped;
 } tf_run_info;
 
 /* Write atomically (temporary file + rename).  0, or -1 with a message. */

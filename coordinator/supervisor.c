@@ -1,19 +1,21 @@
 /* supervisor.c: see supervisor.h for what it does; this comment is about how.
  *
- * Task ids run 0 .. tasks.count-1 in write order.  Three cursors move only forward:
- *     write_task <= next_deal <= tasks.count
+ * Task ids run 0 .. total_tasks-1 in write order: job 0's tasks (tasks.h numbering, offset by
+ * the job's first_id), then job 1's, and so on.  Three cursors move only forward:
+ *     write_task <= next_deal <= total_tasks
  * Tasks below write_task are on disk; tasks in [write_task, next_deal) are "outstanding"
  * (dealt, in the space, leased to a worker, or done and waiting for their band); tasks from
  * next_deal on have not been dealt.  INVARIANTS (checked by supervisor_ok() in debug builds,
  * `make asan`):
- *   S1. 0 <= write_task <= next_deal <= tasks.count.
+ *   S1. 0 <= write_task <= next_deal <= total_tasks, and write_job is the job of write_task
+ *       (njobs once everything is written); jobs before it are finished.
  *   S2. next_deal - write_task <= ring_size, and the slot of every outstanding task id is
  *       ring[id % ring_size] with ring[...].id == id, so the ring holds every outstanding task.
  *   S3. A slot's counts are never negative: in_space >= 0, leased >= 0.
  *   S4. Every lease names a dealt task (0 <= task < next_deal; a straggler may still hold a
  *       copy of a task already written), and for an outstanding task the number of leases
  *       naming it never exceeds its slot's `leased`.
- *   S5. rows_written only grows, and rows_written <= height.
+ *   S5. A job's rows_written only grows, and rows_written <= height.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -61,10 +63,24 @@ typedef struct lease {
     int64_t task;
 } lease;
 
+/* One frame job: its tasks, where its ids start, its output. */
+typedef struct job_state {
+    tf_frame_job job;
+    tf_tasks tasks;
+    int64_t first_id;        /* global id of its task 0 */
+    tf_rowwriter *writer;    /* from open (or tf_supervisor_set_writer) until finish */
+    int opened, finished;
+    int rows_written;        /* rows handed to its writer (plus first_row) */
+} job_state;
+
 struct tf_supervisor {
     ts_space *space;
     ts_server *srv;
-    tf_tasks tasks;
+    job_state *jobs;
+    int njobs;
+    int write_job;           /* the job of write_task */
+    int64_t total_tasks;
+    int band_tasks;          /* tasks per band (every frame has the same width and task shape) */
     tf_supervisor_config cfg;
     int64_t write_task, next_deal;
     int ring_size;
@@ -78,8 +94,7 @@ struct tf_supervisor {
     int nleases, cap_leases;
     int chunk_rows;          /* rows per EXR chunk */
     tf_pixel *chunk;         /* accumulator: chunk_rows rows of width pixels */
-    int chunk_fill;          /* rows in the accumulator */
-    int rows_written;        /* rows handed to the writer by this run (plus first_row) */
+    int chunk_fill;          /* rows in the accumulator (of the write job) */
     int stop_sent;
     char error[512];
     tf_farm_stats stats;
@@ -91,8 +106,17 @@ struct tf_supervisor {
 static int supervisor_ok(const tf_supervisor *s)
 {
     if (!(0 <= s->write_task && s->write_task <= s->next_deal &&
-          s->next_deal <= s->tasks.count))
+          s->next_deal <= s->total_tasks))
         return 0; /* S1 */
+    if (s->write_job < s->njobs
+            ? !(s->write_task >= s->jobs[s->write_job].first_id &&
+                s->write_task < s->jobs[s->write_job].first_id +
+                                    s->jobs[s->write_job].tasks.count)
+            : s->write_task != s->total_tasks)
+        return 0; /* S1 */
+    for (int j = 0; j < s->write_job && j < s->njobs; j++)
+        if (!s->jobs[j].finished)
+            return 0; /* S1 */
     if (s->next_deal - s->write_task > s->ring_size)
         return 0; /* S2 */
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
@@ -114,11 +138,47 @@ static int supervisor_ok(const tf_supervisor *s)
         if (n > s->ring[task % s->ring_size].leased)
             return 0; /* S4 */
     }
-    return s->rows_written <= s->cfg.height; /* S5 */
+    for (int j = 0; j < s->njobs; j++)
+        if (s->jobs[j].rows_written > s->cfg.height)
+            return 0; /* S5 */
+    return 1;
 }
 #endif
 
 /* ---- small helpers ---------------------------------------------------------------------- */
+
+/* The job holding global task id (0 <= id < total_tasks), by binary search. */
+static job_state *job_of(const tf_supervisor *s, int64_t id)
+{
+    int lo = 0, hi = s->njobs - 1;
+    while (lo < hi) {
+        int mid = (lo + hi + 1) / 2;
+        if (s->jobs[mid].first_id <= id)
+            lo = mid;
+        else
+            hi = mid - 1;
+    }
+    return &s->jobs[lo];
+}
+
+static tf_rect rect_of(const tf_supervisor *s, int64_t id)
+{
+    const job_state *j = job_of(s, id);
+    return tf_task_rect(&j->tasks, (int)(id - j->first_id));
+}
+
+/* "task 12 (64x64 at 0,128)" or, in a sequence, "task 12 (frame 3, 64x64 at 0,128)" */
+static const char *describe_task(const tf_supervisor *s, int64_t id, char *buf, size_t len)
+{
+    const job_state *j = job_of(s, id);
+    tf_rect r = tf_task_rect(&j->tasks, (int)(id - j->first_id));
+    if (j->job.frame >= 0)
+        snprintf(buf, len, "task %" PRId64 " (frame %d, %dx%d at %d,%d)", id, j->job.frame, r.w,
+                 r.h, r.x, r.y);
+    else
+        snprintf(buf, len, "task %" PRId64 " (%dx%d at %d,%d)", id, r.w, r.h, r.x, r.y);
+    return buf;
+}
 
 static task_slot *slot_of(tf_supervisor *s, int64_t id)
 {
@@ -181,7 +241,8 @@ static int deal_copy(tf_supervisor *s, task_slot *t)
     tf_task_msg m;
     memset(&m, 0, sizeof m);
     m.id = t->id;
-    m.rect = tf_task_rect(&s->tasks, (int)t->id);
+    m.frame = job_of(s, t->id)->job.frame;
+    m.rect = rect_of(s, t->id);
     for (int i = 0; i < t->nfailed && m.nexcluded < TF_EXCLUDED_MAX; i++)
         if (t->failed_count[i] >= FAILURES_TO_EXCLUDE)
             m.excluded[m.nexcluded++] = t->failed_worker[i];
@@ -195,10 +256,33 @@ static int deal_copy(tf_supervisor *s, task_slot *t)
     return 0;
 }
 
+/* Job j's first task is about to be dealt: its output must exist. */
+static int open_job(tf_supervisor *s, job_state *j)
+{
+    tf_frame_stats *fs = &s->stats.frames[j - s->jobs];
+    if (fs->start_ms == 0)
+        fs->start_ms = tf_now_msf();
+    if (j->opened)
+        return 0;
+    char err[1024] = "cannot open the output";
+    j->writer = s->cfg.hooks.open ? s->cfg.hooks.open(s->cfg.hooks.ctx, (int)(j - s->jobs), err,
+                                                      sizeof err)
+                                  : NULL;
+    if (!j->writer) {
+        fail(s, "%s", err);
+        return -1;
+    }
+    j->opened = 1;
+    return 0;
+}
+
 static void deal_new_tasks(tf_supervisor *s)
 {
-    while (!s->error[0] && s->next_deal < s->tasks.count &&
+    while (!s->error[0] && s->next_deal < s->total_tasks &&
            s->next_deal - s->write_task < s->watermark) {
+        job_state *j = job_of(s, s->next_deal);
+        if (s->next_deal == j->first_id && open_job(s, j))
+            return;
         int64_t id = s->next_deal++;
         task_slot *t = &s->ring[id % s->ring_size];
         memset(t, 0, sizeof *t);
@@ -229,10 +313,10 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
     }
     t->failed_count[i]++;
     if (t->nfailed >= s->cfg.max_task_failures) {
-        tf_rect r = tf_task_rect(&s->tasks, (int)t->id);
-        fail(s, "task %" PRId64 " (%dx%d at %d,%d) failed on %d different workers; stopping "
-                "(rows written so far are kept: rerun with --resume)",
-             t->id, r.w, r.h, r.x, r.y, t->nfailed);
+        char what[128];
+        fail(s, "%s failed on %d different workers; stopping (rows written so far are kept: "
+                "rerun with --resume)",
+             describe_task(s, t->id, what, sizeof what), t->nfailed);
         return 1;
     }
     return 0;
@@ -245,8 +329,8 @@ static void redeal_if_lost(tf_supervisor *s, task_slot *t)
         return;
     t->in_space++;
     s->stats.tasks_redealt++;
-    tf_rect r = tf_task_rect(&s->tasks, (int)t->id);
-    tf_info("re-dealing task %" PRId64 " (%dx%d at %d,%d)", t->id, r.w, r.h, r.x, r.y);
+    char what[128];
+    tf_info("re-dealing %s", describe_task(s, t->id, what, sizeof what));
     deal_copy(s, t);
 }
 
@@ -268,28 +352,29 @@ static void withdraw_copies(tf_supervisor *s, task_slot *t)
 
 /* ---- writing ------------------------------------------------------------------------------ */
 
-static int flush_chunk(tf_supervisor *s, int final)
+static int flush_chunk(tf_supervisor *s, job_state *j, int final)
 {
     if (s->chunk_fill == 0 || (s->chunk_fill < s->chunk_rows && !final))
         return 0;
-    if (tf_rowwriter_put(s->cfg.writer, s->chunk, s->chunk_fill)) {
+    if (tf_rowwriter_put(j->writer, s->chunk, s->chunk_fill)) {
         char err[512];
-        tf_rowwriter_error(s->cfg.writer, err, sizeof err);
+        tf_rowwriter_error(j->writer, err, sizeof err);
         fail(s, "%s", err);
         return -1;
     }
-    s->rows_written += s->chunk_fill;
+    j->rows_written += s->chunk_fill;
     s->chunk_fill = 0;
     return 0;
 }
 
-/* Band `band` has every result: take them out of the space in order and write its rows. */
-static int write_band(tf_supervisor *s, int band)
+/* Band `band` of job j has every result: take them out of the space in order and write its
+ * rows. */
+static int write_band(tf_supervisor *s, job_state *j, int band)
 {
     int y0, rows;
-    tf_band_rows(&s->tasks, band, &y0, &rows);
-    int first = tf_band_first_task(&s->tasks, band);
-    int cols = s->tasks.cols;
+    tf_band_rows(&j->tasks, band, &y0, &rows);
+    int64_t first = j->first_id + tf_band_first_task(&j->tasks, band);
+    int cols = j->tasks.cols;
     tf_tuple *res = calloc((size_t)cols, sizeof *res);
     tf_result_msg *msg = calloc((size_t)cols, sizeof *msg);
     int rc = -1;
@@ -302,26 +387,28 @@ static int write_band(tf_supervisor *s, int band)
         if (tf_result_template(&tmpl, first + c, -1) ||
             ts_space_inp(s->space, &tmpl, &res[c]) != 1 || tf_result_unpack(&res[c], &msg[c])) {
             tf_tuple_clear(&tmpl);
-            fail(s, "internal error: result of task %d missing from the tuple space", first + c);
+            fail(s, "internal error: result of task %" PRId64 " missing from the tuple space",
+                 first + c);
             goto out;
         }
         tf_tuple_clear(&tmpl);
     }
     for (int row = 0; row < rows; row++) {
-        tf_pixel *dst = s->chunk + (size_t)s->chunk_fill * (size_t)s->tasks.width;
+        tf_pixel *dst = s->chunk + (size_t)s->chunk_fill * (size_t)j->tasks.width;
         for (int c = 0; c < cols; c++) {
-            tf_rect r = tf_task_rect(&s->tasks, first + c);
+            tf_rect r = rect_of(s, first + c);
             tf_pixels_decode(msg[c].pixels + (size_t)row * (size_t)r.w * TF_PIXEL_WIRE_BYTES,
                              dst + r.x, (size_t)r.w);
         }
-        for (int x = 0; x < s->tasks.width; x++)
+        for (int x = 0; x < j->tasks.width; x++)
             s->stats.spp_sum += dst[x].spp;
-        s->stats.pixels += (uint64_t)s->tasks.width;
+        s->stats.pixels += (uint64_t)j->tasks.width;
         s->chunk_fill++;
-        if (flush_chunk(s, 0))
+        if (flush_chunk(s, j, 0))
             goto out;
     }
     s->stats.rows_rendered += rows;
+    s->stats.frames[j - s->jobs].rows_rendered += rows;
     rc = 0;
 out:
     if (res)
@@ -332,31 +419,53 @@ out:
     return rc;
 }
 
-/* Advance the write front over every band whose results are all in. */
+/* Every row of the write job is queued: flush the last chunk, finish its output, move on. */
+static int finish_job(tf_supervisor *s, job_state *j)
+{
+    if (flush_chunk(s, j, 1))
+        return -1;
+    char err[1024] = "cannot finish the output";
+    tf_rowwriter *w = j->writer;
+    j->writer = NULL;
+    j->finished = 1;
+    s->stats.frames[j - s->jobs].done_ms = tf_now_msf();
+    if (s->cfg.hooks.finish && s->cfg.hooks.finish(s->cfg.hooks.ctx, (int)(j - s->jobs), w, err,
+                                                   sizeof err)) {
+        fail(s, "%s", err);
+        return -1;
+    }
+    s->stats.frames_done++;
+    s->write_job++;
+    return 0;
+}
+
+/* Advance the write front over every band whose results are all in, and over the end of each
+ * job whose rows are then all queued. */
 static void write_ready_bands(tf_supervisor *s)
 {
-    while (!s->error[0] && s->write_task < s->tasks.count) {
-        int band = tf_task_band(&s->tasks, (int)s->write_task);
-        int first = tf_band_first_task(&s->tasks, band);
-        int last = first + s->tasks.cols; /* exclusive */
+    while (!s->error[0] && s->write_task < s->total_tasks) {
+        job_state *j = &s->jobs[s->write_job];
+        int band = tf_task_band(&j->tasks, (int)(s->write_task - j->first_id));
+        int64_t first = j->first_id + tf_band_first_task(&j->tasks, band);
+        int64_t last = first + j->tasks.cols; /* exclusive */
         if (last > s->next_deal)
             return;
-        for (int id = first; id < last; id++) {
+        for (int64_t id = first; id < last; id++) {
             task_slot *t = slot_of(s, id);
             if (!t || !t->has_result)
                 return;
         }
-        if (write_band(s, band))
+        if (write_band(s, j, band))
             return;
-        for (int id = first; id < last; id++) {
+        for (int64_t id = first; id < last; id++) {
             task_slot *t = slot_of(s, id);
             withdraw_copies(s, t);
             t->id = -1;
         }
         s->write_task = last;
+        if (last == j->first_id + j->tasks.count && finish_job(s, j))
+            return;
     }
-    if (s->write_task == s->tasks.count)
-        flush_chunk(s, 1);
 }
 
 /* ---- hooks ---------------------------------------------------------------------------------- */
@@ -461,7 +570,7 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         drop_result(s, m.id, m.worker);
         return;
     }
-    tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
+    tf_rect r = rect_of(s, m.id);
     if (m.pixels_len != (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES) {
         tf_warn("result of task %" PRId64 " from %s has %zu pixel bytes, expected %zu; dropped",
                 m.id, peer_name(s, conn), m.pixels_len,
@@ -487,6 +596,8 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     }
     s->stats.primary_rays += m.counts.primary_rays;
     s->stats.shadow_rays += m.counts.shadow_rays;
+    s->stats.frames[job_of(s, m.id) - s->jobs].rays +=
+        m.counts.primary_rays + m.counts.shadow_rays;
     s->stats.external_rays += m.counts.external_rays;
     /* Rows are written by tf_supervisor_step, after the server has flushed its replies: writing
      * here would make the worker wait for the OK of its out while the coordinator compresses
@@ -592,7 +703,7 @@ static void deal_duplicate(tf_supervisor *s)
     ts_space_get_stats(s->space, &st);
     if (st.waiters == 0)
         return;
-    if (s->next_deal < s->tasks.count && s->next_deal - s->write_task < s->watermark)
+    if (s->next_deal < s->total_tasks && s->next_deal - s->write_task < s->watermark)
         return; /* fresh work can still be dealt */
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
         task_slot *t = slot_of(s, id);
@@ -627,7 +738,7 @@ static void update_watermark(tf_supervisor *s)
         workers = s->cfg.expected_workers;
     if (workers > AUTO_WM_MAX_WORKERS)
         workers = AUTO_WM_MAX_WORKERS;
-    int wm = s->tasks.cols + AUTO_WM_PER_WORKER * workers;
+    int wm = s->band_tasks + AUTO_WM_PER_WORKER * workers;
     if (wm > s->ring_size)
         wm = s->ring_size;
     s->watermark = wm;
@@ -649,18 +760,50 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     s->cfg = *cfg;
     if (s->cfg.max_task_failures < 1)
         s->cfg.max_task_failures = 3;
-    tf_tasks_init(&s->tasks, cfg->width, cfg->height, cfg->first_row, cfg->spec);
+    s->cfg.jobs = NULL; /* copied below */
+    s->njobs = cfg->njobs;
+    s->jobs = calloc(cfg->njobs > 0 ? (size_t)cfg->njobs : 1, sizeof *s->jobs);
+    s->stats.frames = calloc(cfg->njobs > 0 ? (size_t)cfg->njobs : 1, sizeof *s->stats.frames);
+    if (!s->jobs || !s->stats.frames) {
+        tf_seterr(err, errlen, "out of memory");
+        tf_supervisor_free(s);
+        return NULL;
+    }
+    s->stats.nframes = cfg->njobs;
+    for (int i = 0; i < cfg->njobs; i++) {
+        job_state *j = &s->jobs[i];
+        j->job = cfg->jobs[i];
+        if (j->job.first_row < 0 || j->job.first_row >= cfg->height) {
+            tf_seterr(err, errlen, "internal error: frame job %d starts at row %d of %d", i,
+                      j->job.first_row, cfg->height);
+            tf_supervisor_free(s);
+            return NULL;
+        }
+        tf_tasks_init(&j->tasks, cfg->width, cfg->height, j->job.first_row, cfg->spec);
+        j->first_id = s->total_tasks;
+        j->rows_written = j->job.first_row;
+        s->total_tasks += j->tasks.count;
+        s->stats.frames[i].frame = j->job.frame;
+        s->stats.frames[i].rows_resumed = j->job.first_row;
+        s->stats.rows_resumed += j->job.first_row;
+    }
+    if (cfg->njobs < 1) {
+        tf_seterr(err, errlen, "internal error: nothing to render");
+        tf_supervisor_free(s);
+        return NULL;
+    }
+    s->band_tasks = s->jobs[0].tasks.cols;
     s->auto_watermark = cfg->watermark <= 0;
-    if (!s->auto_watermark && cfg->watermark < s->tasks.cols) {
+    if (!s->auto_watermark && cfg->watermark < s->band_tasks) {
         snprintf(err, errlen,
                  "--watermark %d is smaller than the %d tasks of one row band: the first band "
                  "could never be written; use at least %d",
-                 cfg->watermark, s->tasks.cols, s->tasks.cols);
-        free(s);
+                 cfg->watermark, s->band_tasks, s->band_tasks);
+        tf_supervisor_free(s);
         return NULL;
     }
     s->ring_size = s->auto_watermark
-                       ? s->tasks.cols + AUTO_WM_PER_WORKER * AUTO_WM_MAX_WORKERS
+                       ? s->band_tasks + AUTO_WM_PER_WORKER * AUTO_WM_MAX_WORKERS
                        : cfg->watermark;
     s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
@@ -673,9 +816,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     }
     for (int i = 0; i < s->ring_size; i++)
         s->ring[i].id = -1;
-    s->rows_written = cfg->first_row;
-    s->stats.tasks_total = s->tasks.count;
-    s->stats.rows_resumed = cfg->first_row;
+    s->stats.tasks_total = s->total_tasks;
     s->stats.watermark = s->watermark;
     update_watermark(s);
     return s;
@@ -689,23 +830,54 @@ void tf_supervisor_free(tf_supervisor *s)
     free(s->leases);
     free(s->chunk);
     free(s->stats.workers);
+    free(s->stats.frames);
+    free(s->jobs);
     free(s);
 }
 
 void tf_supervisor_attach(tf_supervisor *s, ts_server *srv) { s->srv = srv; }
 
-void tf_supervisor_set_writer(tf_supervisor *s, tf_rowwriter *writer) { s->cfg.writer = writer; }
+void tf_supervisor_set_writer(tf_supervisor *s, int job, tf_rowwriter *writer)
+{
+    s->jobs[job].writer = writer;
+    s->jobs[job].opened = 1;
+}
+
+int tf_supervisor_take_open_writers(tf_supervisor *s, tf_rowwriter **out, int *jobs, int max)
+{
+    int n = 0;
+    for (int i = 0; i < s->njobs && n < max; i++)
+        if (s->jobs[i].writer) {
+            out[n] = s->jobs[i].writer;
+            jobs[n++] = i;
+            s->jobs[i].writer = NULL;
+        }
+    return n;
+}
+
+/* The first write error of any open output. */
+static int writer_failed(tf_supervisor *s)
+{
+    char err[512];
+    for (int i = s->write_job; i < s->njobs; i++) {
+        job_state *j = &s->jobs[i];
+        if (!j->opened)
+            break; /* jobs open in order */
+        if (j->writer && tf_rowwriter_error(j->writer, err, sizeof err)) {
+            fail(s, "%s", err);
+            return 1;
+        }
+    }
+    return 0;
+}
 
 void tf_supervisor_step(tf_supervisor *s, double now_ms)
 {
     (void)now_ms;
     if (s->error[0])
         return;
-    char err[512];
-    if (tf_rowwriter_error(s->cfg.writer, err, sizeof err)) {
-        fail(s, "%s", err);
+    if (writer_failed(s))
         return;
-    }
     assert(supervisor_ok(s));
     write_ready_bands(s);
     update_watermark(s);
@@ -716,7 +888,7 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
 
 int tf_supervisor_done(const tf_supervisor *s)
 {
-    return s->write_task == s->tasks.count && s->chunk_fill == 0 && !s->error[0];
+    return s->write_job == s->njobs && s->chunk_fill == 0 && !s->error[0];
 }
 
 const char *tf_supervisor_error(const tf_supervisor *s) { return s->error[0] ? s->error : NULL; }
@@ -733,7 +905,12 @@ void tf_supervisor_stop_workers(tf_supervisor *s)
         s->stop_sent = 1;
 }
 
-int tf_supervisor_rows_written(const tf_supervisor *s) { return s->rows_written; }
+int tf_supervisor_rows_written(const tf_supervisor *s, int job)
+{
+    return s->jobs[job].rows_written;
+}
+
+int tf_supervisor_write_job(const tf_supervisor *s) { return s->write_job; }
 
 const tf_farm_stats *tf_supervisor_stats(tf_supervisor *s)
 {

@@ -17,6 +17,14 @@
  * mean task times is dealt once more (a few at a time); the first result wins and later ones
  * are dropped.
  *
+ * Sequences.  A render is a list of frame jobs (one for a still): each job is a frame to render
+ * from its first row not yet on disk, into its own output.  Task ids run on across the jobs
+ * (job 0's tasks, then job 1's, ...), so the watermark and the write front simply move on from
+ * one frame into the next: the next frame's first tasks are dealt while the last ones of the
+ * frame before are in flight, and no worker waits at a frame boundary.  Each job's output is
+ * opened (hooks.open) when its first task is about to be dealt, unless it was given before
+ * (tf_supervisor_set_writer), and finished (hooks.finish) as soon as its last row is queued.
+ *
  * Memory is O(watermark): per-task state lives in a ring indexed by task id modulo its size
  * (sized for the largest auto watermark, 4096 workers: a few MB, whatever the image size). */
 #ifndef TF_SUPERVISOR_H
@@ -42,6 +50,14 @@ typedef struct tf_worker_stats {
     double busy_s;
 } tf_worker_stats;
 
+/* One frame of a sequence (DESIGN.md section 5: "frames"). */
+typedef struct tf_frame_stats {
+    int frame;                /* -1: a still */
+    int rows_resumed, rows_rendered;
+    uint64_t rays;            /* primary + shadow rays of this run's results for the frame */
+    double start_ms, done_ms; /* first task dealt, last row queued (0: not yet) */
+} tf_frame_stats;
+
 typedef struct tf_farm_stats {
     int64_t tasks_total, tasks_redealt, tasks_duplicated, results_dropped, task_failures;
     int rows_resumed, rows_rendered;
@@ -53,25 +69,47 @@ typedef struct tf_farm_stats {
     size_t max_tuple_bytes;
     int nworkers;
     tf_worker_stats *workers;
+    int nframes;              /* = the number of jobs */
+    tf_frame_stats *frames;
+    int frames_done;          /* jobs whose output is finished */
 } tf_farm_stats;
+
+typedef struct tf_frame_job {
+    int frame;                /* -1 for a still, else the animation frame (task tuples carry it) */
+    int first_row;            /* rows [0, first_row) of this frame are already on disk */
+} tf_frame_job;
+
+typedef struct tf_frame_hooks {
+    void *ctx;
+    /* Job `job` is about to be dealt: open its output, positioned at its first_row.  The
+     * writer, or NULL with one line in err (the render stops). */
+    tf_rowwriter *(*open)(void *ctx, int job, char *err, size_t errlen);
+    /* Every row of job `job` is queued to w: finish the file (w is the callee's from now on).
+     * 0, or -1 with one line in err (the render stops). */
+    int (*finish)(void *ctx, int job, tf_rowwriter *w, char *err, size_t errlen);
+} tf_frame_hooks;
 
 typedef struct tf_supervisor_config {
     int width, height;
-    int first_row;            /* rows [0, first_row) are already on disk */
+    int njobs;                /* >= 1 */
+    const tf_frame_job *jobs; /* copied */
+    tf_frame_hooks hooks;
     tf_task_spec spec;
     int watermark;            /* >= tasks per band (checked); 0 = auto (follows the workers) */
     int expected_workers;     /* auto watermark: workers to plan for before they connect */
     int max_task_failures;
-    tf_rowwriter *writer;     /* positioned at first_row (or set later with
-                               * tf_supervisor_set_writer); the supervisor queues rows to it */
 } tf_supervisor_config;
 
 /* NULL with a message on error (e.g. watermark smaller than a band). */
 tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cfg, char *err,
                                  size_t errlen);
 void tf_supervisor_free(tf_supervisor *sup);
-/* The writer of the output, once it exists (before the first tf_supervisor_step). */
-void tf_supervisor_set_writer(tf_supervisor *sup, tf_rowwriter *writer);
+/* The writer of job `job`'s output, opened by the caller before the first tf_supervisor_step
+ * (so the first output's problems show before any worker starts); others open through hooks. */
+void tf_supervisor_set_writer(tf_supervisor *sup, int job, tf_rowwriter *writer);
+/* Writers of jobs opened and not finished (for an interrupted render to close): fills up to
+ * max, returns how many; the supervisor forgets them. */
+int tf_supervisor_take_open_writers(tf_supervisor *sup, tf_rowwriter **out, int *jobs, int max);
 /* The server the workers use; needed to name peers.  Call once after ts_server_new. */
 void tf_supervisor_attach(tf_supervisor *sup, ts_server *srv);
 /* Hooks for ts_server_new (ctx = the supervisor). */
@@ -85,8 +123,10 @@ int tf_supervisor_done(const tf_supervisor *sup);
 const char *tf_supervisor_error(const tf_supervisor *sup);
 /* Put the stop tuple out so workers leave. */
 void tf_supervisor_stop_workers(tf_supervisor *sup);
-/* Rows handed to the writer so far (first_row + rows finished by this run). */
-int tf_supervisor_rows_written(const tf_supervisor *sup);
+/* Rows of job `job` handed to its writer so far (its first_row + rows this run). */
+int tf_supervisor_rows_written(const tf_supervisor *sup, int job);
+/* The job at the write front (njobs once every job is done). */
+int tf_supervisor_write_job(const tf_supervisor *sup);
 /* Live statistics (pointers valid until the next call into the supervisor). */
 const tf_farm_stats *tf_supervisor_stats(tf_supervisor *sup);
 /* Connected workers that said hello and have not left. */

@@ -238,9 +238,10 @@ static int64_t sleep_cost(int64_t t0, int64_t cost_ns)
 }
 
 /* The simulated worker's step: sleep the task's modelled cost; its pixels are zero. */
-static int sim_render(void *ctx, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
-                      int64_t *busy_ns, char *err, size_t errlen)
+static int sim_render(void *ctx, int frame, tf_rect rect, tf_pixel *px,
+                      tf_render_counts *counts, int64_t *busy_ns, char *err, size_t errlen)
 {
+    (void)frame; /* the simulation's cost map does not move with a camera */
     (void)err;
     (void)errlen;
     sim_worker *w = ctx;

@@ -123,7 +123,7 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
         }
         tf_render_counts counts = {0};
         int64_t busy = 0;
-        if (step->render(step->ctx, m.rect, px, &counts, &busy, err, sizeof err)) {
+        if (step->render(step->ctx, m.frame, m.rect, px, &counts, &busy, err, sizeof err)) {
             tf_warn("task %" PRId64 ": %s", m.id, err);
             if (report_failure(c, m.id, id, err, step)) {
                 status = TF_SERVE_UNDELIVERED;
@@ -147,19 +147,90 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
 
 /* ---- the real worker: a backend renders the rectangle ---- */
 
-typedef struct backend_ctx {
+/* A sequence's frames differ only in camera and sun: the worker keeps the terrain for the whole
+ * sequence and makes a backend per frame from a copy of the scene with that frame's camera
+ * (tf_scene_at_frame).  Tasks come in frame order, with the next frame's first tasks arriving
+ * while the last ones of the previous frame are still about, so the two most recent frames'
+ * backends are kept.  (The OpenCL backend is rebuilt per frame -- a new context and upload of
+ * the height field: correct, but slow for long sequences; the C backend's renderer is cheap.) */
+#define FRAME_CACHE 2
+
+typedef struct frame_backend {
+    int frame;           /* -1: empty */
+    tf_scene *scene;     /* the frame's scene copy, owned */
     tf_backend *b;
+    uint64_t used;       /* for least-recently-used replacement */
+} frame_backend;
+
+typedef struct backend_ctx {
+    tf_backend *b;       /* the scene as parsed (a still's, or frame 0's camera) */
     const tf_scene *s;
+    const tf_heightfield *hf;
+    const char *backend; /* the name the first backend was made with */
+    frame_backend frames[FRAME_CACHE];
+    uint64_t uses;
 } backend_ctx;
 
-static int backend_render(void *ctx, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
-                          int64_t *busy_ns, char *err, size_t errlen)
+static tf_backend *backend_for_frame(backend_ctx *bc, int frame, char *err, size_t errlen)
+{
+    const tf_animation *a = &bc->s->animation;
+    if (frame < 0 && a->frames == 0)
+        return bc->b;
+    if (a->frames == 0) {
+        tf_seterr(err, errlen, "task for frame %d of a still scene", frame);
+        return NULL;
+    }
+    if (frame < 0 || frame >= a->frames) {
+        tf_seterr(err, errlen, "task for frame %d of a %d-frame animation", frame, a->frames);
+        return NULL;
+    }
+    frame_backend *victim = &bc->frames[0];
+    for (int i = 0; i < FRAME_CACHE; i++) {
+        frame_backend *f = &bc->frames[i];
+        if (f->b && f->frame == frame) {
+            f->used = ++bc->uses;
+            return f->b;
+        }
+        if (!f->b || f->used < victim->used)
+            victim = f;
+    }
+    tf_backend_free(victim->b);
+    tf_scene_free(victim->scene);
+    memset(victim, 0, sizeof *victim);
+    victim->scene = tf_scene_at_frame(bc->s, frame);
+    if (!victim->scene) {
+        tf_seterr(err, errlen, "out of memory");
+        return NULL;
+    }
+    /* the backend that actually runs (auto may have fallen back to C) */
+    victim->b = tf_backend_new(tf_backend_name(bc->b), victim->scene, bc->hf, err, errlen);
+    if (!victim->b) {
+        tf_scene_free(victim->scene);
+        victim->scene = NULL;
+        return NULL;
+    }
+    victim->frame = frame;
+    victim->used = ++bc->uses;
+    return victim->b;
+}
+
+static void backend_ctx_free(backend_ctx *bc)
+{
+    for (int i = 0; i < FRAME_CACHE; i++) {
+        tf_backend_free(bc->frames[i].b);
+        tf_scene_free(bc->frames[i].scene);
+    }
+}
+
+static int backend_render(void *ctx, int frame, tf_rect rect, tf_pixel *px,
+                          tf_render_counts *counts, int64_t *busy_ns, char *err, size_t errlen)
 {
     backend_ctx *bc = ctx;
     if (rect.x + rect.w > bc->s->width || rect.y + rect.h > bc->s->height)
         return tf_seterr(err, errlen, "task rectangle outside the image");
     int64_t t0 = tf_now_ns();
-    int rc = tf_backend_render(bc->b, rect, px, counts, err, errlen);
+    tf_backend *b = backend_for_frame(bc, frame, err, errlen);
+    int rc = b ? tf_backend_render(b, rect, px, counts, err, errlen) : -1;
     *busy_ns = tf_now_ns() - t0;
     return rc;
 }
@@ -183,9 +254,10 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     char tag[32];
     snprintf(tag, sizeof tag, "worker %" PRId64, id);
     tf_log_set_tag(tag);
-    backend_ctx bc = {b, s};
+    backend_ctx bc = {b, s, hf, backend_name, {{0}}, 0};
     tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL};
     int rc = tf_worker_serve(c, id, &step);
+    backend_ctx_free(&bc);
     if (rc == TF_SERVE_LOST)
         tf_error("lost the coordinator: %s", ts_client_error(c));
     else if (rc == TF_SERVE_UNDELIVERED)

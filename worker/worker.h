@@ -23,9 +23,10 @@
  * cost).  The loop around it -- take, check, render, put the result back -- is shared. */
 typedef struct tf_worker_step {
     void *ctx;
-    /* Render rect into px[rect.w * rect.h]; fill *counts and *busy_ns (the time it took).
-     * 0, or -1 with one line in err (reported to the coordinator as a task failure). */
-    int (*render)(void *ctx, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
+    /* Render rect of `frame` (-1 for a still scene, else a frame of its animation) into
+     * px[rect.w * rect.h]; fill *counts and *busy_ns (the time it took).  0, or -1 with one
+     * line in err (reported to the coordinator as a task failure). */
+    int (*render)(void *ctx, int frame, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
                   int64_t *busy_ns, char *err, size_t errlen);
     /* Optional observers: a task was taken after waiting wait_ns for it; a tuple operation was
      * issued (in, out); the stop tuple was seen at monotonic time t_ns. */

@@ -85,7 +85,8 @@ def main():
     c.call(OUT, [(STRING, "next_worker"), (INT, me + 1)])
     c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, "failing"),
                  (INT, os.getpid()), (STRING, "c")])
-    task_tmpl = [(STRING, "task")] + [(INT, None)] * 5 + [(BLOB, None)]
+    # ("task", id, frame, x, y, w, h, excluded)
+    task_tmpl = [(STRING, "task")] + [(INT, None)] * 6 + [(BLOB, None)]
     failures = 0
     while True:
         try:
@@ -94,8 +95,8 @@ def main():
             print("failing worker %d: coordinator gone after %d failures" % (me, failures))
             return 1
         f = dec(body)
-        tid, excluded = f[1], f[6]
-        back = [(STRING, "task")] + [(INT, v) for v in f[1:6]] + [(BLOB, excluded)]
+        tid, excluded = f[1], f[7]
+        back = [(STRING, "task")] + [(INT, v) for v in f[1:7]] + [(BLOB, excluded)]
         if tid == -1:
             c.call(OUT, back)
             print("failing worker %d: stop after %d failures" % (me, failures))

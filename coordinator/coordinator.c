@@ -202,6 +202,12 @@ static int plan_output(render *r)
     r->job_out = calloc((size_t)r->nouts, sizeof *r->job_out);
     if (!r->jobs || !r->job_out)
         return step_failed(r, 1, "out of memory");
+    /* A sequence says what it found in one line rather than one per frame (refusals, which
+     * are errors, still name their frame's file). */
+    int level = tf_log_get_level(), many = r->nouts > 1;
+    if (many && level > TF_LOG_WARN)
+        tf_log_set_level(TF_LOG_WARN);
+    int complete = 0, partial = 0;
     for (int i = 0; i < r->nouts; i++) {
         frame_output *fo = &r->outs[i];
         tf_output_meta(&fo->meta, r->scene, r->o->scene_path);
@@ -210,14 +216,23 @@ static int plan_output(render *r)
             size_t n = strlen(fo->meta.settings);
             snprintf(fo->meta.settings + n, sizeof fo->meta.settings - n, " frame=%d", fo->frame);
         }
-        if (tf_output_plan_for(fo->output, &fo->meta, r->o->resume, r->o->overwrite, &fo->plan))
+        if (tf_output_plan_for(fo->output, &fo->meta, r->o->resume, r->o->overwrite, &fo->plan)) {
+            tf_log_set_level(level);
             return step_failed(r, 1, NULL);
+        }
+        complete += fo->plan.complete;
         if (fo->plan.complete)
             continue;
+        partial += fo->plan.resume_rows >= 0;
         r->jobs[r->njobs] = (tf_frame_job){fo->frame, fo->plan.resume_rows > 0
                                                           ? fo->plan.resume_rows : 0};
         r->job_out[r->njobs++] = i;
     }
+    tf_log_set_level(level);
+    if (many && r->o->resume)
+        tf_info("resuming the sequence %s: %d of %d frames complete on disk (skipped), %d in "
+                "progress (continued row by row), %d to render from the start",
+                r->pattern, complete, r->nouts, partial, r->njobs - partial);
     return 0;
 }
 
@@ -544,7 +559,8 @@ static int finish(render *r)
             if (r->outs[i].plan.complete)
                 skipped[nskipped++] = r->outs[i].frame;
         tf_run_info run = {wall, r->scene->width, r->scene->height, r->scene->path, r->pattern,
-                           r->tdesc, r->nworkers, r->hf_s, r->animated, skipped, nskipped};
+                           r->tdesc, r->nworkers, r->hf_s, r->t_start, r->animated, skipped,
+                           nskipped};
         int bad = tf_stats_write(r->o->stats_path, &run, st, err, sizeof err);
         free(skipped);
         if (bad)

@@ -93,15 +93,19 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
     fprintf(f, "%s]", st->nworkers ? "\n  " : "");
     if (run->sequence) {
         /* one object per frame rendered by this run (wall_s: from its first task dealt to its
-         * last row on disk; frames overlap, so these add up to more than wall_s) */
+         * last row on disk; frames overlap, so these add up to more than wall_s; start_s and
+         * done_s are those instants, in seconds since the run started) */
         fprintf(f, ",\n  \"frames\": [");
         for (int i = 0; i < st->nframes; i++) {
             const tf_frame_stats *fr = &st->frames[i];
             double wall = fr->done_ms > 0 && fr->start_ms > 0 ? (fr->done_ms - fr->start_ms) / 1e3
                                                               : 0;
             fprintf(f, "%s\n    {\"frame\": %d, \"wall_s\": %.3f, \"rays_total\": %llu, "
-                    "\"rows_resumed\": %d, \"rows_rendered\": %d}", i ? "," : "", fr->frame,
-                    wall, (unsigned long long)fr->rays, fr->rows_resumed, fr->rows_rendered);
+                    "\"rows_resumed\": %d, \"rows_rendered\": %d, \"start_s\": %.3f, "
+                    "\"done_s\": %.3f}", i ? "," : "", fr->frame, wall,
+                    (unsigned long long)fr->rays, fr->rows_resumed, fr->rows_rendered,
+                    fr->start_ms > 0 ? fr->start_ms / 1e3 - run->start_s : 0,
+                    fr->done_ms > 0 ? fr->done_ms / 1e3 - run->start_s : 0);
         }
         fprintf(f, "%s],\n  \"frames_skipped\": [", st->nframes ? "\n  " : "");
         for (int i = 0; i < run->nskipped; i++)

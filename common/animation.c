@@ -228,7 +228,7 @@ static int check_keys(const char *name, const int *frames, const int *lines, int
 }
 
 /* The key line to blame for frame f: the key that starts f's segment. */
-static int camera_line(const tf_animation *a, int f)
+int tf_animation_camera_line(const tf_animation *a, int f)
 {
     int k = 0;
     while (k + 1 < a->ncamera && a->camera[k + 1].frame <= f)
@@ -253,7 +253,7 @@ int tf_animation_check(const tf_animation *a, int pinhole, int *line, char *what
         tf_animation_camera_at(a, f, &pos, &look, &up, &fov);
         tf_vec3 dir = v3_sub(look, pos);
         double dlen = v3_len(dir), ulen = v3_len(up);
-        *line = camera_line(a, f);
+        *line = tf_animation_camera_line(a, f);
         if (!(dlen > 0)) {
             snprintf(what, len, "camera: at frame %d look_at meets position (the path of "
                      "look_at crosses the camera's)", f);

@@ -66,6 +66,9 @@ void tf_animation_sun_at(const tf_animation *a, double f, double *azimuth_deg,
  * line to blame and `what` to "key: what is wrong" (one line). */
 int tf_animation_check(const tf_animation *a, int pinhole, int *line, char *what, size_t len);
 
+/* The scene line of the camera key that starts frame f's segment (for messages). */
+int tf_animation_camera_line(const tf_animation *a, int f);
+
 struct tf_scene;
 /* Set s's camera and sun to those of frame f (whatever is animated; the rest unchanged).  The
  * scene hash is not changed: a frame belongs to its sequence's scene. */

@@ -25,6 +25,7 @@
 #include "linda/proto.h"
 #include "linda/sock.h"
 #include "scene.h"
+#include "coordinator/finisher.h"
 #include "coordinator/frames.h"
 #include "coordinator/local_workers.h"
 #include "coordinator/movie.h"
@@ -84,6 +85,8 @@ typedef struct render {
     ts_server_config cfg;
     ts_server *srv;
     tf_local_workers lw;
+    tf_finisher *finisher;       /* finishes each frame's file off the event loop */
+    char finish_error[1024];     /* a frame's file could not be finished */
     tf_tasks tasks;
     char tdesc[64];
     int no_workers;              /* supervise() stopped: no worker could run */
@@ -268,6 +271,35 @@ static int load_secret(render *r)
     return 0;
 }
 
+/* An animated camera whose path dips below the terrain renders the terrain from inside: not
+ * an error (the scene parses everywhere, and a networked-only render has no terrain to check
+ * against), but worth a warning naming the first such frame and its key's line. */
+static void warn_camera_underground(render *r)
+{
+    const tf_animation *a = &r->scene->animation;
+    if (a->ncamera < 2)
+        return;
+    int first = -1, count = 0;
+    double z = 0, ground = 0;
+    for (int i = 0; i < r->nouts; i++) {
+        tf_vec3 pos, look, up;
+        double fov;
+        tf_animation_camera_at(a, r->outs[i].frame, &pos, &look, &up, &fov);
+        if (pos.x < 0 || pos.y < 0 || pos.x > r->hf->extent || pos.y > r->hf->extent)
+            continue;
+        double g = tf_heightfield_height_at(r->hf, pos.x, pos.y);
+        if (pos.z > g)
+            continue;
+        if (count++ == 0)
+            first = r->outs[i].frame, z = pos.z, ground = g;
+    }
+    if (count > 0)
+        tf_warn("%s:%d: camera: at frame %d%s the camera is below the terrain (z %.1f, ground "
+                "%.1f): it sees the terrain from inside", r->o->scene_path,
+                tf_animation_camera_line(a, first), first,
+                count > 1 ? " and more frames after it" : "", z, ground);
+}
+
 /* 2. The terrain, built once before forking so every local worker shares it. */
 static int build_terrain(render *r)
 {
@@ -280,6 +312,7 @@ static int build_terrain(render *r)
         return step_failed(r, 1, err);
     r->hf_s = tf_now_s() - t0;
     tf_debug("height field %dx%d built in %.2f s", r->hf->n, r->hf->n, r->hf_s);
+    warn_camera_underground(r);
     return 0;
 }
 
@@ -311,11 +344,7 @@ static int finish_frame_writer(void *ctx, int job, tf_rowwriter *w, char *err, s
 {
     render *r = ctx;
     frame_output *fo = &r->outs[r->job_out[job]];
-    if (tf_rowwriter_finish(w, err, errlen))
-        return -1;
-    if (fo->frame >= 0)
-        tf_debug("frame %d finished: %s", fo->frame, fo->output);
-    return 0;
+    return tf_finisher_add(r->finisher, w, fo->output, err, errlen);
 }
 
 static int put_scene_tuples(ts_space *space, const tf_scene *s)
@@ -340,7 +369,8 @@ static int start_space(render *r)
     const tf_render_opts *o = r->o;
     tf_tasks_init(&r->tasks, r->scene->width, r->scene->height, r->jobs[0].first_row, r->spec);
     r->space = ts_space_new();
-    if (!r->space || put_scene_tuples(r->space, r->scene))
+    r->finisher = tf_finisher_new();
+    if (!r->space || !r->finisher || put_scene_tuples(r->space, r->scene))
         return step_failed(r, 1, "out of memory");
     int expected_workers = r->nworkers > 0 ? r->nworkers : 4;
     tf_supervisor_config scfg = {r->scene->width, r->scene->height, r->njobs, r->jobs,
@@ -445,13 +475,15 @@ static int supervise(render *r)
     if (r->animated)
         tf_progress_frames(&prog, r->nouts, r->nouts - r->njobs);
     double last_wait_note = tf_now_s();
-    while (!interrupted && !tf_supervisor_done(r->sup) && !tf_supervisor_error(r->sup)) {
+    while (!interrupted && !tf_supervisor_done(r->sup) && !tf_supervisor_error(r->sup) &&
+           !r->finish_error[0]) {
         if (ts_server_run_once(r->srv, 50) < 0) {
             tf_error("event loop failed: %s", strerror(errno));
             break;
         }
         double t = tf_now_s();
         tf_supervisor_step(r->sup, t * 1000.0);
+        tf_finisher_reap(r->finisher, r->finish_error, sizeof r->finish_error);
         tf_local_workers_reap(&r->lw, 1);
         const tf_farm_stats *st = tf_supervisor_stats(r->sup);
         int live = tf_supervisor_live_workers(r->sup);
@@ -474,7 +506,7 @@ static int supervise(render *r)
         }
     }
     tf_progress_clear(&prog);
-    return tf_supervisor_done(r->sup) ? 0 : -1;
+    return tf_supervisor_done(r->sup) && !r->finish_error[0] ? 0 : -1;
 }
 
 /* 5b. A render that did not finish: keep every row already queued, tell how to continue. */
@@ -491,6 +523,11 @@ static void stop_unfinished(render *r)
     while ((n = tf_supervisor_take_open_writers(r->sup, open, jobs, 64)) > 0)
         for (int i = 0; i < n; i++)
             tf_rowwriter_abandon(open[i]);
+    /* frames whose every row was queued are finished all the same */
+    if (!r->finish_error[0])
+        tf_finisher_wait(r->finisher, r->finish_error, sizeof r->finish_error);
+    if (!why && r->finish_error[0])
+        why = r->finish_error;
     const char *where = wj < r->njobs ? r->outs[r->job_out[wj]].output : "?";
     char frames[128] = "";
     if (r->animated)
@@ -532,6 +569,8 @@ static int finish(render *r)
 {
     char err[1024];
     tf_supervisor_stop_workers(r->sup);
+    if (tf_finisher_wait(r->finisher, err, sizeof err))
+        return step_failed(r, 1, err);
     tf_local_workers_drain(&r->lw, 5.0);
     for (int i = 0; i < 10 && ts_server_conn_count(r->srv) > 0; i++)
         ts_server_run_once(r->srv, 20); /* let networked workers read the stop tuple */
@@ -583,6 +622,7 @@ static void render_close(render *r)
             for (int i = 0; i < n; i++)
                 tf_rowwriter_abandon(open[i]);
     }
+    tf_finisher_free(r->finisher);
     tf_local_workers_free(&r->lw);
     ts_server_free(r->srv);
     tf_supervisor_free(r->sup);

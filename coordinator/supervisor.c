@@ -108,12 +108,15 @@ static int supervisor_ok(const tf_supervisor *s)
     if (!(0 <= s->write_task && s->write_task <= s->next_deal &&
           s->next_deal <= s->total_tasks))
         return 0; /* S1 */
-    if (s->write_job < s->njobs
-            ? !(s->write_task >= s->jobs[s->write_job].first_id &&
-                s->write_task < s->jobs[s->write_job].first_id +
-                                    s->jobs[s->write_job].tasks.count)
-            : s->write_task != s->total_tasks)
+    if (s->write_job < s->njobs) {
+        const job_state *j = &s->jobs[s->write_job];
+        if (j->tasks.count == 0 ? s->write_task != j->first_id
+                                : !(s->write_task >= j->first_id &&
+                                    s->write_task < j->first_id + j->tasks.count))
+            return 0; /* S1 */
+    } else if (s->write_task != s->total_tasks) {
         return 0; /* S1 */
+    }
     for (int j = 0; j < s->write_job && j < s->njobs; j++)
         if (!s->jobs[j].finished)
             return 0; /* S1 */
@@ -443,8 +446,15 @@ static int finish_job(tf_supervisor *s, job_state *j)
  * job whose rows are then all queued. */
 static void write_ready_bands(tf_supervisor *s)
 {
-    while (!s->error[0] && s->write_task < s->total_tasks) {
+    while (!s->error[0] && s->write_job < s->njobs) {
         job_state *j = &s->jobs[s->write_job];
+        if (j->tasks.count == 0) {
+            /* every row was on disk already (a frame killed while it was being finished):
+             * it only needs finishing */
+            if (open_job(s, j) || finish_job(s, j))
+                return;
+            continue;
+        }
         int band = tf_task_band(&j->tasks, (int)(s->write_task - j->first_id));
         int64_t first = j->first_id + tf_band_first_task(&j->tasks, band);
         int64_t last = first + j->tasks.cols; /* exclusive */
@@ -773,7 +783,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     for (int i = 0; i < cfg->njobs; i++) {
         job_state *j = &s->jobs[i];
         j->job = cfg->jobs[i];
-        if (j->job.first_row < 0 || j->job.first_row >= cfg->height) {
+        if (j->job.first_row < 0 || j->job.first_row > cfg->height) {
             tf_seterr(err, errlen, "internal error: frame job %d starts at row %d of %d", i,
                       j->job.first_row, cfg->height);
             tf_supervisor_free(s);

@@ -50,6 +50,8 @@ void tf_render_opts_init(tf_render_opts *o)
     o->lease_timeout_ms = 15000;
     o->max_task_failures = 3;
     o->fsync_interval_ms = 1000;
+    o->pixel = TF_PIXEL_HALF; /* see README: Performance, why half */
+    o->preview_interval_ms = 3000;
 }
 
 /* One output file: a still's, or one frame's of a sequence. */
@@ -75,11 +77,14 @@ typedef struct render {
     int njobs;
     int nworkers;                /* local workers to fork */
     tf_task_spec spec;
+    tf_exr_layout layout;        /* of every output file, from the task shape and --pixel */
+    char layout_text[64];
     const char *listen;
     uint8_t key[TF_KEY_BYTES];
     int have_key;
     tf_heightfield *hf;          /* built before forking, for the local workers */
     double hf_s;
+    double setup_cpu_s;          /* CPU time spent before supervising (terrain build included) */
     ts_space *space;
     tf_supervisor *sup;
     ts_server_config cfg;
@@ -197,10 +202,50 @@ static int load_scene(render *r)
     return 0;
 }
 
+/* Scanline-block tasks for a resumed scanline file when no --tasks says otherwise: bands of
+ * about 64 K pixels. */
+static tf_task_spec rows_spec_for(int width)
+{
+    int k = 65536 / (width > 0 ? width : 1);
+    tf_task_spec spec = {TF_TASKS_ROWS, 0, k < 1 ? 1 : k > 64 ? 64 : k};
+    return spec;
+}
+
+/* The output's layout follows the task shape: stamps are tiles of exactly the stamp (as the
+ * tasks clip it to the image), rows a scanline file.  A resume without --tasks (or --pixel)
+ * continues the file's own layout (a sequence's: its first frame on disk's; every frame
+ * of a sequence has the same layout, and a frame whose file differs is refused). */
+static void choose_layout(render *r)
+{
+    const tf_render_opts *o = r->o;
+    int pixel = o->pixel;
+    tf_exr_layout have;
+    int found = 0;
+    for (int i = 0; o->resume && i < r->nouts && !found; i++) /* the first frame on disk */
+        found = tf_output_existing_layout(r->outs[i].output, &have);
+    if (found && have.width == r->scene->width && have.height == r->scene->height) {
+        if (!o->tasks_given)
+            r->spec = have.tiled ? (tf_task_spec){TF_TASKS_STAMPS, have.tile_w, have.tile_h}
+                                 : rows_spec_for(have.width);
+        if (!o->pixel_given)
+            pixel = have.pixel;
+    }
+    tf_tasks all;
+    tf_tasks_init(&all, r->scene->width, r->scene->height, 0, r->spec);
+    r->layout = (tf_exr_layout){r->scene->width, r->scene->height,
+                                r->spec.shape == TF_TASKS_STAMPS, 0, 0, pixel};
+    if (r->layout.tiled) {
+        r->layout.tile_w = all.tw;
+        r->layout.tile_h = all.th;
+    }
+    tf_exr_layout_format(&r->layout, r->layout_text, sizeof r->layout_text);
+}
+
 /* 1b. Each output: fresh, resume, already complete, or refuse -- before any expensive work.
  *     The outputs not complete become the frame jobs. */
 static int plan_output(render *r)
 {
+    choose_layout(r);
     r->jobs = calloc((size_t)r->nouts, sizeof *r->jobs);
     r->job_out = calloc((size_t)r->nouts, sizeof *r->job_out);
     if (!r->jobs || !r->job_out)
@@ -213,7 +258,7 @@ static int plan_output(render *r)
     int complete = 0, partial = 0;
     for (int i = 0; i < r->nouts; i++) {
         frame_output *fo = &r->outs[i];
-        tf_output_meta(&fo->meta, r->scene, r->o->scene_path);
+        tf_output_meta(&fo->meta, r->scene, r->o->scene_path, &r->layout);
         if (fo->frame >= 0) {
             /* a frame's file names its frame: resuming one into another's file is refused */
             size_t n = strlen(fo->meta.settings);
@@ -227,8 +272,9 @@ static int plan_output(render *r)
         if (fo->plan.complete)
             continue;
         partial += fo->plan.resume_rows >= 0;
-        r->jobs[r->njobs] = (tf_frame_job){fo->frame, fo->plan.resume_rows > 0
-                                                          ? fo->plan.resume_rows : 0};
+        r->jobs[r->njobs] = (tf_frame_job){fo->frame,
+                                           fo->plan.resume_rows > 0 ? fo->plan.resume_rows : 0,
+                                           fo->plan.resume_rows >= 0 ? fo->plan.resume_tiles : 0};
         r->job_out[r->njobs++] = i;
     }
     tf_log_set_level(level);
@@ -324,22 +370,19 @@ static tf_rowwriter *open_frame_writer(void *ctx, int job, char *err, size_t err
     tf_exr_writer *writer = tf_output_open(fo->output, &fo->meta, &fo->plan, err, errlen);
     if (!writer)
         return NULL;
-    /* Room for two bands of rows: handing a finished band to the writer must not block the
-     * event loop (every worker waiting for a reply would wait for the compression).  Bands are
-     * capped in pixels (tasks.c), so this stays a few MB whatever the image size. */
-    int queue_rows = 2 * r->tasks.th + 8;
-    int queue_chunks = queue_rows / tf_exr_chunk_rows() > 2 ? queue_rows / tf_exr_chunk_rows() : 2;
-    tf_rowwriter *w = tf_rowwriter_start(writer, r->scene->width, r->scene->height,
-                                         tf_exr_chunk_rows(), queue_chunks,
-                                         r->o->fsync_interval_ms, fo->preview, fo->output, err,
-                                         errlen);
+    /* Room for two bands of results: handing results to the writer must not block the event
+     * loop.  Results are packed chunks, and bands are capped in pixels (tasks.c), so this stays
+     * a few MB whatever the image size. */
+    tf_rowwriter_config wcfg = {2 * r->tasks.cols + 8, r->o->fsync_interval_ms, fo->preview,
+                                r->o->preview_interval_ms, fo->output};
+    tf_rowwriter *w = tf_rowwriter_start(writer, &r->layout, &wcfg, err, errlen);
     if (!w)
         tf_exr_abandon(writer);
     return w;
 }
 
-/* Every row of job `job` is queued: finish its file (offset table, fsync, rename into place
- * as a complete render) and its preview. */
+/* Every task of job `job` is queued: finish its file (offset table, fsync) and its preview,
+ * in a thread of its own (finisher.h). */
 static int finish_frame_writer(void *ctx, int job, tf_rowwriter *w, char *err, size_t errlen)
 {
     render *r = ctx;
@@ -347,12 +390,12 @@ static int finish_frame_writer(void *ctx, int job, tf_rowwriter *w, char *err, s
     return tf_finisher_add(r->finisher, w, fo->output, err, errlen);
 }
 
-static int put_scene_tuples(ts_space *space, const tf_scene *s)
+static int put_scene_tuples(ts_space *space, const tf_scene *s, const char *layout)
 {
     tf_tuple t;
     tf_tuple_init(&t);
-    if (tf_tuple_pack(&t, "ssiis", "scene", s->text, (int64_t)s->width, (int64_t)s->height,
-                      s->hash_hex) ||
+    if (tf_tuple_pack(&t, "ssiiss", "scene", s->text, (int64_t)s->width, (int64_t)s->height,
+                      s->hash_hex, layout) ||
         ts_space_out(space, &t))
         return -1;
     tf_tuple_init(&t);
@@ -368,15 +411,25 @@ static int start_space(render *r)
     char err[1024];
     const tf_render_opts *o = r->o;
     tf_tasks_init(&r->tasks, r->scene->width, r->scene->height, r->jobs[0].first_row, r->spec);
+    tf_tasks_skip(&r->tasks, r->jobs[0].first_tiles);
     r->space = ts_space_new();
     r->finisher = tf_finisher_new();
-    if (!r->space || !r->finisher || put_scene_tuples(r->space, r->scene))
+    if (!r->space || !r->finisher || put_scene_tuples(r->space, r->scene, r->layout_text))
         return step_failed(r, 1, "out of memory");
     int expected_workers = r->nworkers > 0 ? r->nworkers : 4;
-    tf_supervisor_config scfg = {r->scene->width, r->scene->height, r->njobs, r->jobs,
-                                 {r, open_frame_writer, finish_frame_writer}, r->spec,
-                                 o->watermark /* 0: auto, following the connected workers */,
-                                 expected_workers, o->max_task_failures};
+    tf_supervisor_config scfg;
+    memset(&scfg, 0, sizeof scfg);
+    scfg.width = r->scene->width;
+    scfg.height = r->scene->height;
+    scfg.njobs = r->njobs;
+    scfg.jobs = r->jobs;
+    scfg.hooks = (tf_frame_hooks){r, open_frame_writer, finish_frame_writer};
+    scfg.layout = r->layout;
+    scfg.verify_chunks = o->verify_chunks;
+    scfg.spec = r->spec;
+    scfg.watermark = o->watermark; /* 0: auto, following the connected workers */
+    scfg.expected_workers = expected_workers;
+    scfg.max_task_failures = o->max_task_failures;
     r->sup = tf_supervisor_new(r->space, &scfg, err, sizeof err);
     if (!r->sup)
         return step_failed(r, 2, err);
@@ -443,14 +496,14 @@ static int start_workers(render *r)
         char host[256], port[32], e[128];
         if (tf_split_hostport(r->cfg.listen, host, sizeof host, port, sizeof port, e, sizeof e))
             snprintf(host, sizeof host, "?");
-        tf_info("rendering %s %s (%s), watermark %s, %d local worker%s, workers "
+        tf_info("rendering %s %s (%s, %s), watermark %s, %d local worker%s, workers "
                 "may join at %s:%d%s",
-                s->path, what, r->tdesc, wdesc, r->nworkers,
+                s->path, what, r->tdesc, r->layout_text, wdesc, r->nworkers,
                 r->nworkers == 1 ? "" : "s", host, ts_server_port(r->srv),
                 r->have_key ? " (secret required)" : "");
     } else {
-        tf_info("rendering %s %s (%s), watermark %s, %d local workers", s->path, what, r->tdesc,
-                wdesc, r->nworkers);
+        tf_info("rendering %s %s (%s, %s), watermark %s, %d local workers", s->path, what,
+                r->tdesc, r->layout_text, wdesc, r->nworkers);
     }
     return 0;
 }
@@ -598,8 +651,8 @@ static int finish(render *r)
             if (r->outs[i].plan.complete)
                 skipped[nskipped++] = r->outs[i].frame;
         tf_run_info run = {wall, r->scene->width, r->scene->height, r->scene->path, r->pattern,
-                           r->tdesc, r->nworkers, r->hf_s, r->t_start, r->animated, skipped,
-                           nskipped};
+                           r->tdesc, r->nworkers, r->hf_s, r->setup_cpu_s, r->layout_text,
+                           r->t_start, r->animated, skipped, nskipped};
         int bad = tf_stats_write(r->o->stats_path, &run, st, err, sizeof err);
         free(skipped);
         if (bad)
@@ -661,8 +714,11 @@ int tf_coordinator_run(const tf_render_opts *o)
         goto out;
     }
     previews_of_complete(&r);
-    if (load_secret(&r) || build_terrain(&r) || start_space(&r) || open_output(&r) ||
-        start_workers(&r))
+    if (load_secret(&r) || build_terrain(&r))
+        goto out;
+    /* all threads of this process; the forked workers are other processes */
+    r.setup_cpu_s = (double)tf_clock_ns(CLOCK_PROCESS_CPUTIME_ID) * 1e-9;
+    if (start_space(&r) || open_output(&r) || start_workers(&r))
         goto out;
     if (supervise(&r) != 0) {
         stop_unfinished(&r);

@@ -23,7 +23,16 @@
  * A task's copies: `in_space` task tuples sit in the space, `leased` are held by workers (one
  * lease record each in `leases`).  When both reach zero before a result arrived, the task is
  * lost and is dealt again.  A result for a task that already has one, or is written, is
- * removed from the space and dropped. */
+ * removed from the space and dropped.
+ *
+ * Results.  A result's chunks (farmproto.h) are checked when it arrives (on_out): a lease held
+ * by this connection, then tf_result_check's structure against the task (no per-pixel work),
+ * and with --verify-chunks that every chunk decodes.  A refused result is removed from the
+ * space, counts as a failure of its worker, and the task is dealt again; nothing of it reaches
+ * the file.  An accepted result stays in the space until every task before it is written; then
+ * it is taken out and its tuple handed, as is, to the writer thread (rowwriter.h), which writes
+ * its packed chunks raw.  Tasks are written one by one in id order, which is the file's chunk
+ * order (a tile, or a block of rows). */
 #include "coordinator/supervisor.h"
 #include "clock.h"
 
@@ -36,6 +45,7 @@
 #include <time.h>
 
 #include "farmproto.h"
+#include "image/exrencode.h"
 #include "log.h"
 
 #define MAX_FAILED_WORKERS 8  /* per task: distinct workers that failed it */
@@ -49,6 +59,7 @@
 typedef struct task_slot {
     int64_t id;          /* task in this slot, -1 if none */
     int has_result;
+    int64_t result_worker; /* whose result was accepted (its tuple waits in the space) */
     int duplicated;      /* a straggler copy was dealt */
     double taken_ms;     /* when a worker first took it (0: not yet) */
     int in_space;        /* task tuples in the space */
@@ -70,7 +81,7 @@ typedef struct job_state {
     int64_t first_id;        /* global id of its task 0 */
     tf_rowwriter *writer;    /* from open (or tf_supervisor_set_writer) until finish */
     int opened, finished;
-    int rows_written;        /* rows handed to its writer (plus first_row) */
+    int rows_written;        /* whole rows handed to its writer (plus first_row) */
 } job_state;
 
 struct tf_supervisor {
@@ -92,9 +103,9 @@ struct tf_supervisor {
     task_slot *ring;
     lease *leases;
     int nleases, cap_leases;
-    int chunk_rows;          /* rows per EXR chunk */
-    tf_pixel *chunk;         /* accumulator: chunk_rows rows of width pixels */
-    int chunk_fill;          /* rows in the accumulator (of the write job) */
+    tf_preview_grid grid;    /* of the output's progress preview */
+    uint8_t *verify_buf;     /* --verify-chunks: inflated bytes */
+    size_t verify_cap;
     int stop_sent;
     char error[512];
     tf_farm_stats stats;
@@ -150,7 +161,8 @@ static int supervisor_ok(const tf_supervisor *s)
 
 /* ---- small helpers ---------------------------------------------------------------------- */
 
-/* The job holding global task id (0 <= id < total_tasks), by binary search. */
+/* The job holding global task id (0 <= id < total_tasks), by binary search (a job with no
+ * tasks shares its first_id with the next one, which is the one returned). */
 static job_state *job_of(const tf_supervisor *s, int64_t id)
 {
     int lo = 0, hi = s->njobs - 1;
@@ -259,7 +271,7 @@ static int deal_copy(tf_supervisor *s, task_slot *t)
     return 0;
 }
 
-/* Job j's first task is about to be dealt: its output must exist. */
+/* Job j's first task is about to be dealt (or it has none): its output must exist. */
 static int open_job(tf_supervisor *s, job_state *j)
 {
     tf_frame_stats *fs = &s->stats.frames[j - s->jobs];
@@ -355,78 +367,38 @@ static void withdraw_copies(tf_supervisor *s, task_slot *t)
 
 /* ---- writing ------------------------------------------------------------------------------ */
 
-static int flush_chunk(tf_supervisor *s, job_state *j, int final)
+/* Task id is written next and has its result: take the accepted tuple out of the space and hand
+ * it to the writer thread.  Its chunks are never looked at here (they were checked). */
+static int write_task(tf_supervisor *s, job_state *j, task_slot *t)
 {
-    if (s->chunk_fill == 0 || (s->chunk_fill < s->chunk_rows && !final))
-        return 0;
-    if (tf_rowwriter_put(j->writer, s->chunk, s->chunk_fill)) {
+    tf_tuple tmpl, got;
+    tf_tuple_init(&got);
+    if (tf_result_template(&tmpl, t->id, t->result_worker) ||
+        ts_space_inp(s->space, &tmpl, &got) != 1) {
+        tf_tuple_clear(&tmpl);
+        fail(s, "internal error: the result of task %" PRId64 " left the space", t->id);
+        return -1;
+    }
+    tf_tuple_clear(&tmpl);
+    if (tf_rowwriter_put(j->writer, &got)) {
         char err[512];
         tf_rowwriter_error(j->writer, err, sizeof err);
         fail(s, "%s", err);
         return -1;
     }
-    j->rows_written += s->chunk_fill;
-    s->chunk_fill = 0;
+    tf_rect r = rect_of(s, t->id);
+    int end = r.y + r.h;
+    if (r.x + r.w == j->tasks.width && end > j->rows_written) { /* the last task of its rows */
+        s->stats.rows_rendered += end - j->rows_written;
+        s->stats.frames[j - s->jobs].rows_rendered += end - j->rows_written;
+        j->rows_written = end;
+    }
     return 0;
 }
 
-/* Band `band` of job j has every result: take them out of the space in order and write its
- * rows. */
-static int write_band(tf_supervisor *s, job_state *j, int band)
-{
-    int y0, rows;
-    tf_band_rows(&j->tasks, band, &y0, &rows);
-    int64_t first = j->first_id + tf_band_first_task(&j->tasks, band);
-    int cols = j->tasks.cols;
-    tf_tuple *res = calloc((size_t)cols, sizeof *res);
-    tf_result_msg *msg = calloc((size_t)cols, sizeof *msg);
-    int rc = -1;
-    if (!res || !msg) {
-        fail(s, "out of memory writing rows %d..%d", y0, y0 + rows - 1);
-        goto out;
-    }
-    for (int c = 0; c < cols; c++) {
-        tf_tuple tmpl;
-        if (tf_result_template(&tmpl, first + c, -1) ||
-            ts_space_inp(s->space, &tmpl, &res[c]) != 1 || tf_result_unpack(&res[c], &msg[c])) {
-            tf_tuple_clear(&tmpl);
-            fail(s, "internal error: result of task %" PRId64 " missing from the tuple space",
-                 first + c);
-            goto out;
-        }
-        tf_tuple_clear(&tmpl);
-    }
-    for (int row = 0; row < rows; row++) {
-        tf_pixel *dst = s->chunk + (size_t)s->chunk_fill * (size_t)j->tasks.width;
-        for (int c = 0; c < cols; c++) {
-            tf_rect r = rect_of(s, first + c);
-            tf_pixels_decode(msg[c].pixels + (size_t)row * (size_t)r.w * TF_PIXEL_WIRE_BYTES,
-                             dst + r.x, (size_t)r.w);
-        }
-        for (int x = 0; x < j->tasks.width; x++)
-            s->stats.spp_sum += dst[x].spp;
-        s->stats.pixels += (uint64_t)j->tasks.width;
-        s->chunk_fill++;
-        if (flush_chunk(s, j, 0))
-            goto out;
-    }
-    s->stats.rows_rendered += rows;
-    s->stats.frames[j - s->jobs].rows_rendered += rows;
-    rc = 0;
-out:
-    if (res)
-        for (int c = 0; c < cols; c++)
-            tf_tuple_clear(&res[c]);
-    free(res);
-    free(msg);
-    return rc;
-}
-
-/* Every row of the write job is queued: flush the last chunk, finish its output, move on. */
+/* Every task of the write job is queued: hand its output to hooks.finish, move on. */
 static int finish_job(tf_supervisor *s, job_state *j)
 {
-    if (flush_chunk(s, j, 1))
-        return -1;
     char err[1024] = "cannot finish the output";
     tf_rowwriter *w = j->writer;
     j->writer = NULL;
@@ -442,9 +414,9 @@ static int finish_job(tf_supervisor *s, job_state *j)
     return 0;
 }
 
-/* Advance the write front over every band whose results are all in, and over the end of each
- * job whose rows are then all queued. */
-static void write_ready_bands(tf_supervisor *s)
+/* Advance the write front over every task whose result is in, in id (= file) order, and over
+ * the end of each job whose tasks are then all queued. */
+static void write_ready_tasks(tf_supervisor *s)
 {
     while (!s->error[0] && s->write_job < s->njobs) {
         job_state *j = &s->jobs[s->write_job];
@@ -455,25 +427,17 @@ static void write_ready_bands(tf_supervisor *s)
                 return;
             continue;
         }
-        int band = tf_task_band(&j->tasks, (int)(s->write_task - j->first_id));
-        int64_t first = j->first_id + tf_band_first_task(&j->tasks, band);
-        int64_t last = first + j->tasks.cols; /* exclusive */
-        if (last > s->next_deal)
+        if (s->write_task >= s->next_deal)
             return;
-        for (int64_t id = first; id < last; id++) {
-            task_slot *t = slot_of(s, id);
-            if (!t || !t->has_result)
-                return;
-        }
-        if (write_band(s, j, band))
+        task_slot *t = slot_of(s, s->write_task);
+        if (!t || !t->has_result)
             return;
-        for (int64_t id = first; id < last; id++) {
-            task_slot *t = slot_of(s, id);
-            withdraw_copies(s, t);
-            t->id = -1;
-        }
-        s->write_task = last;
-        if (last == j->first_id + j->tasks.count && finish_job(s, j))
+        if (write_task(s, j, t))
+            return;
+        withdraw_copies(s, t);
+        t->id = -1;
+        s->write_task++;
+        if (s->write_task == j->first_id + j->tasks.count && finish_job(s, j))
             return;
     }
 }
@@ -566,6 +530,26 @@ static void remove_exact(tf_supervisor *s, const tf_tuple *tuple)
     tf_tuple_clear(&tmpl);
 }
 
+/* The checks of a result against its task (farmproto.h): structure always, and with
+ * --verify-chunks that every chunk decodes.  0 if accepted, else -1 with the reason. */
+static int refuse_result(tf_supervisor *s, tf_result_msg *m, tf_rect r, char *why, size_t len)
+{
+    if (tf_result_check(m, &s->cfg.layout, &s->grid, r, why, len))
+        return -1;
+    if (!s->cfg.verify_chunks)
+        return 0;
+    size_t off = 0;
+    for (size_t i = 0; i < m->nchunks; i++) {
+        tf_chunk_rec c;
+        tf_chunk_rec_get(m->index + i * TF_CHUNK_RECORD_BYTES, &c);
+        if (tf_exr_chunk_decodes(m->chunks + off, (size_t)c.packed, (size_t)c.unpacked,
+                                 &s->verify_buf, &s->verify_cap))
+            return tf_seterr(why, len, "chunk (%d, %d) does not decode", c.cx, c.cy);
+        off += (size_t)c.packed;
+    }
+    return 0;
+}
+
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
     tf_result_msg m;
@@ -581,16 +565,18 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         return;
     }
     tf_rect r = rect_of(s, m.id);
-    if (m.pixels_len != (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES) {
-        tf_warn("result of task %" PRId64 " from %s has %zu pixel bytes, expected %zu; dropped",
-                m.id, peer_name(s, conn), m.pixels_len,
-                (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES);
+    char why[256];
+    if (refuse_result(s, &m, r, why, sizeof why)) {
+        tf_warn("result of task %" PRId64 " (%dx%d at %d,%d) from %s refused: %s", m.id, r.w,
+                r.h, r.x, r.y, peer_name(s, conn), why);
+        s->stats.results_refused++;
         drop_result(s, m.id, m.worker);
         if (!note_failure(s, t, m.worker))
             redeal_if_lost(s, t);
         return;
     }
     t->has_result = 1;
+    t->result_worker = m.worker;
     if (t->duplicated)
         s->dups_in_flight--;
     withdraw_copies(s, t);
@@ -609,9 +595,10 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     s->stats.frames[job_of(s, m.id) - s->jobs].rays +=
         m.counts.primary_rays + m.counts.shadow_rays;
     s->stats.external_rays += m.counts.external_rays;
-    /* Rows are written by tf_supervisor_step, after the server has flushed its replies: writing
-     * here would make the worker wait for the OK of its out while the coordinator compresses
-     * and writes the band. */
+    s->stats.spp_sum += (double)m.spp_total;
+    s->stats.pixels += m.counts.pixels;
+    /* Results are handed to the writer by tf_supervisor_step, after the server has flushed its
+     * replies: the worker does not wait for anything of the writing. */
 }
 
 static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
@@ -779,6 +766,11 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         tf_supervisor_free(s);
         return NULL;
     }
+    if (cfg->njobs < 1) {
+        tf_seterr(err, errlen, "internal error: nothing to render");
+        tf_supervisor_free(s);
+        return NULL;
+    }
     s->stats.nframes = cfg->njobs;
     for (int i = 0; i < cfg->njobs; i++) {
         job_state *j = &s->jobs[i];
@@ -790,17 +782,13 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
             return NULL;
         }
         tf_tasks_init(&j->tasks, cfg->width, cfg->height, j->job.first_row, cfg->spec);
+        tf_tasks_skip(&j->tasks, j->job.first_tiles);
         j->first_id = s->total_tasks;
         j->rows_written = j->job.first_row;
         s->total_tasks += j->tasks.count;
         s->stats.frames[i].frame = j->job.frame;
         s->stats.frames[i].rows_resumed = j->job.first_row;
         s->stats.rows_resumed += j->job.first_row;
-    }
-    if (cfg->njobs < 1) {
-        tf_seterr(err, errlen, "internal error: nothing to render");
-        tf_supervisor_free(s);
-        return NULL;
     }
     s->band_tasks = s->jobs[0].tasks.cols;
     s->auto_watermark = cfg->watermark <= 0;
@@ -817,9 +805,8 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
                        : cfg->watermark;
     s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
-    s->chunk_rows = tf_exr_chunk_rows();
-    s->chunk = calloc((size_t)s->chunk_rows * (size_t)cfg->width, sizeof *s->chunk);
-    if (!s->ring || !s->chunk) {
+    s->grid = tf_preview_grid_for(cfg->width, cfg->height);
+    if (!s->ring) {
         tf_seterr(err, errlen, "out of memory");
         tf_supervisor_free(s);
         return NULL;
@@ -838,7 +825,7 @@ void tf_supervisor_free(tf_supervisor *s)
         return;
     free(s->ring);
     free(s->leases);
-    free(s->chunk);
+    free(s->verify_buf);
     free(s->stats.workers);
     free(s->stats.frames);
     free(s->jobs);
@@ -889,7 +876,7 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
     if (writer_failed(s))
         return;
     assert(supervisor_ok(s));
-    write_ready_bands(s);
+    write_ready_tasks(s);
     update_watermark(s);
     deal_new_tasks(s);
     deal_duplicate(s);
@@ -898,7 +885,7 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
 
 int tf_supervisor_done(const tf_supervisor *s)
 {
-    return s->write_job == s->njobs && s->chunk_fill == 0 && !s->error[0];
+    return s->write_job == s->njobs && !s->error[0];
 }
 
 const char *tf_supervisor_error(const tf_supervisor *s) { return s->error[0] ? s->error : NULL; }

@@ -2,10 +2,11 @@
  * space that runs in the coordinator's event-loop thread.
  *
  * It deals ("task", ...) tuples in id order, never more than `watermark` tasks beyond the write
- * front (the first task whose rows are not yet on disk), so the space holds a bounded number of
- * bytes whatever the image size.  Results wait in the space until their whole band is done;
- * then it takes them out in order, writes the band's rows to the OpenEXR checkpoint and makes
- * them durable at a bounded interval (through the writer thread, rowwriter.h).
+ * front (the first task not yet written), so the space holds a bounded number of bytes whatever
+ * the image size.  Results -- finished OpenEXR chunks the workers encoded (farmproto.h) -- are
+ * checked against their task as they arrive and wait in the space until every task before
+ * them is written; then it takes them out in order and hands them to the writer thread
+ * (rowwriter.h), which writes the chunks raw and makes them durable at a bounded interval.
  *
  * Faults.  Every take of a task by a connection is a lease (server hook on_take).  When a
  * connection closes (worker killed, link cut, silence timeout) while it holds leases, those
@@ -18,12 +19,13 @@
  * are dropped.
  *
  * Sequences.  A render is a list of frame jobs (one for a still): each job is a frame to render
- * from its first row not yet on disk, into its own output.  Task ids run on across the jobs
- * (job 0's tasks, then job 1's, ...), so the watermark and the write front simply move on from
- * one frame into the next: the next frame's first tasks are dealt while the last ones of the
- * frame before are in flight, and no worker waits at a frame boundary.  Each job's output is
- * opened (hooks.open) when its first task is about to be dealt, unless it was given before
- * (tf_supervisor_set_writer), and finished (hooks.finish) as soon as its last row is queued.
+ * from its first row (and tile) not yet on disk, into its own output.  Task ids run on across
+ * the jobs (job 0's tasks, then job 1's, ...), so the watermark and the write front simply move
+ * on from one frame into the next: the next frame's first tasks are dealt while the last ones
+ * of the frame before are in flight, and no worker waits at a frame boundary.  Each job's
+ * output is opened (hooks.open) when its first task is about to be dealt, unless it was given
+ * before (tf_supervisor_set_writer), and finished (hooks.finish) as soon as its last task is
+ * written.
  *
  * Memory is O(watermark): per-task state lives in a ring indexed by task id modulo its size
  * (sized for the largest auto watermark, 4096 workers: a few MB, whatever the image size). */
@@ -50,16 +52,17 @@ typedef struct tf_worker_stats {
     double busy_s;
 } tf_worker_stats;
 
-/* One frame of a sequence (DESIGN.md section 5: "frames"). */
+/* One frame of a sequence (docs/contract.md: "frames"). */
 typedef struct tf_frame_stats {
     int frame;                /* -1: a still */
     int rows_resumed, rows_rendered;
     uint64_t rays;            /* primary + shadow rays of this run's results for the frame */
-    double start_ms, done_ms; /* first task dealt, last row queued (0: not yet) */
+    double start_ms, done_ms; /* first task dealt, last task written (0: not yet) */
 } tf_frame_stats;
 
 typedef struct tf_farm_stats {
     int64_t tasks_total, tasks_redealt, tasks_duplicated, results_dropped, task_failures;
+    int64_t results_refused;  /* failed the result checks (structure, --verify-chunks) */
     int rows_resumed, rows_rendered;
     uint64_t primary_rays, shadow_rays, external_rays;
     double spp_sum;           /* sum of the spp channel over rendered pixels */
@@ -71,20 +74,21 @@ typedef struct tf_farm_stats {
     tf_worker_stats *workers;
     int nframes;              /* = the number of jobs */
     tf_frame_stats *frames;
-    int frames_done;          /* jobs whose output is finished */
+    int frames_done;          /* jobs whose output was handed to hooks.finish */
 } tf_farm_stats;
 
 typedef struct tf_frame_job {
     int frame;                /* -1 for a still, else the animation frame (task tuples carry it) */
     int first_row;            /* rows [0, first_row) of this frame are already on disk */
+    int first_tiles;          /* and, in a tiled file, this many tiles of the next tile row */
 } tf_frame_job;
 
 typedef struct tf_frame_hooks {
     void *ctx;
-    /* Job `job` is about to be dealt: open its output, positioned at its first_row.  The
+    /* Job `job` is about to be dealt: open its output, positioned after what is on disk.  The
      * writer, or NULL with one line in err (the render stops). */
     tf_rowwriter *(*open)(void *ctx, int job, char *err, size_t errlen);
-    /* Every row of job `job` is queued to w: finish the file (w is the callee's from now on).
+    /* Every task of job `job` is queued to w: finish the file (w is the callee's from now on).
      * 0, or -1 with one line in err (the render stops). */
     int (*finish)(void *ctx, int job, tf_rowwriter *w, char *err, size_t errlen);
 } tf_frame_hooks;
@@ -94,6 +98,8 @@ typedef struct tf_supervisor_config {
     int njobs;                /* >= 1 */
     const tf_frame_job *jobs; /* copied */
     tf_frame_hooks hooks;
+    tf_exr_layout layout;     /* of the output: what results must carry (farmproto.h) */
+    int verify_chunks;        /* --verify-chunks: also check that every chunk decodes */
     tf_task_spec spec;
     int watermark;            /* >= tasks per band (checked); 0 = auto (follows the workers) */
     int expected_workers;     /* auto watermark: workers to plan for before they connect */

@@ -118,3 +118,12 @@ make_partial() {
     kill -KILL $mp_pid; wait $mp_pid 2>/dev/null
     sleep 0.1   # its forked workers follow it (PR_SET_PDEATHSIG)
 }
+
+# same_pixels A B WHAT: the two renders must hold bit-identical decoded pixels (for files whose
+# layout differs -- scanline vs tiled, another tile size -- where cmp cannot apply).
+EXRCMP=${TF_BUILD:-$TF_ROOT/build}/tools/exrcmp
+same_pixels() {
+    [ -x "$EXRCMP" ] || fail "no $EXRCMP (make build/tools/exrcmp)"
+    out=$("$EXRCMP" "$1" "$2" 2>&1) || fail "$3: $2 and $1 differ: $out"
+    say "$3: $out, as the reference"
+}

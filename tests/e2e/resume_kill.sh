@@ -1,5 +1,5 @@
 #!/bin/sh
-# resume_kill.sh: DESIGN.md sections 2-3, issue 5: the coordinator can be SIGKILLed at any
+# resume_kill.sh: docs/contract.md sections 2-3, issue 5: the coordinator can be SIGKILLed at any
 # instant, with workers holding tasks, and `render --resume` continues the same render: rows on
 # disk are kept (rows_resumed), never rendered again, and the final image is byte-identical to
 # an uninterrupted render.  Kills land while the new file's header is written, the instant the

@@ -450,8 +450,22 @@ static int start_space(render *r)
     return 0;
 }
 
-/* 4a. The first output file and its writer thread (the supervisor opens the others through
- *     open_frame_writer when it starts dealing their frames). */
+/* 4a. Fork the local workers.  They are forked before the writer thread starts: a child of a
+ *    multi-threaded process may inherit a lock some other thread held at the fork (ASan's
+ *    allocator's was seen to hang a worker for good), so the coordinator forks while it is
+ *    still one thread.  They wait in `in` until the supervisor deals the first task. */
+static int start_workers(render *r)
+{
+    char err[1024];
+    if (tf_local_workers_start(&r->lw, r->nworkers, r->srv, r->scene, r->hf, r->o->backend, err,
+                               sizeof err))
+        return step_failed(r, 1, err);
+    return 0;
+}
+
+/* 4b. The first output file and its writer thread (see start_workers for why it comes second;
+ *     the supervisor opens the other frames' outputs through open_frame_writer as it starts
+ *     dealing them). */
 static int open_output(render *r)
 {
     char err[1024];
@@ -471,13 +485,9 @@ static const char *describe_tasks(const tf_task_spec *spec, char *buf, size_t le
     return buf;
 }
 
-/* 4b. Fork the local workers, and say where networked ones may join. */
-static int start_workers(render *r)
+/* 5a. Say what is rendered and where networked workers may join. */
+static void announce(render *r)
 {
-    char err[1024];
-    if (tf_local_workers_start(&r->lw, r->nworkers, r->srv, r->scene, r->hf, r->o->backend, err,
-                               sizeof err))
-        return step_failed(r, 1, err);
     char wdesc[32];
     describe_tasks(&r->spec, r->tdesc, sizeof r->tdesc);
     if (r->o->watermark > 0)
@@ -505,7 +515,6 @@ static int start_workers(render *r)
         tf_info("rendering %s %s (%s, %s), watermark %s, %d local workers", s->path, what,
                 r->tdesc, r->layout_text, wdesc, r->nworkers);
     }
-    return 0;
 }
 
 /* Rows on disk or queued over the whole render (resumed rows included), for the progress line;
@@ -519,7 +528,7 @@ static int rows_done(const render *r, int *writing_frame)
     return done;
 }
 
-/* 5. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
+/* 5b. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
 static int supervise(render *r)
 {
     tf_progress prog;
@@ -562,7 +571,7 @@ static int supervise(render *r)
     return tf_supervisor_done(r->sup) && !r->finish_error[0] ? 0 : -1;
 }
 
-/* 5b. A render that did not finish: keep every row already queued, tell how to continue. */
+/* 5c. A render that did not finish: keep every row already queued, tell how to continue. */
 static void stop_unfinished(render *r)
 {
     const char *why = tf_supervisor_error(r->sup);
@@ -718,8 +727,9 @@ int tf_coordinator_run(const tf_render_opts *o)
         goto out;
     /* all threads of this process; the forked workers are other processes */
     r.setup_cpu_s = (double)tf_clock_ns(CLOCK_PROCESS_CPUTIME_ID) * 1e-9;
-    if (start_space(&r) || open_output(&r) || start_workers(&r))
+    if (start_space(&r) || start_workers(&r) || open_output(&r))
         goto out;
+    announce(&r);
     if (supervise(&r) != 0) {
         stop_unfinished(&r);
         goto out;

@@ -200,16 +200,16 @@ static void *writer_main(void *arg)
         if (rw->count == 0 && rw->stop)
             break;
         int have = rw->count > 0 && !rw->failed;
-        tf_tuple item;
-        tf_tuple_init(&item);
-        if (have)
-            tf_tuple_move(&item, &rw->slot[rw->head]);
+        /* The head slot stays in the queue (R2) while it is written: the producer touches only
+         * the slot at head + count, and waits while the queue is full, so this one is ours
+         * until count is decremented below.  (Moving the tuple out here left an empty slot in
+         * the queue, which the producer's check of R2 caught under make asan.) */
+        tf_tuple *item = have ? &rw->slot[rw->head] : NULL;
         pthread_mutex_unlock(&rw->mu);
 
         int rc = 0;
         if (have) {
-            rc = write_result(rw, &item, err, sizeof err);
-            tf_tuple_clear(&item);
+            rc = write_result(rw, item, err, sizeof err);
             dirty = 1;
         }
         double now = tf_now_msf();
@@ -230,6 +230,7 @@ static void *writer_main(void *arg)
         if (rows > rw->rows_written)
             rw->rows_written = rows;
         if (have) {
+            tf_tuple_clear(&rw->slot[rw->head]);
             rw->head = (rw->head + 1) % rw->depth;
             rw->count--;
             pthread_cond_signal(&rw->nonfull);

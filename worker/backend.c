@@ -15,6 +15,7 @@ struct tf_backend {
     enum backend_kind kind;
     tf_renderer *renderer;   /* BACKEND_C */
     tf_cl_backend *cl;       /* BACKEND_OPENCL */
+    const tf_heightfield *hf;
 };
 
 tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightfield *hf,
@@ -25,6 +26,7 @@ tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightf
         tf_seterr(err, errlen, "out of memory");
         return NULL;
     }
+    b->hf = hf;
     if (!strcmp(name, "c")) {
         b->kind = BACKEND_C;
         b->renderer = tf_renderer_new(s, hf, err, errlen);
@@ -59,6 +61,18 @@ int tf_backend_render(tf_backend *b, tf_rect rect, tf_pixel *out, tf_render_coun
 }
 
 const char *tf_backend_name(const tf_backend *b) { return b->kind == BACKEND_C ? "c" : "opencl"; }
+
+int tf_backend_set_scene(tf_backend *b, const tf_scene *s, char *err, size_t errlen)
+{
+    if (b->kind == BACKEND_OPENCL)
+        return tf_cl_backend_set_scene(b->cl, s, err, errlen);
+    tf_renderer *r = tf_renderer_new(s, b->hf, err, errlen);
+    if (!r)
+        return -1;
+    tf_renderer_free(b->renderer);
+    b->renderer = r;
+    return 0;
+}
 
 void tf_backend_free(tf_backend *b)
 {

@@ -19,6 +19,10 @@ tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightf
 int tf_backend_render(tf_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
                       char *err, size_t errlen);
 const char *tf_backend_name(const tf_backend *b);
+/* Render s from now on: a scene that differs from the backend's only in camera and sun (a
+ * frame of the same sequence).  s must outlive its use.  0, or -1 with a message (the backend
+ * then still renders its previous scene). */
+int tf_backend_set_scene(tf_backend *b, const tf_scene *s, char *err, size_t errlen);
 void tf_backend_free(tf_backend *b);
 
 #endif

@@ -436,6 +436,20 @@ static cl_mem upload(tf_cl_backend *b, const void *data, size_t bytes, cl_int *r
                           rc);
 }
 
+/* The max/min grid levels' offsets into I[]; their total size, or 0 if it does not fit an int. */
+static size_t level_offsets(const tf_heightfield *hf, int *I)
+{
+    size_t total = 0;
+    for (int L = 0; L < hf->levels; L++) {
+        size_t side = (size_t)(hf->cells >> L);
+        if (total > (size_t)INT_MAX - side * side)
+            return 0;
+        I[TFI_LEVEL_OFFSET + L] = (int)total;
+        total += side * side;
+    }
+    return total;
+}
+
 /* Upload the parameters, heights, the max/min mipmap (levels concatenated, each cell's max and
  * min side by side) and the noise permutation.  The grid level offsets go into I[] before I is uploaded. */
 static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
@@ -449,15 +463,10 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
         return -1;
     }
     fill_params(b->renderer, P, I);
-    size_t total = 0;
-    for (int L = 0; L < hf->levels; L++) {
-        size_t side = (size_t)(hf->cells >> L);
-        if (total > (size_t)INT_MAX - side * side) {
-            tf_seterr(err, errlen, "OpenCL: height field too large for the grid offsets");
-            return -1;
-        }
-        I[TFI_LEVEL_OFFSET + L] = (int)total;
-        total += side * side;
+    size_t total = level_offsets(hf, I);
+    if (total == 0) {
+        tf_seterr(err, errlen, "OpenCL: height field too large for the grid offsets");
+        return -1;
     }
     /* (max, min) interleaved: the walk reads both of a cell at once (packet_trace.cl) */
     float *mm = total <= SIZE_MAX / (2 * sizeof *mm) ? malloc(total * 2 * sizeof *mm) : NULL;
@@ -538,6 +547,33 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
 fail:
     tf_cl_backend_free(b);
     return NULL;
+}
+
+int tf_cl_backend_set_scene(tf_cl_backend *b, const tf_scene *s, char *err, size_t errlen)
+{
+    const tf_heightfield *hf = b->renderer->hf;
+    tf_renderer *r = tf_renderer_new(s, hf, err, errlen);
+    if (!r)
+        return -1;
+    if (r->jitter_key != b->jitter_key || r->lattice != b->lattice) {
+        tf_renderer_free(r);
+        return tf_seterr(err, errlen, "OpenCL: the new scene differs in more than its camera and sun");
+    }
+    double P[TFP_COUNT] = {0};
+    int I[TFI_COUNT] = {0};
+    fill_params(r, P, I);
+    level_offsets(hf, I); /* fitted when the backend was made */
+    /* the queue is in order: the writes land after every kernel already enqueued */
+    cl_int rc = clEnqueueWriteBuffer(b->queue, b->P, CL_TRUE, 0, sizeof P, P, 0, NULL, NULL);
+    if (rc == CL_SUCCESS)
+        rc = clEnqueueWriteBuffer(b->queue, b->I, CL_TRUE, 0, sizeof I, I, 0, NULL, NULL);
+    if (rc != CL_SUCCESS) {
+        tf_renderer_free(r);
+        return tf_seterr(err, errlen, "OpenCL: cannot upload the new camera (error %d)", rc);
+    }
+    tf_renderer_free(b->renderer);
+    b->renderer = r;
+    return 0;
 }
 
 const char *tf_cl_backend_device(const tf_cl_backend *b) { return b->device_name; }

@@ -18,6 +18,11 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
 int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
                          char *err, size_t errlen);
 void tf_cl_backend_free(tf_cl_backend *b);
+/* Render s from now on: a scene that differs from the backend's only in camera and sun (a
+ * frame of the same sequence, tf_scene_at_frame).  Uploads the new parameters (a few hundred
+ * bytes); the program and the height field stay.  s must outlive the backend's use of it.
+ * 0, or -1 with a message (the backend then still renders its previous scene). */
+int tf_cl_backend_set_scene(tf_cl_backend *b, const tf_scene *s, char *err, size_t errlen);
 /* The chosen device's name, and the seconds clBuildProgram took (a PoCL cache hit is fast). */
 const char *tf_cl_backend_device(const tf_cl_backend *b);
 double tf_cl_backend_build_seconds(const tf_cl_backend *b);

@@ -174,79 +174,76 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
 
 /* ---- the real worker: a backend renders the rectangle ---- */
 
-/* A sequence's frames differ only in camera and sun: the worker keeps the terrain for the whole
- * sequence and makes a backend per frame from a copy of the scene with that frame's camera
- * (tf_scene_at_frame).  Tasks come in frame order, with the next frame's first tasks arriving
- * while the last ones of the previous frame are still about, so the two most recent frames'
- * backends are kept.  (The OpenCL backend is rebuilt per frame -- a new context and upload of
- * the height field: correct, but slow for long sequences; the C backend's renderer is cheap.) */
+/* A sequence's frames differ only in camera and sun: the worker keeps its terrain and its one
+ * backend for the whole sequence, and when a task is of another frame than the last one it
+ * points the backend at a copy of the scene with that frame's camera and sun
+ * (tf_scene_at_frame, tf_backend_set_scene: a new camera setup, and for OpenCL an upload of a
+ * few hundred bytes of parameters).  Tasks come in frame order, the next frame's first ones
+ * mixed with the last of the frame before, so the two latest frames' scene copies are kept. */
 #define FRAME_CACHE 2
 
-typedef struct frame_backend {
-    int frame;           /* -1: empty */
-    tf_scene *scene;     /* the frame's scene copy, owned */
-    tf_backend *b;
+typedef struct frame_scene {
+    int frame;
+    tf_scene *scene;     /* owned; NULL: empty */
     uint64_t used;       /* for least-recently-used replacement */
-} frame_backend;
+} frame_scene;
 
 typedef struct backend_ctx {
-    tf_backend *b;       /* the scene as parsed (a still's, or frame 0's camera) */
-    const tf_scene *s;
-    const tf_heightfield *hf;
-    const char *backend; /* the name the first backend was made with */
-    frame_backend frames[FRAME_CACHE];
+    tf_backend *b;
+    const tf_scene *s;   /* the scene as parsed (a still's, or frame 0's camera) */
+    int frame;           /* the frame b renders now: -1 = s itself */
+    frame_scene frames[FRAME_CACHE];
     uint64_t uses;
 } backend_ctx;
 
-static tf_backend *backend_for_frame(backend_ctx *bc, int frame, char *err, size_t errlen)
+/* The scene of `frame`, from the cache or made (replacing the least recently used copy, never
+ * the one the backend renders now). */
+static const tf_scene *scene_of_frame(backend_ctx *bc, int frame)
 {
-    const tf_animation *a = &bc->s->animation;
-    if (frame < 0 && a->frames == 0)
-        return bc->b;
-    if (a->frames == 0) {
-        tf_seterr(err, errlen, "task for frame %d of a still scene", frame);
-        return NULL;
-    }
-    if (frame < 0 || frame >= a->frames) {
-        tf_seterr(err, errlen, "task for frame %d of a %d-frame animation", frame, a->frames);
-        return NULL;
-    }
-    frame_backend *victim = &bc->frames[0];
+    frame_scene *victim = NULL;
     for (int i = 0; i < FRAME_CACHE; i++) {
-        frame_backend *f = &bc->frames[i];
-        if (f->b && f->frame == frame) {
+        frame_scene *f = &bc->frames[i];
+        if (f->scene && f->frame == frame) {
             f->used = ++bc->uses;
-            return f->b;
+            return f->scene;
         }
-        if (!f->b || f->used < victim->used)
+        if (f->scene && f->frame == bc->frame)
+            continue;
+        if (!victim || !f->scene || (victim->scene && f->used < victim->used))
             victim = f;
     }
-    tf_backend_free(victim->b);
+    tf_scene *copy = victim ? tf_scene_at_frame(bc->s, frame) : NULL;
+    if (!copy)
+        return NULL;
     tf_scene_free(victim->scene);
-    memset(victim, 0, sizeof *victim);
-    victim->scene = tf_scene_at_frame(bc->s, frame);
-    if (!victim->scene) {
-        tf_seterr(err, errlen, "out of memory");
-        return NULL;
-    }
-    /* the backend that actually runs (auto may have fallen back to C) */
-    victim->b = tf_backend_new(tf_backend_name(bc->b), victim->scene, bc->hf, err, errlen);
-    if (!victim->b) {
-        tf_scene_free(victim->scene);
-        victim->scene = NULL;
-        return NULL;
-    }
-    victim->frame = frame;
-    victim->used = ++bc->uses;
-    return victim->b;
+    *victim = (frame_scene){frame, copy, ++bc->uses};
+    return copy;
+}
+
+/* Point the backend at `frame` (-1: a still's task). */
+static int backend_to_frame(backend_ctx *bc, int frame, char *err, size_t errlen)
+{
+    const tf_animation *a = &bc->s->animation;
+    if (a->frames == 0 && frame != -1)
+        return tf_seterr(err, errlen, "task for frame %d of a still scene", frame);
+    if (a->frames > 0 && (frame < 0 || frame >= a->frames))
+        return tf_seterr(err, errlen, "task for frame %d of a %d-frame animation", frame,
+                         a->frames);
+    if (frame == bc->frame)
+        return 0;
+    const tf_scene *fs = scene_of_frame(bc, frame);
+    if (!fs)
+        return tf_seterr(err, errlen, "out of memory");
+    if (tf_backend_set_scene(bc->b, fs, err, errlen))
+        return -1;
+    bc->frame = frame;
+    return 0;
 }
 
 static void backend_ctx_free(backend_ctx *bc)
 {
-    for (int i = 0; i < FRAME_CACHE; i++) {
-        tf_backend_free(bc->frames[i].b);
+    for (int i = 0; i < FRAME_CACHE; i++)
         tf_scene_free(bc->frames[i].scene);
-    }
 }
 
 static int backend_render(void *ctx, int frame, tf_rect rect, tf_pixel *px,
@@ -256,8 +253,8 @@ static int backend_render(void *ctx, int frame, tf_rect rect, tf_pixel *px,
     if (rect.x + rect.w > bc->s->width || rect.y + rect.h > bc->s->height)
         return tf_seterr(err, errlen, "task rectangle outside the image");
     int64_t t0 = tf_now_ns();
-    tf_backend *b = backend_for_frame(bc, frame, err, errlen);
-    int rc = b ? tf_backend_render(b, rect, px, counts, err, errlen) : -1;
+    int rc = backend_to_frame(bc, frame, err, errlen) ? -1
+             : tf_backend_render(bc->b, rect, px, counts, err, errlen);
     *busy_ns = tf_now_ns() - t0;
     return rc;
 }
@@ -287,7 +284,7 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
         tf_backend_free(b);
         return 1;
     }
-    backend_ctx bc = {b, s, hf, backend_name, {{0}}, 0};
+    backend_ctx bc = {b, s, -1, {{0}}, 0};
     tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, NULL};
     int rc = tf_worker_serve(c, id, &layout, &step);
     backend_ctx_free(&bc);

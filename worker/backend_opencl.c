@@ -40,8 +40,13 @@
 #include "log.h"
 
 #define KERNEL_FILE "terrafarm.cl" /* the file that marks a kernel directory */
+/* The program's sources, concatenated in this order.  A name with a folder is one of the C
+ * renderer's own headers, shared with the kernels (common/portable.h explains how): it is found
+ * beside the kernels once installed (make install copies it there), else in the checkout's
+ * common/ (kernel directory/../../common/NAME). */
 #define SOURCE_FILES                                                                            \
-    {"tf_cl_params.h", "terrafarm.cl", "packet.cl", "packet_trace.cl", "packet_shade.cl",       \
+    {"tf_cl_params.h", "render/constants.h", "terrafarm.cl", "packet.cl", "common/portable.h",  \
+     "terrain/noise_kernel.h", "render/sample_math.h", "packet_trace.cl", "packet_shade.cl",    \
      "packet_render.cl"}
 /* passed to the kernels as -DTF_STREAM and -DTF_PIX, so host and device cannot disagree */
 #define CORNERS_PER_ITEM 128 /* TF_STREAM: the batch of samples, the corners per tf_corners8 item */
@@ -279,11 +284,28 @@ static int choose_device(cl_device_id *out, char *name, size_t namelen, char *er
 
 /* ---------------------------------------------------------------- program */
 
+/* Read source `name` of SOURCE_FILES for kernel directory dir: a plain name from dir; a shared
+ * header ("render/constants.h", "common/portable.h") from dir by its base name (installed),
+ * else from the checkout's common/ beside dir.  NULL if none is readable; *where gets the path
+ * last tried. */
+static char *read_source(const char *dir, const char *name, size_t *len, char *where,
+                         size_t wherelen)
+{
+    const char *slash = strrchr(name, '/');
+    snprintf(where, wherelen, "%s/%s", dir, slash ? slash + 1 : name);
+    char *src = read_text(where, len);
+    if (src || !slash)
+        return src;
+    const char *under_common = strncmp(name, "common/", 7) == 0 ? name + 7 : name;
+    snprintf(where, wherelen, "%s/../../common/%s", dir, under_common);
+    return read_text(where, len);
+}
+
 /* Build the program from SOURCE_FILES, concatenated in that order.  On failure the build log
  * goes to stderr (it is many lines; the error itself stays one line). */
 static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t errlen)
 {
-    char dir[PATH_MAX], path[PATH_MAX + 32];
+    char dir[PATH_MAX], path[PATH_MAX + 64], missing_path[PATH_MAX + 64] = "";
     if (find_kernel_dir(dir, sizeof dir, err, errlen))
         return -1;
     const char *names[] = SOURCE_FILES;
@@ -292,13 +314,20 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
     char *src[NSRC];
     int missing = -1;
     for (int i = 0; i < NSRC; i++) {
-        snprintf(path, sizeof path, "%s/%s", dir, names[i]);
-        src[i] = read_text(path, &len[i]);
-        if (!src[i] && missing < 0)
+        src[i] = read_source(dir, names[i], &len[i], path, sizeof path);
+        if (!src[i] && missing < 0) {
             missing = i;
+            snprintf(missing_path, sizeof missing_path, "%s", path);
+        }
     }
     if (missing >= 0) {
-        tf_seterr(err, errlen, "cannot read the OpenCL kernel source %s/%s", dir, names[missing]);
+        if (strchr(names[missing], '/'))
+            tf_seterr(err, errlen,
+                      "cannot read the OpenCL kernel source %s (the shared header %s: looked "
+                      "beside the kernels in %s, then in the checkout at %s)",
+                      names[missing], names[missing], dir, missing_path);
+        else
+            tf_seterr(err, errlen, "cannot read the OpenCL kernel source %s", missing_path);
         for (int i = 0; i < NSRC; i++)
             free(src[i]);
         return -1;

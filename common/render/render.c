@@ -28,6 +28,7 @@
 #include <string.h>
 #include "log.h"
 #include "render/render_internal.h"
+#include "render/sample_math.h"
 
 tf_renderer *tf_renderer_new(const tf_scene *s, const tf_heightfield *hf, char *err, size_t errlen)
 {
@@ -77,23 +78,11 @@ void tf_render_point(const tf_renderer *r, double x, double y, tf_sample *out,
     tf_shade_ray(&r->shader, r->camera.position, dir, out, shadow_rays);
 }
 
-/* Jitter of lattice point (X, Y): two values in [-1/2, 1/2), from the seed and (X, Y) only. */
-static void lattice_jitter(const tf_renderer *r, int64_t X, int64_t Y, double *jx, double *jy)
-{
-    uint64_t h = tf_hash64(r->jitter_key ^ (uint64_t)X);
-    h = tf_hash64(h ^ ((uint64_t)Y * 0x9e3779b97f4a7c15ULL));
-    *jx = tf_hash_unit(h) - 0.5;
-    *jy = tf_hash_unit(h ^ 0xd1b54a32d192ed03ULL) - 0.5;
-}
-
 void tf_render_lattice_sample(const tf_renderer *r, int64_t X, int64_t Y, tf_sample *out,
                               uint64_t *shadow_rays)
 {
-    double jx, jy;
-    lattice_jitter(r, X, Y, &jx, &jy);
-    /* N is a power of two: the divisions are exact scalings, identical everywhere */
-    double x = ((double)X + jx) / (double)r->lattice;
-    double y = ((double)Y + jy) / (double)r->lattice;
+    double x, y;
+    tf_lattice_position(r->jitter_key, (double)r->lattice, X, Y, &x, &y);
     tf_render_point(r, x, y, out, shadow_rays);
 }
 
@@ -101,10 +90,7 @@ void tf_render_lattice_sample(const tf_renderer *r, int64_t X, int64_t Y, tf_sam
  * curve the preview and the benchmark's PSNR use), clamped to the displayable [0, 1] since
  * differences above white or below black never show.  sqrt is correctly rounded in IEEE and in
  * OpenCL C, so the kernel makes the same decisions bit for bit. */
-double tf_display_level(double v)
-{
-    return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
-}
+double tf_display_level(double v) { return tf_display_level_of(v); }
 
 /* The largest per-channel range of display levels over n samples (n <= 5). */
 static double display_range(const tf_sample *const s[], int n)

@@ -28,6 +28,7 @@
 #include "terrain/heightfield.h"
 #include "terrain/noise.h"
 #include "scene.h"
+#include "render/constants.h"
 #include "render/trace.h"
 #include "vec.h"
 
@@ -54,7 +55,7 @@ typedef struct tf_sample {
     float dist;
 } tf_sample;
 
-#define TF_SKY_DIST 1e30f
+/* TF_SKY_DIST: render/constants.h */
 
 void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
 

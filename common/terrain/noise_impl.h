@@ -22,27 +22,17 @@
 #include <stdint.h>
 #include "terrain/noise.h"
 
-/* Beyond 2^52 a double has no fractional part: the lattice is meaningless there (and the
- * conversion to an integer would overflow for inf / NaN).  Noise is 0 outside this range. */
-#define TF_NOISE_COORD_LIMIT 0x1p52
+/* The constants (TF_NOISE_COORD_LIMIT, TF_NOISE2_SCALE, the gradients' TF_C1, TF_S1, TF_H1),
+ * tf_fade, tf_noise_column and the column and blend arithmetic are in noise_kernel.h, which the
+ * OpenCL kernels share. */
 
-/* sqrt(2) and sqrt(2/3) rounded down in the 5th digit: see the range note above. */
-#define TF_NOISE2_SCALE 1.41421
-#define TF_NOISE3_SCALE 0.816496
-
-/* 16 unit gradients evenly spaced on the circle (22.5 degrees apart): nearly isotropic, and a
- * table of constants (not cos/sin at run time) so every libm gives the same bits. */
-#define TF_C1 0.92387953251128674
-#define TF_S1 0.38268343236508977
-#define TF_H1 0.70710678118654752
-static const double tf_grad2[16][2] = {
+/* 16 unit gradients evenly spaced on the circle (22.5 degrees apart): nearly isotropic. */
+static const double tf_grad2[TF_NOISE_GRADS][2] = {
     {1, 0},       {TF_C1, TF_S1},   {TF_H1, TF_H1},   {TF_S1, TF_C1},
     {0, 1},       {-TF_S1, TF_C1},  {-TF_H1, TF_H1},  {-TF_C1, TF_S1},
     {-1, 0},      {-TF_C1, -TF_S1}, {-TF_H1, -TF_H1}, {-TF_S1, -TF_C1},
     {0, -1},      {TF_S1, -TF_C1},  {TF_H1, -TF_H1},  {TF_C1, -TF_S1},
 };
-
-static inline double tf_fade(double t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }
 
 /* floor() for |x| < TF_NOISE_COORD_LIMIT without the libm call: truncate, then step down for
  * negative non-integers.  *fraction = x - floor(x).  One int->double conversion only (the
@@ -65,7 +55,7 @@ static inline int64_t tf_floor_i64(double x)
 
 /* The y half of a 2D noise evaluation.  ok == 0 marks an out-of-range y (noise is then 0). */
 typedef struct tf_noise_axis {
-    int lattice;    /* floor(y) & 255 */
+    int lattice;    /* floor(y) & (TF_NOISE_LATTICE - 1) */
     int ok;
     double f0, f1;  /* y - floor(y), and that minus 1 */
     double fade;    /* tf_fade(f0) */
@@ -75,41 +65,30 @@ static inline void tf_noise_axis_set(tf_noise_axis *a, double y)
 {
     a->ok = fabs(y) < TF_NOISE_COORD_LIMIT;
     int64_t yi = a->ok ? tf_floor_i64(y) : 0;
-    a->lattice = (int)(yi & 255);
+    a->lattice = (int)(yi & (TF_NOISE_LATTICE - 1));
     a->f0 = a->ok ? y - (double)yi : 0.0;
     a->f1 = a->f0 - 1.0;
     a->fade = tf_fade(a->f0);
 }
 
-/* The noise along one lattice column: with the y half fixed, the two corners (X, Y) and
- * (X, Y + 1) of column X blend (by the y fade) into a linear function of the x offset from X,
- * slope * (x - X) + intercept.  Both the point kernel and the row evaluator build the noise
- * from these column lines, so they perform the same operations and agree to the bit. */
-typedef struct tf_noise_column {
-    double slope, intercept;
-} tf_noise_column;
-
+/* The noise along one lattice column (tf_noise_column, noise_kernel.h).  Both the point kernel
+ * and the row evaluator build the noise from these column lines, so they perform the same
+ * operations and agree to the bit. */
 static inline tf_noise_column tf_noise_column_at(const tf_noise *nz, int64_t xi,
                                                  const tf_noise_axis *ay)
 {
     const uint16_t *p = nz->perm;
     /* perm holds 0..255 twice, so perm[X] + Y + 1 <= 511 stays in bounds. */
-    int a = p[xi & 255] + ay->lattice;
-    const double *g0 = tf_grad2[p[a] & 15], *g1 = tf_grad2[p[a + 1] & 15];
-    double e0 = g0[1] * ay->f0, e1 = g1[1] * ay->f1;
-    tf_noise_column c;
-    c.slope = g0[0] + ay->fade * (g1[0] - g0[0]);
-    c.intercept = e0 + ay->fade * (e1 - e0);
-    return c;
+    int a = p[xi & (TF_NOISE_LATTICE - 1)] + ay->lattice;
+    const double *g0 = tf_grad2[p[a] & (TF_NOISE_GRADS - 1)];
+    const double *g1 = tf_grad2[p[a + 1] & (TF_NOISE_GRADS - 1)];
+    return tf_noise_column_line(g0[0], g0[1], g1[0], g1[1], ay->f0, ay->f1, ay->fade);
 }
 
 /* Noise at x offset fx from the column `left`, with `right` the next column. */
 static inline double tf_noise_blend(double fx, tf_noise_column left, tf_noise_column right)
 {
-    double u = tf_fade(fx);
-    double l = left.slope * fx + left.intercept;
-    double r = right.slope * (fx - 1.0) + right.intercept;
-    return (l + u * (r - l)) * TF_NOISE2_SCALE;
+    return tf_noise_blend_faded(fx, tf_fade(fx), left, right);
 }
 
 /* 2D noise at (x, y) where `ay` was set from y. */

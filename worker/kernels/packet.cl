@@ -44,6 +44,31 @@ v3p v3p_select(v3p a, v3p b, lv m)
     return v3p_make(select(a.x, b.x, m), select(a.y, b.y, m), select(a.z, b.z, m));
 }
 
+/* v3_norm per lane: lanes of length 0 (or NaN) keep their vector, as in the scalar code. */
+v3p v3p_norm(v3p a)
+{
+    dv l = sqrt(v3p_dot(a, a));
+    return v3p_select(a, v3p_scale(a, 1.0 / l), l > 0.0);
+}
+
+/* v3_lerp per lane: a + (b - a) t, each component in the scalar order. */
+v3p v3p_lerp(v3p a, v3p b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
+}
+
+/* v3_lerp between two shared vectors: (b - a) is the scalar difference, then per lane. */
+v3p v3p_lerp_ss(vec3 a, vec3 b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
+}
+
+/* v3_lerp from a packet vector to a shared one. */
+v3p v3p_lerp_ps(v3p a, vec3 b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
+}
+
 /* Is some lane of mask m set?  OpenCL's any() tests every lane's sign bit; PoCL compiles that
  * to a chain of extracts and ORs.  Narrowing the lanes to bytes and testing the 64-bit word is
  * three instructions, and the same answer for masks (every lane 0 or -1). */

@@ -39,13 +39,6 @@
 #define TF_QUEUED 0x80000000u
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
 
-/* render.c's tf_display_level per lane: sqrt of the linear value clamped to [0, 1]; never
- * NaN. */
-dv display_level8(dv v)
-{
-    return select(select((dv)(1), sqrt(v), v < 1), (dv)(0), !(v > 0));
-}
-
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
                           __global const float *h, __global const float2 *mm,
                           __global const ushort *perm, int rx, int ry, int cw, int ch,
@@ -72,7 +65,7 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
     dv lvl[TF_STREAM_PACKETS][3];
     for (int p = 0; p * TF_LANES < n; p++)
         for (int ch = 0; ch < 3; ch++)
-            lvl[p][ch] = display_level8(convert_double8(s[p][ch]));
+            lvl[p][ch] = tf_display_level_of(convert_double8(s[p][ch]));
     for (int e = 0; e < n; e++) {
         for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
             out[(size_t)(base + e) * TF_CL_SAMPLE_FLOATS + m] = s[e / TF_LANES][m][e % TF_LANES];
@@ -321,7 +314,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         for (int b = 0; b * TF_LANES < q.n; b++) {
             dv lvl[3];
             for (int ch = 0; ch < 3; ch++)
-                lvl[ch] = display_level8(convert_double8(smp[b][ch]));
+                lvl[ch] = tf_display_level_of(convert_double8(smp[b][ch]));
             for (int l = 0; l < TF_LANES && b * TF_LANES + l < q.n; l++) {
                 int e = b * TF_LANES + l;
                 pixel_state *s = &ps[q.pixel[e]];

@@ -323,9 +323,9 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
     if (missing >= 0) {
         if (strchr(names[missing], '/'))
             tf_seterr(err, errlen,
-                      "cannot read the OpenCL kernel source %s (the shared header %s: looked "
-                      "beside the kernels in %s, then in the checkout at %s)",
-                      names[missing], names[missing], dir, missing_path);
+                      "cannot read the shared OpenCL kernel header %s (looked beside the "
+                      "kernels in %s, then in the checkout at %s)",
+                      names[missing], dir, missing_path);
         else
             tf_seterr(err, errlen, "cannot read the OpenCL kernel source %s", missing_path);
         for (int i = 0; i < NSRC; i++)

@@ -131,7 +131,7 @@ bench-deps:
 # checkout's common/, or installed flat beside the kernels.
 PREFIX ?= /usr/local
 KERNEL_SHARED := common/portable.h common/render/constants.h common/render/sample_math.h \
-                 common/terrain/noise_kernel.h
+                 common/render/trace_math.h common/terrain/noise_kernel.h
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
 	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels

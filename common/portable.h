@@ -18,8 +18,10 @@
  *
  *   TF_SEL(a, b, m)     b where m, else a        (C: m ? b : a -- only the side taken is
  *   TF_SEL3(a, b, m)    the same on tf_lane3       evaluated; OpenCL: select, both are)
+ *   TF_SELM(a, b, m)    the same on tf_masks
  *   TF_ANY(m)           some sample has m        (guards work no sample needs: in C a plain if)
  *   TF_NOT(m)           !m                       (masks combine with & and |)
+ *   TF_ISINF(x), TF_ISFINITE(x)   as masks
  *   TF_LANE(s)          a tf_lane from a shared double; TF_SPLAT3(v) a tf_lane3 from a tf_vec3
  *
  * A branch of the scalar code is written `if (TF_ANY(m)) x = TF_SEL(x, value, m);`: in C that
@@ -29,8 +31,9 @@
  * backends (tests/unit/test_opencl.c) rests on that, and on FMA contraction being off in both
  * (-ffp-contract=off in the Makefile; `#pragma OPENCL FP_CONTRACT OFF` in terrafarm.cl).
  *
- * Included by C headers (noise_kernel.h, noise_hash.h, render/sample_math.h) through the
- * include path, and handed to the OpenCL build by worker/backend_opencl.c after packet.cl. */
+ * Included by the shared C headers (terrain/noise_kernel.h, render/sample_math.h,
+ * render/trace_math.h), and handed to the OpenCL build by worker/backend_opencl.c right after
+ * packet.cl, which defines the packet types. */
 #ifndef TF_PORTABLE_H
 #define TF_PORTABLE_H
 
@@ -47,9 +50,11 @@ typedef ulong tf_u64;
 typedef vec3 tf_vec3;
 #define TF_SEL(a, b, m) select((tf_lane)(a), (tf_lane)(b), (m))
 #define TF_SEL3(a, b, m) v3p_select((a), (b), (m))
+#define TF_SELM(a, b, m) select((tf_mask)(a), (tf_mask)(b), (m))
 #define TF_ANY(m) any_lane(m)
 #define TF_NOT(m) (~(m))
 #define TF_ISINF(x) isinf(x)
+#define TF_ISFINITE(x) isfinite(x)
 #define TF_LANE(s) ((tf_lane)(s))
 #define TF_SPLAT3(v) v3p_splat(v)
 #define TF_U64_TO_LANE(x) convert_double8(x)
@@ -81,9 +86,11 @@ typedef int64_t tf_lane_i64;
 typedef uint64_t tf_u64;
 #define TF_SEL(a, b, m) ((m) ? (b) : (a))
 #define TF_SEL3(a, b, m) ((m) ? (b) : (a))
+#define TF_SELM(a, b, m) ((m) ? (b) : (a))
 #define TF_ANY(m) (m)
 #define TF_NOT(m) (!(m))
 #define TF_ISINF(x) (isinf(x) != 0)
+#define TF_ISFINITE(x) (isfinite(x) != 0)
 #define TF_LANE(s) ((double)(s))
 #define TF_SPLAT3(v) (v)
 #define TF_U64_TO_LANE(x) ((double)(x))

@@ -46,8 +46,8 @@
  * common/ (kernel directory/../../common/NAME). */
 #define SOURCE_FILES                                                                            \
     {"tf_cl_params.h", "render/constants.h", "terrafarm.cl", "packet.cl", "common/portable.h",  \
-     "terrain/noise_kernel.h", "render/sample_math.h", "packet_trace.cl", "packet_shade.cl",    \
-     "packet_render.cl"}
+     "terrain/noise_kernel.h", "render/sample_math.h", "render/trace_math.h", "packet_trace.cl", \
+     "packet_shade.cl", "packet_render.cl"}
 /* passed to the kernels as -DTF_STREAM and -DTF_PIX, so host and device cannot disagree */
 #define CORNERS_PER_ITEM 128 /* TF_STREAM: the batch of samples, the corners per tf_corners8 item */
 #define PIXELS_PER_ITEM 64   /* TF_PIX: pixels per tf_pixels8 work-item */

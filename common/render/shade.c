@@ -129,14 +129,10 @@ static pthread_once_t full_plans_once = PTHREAD_ONCE_INIT;
 
 static void prefix_plan(tf_octaves *o, const tf_octaves *full, double octaves)
 {
-    if (!(octaves >= 1.0))
-        octaves = 1.0;
-    if (octaves > TF_MAX_OCTAVES)
-        octaves = TF_MAX_OCTAVES;
-    int whole = (int)octaves;
-    double remainder = octaves - whole;
+    int whole;
+    double remainder;
     *o = *full;
-    o->count = whole + (remainder > 0.0);
+    o->count = tf_octaves_split(octaves, &whole, &remainder);
     if (remainder > 0.0)
         o->amp[whole] *= remainder;
 }

@@ -113,17 +113,26 @@ typedef struct tf_octaves {
     double amp[TF_MAX_OCTAVES + 1];
 } tf_octaves;
 
-/* octaves is clamped to [1, TF_MAX_OCTAVES]; a NaN counts as 1. */
-static inline void tf_octaves_plan(tf_octaves *o, double H, double lacunarity, double octaves)
+/* The shape of a plan of `octaves` octaves, clamped to [1, TF_MAX_OCTAVES] (a NaN counts as
+ * 1): *whole octaves at full weight and a *remainder fraction of one more; returns the number
+ * of noise evaluations. */
+static inline int tf_octaves_split(double octaves, int *whole, double *remainder)
 {
     if (!(octaves >= 1.0))
         octaves = 1.0;
     if (octaves > TF_MAX_OCTAVES)
         octaves = TF_MAX_OCTAVES;
-    int whole = (int)octaves;
-    double remainder = octaves - whole;
+    *whole = (int)octaves;
+    *remainder = octaves - *whole;
+    return *whole + (*remainder > 0.0);
+}
+
+static inline void tf_octaves_plan(tf_octaves *o, double H, double lacunarity, double octaves)
+{
+    int whole;
+    double remainder;
     o->lacunarity = lacunarity;
-    o->count = whole + (remainder > 0.0);
+    o->count = tf_octaves_split(octaves, &whole, &remainder);
     double frequency = 1.0;
     o->amp[0] = 1.0;
     for (int i = 1; i < o->count; i++) {

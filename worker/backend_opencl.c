@@ -383,17 +383,6 @@ static void put3(double *P, int k, tf_vec3 v)
     P[k + 2] = v.z;
 }
 
-/* pow(2^i, -H) for i < TF_CL_AMP_TABLE, as tf_octaves_plan computes it for lacunarity 2. */
-static void fill_amp_table(double *amp, double H)
-{
-    double frequency = 1.0;
-    amp[0] = 1.0;
-    for (int i = 1; i < TF_CL_AMP_TABLE; i++) {
-        frequency *= 2.0;
-        amp[i] = pow(frequency, -H);
-    }
-}
-
 /* Copy what tf_renderer_new derived into the P[] / I[] blocks. */
 static void fill_params(const tf_renderer *r, double *P, int *I)
 {
@@ -438,13 +427,10 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     put3(P, TFP_SKY_HORIZON, s->sky.horizon);
     put3(P, TFP_SKY_ZENITH, s->sky.zenith);
     P[TFP_THRESHOLD] = r->threshold;
-    fill_amp_table(P + TFP_AMP_H08, 0.8); /* shade.c: BUMP_H */
-    fill_amp_table(P + TFP_AMP_H05, 0.5); /* shade.c: snow line and ripples */
-    /* shade.c make_snow_plan: SNOW_OCTAVES = 5 whole octaves of the H 0.5 table */
-    double snow_sum = 0;
-    for (int i = 0; i < 5; i++)
-        snow_sum += fabs(P[TFP_AMP_H05 + i]);
-    P[TFP_SNOW_BOUND] = snow_sum * (1.0 + 1e-9);
+    /* the shader's own octave weights and snow bound (shade.h) */
+    tf_shade_octave_weights(TF_BUMP_H, P + TFP_AMP_H08, TF_CL_AMP_TABLE);
+    tf_shade_octave_weights(TF_SNOW_H, P + TFP_AMP_H05, TF_CL_AMP_TABLE); /* = TF_RIPPLE_H */
+    P[TFP_SNOW_BOUND] = tf_shade_snow_fbm_bound();
 
     I[TFI_N] = hf->n;
     I[TFI_CELLS] = hf->cells;

@@ -137,18 +137,21 @@ static void prefix_plan(tf_octaves *o, const tf_octaves *full, double octaves)
         o->amp[whole] *= remainder;
 }
 
+/* The snow line and the ripples share the H = 0.5 plan. */
+#define TF_HALF_H TF_SNOW_H
+
 static void make_full_plans(void)
 {
     static const double samples[] = {0.0, 0.4, 1.0, 1.3, 2.0, 2.71, 3.5, 4.0, 5.9, 40.0};
     tf_octaves_plan(&full_plan_bump, TF_BUMP_H, 2.0, TF_MAX_OCTAVES);
-    tf_octaves_plan(&full_plan_half, 0.5, 2.0, TF_MAX_OCTAVES);
+    tf_octaves_plan(&full_plan_half, TF_HALF_H, 2.0, TF_MAX_OCTAVES);
     int exact = 1;
     for (size_t i = 0; i < sizeof samples / sizeof samples[0]; i++) {
         for (int which = 0; which < 2; which++) {
             tf_octaves fast, slow;
             const tf_octaves *full = which ? &full_plan_half : &full_plan_bump;
             prefix_plan(&fast, full, samples[i]);
-            tf_octaves_plan(&slow, which ? 0.5 : TF_BUMP_H, 2.0, samples[i]);
+            tf_octaves_plan(&slow, which ? TF_HALF_H : TF_BUMP_H, 2.0, samples[i]);
             exact &= fast.count == slow.count && fast.lacunarity == slow.lacunarity &&
                      memcmp(fast.amp, slow.amp, (size_t)slow.count * sizeof slow.amp[0]) == 0;
         }
@@ -162,7 +165,7 @@ static void texture_plan(tf_octaves *o, double H, double octaves)
     pthread_once(&full_plans_once, make_full_plans);
     if (prefix_plans_exact && H == TF_BUMP_H)
         prefix_plan(o, &full_plan_bump, octaves);
-    else if (prefix_plans_exact && H == 0.5)
+    else if (prefix_plans_exact && H == TF_HALF_H)
         prefix_plan(o, &full_plan_half, octaves);
     else
         tf_octaves_plan(o, H, 2.0, octaves);
@@ -227,6 +230,19 @@ static double snow_fbm(const tf_noise *nz, double x, double y)
     pthread_once(&snow_plan_once, make_snow_plan);
     tf_octave_axes(&snow_plan, y, axes);
     return tf_fbm2_axes(nz, &snow_plan, x, axes);
+}
+
+void tf_shade_octave_weights(double H, double *amp, int n)
+{
+    tf_octaves plan;
+    texture_plan(&plan, H, TF_MAX_OCTAVES);
+    memcpy(amp, plan.amp, (size_t)n * sizeof amp[0]);
+}
+
+double tf_shade_snow_fbm_bound(void)
+{
+    pthread_once(&snow_plan_once, make_snow_plan);
+    return snow_fbm_bound;
 }
 
 /* ---------------------------------------------------------------- sky and mist */

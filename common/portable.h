@@ -11,6 +11,7 @@
  *   tf_lane3      tf_vec3            v3p          a vector per sample
  *   tf_lane_u64   uint64_t           ulong8       an integer per sample
  *   tf_lane_i64   int64_t            long8
+ *   tf_lane_int   int                int8
  *   tf_vec3       tf_vec3            vec3         a vector all samples share (scene constants)
  *
  * with the operators +, -, *, / and the math functions (sqrt, exp, log2, acos, cos, ...), which
@@ -22,6 +23,8 @@
  *   TF_ANY(m)           some sample has m        (guards work no sample needs: in C a plain if)
  *   TF_NOT(m)           !m                       (masks combine with & and |)
  *   TF_ISINF(x), TF_ISFINITE(x)   as masks
+ *   TF_SELI64, TF_LANE_TO_I64, TF_I64_TO_LANE, TF_I64_TO_INT, TF_I64_AS_U64, TF_U64_TO_LANE:
+ *                       selects and C casts on the integer lanes; TF_MASK_ONE(m) is 1 where m
  *   TF_LANE(s)          a tf_lane from a shared double; TF_SPLAT3(v) a tf_lane3 from a tf_vec3
  *
  * A branch of the scalar code is written `if (TF_ANY(m)) x = TF_SEL(x, value, m);`: in C that
@@ -46,6 +49,7 @@ typedef lv tf_mask;
 typedef v3p tf_lane3;
 typedef ulong8 tf_lane_u64;
 typedef long8 tf_lane_i64;
+typedef int8 tf_lane_int;
 typedef ulong tf_u64;
 typedef vec3 tf_vec3;
 #define TF_SEL(a, b, m) select((tf_lane)(a), (tf_lane)(b), (m))
@@ -60,6 +64,10 @@ typedef vec3 tf_vec3;
 #define TF_U64_TO_LANE(x) convert_double8(x)
 #define TF_I64_TO_LANE(x) convert_double8(x)
 #define TF_I64_AS_U64(x) as_ulong8(x)
+#define TF_LANE_TO_I64(x) convert_long8(x) /* rounds toward zero, as C's cast */
+#define TF_I64_TO_INT(x) convert_int8(x)
+#define TF_SELI64(a, b, m) select((tf_lane_i64)(a), (tf_lane_i64)(b), (m))
+#define TF_MASK_ONE(m) (-(m)) /* 1 where m, as a tf_lane_i64 */
 #define tf_l3(x, y, z) v3p_make((x), (y), (z))
 #define tf_l3_add v3p_add
 #define tf_l3_mul v3p_mul
@@ -83,6 +91,7 @@ typedef int tf_mask;
 typedef tf_vec3 tf_lane3;
 typedef uint64_t tf_lane_u64;
 typedef int64_t tf_lane_i64;
+typedef int tf_lane_int;
 typedef uint64_t tf_u64;
 #define TF_SEL(a, b, m) ((m) ? (b) : (a))
 #define TF_SEL3(a, b, m) ((m) ? (b) : (a))
@@ -96,6 +105,10 @@ typedef uint64_t tf_u64;
 #define TF_U64_TO_LANE(x) ((double)(x))
 #define TF_I64_TO_LANE(x) ((double)(x))
 #define TF_I64_AS_U64(x) ((uint64_t)(x))
+#define TF_LANE_TO_I64(x) ((int64_t)(x))
+#define TF_I64_TO_INT(x) ((int)(x))
+#define TF_SELI64(a, b, m) ((m) ? (b) : (a))
+#define TF_MASK_ONE(m) (m)
 #define tf_l3(x, y, z) v3((x), (y), (z))
 #define tf_l3_add v3_add
 #define tf_l3_mul v3_mul

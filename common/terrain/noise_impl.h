@@ -34,18 +34,7 @@ static const double tf_grad2[TF_NOISE_GRADS][2] = {
     {0, -1},      {TF_S1, -TF_C1},  {TF_H1, -TF_H1},  {TF_C1, -TF_S1},
 };
 
-/* floor() for |x| < TF_NOISE_COORD_LIMIT without the libm call: truncate, then step down for
- * negative non-integers.  *fraction = x - floor(x).  One int->double conversion only (the
- * conversions were the hottest instructions of the row loop), and the step down is done on
- * the double too, which is exact below 2^53, so the bits equal x - (double)floor(x). */
-static inline int64_t tf_floor_split(double x, double *fraction)
-{
-    int64_t i = (int64_t)x;
-    double d = (double)i;
-    int below = x < d;
-    *fraction = x - (d - (below ? 1.0 : 0.0));
-    return i - below;
-}
+/* tf_floor_split, tf_noise_axis and tf_noise_axis_of: noise_kernel.h. */
 
 static inline int64_t tf_floor_i64(double x)
 {
@@ -53,23 +42,7 @@ static inline int64_t tf_floor_i64(double x)
     return tf_floor_split(x, &fraction);
 }
 
-/* The y half of a 2D noise evaluation.  ok == 0 marks an out-of-range y (noise is then 0). */
-typedef struct tf_noise_axis {
-    int lattice;    /* floor(y) & (TF_NOISE_LATTICE - 1) */
-    int ok;
-    double f0, f1;  /* y - floor(y), and that minus 1 */
-    double fade;    /* tf_fade(f0) */
-} tf_noise_axis;
-
-static inline void tf_noise_axis_set(tf_noise_axis *a, double y)
-{
-    a->ok = fabs(y) < TF_NOISE_COORD_LIMIT;
-    int64_t yi = a->ok ? tf_floor_i64(y) : 0;
-    a->lattice = (int)(yi & (TF_NOISE_LATTICE - 1));
-    a->f0 = a->ok ? y - (double)yi : 0.0;
-    a->f1 = a->f0 - 1.0;
-    a->fade = tf_fade(a->f0);
-}
+static inline void tf_noise_axis_set(tf_noise_axis *a, double y) { *a = tf_noise_axis_of(y); }
 
 /* The noise along one lattice column (tf_noise_column, noise_kernel.h).  Both the point kernel
  * and the row evaluator build the noise from these column lines, so they perform the same

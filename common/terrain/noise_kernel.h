@@ -3,10 +3,11 @@
  * OpenCL build (worker/backend_opencl.c) loads this file so the kernels' texture noise and
  * lattice jitter run the same operations eight samples at a time.
  *
- * What is here is what both sides compute alike: the hash, the quintic fade, a lattice
- * column's line from its two corner gradients, and the blend of two column lines.  What is
- * not: the lattice lookups (the permutation and gradient tables are C arrays on one side and
- * per-lane gathers on the other; noise_impl.h and packet_shade.cl) and the octave loops.
+ * What is here is what both sides compute alike: the hash, the quintic fade, the floor split
+ * of a coordinate, the y half of a 2D evaluation, a lattice column's line from its two corner
+ * gradients, and the blend of two column lines.  What is not: the lattice lookups (the
+ * permutation and gradient tables are C arrays on one side and per-lane gathers on the other;
+ * noise_impl.h and packet_shade.cl) and the octave loops.
  * noise_impl.h explains the noise itself. */
 #ifndef TF_NOISE_KERNEL_H
 #define TF_NOISE_KERNEL_H
@@ -50,6 +51,40 @@ TF_SHARED tf_lane tf_hash_unit(tf_lane_u64 x)
 TF_SHARED_HOT TF_SHARED tf_lane tf_fade(tf_lane t)
 {
     return t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
+}
+
+/* floor() for |x| < TF_NOISE_COORD_LIMIT without the libm call: truncate, then step down for
+ * negative non-integers.  *fraction = x - floor(x).  One int->double conversion only (the
+ * conversions were the hottest instructions of the terrain's row loop), and the step down is
+ * done on the double too, which is exact below 2^53, so the bits equal x - (double)floor(x). */
+TF_SHARED_HOT TF_SHARED tf_lane_i64 tf_floor_split(tf_lane x, tf_lane *fraction)
+{
+    tf_lane_i64 i = TF_LANE_TO_I64(x);
+    tf_lane d = TF_I64_TO_LANE(i);
+    tf_mask below = x < d;
+    *fraction = x - (d - TF_SEL(0.0, 1.0, below));
+    return i - TF_MASK_ONE(below);
+}
+
+/* The y half of a 2D noise evaluation.  ok == 0 marks an out-of-range y (noise is then 0). */
+typedef struct tf_noise_axis {
+    tf_lane_int lattice; /* floor(y) & (TF_NOISE_LATTICE - 1) */
+    tf_mask ok;
+    tf_lane f0, f1;      /* y - floor(y), and that minus 1 */
+    tf_lane fade;        /* tf_fade(f0) */
+} tf_noise_axis;
+
+TF_SHARED_HOT TF_SHARED tf_noise_axis tf_noise_axis_of(tf_lane y)
+{
+    tf_noise_axis a;
+    tf_lane unused;
+    a.ok = fabs(y) < TF_NOISE_COORD_LIMIT;
+    tf_lane_i64 yi = TF_SELI64(0, tf_floor_split(TF_SEL(0.0, y, a.ok), &unused), a.ok);
+    a.lattice = TF_I64_TO_INT(yi & (TF_NOISE_LATTICE - 1));
+    a.f0 = TF_SEL(0.0, y - TF_I64_TO_LANE(yi), a.ok);
+    a.f1 = a.f0 - 1.0;
+    a.fade = tf_fade(a.f0);
+    return a;
 }
 
 /* The noise along one lattice column X with the y half fixed: the two corners (X, Y) and

@@ -55,41 +55,19 @@ dv height_sample8(const world *w, iv i, iv j)
 
 /* ---------------------------------------------------------------- noise (noise_impl.h) */
 
-/* tf_fade, the column line and the blend are noise_kernel.h's; what is here is the lattice
- * side: floors, permutation loads and gradients per lane. */
+/* tf_fade, tf_floor_split, the y axis (tf_noise_axis_of), the column line and the blend are
+ * noise_kernel.h's; what is here is the lattice side: permutation loads and gradients per
+ * lane, and the x axis split so that fbm_with_gradient8 can share lookups between lanes.
+ * tf_floor_split is only called on lanes whose |x| < 2^52 matter; the callers zero the others
+ * first so every conversion is in range. */
 
-/* tf_floor_split per lane.  Only called on lanes whose |x| < 2^52 matter; the caller zeroes
- * the others first so every conversion is in range. */
-lv tf_floor_split8(dv x, dv *fraction)
-{
-    lv i = convert_long8(x); /* rounds toward zero, as the C cast */
-    dv d = convert_double8(i);
-    lv below = x < d; /* -1 where below */
-    *fraction = x - (d - select((dv)(0.0), (dv)(1.0), below));
-    return i + below;
-}
-
-typedef struct noise_axis8 { iv lattice; lv ok; dv f0, f1, fade; } noise_axis8;
-
-TF_INLINE noise_axis8 noise_axis_set8(dv y)
-{
-    noise_axis8 a;
-    dv unused;
-    a.ok = fabs(y) < TF_NOISE_COORD_LIMIT;
-    lv yi = tf_floor_split8(select((dv)(0.0), y, a.ok), &unused);
-    yi = select((lv)(0), yi, a.ok);
-    a.lattice = convert_int8(yi & 255);
-    a.f0 = select((dv)(0.0), y - convert_double8(yi), a.ok);
-    a.f1 = a.f0 - 1.0;
-    a.fade = tf_fade(a.f0);
-    return a;
-}
+typedef tf_noise_axis noise_axis8;
 
 /* p[k] per lane, k in 0..511 (the permutation has 512 entries); written out lane by lane,
  * which PoCL turns into straight loads (a lane loop stays a loop through memory). */
 iv perm8(__global const ushort *p, iv k)
 {
-    k &= 511;
+    k &= TF_NOISE_PERM - 1;
     return convert_int8((ushort8)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5],
                                   p[k.s6], p[k.s7]));
 }
@@ -155,8 +133,8 @@ TF_INLINE noise_xaxis8 noise_xaxis_frac8(dv x)
 {
     noise_xaxis8 a;
     a.ok = fabs(x) < TF_NOISE_COORD_LIMIT;
-    lv xl = tf_floor_split8(select((dv)(0.0), x, a.ok), &a.f);
-    a.xi = convert_int8(xl & 255);
+    lv xl = tf_floor_split(select((dv)(0.0), x, a.ok), &a.f);
+    a.xi = convert_int8(xl & (TF_NOISE_LATTICE - 1));
     a.u = tf_fade(a.f);
     return a;
 }
@@ -165,7 +143,7 @@ TF_INLINE noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
 {
     noise_xaxis8 a = noise_xaxis_frac8(x);
     a.pl = perm8(p, a.xi);
-    a.pr = perm8(p, (a.xi + 1) & 255);
+    a.pr = perm8(p, (a.xi + 1) & (TF_NOISE_LATTICE - 1));
     return a;
 }
 
@@ -201,7 +179,7 @@ dv tf_fbm2_8(__global const ushort *p, __global const double *amp, dv x, dv y, d
         double a = amp[i];
         if (remainder > 0.0 && i == whole)
             a *= remainder;
-        noise_axis8 ay = noise_axis_set8(y);
+        noise_axis8 ay = tf_noise_axis_of(y);
         noise_xaxis8 ax = noise_xaxis_set8(p, x);
         result += a * noise2_axes8(p, &ax, &ay);
         x *= 2.0;
@@ -241,7 +219,7 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
         lv in = convert_long8(count > i);
         dv a = (dv)(amp[i]);
         a = select(a, a * remainder, partial & convert_long8(whole == i));
-        noise_axis8 ay = noise_axis_set8(y0), ay1 = noise_axis_set8(y1);
+        noise_axis8 ay = tf_noise_axis_of(y0), ay1 = tf_noise_axis_of(y1);
         noise_xaxis8 ax = noise_xaxis_set8(p, x0), ax1 = noise_xaxis_frac8(x1);
 
         /* (x0, y0) */
@@ -257,7 +235,7 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
         if (any_lane(xmoved)) {
             iv moved = mask_i(xmoved);
             ax1.pl = select(ax.pl, perm8(p, ax1.xi), moved);
-            ax1.pr = select(ax.pr, perm8(p, (ax1.xi + 1) & 255), moved);
+            ax1.pr = select(ax.pr, perm8(p, (ax1.xi + 1) & (TF_NOISE_LATTICE - 1)), moved);
             column_grads8 gl1 = column_grads8_at(p, ax1.pl, ay.lattice);
             column_grads8 gr1 = column_grads8_at(p, ax1.pr, ay.lattice);
             column_line8 l1 = column_line8_of(&gl1, &ay), r1 = column_line8_of(&gr1, &ay);

@@ -162,11 +162,7 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
         s[2] = cached_sample(r, pc, px, py, q.i, q.j + q.size, &spp, tally);
         s[3] = cached_sample(r, pc, px, py, q.i + q.size, q.j + q.size, &spp, tally);
         if (q.size > 1) {
-            /* The threshold grows 8x per level (N/size cubed, exact in double): a quad's error
-             * weighs in the pixel by its share of the area (4x per level) and its 5-sample
-             * estimate is already better than the corners' (another 2x). */
-            double ratio = (double)(N / q.size);
-            double split_threshold = r->threshold * ratio * ratio * ratio;
+            double split_threshold = tf_aa_split_threshold(r->threshold, N, q.size);
             if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
                 int h = q.size / 2;
                 s[4] = cached_sample(r, pc, px, py, q.i + h, q.j + h, &spp, tally);
@@ -177,21 +173,18 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
                     stack[sp++] = (quad){q.i, q.j, h};
                     continue;
                 }
-                /* probed leaf: area (size^2 lattice cells) times corners/8 + centre/2 */
-                double w = 0.125 * (double)q.size * (double)q.size;
-                sum_r += w * ((double)s[0]->r + s[1]->r + s[2]->r + s[3]->r + 4.0 * s[4]->r);
-                sum_g += w * ((double)s[0]->g + s[1]->g + s[2]->g + s[3]->g + 4.0 * s[4]->g);
-                sum_b += w * ((double)s[0]->b + s[1]->b + s[2]->b + s[3]->b + 4.0 * s[4]->b);
-                sum_a += w * ((double)s[0]->a + s[1]->a + s[2]->a + s[3]->a + 4.0 * s[4]->a);
+                int z = q.size;
+                sum_r += tf_aa_probed_leaf(z, s[0]->r, s[1]->r, s[2]->r, s[3]->r, s[4]->r);
+                sum_g += tf_aa_probed_leaf(z, s[0]->g, s[1]->g, s[2]->g, s[3]->g, s[4]->g);
+                sum_b += tf_aa_probed_leaf(z, s[0]->b, s[1]->b, s[2]->b, s[3]->b, s[4]->b);
+                sum_a += tf_aa_probed_leaf(z, s[0]->a, s[1]->a, s[2]->a, s[3]->a, s[4]->a);
                 continue;
             }
         }
-        /* flat (or smallest) leaf: area (size^2 lattice cells) times the mean of its corners */
-        double w = 0.25 * (double)q.size * (double)q.size;
-        sum_r += w * ((double)s[0]->r + s[1]->r + s[2]->r + s[3]->r);
-        sum_g += w * ((double)s[0]->g + s[1]->g + s[2]->g + s[3]->g);
-        sum_b += w * ((double)s[0]->b + s[1]->b + s[2]->b + s[3]->b);
-        sum_a += w * ((double)s[0]->a + s[1]->a + s[2]->a + s[3]->a);
+        sum_r += tf_aa_flat_leaf(q.size, s[0]->r, s[1]->r, s[2]->r, s[3]->r);
+        sum_g += tf_aa_flat_leaf(q.size, s[0]->g, s[1]->g, s[2]->g, s[3]->g);
+        sum_b += tf_aa_flat_leaf(q.size, s[0]->b, s[1]->b, s[2]->b, s[3]->b);
+        sum_a += tf_aa_flat_leaf(q.size, s[0]->a, s[1]->a, s[2]->a, s[3]->a);
     }
 
     float zmin = TF_SKY_DIST;

@@ -79,6 +79,36 @@ TF_SHARED tf_lane tf_display_level_of(tf_lane v)
     return TF_SEL(0.0, TF_SEL(1.0, sqrt(v), v < 1.0), v > 0.0);
 }
 
+/* ---------------------------------------------------------------- a pixel's refinement
+ *
+ * render.c's render_pixel and packet_render.cl's pixel state machine run one pixel at a time
+ * in both backends, so these take plain doubles and floats. */
+
+/* The split threshold of a quad `size` lattice steps wide in a pixel of N steps: it grows 8x
+ * per level (N/size cubed, exact in double): a quad's error weighs in the pixel by its share
+ * of the area (4x per level) and its 5-sample estimate is already better than the corners'
+ * (another 2x). */
+TF_SHARED double tf_aa_split_threshold(double threshold, int N, int size)
+{
+    double ratio = (double)(N / size);
+    return threshold * ratio * ratio * ratio;
+}
+
+/* A probed leaf's share of a channel: its area (size^2 lattice cells) times corners/8 +
+ * centre/2 (the quincunx estimate). */
+TF_SHARED double tf_aa_probed_leaf(int size, float c0, float c1, float c2, float c3, float centre)
+{
+    double w = 0.125 * (double)size * (double)size;
+    return w * ((double)c0 + c1 + c2 + c3 + 4.0 * centre);
+}
+
+/* A flat (or smallest) leaf's share: its area times the mean of its corners. */
+TF_SHARED double tf_aa_flat_leaf(int size, float c0, float c1, float c2, float c3)
+{
+    double w = 0.25 * (double)size * (double)size;
+    return w * ((double)c0 + c1 + c2 + c3);
+}
+
 /* ---------------------------------------------------------------- surfaces */
 
 /* How many octaves of a texture whose first octave has wavelength `scale` a pixel (of angle
@@ -119,10 +149,12 @@ TF_SHARED tf_lane3 tf_smooth_normal_blend(tf_lane3 n00, tf_lane3 nside, tf_lane3
     return tf_l3_norm(n);
 }
 
-/* The bumped normal: n tilted by the bump texture's gradient (gx, gy) times amp. */
+/* The bumped normal: n tilted by the bump texture's gradient (gx, gy) times amp -- but never
+ * tipped over the horizon (then n itself). */
 TF_SHARED tf_lane3 tf_bump_normal(tf_lane3 n, double amp, tf_lane gx, tf_lane gy)
 {
-    return tf_l3_norm(tf_l3_add(n, tf_l3(-amp * gx, -amp * gy, TF_LANE(0.0))));
+    tf_lane3 nb = tf_l3_norm(tf_l3_add(n, tf_l3(-amp * gx, -amp * gy, TF_LANE(0.0))));
+    return TF_SEL3(nb, n, nb.z < 0.05);
 }
 
 /* The water's normal from the ripple texture's gradient. */

@@ -315,8 +315,6 @@ tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shado
         variation = fbm_with_gradient(&sh->noise, hit->p.x, hit->p.y, sh->bump_scale, TF_BUMP_H,
                                       octaves, 0.0, &gx, &gy);
         nb = tf_bump_normal(n, sh->scene->materials.bump, gx, gy);
-        if (nb.z < 0.05) /* never tip a bumped normal over the horizon */
-            nb = n;
     }
     tf_vec3 albedo = terrain_albedo(sh, hit->p, n, variation);
     double cos_sun = v3_dot(nb, sh->sun_dir);

@@ -3,11 +3,13 @@
  *
  * A work-item of packet_render.cl gathers up to 128 lattice samples (from neighbouring pixels,
  * so their rays are coherent) and hands them to lattice_samples (packet_shade.cl), which
- * shades them eight at a time and walks their rays with walk_stream (packet_trace.cl).  Every
- * packet function NAME8 computes, in each active lane, exactly what its C twin NAME in
- * common/ (trace.c, shade.c, camera.c, render.c, noise.c: the scalar renderer of the C
- * backend) computes for that lane's sample: the same operations in the same order, so the
- * OpenCL pixels are the C pixels to the bit (tests/unit/test_opencl.c checks it).
+ * shades them eight at a time and walks their rays with walk_stream (packet_trace.cl).  The
+ * per-sample math is the C renderer's own source (common/portable.h, render/sample_math.h,
+ * render/trace_math.h, terrain/noise_kernel.h), compiled on these types; every packet function
+ * NAME8 of the schedules computes, in each active lane, exactly what its C counterpart NAME in
+ * common/render (trace.c, shade.c, render.c) computes for that lane's sample: the same
+ * operations in the same order, so the OpenCL pixels are the C pixels to the bit
+ * (tests/unit/test_opencl.c checks it).
  *
  * Conventions:
  *   - A lane mask is an lv (long8): -1 for active lanes, 0 for idle ones -- what comparisons of

@@ -182,8 +182,7 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
         s[2] = slot_of(ps, side, t.i, t.j + t.size);
         s[3] = slot_of(ps, side, t.i + t.size, t.j + t.size);
         if (t.size > 1) {
-            double ratio = (double)(N / t.size);
-            double split_threshold = threshold * ratio * ratio * ratio;
+            double split_threshold = tf_aa_split_threshold(threshold, N, t.size);
             lvl[0] = levels_of(ps, side, t.i, t.j);
             lvl[1] = levels_of(ps, side, t.i + t.size, t.j);
             lvl[2] = levels_of(ps, side, t.i, t.j + t.size);
@@ -205,21 +204,20 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
                     ps->sp += 4;
                     continue;
                 }
-                double wt = 0.125 * (double)t.size * (double)t.size;
-                ps->sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0] + 4.0 * s[4][0]);
-                ps->sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1] + 4.0 * s[4][1]);
-                ps->sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2] + 4.0 * s[4][2]);
-                ps->sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3] + 4.0 * s[4][3]);
+                int z = t.size;
+                ps->sum_r += tf_aa_probed_leaf(z, s[0][0], s[1][0], s[2][0], s[3][0], s[4][0]);
+                ps->sum_g += tf_aa_probed_leaf(z, s[0][1], s[1][1], s[2][1], s[3][1], s[4][1]);
+                ps->sum_b += tf_aa_probed_leaf(z, s[0][2], s[1][2], s[2][2], s[3][2], s[4][2]);
+                ps->sum_a += tf_aa_probed_leaf(z, s[0][3], s[1][3], s[2][3], s[3][3], s[4][3]);
                 continue;
             }
         }
         ps->sp--;
         ps->asked = min(ps->asked, ps->sp);
-        double wt = 0.25 * (double)t.size * (double)t.size;
-        ps->sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0]);
-        ps->sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1]);
-        ps->sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2]);
-        ps->sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3]);
+        ps->sum_r += tf_aa_flat_leaf(t.size, s[0][0], s[1][0], s[2][0], s[3][0]);
+        ps->sum_g += tf_aa_flat_leaf(t.size, s[0][1], s[1][1], s[2][1], s[3][1]);
+        ps->sum_b += tf_aa_flat_leaf(t.size, s[0][2], s[1][2], s[2][2], s[3][2]);
+        ps->sum_a += tf_aa_flat_leaf(t.size, s[0][3], s[1][3], s[2][3], s[3][3]);
     }
     /* an entry below the top changes only by being popped (asked follows every pop down), so
      * each is asked once */

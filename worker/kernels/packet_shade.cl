@@ -3,12 +3,16 @@
  * shaded in SIMD eight at a time, one sample per lane of the dv / lv / iv types of packet.cl,
  * with all their shadow rays walked as a second stream.
  *
- * Every function NAME8 here is the packet twin of NAME in common/shade.c, camera.c, render.c
- * or noise.c (the scalar renderer of the C backend).  The one rule, on which the bit-identity
- * of the OpenCL and C backends rests:
+ * The formulas are the C renderer's own (common/render/sample_math.h and
+ * common/terrain/noise_kernel.h, compiled here on packets); this file holds their packet
+ * schedule and what reads memory: the texture octave loops (fbm_with_gradient8, tf_fbm2_8,
+ * sharing lattice lookups between lanes), the permutation and gradient lookups, the height
+ * reads of the vertex normals, and the shading split around the batch's shadow walk.  Each
+ * function NAME8 left here is the packet form of NAME in common/render/shade.c or render.c.
+ * The one rule, on which the bit-identity of the OpenCL and C backends rests:
  *
  *   In every active lane, a packet function performs exactly the floating-point operations of
- *   its C twin, in the same order, on the same operands.
+ *   its C counterpart, in the same order, on the same operands.
  *
  * So: FP contraction stays off (terrafarm.cl's pragma), no fma / mad / native_ / half_
  * functions, no reassociation (a scalar a * b * c stays (a * b) * c, a constant difference
@@ -18,7 +22,8 @@
  *
  * How the scalar control flow becomes lanes:
  *   - A branch becomes a lane mask (lv: -1 active, 0 idle): both sides are evaluated and merged
- *     with select().  A side no active lane needs is skipped altogether with `if (any_lane(mask))`
+ *     with select() (TF_SEL in the shared headers).  A side no active lane needs is skipped
+ *     altogether with `if (any_lane(mask))` (TF_ANY)
  *     -- that is where the time is saved: the terrain, water and sky shaders, the bump fBm, the
  *     snow-line fBm and the shadow rays run only for packets in which some lane needs them.
  *   - A loop whose trip count differs per lane (the fBm octaves, which follow each sample's
@@ -380,7 +385,7 @@ void terrain_before8(const world *w, const hitp *hit, lv mask, shading8 *sh)
                                         TFP_AMP_H08, octaves, 0.0, bumped, &gx, &gy);
             v3p nbump = tf_bump_normal(n, w->P[TFP_BUMP], gx, gy);
             variation = select(variation, var, bumped);
-            nb = v3p_select(nb, nbump, bumped & ~(nbump.z < 0.05));
+            nb = v3p_select(nb, nbump, bumped);
         }
     }
     v3p albedo = terrain_albedo8(w, hit->p, n, variation, mask);

@@ -21,7 +21,9 @@
  *   TF_SEL3(a, b, m)    the same on tf_lane3       evaluated; OpenCL: select, both are)
  *   TF_SELM(a, b, m)    the same on tf_masks
  *   TF_ANY(m)           some sample has m        (guards work no sample needs: in C a plain if)
- *   TF_NOT(m)           !m                       (masks combine with & and |)
+ *   TF_NOT(m)           !m                       (masks combine with & and |, or with
+ *   TF_AND(a, b)        a && b                    TF_AND / TF_OR, which short-circuit in C:
+ *   TF_OR(a, b)         a || b                    for hot tests that C should branch on)
  *   TF_ISINF(x), TF_ISFINITE(x)   as masks
  *   TF_SELI64, TF_LANE_TO_I64, TF_I64_TO_LANE, TF_I64_TO_INT, TF_I64_AS_U64, TF_U64_TO_LANE:
  *                       selects and C casts on the integer lanes; TF_MASK_ONE(m) is 1 where m
@@ -57,6 +59,8 @@ typedef vec3 tf_vec3;
 #define TF_SELM(a, b, m) select((tf_mask)(a), (tf_mask)(b), (m))
 #define TF_ANY(m) any_lane(m)
 #define TF_NOT(m) (~(m))
+#define TF_AND(a, b) ((a) & (b))
+#define TF_OR(a, b) ((a) | (b))
 #define TF_ISINF(x) isinf(x)
 #define TF_ISFINITE(x) isfinite(x)
 #define TF_LANE(s) ((tf_lane)(s))
@@ -98,6 +102,8 @@ typedef uint64_t tf_u64;
 #define TF_SELM(a, b, m) ((m) ? (b) : (a))
 #define TF_ANY(m) (m)
 #define TF_NOT(m) (!(m))
+#define TF_AND(a, b) ((a) && (b))
+#define TF_OR(a, b) ((a) || (b))
 #define TF_ISINF(x) (isinf(x) != 0)
 #define TF_ISFINITE(x) (isfinite(x) != 0)
 #define TF_LANE(s) ((double)(s))

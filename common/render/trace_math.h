@@ -93,7 +93,7 @@ TF_SHARED tf_mask tf_span_culled(tf_lane z_in, tf_lane z_out, tf_lane hi, tf_lan
 {
     tf_mask rising = z_in < z_out;
     tf_lane zlo = TF_SEL(z_out, z_in, rising), zhi = TF_SEL(z_in, z_out, rising);
-    return (zlo > hi + margin) | (zhi < lo - margin);
+    return TF_OR(zlo > hi + margin, zhi < lo - margin);
 }
 
 /* ---------------------------------------------------------------- triangles */
@@ -127,14 +127,18 @@ TF_SHARED tf_mask tf_triangle_hit(tf_lane u, tf_lane v, tf_lane w, tf_lane za, t
                                   tf_lane zc, tf_lane tmin, tf_lane tmax, tf_lane best_t,
                                   tf_lane *t)
 {
-    tf_mask mixed = ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0));
+    tf_mask mixed = TF_AND(TF_OR(TF_OR(u < 0.0, v < 0.0), w < 0.0),
+                           TF_OR(TF_OR(u > 0.0, v > 0.0), w > 0.0));
+    tf_mask hit = TF_NOT(mixed);
+    if (!TF_ANY(hit))
+        return hit;
     tf_lane det = u + v + w;
-    tf_mask hit = TF_NOT(mixed) & (det != 0.0);
+    hit = TF_AND(hit, det != 0.0); /* not: the ray in the triangle's plane, or edge-on */
     if (!TF_ANY(hit))
         return hit;
     tf_lane th = (u * za + v * zb + w * zc) / det;
     *t = th;
-    return hit & (th > tmin) & (th < tmax) & (th < best_t);
+    return TF_AND(hit, TF_AND(TF_AND(th > tmin, th < tmax), th < best_t));
 }
 
 /* The unit normal of triangle `first` ? (A, B, C) : (A, C, D) of a cell with corner heights

@@ -45,10 +45,8 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
         sh->pixel_angle = 2.0 * tan(0.5 * s->camera.fov_deg * TF_DEG2RAD) / columns;
 }
 
-/* How many octaves of a texture whose first octave has wavelength `scale` a pixel can show at
- * distance dist: octave i (wavelength scale / 2^i) is kept while it spans at least two pixel
- * footprints (Nyquist); the last one fades in fractionally, so the cut moves smoothly with
- * distance.  0 means the texture is invisible there. */
+/* How many octaves of a texture of first wavelength `scale` a pixel shows at distance dist
+ * (tf_visible_octaves, sample_math.h); 0: the texture is invisible there. */
 static double visible_octaves(const tf_shader *sh, double scale, double dist, double max_octaves)
 {
     return tf_visible_octaves(sh->pixel_angle, scale, dist, max_octaves);
@@ -120,7 +118,7 @@ static void noise_triple(const tf_noise *nz, double x, double x_dx, const tf_noi
  * tf_octaves_plan(H, lacunarity 2, octaves) gives amp[i] = pow(2^i, -H) (2^i is exact) for
  * i < count, then scales amp[whole] by the fractional remainder: every plan of a given H is a
  * prefix of the 32-octave plan with at most its last weight scaled.  The texture H values
- * (TF_BUMP_H, 0.5) get their full plan once; texture_plan cuts the prefix.  Made once per process
+ * (TF_BUMP_H, TF_HALF_H) get their full plan once; texture_plan cuts the prefix.  Made once per process
  * (pthread_once) and checked there against tf_octaves_plan itself on sample octave counts; if
  * noise_impl.h ever plans differently, texture_plan just calls tf_octaves_plan. */
 static tf_octaves full_plan_bump, full_plan_half;

@@ -118,9 +118,9 @@ static void noise_triple(const tf_noise *nz, double x, double x_dx, const tf_noi
  * tf_octaves_plan(H, lacunarity 2, octaves) gives amp[i] = pow(2^i, -H) (2^i is exact) for
  * i < count, then scales amp[whole] by the fractional remainder: every plan of a given H is a
  * prefix of the 32-octave plan with at most its last weight scaled.  The texture H values
- * (TF_BUMP_H, TF_HALF_H) get their full plan once; texture_plan cuts the prefix.  Made once per process
- * (pthread_once) and checked there against tf_octaves_plan itself on sample octave counts; if
- * noise_impl.h ever plans differently, texture_plan just calls tf_octaves_plan. */
+ * (TF_BUMP_H, TF_HALF_H) get their full plan once; texture_plan cuts the prefix.  Made once
+ * per process (pthread_once) and checked there against tf_octaves_plan itself on sample octave
+ * counts; if noise_impl.h ever plans differently, texture_plan just calls tf_octaves_plan. */
 static tf_octaves full_plan_bump, full_plan_half;
 static int prefix_plans_exact;
 static pthread_once_t full_plans_once = PTHREAD_ONCE_INIT;

@@ -70,8 +70,15 @@ dv to_d(lv v) { return convert_double8(v); }
 /* Component k (0, 1, 2 per lane) of (a0, a1, a2). */
 dv pick3(dv a0, dv a1, dv a2, lv k) { return select(select(a0, a1, k == 1), a2, k == 2); }
 
-dv xcross8(const world *w, const rayp *r, lv X) { return tf_grid_cross(to_d(X), w->cell, r->o.x, r->inv_dx); }
-dv ycross8(const world *w, const rayp *r, lv Y) { return tf_grid_cross(to_d(Y), w->cell, r->o.y, r->inv_dy); }
+dv xcross8(const world *w, const rayp *r, lv X)
+{
+    return tf_grid_cross(to_d(X), w->cell, r->o.x, r->inv_dx);
+}
+
+dv ycross8(const world *w, const rayp *r, lv Y)
+{
+    return tf_grid_cross(to_d(Y), w->cell, r->o.y, r->inv_dy);
+}
 
 /* cell_of per lane; the two correction loops run while some lane still moves. */
 lv cell_of8(const world *w, dv v)

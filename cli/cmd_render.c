@@ -35,6 +35,8 @@ static const char usage[] =
     "      --size WxH            override the scene's image size\n"
     "      --pixel half|float    channel type of R, G, B, A (Z and samples stay float; default\n"
     "                            half). rows:K writes a scanline EXR, stamps:WxH a tiled one\n"
+    "      --preview-interval MS rewrite the progress preview (FILE.png) at most this often\n"
+    "                            while rendering (default 5000; it is also written at the end)\n"
     "      --verify-chunks       also decode every result's chunks before accepting it (costs\n"
     "                            the coordinator per-pixel work; structure is always checked)\n"
     "      --backend c|opencl|auto  backend of the local workers (default c; auto: OpenCL if\n"
@@ -85,7 +87,7 @@ int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
            O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE, O_PIXEL,
-           O_VERIFY_CHUNKS };
+           O_VERIFY_CHUNKS, O_PREVIEW_INTERVAL };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -105,6 +107,7 @@ int cmd_render(int argc, char **argv)
         {"movie", required_argument, NULL, O_MOVIE},
         {"pixel", required_argument, NULL, O_PIXEL},
         {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
+        {"preview-interval", required_argument, NULL, O_PREVIEW_INTERVAL},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -183,6 +186,10 @@ int cmd_render(int argc, char **argv)
             o.pixel_given = 1;
             break;
         case O_VERIFY_CHUNKS: o.verify_chunks = 1; break;
+        case O_PREVIEW_INTERVAL:
+            if (parse_int("--preview-interval", optarg, 100, 86400000, &o.preview_interval_ms))
+                return TF_EXIT_USAGE;
+            break;
         case O_LEASE:
             if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))
                 return TF_EXIT_USAGE;

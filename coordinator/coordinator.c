@@ -256,7 +256,8 @@ static int plan_output(render *r)
     int level = tf_log_get_level(), many = r->nouts > 1;
     if (many && level > TF_LOG_WARN)
         tf_log_set_level(TF_LOG_WARN);
-    int complete = 0, partial = 0;
+    int complete = 0, partial = 0, replaced = 0;
+    struct stat st;
     for (int i = 0; i < r->nouts; i++) {
         frame_output *fo = &r->outs[i];
         tf_output_meta(&fo->meta, r->scene, r->o->scene_path, &r->layout);
@@ -272,6 +273,7 @@ static int plan_output(render *r)
         complete += fo->plan.complete;
         if (fo->plan.complete)
             continue;
+        replaced += !r->o->resume && fo->plan.resume_rows < 0 && stat(fo->output, &st) == 0;
         partial += fo->plan.resume_rows >= 0;
         r->jobs[r->njobs] = (tf_frame_job){fo->frame,
                                            fo->plan.resume_rows > 0 ? fo->plan.resume_rows : 0,
@@ -283,6 +285,9 @@ static int plan_output(render *r)
         tf_info("resuming the sequence %s: %d of %d frames complete on disk (skipped), %d in "
                 "progress (continued row by row), %d to render from the start",
                 r->pattern, complete, r->nouts, partial, r->njobs - partial);
+    else if (many && replaced > 0)
+        tf_info("%d of the %d frames of %s are on disk already and will be rendered again "
+                "(--resume keeps the complete ones)", replaced, r->nouts, r->pattern);
     return 0;
 }
 

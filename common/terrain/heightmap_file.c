@@ -260,10 +260,11 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
     double side_x = (w - 1) * dx, side_y = (h - 1) * dy;
     if (fabs(side_x - side_y) > SQUARE_TOLERANCE * fmax(side_x, side_y)) {
         free(win);
-        tf_seterr(err, errlen, "%s: the window covers %.6g x %.6g %s (%dx%d pixels), not a square; "
-                  "the terrain is square: set crop_width and crop_height (about %d rows for "
-                  "%d columns)", name, side_x, side_y, r.has_georef ? "metres" : "pixels", w, h,
-                  (int)lround(side_x / dy) + 1, w);
+        int wide = side_x > side_y;
+        tf_seterr(err, errlen, "%s: the window covers %.6g x %.6g %s (%dx%d pixels), not a "
+                  "square as the terrain is: crop it, e.g. %s = %ld", name, side_x, side_y,
+                  r.has_georef ? "metres" : "pixels", w, h, wide ? "crop_width" : "crop_height",
+                  wide ? lround(side_y / dx) + 1 : lround(side_x / dy) + 1);
         goto out;
     }
     *extent = t->extent > 0 ? t->extent : side_x;

@@ -80,8 +80,10 @@ static void last_gdal_message(char *out, size_t outlen, const char *vpath)
     size_t k = snprintf(out, outlen, ": ");
     size_t vlen = strlen(vpath);
     for (const char *c = m; *c && k + 1 < outlen && k < 170; c++) {
-        if (strncmp(c, vpath, vlen) == 0) {
-            c += vlen - 1;
+        if (strncmp(c, vpath, vlen) == 0) { /* "VPATH: " or "VPATH, ": said already */
+            c += vlen - 1; /* the loop's c++ steps past the path */
+            if ((c[1] == ':' || c[1] == ',') && c[2] == ' ')
+                c += 2;
             continue;
         }
         out[k++] = (*c >= 0x20 && *c < 0x7f) ? *c : ' ';

@@ -52,6 +52,16 @@ int tf_raster_read_png(const uint8_t *data, size_t len, const char *name, tf_ras
                        char *err, size_t errlen)
 {
     memset(r, 0, sizeof *r);
+    /* The IHDR's size, checked before libpng (which refuses sizes above its own limit with
+     * a vaguer message): signature, chunk length, "IHDR", width, height, all big-endian. */
+    if (len >= 24 && memcmp(data + 12, "IHDR", 4) == 0) {
+        unsigned long long w = (unsigned long long)data[16] << 24 | data[17] << 16 |
+                               data[18] << 8 | data[19];
+        unsigned long long h = (unsigned long long)data[20] << 24 | data[21] << 16 |
+                               data[22] << 8 | data[23];
+        if (tf_raster_check_size((long long)w, (long long)h, name, err, errlen) != 0)
+            return -1;
+    }
     png_source src = {data, len, 0, ""};
     png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &src, on_error, on_warning);
     png_infop info = png ? png_create_info_struct(png) : NULL;
@@ -69,7 +79,6 @@ int tf_raster_read_png(const uint8_t *data, size_t len, const char *name, tf_ras
         goto out;
     }
     png_set_read_fn(png, &src, read_bytes);
-    png_set_user_limits(png, TF_RASTER_MAX_SIDE, TF_RASTER_MAX_SIDE);
     png_read_info(png, info);
     png_uint_32 w = png_get_image_width(png, info), h = png_get_image_height(png, info);
     int depth = png_get_bit_depth(png, info), type = png_get_color_type(png, info);

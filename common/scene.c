@@ -63,7 +63,7 @@ enum key_type {
     KT_GENERATOR, /* enum tf_generator by name */
     KT_CAMERA,    /* enum tf_camera_kind by name */
     KT_ENVELOPE,  /* list of up to TF_ENVELOPE_MAX^2 doubles, may continue on indented lines */
-    KT_PATH,      /* char[max] file name: printable, no " ;" or " #" (inih's comments) */
+    KT_PATH,      /* char[max] file name without control characters */
     KT_SHA256,    /* char[65]: 64 hex digits, stored in lower case */
     KT_NODATA,    /* enum tf_nodata by name */
     KT_FIRST_ROW, /* enum tf_first_row by name */
@@ -518,9 +518,8 @@ static int add_envelope_numbers(struct parser *p, int key, const char *value)
     return 0;
 }
 
-/* A file name: printable ASCII or UTF-8, shorter than the key's buffer, and without what would
- * not survive the canonical form (inih strips blanks at either end and a " ;" or " #"
- * comment). */
+/* A file name: no control characters, shorter than the key's buffer.  (inih has already cut
+ * a " ;" comment and the blanks at either end, so what is left survives the canonical form.) */
 static int parse_path_value(struct parser *p, int key, const char *value, char *out)
 {
     const struct key_def *k = &KEYS[key];
@@ -533,10 +532,6 @@ static int parse_path_value(struct parser *p, int key, const char *value, char *
         unsigned char c = (unsigned char)value[i];
         if (c < 0x20 || c == 0x7f) {
             fail_at(p, p->line, "%s: contains a control character", k->name);
-            return -1;
-        }
-        if ((c == ';' || c == '#') && i > 0 && isspace((unsigned char)value[i - 1])) {
-            fail_at(p, p->line, "%s: \" %c\" would start a comment; rename the file", k->name, c);
             return -1;
         }
     }

@@ -22,6 +22,7 @@
 #include "coordinator/rowwriter.h"
 #include "linda/proto.h"
 #include "linda/sock.h"
+#include "heightmap_tuples.h"
 #include "scene.h"
 #include "coordinator/spawn.h"
 #include "coordinator/stats.h"
@@ -185,7 +186,7 @@ static int put_scene_tuples(ts_space *space, const tf_scene *s)
     tf_tuple_init(&t);
     if (tf_tuple_pack(&t, "ssiis", "scene", s->text, (int64_t)s->width, (int64_t)s->height,
                       s->hash_hex) ||
-        ts_space_out(space, &t))
+        ts_space_out(space, &t) || tf_heightmap_tuples_put(space, s))
         return -1;
     tf_tuple_init(&t);
     if (tf_tuple_pack(&t, "si", "next_worker", (int64_t)1) || ts_space_out(space, &t))

@@ -118,7 +118,8 @@ bench: $(PROG) $(BENCHES)
 # Every Debian package the build, the tests and the benchmarks use.
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
-            iproute2 python3 gnuplot-nox libgdal-dev gdal-bin
+            iproute2 python3 gnuplot-nox libgdal-dev gdal-bin openssh-server openssh-client \
+            slurm-wlm munge
 # Only the benchmarks' peers need these (make bench-deps).
 BENCH_PKGS := povray redis-server hyperfine linux-perf valgrind
 deps:

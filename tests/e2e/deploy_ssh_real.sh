@@ -8,6 +8,7 @@
 # "hosts" (both 127.0.0.1 through sshd) in the foreground.  The image must be byte-identical
 # to a local render, both workers must have rendered, and the pushed secret must be mode 600.
 # Skips (77) with the reason when sshd or ssh-keygen is missing or sshd cannot start here.
+# shellcheck disable=SC1091 # lib.sh: the shared e2e helpers (say, fail, skip, e2e_*, same)
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SSHD=$(command -v sshd || echo /usr/sbin/sshd)
@@ -24,7 +25,7 @@ cp "$T/id.pub" "$T/authorized_keys"
 chmod 600 "$T/authorized_keys"
 # sshd refuses to start without its privilege-separation directory; Debian's package creates
 # it at boot (tmpfiles.d), a container may not have it
-[ -d /run/sshd ] || mkdir -p -m 755 /run/sshd
+[ -d /run/sshd ] || mkdir -m 755 /run/sshd
 PORT=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 cat >"$T/sshd_config" <<CONF
 ListenAddress 127.0.0.1
@@ -67,6 +68,7 @@ printf '%s 1\n%s 1\n' "$USER_NAME@127.0.0.1" "$USER_NAME@127.0.0.1" >"$T/hosts.t
     --push-secret "$T/secret" --secret-file "$T/remote/secret" "$T/hosts.txt" >"$T/ssh-workers.log" 2>&1 ||
     fail "ssh-workers.sh failed: $(cat "$T/ssh-workers.log")"
 wait_exit $COORD 60
+# shellcheck disable=SC2154 # rc: set by wait_exit
 [ "$rc" -eq 0 ] || fail "coordinator exited with $rc: $(cat "$T/coord.log")"
 grep -q "all 2 worker hosts finished" "$T/ssh-workers.log" || fail "ssh-workers.sh: $(cat "$T/ssh-workers.log")"
 [ "$(stat -c %a "$T/remote/secret")" = 600 ] || fail "the pushed secret is mode $(stat -c %a "$T/remote/secret")"

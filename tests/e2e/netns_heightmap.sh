@@ -49,9 +49,10 @@ for ns in "$NS_C" "$NS_W"; do
     ip -n "$ns" link set lo up || fail "lo in $ns"
 done
 ip -n "$NS_C" link add eth0 type veth peer name eth0 netns "$NS_W" || fail "veth"
-ip -n "$NS_C" addr add 10.78.0.1/24 dev eth0 && ip -n "$NS_C" link set eth0 up &&
-    ip -n "$NS_W" addr add 10.78.0.2/24 dev eth0 && ip -n "$NS_W" link set eth0 up ||
+if ! { ip -n "$NS_C" addr add 10.78.0.1/24 dev eth0 && ip -n "$NS_C" link set eth0 up &&
+    ip -n "$NS_W" addr add 10.78.0.2/24 dev eth0 && ip -n "$NS_W" link set eth0 up; }; then
     fail "cannot address the cable"
+fi
 
 umask 077
 head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$CDIR/secret"
@@ -73,11 +74,12 @@ until grep -q "may join at" "$WDIR/coord.log"; do
     sleep 0.1
 done
 # the worker: its own mount namespace, the coordinator's directory covered by an empty tmpfs
+# shellcheck disable=SC2016 # the inner script expands its own arguments
 ip netns exec "$NS_W" unshare --mount --propagation private sh -c '
     mount -t tmpfs none "$1" || exit 90
     if [ -e "$1/dem.tif" ] || [ -e "$1/dem.scene" ]; then exit 91; fi
-    cd / && exec timeout "$2" "$3" worker --connect 10.78.0.1:'$PORT' --secret-file "$4" -j 2
-' sh "$CDIR" "$LIMIT" "$TF" "$WDIR/secret" >"$WDIR/worker.log" 2>&1
+    cd / && exec timeout "$2" "$3" worker --connect "$5" --secret-file "$4" -j 2
+' sh "$CDIR" "$LIMIT" "$TF" "$WDIR/secret" "10.78.0.1:$PORT" >"$WDIR/worker.log" 2>&1
 rc=$?
 [ $rc -eq 90 ] && skip "cannot mount a tmpfs in a private mount namespace"
 [ $rc -eq 91 ] && fail "the worker could still see the coordinator's files"

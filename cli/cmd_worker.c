@@ -1,30 +1,15 @@
-/* cmd_worker.c: `terrafarm worker --connect HOST:PORT [-j N]`: a networked worker (the tsnet
- * model).  It reads the scene from the coordinator's tuple space, builds the terrain itself
- * (once, on all cores), then runs N worker processes that share it copy-on-write, each with
- * its own connection, until the render is finished.
- *
- * With --simulate MODEL it joins as N synthetic workers instead (worker/simulate.h): threads
- * that sleep each task's modelled cost from a cost map, to measure the coordinator with far
- * more workers than there are cores. */
+/* cmd_worker.c: `terrafarm worker --connect HOST:PORT [-j N]`: the command line of a networked
+ * worker.  Its life (connect, fetch the scene, build the terrain, fork N workers) is in
+ * worker/networked.c; with --simulate MODEL it joins as synthetic workers (worker/simulate.h). */
 #include <getopt.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/prctl.h>
-#include <sys/wait.h>
-#include <time.h>
-#include <unistd.h>
 
-#include "linda/auth.h"
-#include "clock.h"
 #include "cli/commands.h"
-#include "terrain/heightfield.h"
 #include "log.h"
-#include "scene.h"
-#include "worker/simulate.h"
-#include "linda/tsclient.h"
-#include "worker/worker.h"
+#include "worker/networked.h"
 
 static const char usage[] =
     "usage: terrafarm worker --connect HOST:PORT [options]\n"
@@ -47,69 +32,6 @@ static const char usage[] =
     "      --pixel-us U          with --simulate: modelled cost of an average pixel (default 50)\n"
     "  -q, --quiet / -v, --verbose\n"
     "  -h, --help\n";
-
-/* Connect, retrying while the coordinator is not (yet) listening, for at most timeout_ms: a
- * worker started before its coordinator (a boot script, a batch job) simply waits for it.
- * Any other failure (refused secret, bad address) is final at once. */
-static ts_client *connect_patiently(const char *hostport, const uint8_t *key, int timeout_ms,
-                                    char *err, size_t errlen)
-{
-    int64_t t0 = tf_now_ms();
-    for (;;) {
-        ts_client *c = ts_client_connect(hostport, key, timeout_ms, err, errlen);
-        if (c || !strstr(err, "Connection refused"))
-            return c;
-        double waited_ms = (double)(tf_now_ms() - t0);
-        if (waited_ms + 250 > timeout_ms)
-            return NULL;
-        usleep(250 * 1000);
-    }
-}
-
-static int run_one(const char *connect, const uint8_t *key, int timeout_ms, const tf_scene *s,
-                   const tf_heightfield *hf, const char *backend)
-{
-    char err[1024];
-    ts_client *c = connect_patiently(connect, key, timeout_ms, err, sizeof err);
-    if (!c) {
-        tf_error("%s", err);
-        return 1;
-    }
-    int status = tf_worker_loop(c, s, hf, "networked", backend);
-    ts_client_close(c);
-    return status;
-}
-
-/* --simulate: n synthetic workers on the cost map at path; prints one report line on stdout
- * (key=value pairs, for scripts such as bench/scale_sim.sh). */
-static int run_simulated(const char *connect, const uint8_t *key, int timeout_ms,
-                         const tf_scene *s, const char *path, int n, double pixel_us)
-{
-    char err[1024];
-    tf_cost_map map;
-    if (tf_cost_map_load(path, &map, err, sizeof err)) {
-        tf_error("%s", err);
-        return TF_EXIT_FAIL;
-    }
-    tf_info("joining %s as %d simulated workers: %dx%d render, %.1f us per average pixel",
-            connect, n, s->width, s->height, pixel_us);
-    tf_sim_config cfg = {connect, key, timeout_ms, n, pixel_us, &map, s->width, s->height};
-    tf_sim_report r;
-    int rc = tf_simulate_run(&cfg, &r, err, sizeof err);
-    tf_cost_map_free(&map);
-    printf("simulated workers=%d tasks=%lld ops=%lld wall_s=%.3f modelled_s=%.3f "
-           "slept_s=%.3f efficiency=%.4f ops_per_s=%.0f take_mean_ms=%.3f take_p50_ms=%.3f "
-           "take_p99_ms=%.3f take_max_ms=%.3f oversleep_ms=%.3f\n",
-           r.workers, (long long)r.tasks, (long long)r.ops, r.wall_s, r.modelled_s,
-           r.slept_s, r.efficiency, r.wall_s > 0 ? (double)r.ops / r.wall_s : 0.0, r.take_mean_ms,
-           r.take_p50_ms, r.take_p99_ms, r.take_max_ms, r.slept_over_ms);
-    fflush(stdout);
-    if (rc) {
-        tf_error("%s", err);
-        return TF_EXIT_FAIL;
-    }
-    return TF_EXIT_OK;
-}
 
 int cmd_worker(int argc, char **argv)
 {
@@ -190,77 +112,6 @@ int cmd_worker(int argc, char **argv)
         return TF_EXIT_USAGE;
     }
     signal(SIGPIPE, SIG_IGN);
-    uint8_t key[TF_KEY_BYTES];
-    char err[1024];
-    if (secret && (tf_auth_init() || tf_secret_load(secret, key, err, sizeof err))) {
-        tf_error("%s", err);
-        return TF_EXIT_FAIL;
-    }
-    const uint8_t *k = secret ? key : NULL;
-
-    /* The scene, from the coordinator (tsnet model): the first connection only reads it. */
-    ts_client *c = connect_patiently(connect, k, timeout_ms, err, sizeof err);
-    if (!c) {
-        tf_error("%s", err);
-        return TF_EXIT_FAIL;
-    }
-    tf_scene *s = tf_worker_fetch_scene(c, connect, err, sizeof err);
-    if (!s) {
-        tf_error("%s", err);
-        ts_client_close(c);
-        return TF_EXIT_FAIL;
-    }
-    if (model) {
-        ts_client_close(c);
-        int status = run_simulated(connect, k, timeout_ms, s, model, nproc ? nproc : 16,
-                                   pixel_us);
-        tf_scene_free(s);
-        return status;
-    }
-    if (nproc == 0)
-        nproc = tf_thread_count(0);
-    tf_info("joining %s: %dx%d render of a %s terrain; building the height field", connect,
-            s->width, s->height, tf_generator_name(s->terrain.generator));
-    ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS); /* stay alive while the terrain builds */
-    tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
-    if (!hf) {
-        tf_error("%s", err);
-        tf_scene_free(s);
-        ts_client_close(c);
-        return TF_EXIT_FAIL;
-    }
-    int status = 0;
-    if (nproc == 1) {
-        status = tf_worker_loop(c, s, hf, "networked", backend);
-        ts_client_close(c);
-    } else {
-        ts_client_close(c);
-        pid_t *pids = calloc((size_t)nproc, sizeof *pids);
-        if (!pids) {
-            tf_error("out of memory");
-            return TF_EXIT_FAIL;
-        }
-        for (int i = 0; i < nproc; i++) {
-            pid_t p = fork();
-            if (p == 0) {
-                prctl(PR_SET_PDEATHSIG, SIGTERM);
-                _exit(run_one(connect, k, timeout_ms, s, hf, backend));
-            }
-            pids[i] = p;
-            if (p < 0)
-                tf_warn("fork: cannot start worker process %d", i);
-        }
-        for (int i = 0; i < nproc; i++) {
-            int st;
-            if (pids[i] > 0 && waitpid(pids[i], &st, 0) == pids[i] &&
-                !(WIFEXITED(st) && WEXITSTATUS(st) == 0))
-                status = 1;
-        }
-        free(pids);
-    }
-    if (status == 0)
-        tf_info("render finished; worker leaving");
-    tf_heightfield_free(hf);
-    tf_scene_free(s);
-    return status;
+    tf_networked_opts o = {connect, secret, timeout_ms, nproc, backend, model, pixel_us};
+    return tf_networked_worker_run(&o) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
 }

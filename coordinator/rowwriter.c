@@ -1,12 +1,17 @@
 /* rowwriter.c: see rowwriter.h.  A ring of `depth` chunk buffers between one producer (the
  * supervisor) and one consumer (the writer thread), under one mutex with two condition
- * variables.  INVARIANT: slots [head, head + count) modulo depth hold queued chunks in row order. */
+ * variables.  INVARIANTS (checked by queue_ok() under the mutex in debug builds, `make asan`):
+ *   R1. 0 <= head < depth and 0 <= count <= depth;
+ *   R2. slots [head, head + count) modulo depth hold the queued chunks in row order, each of
+ *       1..chunk_rows rows, and only the producer touches the slot at head + count;
+ *   R3. rows_written only grows. */
 #include "coordinator/rowwriter.h"
 #include "clock.h"
 
 #include "image/png_write.h"
 #include "image/preview.h"
 
+#include <assert.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -50,6 +55,21 @@ static void preview_rows(tf_rowwriter *rw, const tf_pixel *px, int nrows)
     }
 }
 
+#ifndef NDEBUG
+/* R1 and R2 (call with rw->mu held). */
+static int queue_ok(const tf_rowwriter *rw)
+{
+    if (rw->head < 0 || rw->head >= rw->depth || rw->count < 0 || rw->count > rw->depth)
+        return 0;
+    for (int i = 0; i < rw->count; i++) {
+        int rows = rw->slot_rows[(rw->head + i) % rw->depth];
+        if (rows < 1 || rows > rw->chunk_rows)
+            return 0;
+    }
+    return 1;
+}
+#endif
+
 static void *writer_main(void *arg)
 {
     tf_rowwriter *rw = arg;
@@ -71,6 +91,7 @@ static void *writer_main(void *arg)
                 pthread_cond_wait(&rw->nonempty, &rw->mu);
             }
         }
+        assert(queue_ok(rw));
         if (rw->count == 0 && rw->stop)
             break;
         int have = rw->count > 0 && !rw->failed;
@@ -219,6 +240,7 @@ int tf_rowwriter_put(tf_rowwriter *rw, const void *rows, int nrows)
     pthread_mutex_lock(&rw->mu);
     rw->slot_rows[idx] = nrows;
     rw->count++;
+    assert(queue_ok(rw));
     pthread_cond_signal(&rw->nonempty);
     pthread_mutex_unlock(&rw->mu);
     return 0;

@@ -4,8 +4,16 @@
  *     write_task <= next_deal <= tasks.count
  * Tasks below write_task are on disk; tasks in [write_task, next_deal) are "outstanding"
  * (dealt, in the space, leased to a worker, or done and waiting for their band); tasks from
- * next_deal on have not been dealt.  INVARIANT: next_deal - write_task <= watermark <=
- * ring_size, so the ring holds the state of every outstanding task, at slot id % ring_size.
+ * next_deal on have not been dealt.  INVARIANTS (checked by supervisor_ok() in debug builds,
+ * `make asan`):
+ *   S1. 0 <= write_task <= next_deal <= tasks.count.
+ *   S2. next_deal - write_task <= ring_size, and the slot of every outstanding task id is
+ *       ring[id % ring_size] with ring[...].id == id, so the ring holds every outstanding task.
+ *   S3. A slot's counts are never negative: in_space >= 0, leased >= 0.
+ *   S4. Every lease names a dealt task (0 <= task < next_deal; a straggler may still hold a
+ *       copy of a task already written), and for an outstanding task the number of leases
+ *       naming it never exceeds its slot's `leased`.
+ *   S5. rows_written only grows, and rows_written <= height.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -17,6 +25,7 @@
 #include "coordinator/supervisor.h"
 #include "clock.h"
 
+#include <assert.h>
 #include <inttypes.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -76,6 +85,38 @@ struct tf_supervisor {
     tf_farm_stats stats;
     int cap_workers;
 };
+
+/* ---- invariants (S1-S5 above), for assert() in debug builds ------------------------------ */
+#ifndef NDEBUG
+static int supervisor_ok(const tf_supervisor *s)
+{
+    if (!(0 <= s->write_task && s->write_task <= s->next_deal &&
+          s->next_deal <= s->tasks.count))
+        return 0; /* S1 */
+    if (s->next_deal - s->write_task > s->ring_size)
+        return 0; /* S2 */
+    for (int64_t id = s->write_task; id < s->next_deal; id++) {
+        const task_slot *t = &s->ring[id % s->ring_size];
+        if (t->id != id)
+            return 0; /* S2 */
+        if (t->in_space < 0 || t->leased < 0)
+            return 0; /* S3 */
+    }
+    for (int i = 0; i < s->nleases; i++) {
+        int64_t task = s->leases[i].task;
+        if (task < 0 || task >= s->next_deal)
+            return 0; /* S4 */
+        if (task < s->write_task)
+            continue;
+        int n = 0;
+        for (int j = 0; j < s->nleases; j++)
+            n += s->leases[j].task == task;
+        if (n > s->ring[task % s->ring_size].leased)
+            return 0; /* S4 */
+    }
+    return s->rows_written <= s->cfg.height; /* S5 */
+}
+#endif
 
 /* ---- small helpers ---------------------------------------------------------------------- */
 
@@ -665,10 +706,12 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
         fail(s, "%s", err);
         return;
     }
+    assert(supervisor_ok(s));
     write_ready_bands(s);
     update_watermark(s);
     deal_new_tasks(s);
     deal_duplicate(s);
+    assert(supervisor_ok(s));
 }
 
 int tf_supervisor_done(const tf_supervisor *s)

@@ -2,6 +2,7 @@
  * then the simulated workers: one thread per worker, each with its own tuple-space connection,
  * all released together from a start line so the measured wall time starts with a full farm. */
 #include "worker/simulate.h"
+#include "worker/worker.h"
 #include "clock.h"
 
 #include <errno.h>
@@ -208,38 +209,9 @@ static void shared_fail(sim_shared *sh, const char *what, const ts_client *c)
     pthread_mutex_unlock(&sh->lock);
 }
 
-/* Linda's counter idiom, as in worker.c: in ("next_worker", ?n), out ("next_worker", n + 1). */
-static int sim_take_worker_id(ts_client *c, int64_t *id)
-{
-    tf_tuple tmpl, got, next;
-    tf_tuple_init(&tmpl);
-    tf_tuple_init(&got);
-    tf_tuple_init(&next);
-    int rc = tf_tuple_pack(&tmpl, "sI", "next_worker") || ts_in(c, &tmpl, &got) ||
-                     tf_tuple_get_int(&got, 1, id) ||
-                     tf_tuple_pack(&next, "si", "next_worker", *id + 1) || ts_out(c, &next)
-                 ? -1
-                 : 0;
-    tf_tuple_clear(&tmpl);
-    tf_tuple_clear(&got);
-    tf_tuple_clear(&next);
-    return rc;
-}
-
 static int sim_join(sim_worker *w)
 {
-    if (sim_take_worker_id(w->client, &w->id))
-        return -1;
-    char host[64] = "";
-    gethostname(host, sizeof host - 1);
-    tf_tuple t;
-    tf_tuple_init(&t);
-    int rc = tf_tuple_pack(&t, "sissis", "hello", w->id, "networked", host,
-                           (int64_t)getpid(), "simulated") || ts_out(w->client, &t)
-                 ? -1
-                 : 0;
-    tf_tuple_clear(&t);
-    return rc;
+    return tf_worker_join(w->client, "networked", "simulated", &w->id);
 }
 
 static void note_latency(sim_worker *w, double ms)
@@ -262,91 +234,60 @@ static int64_t sleep_cost(int64_t t0, int64_t cost_ns)
     struct timespec ts = {(time_t)(until / 1000000000), (long)(until % 1000000000)};
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR)
         ;
-    return tf_clock_ns(CLOCK_MONOTONIC) - until;
+    return tf_now_ns() - until;
 }
 
-/* Render one task the simulated way: sleep its modelled cost, put back zero pixels. */
-static int sim_task(sim_worker *w, const tf_task_msg *m, tf_pixel **px, size_t *cap)
+/* The simulated worker's step: sleep the task's modelled cost; its pixels are zero. */
+static int sim_render(void *ctx, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
+                      int64_t *busy_ns, char *err, size_t errlen)
 {
+    (void)err;
+    (void)errlen;
+    sim_worker *w = ctx;
     const tf_sim_config *cfg = w->sh->cfg;
-    size_t n = (size_t)m->rect.w * (size_t)m->rect.h;
-    if (n > *cap) {
-        tf_pixel *np = realloc(*px, n * sizeof *np);
-        if (!np)
-            return -1;
-        memset(np, 0, n * sizeof *np);
-        *px = np;
-        *cap = n;
-    }
+    size_t n = (size_t)rect.w * (size_t)rect.h;
+    memset(px, 0, n * sizeof *px);
     double cost = cfg->pixel_us * 1000.0 *
-                  tf_cost_map_rect(cfg->map, cfg->image_w, cfg->image_h, m->rect);
+                  tf_cost_map_rect(cfg->map, cfg->image_w, cfg->image_h, rect);
     int64_t cost_ns = (int64_t)cost;
-    int64_t t0 = tf_clock_ns(CLOCK_MONOTONIC);
+    int64_t t0 = tf_now_ns();
     w->oversleep_ns += (double)sleep_cost(t0, cost_ns);
     w->modelled_ns += (double)cost_ns;
-    tf_render_counts counts = {0, 0, 0, (uint64_t)n};
-    tf_tuple result;
-    int rc = tf_result_pack(&result, m->id, w->id, &counts, cost_ns, *px, n) ||
-                     ts_out(w->client, &result)
-                 ? -1
-                 : 0;
-    tf_tuple_clear(&result);
-    w->ops++;
-    w->tasks += rc == 0;
-    return rc;
+    w->tasks++;
+    *counts = (tf_render_counts){0, 0, 0, (uint64_t)n};
+    *busy_ns = cost_ns;
+    return 0;
 }
 
+static void sim_on_take(void *ctx, int64_t wait_ns)
+{
+    note_latency(ctx, (double)wait_ns * 1e-6);
+}
+
+static void sim_on_op(void *ctx)
+{
+    ((sim_worker *)ctx)->ops++;
+}
+
+static void sim_on_stop(void *ctx, int64_t t_ns)
+{
+    sim_worker *w = ctx;
+    int64_t zero = 0;
+    atomic_compare_exchange_strong(&w->sh->first_stop_ns, &zero, t_ns);
+}
+
+/* The real worker loop (worker.c) with the simulated step. */
 static void sim_serve(sim_worker *w)
 {
-    tf_tuple tmpl;
-    tf_task_template(&tmpl, TF_TASK_ANY);
-    tf_pixel *px = NULL;
-    size_t cap = 0;
-    for (;;) {
-        tf_tuple task;
-        tf_task_msg m;
-        tf_tuple_init(&task);
-        int64_t t0 = tf_clock_ns(CLOCK_MONOTONIC);
-        int rc = ts_in(w->client, &tmpl, &task);
-        int64_t t1 = tf_clock_ns(CLOCK_MONOTONIC);
-        w->ops++;
-        if (rc) {
-            /* After the stop tuple a closing coordinator is the end of the render (see below). */
-            if (atomic_load(&w->sh->first_stop_ns) == 0)
-                shared_fail(w->sh, "lost the coordinator", w->client);
-            break;
-        }
-        if (tf_task_unpack(&task, &m)) {
-            tf_tuple_clear(&task);
-            continue;
-        }
-        if (m.id == TF_TASK_STOP) {
-            int64_t zero = 0;
-            atomic_compare_exchange_strong(&w->sh->first_stop_ns, &zero, t1);
-            ts_out(w->client, &task); /* so every other worker sees it too */
-            tf_tuple_clear(&task);
-            break;
-        }
-        if (tf_task_excludes(&m, w->id)) {
-            ts_out(w->client, &task);
-            w->ops++;
-            tf_tuple_clear(&task);
-            usleep(200 * 1000);
-            continue;
-        }
-        tf_tuple_clear(&task);
-        note_latency(w, (double)(t1 - t0) * 1e-6);
-        if (sim_task(w, &m, &px, &cap)) {
-            /* Once the stop tuple is out the coordinator may finish and close while this
-             * worker still sleeps on a straggler's duplicate: losing it then is the end of
-             * the render, not a failure. */
-            if (atomic_load(&w->sh->first_stop_ns) == 0)
-                shared_fail(w->sh, "cannot deliver a result", w->client);
-            break;
-        }
-    }
-    free(px);
-    tf_tuple_clear(&tmpl);
+    tf_worker_step step = {w, sim_render, sim_on_take, sim_on_op, sim_on_stop};
+    int rc = tf_worker_serve(w->client, w->id, &step);
+    /* Once the stop tuple is out the coordinator may finish and close while this worker still
+     * waits, or sleeps on a straggler's duplicate: losing it then is the end of the render,
+     * not a failure. */
+    if (rc != TF_SERVE_STOPPED && atomic_load(&w->sh->first_stop_ns) == 0)
+        shared_fail(w->sh, rc == TF_SERVE_LOST ? "lost the coordinator"
+                                               : "cannot deliver a result",
+                    w->client);
 }
 
 static void merge(sim_shared *sh, sim_worker *w)
@@ -497,7 +438,7 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
     pthread_mutex_lock(&sh.lock);
     while (sh.arrived < started)
         pthread_cond_wait(&sh.gate, &sh.lock);
-    sh.start_ns = tf_clock_ns(CLOCK_MONOTONIC);
+    sh.start_ns = tf_now_ns();
     sh.released = 1;
     pthread_cond_broadcast(&sh.gate);
     pthread_mutex_unlock(&sh.lock);

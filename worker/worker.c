@@ -20,27 +20,27 @@ static int take_worker_id(ts_client *c, int64_t *id)
     tf_tuple tmpl, got, next;
     tf_tuple_init(&tmpl);
     tf_tuple_init(&got);
-    if (tf_tuple_pack(&tmpl, "sI", "next_worker") || ts_in(c, &tmpl, &got) ||
-        tf_tuple_get_int(&got, 1, id)) {
-        tf_tuple_clear(&tmpl);
-        tf_tuple_clear(&got);
-        return -1;
-    }
+    tf_tuple_init(&next);
+    int rc = tf_tuple_pack(&tmpl, "sI", "next_worker") || ts_in(c, &tmpl, &got) ||
+                     tf_tuple_get_int(&got, 1, id) ||
+                     tf_tuple_pack(&next, "si", "next_worker", *id + 1) || ts_out(c, &next)
+                 ? -1
+                 : 0;
     tf_tuple_clear(&tmpl);
     tf_tuple_clear(&got);
-    tf_tuple_init(&next);
-    int rc = tf_tuple_pack(&next, "si", "next_worker", *id + 1) || ts_out(c, &next) ? -1 : 0;
     tf_tuple_clear(&next);
     return rc;
 }
 
-static int say_hello(ts_client *c, int64_t id, const char *kind, const char *backend)
+int tf_worker_join(ts_client *c, const char *kind, const char *backend, int64_t *id)
 {
+    if (take_worker_id(c, id))
+        return -1;
     char host[64] = "";
     gethostname(host, sizeof host - 1);
     tf_tuple t;
     tf_tuple_init(&t);
-    int rc = tf_tuple_pack(&t, "sissis", "hello", id, kind, host, (int64_t)getpid(), backend) ||
+    int rc = tf_tuple_pack(&t, "sissis", "hello", *id, kind, host, (int64_t)getpid(), backend) ||
                      ts_out(c, &t)
                  ? -1
                  : 0;
@@ -48,57 +48,49 @@ static int say_hello(ts_client *c, int64_t id, const char *kind, const char *bac
     return rc;
 }
 
-static int put_back(ts_client *c, tf_tuple *task)
+static void note_op(const tf_worker_step *step)
+{
+    if (step->on_op)
+        step->on_op(step->ctx);
+}
+
+static int put_back(ts_client *c, tf_tuple *task, const tf_worker_step *step)
 {
     int rc = ts_out(c, task);
     tf_tuple_clear(task);
+    note_op(step);
     return rc;
 }
 
-static int report_failure(ts_client *c, int64_t task, int64_t worker, const char *msg)
+static int report_failure(ts_client *c, int64_t task, int64_t worker, const char *msg,
+                          const tf_worker_step *step)
 {
     tf_tuple t;
     tf_tuple_init(&t);
     int rc = tf_tuple_pack(&t, "siis", "failed", task, worker, msg) || ts_out(c, &t) ? -1 : 0;
     tf_tuple_clear(&t);
+    note_op(step);
     return rc;
 }
 
-int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, const char *kind,
-                   const char *backend_name)
+int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
 {
     char err[1024];
-    int64_t id;
-    ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS);
-    if (take_worker_id(c, &id)) {
-        tf_error("cannot join the render: %s", ts_client_error(c));
-        return 1;
-    }
-    char tag[32];
-    snprintf(tag, sizeof tag, "worker %" PRId64, id);
-    tf_log_set_tag(tag);
-    tf_backend *b = tf_backend_new(backend_name, s, hf, err, sizeof err);
-    if (!b) {
-        tf_error("%s", err);
-        return TF_WORKER_EXIT_NOSTART;
-    }
-    if (say_hello(c, id, kind, tf_backend_name(b))) {
-        tf_error("cannot join the render: %s", ts_client_error(c));
-        tf_backend_free(b);
-        return 1;
-    }
     tf_tuple tmpl;
     tf_task_template(&tmpl, TF_TASK_ANY);
-    int status = 0;
+    int status = TF_SERVE_STOPPED;
     tf_pixel *px = NULL;
     size_t px_cap = 0;
     for (;;) {
         tf_tuple task;
         tf_task_msg m;
         tf_tuple_init(&task);
-        if (ts_in(c, &tmpl, &task)) {
-            tf_error("lost the coordinator: %s", ts_client_error(c));
-            status = 1;
+        int64_t t0 = tf_now_ns();
+        int rc = ts_in(c, &tmpl, &task);
+        int64_t t1 = tf_now_ns();
+        note_op(step);
+        if (rc) {
+            status = TF_SERVE_LOST;
             break;
         }
         if (tf_task_unpack(&task, &m)) {
@@ -107,52 +99,100 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
             continue;
         }
         if (m.id == TF_TASK_STOP) {
-            put_back(c, &task); /* so every other worker sees it too */
+            if (step->on_stop)
+                step->on_stop(step->ctx, t1);
+            put_back(c, &task, step); /* so every other worker sees it too */
             break;
         }
         if (tf_task_excludes(&m, id)) {
-            put_back(c, &task);
+            put_back(c, &task, step);
             usleep(200 * 1000); /* let a worker that can render it take it */
             continue;
         }
         tf_tuple_clear(&task);
+        if (step->on_take)
+            step->on_take(step->ctx, t1 - t0);
         size_t n = (size_t)m.rect.w * (size_t)m.rect.h;
         if (n > px_cap) {
             tf_pixel *np = realloc(px, n * sizeof *px);
             if (!np) {
-                report_failure(c, m.id, id, "out of memory");
+                report_failure(c, m.id, id, "out of memory", step);
                 continue;
             }
             px = np;
             px_cap = n;
         }
         tf_render_counts counts = {0};
-        int64_t t0 = tf_now_ns();
-        if (m.rect.x + m.rect.w > s->width || m.rect.y + m.rect.h > s->height) {
-            report_failure(c, m.id, id, "task rectangle outside the image");
-            continue;
-        }
-        if (tf_backend_render(b, m.rect, px, &counts, err, sizeof err)) {
+        int64_t busy = 0;
+        if (step->render(step->ctx, m.rect, px, &counts, &busy, err, sizeof err)) {
             tf_warn("task %" PRId64 ": %s", m.id, err);
-            if (report_failure(c, m.id, id, err))
+            if (report_failure(c, m.id, id, err, step)) {
+                status = TF_SERVE_UNDELIVERED;
                 break;
+            }
             continue;
         }
-        int64_t busy = tf_now_ns() - t0;
         tf_tuple result;
-        if (tf_result_pack(&result, m.id, id, &counts, busy, px, n) || ts_out(c, &result)) {
-            tf_tuple_clear(&result);
-            tf_error("cannot deliver the result of task %" PRId64 ": %s", m.id,
-                     ts_client_error(c));
-            status = 1;
+        rc = tf_result_pack(&result, m.id, id, &counts, busy, px, n) || ts_out(c, &result);
+        tf_tuple_clear(&result);
+        note_op(step);
+        if (rc) {
+            status = TF_SERVE_UNDELIVERED;
             break;
         }
-        tf_tuple_clear(&result);
     }
     tf_tuple_clear(&tmpl);
     free(px);
-    tf_backend_free(b);
     return status;
+}
+
+/* ---- the real worker: a backend renders the rectangle ---- */
+
+typedef struct backend_ctx {
+    tf_backend *b;
+    const tf_scene *s;
+} backend_ctx;
+
+static int backend_render(void *ctx, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
+                          int64_t *busy_ns, char *err, size_t errlen)
+{
+    backend_ctx *bc = ctx;
+    if (rect.x + rect.w > bc->s->width || rect.y + rect.h > bc->s->height)
+        return tf_seterr(err, errlen, "task rectangle outside the image");
+    int64_t t0 = tf_now_ns();
+    int rc = tf_backend_render(bc->b, rect, px, counts, err, errlen);
+    *busy_ns = tf_now_ns() - t0;
+    return rc;
+}
+
+int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, const char *kind,
+                   const char *backend_name)
+{
+    char err[1024];
+    ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS);
+    tf_backend *b = tf_backend_new(backend_name, s, hf, err, sizeof err);
+    if (!b) {
+        tf_error("%s", err);
+        return TF_WORKER_EXIT_NOSTART;
+    }
+    int64_t id;
+    if (tf_worker_join(c, kind, tf_backend_name(b), &id)) {
+        tf_error("cannot join the render: %s", ts_client_error(c));
+        tf_backend_free(b);
+        return 1;
+    }
+    char tag[32];
+    snprintf(tag, sizeof tag, "worker %" PRId64, id);
+    tf_log_set_tag(tag);
+    backend_ctx bc = {b, s};
+    tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL};
+    int rc = tf_worker_serve(c, id, &step);
+    if (rc == TF_SERVE_LOST)
+        tf_error("lost the coordinator: %s", ts_client_error(c));
+    else if (rc == TF_SERVE_UNDELIVERED)
+        tf_error("cannot deliver a result: %s", ts_client_error(c));
+    tf_backend_free(b);
+    return rc == TF_SERVE_STOPPED ? 0 : 1;
 }
 
 tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen)

@@ -9,6 +9,7 @@
 #include "terrain/heightfield.h"
 #include "scene.h"
 #include "linda/tsclient.h"
+#include "render/render.h"
 
 /* Heartbeat interval: well under the coordinator's default 15 s silence timeout. */
 #define TF_WORKER_HEARTBEAT_MS 2000
@@ -17,8 +18,39 @@
  * does not restart it. */
 #define TF_WORKER_EXIT_NOSTART 3
 
-/* Serve tasks until told to stop.  kind is "forked" or "networked".  Returns an exit status
- * (0 when the render finished); prints one line on failure.  Closes nothing: the caller owns c. */
+/* What a worker does with a task, the one thing that differs between the real worker (the C
+ * or OpenCL backend traces rays) and the simulated one (worker/simulate.c sleeps a modelled
+ * cost).  The loop around it -- take, check, render, put the result back -- is shared. */
+typedef struct tf_worker_step {
+    void *ctx;
+    /* Render rect into px[rect.w * rect.h]; fill *counts and *busy_ns (the time it took).
+     * 0, or -1 with one line in err (reported to the coordinator as a task failure). */
+    int (*render)(void *ctx, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
+                  int64_t *busy_ns, char *err, size_t errlen);
+    /* Optional observers: a task was taken after waiting wait_ns for it; a tuple operation was
+     * issued (in, out); the stop tuple was seen at monotonic time t_ns. */
+    void (*on_take)(void *ctx, int64_t wait_ns);
+    void (*on_op)(void *ctx);
+    void (*on_stop)(void *ctx, int64_t t_ns);
+} tf_worker_step;
+
+/* Join the render: take a worker id (Linda's counter idiom) and announce ("hello", id, kind,
+ * host, pid, backend).  0, or -1 (the client's error says why). */
+int tf_worker_join(ts_client *c, const char *kind, const char *backend, int64_t *id);
+
+/* How tf_worker_serve ended. */
+enum { TF_SERVE_STOPPED = 0, TF_SERVE_LOST = 1, TF_SERVE_UNDELIVERED = 2 };
+
+/* Take tasks and answer them with step until the stop tuple: TF_SERVE_STOPPED; or the
+ * coordinator was lost while waiting for a task (TF_SERVE_LOST) or while delivering a result
+ * (TF_SERVE_UNDELIVERED).  Logs nothing about those two: the caller knows whether the render
+ * was ending anyway. */
+int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step);
+
+/* The real worker: join, build the backend, serve until told to stop.  kind is "forked" or
+ * "networked".  Returns an exit status (0 when the render finished; TF_WORKER_EXIT_NOSTART
+ * when the backend cannot start); prints one line on failure.  Closes nothing: the caller
+ * owns c. */
 int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, const char *kind,
                    const char *backend);
 

@@ -14,10 +14,17 @@
  *
  * Closing never frees a connection while the loop may still hold a pointer to it: it is marked
  * dead (fd closed, waiter cancelled, on_disconnect run) and freed by the sweep at the end of
- * ts_server_run_once, or at once when the close comes from outside the loop. */
+ * ts_server_run_once, or at once when the close comes from outside the loop.
+ *
+ * The dirty list (see conn_touch).  INVARIANTS (checked by dirty_list_ok() in debug builds,
+ * `make asan`):
+ *   T1. A connection is on srv->dirty at most once, and exactly when c->dirty is set (a live
+ *       connection with c->dirty set is on the list; every entry of the list has it set).
+ *   T2. srv->nconns is the length of the live list srv->conns. */
 #include "linda/tsserver.h"
 #include "clock.h"
 
+#include <assert.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <arpa/inet.h>
@@ -181,6 +188,23 @@ static void conn_touch(conn *c)
     c->dirty_next = c->srv->dirty;
     c->srv->dirty = c;
 }
+
+#ifndef NDEBUG
+static int dirty_list_ok(const ts_server *srv)
+{
+    size_t listed = 0, live_listed = 0, live_dirty = 0, live = 0;
+    for (const conn *c = srv->dirty; c; c = c->dirty_next) {
+        if (!c->dirty || ++listed > srv->nconns + 65536)
+            return 0; /* T1: an entry without the flag, or a cycle */
+        live_listed += !c->dead;
+    }
+    for (const conn *c = srv->conns; c; c = c->next) {
+        live++;
+        live_dirty += c->dirty && !c->dead;
+    }
+    return live_listed == live_dirty && live == srv->nconns; /* T1, T2 */
+}
+#endif
 
 static void conn_destroy(conn *c)
 {
@@ -567,6 +591,7 @@ static void sync_conn_interest(conn *c)
  * a connection may run hooks that touch others: they join the list and are served here too. */
 static void flush_dirty(ts_server *srv)
 {
+    assert(dirty_list_ok(srv));
     while (srv->dirty) {
         conn *c = srv->dirty;
         srv->dirty = c->dirty_next;

@@ -1,0 +1,176 @@
+/* networked.c: see networked.h. */
+#include "worker/networked.h"
+
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/prctl.h>
+#include <sys/types.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "clock.h"
+#include "log.h"
+#include "scene.h"
+#include "linda/auth.h"
+#include "linda/tsclient.h"
+#include "terrain/heightfield.h"
+#include "terrain/terrain.h"
+#include "worker/simulate.h"
+#include "worker/worker.h"
+
+/* Connect, retrying while the coordinator is not (yet) listening, for at most timeout_ms: a
+ * worker started before its coordinator (a boot script, a batch job) simply waits for it.
+ * Any other failure (refused secret, bad address) is final at once. */
+static ts_client *connect_patiently(const char *hostport, const uint8_t *key, int timeout_ms,
+                                    char *err, size_t errlen)
+{
+    int64_t t0 = tf_now_ms();
+    for (;;) {
+        ts_client *c = ts_client_connect(hostport, key, timeout_ms, err, errlen);
+        if (c || !strstr(err, "Connection refused"))
+            return c;
+        double waited_ms = (double)(tf_now_ms() - t0);
+        if (waited_ms + 250 > timeout_ms)
+            return NULL;
+        usleep(250 * 1000);
+    }
+}
+
+static int run_one(const char *connect, const uint8_t *key, int timeout_ms, const tf_scene *s,
+                   const tf_heightfield *hf, const char *backend)
+{
+    char err[1024];
+    ts_client *c = connect_patiently(connect, key, timeout_ms, err, sizeof err);
+    if (!c) {
+        tf_error("%s", err);
+        return 1;
+    }
+    int status = tf_worker_loop(c, s, hf, "networked", backend);
+    ts_client_close(c);
+    return status;
+}
+
+/* --simulate: n synthetic workers on the cost map at path; prints one report line on stdout
+ * (key=value pairs, for scripts such as bench/scale_sim.sh). */
+static int run_simulated(const char *connect, const uint8_t *key, int timeout_ms,
+                         const tf_scene *s, const char *path, int n, double pixel_us)
+{
+    char err[1024];
+    tf_cost_map map;
+    if (tf_cost_map_load(path, &map, err, sizeof err)) {
+        tf_error("%s", err);
+        return 1;
+    }
+    tf_info("joining %s as %d simulated workers: %dx%d render, %.1f us per average pixel",
+            connect, n, s->width, s->height, pixel_us);
+    tf_sim_config cfg = {connect, key, timeout_ms, n, pixel_us, &map, s->width, s->height};
+    tf_sim_report r;
+    int rc = tf_simulate_run(&cfg, &r, err, sizeof err);
+    tf_cost_map_free(&map);
+    printf("simulated workers=%d tasks=%lld ops=%lld wall_s=%.3f modelled_s=%.3f "
+           "slept_s=%.3f efficiency=%.4f ops_per_s=%.0f take_mean_ms=%.3f take_p50_ms=%.3f "
+           "take_p99_ms=%.3f take_max_ms=%.3f oversleep_ms=%.3f\n",
+           r.workers, (long long)r.tasks, (long long)r.ops, r.wall_s, r.modelled_s,
+           r.slept_s, r.efficiency, r.wall_s > 0 ? (double)r.ops / r.wall_s : 0.0, r.take_mean_ms,
+           r.take_p50_ms, r.take_p99_ms, r.take_max_ms, r.slept_over_ms);
+    fflush(stdout);
+    if (rc) {
+        tf_error("%s", err);
+        return 1;
+    }
+    return 0;
+}
+
+/* nproc worker processes sharing the scene and the height field copy-on-write, each with its
+ * own connection; 0 when every one finished cleanly. */
+static int run_processes(int nproc, const char *connect, const uint8_t *key, int timeout_ms,
+                         const tf_scene *s, const tf_heightfield *hf, const char *backend)
+{
+    pid_t *pids = calloc((size_t)nproc, sizeof *pids);
+    if (!pids) {
+        tf_error("out of memory");
+        return 1;
+    }
+    int status = 0;
+    for (int i = 0; i < nproc; i++) {
+        pid_t p = fork();
+        if (p == 0) {
+            prctl(PR_SET_PDEATHSIG, SIGTERM);
+            _exit(run_one(connect, key, timeout_ms, s, hf, backend));
+        }
+        pids[i] = p;
+        if (p < 0)
+            tf_warn("fork: cannot start worker process %d", i);
+    }
+    for (int i = 0; i < nproc; i++) {
+        int st;
+        if (pids[i] > 0 && waitpid(pids[i], &st, 0) == pids[i] &&
+            !(WIFEXITED(st) && WEXITSTATUS(st) == 0))
+            status = 1;
+    }
+    free(pids);
+    return status;
+}
+
+int tf_networked_worker_run(const tf_networked_opts *o)
+{
+    const char *connect = o->connect, *backend = o->backend, *model = o->simulate_model;
+    int timeout_ms = o->timeout_ms, nproc = o->processes;
+    const char *secret = o->secret_file;
+    double pixel_us = o->pixel_us;
+    signal(SIGPIPE, SIG_IGN);
+    uint8_t key[TF_KEY_BYTES];
+    char err[1024];
+    if (secret && (tf_auth_init() || tf_secret_load(secret, key, err, sizeof err))) {
+        tf_error("%s", err);
+        return 1;
+    }
+    const uint8_t *k = secret ? key : NULL;
+
+    /* The scene, from the coordinator (tsnet model): the first connection only reads it. */
+    ts_client *c = connect_patiently(connect, k, timeout_ms, err, sizeof err);
+    if (!c) {
+        tf_error("%s", err);
+        return 1;
+    }
+    tf_scene *s = tf_worker_fetch_scene(c, connect, err, sizeof err);
+    if (!s) {
+        tf_error("%s", err);
+        ts_client_close(c);
+        return 1;
+    }
+    if (model) {
+        ts_client_close(c);
+        int status = run_simulated(connect, k, timeout_ms, s, model, nproc ? nproc : 16,
+                                   pixel_us);
+        tf_scene_free(s);
+        return status;
+    }
+    if (nproc == 0)
+        nproc = tf_thread_count(0);
+    tf_info("joining %s: %dx%d render of a %s terrain; building the height field", connect,
+            s->width, s->height, tf_generator_name(s->terrain.generator));
+    ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS); /* stay alive while the terrain builds */
+    tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
+    if (!hf) {
+        tf_error("%s", err);
+        tf_scene_free(s);
+        ts_client_close(c);
+        return 1;
+    }
+    int status;
+    if (nproc == 1) {
+        status = tf_worker_loop(c, s, hf, "networked", backend);
+        ts_client_close(c);
+    } else {
+        ts_client_close(c);
+        status = run_processes(nproc, connect, k, timeout_ms, s, hf, backend);
+    }
+    if (status == 0)
+        tf_info("render finished; worker leaving");
+    tf_heightfield_free(hf);
+    tf_scene_free(s);
+    return status;
+}

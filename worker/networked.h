@@ -1,0 +1,27 @@
+/* networked.h: the life of a networked worker (the tsnet model), `terrafarm worker`.
+ *
+ * Connect to the coordinator (waiting for it while it is not yet listening, up to a timeout),
+ * read the scene from its tuple space, build the terrain once, then run N worker processes
+ * that share it copy-on-write, each with its own connection and the worker loop of worker.h,
+ * until the render is finished.  With a simulation model it joins as N synthetic workers
+ * instead (simulate.h). */
+#ifndef TF_NETWORKED_H
+#define TF_NETWORKED_H
+
+#include <stdint.h>
+
+typedef struct tf_networked_opts {
+    const char *connect;        /* HOST:PORT of the coordinator */
+    const char *secret_file;    /* or NULL */
+    int timeout_ms;             /* keep trying to reach the coordinator this long */
+    int processes;              /* worker processes; 0 = online CPUs (16 threads simulated) */
+    const char *backend;        /* "c" | "opencl" | "auto" */
+    const char *simulate_model; /* cost map path: simulated workers; NULL: real ones */
+    double pixel_us;            /* simulated cost of an average pixel */
+} tf_networked_opts;
+
+/* Run until the render is finished.  Returns the process exit status (0, or 1 after one
+ * line on stderr). */
+int tf_networked_worker_run(const tf_networked_opts *o);
+
+#endif

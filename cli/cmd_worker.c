@@ -2,11 +2,13 @@
  * worker.  Its life (connect, fetch the scene, build the terrain, fork N workers) is in
  * worker/networked.c; with --simulate MODEL it joins as synthetic workers (worker/simulate.h). */
 #include <getopt.h>
+#include <stdint.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "clock.h"
 #include "cli/commands.h"
 #include "log.h"
 #include "worker/networked.h"

@@ -63,6 +63,8 @@ int main(int argc, char **argv)
         return 2;
     if (a.w != b.w || a.h != b.h) {
         printf("sizes differ: %dx%d vs %dx%d\n", a.w, a.h, b.w, b.h);
+        free(a.px);
+        free(b.px);
         return 1;
     }
     size_t n = (size_t)a.w * (size_t)a.h, same = 0, far = 0;
@@ -79,6 +81,8 @@ int main(int argc, char **argv)
     }
     printf("pixels=%zu identical=%zu mean_abs_rgb=%.6g far=%zu max_abs_rgb=%.6g\n", n, same,
            sum / n, far, max);
+    free(a.px);
+    free(b.px);
     if (argc == 3)
         return same == n ? 0 : 1;
     return (double)far <= atof(argv[4]) * n && sum / n <= atof(argv[5]) ? 0 : 1;

@@ -92,57 +92,75 @@ static int crop_window(const tf_terrain *t, const tf_raster *r, const char *name
     return 0;
 }
 
-/* Step 4, fill: breadth-first layers from the known samples.  Each layer's values are
- * computed from the earlier layers only, then stored, so the result does not depend on the
- * order within a layer.  -1 on out of memory. */
+/* Step 4, fill: breadth-first layers from the known samples.  Layer L is the unknown samples
+ * next to a sample of layer L-1 (layer 0: the data); each gets the mean of its neighbours
+ * known before its layer, and only then is the layer stored, so the result does not depend
+ * on the order within a layer.  Every sample joins one layer once: linear time, whatever the
+ * shape of the holes.  -1 on out of memory. */
+enum { UNKNOWN = 0, QUEUED = 1, KNOWN = 2 };
+
+static void queue_unknown_neighbours(uint32_t i, int w, int h, uint8_t *state, uint32_t *next,
+                                     size_t *nn)
+{
+    int x = (int)(i % (uint32_t)w), y = (int)(i / (uint32_t)w);
+    uint32_t nb[4];
+    int m = 0;
+    if (x > 0) nb[m++] = i - 1;
+    if (x < w - 1) nb[m++] = i + 1;
+    if (y > 0) nb[m++] = i - (uint32_t)w;
+    if (y < h - 1) nb[m++] = i + (uint32_t)w;
+    for (int k = 0; k < m; k++)
+        if (state[nb[k]] == UNKNOWN) {
+            state[nb[k]] = QUEUED;
+            next[(*nn)++] = nb[k];
+        }
+}
+
 static int fill_nodata(float *z, int w, int h)
 {
     size_t count = (size_t)w * (size_t)h;
-    uint32_t *pending = malloc(count * sizeof *pending); /* unknown samples, in index order */
-    uint32_t *layer = malloc(count * sizeof *layer);
+    uint32_t *layer = malloc(count * sizeof *layer), *next = malloc(count * sizeof *next);
     float *layer_v = malloc(count * sizeof *layer_v);
-    uint8_t *known = malloc(count);
+    uint8_t *state = malloc(count);
     int rc = -1;
-    if (!pending || !layer || !layer_v || !known)
+    if (!layer || !next || !layer_v || !state)
         goto out;
-    size_t np = 0;
-    for (size_t i = 0; i < count; i++) {
-        known[i] = !isnan(z[i]);
-        if (!known[i])
-            pending[np++] = (uint32_t)i;
-    }
-    while (np > 0) {
-        size_t nl = 0, still = 0;
-        for (size_t k = 0; k < np; k++) {
-            uint32_t i = pending[k];
+    size_t nl = 0;
+    for (size_t i = 0; i < count; i++)
+        state[i] = isnan(z[i]) ? UNKNOWN : KNOWN;
+    for (size_t i = 0; i < count; i++)
+        if (state[i] == KNOWN)
+            queue_unknown_neighbours((uint32_t)i, w, h, state, layer, &nl);
+    while (nl > 0) {
+        for (size_t k = 0; k < nl; k++) {
+            uint32_t i = layer[k];
             int x = (int)(i % (uint32_t)w), y = (int)(i / (uint32_t)w);
             double sum = 0;
             int m = 0;
-            if (x > 0 && known[i - 1]) sum += z[i - 1], m++;
-            if (x < w - 1 && known[i + 1]) sum += z[i + 1], m++;
-            if (y > 0 && known[i - (uint32_t)w]) sum += z[i - (uint32_t)w], m++;
-            if (y < h - 1 && known[i + (uint32_t)w]) sum += z[i + (uint32_t)w], m++;
-            if (m) {
-                layer[nl] = i;
-                layer_v[nl++] = (float)(sum / m);
-            } else {
-                pending[still++] = i; /* still <= k: writing behind the reader */
-            }
+            if (x > 0 && state[i - 1] == KNOWN) sum += z[i - 1], m++;
+            if (x < w - 1 && state[i + 1] == KNOWN) sum += z[i + 1], m++;
+            if (y > 0 && state[i - (uint32_t)w] == KNOWN) sum += z[i - (uint32_t)w], m++;
+            if (y < h - 1 && state[i + (uint32_t)w] == KNOWN) sum += z[i + (uint32_t)w], m++;
+            layer_v[k] = (float)(sum / m); /* m >= 1: queued next to a known sample */
         }
-        if (nl == 0)
-            break; /* only when nothing is known at all, which the caller excludes */
         for (size_t k = 0; k < nl; k++) {
             z[layer[k]] = layer_v[k];
-            known[layer[k]] = 1;
+            state[layer[k]] = KNOWN;
         }
-        np = still;
+        size_t nn = 0;
+        for (size_t k = 0; k < nl; k++)
+            queue_unknown_neighbours(layer[k], w, h, state, next, &nn);
+        uint32_t *t = layer;
+        layer = next;
+        next = t;
+        nl = nn;
     }
     rc = 0;
 out:
-    free(pending);
     free(layer);
+    free(next);
     free(layer_v);
-    free(known);
+    free(state);
     return rc;
 }
 

@@ -194,6 +194,32 @@ static void test_nodata(void **state)
     free(bytes);
 }
 
+/* One known sample in a corner of 1025 x 1025: the fill reaches every sample in breadth-first
+ * layers, each sample once (the first version rescanned every pending sample per layer, 2000
+ * layers here: minutes; the fuzzer found it as a hang). */
+static void test_fill_single_sample(void **state)
+{
+    (void)state;
+    enum { N = 1025 };
+    float *v = malloc((size_t)N * N * sizeof *v);
+    for (size_t i = 0; i < (size_t)N * N; i++)
+        v[i] = -9999;
+    v[0] = 42;
+    size_t len;
+    uint8_t *bytes = make_tif(N, N, v, NULL, 0, 1, -9999, &len);
+    free(v);
+    tf_terrain t = file_terrain(bytes, len, 10);
+    double extent;
+    char err[512];
+    float *h = tf_heightmap_heights(&t, &extent, err, sizeof err);
+    assert_non_null(h);
+    for (size_t i = 0; i < (size_t)N * N; i++)
+        if (h[i] != 42)
+            fail_msg("sample %zu is %g, not 42", i, (double)h[i]);
+    free(h);
+    free(bytes);
+}
+
 /* 17 -> 9 samples: two source pixels a sample; the tent of radius 2 keeps a ramp exact away
  * from the edges and a constant exact everywhere. */
 static void test_resample_shrink(void **state)
@@ -239,6 +265,7 @@ int main(void)
         cmocka_unit_test(test_geographic_metres),
         cmocka_unit_test(test_rows_north_up_and_south_first),
         cmocka_unit_test(test_nodata),
+        cmocka_unit_test(test_fill_single_sample),
         cmocka_unit_test(test_resample_shrink),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -18,6 +18,7 @@
 #include "image/exrfile.h"
 #include "farmproto.h"
 #include "terrain/heightfield.h"
+#include "terrain/terrain_build.h"
 #include "log.h"
 #include "image/preview.h"
 #include "coordinator/progress.h"
@@ -157,6 +158,14 @@ static int load_secret(render *r)
 static int build_terrain(render *r)
 {
     char err[1024];
+    if (r->nworkers <= 0 && r->scene->terrain.generator == TF_GEN_FILE) {
+        /* networked workers build their own, but a height map is decoded here once, so a bad
+         * file is one line now rather than a failure on every worker that joins */
+        float *h = tf_terrain_heights(&r->scene->terrain, 0, NULL, err, sizeof err);
+        if (!h)
+            return step_failed(r, 1, err);
+        free(h);
+    }
     if (r->nworkers <= 0)
         return 0; /* networked workers build their own */
     double t0 = tf_now_s();

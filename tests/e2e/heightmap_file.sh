@@ -111,6 +111,14 @@ bad huge_tif "too large" huge.tif
 gdal_create -of GTiff -outsize 33 33 -ot Float32 -burn -9999 -a_nodata -9999 \
     "$T/maps/nodata.tif" >/dev/null || fail "gdal_create"
 bad nodata_only "no data" nodata.tif
+# a coordinator without local workers (-j 0) still decodes the map once: one line, at once
+if timeout 20 "$TF_BIN" render "$T/bad_nodata_only.scene" --listen 127.0.0.1:0 -j 0 -q \
+    -o "$T/bad.exr" --overwrite 2>"$T/bad.err"; then
+    fail "-j 0: a nodata-only height map was accepted"
+fi
+[ "$(grep -c . "$T/bad.err")" -eq 1 ] && grep -q "maps/nodata.tif: no data" "$T/bad.err" ||
+    fail "-j 0: expected one line about maps/nodata.tif: $(cat "$T/bad.err")"
+say "-j 0 (networked workers only): $(cat "$T/bad.err")"
 gdal_create -of GTiff -outsize 65 33 -ot Float32 -burn 5 "$T/maps/wide.tif" >/dev/null
 bad not_square "not a square" wide.tif
 exit 0

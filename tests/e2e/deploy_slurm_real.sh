@@ -1,17 +1,20 @@
 #!/bin/sh
 # deploy_slurm_real.sh: deploy/slurm/terrafarm.sbatch submitted with sbatch to a real Slurm.
 #
-# A private one-node cluster on this machine: munged (its own key and socket), slurmctld and
-# slurmd (Debian's slurm-wlm) with a slurm.conf, state and spool in the test's temp dir, on free
-# ports; nothing under /etc is read or written (SLURM_CONF points every command at ours).
-#   1. sbatch -N 1 terrafarm.sbatch SCENE OUT.exr: the job completes and its image is
-#      byte-identical to a local render.
+# A private two-node cluster on this machine, built from network namespaces on a bridge (as
+# tests/e2e/netns_farm.sh does): slurmctld on "ctl" (10.79.0.1), slurmd on "node1" (.2) and
+# "node2" (.3), each slurmd in its own network and UTS namespace (its own address and host
+# name; nsenter keeps the host's /sys/fs/cgroup, which slurmd wants), one munged (its own key
+# and socket) for all.  slurm.conf, state, spool and logs live in the test's temp dir; nothing
+# under /etc is read or written (SLURM_CONF points every command at ours).
+#   1. sbatch -N 2 terrafarm.sbatch SCENE OUT.exr: the coordinator runs on node1, `srun`
+#      starts a networked worker on node2; the job completes, node2's worker rendered tasks,
+#      and the image is byte-identical to a local render.
 #   2. A bigger job is requeued by Slurm mid-render (scontrol requeue): the script's --resume
 #      makes the second run continue the partial image instead of refusing it ("resuming ..."
 #      in the job's output), and the final image is byte-identical to a local render.
-# This cluster has one node, so the script's srun workers (used from two nodes up) are not
-# exercised here; they are checked against stand-ins in deploy_slurm.sh.  Skips (77) with the
-# reason where the daemons are not installed or cannot start.
+# Skips (77) with the reason where the daemons are not installed or cannot start, or network
+# namespaces cannot be made.
 set -u
 ROOT=${TF_ROOT:-$(cd "$(dirname "$0")/../.." && pwd)}
 TF=${TF_BIN:-$ROOT/bin/terrafarm}
@@ -22,8 +25,8 @@ skip() { echo "skipped: $*"; exit 77; }
 fail() { echo "FAIL: $*"; exit 1; }
 note() { echo "deploy_slurm_real: $*"; }
 
-[ "$(id -u)" -eq 0 ] || skip "needs root (slurmd runs jobs as their user)"
-for p in munged slurmctld slurmd sbatch scontrol; do
+[ "$(id -u)" -eq 0 ] || skip "needs root (slurmd runs jobs as their user; network namespaces)"
+for p in munged slurmctld slurmd sbatch scontrol ip nsenter unshare; do
     command -v "$p" >/dev/null 2>&1 || [ -x "/usr/sbin/$p" ] ||
         skip "$p is not installed (make deps: slurm-wlm, munge)"
 done
@@ -34,11 +37,13 @@ T=$(mktemp -d "${TMPDIR:-/tmp}/tf-slurm.XXXXXX") || fail "mktemp"
 chmod 755 "$T"
 export SLURM_CONF="$T/slurm.conf"
 # The daemons run in the foreground as children of this script, so it can stop and reap them.
-DAEMONS=""
+DAEMONS="" NAMESPACES=""
+NS=tf-$$-slurm
 cleanup() {
-    scancel --full --quiet --user="$(id -un)" 2>/dev/null
+    [ -n "$NAMESPACES" ] && ip netns exec "$NS-ctl" scancel --full --quiet --user="$(id -un)" 2>/dev/null
     for pid in $DAEMONS; do kill "$pid" 2>/dev/null; done
     for pid in $DAEMONS; do wait "$pid" 2>/dev/null; done
+    for ns in $NAMESPACES; do ip netns delete "$ns" 2>/dev/null; done
     rm -rf "$T"
 }
 trap cleanup EXIT
@@ -60,33 +65,46 @@ until [ -S "$T/munge/sock" ]; do
     sleep 0.1
 done
 
+# ---- the network: a bridge and three hosts ----
+for n in lan ctl node1 node2; do
+    ip netns add "$NS-$n" 2>"$T/ip.err" || skip "ip netns add failed: $(head -1 "$T/ip.err")"
+    NAMESPACES="$NAMESPACES $NS-$n"
+    ip -n "$NS-$n" link set lo up || fail "lo in $NS-$n"
+done
+if ! { ip -n "$NS-lan" link add br0 type bridge && ip -n "$NS-lan" link set br0 up; }; then
+    skip "cannot create a bridge in a network namespace"
+fi
+i=1
+for n in ctl node1 node2; do
+    if ! { ip -n "$NS-lan" link add "p-$n" type veth peer name eth0 netns "$NS-$n" &&
+        ip -n "$NS-lan" link set "p-$n" master br0 && ip -n "$NS-lan" link set "p-$n" up &&
+        ip -n "$NS-$n" addr add "10.79.0.$i/24" dev eth0 && ip -n "$NS-$n" link set eth0 up; }; then
+        fail "cannot plug $n into the bridge"
+    fi
+    i=$((i + 1))
+done
+# on_ctl CMD...: a Slurm client command, run on the controller's host
+on_ctl() { ip netns exec "$NS-ctl" "$@"; }
+
 # ---- slurm ----
-HOST=$(hostname -s)
 CPUS=$(nproc)
-# shellcheck disable=SC2046 # three port numbers, split on purpose
-set -- $(python3 -c '
-import socket
-s = [socket.socket() for _ in range(3)]
-for x in s: x.bind(("127.0.0.1", 0))
-print(" ".join(str(x.getsockname()[1]) for x in s))')
-CTLD_PORT=$1 SLURMD_PORT=$2 TF_PORT=$3
-mkdir -p "$T/state" "$T/spool" "$T/log" "$T/job"
+mkdir -p "$T/state" "$T/spool/node1" "$T/spool/node2" "$T/log" "$T/job"
 cat >"$SLURM_CONF" <<CONF
-ClusterName=tftest$$
-SlurmctldHost=$HOST(127.0.0.1)
-SlurmctldPort=$CTLD_PORT
-SlurmdPort=$SLURMD_PORT
+ClusterName=tftest
+SlurmctldHost=ctl(10.79.0.1)
+SlurmctldPort=6817
+SlurmdPort=6818
 SlurmUser=root
 SlurmdUser=root
 AuthType=auth/munge
 AuthInfo=socket=$T/munge/sock
 CredType=cred/munge
 StateSaveLocation=$T/state
-SlurmdSpoolDir=$T/spool
+SlurmdSpoolDir=$T/spool/%n
 SlurmctldPidFile=$T/slurmctld.pid
-SlurmdPidFile=$T/slurmd.pid
+SlurmdPidFile=$T/slurmd-%n.pid
 SlurmctldLogFile=$T/log/slurmctld.log
-SlurmdLogFile=$T/log/slurmd.log
+SlurmdLogFile=$T/log/slurmd-%n.log
 ProctrackType=proctrack/linuxproc
 TaskPlugin=task/none
 JobAcctGatherType=jobacct_gather/none
@@ -98,33 +116,47 @@ SwitchType=switch/none
 ReturnToService=2
 PlugStackConfig=/dev/null
 JobRequeue=1
-NodeName=$HOST NodeAddr=127.0.0.1 CPUs=$CPUS State=UNKNOWN
-PartitionName=tf Nodes=$HOST Default=YES MaxTime=10 State=UP
+NodeName=node1 NodeAddr=10.79.0.2 CPUs=$CPUS State=UNKNOWN
+NodeName=node2 NodeAddr=10.79.0.3 CPUs=$CPUS State=UNKNOWN
+PartitionName=tf Nodes=node1,node2 Default=YES MaxTime=10 State=UP
 CONF
-slurmctld -D -i -f "$SLURM_CONF" 2>"$T/ctld.err" &
+# Each daemon as its host: its network namespace and its own host name (slurmd takes its node
+# name from it).  nsenter, unshare and sh all exec, so $! is the daemon itself.
+# shellcheck disable=SC2016 # expanded by the inner sh, from its own arguments
+AS_HOST='hostname "$0" && exec "$@"'
+nsenter --net="/run/netns/$NS-ctl" unshare --uts sh -c "$AS_HOST" ctl \
+    slurmctld -D -i -f "$SLURM_CONF" 2>"$T/ctld.err" &
 CTLD=$!
 DAEMONS="$DAEMONS $CTLD"
-slurmd -D -f "$SLURM_CONF" 2>"$T/slurmd.err" &
-SLURMD=$!
-DAEMONS="$DAEMONS $SLURMD"
+nsenter --net="/run/netns/$NS-node1" unshare --uts sh -c "$AS_HOST" node1 \
+    slurmd -D -f "$SLURM_CONF" 2>"$T/slurmd1.err" &
+D1=$!
+DAEMONS="$DAEMONS $D1"
+nsenter --net="/run/netns/$NS-node2" unshare --uts sh -c "$AS_HOST" node2 \
+    slurmd -D -f "$SLURM_CONF" 2>"$T/slurmd2.err" &
+D2=$!
+DAEMONS="$DAEMONS $D2"
 i=0
-until sinfo -h -o %t 2>/dev/null | grep -q idle; do
+until [ "$(on_ctl sinfo -h -N -o %t 2>/dev/null | grep -c idle)" -eq 2 ]; do
     kill -0 $CTLD 2>/dev/null || skip "slurmctld cannot start here: $(tail -1 "$T/log/slurmctld.log" 2>/dev/null)"
-    kill -0 $SLURMD 2>/dev/null || skip "slurmd cannot start here: $(tail -1 "$T/log/slurmd.log" 2>/dev/null)"
+    kill -0 $D1 2>/dev/null || skip "slurmd cannot start here: $(tail -1 "$T/slurmd1.err" 2>/dev/null)"
+    kill -0 $D2 2>/dev/null || skip "slurmd cannot start here: $(tail -1 "$T/slurmd2.err" 2>/dev/null)"
     i=$((i + 1))
-    [ $i -le 100 ] || skip "the Slurm node never became idle: $(tail -2 "$T/log/slurmd.log" | tr '\n' ' ')"
+    [ $i -le 150 ] || skip "the Slurm nodes never became idle: $(tail -2 "$T/slurmd1.err" | tr '\n' ' ')"
     sleep 0.1
 done
-note "slurmctld + slurmd + munged up: $(sinfo -h -o '%P %D node(s) %t %c CPUs')"
+note "slurmctld + 2 slurmd (network namespaces) + munged up: $(on_ctl sinfo -h -o '%P %D nodes %t %c CPUs each')"
 
 # job_state ID: Slurm's state of the job
-job_state() { scontrol show job "$1" 2>/dev/null | sed -n 's/.*JobState=\([A-Z_]*\).*/\1/p'; }
+job_state() { on_ctl scontrol show job "$1" 2>/dev/null | sed -n 's/.*JobState=\([A-Z_]*\).*/\1/p'; }
 
-# submit OUT SIZE: sbatch the deploy script; the job id in JOB
+# submit OUT SIZE [ARGS]: sbatch -N 2 the deploy script; the job id in JOB.  The coordinator
+# finds node1's address itself (hostname -I in node1's namespace); it forks one local worker.
 submit() {
-    JOB=$(sbatch --parsable -N 1 --chdir="$T/job" --output="$T/job/slurm-%j.out" --open-mode=append \
-        --export=ALL,TF_BIN="$TF",TF_PORT="$TF_PORT",TF_LISTEN_HOST=127.0.0.1,TF_LOCAL_WORKERS=2 \
-        "$SBATCH_SCRIPT" "$SCENE" "$1" --size "$2" 2>"$T/sbatch.err") ||
+    out=$1 size=$2; shift 2
+    JOB=$(on_ctl sbatch --parsable -N 2 --chdir="$T/job" --output="$T/job/slurm-%j.out" \
+        --open-mode=append --export=ALL,TF_BIN="$TF",TF_LOCAL_WORKERS=1 \
+        "$SBATCH_SCRIPT" "$SCENE" "$out" --size "$size" "$@" 2>"$T/sbatch.err") ||
         fail "sbatch refused the job: $(cat "$T/sbatch.err")"
 }
 
@@ -142,13 +174,18 @@ wait_done() {
     done
 }
 
-# ---- 1. a job renders what a local render does ----
-SMALL=240x135
-submit "$T/job/small.exr" $SMALL
-wait_done "$JOB" 60
+# ---- 1. a two-node job renders what a local render does ----
+SMALL=720x405
+submit "$T/job/small.exr" $SMALL --stats "$T/job/small.json"
+wait_done "$JOB" 90
+grep -q "coordinator on node1 (10.79.0.2:[0-9]*), 1 worker node(s)" "$T/job/slurm-$JOB.out" ||
+    { cat "$T/job/slurm-$JOB.out"; fail "the job did not put its coordinator on node1"; }
+srun_tasks=$(sed -n 's/.*"kind": "networked".*"tasks": \([0-9]*\),.*/\1/p' "$T/job/small.json" |
+    awk '{ s += $1 } END { print s + 0 }')
+[ "$srun_tasks" -gt 0 ] || { cat "$T/job/slurm-$JOB.out"; fail "node2's srun worker rendered no task"; }
 "$TF" render "$SCENE" --size $SMALL -j 2 -q -o "$T/local-small.exr" || fail "local render"
 cmp "$T/local-small.exr" "$T/job/small.exr" || fail "the Slurm job's image differs from a local render"
-note "job $JOB (sbatch terrafarm.sbatch) COMPLETED; image identical to a local render"
+note "job $JOB (sbatch -N 2) COMPLETED: node2's srun worker rendered $srun_tasks tasks; image identical to a local render"
 
 # ---- 2. requeued mid-render: the second run resumes ----
 BIG=1280x720
@@ -162,14 +199,14 @@ until grep -q "rendering .* workers may join" "$T/job/slurm-$JOB.out" 2>/dev/nul
     sleep 0.1
 done
 [ "$(job_state "$JOB")" = RUNNING ] || fail "job $JOB finished before the requeue (raise BIG)"
-scontrol requeue "$JOB" || fail "scontrol requeue $JOB"
+on_ctl scontrol requeue "$JOB" || fail "scontrol requeue $JOB"
 # Slurm holds a requeued job back for a while (its begin time moves ~2 min ahead): start it now
 i=0
 until [ "$(job_state "$JOB")" = PENDING ]; do
     i=$((i + 1)); [ $i -le 300 ] || fail "job $JOB is $(job_state "$JOB"), not pending, after the requeue"
     sleep 0.1
 done
-scontrol update JobId="$JOB" StartTime=now || fail "cannot release the requeued job $JOB"
+on_ctl scontrol update JobId="$JOB" StartTime=now || fail "cannot release the requeued job $JOB"
 note "job $JOB requeued mid-render ($(stat -c %s "$T/job/big.exr") bytes on disk)"
 wait_done "$JOB" 120
 grep -q "resuming" "$T/job/slurm-$JOB.out" ||

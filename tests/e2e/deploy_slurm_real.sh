@@ -193,8 +193,11 @@ submit "$T/job/big.exr" $BIG
 i=0
 until grep -q "rendering .* workers may join" "$T/job/slurm-$JOB.out" 2>/dev/null &&
     [ "$(stat -c %s "$T/job/big.exr" 2>/dev/null || echo 0)" -gt 200000 ]; do
-    [ "$(job_state "$JOB")" = RUNNING ] || [ "$(job_state "$JOB")" = PENDING ] ||
-        { cat "$T/job/slurm-$JOB.out"; fail "job $JOB ended before it could be requeued"; }
+    # PENDING, CONFIGURING, RUNNING, or "" while scontrol is briefly busy: not ended
+    case "$(job_state "$JOB")" in COMPLETED | COMPLETING | FAILED | CANCELLED | TIMEOUT | NODE_FAIL | OUT_OF_MEMORY | BOOT_FAIL | DEADLINE | PREEMPTED)
+        cat "$T/job/slurm-$JOB.out" 2>/dev/null
+        fail "job $JOB ended ($(job_state "$JOB")) before it could be requeued" ;;
+    esac
     i=$((i + 1)); [ $i -le 600 ] || fail "job $JOB wrote no rows in 60 s"
     sleep 0.1
 done

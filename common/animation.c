@@ -304,6 +304,12 @@ tf_scene *tf_scene_at_frame(const tf_scene *s, int f)
     if (!c)
         return NULL;
     memcpy(c, s, sizeof *c);
+    /* A height map (generator = file) stays s's: the copy borrows it through terrain.file_bytes
+     * and never frees it, so s must outlive the copy (a frame's renderer needs only the
+     * terrain already built from it). */
+    c->heightmap = NULL;
+    c->heightmap_len = 0;
+    c->heightmap_name = NULL;
     c->path = strdup(s->path ? s->path : "<string>");
     c->text = malloc(s->text_len + 1);
     if (!c->path || !c->text) {

@@ -73,8 +73,9 @@ struct tf_scene;
 /* Set s's camera and sun to those of frame f (whatever is animated; the rest unchanged).  The
  * scene hash is not changed: a frame belongs to its sequence's scene. */
 void tf_scene_apply_frame(struct tf_scene *s, int f);
-/* A copy of s (own path and text) with frame f's camera and sun, for a renderer of that frame.
- * NULL on out of memory.  Free with tf_scene_free. */
+/* A copy of s (own path and text; a generator = file height map stays s's, borrowed, so s must
+ * outlive the copy) with frame f's camera and sun, for a renderer of that frame.  NULL on out
+ * of memory.  Free with tf_scene_free. */
 struct tf_scene *tf_scene_at_frame(const struct tf_scene *s, int f);
 
 #endif

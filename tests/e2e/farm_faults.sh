@@ -55,6 +55,7 @@ say "2. SIGSTOP a networked worker holding a task (--lease-timeout 2000, -j 0)"
 # worker is between tasks for the instant of a round trip after each result): then again.
 stop_attempt() {
     rm -f "$T/stop.exr"
+    : >"$T/stop.err"   # empty now: e2e_port must not read the previous attempt's port
     "$TF_BIN" render "$SCENE" -v -j 0 --size $SIZE --tasks rows:8 --watermark 64 \
         --lease-timeout 2000 --listen 127.0.0.1:0 -o "$T/stop.exr" --stats "$T/stop.json" 2>"$T/stop.err" &
     coord=$!; e2e_track $coord

@@ -34,6 +34,7 @@ same_pixels "$T/ref.exr" "$T/default.exr" "default stamps, -j 2"
 # mixed TASKS REF: -j 1 forked plus a terrafarm worker --connect -j 1, compared with REF (cmp)
 mixed() {
     say "forked plus networked, --tasks $1: -j 1 and a terrafarm worker --connect -j 1"
+    : >"$T/coord.err"   # empty now: e2e_port must not read the previous call's port
     "$TF_BIN" render "$SCENE" -j 1 --size $SIZE --tasks $1 --listen 127.0.0.1:0 \
         -o "$T/mixed.exr" --overwrite --stats "$T/mixed.json" 2>"$T/coord.err" &
     coord=$!; e2e_track $coord

@@ -14,13 +14,13 @@ BUILD   ?= build
 BIN     ?= bin
 VERSION := 0.1.0
 
-PKGS      := inih libpng libsodium zlib
+PKGS      := inih libpng libsodium gdal zlib
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
 EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
 
 # -ffp-contract=off: no fused multiply-add contraction, so every machine computes the same
-# bits (DESIGN.md section 4: deterministic terrain and pixels everywhere).
+# bits (docs/contract.md section 4: deterministic terrain and pixels everywhere).
 # -DNDEBUG: the numbered invariants (assert) are checked in `make asan`, not in release builds.
 CFLAGS   ?= -O2 -g -DNDEBUG
 SAN      ?=
@@ -40,8 +40,8 @@ IMAGE_SRC   := $(wildcard common/image/*.c)
 RENDER_SRC  := $(wildcard common/render/*.c)
 # 4. linda: tuples, the wire protocol, sockets, authentication, the store, client and server
 LINDA_SRC   := $(wildcard common/linda/*.c)
-# 5. the farm's tuples (task, result, failure, scene), spoken by both sides
-FARM_SRC    := common/farmproto.c
+# 5. the farm's tuples (task, result, failure, scene, height map), spoken by both sides
+FARM_SRC    := common/farmproto.c common/heightmap_tuples.c
 # 6. worker: the worker loop, its C and OpenCL backends, the simulated worker
 WORKER_SRC  := $(wildcard worker/*.c)
 # 7. coordinator: the farm's policy (dealer and watermark, leases, in-order writer, progress)
@@ -81,12 +81,6 @@ $(BUILD)/tests/%: tests/unit/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB_OBJ) $(TEST_LIBS) $(LDLIBS)
 
-# Test tools the end-to-end scripts call (tests/tools/*.c), e.g. exrcmp.
-TOOLS := $(patsubst tests/tools/%.c,$(BUILD)/tools/%,$(wildcard tests/tools/*.c))
-$(BUILD)/tools/%: tests/tools/%.c $(LIB_OBJ)
-	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
-
 $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
@@ -107,6 +101,12 @@ fuzz: $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/fuzz/%)
 
 REPLAYS := $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/replay/%)
 
+# Helper programs of the e2e tests (tests/tools/*.c), e.g. exrcmp.
+TOOLS := $(patsubst tests/tools/%.c,$(BUILD)/tools/%,$(wildcard tests/tools/*.c))
+$(BUILD)/tools/%: tests/tools/%.c $(LIB_OBJ)
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
+
 test: $(PROG) $(TESTS) $(REPLAYS) $(TOOLS)
 	BUILD=$(BUILD) BIN=$(BIN) tests/run.sh
 
@@ -119,7 +119,8 @@ bench: $(PROG) $(BENCHES)
 # Every Debian package the build, the tests and the benchmarks use.
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
-            iproute2 python3 gnuplot-nox
+            iproute2 python3 gnuplot-nox libgdal-dev gdal-bin openssh-server openssh-client \
+            slurm-wlm munge
 # Only the benchmarks' peers need these (make bench-deps).
 BENCH_PKGS := povray redis-server hyperfine linux-perf valgrind
 deps:
@@ -133,12 +134,17 @@ bench-deps:
 	@$(MAKE) --no-print-directory deps DEB_PKGS="$(BENCH_PKGS)"
 
 # The OpenCL backend reads its kernels at run time: beside the executable (bin/../worker/kernels)
-# in a checkout, from PREFIX/share/terrafarm/kernels once installed.
+# in a checkout, from PREFIX/share/terrafarm/kernels once installed.  The kernel build also
+# reads the C renderer's headers it shares (SOURCE_FILES in worker/backend_opencl.c): from the
+# checkout's common/, or installed flat beside the kernels.
 PREFIX ?= /usr/local
+KERNEL_SHARED := common/portable.h common/render/constants.h common/render/sample_math.h \
+                 common/render/trace_math.h common/terrain/noise_kernel.h
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
 	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels
-	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
+	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(KERNEL_SHARED) \
+	  $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
 
 clean:
 	rm -rf build build-asan bin

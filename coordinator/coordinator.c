@@ -19,12 +19,14 @@
 #include "image/exrfile.h"
 #include "farmproto.h"
 #include "terrain/heightfield.h"
+#include "terrain/terrain_build.h"
 #include "log.h"
 #include "image/preview.h"
 #include "coordinator/progress.h"
 #include "coordinator/rowwriter.h"
 #include "linda/proto.h"
 #include "linda/sock.h"
+#include "heightmap_tuples.h"
 #include "scene.h"
 #include "coordinator/local_workers.h"
 #include "coordinator/output.h"
@@ -201,6 +203,14 @@ static int load_secret(render *r)
 static int build_terrain(render *r)
 {
     char err[1024];
+    if (r->nworkers <= 0 && r->scene->terrain.generator == TF_GEN_FILE) {
+        /* networked workers build their own, but a height map is decoded here once, so a bad
+         * file is one line now rather than a failure on every worker that joins */
+        float *h = tf_terrain_heights(&r->scene->terrain, 0, NULL, err, sizeof err);
+        if (!h)
+            return step_failed(r, 1, err);
+        free(h);
+    }
     if (r->nworkers <= 0)
         return 0; /* networked workers build their own */
     double t0 = tf_now_s();
@@ -218,7 +228,7 @@ static int put_scene_tuples(ts_space *space, const tf_scene *s, const char *layo
     tf_tuple_init(&t);
     if (tf_tuple_pack(&t, "ssiiss", "scene", s->text, (int64_t)s->width, (int64_t)s->height,
                       s->hash_hex, layout) ||
-        ts_space_out(space, &t))
+        ts_space_out(space, &t) || tf_heightmap_tuples_put(space, s))
         return -1;
     tf_tuple_init(&t);
     if (tf_tuple_pack(&t, "si", "next_worker", (int64_t)1) || ts_space_out(space, &t))
@@ -271,7 +281,20 @@ static int start_space(render *r)
     return 0;
 }
 
-/* 4a. The output file and its writer thread. */
+/* 4a. Fork the local workers.  They are forked before the writer thread starts: a child of a
+ *    multi-threaded process may inherit a lock some other thread held at the fork (ASan's
+ *    allocator's was seen to hang a worker for good), so the coordinator forks while it is
+ *    still one thread.  They wait in `in` until the supervisor deals the first task. */
+static int start_workers(render *r)
+{
+    char err[1024];
+    if (tf_local_workers_start(&r->lw, r->nworkers, r->srv, r->scene, r->hf, r->o->backend, err,
+                               sizeof err))
+        return step_failed(r, 1, err);
+    return 0;
+}
+
+/* 4b. The output file and its writer thread (see start_workers for why it comes second). */
 static int open_output(render *r)
 {
     char err[1024];
@@ -301,13 +324,9 @@ static const char *describe_tasks(const tf_task_spec *spec, char *buf, size_t le
     return buf;
 }
 
-/* 4b. Fork the local workers, and say where networked ones may join. */
-static int start_workers(render *r)
+/* 5a. Say what is rendered and where networked workers may join. */
+static void announce(render *r)
 {
-    char err[1024];
-    if (tf_local_workers_start(&r->lw, r->nworkers, r->srv, r->scene, r->hf, r->o->backend, err,
-                               sizeof err))
-        return step_failed(r, 1, err);
     char wdesc[32];
     describe_tasks(&r->spec, r->tdesc, sizeof r->tdesc);
     if (r->o->watermark > 0)
@@ -330,10 +349,9 @@ static int start_workers(render *r)
                 s->path, s->width, s->height, r->tasks.count, r->tdesc, r->layout_text, wdesc,
                 r->nworkers);
     }
-    return 0;
 }
 
-/* 5. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
+/* 5b. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
 static int supervise(render *r)
 {
     tf_progress prog;
@@ -372,7 +390,7 @@ static int supervise(render *r)
     return tf_supervisor_done(r->sup) ? 0 : -1;
 }
 
-/* 5b. A render that did not finish: keep every row already queued, tell how to continue. */
+/* 5c. A render that did not finish: keep every row already queued, tell how to continue. */
 static void stop_unfinished(render *r)
 {
     const char *why = tf_supervisor_error(r->sup);
@@ -468,8 +486,9 @@ int tf_coordinator_run(const tf_render_opts *o)
      * watermark), so the heap stays bounded too. */
     mallopt(M_MMAP_THRESHOLD, 64 << 20);
     mallopt(M_TRIM_THRESHOLD, 128 << 20);
-    if (start_space(&r) || open_output(&r) || start_workers(&r))
+    if (start_space(&r) || start_workers(&r) || open_output(&r))
         goto out;
+    announce(&r);
     if (supervise(&r) != 0) {
         stop_unfinished(&r);
         goto out;

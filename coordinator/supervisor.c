@@ -387,17 +387,6 @@ static void on_task_returned(tf_supervisor *s, uint64_t conn, const tf_tuple *tu
         t->in_space++;
 }
 
-static void drop_result(tf_supervisor *s, int64_t id, int64_t worker)
-{
-    tf_tuple tmpl, got;
-    if (tf_result_template(&tmpl, id, worker))
-        return;
-    tf_tuple_init(&got);
-    if (ts_space_inp(s->space, &tmpl, &got) == 1)
-        s->stats.results_dropped++;
-    tf_tuple_clear(&got);
-    tf_tuple_clear(&tmpl);
-}
 
 /* A connection's peer, for messages only (the lookup scans the connections). */
 static const char *peer_name(const tf_supervisor *s, uint64_t conn)
@@ -437,6 +426,13 @@ static int refuse_result(tf_supervisor *s, tf_result_msg *m, tf_rect r, char *wh
     return 0;
 }
 
+/* Take this very result out of the space (not "a result of task id from worker w": a second
+ * tuple claiming the same id and worker must never take the accepted one with it). */
+static void drop_result(tf_supervisor *s, const tf_tuple *tuple)
+{
+    remove_exact(s, tuple);
+}
+
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
     tf_result_msg m;
@@ -448,7 +444,8 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     remove_lease(s, conn, m.id);
     task_slot *t = slot_of(s, m.id);
     if (!t || t->has_result) {
-        drop_result(s, m.id, m.worker);
+        drop_result(s, tuple);
+        s->stats.results_dropped++;
         return;
     }
     tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
@@ -457,7 +454,7 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         tf_warn("result of task %" PRId64 " (%dx%d at %d,%d) from %s refused: %s", m.id, r.w,
                 r.h, r.x, r.y, peer_name(s, conn), why);
         s->stats.results_refused++;
-        drop_result(s, m.id, m.worker);
+        drop_result(s, tuple);
         if (!note_failure(s, t, m.worker))
             redeal_if_lost(s, t);
         return;

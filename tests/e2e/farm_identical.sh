@@ -1,5 +1,5 @@
 #!/bin/sh
-# farm_identical.sh: the decomposition invariant end to end (DESIGN.md section 4).  The same
+# farm_identical.sh: the decomposition invariant end to end (docs/contract.md section 4).  The same
 # scene and size give bit-identical decoded pixels whatever the worker count (1, 2, 4 forked),
 # the task shape (rows:1, rows:7 -> a scanline EXR; stamps:16x16, stamps:37x23 with partial
 # edge tiles, the default stamps -> a tiled EXR) and the mix of forked and networked workers.

@@ -552,7 +552,7 @@ static int supervise(render *r)
     tf_progress_init(&prog, r->njobs * h, rows_done(r, &frame_now), r->o->quiet, tf_now_s());
     if (r->animated)
         tf_progress_frames(&prog, r->nouts, r->nouts - r->njobs);
-    double last_wait_note = tf_now_s();
+    double last_wait_note = tf_now_s(), last_reap = 0;
     while (!interrupted && !tf_supervisor_done(r->sup) && !tf_supervisor_error(r->sup) &&
            !r->finish_error[0]) {
         if (ts_server_run_once(r->srv, 50) < 0) {
@@ -562,7 +562,10 @@ static int supervise(render *r)
         double t = tf_now_s();
         tf_supervisor_step(r->sup, t * 1000.0);
         tf_finisher_reap(r->finisher, r->finish_error, sizeof r->finish_error);
-        tf_local_workers_reap(&r->lw, 1);
+        if (t - last_reap >= 0.05) { /* a waitpid per worker: not at every event */
+            tf_local_workers_reap(&r->lw, 1);
+            last_reap = t;
+        }
         const tf_farm_stats *st = tf_supervisor_stats(r->sup);
         int live = tf_supervisor_live_workers(r->sup);
         int rows = rows_done(r, &frame_now);

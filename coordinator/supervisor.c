@@ -16,6 +16,7 @@
  *       copy of a task already written), and for an outstanding task the number of leases
  *       naming it never exceeds its slot's `leased`.
  *   S5. A job's rows_written only grows, and rows_written <= height.
+ *   S6. live_workers is the number of announced workers whose connection is open.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -110,6 +111,7 @@ struct tf_supervisor {
     char error[512];
     tf_farm_stats stats;
     int cap_workers;
+    int live_workers;        /* workers connected and announced: kept, not counted per step */
 };
 
 /* ---- invariants (S1-S5 above), for assert() in debug builds ------------------------------ */
@@ -152,6 +154,11 @@ static int supervisor_ok(const tf_supervisor *s)
         if (n > s->ring[task % s->ring_size].leased)
             return 0; /* S4 */
     }
+    int live = 0;
+    for (int i = 0; i < s->stats.nworkers; i++)
+        live += s->stats.workers[i].conn != 0;
+    if (live != s->live_workers)
+        return 0; /* S6 */
     for (int j = 0; j < s->njobs; j++)
         if (s->jobs[j].rows_written > s->cfg.height)
             return 0; /* S5 */
@@ -500,17 +507,6 @@ static void on_task_returned(tf_supervisor *s, uint64_t conn, const tf_tuple *tu
         t->in_space++;
 }
 
-static void drop_result(tf_supervisor *s, int64_t id, int64_t worker)
-{
-    tf_tuple tmpl, got;
-    if (tf_result_template(&tmpl, id, worker))
-        return;
-    tf_tuple_init(&got);
-    if (ts_space_inp(s->space, &tmpl, &got) == 1)
-        s->stats.results_dropped++;
-    tf_tuple_clear(&got);
-    tf_tuple_clear(&tmpl);
-}
 
 /* A connection's peer, for messages only (the lookup scans the connections). */
 static const char *peer_name(const tf_supervisor *s, uint64_t conn)
@@ -550,6 +546,13 @@ static int refuse_result(tf_supervisor *s, tf_result_msg *m, tf_rect r, char *wh
     return 0;
 }
 
+/* Take this very result out of the space (not "a result of task id from worker w": a second
+ * tuple claiming the same id and worker must never take the accepted one with it). */
+static void drop_result(tf_supervisor *s, const tf_tuple *tuple)
+{
+    remove_exact(s, tuple);
+}
+
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
     tf_result_msg m;
@@ -561,7 +564,8 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     remove_lease(s, conn, m.id);
     task_slot *t = slot_of(s, m.id);
     if (!t || t->has_result) {
-        drop_result(s, m.id, m.worker);
+        drop_result(s, tuple);
+        s->stats.results_dropped++;
         return;
     }
     tf_rect r = rect_of(s, m.id);
@@ -570,7 +574,7 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         tf_warn("result of task %" PRId64 " (%dx%d at %d,%d) from %s refused: %s", m.id, r.w,
                 r.h, r.x, r.y, peer_name(s, conn), why);
         s->stats.results_refused++;
-        drop_result(s, m.id, m.worker);
+        drop_result(s, tuple);
         if (!note_failure(s, t, m.worker))
             redeal_if_lost(s, t);
         return;
@@ -613,6 +617,8 @@ static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
             snprintf(w->kind, sizeof w->kind, "%s", kind);
             snprintf(w->host, sizeof w->host, "%s", host);
             snprintf(w->backend, sizeof w->backend, "%s", backend);
+            if (!w->conn)
+                s->live_workers++;
             w->conn = conn;
             const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
             tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)", id,
@@ -658,8 +664,11 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
     tf_supervisor *s = ctx;
     tf_worker_stats *w = worker_by_conn(s, conn);
     int64_t worker = w ? w->id : -(int64_t)conn; /* a connection that never said hello */
-    if (w)
-        w->conn = 0;
+    for (int i = 0; w && i < s->stats.nworkers; i++)
+        if (s->stats.workers[i].conn == conn) {
+            s->stats.workers[i].conn = 0;
+            s->live_workers--;
+        }
     for (int i = 0; i < s->nleases;) {
         if (s->leases[i].conn != conn) {
             i++;
@@ -919,8 +928,5 @@ const tf_farm_stats *tf_supervisor_stats(tf_supervisor *s)
 
 int tf_supervisor_live_workers(const tf_supervisor *s)
 {
-    int n = 0;
-    for (int i = 0; i < s->stats.nworkers; i++)
-        n += s->stats.workers[i].conn != 0;
-    return n;
+    return s->live_workers; /* == entries of stats.workers with conn != 0 (S6) */
 }

@@ -3,7 +3,8 @@
  * variables.  INVARIANTS (checked by queue_ok() under the mutex in debug builds, `make asan`):
  *   R1. 0 <= head < depth and 0 <= count <= depth;
  *   R2. slots [head, head + count) modulo depth hold the queued results in file order, each a
- *       result tuple (11 fields), and only the producer touches the slot at head + count;
+ *       result tuple (11 fields), and only the producer touches the slot at head + count (the
+ *       thread takes a result out of the ring, under the mutex, before writing it);
  *   R3. rows_written only grows. */
 #include "coordinator/rowwriter.h"
 #include "clock.h"
@@ -207,16 +208,20 @@ static void *writer_main(void *arg)
         if (rw->count == 0 && rw->stop)
             break;
         int have = rw->count > 0 && !rw->failed;
-        /* The head slot stays in the queue (R2) while it is written: the producer touches only
-         * the slot at head + count, and waits while the queue is full, so this one is ours
-         * until count is decremented below.  (Moving the tuple out here left an empty slot in
-         * the queue, which the producer's check of R2 caught under make asan.) */
-        tf_tuple *item = have ? &rw->slot[rw->head] : NULL;
+        tf_tuple item;
+        tf_tuple_init(&item);
+        if (have) { /* take it out of the ring: R2 holds for what stays queued */
+            tf_tuple_move(&item, &rw->slot[rw->head]);
+            rw->head = (rw->head + 1) % rw->depth;
+            if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
+                pthread_cond_signal(&rw->nonfull);
+        }
         pthread_mutex_unlock(&rw->mu);
 
         int rc = 0;
         if (have) {
-            rc = write_result(rw, item, err, sizeof err);
+            rc = write_result(rw, &item, err, sizeof err);
+            tf_tuple_clear(&item);
             dirty = 1;
         }
         double now = tf_now_msf();
@@ -236,12 +241,7 @@ static void *writer_main(void *arg)
         }
         if (rows > rw->rows_written)
             rw->rows_written = rows;
-        if (have) {
-            tf_tuple_clear(&rw->slot[rw->head]);
-            rw->head = (rw->head + 1) % rw->depth;
-            if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
-                pthread_cond_signal(&rw->nonfull);
-        } else if (rw->failed && rw->count > 0) {
+        if (!have && rw->failed && rw->count > 0) {
             /* after a failure, drop the queue: nothing more may be written past the gap */
             while (rw->count > 0) {
                 tf_tuple_clear(&rw->slot[rw->head]);

@@ -14,7 +14,7 @@ BUILD   ?= build
 BIN     ?= bin
 VERSION := 0.1.0
 
-PKGS      := inih libpng libsodium
+PKGS      := inih libpng libsodium libmicrohttpd jansson
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
 EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
@@ -113,7 +113,7 @@ bench: $(PROG) $(BENCHES)
 # Every Debian package the build, the tests and the benchmarks use.
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
-            iproute2 python3 gnuplot-nox
+            iproute2 python3 gnuplot-nox libmicrohttpd-dev libjansson-dev chromium
 # Only the benchmarks' peers need these (make bench-deps).
 BENCH_PKGS := povray redis-server hyperfine linux-perf valgrind
 deps:

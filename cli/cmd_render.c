@@ -71,7 +71,7 @@ bad:
 int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
-           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE };
+           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_HTTP, O_HTTP_TOKEN, O_ON_DONE };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -86,6 +86,9 @@ int cmd_render(int argc, char **argv)
         {"stats", required_argument, NULL, O_STATS},
         {"lease-timeout", required_argument, NULL, O_LEASE},
         {"cl-device", required_argument, NULL, O_CL_DEVICE},
+        {"http", required_argument, NULL, O_HTTP},
+        {"http-token-file", required_argument, NULL, O_HTTP_TOKEN},
+        {"on-done", required_argument, NULL, O_ON_DONE},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -131,6 +134,9 @@ int cmd_render(int argc, char **argv)
         case O_RESUME: o.resume = 1; break;
         case O_OVERWRITE: o.overwrite = 1; break;
         case O_STATS: o.stats_path = optarg; break;
+        case O_HTTP: o.http = optarg; break;
+        case O_HTTP_TOKEN: o.http_token_file = optarg; break;
+        case O_ON_DONE: o.on_done = optarg; break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
         case O_LEASE:
             if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))

@@ -25,7 +25,9 @@
 #include "linda/proto.h"
 #include "linda/sock.h"
 #include "scene.h"
+#include "coordinator/dashboard.h"
 #include "coordinator/local_workers.h"
+#include "coordinator/on_done.h"
 #include "coordinator/output.h"
 #include "coordinator/stats.h"
 #include "coordinator/supervisor.h"
@@ -75,12 +77,18 @@ typedef struct render {
     tf_tasks tasks;
     char tdesc[64];
     int no_workers;              /* supervise() stopped: no worker could run */
+    tf_dashboard *dash;          /* --http (NULL with --http none) */
+    int stopped;                 /* supervise() stopped: asked to from the dashboard */
+    int rows_on_disk;            /* for --on-done */
+    char error[1024];            /* the line a failed step printed, for --on-done */
 } render;
 
 static int step_failed(render *r, int status, const char *msg)
 {
-    if (msg)
+    if (msg) {
         tf_error("%s", msg);
+        snprintf(r->error, sizeof r->error, "%s", msg);
+    }
     r->status = status;
     return -1;
 }
@@ -152,6 +160,27 @@ static int load_secret(render *r)
     return 0;
 }
 
+static const char *describe_tasks(const tf_task_spec *spec, char *buf, size_t len);
+
+/* 1d. The dashboard's socket (--http), before anything slow, so that a busy port is refused
+ *     before the output is touched; it serves once the workers are forked (serve_dashboard). */
+static int open_dashboard(render *r)
+{
+    char err[1024];
+    const tf_render_opts *o = r->o;
+    if (o->http && !strcmp(o->http, "none"))
+        return 0;
+    describe_tasks(&r->spec, r->tdesc, sizeof r->tdesc);
+    tf_dashboard_config dc = {o->http, o->http_token_file, r->have_key ? r->key : NULL,
+                              r->t_start, r->scene->path, r->output, r->tdesc,
+                              r->scene->width, r->scene->height, r->first_row,
+                              r->first_row > 0 ? r->output : NULL};
+    r->dash = tf_dashboard_open(&dc, err, sizeof err);
+    if (!r->dash)
+        return step_failed(r, 2, err);
+    return 0;
+}
+
 /* 2. The terrain, built once before forking so every local worker shares it. */
 static int build_terrain(render *r)
 {
@@ -204,6 +233,10 @@ static int start_space(render *r)
     r->cfg.key = r->have_key ? r->key : NULL;
     r->cfg.silence_timeout_ms = o->lease_timeout_ms;
     ts_server_hooks hooks = tf_supervisor_hooks(r->sup);
+    if (r->dash) { /* the dashboard watches the traffic (results for its preview) */
+        hooks = tf_dashboard_hooks(r->dash, hooks);
+        tf_supervisor_set_events(r->sup, tf_dashboard_events(r->dash));
+    }
     r->srv = ts_server_new(r->space, &r->cfg, &hooks, err, sizeof err);
     if (!r->srv && !o->listen && r->nworkers > 0) {
         /* The default port is taken (another render?): local workers do not need it. */
@@ -213,6 +246,8 @@ static int start_space(render *r)
     if (!r->srv)
         return step_failed(r, 1, err);
     tf_supervisor_attach(r->sup, r->srv);
+    if (r->dash)
+        tf_dashboard_attach(r->dash, r->sup, r->srv, &r->tasks);
     return 0;
 }
 
@@ -278,6 +313,15 @@ static int start_workers(render *r)
     return 0;
 }
 
+/* 4c. The dashboard's HTTP threads, after the fork (the children need none of them). */
+static int serve_dashboard(render *r)
+{
+    char err[1024];
+    if (r->dash && tf_dashboard_serve(r->dash, err, sizeof err))
+        return step_failed(r, 1, err);
+    return 0;
+}
+
 /* 5. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
 static int supervise(render *r)
 {
@@ -294,8 +338,12 @@ static int supervise(render *r)
         tf_local_workers_reap(&r->lw, 1);
         const tf_farm_stats *st = tf_supervisor_stats(r->sup);
         int live = tf_supervisor_live_workers(r->sup);
-        tf_progress_update(&prog, t, tf_rowwriter_rows_written(r->rows_out),
-                           st->primary_rays + st->shadow_rays, live, 0);
+        int rows = tf_rowwriter_rows_written(r->rows_out);
+        tf_progress_update(&prog, t, rows, st->primary_rays + st->shadow_rays, live, 0);
+        if (tf_dashboard_tick(r->dash, rows)) {
+            r->stopped = 1;
+            break;
+        }
         if (r->nworkers > 0 && r->lw.gave_up == r->nworkers && live == 0) {
             tf_progress_clear(&prog);
             tf_error("no local worker could run (see above) and no networked worker is "
@@ -323,8 +371,13 @@ static void stop_unfinished(render *r)
     tf_local_workers_drain(&r->lw, 1.0);
     tf_rowwriter_abandon(r->rows_out);
     r->rows_out = NULL;
-    if (why)
+    r->rows_on_disk = rows;
+    if (why) {
         tf_error("%s", why);
+        snprintf(r->error, sizeof r->error, "%s", why);
+    } else if (r->stopped)
+        tf_error("stopped from the dashboard: %d of %d rows are on disk in %s; continue with "
+                 "--resume", rows, r->scene->height, r->output);
     else if (r->no_workers)
         tf_error("%d of %d rows are on disk in %s; continue with --resume", rows,
                  r->scene->height, r->output);
@@ -332,6 +385,8 @@ static void stop_unfinished(render *r)
         tf_error("interrupted: %d of %d rows are on disk in %s; continue with --resume", rows,
                  r->scene->height, r->output);
     r->status = why || r->no_workers ? 1 : 130;
+    tf_dashboard_end(r->dash, r->status == 130 ? TF_RUN_INTERRUPTED : TF_RUN_FAILED, r->status,
+                     rows);
 }
 
 /* 6. Finish: the file, the workers, the summary, the statistics. */
@@ -362,7 +417,22 @@ static int finish(render *r)
             return step_failed(r, 1, err);
     }
     r->status = 0;
+    r->rows_on_disk = r->scene->height;
+    tf_dashboard_end(r->dash, TF_RUN_FINISHED, 0, r->scene->height);
     return 0;
+}
+
+/* 7. --on-done: the outcome, to a command of the user's (after the dashboard has stopped). */
+static void run_on_done(render *r)
+{
+    if (!r->o->on_done)
+        return;
+    tf_outcome out = {r->status == 0 ? "ok" : r->status == 130 ? "interrupted" : "failed",
+                      r->status, r->output, r->preview, r->o->scene_path, r->o->stats_path,
+                      r->status == 0 ? "" : r->error,
+                      r->scene ? r->scene->width : 0, r->scene ? r->scene->height : 0,
+                      r->rows_on_disk, tf_now_s() - r->t_start};
+    tf_on_done_run(r->o->on_done, &out);
 }
 
 static void render_close(render *r)
@@ -392,16 +462,18 @@ int tf_coordinator_run(const tf_render_opts *o)
 
     if (load_scene(&r) || plan_output(&r))
         goto out;
+    r.rows_on_disk = r.first_row;
     if (r.plan.complete) {
         char err[1024];
         tf_info("%s is already complete: nothing to render", r.output);
         if (tf_preview_from_exr(r.output, r.preview, err, sizeof err))
             tf_warn("%s", err);
         r.status = 0;
+        r.rows_on_disk = r.scene->height;
         goto out;
     }
-    if (load_secret(&r) || build_terrain(&r) || start_space(&r) || open_output(&r) ||
-        start_workers(&r))
+    if (load_secret(&r) || open_dashboard(&r) || build_terrain(&r) || start_space(&r) ||
+        open_output(&r) || start_workers(&r) || serve_dashboard(&r))
         goto out;
     if (supervise(&r) != 0) {
         stop_unfinished(&r);
@@ -409,6 +481,11 @@ int tf_coordinator_run(const tf_render_opts *o)
     }
     finish(&r);
 out:
+    if (r.status != 0)
+        tf_dashboard_end(r.dash, TF_RUN_FAILED, r.status, r.rows_on_disk);
+    tf_dashboard_close(r.dash);
+    r.dash = NULL;
+    run_on_done(&r);
     render_close(&r);
     return r.status;
 }

@@ -29,6 +29,9 @@ typedef struct tf_render_opts {
     int lease_timeout_ms;      /* a silent worker is dropped after this (default 15000) */
     int max_task_failures;     /* distinct workers a task may fail on before the render stops */
     int fsync_interval_ms;     /* at most this long between durable checkpoints */
+    const char *http;          /* --http HOST:PORT | none; NULL = 127.0.0.1:7880 (ephemeral if busy) */
+    const char *http_token_file; /* the dashboard's token (else derived from the secret) */
+    const char *on_done;       /* --on-done CMD (on_done.h) */
     int quiet, verbose;
 } tf_render_opts;
 

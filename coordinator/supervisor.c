@@ -33,6 +33,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "coordinator/events.h"
 #include "farmproto.h"
 #include "log.h"
 
@@ -84,6 +85,7 @@ struct tf_supervisor {
     char error[512];
     tf_farm_stats stats;
     int cap_workers;
+    tf_events *events;       /* the dashboard's event log, or NULL */
 };
 
 /* ---- invariants (S1-S5 above), for assert() in debug builds ------------------------------ */
@@ -228,6 +230,9 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
         t->failed_count[i] = 0;
     }
     t->failed_count[i]++;
+    if (t->failed_count[i] == FAILURES_TO_EXCLUDE)
+        tf_events_add(s->events, TF_EV_EXCLUSION, worker, t->id, "worker %" PRId64
+                      " is no longer dealt task %" PRId64, worker, t->id);
     if (t->nfailed >= s->cfg.max_task_failures) {
         tf_rect r = tf_task_rect(&s->tasks, (int)t->id);
         fail(s, "task %" PRId64 " (%dx%d at %d,%d) failed on %d different workers; stopping "
@@ -247,6 +252,8 @@ static void redeal_if_lost(tf_supervisor *s, task_slot *t)
     s->stats.tasks_redealt++;
     tf_rect r = tf_task_rect(&s->tasks, (int)t->id);
     tf_info("re-dealing task %" PRId64 " (%dx%d at %d,%d)", t->id, r.w, r.h, r.x, r.y);
+    tf_events_add(s->events, TF_EV_REDEAL, -1, t->id, "task %" PRId64 " (%dx%d at %d,%d) dealt again",
+                  t->id, r.w, r.h, r.x, r.y);
     deal_copy(s, t);
 }
 
@@ -467,6 +474,7 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
                 m.id, peer_name(s, conn), m.pixels_len,
                 (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES);
         drop_result(s, m.id, m.worker);
+        tf_events_add(s->events, TF_EV_FAILURE, m.worker, m.id, "result of the wrong size");
         if (!note_failure(s, t, m.worker))
             redeal_if_lost(s, t);
         return;
@@ -509,6 +517,8 @@ static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
             const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
             tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)", id,
                      kind, host, pid, backend, peer ? peer : "?");
+            tf_events_add(s->events, TF_EV_JOIN, id, -1, "%s worker on %s (%s backend, %s)",
+                          w->kind, w->host, w->backend, peer ? peer : "?");
         }
     }
     remove_exact(s, tuple);
@@ -521,6 +531,7 @@ static void on_failed(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     if (tuple->nfields == 4 && !tf_tuple_get_int(tuple, 1, &id) &&
         !tf_tuple_get_int(tuple, 2, &worker) && !tf_tuple_get_string(tuple, 3, &msg)) {
         tf_warn("worker %" PRId64 " failed task %" PRId64 ": %s", worker, id, msg);
+        tf_events_add(s->events, TF_EV_FAILURE, worker, id, "%s", msg);
         remove_lease(s, conn, id);
         task_slot *t = slot_of(s, id);
         if (t && !t->has_result && !note_failure(s, t, worker))
@@ -550,8 +561,10 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
     tf_supervisor *s = ctx;
     tf_worker_stats *w = worker_by_conn(s, conn);
     int64_t worker = w ? w->id : -(int64_t)conn; /* a connection that never said hello */
-    if (w)
+    if (w) {
         w->conn = 0;
+        tf_events_add(s->events, TF_EV_LEAVE, w->id, -1, "connection closed (%s)", peer ? peer : "?");
+    }
     for (int i = 0; i < s->nleases;) {
         if (s->leases[i].conn != conn) {
             i++;
@@ -567,6 +580,7 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
         if (t->has_result)
             continue;
         tf_warn("worker %s left holding task %" PRId64, peer ? peer : "?", id);
+        tf_events_add(s->events, TF_EV_FAILURE, worker, id, "left holding the task");
         if (!note_failure(s, t, worker))
             redeal_if_lost(s, t);
     }
@@ -748,5 +762,44 @@ int tf_supervisor_live_workers(const tf_supervisor *s)
     int n = 0;
     for (int i = 0; i < s->stats.nworkers; i++)
         n += s->stats.workers[i].conn != 0;
+    return n;
+}
+
+/* ---- for the dashboard (coordinator/dashboard.c), in the event-loop thread ----------------- */
+
+void tf_supervisor_set_events(tf_supervisor *s, tf_events *events) { s->events = events; }
+
+int tf_supervisor_outstanding(const tf_supervisor *s) { return (int)(s->next_deal - s->write_task); }
+
+int tf_supervisor_watermark(const tf_supervisor *s) { return s->watermark; }
+
+int tf_supervisor_watermark_max(const tf_supervisor *s) { return s->ring_size; }
+
+int tf_supervisor_set_watermark(tf_supervisor *s, int watermark, char *err, size_t errlen)
+{
+    if (watermark < s->tasks.cols || watermark > s->ring_size)
+        return tf_seterr(err, errlen, "watermark %d is outside %d (one band of tasks) .. %d",
+                         watermark, s->tasks.cols, s->ring_size);
+    s->auto_watermark = 0;
+    s->watermark = watermark;
+    if (watermark > s->stats.watermark)
+        s->stats.watermark = watermark;
+    return 0;
+}
+
+int tf_supervisor_task_views(const tf_supervisor *s, int64_t *write_task, tf_task_view *out,
+                             int max)
+{
+    int n = 0;
+    *write_task = s->write_task;
+    for (int64_t id = s->write_task; id < s->next_deal && n < max; id++, n++) {
+        const task_slot *t = &s->ring[id % s->ring_size];
+        out[n] = (tf_task_view){id, t->has_result, t->leased, 0};
+    }
+    for (int i = 0; i < s->nleases; i++) {
+        int64_t k = s->leases[i].task - s->write_task;
+        if (k >= 0 && k < n && out[k].holder_conn == 0)
+            out[k].holder_conn = s->leases[i].conn;
+    }
     return n;
 }

@@ -24,6 +24,7 @@
 
 #include <stdint.h>
 
+#include "coordinator/events.h"
 #include "coordinator/rowwriter.h"
 #include "coordinator/tasks.h"
 #include "linda/tsserver.h"
@@ -91,5 +92,29 @@ int tf_supervisor_rows_written(const tf_supervisor *sup);
 const tf_farm_stats *tf_supervisor_stats(tf_supervisor *sup);
 /* Connected workers that said hello and have not left. */
 int tf_supervisor_live_workers(const tf_supervisor *sup);
+
+
+/* ---- for the dashboard (coordinator/dashboard.h), in the event-loop thread ---- */
+
+/* One outstanding task (dealt, not yet written). */
+typedef struct tf_task_view {
+    int64_t id;
+    int has_result;          /* done, waiting for the rest of its band */
+    int leased;              /* copies held by workers */
+    uint64_t holder_conn;    /* one connection holding it, 0 if none */
+} tf_task_view;
+
+/* Record joins, leaves, re-deals, failures and exclusions there (NULL: nowhere). */
+void tf_supervisor_set_events(tf_supervisor *sup, tf_events *events);
+/* Tasks dealt beyond the write front, and the watermark in force (and its largest value). */
+int tf_supervisor_outstanding(const tf_supervisor *sup);
+int tf_supervisor_watermark(const tf_supervisor *sup);
+int tf_supervisor_watermark_max(const tf_supervisor *sup);
+/* Fix the watermark from now on (ends the auto watermark): 0, or -1 if out of range. */
+int tf_supervisor_set_watermark(tf_supervisor *sup, int watermark, char *err, size_t errlen);
+/* The write front (tasks below it are on disk) and the outstanding tasks in id order, at most
+ * max; returns the count. */
+int tf_supervisor_task_views(const tf_supervisor *sup, int64_t *write_task, tf_task_view *out,
+                             int max);
 
 #endif

@@ -18,6 +18,19 @@ static json_t *iso_time(double unix_s)
     return json_string(buf);
 }
 
+/* A string from outside (a worker's hello, a path): JSON wants UTF-8, so other bytes become '?'. */
+static json_t *text(const char *s)
+{
+    json_t *j = json_string(s ? s : "");
+    if (j)
+        return j;
+    char buf[1024];
+    size_t n = 0;
+    for (; *s && n < sizeof buf - 1; s++)
+        buf[n++] = (unsigned char)*s < 0x80 ? *s : '?';
+    return json_stringn(buf, n);
+}
+
 static json_t *int_or_null(int64_t v) { return v < 0 ? json_null() : json_integer(v); }
 static json_t *real_or_null(double v) { return v < 0 || !isfinite(v) ? json_null() : json_real(v); }
 
@@ -28,8 +41,8 @@ json_t *tf_api_status(const tf_snapshot *s)
     double pct = s->height ? 100.0 * s->rows_written / s->height : 100.0;
     json_t *o = json_object();
     json_object_set_new(o, "state", json_string(tf_run_state_name(s->state)));
-    json_object_set_new(o, "scene", json_string(s->scene));
-    json_object_set_new(o, "output", json_string(s->output));
+    json_object_set_new(o, "scene", text(s->scene));
+    json_object_set_new(o, "output", text(s->output));
     json_object_set_new(o, "width", json_integer(s->width));
     json_object_set_new(o, "height", json_integer(s->height));
     json_object_set_new(o, "size", json_string(size));
@@ -51,7 +64,7 @@ json_t *tf_api_status(const tf_snapshot *s)
     json_object_set_new(o, "watermark_max", json_integer(s->watermark_max));
     json_object_set_new(o, "outstanding_tasks", json_integer(s->outstanding));
     json_object_set_new(o, "max_outstanding_tasks", json_integer(s->max_outstanding));
-    json_object_set_new(o, "tasks", json_string(s->tasks_desc));
+    json_object_set_new(o, "tasks", text(s->tasks_desc));
     json_object_set_new(o, "tasks_total", json_integer(s->tasks_total));
     json_object_set_new(o, "tasks_written", json_integer(s->tasks_written));
     json_object_set_new(o, "tasks_redealt", json_integer(s->tasks_redealt));
@@ -78,9 +91,9 @@ json_t *tf_api_workers(const tf_snapshot *s)
         if (frac > 1)
             frac = 1; /* busy_s is measured by the worker, the span by us: clocks differ a hair */
         json_object_set_new(o, "id", json_integer(w->id));
-        json_object_set_new(o, "kind", json_string(w->kind));
-        json_object_set_new(o, "host", json_string(w->host));
-        json_object_set_new(o, "backend", json_string(w->backend));
+        json_object_set_new(o, "kind", text(w->kind));
+        json_object_set_new(o, "host", text(w->host));
+        json_object_set_new(o, "backend", text(w->backend));
         json_object_set_new(o, "state", json_string(tf_worker_state_name(w->state)));
         json_object_set_new(o, "task", int_or_null(w->holding));
         json_object_set_new(o, "tasks", json_integer(w->tasks));
@@ -111,8 +124,7 @@ json_t *tf_api_event(const tf_snapshot *s, const tf_event *e)
     json_object_set_new(o, "worker", int_or_null(e->worker));
     json_object_set_new(o, "task", int_or_null(e->task));
     /* the text may hold bytes a worker sent (a failure message): keep it valid UTF-8 */
-    json_t *text = json_string(e->text);
-    json_object_set_new(o, "text", text ? text : json_stringn("(not UTF-8)", 11));
+    json_object_set_new(o, "text", text(e->text));
     (void)s;
     return o;
 }

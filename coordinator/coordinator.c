@@ -422,7 +422,9 @@ static int finish(render *r)
     return 0;
 }
 
-/* 7. --on-done: the outcome, to a command of the user's (after the dashboard has stopped). */
+/* 7. --on-done: the outcome, to a command of the user's.  The dashboard keeps serving the
+ *    final state while it runs (the command may ask it); it is forked and exec'd at once, so
+ *    the HTTP threads do not matter to it. */
 static void run_on_done(render *r)
 {
     if (!r->o->on_done)
@@ -483,9 +485,9 @@ int tf_coordinator_run(const tf_render_opts *o)
 out:
     if (r.status != 0)
         tf_dashboard_end(r.dash, TF_RUN_FAILED, r.status, r.rows_on_disk);
+    run_on_done(&r); /* the dashboard still shows the final state meanwhile */
     tf_dashboard_close(r.dash);
     r.dash = NULL;
-    run_on_done(&r);
     render_close(&r);
     return r.status;
 }

@@ -8,8 +8,9 @@
  *   TERRAFARM_ROWS     rows on disk;    TERRAFARM_ROWS_TOTAL  rows of the image
  *   TERRAFARM_STATS    the --stats file (empty if none)
  *   TERRAFARM_ERROR    the reason a failed render stopped (empty otherwise)
- * The coordinator waits for it (its output goes to the coordinator's stdout/stderr); its exit
- * status is logged, never changes the render's. */
+ * The coordinator waits for it (its output goes to the coordinator's stdout/stderr), serving
+ * the dashboard's final state meanwhile; its exit status is logged, never changes the
+ * render's. */
 #ifndef TF_ON_DONE_H
 #define TF_ON_DONE_H
 

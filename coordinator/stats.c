@@ -1,27 +1,71 @@
-/* stats.c: see stats.h. */
+/* stats.c: see stats.h.  The document is built with jansson (keys in this order). */
 #include "coordinator/stats.h"
 
 #include <errno.h>
+#include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
 #include "log.h"
 
-/* JSON string with the escapes RFC 8259 requires. */
-static void json_string(FILE *f, const char *s)
+/* Seconds rounded to the millisecond, as the file has always shown them. */
+static json_t *seconds(double s) { return json_real((double)(long long)(s * 1000.0 + (s < 0 ? -0.5 : 0.5)) / 1000.0); }
+
+static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
 {
-    fputc('"', f);
-    for (; s && *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\')
-            fprintf(f, "\\%c", c);
-        else if (c < 0x20)
-            fprintf(f, "\\u%04x", c);
-        else
-            fputc(c, f);
+    json_t *o = json_object();
+    uint64_t rays = st->primary_rays + st->shadow_rays;
+    json_object_set_new(o, "wall_s", seconds(run->wall_s));
+    json_object_set_new(o, "width", json_integer(run->width));
+    json_object_set_new(o, "height", json_integer(run->height));
+    json_object_set_new(o, "scene", json_string(run->scene ? run->scene : ""));
+    json_object_set_new(o, "output", json_string(run->output ? run->output : ""));
+    json_object_set_new(o, "tasks", json_string(run->tasks ? run->tasks : ""));
+    json_object_set_new(o, "tasks_total", json_integer(st->tasks_total));
+    json_object_set_new(o, "tasks_redealt", json_integer(st->tasks_redealt));
+    json_object_set_new(o, "tasks_duplicated", json_integer(st->tasks_duplicated));
+    json_object_set_new(o, "results_dropped", json_integer(st->results_dropped));
+    json_object_set_new(o, "task_failures", json_integer(st->task_failures));
+    json_object_set_new(o, "rows_resumed", json_integer(st->rows_resumed));
+    json_object_set_new(o, "rows_rendered", json_integer(st->rows_rendered));
+    json_object_set_new(o, "rays_total", json_integer((json_int_t)rays));
+    json_object_set_new(o, "primary_rays", json_integer((json_int_t)st->primary_rays));
+    json_object_set_new(o, "shadow_rays", json_integer((json_int_t)st->shadow_rays));
+    json_object_set_new(o, "external_rays", json_integer((json_int_t)st->external_rays));
+    json_object_set_new(o, "samples_per_pixel_avg",
+                        json_real(st->pixels ? st->spp_sum / (double)st->pixels : 0.0));
+    json_object_set_new(o, "rays_per_pixel_avg",
+                        json_real(st->pixels ? (double)st->primary_rays / (double)st->pixels : 0.0));
+    json_object_set_new(o, "max_outstanding_tasks", json_integer(st->max_outstanding_tasks));
+    json_object_set_new(o, "watermark", json_integer(st->watermark));
+    json_object_set_new(o, "max_tuple_bytes", json_integer((json_int_t)st->max_tuple_bytes));
+    json_object_set_new(o, "local_workers", json_integer(run->local_workers));
+    json_object_set_new(o, "heightfield_s", seconds(run->heightfield_s));
+    struct rusage ru;
+    if (getrusage(RUSAGE_SELF, &ru) == 0) { /* the coordinator alone: workers are other processes */
+        json_object_set_new(o, "coordinator_max_rss_kb", json_integer(ru.ru_maxrss));
+        json_object_set_new(o, "coordinator_cpu_s",
+                            seconds((double)ru.ru_utime.tv_sec + ru.ru_utime.tv_usec * 1e-6 +
+                                    (double)ru.ru_stime.tv_sec + ru.ru_stime.tv_usec * 1e-6));
     }
-    fputc('"', f);
+    json_t *workers = json_array();
+    for (int i = 0; i < st->nworkers; i++) {
+        const tf_worker_stats *w = &st->workers[i];
+        json_t *wo = json_object();
+        json_object_set_new(wo, "id", json_integer(w->id));
+        json_object_set_new(wo, "kind", json_string(w->kind));
+        /* host and backend come from the worker's hello: not trusted to be UTF-8 */
+        json_t *host = json_string(w->host), *backend = json_string(w->backend);
+        json_object_set_new(wo, "host", host ? host : json_string("?"));
+        json_object_set_new(wo, "backend", backend ? backend : json_string("?"));
+        json_object_set_new(wo, "tasks", json_integer(w->tasks));
+        json_object_set_new(wo, "rays", json_integer((json_int_t)w->rays));
+        json_object_set_new(wo, "busy_s", seconds(w->busy_s));
+        json_array_append_new(workers, wo);
+    }
+    json_object_set_new(o, "workers", workers);
+    return o;
 }
 
 int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats *st, char *err,
@@ -29,72 +73,28 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
 {
     size_t n = strlen(path) + 8;
     char *tmp = malloc(n);
-    if (!tmp) {
-        tf_seterr(err, errlen, "%s: out of memory", path);
-        return -1;
+    json_t *doc = stats_doc(run, st);
+    if (!tmp || !doc) {
+        free(tmp);
+        json_decref(doc);
+        return tf_seterr(err, errlen, "%s: out of memory", path);
     }
     snprintf(tmp, n, "%s.tmp", path);
     FILE *f = fopen(tmp, "w");
     if (!f) {
         tf_seterr(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
         free(tmp);
+        json_decref(doc);
         return -1;
     }
-    uint64_t rays = st->primary_rays + st->shadow_rays;
-    fprintf(f, "{\n  \"wall_s\": %.3f,\n  \"width\": %d,\n  \"height\": %d,\n", run->wall_s,
-            run->width, run->height);
-    fprintf(f, "  \"scene\": ");
-    json_string(f, run->scene);
-    fprintf(f, ",\n  \"output\": ");
-    json_string(f, run->output);
-    fprintf(f, ",\n  \"tasks\": ");
-    json_string(f, run->tasks);
-    fprintf(f,
-            ",\n  \"tasks_total\": %lld,\n  \"tasks_redealt\": %lld,\n"
-            "  \"tasks_duplicated\": %lld,\n  \"results_dropped\": %lld,\n"
-            "  \"task_failures\": %lld,\n",
-            (long long)st->tasks_total, (long long)st->tasks_redealt,
-            (long long)st->tasks_duplicated, (long long)st->results_dropped,
-            (long long)st->task_failures);
-    fprintf(f, "  \"rows_resumed\": %d,\n  \"rows_rendered\": %d,\n", st->rows_resumed,
-            st->rows_rendered);
-    fprintf(f,
-            "  \"rays_total\": %llu,\n  \"primary_rays\": %llu,\n  \"shadow_rays\": %llu,\n"
-            "  \"external_rays\": %llu,\n",
-            (unsigned long long)rays, (unsigned long long)st->primary_rays,
-            (unsigned long long)st->shadow_rays, (unsigned long long)st->external_rays);
-    fprintf(f, "  \"samples_per_pixel_avg\": %.4f,\n",
-            st->pixels ? st->spp_sum / (double)st->pixels : 0.0);
-    fprintf(f, "  \"rays_per_pixel_avg\": %.4f,\n",
-            st->pixels ? (double)st->primary_rays / (double)st->pixels : 0.0);
-    fprintf(f, "  \"max_outstanding_tasks\": %d,\n  \"watermark\": %d,\n", st->max_outstanding_tasks,
-            st->watermark);
-    fprintf(f, "  \"max_tuple_bytes\": %zu,\n", st->max_tuple_bytes);
-    fprintf(f, "  \"local_workers\": %d,\n  \"heightfield_s\": %.3f,\n", run->local_workers,
-            run->heightfield_s);
-    struct rusage ru;
-    if (getrusage(RUSAGE_SELF, &ru) == 0) /* the coordinator alone: workers are other processes */
-        fprintf(f, "  \"coordinator_max_rss_kb\": %ld,\n  \"coordinator_cpu_s\": %.3f,\n",
-                ru.ru_maxrss,
-                (double)ru.ru_utime.tv_sec + ru.ru_utime.tv_usec * 1e-6 +
-                    (double)ru.ru_stime.tv_sec + ru.ru_stime.tv_usec * 1e-6);
-    fprintf(f, "  \"workers\": [");
-    for (int i = 0; i < st->nworkers; i++) {
-        const tf_worker_stats *w = &st->workers[i];
-        fprintf(f, "%s\n    {\"id\": %lld, \"kind\": ", i ? "," : "", (long long)w->id);
-        json_string(f, w->kind);
-        fprintf(f, ", \"host\": ");
-        json_string(f, w->host);
-        fprintf(f, ", \"backend\": ");
-        json_string(f, w->backend);
-        fprintf(f, ", \"tasks\": %lld, \"rays\": %llu, \"busy_s\": %.3f}", (long long)w->tasks,
-                (unsigned long long)w->rays, w->busy_s);
-    }
-    fprintf(f, "%s]\n}\n", st->nworkers ? "\n  " : "");
-    int bad = ferror(f);
+    int bad = json_dumpf(doc, f, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10));
+    json_decref(doc);
+    bad |= fputc('\n', f) == EOF;
+    bad |= ferror(f);
     bad |= fclose(f) != 0;
     if (bad || rename(tmp, path)) {
-        tf_seterr(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
+        tf_seterr(err, errlen, "%s: cannot write statistics: %s", path,
+                  errno ? strerror(errno) : "write failed");
         remove(tmp);
         free(tmp);
         return -1;

@@ -146,8 +146,10 @@ function renderWorkers(list) {
   $("worker-count").textContent = live + " connected, " + list.length + " seen";
 }
 
+// Warm colours for workers, so that none is mistaken for the green of "done".
+const PALETTE = ["#ffb347", "#ff6f91", "#ffd166", "#c792ea", "#4fc3f7", "#f78c6c", "#ff9ff3", "#feca57"];
 function workerColour(id) {
-  return "hsl(" + ((id * 137) % 360) + ", 90%, 65%)";
+  return PALETTE[(id - 1 + PALETTE.length * 1000) % PALETTE.length];
 }
 
 // The preview, then the outstanding tasks outlined on it.
@@ -171,8 +173,10 @@ function drawImage() {
     const x = t.x * scale, y = t.y * scale, w = t.w * scale, h = t.h * scale;
     if (t.state === "held") {
       g.setLineDash([]);
+      g.lineWidth = 2.5;
       g.strokeStyle = workerColour(t.worker);
-      g.strokeRect(x + 1, y + 1, w - 2, h - 2);
+      g.strokeRect(x + 1.5, y + 1.5, w - 3, h - 3);
+      g.lineWidth = 1.5;
       g.fillStyle = workerColour(t.worker);
       g.fillText("w" + t.worker, x + 4, y + 13);
     } else if (t.state === "queued") {
@@ -223,11 +227,14 @@ function drawPlot() {
   const W = c.width, H = c.height, L = 40, R = 34, T = 10, B = 22;
   g.fillStyle = "#0b0d10";
   g.fillRect(0, 0, W, H);
+  // rates over spans of at least 1.5 s: results arrive in lumps, a task at a time
   const pts = [];
-  for (let i = 1; i < history.length; i++) {
-    const a = history[i - 1], b = history[i], dt = b.t - a.t;
+  for (let i = 1, a = history[0]; i < history.length; i++) {
+    const b = history[i], dt = b.t - a.t;
+    if (dt < 1.5 && i < history.length - 1) continue;
     if (dt <= 0) continue;
     pts.push({ t: b.t, rays: (b.rays - a.rays) / dt / 1e6, busy: (b.busy_s - a.busy_s) / dt, workers: b.workers });
+    a = b;
   }
   document.body.dataset.plotPoints = pts.length;
   if (pts.length < 1) return;

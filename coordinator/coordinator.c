@@ -431,7 +431,7 @@ static void run_on_done(render *r)
         return;
     tf_outcome out = {r->status == 0 ? "ok" : r->status == 130 ? "interrupted" : "failed",
                       r->status, r->output, r->preview, r->o->scene_path, r->o->stats_path,
-                      r->status == 0 ? "" : r->error,
+                      r->status == 0 ? "" : r->error, tf_dashboard_url(r->dash),
                       r->scene ? r->scene->width : 0, r->scene ? r->scene->height : 0,
                       r->rows_on_disk, tf_now_s() - r->t_start};
     tf_on_done_run(r->o->on_done, &out);

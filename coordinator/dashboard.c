@@ -71,6 +71,7 @@ struct tf_dashboard {
     tf_run_state state;
     int exit_status;
     int stop_requested;
+    char url[300];
     /* static facts */
     double t_start, start_unix_s;
     char scene[512], output[1024], tasks_desc[64];
@@ -78,6 +79,8 @@ struct tf_dashboard {
 };
 
 static double since_start(const tf_dashboard *d) { return tf_now_s() - d->t_start; }
+
+static void publish(tf_dashboard *d, int rows_written, int block);
 
 /* ---- open ----------------------------------------------------------------------------------- */
 
@@ -312,6 +315,8 @@ void tf_dashboard_attach(tf_dashboard *d, tf_supervisor *sup, ts_server *srv, co
 
 int tf_dashboard_port(const tf_dashboard *d) { return d ? d->port : 0; }
 
+const char *tf_dashboard_url(const tf_dashboard *d) { return d ? d->url : ""; }
+
 int tf_dashboard_serve(tf_dashboard *d, char *err, size_t errlen)
 {
     tf_httpd_config hc = {d->listen_fd, d->port, d->loopback, d->have_token ? d->token : NULL,
@@ -322,9 +327,12 @@ int tf_dashboard_serve(tf_dashboard *d, char *err, size_t errlen)
         return -1;
     const char *h = d->host[0] ? d->host : "0.0.0.0";
     int v6 = strchr(h, ':') != NULL;
-    tf_info("dashboard at http://%s%s%s:%d/%s", v6 ? "[" : "", h, v6 ? "]" : "", d->port,
+    snprintf(d->url, sizeof d->url, "http://%s%s%s:%d/", v6 ? "[" : "", h, v6 ? "]" : "",
+             d->port);
+    tf_info("dashboard at %s%s", d->url,
             d->have_token ? " (token required: Authorization: Bearer, or open /login?token=...)"
                           : "");
+    publish(d, d->first_row, 1);
     return 0;
 }
 
@@ -442,6 +450,14 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written)
                 o->worker = views[i].holder_conn ? owner_of(owners, nowners, views[i].holder_conn) : -1;
             }
             s->ntasks = n;
+            /* connection -> a task it holds (reusing the pairs: .worker holds a task id) */
+            conn_owner *held = malloc((size_t)(n > 0 ? n : 1) * sizeof *held);
+            int nheld = 0;
+            for (int i = 0; held && i < n; i++)
+                if (views[i].holder_conn && !views[i].has_result)
+                    held[nheld++] = (conn_owner){views[i].holder_conn, views[i].id};
+            if (held)
+                qsort(held, (size_t)nheld, sizeof *held, cmp_owner);
             for (int i = 0; i < st->nworkers; i++) {
                 const tf_worker_stats *w = &st->workers[i];
                 tf_snap_worker *o = &s->workers[i];
@@ -452,12 +468,7 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written)
                 o->tasks = w->tasks;
                 o->rays = w->rays;
                 o->busy_s = w->busy_s;
-                o->holding = -1;
-                for (int k = 0; w->conn && k < n; k++)
-                    if (views[k].holder_conn == w->conn && !views[k].has_result) {
-                        o->holding = views[k].id;
-                        break;
-                    }
+                o->holding = w->conn && held ? owner_of(held, nheld, w->conn) : -1;
                 worker_seen *ws = seen_worker(d, w->id);
                 o->since_s = ws ? ws->since_s : -1;
                 o->last_heard_s = ws ? ws->last_s : -1;
@@ -466,6 +477,7 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written)
                                              : TF_WS_IDLE;
             }
             s->nworkers = st->nworkers;
+            free(held);
         }
         free(views);
         free(owners);

@@ -39,6 +39,7 @@ int tf_on_done_run(const char *cmd, const tf_outcome *o)
         put("TERRAFARM_SCENE", o->scene);
         put("TERRAFARM_STATS", o->stats);
         put("TERRAFARM_ERROR", o->error);
+        put("TERRAFARM_DASHBOARD", o->dashboard);
         snprintf(buf, sizeof buf, "%dx%d", o->width, o->height);
         put("TERRAFARM_SIZE", buf);
         snprintf(buf, sizeof buf, "%.3f", o->wall_s);

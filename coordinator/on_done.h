@@ -8,6 +8,7 @@
  *   TERRAFARM_ROWS     rows on disk;    TERRAFARM_ROWS_TOTAL  rows of the image
  *   TERRAFARM_STATS    the --stats file (empty if none)
  *   TERRAFARM_ERROR    the reason a failed render stopped (empty otherwise)
+ *   TERRAFARM_DASHBOARD  the dashboard's URL, still serving the final state (empty if none)
  * The coordinator waits for it (its output goes to the coordinator's stdout/stderr), serving
  * the dashboard's final state meanwhile; its exit status is logged, never changes the
  * render's. */
@@ -17,7 +18,7 @@
 typedef struct tf_outcome {
     const char *status;      /* ok | failed | interrupted */
     int exit_status;
-    const char *output, *preview, *scene, *stats, *error;
+    const char *output, *preview, *scene, *stats, *error, *dashboard;
     int width, height, rows;
     double wall_s;
 } tf_outcome;

@@ -532,17 +532,22 @@ static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *u
         if (!rq)
             return MHD_NO;
         *con_cls = rq;
+        const char *cl = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Content-Length");
+        if (cl && strtoull(cl, NULL, 10) > MAX_BODY) {
+            rq->too_big = 1;
+            return send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
+        }
         return MHD_YES; /* headers are in; the body (if any) follows */
     }
     if (*upload_size) {
         size_t n = *upload_size;
-        if (rq->len + n > MAX_BODY)
-            rq->too_big = 1;
-        else {
-            memcpy(rq->body + rq->len, upload, n);
-            rq->len += n;
-        }
         *upload_size = 0;
+        if (rq->too_big || rq->len + n > MAX_BODY) {
+            rq->too_big = 1; /* answer now and close: the rest is not read */
+            return send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
+        }
+        memcpy(rq->body + rq->len, upload, n);
+        rq->len += n;
         return MHD_YES;
     }
     if (h->loopback && !host_ok(c))

@@ -26,7 +26,7 @@ say "render with the dashboard on loopback, polled while it runs"
     --on-done "python3 '$T/final.py' '$T'" 2>"$T/coord.err" &
 pid=$!; e2e_track $pid
 i=0
-while ! grep -q 'dashboard at' "$T/coord.err"; do
+while ! grep -q 'dashboard at' "$T/coord.err" 2>/dev/null; do
     kill -0 $pid 2>/dev/null || fail "render ended early: $(cat "$T/coord.err")"
     sleep 0.05; i=$((i + 1)); [ $i -lt 400 ] || fail "no dashboard URL logged: $(cat "$T/coord.err")"
 done

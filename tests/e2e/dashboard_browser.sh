@@ -17,7 +17,7 @@ say "render with the dashboard, watched by Chromium"
     --tasks stamps:80x60 -o "$T/out.exr" 2>"$T/coord.err" &
 pid=$!; e2e_track $pid
 i=0
-while ! grep -q 'dashboard at' "$T/coord.err"; do
+while ! grep -q 'dashboard at' "$T/coord.err" 2>/dev/null; do
     kill -0 $pid 2>/dev/null || fail "render ended early: $(cat "$T/coord.err")"
     sleep 0.1; i=$((i + 1)); [ $i -lt 200 ] || fail "no dashboard URL logged: $(cat "$T/coord.err")"
 done

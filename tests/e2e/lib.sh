@@ -118,3 +118,14 @@ make_partial() {
     kill -KILL $mp_pid; wait $mp_pid 2>/dev/null
     sleep 0.1   # its forked workers follow it (PR_SET_PDEATHSIG)
 }
+
+# dashboard_url LOGFILE PID: wait until a coordinator logging to LOGFILE prints its dashboard
+# URL ("dashboard at http://HOST:PORT/"); prints the URL.  Fails if PID ends first.
+dashboard_url() {
+    i=0
+    while ! grep -q 'dashboard at' "$1" 2>/dev/null; do
+        kill -0 "$2" 2>/dev/null || fail "render ended before its dashboard was up: $(cat "$1")"
+        sleep 0.05; i=$((i + 1)); [ $i -lt 600 ] || fail "no dashboard URL logged: $(cat "$1")"
+    done
+    sed -n 's/.*dashboard at \(http:[^ ]*\).*/\1/p' "$1" | head -1
+}

@@ -126,13 +126,16 @@ deps:
 bench-deps:
 	@$(MAKE) --no-print-directory deps DEB_PKGS="$(BENCH_PKGS)"
 
-# The OpenCL backend reads its kernels at run time: beside the executable (bin/../worker/kernels)
-# in a checkout, from PREFIX/share/terrafarm/kernels once installed.
+# The OpenCL backend reads its kernels at run time, and the dashboard its page (web/): beside
+# the executable (bin/../worker/kernels, bin/../web) in a checkout, from
+# PREFIX/share/terrafarm/{kernels,web} once installed.
 PREFIX ?= /usr/local
+WEB_FILES := web/index.html web/dashboard.js web/dashboard.css
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
-	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels
+	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels $(DESTDIR)$(PREFIX)/share/terrafarm/web
 	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
+	install -m 644 $(WEB_FILES) $(DESTDIR)$(PREFIX)/share/terrafarm/web/
 
 clean:
 	rm -rf build build-asan bin

@@ -8,6 +8,7 @@
 #include <inttypes.h>
 #include <limits.h>
 #include <microhttpd.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -621,6 +622,14 @@ tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen)
                 tf_httpd_stop(h);
                 return NULL;
             }
+    /* The server's threads inherit this signal mask: they never take SIGINT or SIGTERM, so
+     * an interrupt always reaches the event loop's thread (and wakes its poll). */
+    sigset_t block, old;
+    sigemptyset(&block);
+    sigaddset(&block, SIGINT);
+    sigaddset(&block, SIGTERM);
+    sigaddset(&block, SIGPIPE);
+    pthread_sigmask(SIG_BLOCK, &block, &old);
     h->mhd = MHD_start_daemon(
         MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL |
             MHD_USE_ERROR_LOG,
@@ -630,6 +639,7 @@ tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen)
         MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)CONNECTION_MEMORY,
         MHD_OPTION_NOTIFY_COMPLETED, request_done, NULL, MHD_OPTION_EXTERNAL_LOGGER, mhd_log,
         NULL, MHD_OPTION_END);
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
     if (!h->mhd) {
         close(cfg->listen_fd);
         tf_seterr(err, errlen, "cannot start the dashboard's HTTP server on port %d", cfg->port);

@@ -10,6 +10,7 @@
 e2e_init
 SIZE=1280x720
 TASKS=stamps:128x120
+LEASE="--lease-timeout 120000"   # frozen workers must not be taken for dead
 render -q -j 2 --size $SIZE --tasks $TASKS --http none -o "$T/ref.exr" || fail "reference: $(cat "$T/last.err")"
 ENVDUMP='env | grep ^TERRAFARM_ | sort > "$0"'
 
@@ -54,29 +55,30 @@ same "$T/ref.exr" "$T/stop.exr" "stopped from the dashboard and resumed"
 
 say "2. drop a busy worker, 3. change the watermark"
 "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 --http 127.0.0.1:0 -j 2 --size $SIZE --tasks $TASKS \
-    -o "$T/drop.exr" --stats "$T/drop.json" 2>"$T/drop.err" &
+    $LEASE -o "$T/drop.exr" --stats "$T/drop.json" 2>"$T/drop.err" &
 pid=$!; e2e_track $pid
 url=$(dashboard_url "$T/drop.err" $pid)
-redealt=0 tries=0
-while [ $redealt -eq 0 ] && [ $tries -lt 5 ]; do
-    tries=$((tries + 1))
-    id=""
-    i=0
-    while [ -z "$id" ]; do
-        id=$(jget "$url" /api/workers 'b=[w["id"] for w in d["workers"] if w["state"]=="busy"]; print(b[0] if b else "")')
-        [ -n "$id" ] || sleep 0.1
-        i=$((i + 1)); [ $i -lt 300 ] || fail "no busy worker to drop"
-    done
-    out=$(post "$url" /api/workers/$id/drop)
-    case "$out" in 202*) ;; *) fail "POST drop worker $id: $out" ;; esac
-    i=0
-    until jget "$url" /api/workers "sys.exit(0 if [w for w in d['workers'] if w['id']==$id and w['state']=='dropped'] else 1)"; do
-        sleep 0.1; i=$((i + 1)); [ $i -lt 100 ] || fail "worker $id is not shown as dropped"
-    done
-    redealt=$(jget "$url" /api/status 'print(d["tasks_redealt"])')
-    say "dropped worker $id: $redealt task(s) re-dealt so far"
+# wait until a worker is busy, then freeze the workers (SIGSTOP) so nothing moves meanwhile
+i=0
+until jget "$url" /api/workers 'sys.exit(0 if any(w["state"]=="busy" for w in d["workers"]) else 1)'; do
+    sleep 0.1; i=$((i + 1)); [ $i -lt 300 ] || fail "no worker became busy"
 done
-[ "$redealt" -gt 0 ] || fail "dropping busy workers re-dealt no task"
+freeze_workers $pid
+sleep 0.6   # a snapshot or two after the freeze
+id=$(jget "$url" /api/workers 'b=[w["id"] for w in d["workers"] if w["state"]=="busy"]; print(b[0] if b else "")')
+[ -n "$id" ] || fail "no busy worker once frozen"
+before=$(jget "$url" /api/status 'print(d["tasks_redealt"])')
+out=$(post "$url" /api/workers/$id/drop)
+case "$out" in 202*) ;; *) fail "POST drop worker $id: $out" ;; esac
+i=0
+until jget "$url" /api/workers "sys.exit(0 if [w for w in d['workers'] if w['id']==$id and w['state']=='dropped'] else 1)"; do
+    sleep 0.1; i=$((i + 1)); [ $i -lt 100 ] || fail "worker $id is not shown as dropped"
+done
+redealt=$(jget "$url" /api/status 'print(d["tasks_redealt"])')
+[ "$redealt" -gt "$before" ] || fail "dropping busy worker $id re-dealt no task ($before -> $redealt)"
+say "dropped busy worker $id: its task was dealt again"
+out=$(post "$url" /api/workers/$id/drop)
+case "$out" in 404*) ;; *) fail "dropping worker $id twice: $out" ;; esac
 out=$(post "$url" /api/watermark '{"watermark": 1}')
 case "$out" in 400*) ;; *) fail "watermark 1 (below a band) was not refused: $out" ;; esac
 wm=$(jget "$url" /api/status 'print(d["watermark_min"] + 2)')
@@ -89,6 +91,7 @@ done
 jget "$url" /api/events 'k=[e["text"] for e in d["events"] if e["kind"]=="control"]; print(k); sys.exit(0 if any("dropped" in t for t in k) and any("watermark set" in t for t in k) else 1)' \
     || fail "the controls are not in the event log"
 jget "$url" /api/events 'sys.exit(0 if any(e["kind"]=="redeal" for e in d["events"]) else 1)' || fail "no re-deal in the event log"
+thaw_workers $pid
 wait_exit $pid 120
 [ $rc -eq 0 ] || fail "render with a dropped worker exited $rc: $(tail -3 "$T/drop.err")"
 [ "$(jstat tasks_redealt "$T/drop.json")" -ge 1 ] || fail "--stats shows no re-dealt task"

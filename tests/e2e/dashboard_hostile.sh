@@ -40,7 +40,7 @@ render -q -j 2 --size $SIZE --tasks stamps:64x64 --http none -o "$T/ref.exr" || 
 
 say "2. a dashboard on 0.0.0.0 with the token derived from the farm secret, under attack"
 "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 --secret-file "$T/farm.key" --http 0.0.0.0:0 \
-    -j 2 --size $SIZE --tasks stamps:64x64 -o "$T/out.exr" 2>"$T/coord.err" &
+    -j 2 --size $SIZE --tasks stamps:64x64 --lease-timeout 120000 -o "$T/out.exr" 2>"$T/coord.err" &
 pid=$!; e2e_track $pid
 i=0
 while ! grep -q 'dashboard at' "$T/coord.err" 2>/dev/null; do
@@ -49,6 +49,9 @@ while ! grep -q 'dashboard at' "$T/coord.err" 2>/dev/null; do
 done
 grep 'dashboard at' "$T/coord.err" | grep -q 'token required' || fail "the log does not say a token is required"
 port=$(sed -n 's/.*dashboard at http:\/\/[^ ]*:\([0-9][0-9]*\)\/.*/\1/p' "$T/coord.err" | head -1)
+# the workers are frozen (SIGSTOP) during the attack, so the render outlasts it; they go on after
+sleep 0.5
+freeze_workers $pid
 TOKEN=$("$TF_BIN" status --secret-file "$T/farm.key" --print-token) || fail "status --print-token"
 printf '%s\n' "$TOKEN" >"$T/token"
 "$TF_BIN" status "$ADDR:$port" >"$T/st_no.out" 2>"$T/st_no.err" && fail "terrafarm status without the token succeeded"
@@ -172,6 +175,7 @@ for b in bad:
 print("off-loopback checks: %s" % ("ok" if not bad else "%d failed" % len(bad)))
 sys.exit(1 if bad else 0)
 PY
+thaw_workers $pid
 wait_exit $pid 120
 [ $rc -eq 0 ] || fail "the attacked render exited $rc: $(tail -5 "$T/coord.err")"
 same "$T/ref.exr" "$T/out.exr" "render whose dashboard was attacked"

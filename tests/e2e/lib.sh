@@ -129,3 +129,8 @@ dashboard_url() {
     done
     sed -n 's/.*dashboard at \(http:[^ ]*\).*/\1/p' "$1" | head -1
 }
+
+# freeze_workers PID / thaw_workers PID: SIGSTOP / SIGCONT the forked workers of coordinator
+# PID, so that a render lasts exactly as long as a test needs (the coordinator keeps serving).
+freeze_workers() { for c in $(pgrep -P "$1"); do kill -STOP "$c" 2>/dev/null; done; }
+thaw_workers() { for c in $(pgrep -P "$1"); do kill -CONT "$c" 2>/dev/null; done; }

@@ -20,6 +20,7 @@
 #include "log.h"
 
 #define DASH_PUBLISH_MS 200      /* a fresh snapshot at most this often */
+#define DASH_LINGER_MS 1000      /* at the end, for open event streams to send the final state */
 #define PREVIEW_MAX_SIDE 512     /* the live preview's longer side, in pixels */
 #define HISTORY_MAX 512          /* throughput samples kept (then halved, interval doubled) */
 #define HISTORY_FIRST_INTERVAL_S 0.5
@@ -588,6 +589,8 @@ void tf_dashboard_close(tf_dashboard *d)
 {
     if (!d)
         return;
+    if (d->state >= TF_RUN_FINISHED)
+        tf_httpd_linger(d->httpd, DASH_LINGER_MS); /* pages watching see the end */
     if (d->hub_ok)
         tf_hub_stop(&d->hub);
     tf_httpd_stop(d->httpd);

@@ -16,6 +16,7 @@
 #include <strings.h>
 #include <unistd.h>
 
+#include "clock.h"
 #include "coordinator/api.h"
 #include "coordinator/httpauth.h"
 #include "coordinator/livepreview.h"
@@ -46,6 +47,9 @@ struct tf_httpd {
     uint64_t png_version;
     uint8_t *png;
     size_t png_len;
+    pthread_mutex_t streams_lock;  /* event streams that have not yet sent the final state */
+    pthread_cond_t streams_done;
+    int streams_open;
 };
 
 /* Per request: the body of a POST, read up to MAX_BODY. */
@@ -265,6 +269,8 @@ static enum MHD_Result serve_preview(tf_httpd *h, struct MHD_Connection *c, cons
  * to keep the connection alive. */
 typedef struct stream {
     tf_httpd *h;
+    int counted;                   /* in h->streams_open */
+    int final;                     /* the final state is queued: end after sending it */
     uint64_t last_seq, version;
     char *pending;
     size_t len, off;
@@ -317,7 +323,19 @@ static void fill_stream(stream *st)
             st->last_seq = s->events[i].seq;
         }
     append_json(st, 0, "status", tf_api_status(s));
+    st->final = s->state != TF_RUN_STARTING && s->state != TF_RUN_RENDERING;
     tf_hub_release(st->h->hub, s);
+}
+
+static void stream_uncount(stream *st)
+{
+    if (!st->counted)
+        return;
+    st->counted = 0;
+    pthread_mutex_lock(&st->h->streams_lock);
+    st->h->streams_open--;
+    pthread_mutex_unlock(&st->h->streams_lock);
+    pthread_cond_broadcast(&st->h->streams_done);
 }
 
 static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
@@ -325,6 +343,10 @@ static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
     (void)pos;
     stream *st = cls;
     while (st->off == st->len) {
+        if (st->final) { /* the render's end has been sent: the stream is over */
+            stream_uncount(st);
+            return MHD_CONTENT_READER_END_OF_STREAM;
+        }
         free(st->pending);
         st->pending = NULL;
         st->len = st->off = 0;
@@ -347,6 +369,7 @@ static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
 static void stream_free(void *cls)
 {
     stream *st = cls;
+    stream_uncount(st);
     free(st->pending);
     free(st);
 }
@@ -357,6 +380,10 @@ static enum MHD_Result serve_stream(tf_httpd *h, struct MHD_Connection *c)
     if (!st)
         return send_text(c, 500, "out of memory");
     st->h = h;
+    pthread_mutex_lock(&h->streams_lock);
+    h->streams_open++;
+    pthread_mutex_unlock(&h->streams_lock);
+    st->counted = 1;
     const char *last = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Last-Event-ID");
     uint64_t v;
     if (last && parse_u64(last, &v) == 0)
@@ -612,6 +639,8 @@ tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen)
         h->have_token = 1;
     }
     pthread_mutex_init(&h->png_lock, NULL);
+    pthread_mutex_init(&h->streams_lock, NULL);
+    pthread_cond_init(&h->streams_done, NULL);
     h->files[0] = (web_file){"index.html", "text/html; charset=utf-8", NULL, 0};
     h->files[1] = (web_file){"dashboard.js", "text/javascript; charset=utf-8", NULL, 0};
     h->files[2] = (web_file){"dashboard.css", "text/css; charset=utf-8", NULL, 0};
@@ -649,6 +678,18 @@ tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen)
     return h;
 }
 
+void tf_httpd_linger(tf_httpd *h, int ms)
+{
+    if (!h)
+        return;
+    struct timespec deadline = tf_realtime_in(ms);
+    pthread_mutex_lock(&h->streams_lock);
+    while (h->streams_open > 0)
+        if (pthread_cond_timedwait(&h->streams_done, &h->streams_lock, &deadline) == ETIMEDOUT)
+            break;
+    pthread_mutex_unlock(&h->streams_lock);
+}
+
 void tf_httpd_stop(tf_httpd *h)
 {
     if (!h)
@@ -659,5 +700,7 @@ void tf_httpd_stop(tf_httpd *h)
         free(h->files[i].data);
     free(h->png);
     pthread_mutex_destroy(&h->png_lock);
+    pthread_mutex_destroy(&h->streams_lock);
+    pthread_cond_destroy(&h->streams_done);
     free(h);
 }

@@ -34,6 +34,9 @@ int tf_web_dir_find(char *dir, size_t len);
 
 /* Load the page's files and start the threads.  NULL with a message in err (the fd is closed). */
 tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen);
+/* After the final state is published: wait up to ms for the open event streams to send it
+ * (so a page watching learns how the render ended), then return. */
+void tf_httpd_linger(tf_httpd *h, int ms);
 /* Wake the event streams, stop every thread, close the socket, free (NULL is fine). */
 void tf_httpd_stop(tf_httpd *h);
 

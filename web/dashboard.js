@@ -177,8 +177,11 @@ function drawImage() {
       g.strokeStyle = workerColour(t.worker);
       g.strokeRect(x + 1.5, y + 1.5, w - 3, h - 3);
       g.lineWidth = 1.5;
+      const label = "w" + t.worker;
+      g.fillStyle = "rgba(11, 13, 16, 0.75)";
+      g.fillRect(x + 3, y + 3, g.measureText(label).width + 4, 13);
       g.fillStyle = workerColour(t.worker);
-      g.fillText("w" + t.worker, x + 4, y + 13);
+      g.fillText(label, x + 5, y + 13);
     } else if (t.state === "queued") {
       g.setLineDash([4, 3]);
       g.strokeStyle = "#8899aa";
@@ -227,12 +230,11 @@ function drawPlot() {
   const W = c.width, H = c.height, L = 40, R = 34, T = 10, B = 22;
   g.fillStyle = "#0b0d10";
   g.fillRect(0, 0, W, H);
-  // rates over spans of at least 1.5 s: results arrive in lumps, a task at a time
+  // rates over spans of at least a second: results arrive in lumps, a task at a time
   const pts = [];
   for (let i = 1, a = history[0]; i < history.length; i++) {
     const b = history[i], dt = b.t - a.t;
-    if (dt < 1.5 && i < history.length - 1) continue;
-    if (dt <= 0) continue;
+    if (dt < 1.0) continue;
     pts.push({ t: b.t, rays: (b.rays - a.rays) / dt / 1e6, busy: (b.busy_s - a.busy_s) / dt, workers: b.workers });
     a = b;
   }
@@ -284,11 +286,21 @@ function followEvents() {
   const es = new EventSource("/api/events/stream");
   for (const kind of ["join", "leave", "redeal", "failure", "exclusion", "control", "end"])
     es.addEventListener(kind, (m) => addEvent(JSON.parse(m.data)));
-  es.addEventListener("status", (m) => { if (!ended) { status = JSON.parse(m.data); renderStatus(status); } });
+  es.addEventListener("status", (m) => {
+    if (ended) return;
+    status = JSON.parse(m.data);
+    renderStatus(status);
+    if (status.state !== "rendering" && status.state !== "starting") {
+      ended = true; // the coordinator says how it ended, then the stream closes
+      es.close();
+      drawImage();
+    }
+  });
   es.onerror = () => { if (ended) es.close(); };
 }
 
 async function poll() {
+  if (ended) return;
   tick++;
   try {
     const [s, w, t] = await Promise.all([getJSON("/api/status"), getJSON("/api/workers"), getJSON("/api/tasks")]);

@@ -255,6 +255,8 @@ static int run_render(const bench_opts *o, const char *dir, int n, int r, char *
     args[k++] = json;
     args[k++] = "--overwrite";
     args[k++] = "-q";
+    args[k++] = "--http"; /* a measurement opens no dashboard */
+    args[k++] = "none";
     if (o->tasks) {
         args[k++] = "--tasks";
         args[k++] = o->tasks;

@@ -454,6 +454,8 @@ static void render_close(render *r)
         tf_rowwriter_abandon(r->rows_out);
     tf_local_workers_free(&r->lw);
     ts_server_free(r->srv);
+    tf_dashboard_close(r->dash); /* after the server: its hooks (the dashboard's taps) run to
+                                  * the last connection closed */
     tf_supervisor_free(r->sup);
     ts_space_free(r->space);
     tf_heightfield_free(r->hf);
@@ -496,8 +498,6 @@ out:
     if (r.status != 0)
         tf_dashboard_end(r.dash, TF_RUN_FAILED, r.status, r.rows_on_disk);
     run_on_done(&r); /* the dashboard still shows the final state meanwhile */
-    tf_dashboard_close(r.dash);
-    r.dash = NULL;
     render_close(&r);
     return r.status;
 }

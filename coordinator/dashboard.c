@@ -117,11 +117,10 @@ tf_dashboard *tf_dashboard_open(const tf_dashboard_config *cfg, char *err, size_
     d->hist_last_s = -1e9;
 
     const char *spec = cfg->http ? cfg->http : TF_DEFAULT_HTTP;
-    char port[32];
-    if (tf_split_hostport(spec, d->host, sizeof d->host, port, sizeof port, err, errlen))
-        goto fail;
-    if (!strncmp(spec, "unix:", 5)) {
-        tf_seterr(err, errlen, "--http %s: expected HOST:PORT (a TCP address)", spec);
+    char port[32], why[256];
+    if (!strncmp(spec, "unix:", 5) ||
+        tf_split_hostport(spec, d->host, sizeof d->host, port, sizeof port, why, sizeof why)) {
+        tf_seterr(err, errlen, "--http %s: expected HOST:PORT (a TCP address) or none", spec);
         goto fail;
     }
     d->loopback = tf_listen_is_loopback(spec);

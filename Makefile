@@ -128,13 +128,18 @@ bench-deps:
 
 # The OpenCL backend reads its kernels at run time, and the dashboard its page (web/): beside
 # the executable (bin/../worker/kernels, bin/../web) in a checkout, from
-# PREFIX/share/terrafarm/{kernels,web} once installed.
+# PREFIX/share/terrafarm/{kernels,web} once installed.  The kernel build also reads the C
+# renderer's headers it shares (SOURCE_FILES in worker/backend_opencl.c): from the checkout's
+# common/, or installed flat beside the kernels.
 PREFIX ?= /usr/local
+KERNEL_SHARED := common/portable.h common/render/constants.h common/render/sample_math.h \
+                 common/render/trace_math.h common/terrain/noise_kernel.h
 WEB_FILES := web/index.html web/dashboard.js web/dashboard.css
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
 	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels $(DESTDIR)$(PREFIX)/share/terrafarm/web
-	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
+	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(KERNEL_SHARED) \
+	  $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
 	install -m 644 $(WEB_FILES) $(DESTDIR)$(PREFIX)/share/terrafarm/web/
 
 clean:

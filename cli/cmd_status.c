@@ -30,7 +30,7 @@ static const char usage[] =
     "      --secret-file FILE    the farm secret, to derive the token from it\n"
     "      --print-token         print the token derived from --secret-file (for a browser:\n"
     "                            open http://HOST:PORT/login?token=TOKEN) and exit\n"
-    "      --timeout MS          give up after this long (default 5000)\n"
+    "      --timeout T           give up after this long (default 5s; 500ms, 2m, ...)\n"
     "  -h, --help                this help\n";
 
 typedef struct answer {
@@ -211,12 +211,13 @@ int cmd_status(int argc, char **argv)
         case O_SECRET: secret_file = optarg; break;
         case O_PRINT: print_token = 1; break;
         case O_TIMEOUT: {
-            char *end;
-            timeout_ms = strtol(optarg, &end, 10);
-            if (end == optarg || *end || timeout_ms < 1 || timeout_ms > 3600000) {
-                tf_error("--timeout '%s': expected milliseconds from 1 to 3600000", optarg);
+            int64_t ms;
+            if (tf_parse_duration_ms(optarg, &ms) || ms < 1 || ms > 3600000) {
+                tf_error("--timeout '%s': expected a duration from 1ms to 1h (e.g. 500ms, 5s)",
+                         optarg);
                 return TF_EXIT_USAGE;
             }
+            timeout_ms = (long)ms;
             break;
         }
         case 'h': fputs(usage, stdout); return TF_EXIT_OK;

@@ -35,6 +35,7 @@ for p in $pkgs OpenEXR OpenCL; do
     libsodium) dev=libsodium-dev run=libsodium23 ;;
     libmicrohttpd) dev=libmicrohttpd-dev run=libmicrohttpd12 ;;
     jansson) dev=libjansson-dev run=libjansson4 ;;
+    gdal) dev=libgdal-dev run=libgdal32 ;;
     OpenEXR) dev=libopenexr-dev run=libopenexr-3-1-30 ;;
     OpenCL) dev=ocl-icd-opencl-dev run=ocl-icd-libopencl1 ;;
     *) fail "the Makefile links '$p', unknown to this test: add its Debian packages" ;;

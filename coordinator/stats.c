@@ -68,6 +68,35 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
     return o;
 }
 
+#define STATS_FLAGS (JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10))
+
+/* The layout the file has always had, which line-based tools (grep, sed) rely on: one key per
+ * line at the top, one worker object per line ({"id": 1, "kind": "forked", ...}). */
+static int dump_stats(FILE *f, json_t *doc)
+{
+    json_t *workers = json_incref(json_object_get(doc, "workers"));
+    json_object_del(doc, "workers");
+    char *top = json_dumps(doc, JSON_INDENT(2) | STATS_FLAGS);
+    size_t n = top ? strlen(top) : 0;
+    int bad = n < 2 || top[n - 1] != '}';
+    if (!bad) { /* drop the closing "\n}" and add the workers before it */
+        fwrite(top, 1, n - 2, f);
+        fputs(",\n  \"workers\": [", f);
+        size_t i;
+        json_t *w;
+        json_array_foreach(workers, i, w) {
+            char *line = json_dumps(w, STATS_FLAGS);
+            bad |= !line;
+            fprintf(f, "%s\n    %s", i ? "," : "", line ? line : "{}");
+            free(line);
+        }
+        fputs(json_array_size(workers) ? "\n  ]\n}\n" : "]\n}\n", f);
+    }
+    free(top);
+    json_decref(workers);
+    return bad ? -1 : 0;
+}
+
 int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats *st, char *err,
                    size_t errlen)
 {
@@ -87,9 +116,8 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
         json_decref(doc);
         return -1;
     }
-    int bad = json_dumpf(doc, f, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10));
+    int bad = dump_stats(f, doc);
     json_decref(doc);
-    bad |= fputc('\n', f) == EOF;
     bad |= ferror(f);
     bad |= fclose(f) != 0;
     if (bad || rename(tmp, path)) {

@@ -14,7 +14,7 @@ BUILD   ?= build
 BIN     ?= bin
 VERSION := 0.1.0
 
-PKGS      := inih libpng libsodium gdal zlib
+PKGS      := inih libpng libsodium gdal zlib libmicrohttpd jansson
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
 EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
@@ -120,7 +120,7 @@ bench: $(PROG) $(BENCHES)
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
             iproute2 python3 gnuplot-nox ffmpeg libgdal-dev gdal-bin openssh-server openssh-client \
-            slurm-wlm munge
+            slurm-wlm munge libmicrohttpd-dev libjansson-dev chromium
 # Only the benchmarks' peers need these (make bench-deps).
 BENCH_PKGS := povray redis-server hyperfine linux-perf valgrind
 deps:
@@ -133,18 +133,21 @@ deps:
 bench-deps:
 	@$(MAKE) --no-print-directory deps DEB_PKGS="$(BENCH_PKGS)"
 
-# The OpenCL backend reads its kernels at run time: beside the executable (bin/../worker/kernels)
-# in a checkout, from PREFIX/share/terrafarm/kernels once installed.  The kernel build also
-# reads the C renderer's headers it shares (SOURCE_FILES in worker/backend_opencl.c): from the
-# checkout's common/, or installed flat beside the kernels.
+# The OpenCL backend reads its kernels at run time, and the dashboard its page (web/): beside
+# the executable (bin/../worker/kernels, bin/../web) in a checkout, from
+# PREFIX/share/terrafarm/{kernels,web} once installed.  The kernel build also reads the C
+# renderer's headers it shares (SOURCE_FILES in worker/backend_opencl.c): from the checkout's
+# common/, or installed flat beside the kernels.
 PREFIX ?= /usr/local
 KERNEL_SHARED := common/portable.h common/render/constants.h common/render/sample_math.h \
                  common/render/trace_math.h common/terrain/noise_kernel.h
+WEB_FILES := web/index.html web/dashboard.js web/dashboard.css
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
-	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels
+	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels $(DESTDIR)$(PREFIX)/share/terrafarm/web
 	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(KERNEL_SHARED) \
 	  $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
+	install -m 644 $(WEB_FILES) $(DESTDIR)$(PREFIX)/share/terrafarm/web/
 
 clean:
 	rm -rf build build-asan bin

@@ -13,6 +13,7 @@
  * `terrafarm bench SCENE --cost-map OUT` instead measures the per-region cost of the scene
  * in-process and writes the cost map that simulated workers read (worker/simulate.h). */
 #include <errno.h>
+#include <jansson.h>
 #include <getopt.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -31,7 +32,6 @@
 
 #define MAX_COUNTS 64
 #define MAX_REPEAT 100
-#define MAX_STATS_BYTES (16u << 20)
 
 static const char usage[] =
     "usage: terrafarm bench SCENE --workers 1,2,4 [options]\n"
@@ -258,6 +258,8 @@ static int run_render(const bench_opts *o, const char *dir, int n, int r, char *
     args[k++] = json;
     args[k++] = "--overwrite";
     args[k++] = "-q";
+    args[k++] = "--http"; /* a measurement opens no dashboard */
+    args[k++] = "none";
     if (o->tasks) {
         args[k++] = "--tasks";
         args[k++] = o->tasks;
@@ -296,56 +298,45 @@ static int run_render(const bench_opts *o, const char *dir, int n, int r, char *
     return 0;
 }
 
-static char *read_small_file(const char *path, size_t max)
+/* One number of the statistics; 0, or -1 if it is missing or not a number. */
+static int stat_number(json_t *doc, const char *key, double *out)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
-    char *buf = malloc(max + 1);
-    size_t n = buf ? fread(buf, 1, max, f) : 0;
-    int too_big = buf && n == max && fgetc(f) != EOF;
-    fclose(f);
-    if (!buf || too_big) {
-        free(buf);
-        return NULL;
-    }
-    buf[n] = '\0';
-    return buf;
-}
-
-/* The number after `"key":` at or after p; NULL if absent. */
-static const char *json_number(const char *p, const char *key, double *out)
-{
-    char pat[64];
-    snprintf(pat, sizeof pat, "\"%s\":", key);
-    const char *at = strstr(p, pat);
-    if (!at)
-        return NULL;
-    char *end;
-    *out = strtod(at + strlen(pat), &end);
-    return end == at + strlen(pat) ? NULL : end;
+    json_t *v = json_object_get(doc, key);
+    if (!json_is_number(v))
+        return -1;
+    *out = json_number_value(v);
+    return 0;
 }
 
 static int read_stats(const char *path, run_stats *st)
 {
     memset(st, 0, sizeof *st);
-    char *text = read_small_file(path, MAX_STATS_BYTES);
-    if (!text) {
-        tf_error("bench: cannot read the statistics %s", path);
+    json_error_t jerr;
+    json_t *doc = json_load_file(path, JSON_REJECT_DUPLICATES, &jerr);
+    if (!doc) {
+        tf_error("bench: cannot read the statistics %s: line %d: %s", path, jerr.line, jerr.text);
         return -1;
     }
-    int ok = json_number(text, "wall_s", &st->wall_s) && json_number(text, "rays_total", &st->rays) &&
-             json_number(text, "primary_rays", &st->primary) &&
-             json_number(text, "external_rays", &st->external) &&
-             json_number(text, "tasks_redealt", &st->redealt);
-    const char *p = ok ? strstr(text, "\"workers\":") : NULL;
-    double busy;
-    while (p && (p = json_number(p, "busy_s", &busy)) != NULL) {
+    int bad = !json_is_object(doc) || stat_number(doc, "wall_s", &st->wall_s) ||
+              stat_number(doc, "rays_total", &st->rays) ||
+              stat_number(doc, "primary_rays", &st->primary) ||
+              stat_number(doc, "external_rays", &st->external) ||
+              stat_number(doc, "tasks_redealt", &st->redealt);
+    json_t *workers = json_object_get(doc, "workers");
+    size_t i;
+    json_t *w;
+    bad |= !json_is_array(workers);
+    json_array_foreach(workers, i, w) {
+        double busy;
+        if (stat_number(w, "busy_s", &busy)) {
+            bad = 1;
+            break;
+        }
         st->busy_sum += busy;
         st->nworkers++;
     }
-    free(text);
-    if (!ok || st->wall_s <= 0) {
+    json_decref(doc);
+    if (bad || st->wall_s <= 0) {
         tf_error("bench: %s lacks the statistics the bench needs (wall_s, rays_total, ...)",
                  path);
         return -1;

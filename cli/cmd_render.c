@@ -89,7 +89,7 @@ int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
            O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE, O_PIXEL,
-           O_VERIFY_CHUNKS, O_PREVIEW_INTERVAL };
+           O_VERIFY_CHUNKS, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -110,6 +110,9 @@ int cmd_render(int argc, char **argv)
         {"pixel", required_argument, NULL, O_PIXEL},
         {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
         {"preview-interval", required_argument, NULL, O_PREVIEW_INTERVAL},
+        {"http", required_argument, NULL, O_HTTP},
+        {"http-token-file", required_argument, NULL, O_HTTP_TOKEN},
+        {"on-done", required_argument, NULL, O_ON_DONE},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -155,6 +158,9 @@ int cmd_render(int argc, char **argv)
         case O_RESUME: o.resume = 1; break;
         case O_OVERWRITE: o.overwrite = 1; break;
         case O_STATS: o.stats_path = optarg; break;
+        case O_HTTP: o.http = optarg; break;
+        case O_HTTP_TOKEN: o.http_token_file = optarg; break;
+        case O_ON_DONE: o.on_done = optarg; break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
         case O_FRAMES:
         case O_FRAME: {

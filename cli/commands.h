@@ -7,6 +7,7 @@ int cmd_render(int argc, char **argv);      /* cmd_render.c: the coordinator */
 int cmd_worker(int argc, char **argv);      /* cmd_worker.c: a networked worker */
 int cmd_heightfield(int argc, char **argv); /* cmd_heightfield.c: export the terrain */
 int cmd_bench(int argc, char **argv);       /* cmd_bench.c: speedup against worker count */
+int cmd_status(int argc, char **argv);      /* cmd_status.c: a running render's dashboard */
 
 /* Exit statuses shared by all commands. */
 enum { TF_EXIT_OK = 0, TF_EXIT_FAIL = 1, TF_EXIT_USAGE = 2 };

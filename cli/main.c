@@ -16,6 +16,7 @@ static const char usage[] =
     "  worker --connect HOST:PORT      join a render as a networked worker\n"
     "  heightfield SCENE -o FILE       export the terrain as 16-bit PNG or float EXR\n"
     "  bench SCENE --workers 1,2,4     measure speedup against worker count\n"
+    "  status HOST:PORT [--json]       a running render's progress, from its dashboard\n"
     "\n"
     "  terrafarm COMMAND --help        options of one command\n"
     "  terrafarm --version             print the version\n";
@@ -43,6 +44,7 @@ int main(int argc, char **argv)
         {"worker", cmd_worker},
         {"heightfield", cmd_heightfield},
         {"bench", cmd_bench},
+        {"status", cmd_status},
     };
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
         if (!strcmp(cmd, commands[i].name))

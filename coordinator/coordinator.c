@@ -28,10 +28,12 @@
 #include "linda/sock.h"
 #include "heightmap_tuples.h"
 #include "scene.h"
+#include "coordinator/dashboard.h"
 #include "coordinator/finisher.h"
 #include "coordinator/frames.h"
 #include "coordinator/local_workers.h"
 #include "coordinator/movie.h"
+#include "coordinator/on_done.h"
 #include "coordinator/output.h"
 #include "coordinator/stats.h"
 #include "coordinator/supervisor.h"
@@ -98,12 +100,18 @@ typedef struct render {
     tf_tasks tasks;
     char tdesc[64];
     int no_workers;              /* supervise() stopped: no worker could run */
+    tf_dashboard *dash;          /* --http (NULL with --http none) */
+    int stopped;                 /* supervise() stopped: asked to from the dashboard */
+    int rows_on_disk;            /* for --on-done */
+    char error[1024];            /* the line a failed step printed, for --on-done */
 } render;
 
 static int step_failed(render *r, int status, const char *msg)
 {
-    if (msg)
+    if (msg) {
         tf_error("%s", msg);
+        snprintf(r->error, sizeof r->error, "%s", msg);
+    }
     r->status = status;
     return -1;
 }
@@ -354,6 +362,34 @@ static void warn_camera_underground(render *r)
                 count > 1 ? " and more frames after it" : "", z, ground);
 }
 
+static const char *describe_tasks(const tf_task_spec *spec, char *buf, size_t len);
+static int render_rows_at_start(const render *r);
+
+/* 1d. The dashboard's socket (--http), before anything slow, so that a busy port is refused
+ *     before the output is touched; it serves once the workers are forked (serve_dashboard).
+ *     In a sequence its rows count every frame's (frames complete before this run included). */
+static int open_dashboard(render *r)
+{
+    char err[1024];
+    const tf_render_opts *o = r->o;
+    if (o->http && !strcmp(o->http, "none"))
+        return 0;
+    describe_tasks(&r->spec, r->tdesc, sizeof r->tdesc);
+    const tf_frame_job *first = &r->jobs[0];
+    frame_output *fo = &r->outs[r->job_out[0]];
+    int h = r->scene->height, rows_at_start = render_rows_at_start(r);
+    tf_dashboard_config dc = {o->http, o->http_token_file, r->have_key ? r->key : NULL,
+                              r->t_start, r->scene->path, r->nouts == 1 ? fo->output : r->pattern,
+                              r->tdesc, r->scene->width, h, first->first_row,
+                              first->first_row > 0 ? fo->output : NULL,
+                              r->animated ? r->nouts : -1, r->nouts * h, rows_at_start};
+    r->dash = tf_dashboard_open(&dc, err, sizeof err);
+    if (!r->dash)
+        return step_failed(r, 2, err);
+    tf_dashboard_frames(r->dash, first->frame, r->nouts - r->njobs);
+    return 0;
+}
+
 /* 2. The terrain, built once before forking so every local worker shares it. */
 static int build_terrain(render *r)
 {
@@ -454,6 +490,10 @@ static int start_space(render *r)
     r->cfg.key = r->have_key ? r->key : NULL;
     r->cfg.silence_timeout_ms = o->lease_timeout_ms;
     ts_server_hooks hooks = tf_supervisor_hooks(r->sup);
+    if (r->dash) { /* the dashboard watches the traffic (results for its preview) */
+        hooks = tf_dashboard_hooks(r->dash, hooks);
+        tf_supervisor_set_events(r->sup, tf_dashboard_events(r->dash));
+    }
     r->srv = ts_server_new(r->space, &r->cfg, &hooks, err, sizeof err);
     if (!r->srv && !o->listen && r->nworkers > 0) {
         /* The default port is taken (another render?): local workers do not need it. */
@@ -463,6 +503,8 @@ static int start_space(render *r)
     if (!r->srv)
         return step_failed(r, 1, err);
     tf_supervisor_attach(r->sup, r->srv);
+    if (r->dash)
+        tf_dashboard_attach(r->dash, r->sup, r->srv, &r->tasks);
     return 0;
 }
 
@@ -544,6 +586,35 @@ static int rows_done(const render *r, int *writing_frame)
     return done;
 }
 
+/* Rows on disk or queued over every frame asked for (those complete before this run
+ * included), for the dashboard; and the frame being written. */
+static int render_rows(const render *r, int *writing_frame)
+{
+    int rows = (r->nouts - r->njobs) * r->scene->height + rows_done(r, writing_frame);
+    if (*writing_frame < 0 && r->animated) /* every frame is written: the last one was */
+        *writing_frame = r->jobs[r->njobs - 1].frame;
+    return rows;
+}
+
+/* The same before the first task is dealt: what earlier runs left on disk. */
+static int render_rows_at_start(const render *r)
+{
+    int rows = (r->nouts - r->njobs) * r->scene->height;
+    for (int j = 0; j < r->njobs; j++)
+        rows += r->jobs[j].first_row;
+    return rows;
+}
+
+/* 4c. The dashboard's HTTP threads, after the fork (see start_workers: the coordinator forks
+ *     while it is one thread). */
+static int serve_dashboard(render *r)
+{
+    char err[1024];
+    if (r->dash && tf_dashboard_serve(r->dash, err, sizeof err))
+        return step_failed(r, 1, err);
+    return 0;
+}
+
 /* 5b. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
 static int supervise(render *r)
 {
@@ -572,6 +643,15 @@ static int supervise(render *r)
         if (r->animated)
             tf_progress_frame_now(&prog, r->nouts - r->njobs + st->frames_done, frame_now);
         tf_progress_update(&prog, t, rows, st->primary_rays + st->shadow_rays, live, 0);
+        if (r->dash) {
+            int frame_written;
+            int all_rows = render_rows(r, &frame_written);
+            tf_dashboard_frames(r->dash, frame_written, r->nouts - r->njobs + st->frames_done);
+            if (tf_dashboard_tick(r->dash, all_rows)) {
+                r->stopped = 1;
+                break;
+            }
+        }
         if (r->nworkers > 0 && r->lw.gave_up == r->nworkers && live == 0) {
             tf_progress_clear(&prog);
             tf_error("no local worker could run (see above) and no networked worker is "
@@ -614,8 +694,15 @@ static void stop_unfinished(render *r)
     if (r->animated)
         snprintf(frames, sizeof frames, "%d of %d frames done, ",
                  r->nouts - r->njobs + tf_supervisor_stats(r->sup)->frames_done, r->nouts);
-    if (why)
+    int fw;
+    r->rows_on_disk = render_rows(r, &fw);
+    tf_dashboard_frames(r->dash, fw, r->nouts - r->njobs + tf_supervisor_stats(r->sup)->frames_done);
+    if (why) {
         tf_error("%s", why);
+        snprintf(r->error, sizeof r->error, "%s", why);
+    } else if (r->stopped)
+        tf_error("stopped from the dashboard: %s%d of %d rows are on disk in %s; continue with "
+                 "--resume", frames, rows, r->scene->height, where);
     else if (r->no_workers)
         tf_error("%s%d of %d rows are on disk in %s; continue with --resume", frames, rows,
                  r->scene->height, where);
@@ -623,6 +710,8 @@ static void stop_unfinished(render *r)
         tf_error("interrupted: %s%d of %d rows are on disk in %s; continue with --resume", frames,
                  rows, r->scene->height, where);
     r->status = why || r->no_workers ? 1 : 130;
+    tf_dashboard_end(r->dash, r->status == 130 ? TF_RUN_INTERRUPTED : TF_RUN_FAILED, r->status,
+                     r->rows_on_disk);
 }
 
 /* The frames rendered (or complete before) as a movie: --movie, once all are on disk. */
@@ -689,7 +778,28 @@ static int finish(render *r)
     if (make_movie(r))
         return -1;
     r->status = 0;
+    r->rows_on_disk = r->nouts * r->scene->height;
+    tf_dashboard_frames(r->dash, r->outs[r->nouts - 1].frame, r->nouts);
+    tf_dashboard_end(r->dash, TF_RUN_FINISHED, 0, r->rows_on_disk);
     return 0;
+}
+
+/* 7. --on-done: the outcome, to a command of the user's.  The dashboard keeps serving the
+ *    final state while it runs (the command may ask it); it is forked and exec'd at once, so
+ *    the HTTP threads do not matter to it. */
+static void run_on_done(render *r)
+{
+    if (!r->o->on_done)
+        return;
+    /* a still's output and preview; a sequence's -o pattern and its last frame's preview */
+    const char *output = r->nouts == 1 ? r->outs[0].output : r->pattern;
+    const char *preview = r->nouts > 0 ? r->outs[r->nouts - 1].preview : NULL;
+    tf_outcome out = {r->status == 0 ? "ok" : r->status == 130 ? "interrupted" : "failed",
+                      r->status, output, preview, r->o->scene_path, r->o->stats_path,
+                      r->status == 0 ? "" : r->error, tf_dashboard_url(r->dash),
+                      r->scene ? r->scene->width : 0, r->scene ? r->scene->height : 0,
+                      r->rows_on_disk, tf_now_s() - r->t_start};
+    tf_on_done_run(r->o->on_done, &out);
 }
 
 static void render_close(render *r)
@@ -706,6 +816,8 @@ static void render_close(render *r)
     tf_finisher_free(r->finisher);
     tf_local_workers_free(&r->lw);
     ts_server_free(r->srv);
+    tf_dashboard_close(r->dash); /* after the server: its hooks (the dashboard's taps) run to
+                                  * the last connection closed */
     tf_supervisor_free(r->sup);
     ts_space_free(r->space);
     tf_heightfield_free(r->hf);
@@ -739,10 +851,12 @@ int tf_coordinator_run(const tf_render_opts *o)
             tf_info("%s is already complete: nothing to render", r.outs[0].output);
         previews_of_complete(&r);
         r.status = make_movie(&r) ? r.status : 0;
+        r.rows_on_disk = r.nouts * r.scene->height;
         goto out;
     }
     previews_of_complete(&r);
-    if (load_secret(&r) || build_terrain(&r))
+    r.rows_on_disk = render_rows_at_start(&r);
+    if (load_secret(&r) || open_dashboard(&r) || build_terrain(&r))
         goto out;
     /* all threads of this process; the forked workers are other processes */
     r.setup_cpu_s = (double)tf_clock_ns(CLOCK_PROCESS_CPUTIME_ID) * 1e-9;
@@ -752,7 +866,7 @@ int tf_coordinator_run(const tf_render_opts *o)
      * watermark), so the heap stays bounded too. */
     mallopt(M_MMAP_THRESHOLD, 64 << 20);
     mallopt(M_TRIM_THRESHOLD, 128 << 20);
-    if (start_space(&r) || start_workers(&r) || open_output(&r))
+    if (start_space(&r) || start_workers(&r) || open_output(&r) || serve_dashboard(&r))
         goto out;
     announce(&r);
     if (supervise(&r) != 0) {
@@ -761,6 +875,9 @@ int tf_coordinator_run(const tf_render_opts *o)
     }
     finish(&r);
 out:
+    if (r.status != 0)
+        tf_dashboard_end(r.dash, TF_RUN_FAILED, r.status, r.rows_on_disk);
+    run_on_done(&r); /* the dashboard still shows the final state meanwhile */
     render_close(&r);
     return r.status;
 }

@@ -1,84 +1,62 @@
-/* stats.c: see stats.h. */
+/* stats.c: see stats.h.  The document is built with jansson (keys in this order). */
 #include "coordinator/stats.h"
 
 #include <errno.h>
+#include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
 #include "log.h"
 
-/* JSON string with the escapes RFC 8259 requires. */
-static void json_string(FILE *f, const char *s)
+/* Seconds rounded to the millisecond, as the file has always shown them. */
+static json_t *rounded(double x, double scale)
 {
-    fputc('"', f);
-    for (; s && *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\')
-            fprintf(f, "\\%c", c);
-        else if (c < 0x20)
-            fprintf(f, "\\u%04x", c);
-        else
-            fputc(c, f);
-    }
-    fputc('"', f);
+    return json_real((double)(long long)(x * scale + (x < 0 ? -0.5 : 0.5)) / scale);
+}
+static json_t *seconds(double s) { return rounded(s, 1000.0); }
+
+static double cpu_seconds(const struct rusage *ru)
+{
+    return (double)ru->ru_utime.tv_sec + ru->ru_utime.tv_usec * 1e-6 +
+           (double)ru->ru_stime.tv_sec + ru->ru_stime.tv_usec * 1e-6;
 }
 
-int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats *st, char *err,
-                   size_t errlen)
+static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
 {
-    size_t n = strlen(path) + 8;
-    char *tmp = malloc(n);
-    if (!tmp) {
-        tf_seterr(err, errlen, "%s: out of memory", path);
-        return -1;
-    }
-    snprintf(tmp, n, "%s.tmp", path);
-    FILE *f = fopen(tmp, "w");
-    if (!f) {
-        tf_seterr(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
-        free(tmp);
-        return -1;
-    }
+    json_t *o = json_object();
     uint64_t rays = st->primary_rays + st->shadow_rays;
-    fprintf(f, "{\n  \"wall_s\": %.3f,\n  \"width\": %d,\n  \"height\": %d,\n", run->wall_s,
-            run->width, run->height);
-    fprintf(f, "  \"scene\": ");
-    json_string(f, run->scene);
-    fprintf(f, ",\n  \"output\": ");
-    json_string(f, run->output);
-    fprintf(f, ",\n  \"tasks\": ");
-    json_string(f, run->tasks);
-    fprintf(f,
-            ",\n  \"tasks_total\": %lld,\n  \"tasks_redealt\": %lld,\n"
-            "  \"tasks_duplicated\": %lld,\n  \"results_dropped\": %lld,\n"
-            "  \"task_failures\": %lld,\n",
-            (long long)st->tasks_total, (long long)st->tasks_redealt,
-            (long long)st->tasks_duplicated, (long long)st->results_dropped,
-            (long long)st->task_failures);
-    fprintf(f, "  \"rows_resumed\": %d,\n  \"rows_rendered\": %d,\n", st->rows_resumed,
-            st->rows_rendered);
-    fprintf(f,
-            "  \"rays_total\": %llu,\n  \"primary_rays\": %llu,\n  \"shadow_rays\": %llu,\n"
-            "  \"external_rays\": %llu,\n",
-            (unsigned long long)rays, (unsigned long long)st->primary_rays,
-            (unsigned long long)st->shadow_rays, (unsigned long long)st->external_rays);
-    fprintf(f, "  \"samples_per_pixel_avg\": %.4f,\n",
-            st->pixels ? st->spp_sum / (double)st->pixels : 0.0);
-    fprintf(f, "  \"rays_per_pixel_avg\": %.4f,\n",
-            st->pixels ? (double)st->primary_rays / (double)st->pixels : 0.0);
-    fprintf(f, "  \"max_outstanding_tasks\": %d,\n  \"watermark\": %d,\n", st->max_outstanding_tasks,
-            st->watermark);
-    fprintf(f, "  \"max_tuple_bytes\": %zu,\n", st->max_tuple_bytes);
-    fprintf(f, "  \"local_workers\": %d,\n  \"heightfield_s\": %.3f,\n", run->local_workers,
-            run->heightfield_s);
-    fprintf(f, "  \"results_refused\": %lld,\n  \"layout\": ", (long long)st->results_refused);
-    json_string(f, run->layout);
-    fprintf(f, ",\n");
+    json_object_set_new(o, "wall_s", seconds(run->wall_s));
+    json_object_set_new(o, "width", json_integer(run->width));
+    json_object_set_new(o, "height", json_integer(run->height));
+    json_object_set_new(o, "scene", json_string(run->scene ? run->scene : ""));
+    json_object_set_new(o, "output", json_string(run->output ? run->output : ""));
+    json_object_set_new(o, "tasks", json_string(run->tasks ? run->tasks : ""));
+    json_object_set_new(o, "tasks_total", json_integer(st->tasks_total));
+    json_object_set_new(o, "tasks_redealt", json_integer(st->tasks_redealt));
+    json_object_set_new(o, "tasks_duplicated", json_integer(st->tasks_duplicated));
+    json_object_set_new(o, "results_dropped", json_integer(st->results_dropped));
+    json_object_set_new(o, "task_failures", json_integer(st->task_failures));
+    json_object_set_new(o, "rows_resumed", json_integer(st->rows_resumed));
+    json_object_set_new(o, "rows_rendered", json_integer(st->rows_rendered));
+    json_object_set_new(o, "rays_total", json_integer((json_int_t)rays));
+    json_object_set_new(o, "primary_rays", json_integer((json_int_t)st->primary_rays));
+    json_object_set_new(o, "shadow_rays", json_integer((json_int_t)st->shadow_rays));
+    json_object_set_new(o, "external_rays", json_integer((json_int_t)st->external_rays));
+    json_object_set_new(o, "samples_per_pixel_avg",
+                        json_real(st->pixels ? st->spp_sum / (double)st->pixels : 0.0));
+    json_object_set_new(o, "rays_per_pixel_avg",
+                        json_real(st->pixels ? (double)st->primary_rays / (double)st->pixels : 0.0));
+    json_object_set_new(o, "max_outstanding_tasks", json_integer(st->max_outstanding_tasks));
+    json_object_set_new(o, "watermark", json_integer(st->watermark));
+    json_object_set_new(o, "max_tuple_bytes", json_integer((json_int_t)st->max_tuple_bytes));
+    json_object_set_new(o, "local_workers", json_integer(run->local_workers));
+    json_object_set_new(o, "heightfield_s", seconds(run->heightfield_s));
+    json_object_set_new(o, "results_refused", json_integer(st->results_refused));
+    json_object_set_new(o, "layout", json_string(run->layout ? run->layout : ""));
     struct rusage ru;
     if (getrusage(RUSAGE_SELF, &ru) == 0) { /* the coordinator alone: workers are other processes */
-        double cpu = (double)ru.ru_utime.tv_sec + ru.ru_utime.tv_usec * 1e-6 +
-                     (double)ru.ru_stime.tv_sec + ru.ru_stime.tv_usec * 1e-6;
+        double cpu = cpu_seconds(&ru);
         /* The render path's cost, without the terrain build before forking: per rendered pixel,
          * and against the workers' render time per pixel (how many such workers one
          * coordinator core could feed). */
@@ -87,12 +65,13 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
         for (int i = 0; i < st->nworkers; i++)
             busy += st->workers[i].busy_s;
         double px = (double)st->pixels;
-        fprintf(f, "  \"coordinator_max_rss_kb\": %ld,\n  \"coordinator_cpu_s\": %.3f,\n",
-                ru.ru_maxrss, cpu);
-        fprintf(f, "  \"coordinator_render_cpu_s\": %.3f,\n", render_cpu);
-        fprintf(f, "  \"coordinator_cpu_ns_per_pixel\": %.2f,\n",
-                px > 0 ? render_cpu * 1e9 / px : 0.0);
-        fprintf(f, "  \"worker_busy_ns_per_pixel\": %.2f,\n", px > 0 ? busy * 1e9 / px : 0.0);
+        json_object_set_new(o, "coordinator_max_rss_kb", json_integer(ru.ru_maxrss));
+        json_object_set_new(o, "coordinator_cpu_s", seconds(cpu));
+        json_object_set_new(o, "coordinator_render_cpu_s", seconds(render_cpu));
+        json_object_set_new(o, "coordinator_cpu_ns_per_pixel",
+                            rounded(px > 0 ? render_cpu * 1e9 / px : 0.0, 100.0));
+        json_object_set_new(o, "worker_busy_ns_per_pixel",
+                            rounded(px > 0 ? busy * 1e9 / px : 0.0, 100.0));
         /* Workers' CPU time, where the coordinator can know it: its forked workers, reaped by
          * now (their render and encoding; the terrain was built before the fork).  busy_s is
          * wall time and grows on a loaded machine; CPU time does not. */
@@ -102,53 +81,129 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
             all_forked &= strcmp(st->workers[i].kind, "forked") == 0;
         double wcpu = 0;
         if (all_forked && getrusage(RUSAGE_CHILDREN, &rc) == 0)
-            wcpu = (double)rc.ru_utime.tv_sec + rc.ru_utime.tv_usec * 1e-6 +
-                   (double)rc.ru_stime.tv_sec + rc.ru_stime.tv_usec * 1e-6;
-        fprintf(f, "  \"worker_cpu_ns_per_pixel\": %.2f,\n", px > 0 ? wcpu * 1e9 / px : 0.0);
+            wcpu = cpu_seconds(&rc);
+        json_object_set_new(o, "worker_cpu_ns_per_pixel",
+                            rounded(px > 0 ? wcpu * 1e9 / px : 0.0, 100.0));
         /* how many workers one coordinator core feeds: workers' CPU (else busy time) per
          * coordinator render-path CPU second */
-        fprintf(f, "  \"workers_per_coordinator_core\": %.1f,\n",
-                render_cpu > 0 ? (wcpu > 0 ? wcpu : busy) / render_cpu : 0.0);
+        json_object_set_new(o, "workers_per_coordinator_core",
+                            rounded(render_cpu > 0 ? (wcpu > 0 ? wcpu : busy) / render_cpu : 0.0,
+                                    10.0));
     }
-    fprintf(f, "  \"workers\": [");
+    json_t *workers = json_array();
     for (int i = 0; i < st->nworkers; i++) {
         const tf_worker_stats *w = &st->workers[i];
-        fprintf(f, "%s\n    {\"id\": %lld, \"kind\": ", i ? "," : "", (long long)w->id);
-        json_string(f, w->kind);
-        fprintf(f, ", \"host\": ");
-        json_string(f, w->host);
-        fprintf(f, ", \"backend\": ");
-        json_string(f, w->backend);
-        fprintf(f, ", \"tasks\": %lld, \"rays\": %llu, \"busy_s\": %.3f}", (long long)w->tasks,
-                (unsigned long long)w->rays, w->busy_s);
+        json_t *wo = json_object();
+        json_object_set_new(wo, "id", json_integer(w->id));
+        json_object_set_new(wo, "kind", json_string(w->kind));
+        /* host and backend come from the worker's hello: not trusted to be UTF-8 */
+        json_t *host = json_string(w->host), *backend = json_string(w->backend);
+        json_object_set_new(wo, "host", host ? host : json_string("?"));
+        json_object_set_new(wo, "backend", backend ? backend : json_string("?"));
+        json_object_set_new(wo, "tasks", json_integer(w->tasks));
+        json_object_set_new(wo, "rays", json_integer((json_int_t)w->rays));
+        json_object_set_new(wo, "busy_s", seconds(w->busy_s));
+        json_array_append_new(workers, wo);
     }
-    fprintf(f, "%s]", st->nworkers ? "\n  " : "");
+    json_object_set_new(o, "workers", workers);
     if (run->sequence) {
         /* one object per frame rendered by this run (wall_s: from its first task dealt to its
          * last row on disk; frames overlap, so these add up to more than wall_s; start_s and
          * done_s are those instants, in seconds since the run started) */
-        fprintf(f, ",\n  \"frames\": [");
+        json_t *frames = json_array();
         for (int i = 0; i < st->nframes; i++) {
             const tf_frame_stats *fr = &st->frames[i];
             double wall = fr->done_ms > 0 && fr->start_ms > 0 ? (fr->done_ms - fr->start_ms) / 1e3
                                                               : 0;
-            fprintf(f, "%s\n    {\"frame\": %d, \"wall_s\": %.3f, \"rays_total\": %llu, "
-                    "\"rows_resumed\": %d, \"rows_rendered\": %d, \"start_s\": %.3f, "
-                    "\"done_s\": %.3f}", i ? "," : "", fr->frame, wall,
-                    (unsigned long long)fr->rays, fr->rows_resumed, fr->rows_rendered,
-                    fr->start_ms > 0 ? fr->start_ms / 1e3 - run->start_s : 0,
-                    fr->done_ms > 0 ? fr->done_ms / 1e3 - run->start_s : 0);
+            json_t *fo = json_object();
+            json_object_set_new(fo, "frame", json_integer(fr->frame));
+            json_object_set_new(fo, "wall_s", seconds(wall));
+            json_object_set_new(fo, "rays_total", json_integer((json_int_t)fr->rays));
+            json_object_set_new(fo, "rows_resumed", json_integer(fr->rows_resumed));
+            json_object_set_new(fo, "rows_rendered", json_integer(fr->rows_rendered));
+            json_object_set_new(fo, "start_s",
+                                seconds(fr->start_ms > 0 ? fr->start_ms / 1e3 - run->start_s : 0));
+            json_object_set_new(fo, "done_s",
+                                seconds(fr->done_ms > 0 ? fr->done_ms / 1e3 - run->start_s : 0));
+            json_array_append_new(frames, fo);
         }
-        fprintf(f, "%s],\n  \"frames_skipped\": [", st->nframes ? "\n  " : "");
+        json_object_set_new(o, "frames", frames);
+        json_t *skipped = json_array();
         for (int i = 0; i < run->nskipped; i++)
-            fprintf(f, "%s%d", i ? ", " : "", run->frames_skipped[i]);
-        fprintf(f, "]");
+            json_array_append_new(skipped, json_integer(run->frames_skipped[i]));
+        json_object_set_new(o, "frames_skipped", skipped);
     }
-    fprintf(f, "\n}\n");
-    int bad = ferror(f);
+    return o;
+}
+
+#define STATS_FLAGS (JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10))
+
+/* The layout the file has always had, which line-based tools (grep, sed) rely on: one key per
+ * line at the top, one object per line inside an array of objects ("workers": [{"id": 1, ...},
+ * ...], "frames"), other arrays on one line ("frames_skipped": [1, 2]). */
+static int dump_stats(FILE *f, json_t *doc)
+{
+    const char *key;
+    json_t *value;
+    int bad = 0, first = 1;
+    fputs("{", f);
+    json_object_foreach(doc, key, value) {
+        json_t *name = json_string(key);
+        char *k = name ? json_dumps(name, JSON_ENCODE_ANY) : NULL;
+        json_decref(name);
+        bad |= !k;
+        fprintf(f, "%s\n  %s: ", first ? "" : ",", k ? k : "\"?\"");
+        free(k);
+        first = 0;
+        if (json_is_array(value) && json_array_size(value) > 0 &&
+            json_is_object(json_array_get(value, 0))) {
+            size_t i;
+            json_t *elem;
+            fputs("[", f);
+            json_array_foreach(value, i, elem) {
+                char *line = json_dumps(elem, STATS_FLAGS);
+                bad |= !line;
+                fprintf(f, "%s\n    %s", i ? "," : "", line ? line : "{}");
+                free(line);
+            }
+            fputs("\n  ]", f);
+        } else {
+            char *text = json_dumps(value, JSON_ENCODE_ANY | STATS_FLAGS);
+            bad |= !text;
+            fputs(text ? text : "null", f);
+            free(text);
+        }
+    }
+    fputs("\n}\n", f);
+    return bad ? -1 : 0;
+}
+
+int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats *st, char *err,
+                   size_t errlen)
+{
+    size_t n = strlen(path) + 8;
+    char *tmp = malloc(n);
+    json_t *doc = stats_doc(run, st);
+    if (!tmp || !doc) {
+        free(tmp);
+        json_decref(doc);
+        return tf_seterr(err, errlen, "%s: out of memory", path);
+    }
+    snprintf(tmp, n, "%s.tmp", path);
+    FILE *f = fopen(tmp, "w");
+    if (!f) {
+        tf_seterr(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
+        free(tmp);
+        json_decref(doc);
+        return -1;
+    }
+    int bad = dump_stats(f, doc);
+    json_decref(doc);
+    bad |= ferror(f);
     bad |= fclose(f) != 0;
     if (bad || rename(tmp, path)) {
-        tf_seterr(err, errlen, "%s: cannot write statistics: %s", path, strerror(errno));
+        tf_seterr(err, errlen, "%s: cannot write statistics: %s", path,
+                  errno ? strerror(errno) : "write failed");
         remove(tmp);
         free(tmp);
         return -1;

@@ -45,6 +45,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "coordinator/events.h"
 #include "farmproto.h"
 #include "image/exrencode.h"
 #include "log.h"
@@ -112,6 +113,8 @@ struct tf_supervisor {
     tf_farm_stats stats;
     int cap_workers;
     int live_workers;        /* workers connected and announced: kept, not counted per step */
+    tf_events *events;       /* the dashboard's event log, or NULL */
+    int64_t last_accepted;   /* tf_supervisor_last_accepted */
 };
 
 /* ---- invariants (S1-S5 above), for assert() in debug builds ------------------------------ */
@@ -334,6 +337,9 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
         t->failed_count[i] = 0;
     }
     t->failed_count[i]++;
+    if (t->failed_count[i] == FAILURES_TO_EXCLUDE)
+        tf_events_add(s->events, TF_EV_EXCLUSION, worker, t->id, "worker %" PRId64
+                      " is no longer dealt task %" PRId64, worker, t->id);
     if (t->nfailed >= s->cfg.max_task_failures) {
         char what[128];
         fail(s, "%s failed on %d different workers; stopping (rows written so far are kept: "
@@ -352,7 +358,9 @@ static void redeal_if_lost(tf_supervisor *s, task_slot *t)
     t->in_space++;
     s->stats.tasks_redealt++;
     char what[128];
-    tf_info("re-dealing %s", describe_task(s, t->id, what, sizeof what));
+    describe_task(s, t->id, what, sizeof what);
+    tf_info("re-dealing %s", what);
+    tf_events_add(s->events, TF_EV_REDEAL, -1, t->id, "%s dealt again", what);
     deal_copy(s, t);
 }
 
@@ -575,12 +583,14 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
                 r.h, r.x, r.y, peer_name(s, conn), why);
         s->stats.results_refused++;
         drop_result(s, tuple);
+        tf_events_add(s->events, TF_EV_FAILURE, m.worker, m.id, "result refused: %s", why);
         if (!note_failure(s, t, m.worker))
             redeal_if_lost(s, t);
         return;
     }
     t->has_result = 1;
     t->result_worker = m.worker;
+    s->last_accepted = m.id;
     if (t->duplicated)
         s->dups_in_flight--;
     withdraw_copies(s, t);
@@ -623,6 +633,8 @@ static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
             const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
             tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)", id,
                      kind, host, pid, backend, peer ? peer : "?");
+            tf_events_add(s->events, TF_EV_JOIN, id, -1, "%s worker on %s (%s backend, %s)",
+                          w->kind, w->host, w->backend, peer ? peer : "?");
         }
     }
     remove_exact(s, tuple);
@@ -635,6 +647,7 @@ static void on_failed(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     if (tuple->nfields == 4 && !tf_tuple_get_int(tuple, 1, &id) &&
         !tf_tuple_get_int(tuple, 2, &worker) && !tf_tuple_get_string(tuple, 3, &msg)) {
         tf_warn("worker %" PRId64 " failed task %" PRId64 ": %s", worker, id, msg);
+        tf_events_add(s->events, TF_EV_FAILURE, worker, id, "%s", msg);
         remove_lease(s, conn, id);
         task_slot *t = slot_of(s, id);
         if (t && !t->has_result && !note_failure(s, t, worker))
@@ -646,6 +659,7 @@ static void on_failed(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 static void on_out(void *ctx, uint64_t conn, const tf_tuple *tuple)
 {
     tf_supervisor *s = ctx;
+    s->last_accepted = -1;
     const char *name = tf_tuple_name(tuple);
     if (!name)
         return;
@@ -669,6 +683,8 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
             s->stats.workers[i].conn = 0;
             s->live_workers--;
         }
+    if (w)
+        tf_events_add(s->events, TF_EV_LEAVE, w->id, -1, "connection closed (%s)", peer ? peer : "?");
     for (int i = 0; i < s->nleases;) {
         if (s->leases[i].conn != conn) {
             i++;
@@ -684,6 +700,7 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
         if (t->has_result)
             continue;
         tf_warn("worker %s left holding task %" PRId64, peer ? peer : "?", id);
+        tf_events_add(s->events, TF_EV_FAILURE, worker, id, "left holding the task");
         if (!note_failure(s, t, worker))
             redeal_if_lost(s, t);
     }
@@ -763,6 +780,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         return NULL;
     }
     s->space = space;
+    s->last_accepted = -1;
     s->cfg = *cfg;
     if (s->cfg.max_task_failures < 1)
         s->cfg.max_task_failures = 3;
@@ -929,4 +947,55 @@ const tf_farm_stats *tf_supervisor_stats(tf_supervisor *s)
 int tf_supervisor_live_workers(const tf_supervisor *s)
 {
     return s->live_workers; /* == entries of stats.workers with conn != 0 (S6) */
+}
+
+/* ---- for the dashboard (coordinator/dashboard.c), in the event-loop thread ----------------- */
+
+void tf_supervisor_set_events(tf_supervisor *s, tf_events *events) { s->events = events; }
+
+int tf_supervisor_outstanding(const tf_supervisor *s) { return (int)(s->next_deal - s->write_task); }
+
+int tf_supervisor_watermark(const tf_supervisor *s) { return s->watermark; }
+
+int tf_supervisor_watermark_max(const tf_supervisor *s) { return s->ring_size; }
+
+int tf_supervisor_set_watermark(tf_supervisor *s, int watermark, char *err, size_t errlen)
+{
+    if (watermark < s->band_tasks || watermark > s->ring_size)
+        return tf_seterr(err, errlen, "watermark %d is outside %d (one band of tasks) .. %d",
+                         watermark, s->band_tasks, s->ring_size);
+    s->auto_watermark = 0;
+    s->watermark = watermark;
+    if (watermark > s->stats.watermark)
+        s->stats.watermark = watermark;
+    return 0;
+}
+
+int tf_supervisor_task_rect(const tf_supervisor *s, int64_t id, tf_rect *rect, int *frame)
+{
+    if (id < 0 || id >= s->total_tasks)
+        return -1;
+    const job_state *j = job_of(s, id);
+    *rect = tf_task_rect(&j->tasks, (int)(id - j->first_id));
+    *frame = j->job.frame;
+    return 0;
+}
+
+int64_t tf_supervisor_last_accepted(const tf_supervisor *s) { return s->last_accepted; }
+
+int tf_supervisor_task_views(const tf_supervisor *s, int64_t *write_task, tf_task_view *out,
+                             int max)
+{
+    int n = 0;
+    *write_task = s->write_task;
+    for (int64_t id = s->write_task; id < s->next_deal && n < max; id++, n++) {
+        const task_slot *t = &s->ring[id % s->ring_size];
+        out[n] = (tf_task_view){id, t->has_result, t->leased, 0};
+    }
+    for (int i = 0; i < s->nleases; i++) {
+        int64_t k = s->leases[i].task - s->write_task;
+        if (k >= 0 && k < n && out[k].holder_conn == 0)
+            out[k].holder_conn = s->leases[i].conn;
+    }
+    return n;
 }

@@ -34,6 +34,7 @@
 
 #include <stdint.h>
 
+#include "coordinator/events.h"
 #include "coordinator/rowwriter.h"
 #include "coordinator/tasks.h"
 #include "linda/tsserver.h"
@@ -137,5 +138,35 @@ int tf_supervisor_write_job(const tf_supervisor *sup);
 const tf_farm_stats *tf_supervisor_stats(tf_supervisor *sup);
 /* Connected workers that said hello and have not left. */
 int tf_supervisor_live_workers(const tf_supervisor *sup);
+
+
+/* ---- for the dashboard (coordinator/dashboard.h), in the event-loop thread ---- */
+
+/* One outstanding task (dealt, not yet written). */
+typedef struct tf_task_view {
+    int64_t id;
+    int has_result;          /* done, waiting for the rest of its band */
+    int leased;              /* copies held by workers */
+    uint64_t holder_conn;    /* one connection holding it, 0 if none */
+} tf_task_view;
+
+/* Record joins, leaves, re-deals, failures and exclusions there (NULL: nowhere). */
+void tf_supervisor_set_events(tf_supervisor *sup, tf_events *events);
+/* Tasks dealt beyond the write front, and the watermark in force (and its largest value). */
+int tf_supervisor_outstanding(const tf_supervisor *sup);
+int tf_supervisor_watermark(const tf_supervisor *sup);
+int tf_supervisor_watermark_max(const tf_supervisor *sup);
+/* Fix the watermark from now on (ends the auto watermark): 0, or -1 if out of range. */
+int tf_supervisor_set_watermark(tf_supervisor *sup, int watermark, char *err, size_t errlen);
+/* Task id's rectangle and frame (-1: a still): 0, or -1 if no task has that id. */
+int tf_supervisor_task_rect(const tf_supervisor *sup, int64_t id, tf_rect *rect, int *frame);
+/* The task whose result the last on_out hook accepted (passed the result checks and was the
+ * first for its task), or -1 if that hook accepted none: for hooks that wrap the supervisor's
+ * (dashboard.c) and may only use a result it accepted. */
+int64_t tf_supervisor_last_accepted(const tf_supervisor *sup);
+/* The write front (tasks below it are on disk) and the outstanding tasks in id order, at most
+ * max; returns the count. */
+int tf_supervisor_task_views(const tf_supervisor *sup, int64_t *write_task, tf_task_view *out,
+                             int max);
 
 #endif

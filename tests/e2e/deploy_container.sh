@@ -34,6 +34,8 @@ for p in $pkgs OpenEXR OpenCL; do
     libpng) dev=libpng-dev run=libpng16-16 ;;
     libsodium) dev=libsodium-dev run=libsodium23 ;;
     zlib) dev=zlib1g-dev run=zlib1g ;;
+    libmicrohttpd) dev=libmicrohttpd-dev run=libmicrohttpd12 ;;
+    jansson) dev=libjansson-dev run=libjansson4 ;;
     gdal) dev=libgdal-dev run=libgdal32 ;;
     OpenEXR) dev=libopenexr-dev run=libopenexr-3-1-30 ;;
     OpenCL) dev=ocl-icd-opencl-dev run=ocl-icd-libopencl1 ;;

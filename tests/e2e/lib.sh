@@ -136,3 +136,19 @@ same_pixels() {
     out=$("$EXRCMP" "$1" "$2" 2>&1) || fail "$3: $2 and $1 differ: $out"
     say "$3: $out, as the reference"
 }
+
+# dashboard_url LOGFILE PID: wait until a coordinator logging to LOGFILE prints its dashboard
+# URL ("dashboard at http://HOST:PORT/"); prints the URL.  Fails if PID ends first.
+dashboard_url() {
+    i=0
+    while ! grep -q 'dashboard at' "$1" 2>/dev/null; do
+        kill -0 "$2" 2>/dev/null || fail "render ended before its dashboard was up: $(cat "$1")"
+        sleep 0.05; i=$((i + 1)); [ $i -lt 600 ] || fail "no dashboard URL logged: $(cat "$1")"
+    done
+    sed -n 's/.*dashboard at \(http:[^ ]*\).*/\1/p' "$1" | head -1
+}
+
+# freeze_workers PID / thaw_workers PID: SIGSTOP / SIGCONT the forked workers of coordinator
+# PID, so that a render lasts exactly as long as a test needs (the coordinator keeps serving).
+freeze_workers() { for c in $(pgrep -P "$1"); do kill -STOP "$c" 2>/dev/null; done; }
+thaw_workers() { for c in $(pgrep -P "$1"); do kill -CONT "$c" 2>/dev/null; done; }

@@ -1,0 +1,289 @@
+/* cmd_status.c: `terrafarm status HOST:PORT [--json]`: what a running render's dashboard shows
+ * (its /api/status and /api/workers, README "Dashboard and API"), in a terminal or as one JSON
+ * document for scripts.  A plain HTTP/1.0 GET over the project's sockets (linda/sock.h); the
+ * answer is bounded in size and time and parsed with jansson. */
+#include <errno.h>
+#include <getopt.h>
+#include <jansson.h>
+#include <poll.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "clock.h"
+#include "cli/commands.h"
+#include "coordinator/httpauth.h"
+#include "linda/auth.h"
+#include "linda/sock.h"
+#include "log.h"
+
+#define MAX_ANSWER (4u << 20)
+
+static const char usage[] =
+    "usage: terrafarm status HOST:PORT [options]\n"
+    "\n"
+    "Show a running render's progress and workers, from its dashboard (render --http).\n"
+    "\n"
+    "      --json                one JSON object: the /api/status document plus \"workers\"\n"
+    "      --token-file FILE     the dashboard's token (--http-token-file of the render)\n"
+    "      --secret-file FILE    the farm secret, to derive the token from it\n"
+    "      --print-token         print the token derived from --secret-file (for a browser:\n"
+    "                            open http://HOST:PORT/login?token=TOKEN) and exit\n"
+    "      --timeout T           give up after this long (default 5s; 500ms, 2m, ...)\n"
+    "  -h, --help                this help\n";
+
+typedef struct answer {
+    int code;
+    char *body;
+    size_t len;
+} answer;
+
+/* GET path from addr; 0 and the answer, or -1 with a message. */
+static int http_get(const char *addr, const char *path, const char *token, int64_t deadline,
+                    answer *a, char *err, size_t errlen)
+{
+    memset(a, 0, sizeof *a);
+    int fd = tf_sock_connect(addr, deadline, err, errlen);
+    if (fd < 0)
+        return -1;
+    char req[1024];
+    int n = snprintf(req, sizeof req,
+                     "GET %s HTTP/1.0\r\nHost: %s\r\n%s%s%sAccept: application/json\r\n"
+                     "Connection: close\r\n\r\n",
+                     path, addr, token ? "Authorization: Bearer " : "", token ? token : "",
+                     token ? "\r\n" : "");
+    if (n <= 0 || n >= (int)sizeof req || write(fd, req, (size_t)n) != n) {
+        close(fd);
+        return tf_seterr(err, errlen, "%s: cannot send the request: %s", addr, strerror(errno));
+    }
+    size_t cap = 65536, len = 0;
+    char *buf = malloc(cap + 1);
+    while (buf) {
+        int64_t left = deadline - tf_now_ms();
+        struct pollfd p = {fd, POLLIN, 0};
+        if (left <= 0 || poll(&p, 1, (int)left) <= 0) {
+            free(buf);
+            close(fd);
+            return tf_seterr(err, errlen, "%s: no complete answer in time", addr);
+        }
+        if (len == cap) {
+            if (cap >= MAX_ANSWER)
+                break;
+            char *nb = realloc(buf, 2 * cap + 1);
+            if (!nb)
+                break;
+            buf = nb;
+            cap *= 2;
+        }
+        ssize_t got = read(fd, buf + len, cap - len);
+        if (got < 0 && errno == EINTR)
+            continue;
+        if (got <= 0)
+            break;
+        len += (size_t)got;
+    }
+    close(fd);
+    if (!buf)
+        return tf_seterr(err, errlen, "out of memory");
+    buf[len] = 0;
+    char *body = strstr(buf, "\r\n\r\n");
+    if (len >= cap || !body || sscanf(buf, "HTTP/1.%*d %d", &a->code) != 1) {
+        free(buf);
+        return tf_seterr(err, errlen, "%s: not an HTTP answer from a terrafarm dashboard", addr);
+    }
+    body += 4;
+    a->len = len - (size_t)(body - buf);
+    memmove(buf, body, a->len + 1);
+    a->body = buf;
+    return 0;
+}
+
+/* GET a JSON document; NULL with a message. */
+static json_t *get_json(const char *addr, const char *path, const char *token, int64_t deadline,
+                        char *err, size_t errlen)
+{
+    answer a;
+    if (http_get(addr, path, token, deadline, &a, err, errlen))
+        return NULL;
+    json_t *doc = NULL;
+    if (a.code != 200) {
+        char *nl = strchr(a.body, '\n');
+        if (nl)
+            *nl = 0;
+        tf_seterr(err, errlen, "%s%s answered %d: %.200s%s", addr, path, a.code, a.body,
+                  a.code == 401 ? " (give --token-file or --secret-file)" : "");
+    } else {
+        json_error_t jerr;
+        doc = json_loadb(a.body, a.len, JSON_REJECT_DUPLICATES, &jerr);
+        if (!json_is_object(doc)) {
+            json_decref(doc);
+            doc = NULL;
+            tf_seterr(err, errlen, "%s%s: not a JSON object: %s", addr, path, jerr.text);
+        }
+    }
+    free(a.body);
+    return doc;
+}
+
+static double num(json_t *o, const char *key)
+{
+    json_t *v = json_object_get(o, key);
+    return json_is_number(v) ? json_number_value(v) : -1;
+}
+
+static const char *str(json_t *o, const char *key)
+{
+    const char *s = json_string_value(json_object_get(o, key));
+    return s ? s : "?";
+}
+
+static void duration(char *buf, size_t len, double s)
+{
+    if (s < 0)
+        snprintf(buf, len, "--:--");
+    else if (s >= 3600)
+        snprintf(buf, len, "%d:%02d:%02d", (int)s / 3600, ((int)s / 60) % 60, (int)s % 60);
+    else
+        snprintf(buf, len, "%d:%02d", (int)s / 60, (int)s % 60);
+}
+
+static void print_human(json_t *st, json_t *workers)
+{
+    char el[32], eta[32];
+    duration(el, sizeof el, num(st, "elapsed_s"));
+    duration(eta, sizeof eta, num(st, "eta_s"));
+    printf("scene      %s %s (%s) -> %s\n", str(st, "scene"), str(st, "size"), str(st, "tasks"),
+           str(st, "output"));
+    printf("state      %s  %.1f%%  rows %.0f/%.0f", str(st, "state"), num(st, "percent"),
+           num(st, "rows_written"), num(st, "rows_total"));
+    if (num(st, "frames_total") >= 0)
+        printf("  frame %.0f of %.0f", num(st, "frame"), num(st, "frames_total"));
+    printf("\nelapsed    %s  eta %s\n", el, eta);
+    printf("rays/s     %.2f M (recent %.2f M)  samples/pixel %.2f\n", num(st, "rays_per_s") / 1e6,
+           num(st, "rays_per_s_recent") / 1e6, num(st, "samples_per_pixel_avg"));
+    printf("tasks      %.0f outstanding, watermark %.0f, %.0f re-dealt, %.0f failures\n",
+           num(st, "outstanding_tasks"), num(st, "watermark"), num(st, "tasks_redealt"),
+           num(st, "task_failures"));
+    printf("workers    %.0f connected\n", num(st, "workers_connected"));
+    json_t *arr = json_object_get(workers, "workers");
+    size_t i;
+    json_t *w;
+    if (json_array_size(arr))
+        printf("  %6s %-9s %-16s %-7s %-7s %6s %6s %9s %5s\n", "id", "kind", "host", "backend",
+               "state", "task", "tasks", "Mrays", "busy");
+    json_array_foreach(arr, i, w) {
+        double task = num(w, "task"), busy = num(w, "busy_fraction");
+        char tb[24] = "", bb[16] = "";
+        if (task >= 0)
+            snprintf(tb, sizeof tb, "%.0f", task);
+        if (busy >= 0)
+            snprintf(bb, sizeof bb, "%.0f%%", 100 * busy);
+        printf("  %6.0f %-9s %-16.16s %-7s %-7s %6s %6.0f %9.2f %5s\n", num(w, "id"), str(w, "kind"),
+               str(w, "host"), str(w, "backend"), str(w, "state"), tb, num(w, "tasks"),
+               num(w, "rays") / 1e6, bb);
+    }
+}
+
+int cmd_status(int argc, char **argv)
+{
+    enum { O_JSON = 256, O_TOKEN, O_SECRET, O_PRINT, O_TIMEOUT };
+    static const struct option longopts[] = {
+        {"json", no_argument, NULL, O_JSON},
+        {"token-file", required_argument, NULL, O_TOKEN},
+        {"secret-file", required_argument, NULL, O_SECRET},
+        {"print-token", no_argument, NULL, O_PRINT},
+        {"timeout", required_argument, NULL, O_TIMEOUT},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    int as_json = 0, print_token = 0;
+    long timeout_ms = 5000;
+    const char *token_file = NULL, *secret_file = NULL;
+    char err[1024];
+    int c;
+    optind = 1;
+    opterr = 0;
+    while ((c = getopt_long(argc, argv, ":h", longopts, NULL)) != -1) {
+        switch (c) {
+        case O_JSON: as_json = 1; break;
+        case O_TOKEN: token_file = optarg; break;
+        case O_SECRET: secret_file = optarg; break;
+        case O_PRINT: print_token = 1; break;
+        case O_TIMEOUT: {
+            int64_t ms;
+            if (tf_parse_duration_ms(optarg, &ms) || ms < 1 || ms > 3600000) {
+                tf_error("--timeout '%s': expected a duration from 1ms to 1h (e.g. 500ms, 5s)",
+                         optarg);
+                return TF_EXIT_USAGE;
+            }
+            timeout_ms = (long)ms;
+            break;
+        }
+        case 'h': fputs(usage, stdout); return TF_EXIT_OK;
+        case ':':
+            tf_error("status: option '%s' needs a value (see terrafarm status --help)",
+                     argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        default:
+            tf_error("status: unknown option '%s' (see terrafarm status --help)", argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        }
+    }
+    char token[TF_HTTP_TOKEN_MAX + 1];
+    int have_token = 0;
+    if (token_file) {
+        if (tf_http_token_load(token_file, token, sizeof token, err, sizeof err)) {
+            tf_error("%s", err);
+            return TF_EXIT_FAIL;
+        }
+        have_token = 1;
+    } else if (secret_file) {
+        uint8_t key[TF_KEY_BYTES];
+        if (tf_auth_init() || tf_secret_load(secret_file, key, err, sizeof err) ||
+            tf_http_token_derive(key, token, sizeof token)) {
+            tf_error("%s", err);
+            return TF_EXIT_FAIL;
+        }
+        have_token = 1;
+    }
+    if (print_token) {
+        if (!secret_file) {
+            tf_error("status: --print-token needs --secret-file FILE");
+            return TF_EXIT_USAGE;
+        }
+        printf("%s\n", token);
+        return TF_EXIT_OK;
+    }
+    if (optind != argc - 1) {
+        tf_error("status: expected one HOST:PORT (see terrafarm status --help)");
+        return TF_EXIT_USAGE;
+    }
+    const char *addr = argv[optind];
+    char host[256], port[32];
+    if (tf_split_hostport(addr, host, sizeof host, port, sizeof port, err, sizeof err)) {
+        tf_error("status: %s", err);
+        return TF_EXIT_USAGE;
+    }
+    int64_t deadline = tf_now_ms() + timeout_ms;
+    const char *tok = have_token ? token : NULL;
+    json_t *st = get_json(addr, "/api/status", tok, deadline, err, sizeof err);
+    json_t *workers = st ? get_json(addr, "/api/workers", tok, deadline, err, sizeof err) : NULL;
+    if (!st || !workers) {
+        tf_error("status: %s", err);
+        json_decref(st);
+        return TF_EXIT_FAIL;
+    }
+    if (as_json) {
+        json_object_set(st, "workers", json_object_get(workers, "workers"));
+        char *text = json_dumps(st, JSON_INDENT(2) | JSON_PRESERVE_ORDER);
+        if (text)
+            printf("%s\n", text);
+        free(text);
+    } else {
+        print_human(st, workers);
+    }
+    json_decref(st);
+    json_decref(workers);
+    return fflush(stdout) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
+}

@@ -158,7 +158,8 @@ static void print_human(json_t *st, json_t *workers)
     printf("state      %s  %.1f%%  rows %.0f/%.0f", str(st, "state"), num(st, "percent"),
            num(st, "rows_written"), num(st, "rows_total"));
     if (num(st, "frames_total") >= 0)
-        printf("  frame %.0f of %.0f", num(st, "frame"), num(st, "frames_total"));
+        printf("  frame %.0f (%.0f of %.0f frames done)", num(st, "frame"), num(st, "frames_done"),
+               num(st, "frames_total"));
     printf("\nelapsed    %s  eta %s\n", el, eta);
     printf("rays/s     %.2f M (recent %.2f M)  samples/pixel %.2f\n", num(st, "rays_per_s") / 1e6,
            num(st, "rays_per_s_recent") / 1e6, num(st, "samples_per_pixel_avg"));

@@ -382,7 +382,8 @@ static int open_dashboard(render *r)
                               r->t_start, r->scene->path, r->nouts == 1 ? fo->output : r->pattern,
                               r->tdesc, r->scene->width, h, first->first_row,
                               first->first_row > 0 ? fo->output : NULL,
-                              r->animated ? r->nouts : -1, r->nouts * h, rows_at_start};
+                              r->animated ? r->nouts : -1, r->nouts * h, rows_at_start,
+                              first->frame};
     r->dash = tf_dashboard_open(&dc, err, sizeof err);
     if (!r->dash)
         return step_failed(r, 2, err);

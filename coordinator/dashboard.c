@@ -174,6 +174,7 @@ tf_dashboard *tf_dashboard_open(const tf_dashboard_config *cfg, char *err, size_
         goto fail;
     }
     d->hub_ok = 1;
+    tf_livepreview_frame(d->preview, cfg->first_frame); /* so its first results keep the seed */
     if (cfg->resume_exr && cfg->first_row > 0) {
         tf_exr_meta meta;
         int rows = cfg->first_row;

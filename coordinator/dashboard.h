@@ -33,6 +33,7 @@ typedef struct tf_dashboard_config {
     int frames_total;            /* frames asked for; -1 for a still */
     int rows_total;              /* rows of the whole render: height, times frames_total */
     int rows_at_start;           /* of those, already on disk (resumed, complete frames) */
+    int first_frame;             /* the frame of resume_exr, and the first one rendered (-1: a still) */
 } tf_dashboard_config;
 
 /* Check the token rules, load the web files and bind the socket.  NULL with a message in err. */

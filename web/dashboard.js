@@ -79,7 +79,8 @@ function renderStatus(s) {
   const fr = $("frames");
   if (s.frames_total !== null) {
     fr.hidden = false;
-    fr.textContent = "frame " + s.frame + " of " + s.frames_total;
+    fr.textContent = "frame " + s.frame + " \u2014 " + s.frames_done + " of " + s.frames_total +
+      " frames done";
   } else {
     fr.hidden = true;
   }

@@ -2,6 +2,7 @@
 #include "farmproto.h"
 
 #include <endian.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -151,4 +152,27 @@ void tf_pixels_decode(const uint8_t *wire, tf_pixel *px, size_t n)
         px[i].z = get_f32(p + 16);
         px[i].spp = get_f32(p + 20);
     }
+}
+
+const char *tf_task_rect_problem(tf_rect r, int image_w, int image_h)
+{
+    if (r.w < 1 || r.h < 1)
+        return "empty rectangle";
+    if ((uint64_t)r.w * (uint64_t)r.h > TF_TASK_MAX_PIXELS)
+        return "rectangle larger than any task";
+    if (r.x < 0 || r.y < 0)
+        return "rectangle outside the image";
+    if (image_w > 0 && image_h > 0 &&
+        ((int64_t)r.x + r.w > image_w || (int64_t)r.y + r.h > image_h))
+        return "rectangle outside the image";
+    return NULL;
+}
+
+long tf_first_non_finite(const tf_pixel *px, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(px[i].r) || !isfinite(px[i].g) || !isfinite(px[i].b) ||
+            !isfinite(px[i].a) || !isfinite(px[i].z) || !isfinite(px[i].spp))
+            return (long)i;
+    return -1;
 }

@@ -29,11 +29,15 @@
 #include "coordinator/output.h"
 #include "coordinator/stats.h"
 #include "coordinator/supervisor.h"
+#include "coordinator/worker_role.h"
 #include "linda/tsserver.h"
 #include "linda/tuplespace.h"
 #include "worker/worker.h"
 
 #define DEFAULT_LISTEN "127.0.0.1:7878"
+/* Workers' outs are refused once the space holds this much (results wait there for their
+ * band, bounded by the watermark; this is the backstop). */
+#define MAX_SPACE_BYTES (1024u * 1024u * 1024u)
 
 static volatile sig_atomic_t interrupted;
 
@@ -69,6 +73,7 @@ typedef struct render {
     ts_space *space;
     tf_supervisor *sup;
     ts_server_config cfg;
+    ts_role worker_role;         /* every connection's role (worker_role.h) */
     ts_server *srv;
     tf_rowwriter *rows_out;      /* owns the EXR writer once started */
     tf_local_workers lw;
@@ -203,6 +208,9 @@ static int start_space(render *r)
     r->cfg.listen = r->listen;
     r->cfg.key = r->have_key ? r->key : NULL;
     r->cfg.silence_timeout_ms = o->lease_timeout_ms;
+    tf_worker_role_init(&r->worker_role, r->sup, &r->tasks);
+    r->cfg.role = &r->worker_role;
+    r->cfg.max_space_bytes = MAX_SPACE_BYTES;
     ts_server_hooks hooks = tf_supervisor_hooks(r->sup);
     r->srv = ts_server_new(r->space, &r->cfg, &hooks, err, sizeof err);
     if (!r->srv && !o->listen && r->nworkers > 0) {

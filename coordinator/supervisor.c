@@ -27,6 +27,7 @@
 
 #include <assert.h>
 #include <inttypes.h>
+#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -34,6 +35,7 @@
 #include <time.h>
 
 #include "farmproto.h"
+#include <endian.h>
 #include "log.h"
 
 #define MAX_FAILED_WORKERS 8  /* per task: distinct workers that failed it */
@@ -68,6 +70,7 @@ struct tf_supervisor {
     tf_supervisor_config cfg;
     int64_t write_task, next_deal;
     int ring_size;
+    int64_t next_worker_id;  /* the counter tuple's value, put back on every join */
     int auto_watermark;      /* watermark follows the connected workers */
     int watermark;           /* in force now */
     int dups_in_flight;      /* duplicate copies dealt whose task has no result yet */
@@ -373,10 +376,35 @@ static void remove_lease(tf_supervisor *s, uint64_t conn, int64_t task)
         }
 }
 
+/* A connection took the worker counter: its worker id is bound to the connection here, once,
+ * and the counter goes back at once (by the supervisor, so no worker can hold it). */
+static void on_join(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
+{
+    int64_t id;
+    if (tuple->nfields != 2 || tf_tuple_get_int(tuple, 1, &id))
+        return;
+    if (id >= s->next_worker_id)
+        s->next_worker_id = id + 1;
+    tf_tuple next;
+    tf_tuple_init(&next);
+    if (tf_tuple_pack(&next, "si", "next_worker", s->next_worker_id) ||
+        ts_space_out(s->space, &next)) {
+        fail(s, "out of memory putting the worker counter back");
+        return;
+    }
+    tf_worker_stats *w = add_worker(s, id);
+    if (w)
+        w->conn = conn;
+}
+
 static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)
 {
     tf_supervisor *s = ctx;
     const char *name = tf_tuple_name(tuple);
+    if (name && !strcmp(name, "next_worker")) {
+        on_join(s, conn, tuple);
+        return;
+    }
     if (!name || strcmp(name, "task"))
         return;
     tf_task_msg m;
@@ -417,18 +445,6 @@ static void on_task_returned(tf_supervisor *s, uint64_t conn, const tf_tuple *tu
         t->in_space++;
 }
 
-static void drop_result(tf_supervisor *s, int64_t id, int64_t worker)
-{
-    tf_tuple tmpl, got;
-    if (tf_result_template(&tmpl, id, worker))
-        return;
-    tf_tuple_init(&got);
-    if (ts_space_inp(s->space, &tmpl, &got) == 1)
-        s->stats.results_dropped++;
-    tf_tuple_clear(&got);
-    tf_tuple_clear(&tmpl);
-}
-
 /* A connection's peer, for messages only (the lookup scans the connections). */
 static const char *peer_name(const tf_supervisor *s, uint64_t conn)
 {
@@ -458,7 +474,10 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     remove_lease(s, conn, m.id);
     task_slot *t = slot_of(s, m.id);
     if (!t || t->has_result) {
-        drop_result(s, m.id, m.worker);
+        /* This very tuple, never "a result of this id": that would take the first (valid)
+         * one out and leave this later one to be written. */
+        remove_exact(s, tuple);
+        s->stats.results_dropped++;
         return;
     }
     tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
@@ -466,7 +485,8 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         tf_warn("result of task %" PRId64 " from %s has %zu pixel bytes, expected %zu; dropped",
                 m.id, peer_name(s, conn), m.pixels_len,
                 (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES);
-        drop_result(s, m.id, m.worker);
+        remove_exact(s, tuple);
+        s->stats.results_dropped++;
         if (!note_failure(s, t, m.worker))
             redeal_if_lost(s, t);
         return;
@@ -570,6 +590,192 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
         if (!note_failure(s, t, worker))
             redeal_if_lost(s, t);
     }
+}
+
+/* ---- admission: the farm's checks on a worker's requests, before the space sees them ------
+ * The guard of the worker role (coordinator/worker_role.c).  Everything a worker sends is
+ * checked against what the supervisor knows: the worker id bound to its connection when it
+ * took the counter, the leases it holds, the task a result answers.  A refusal changes nothing
+ * (the server replies ERROR and logs it); a request that breaks the rules on a task the
+ * connection holds also forfeits that lease, so the task is dealt again at once. */
+
+static int lease_count(const tf_supervisor *s, uint64_t conn, int64_t *first)
+{
+    int n = 0;
+    for (int i = 0; i < s->nleases; i++)
+        if (s->leases[i].conn == conn) {
+            if (n++ == 0 && first)
+                *first = s->leases[i].task;
+        }
+    return n;
+}
+
+static int holds_lease(const tf_supervisor *s, uint64_t conn, int64_t task)
+{
+    for (int i = 0; i < s->nleases; i++)
+        if (s->leases[i].conn == conn && s->leases[i].task == task)
+            return 1;
+    return 0;
+}
+
+/* Give up conn's lease on task: the task is dealt again if no other copy is left. */
+static void forfeit(tf_supervisor *s, uint64_t conn, int64_t task)
+{
+    remove_lease(s, conn, task);
+    task_slot *t = slot_of(s, task);
+    if (t && !t->has_result)
+        redeal_if_lost(s, t);
+}
+
+static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    tf_vseterr(why, len, fmt, ap);
+    va_end(ap);
+    return TS_CAP_REFUSE;
+}
+
+/* Index of the first non-finite float in a wire pixel blob, or -1. */
+static long first_non_finite(const uint8_t *wire, size_t len)
+{
+    for (size_t i = 0; i + 4 <= len; i += 4) {
+        uint32_t u;
+        memcpy(&u, wire + i, 4);
+        u = le32toh(u);
+        if ((u & 0x7f800000u) == 0x7f800000u) /* exponent all ones: Inf or NaN */
+            return (long)(i / TF_PIXEL_WIRE_BYTES);
+    }
+    return -1;
+}
+
+static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_worker_stats *w,
+                                   const tf_tuple *tuple, char *why, size_t len)
+{
+    tf_result_msg m;
+    if (tf_result_unpack(tuple, &m))
+        return refuse(why, len, "malformed result tuple");
+    if (m.worker != w->id)
+        return refuse(why, len, "result signed as worker %" PRId64 " by worker %" PRId64,
+                      m.worker, w->id);
+    if (!holds_lease(s, conn, m.id))
+        return refuse(why, len, "result for task %" PRId64 ", which this connection does not "
+                      "hold", m.id);
+    task_slot *t = slot_of(s, m.id);
+    if (!t || t->has_result) {
+        /* A straggler's second copy, or a task already written: the first result won. */
+        remove_lease(s, conn, m.id);
+        s->stats.results_dropped++;
+        return TS_CAP_DISCARD;
+    }
+    tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
+    size_t want = (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES;
+    if (m.pixels_len != want) {
+        forfeit(s, conn, m.id);
+        return refuse(why, len, "result of task %" PRId64 " (%dx%d at %d,%d) has %zu pixel "
+                      "bytes, expected %zu", m.id, r.w, r.h, r.x, r.y, m.pixels_len, want);
+    }
+    long bad = first_non_finite(m.pixels, m.pixels_len);
+    if (bad >= 0) {
+        forfeit(s, conn, m.id);
+        return refuse(why, len, "result of task %" PRId64 " has a non-finite value at pixel "
+                      "(%ld,%ld)", m.id, r.x + bad % r.w, r.y + bad / r.w);
+    }
+    return TS_CAP_ALLOW;
+}
+
+/* A worker puts back a task it will not render (it is excluded).  Only a task it holds, and
+ * the supervisor deals its own copy: the worker's tuple is never stored, so a rectangle or an
+ * exclusion list cannot be altered on the way. */
+static ts_cap_verdict admit_task_return(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple,
+                                        char *why, size_t len)
+{
+    tf_task_msg m;
+    if (tf_task_unpack(tuple, &m))
+        return refuse(why, len, "malformed task tuple");
+    if (m.id == TF_TASK_STOP) {
+        /* The stop task goes round every worker: the one who took it puts it back. */
+        tf_tuple tmpl;
+        size_t present = 0;
+        if (tf_task_template(&tmpl, TF_TASK_STOP) == 0)
+            present = ts_space_count(s->space, &tmpl);
+        tf_tuple_clear(&tmpl);
+        if (!s->stop_sent || present > 0 || m.rect.w || m.rect.h || m.rect.x || m.rect.y ||
+            m.nexcluded)
+            return refuse(why, len, "forged stop task");
+        return TS_CAP_ALLOW;
+    }
+    if (!holds_lease(s, conn, m.id))
+        return refuse(why, len, "puts back task %" PRId64 ", which this connection does not "
+                      "hold", m.id);
+    task_slot *t = slot_of(s, m.id);
+    tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
+    int altered = m.rect.x != r.x || m.rect.y != r.y || m.rect.w != r.w || m.rect.h != r.h;
+    remove_lease(s, conn, m.id);
+    if (t && !t->has_result) {
+        t->in_space++;
+        deal_copy(s, t);
+    }
+    if (altered)
+        return refuse(why, len, "task %" PRId64 " put back with rectangle %dx%d at %d,%d "
+                      "instead of %dx%d at %d,%d", m.id, m.rect.w, m.rect.h, m.rect.x, m.rect.y,
+                      r.w, r.h, r.x, r.y);
+    return TS_CAP_DISCARD;
+}
+
+ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blocking,
+                                   const tf_tuple *tuple, char *why, size_t len)
+{
+    (void)blocking;
+    tf_supervisor *s = ctx;
+    const char *name = tf_tuple_name(tuple);
+    tf_worker_stats *w = worker_by_conn(s, conn);
+    if (!strcmp(name, "next_worker"))
+        return w ? refuse(why, len, "joins twice (already worker %" PRId64 ")", w->id)
+                 : TS_CAP_ALLOW;
+    if (!w)
+        return refuse(why, len, "%s (\"%s\", ...) before joining (take (\"next_worker\", ?n) "
+                      "first)", ts_cap_op_name(op), name);
+    if (!strcmp(name, "hello")) {
+        int64_t id, pid;
+        const char *str;
+        if (tf_tuple_get_int(tuple, 1, &id) || tf_tuple_get_string(tuple, 2, &str) ||
+            tf_tuple_get_string(tuple, 3, &str) || tf_tuple_get_int(tuple, 4, &pid) ||
+            tf_tuple_get_string(tuple, 5, &str))
+            return refuse(why, len, "malformed hello tuple");
+        if (id != w->id)
+            return refuse(why, len, "hello as worker %" PRId64 " from worker %" PRId64, id,
+                          w->id);
+        return TS_CAP_ALLOW;
+    }
+    if (!strcmp(name, "task") && op == TS_CAP_IN) {
+        int64_t held = -1;
+        if (lease_count(s, conn, &held) > 0)
+            return refuse(why, len, "takes another task while holding task %" PRId64
+                          " (one at a time)", held);
+        return TS_CAP_ALLOW;
+    }
+    if (!strcmp(name, "task"))
+        return admit_task_return(s, conn, tuple, why, len);
+    if (!strcmp(name, "result"))
+        return admit_result(s, conn, w, tuple, why, len);
+    if (!strcmp(name, "failed")) {
+        int64_t id, worker;
+        const char *msg;
+        if (tf_tuple_get_int(tuple, 1, &id) || tf_tuple_get_int(tuple, 2, &worker) ||
+            tf_tuple_get_string(tuple, 3, &msg))
+            return refuse(why, len, "malformed failed tuple");
+        if (worker != w->id)
+            return refuse(why, len, "failure reported as worker %" PRId64 " by worker %" PRId64,
+                          worker, w->id);
+        if (!holds_lease(s, conn, id))
+            return refuse(why, len, "failure of task %" PRId64 ", which this connection does not "
+                          "hold", id);
+        return TS_CAP_ALLOW;
+    }
+    return refuse(why, len, "%s (\"%s\", ...) is not a worker's", ts_cap_op_name(op), name);
 }
 
 ts_server_hooks tf_supervisor_hooks(tf_supervisor *sup)

@@ -77,6 +77,12 @@ void tf_supervisor_attach(tf_supervisor *sup, ts_server *srv);
 /* Hooks for ts_server_new (ctx = the supervisor). */
 ts_server_hooks tf_supervisor_hooks(tf_supervisor *sup);
 
+/* The guard of the worker role (capability.h, coordinator/worker_role.c; ctx = the
+ * supervisor): checks a worker connection's request against the supervisor's state (its bound
+ * worker id, its leases, the task a result answers). */
+ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blocking,
+                                   const tf_tuple *tuple, char *why, size_t len);
+
 /* Deal, duplicate for stragglers, write, sync.  Call after every server iteration. */
 void tf_supervisor_step(tf_supervisor *sup, double now_ms);
 /* All rows written (the writer is then finished by the caller). */

@@ -13,21 +13,20 @@
 #include "farmproto.h"
 #include "log.h"
 
-/* Linda's counter idiom: in ("next_worker", ?n), out ("next_worker", n + 1). */
+/* Linda's counter idiom, half of it: in ("next_worker", ?n).  The coordinator binds id n to
+ * this connection and puts the counter back itself (coordinator/worker_role.h): a worker that
+ * could hold the counter could stop every other worker from joining. */
 static int take_worker_id(ts_client *c, int64_t *id)
 {
-    tf_tuple tmpl, got, next;
+    tf_tuple tmpl, got;
     tf_tuple_init(&tmpl);
     tf_tuple_init(&got);
-    tf_tuple_init(&next);
     int rc = tf_tuple_pack(&tmpl, "sI", "next_worker") || ts_in(c, &tmpl, &got) ||
-                     tf_tuple_get_int(&got, 1, id) ||
-                     tf_tuple_pack(&next, "si", "next_worker", *id + 1) || ts_out(c, &next)
+                     tf_tuple_get_int(&got, 1, id)
                  ? -1
                  : 0;
     tf_tuple_clear(&tmpl);
     tf_tuple_clear(&got);
-    tf_tuple_clear(&next);
     return rc;
 }
 
@@ -93,7 +92,8 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
             break;
         }
         if (tf_task_unpack(&task, &m)) {
-            tf_warn("ignoring a malformed task tuple");
+            static tf_ratelimit rl;
+            tf_warn_limited(&rl, "ignoring a malformed task tuple");
             tf_tuple_clear(&task);
             continue;
         }
@@ -111,6 +111,19 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
         tf_tuple_clear(&task);
         if (step->on_take)
             step->on_take(step->ctx, t1 - t0);
+        /* Whatever a task tuple says, it can only become a reported failure here, never a
+         * crash or an exit: no size, a size no image has, or a rectangle outside the image. */
+        const char *bad = tf_task_rect_problem(m.rect, step->image_w, step->image_h);
+        if (bad) {
+            snprintf(err, sizeof err, "task %" PRId64 " (%dx%d at %d,%d): %s", m.id, m.rect.w,
+                     m.rect.h, m.rect.x, m.rect.y, bad);
+            tf_warn("%s", err);
+            if (report_failure(c, m.id, id, err, step)) {
+                status = TF_SERVE_UNDELIVERED;
+                break;
+            }
+            continue;
+        }
         size_t n = (size_t)m.rect.w * (size_t)m.rect.h;
         if (n > px_cap) {
             tf_pixel *np = realloc(px, n * sizeof *px);
@@ -125,6 +138,19 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
         int64_t busy = 0;
         if (step->render(step->ctx, m.rect, px, &counts, &busy, err, sizeof err)) {
             tf_warn("task %" PRId64 ": %s", m.id, err);
+            if (report_failure(c, m.id, id, err, step)) {
+                status = TF_SERVE_UNDELIVERED;
+                break;
+            }
+            continue;
+        }
+        long nf = tf_first_non_finite(px, n);
+        if (nf >= 0) {
+            /* Never emit a NaN or an infinity: the file would carry it forever. */
+            snprintf(err, sizeof err, "task %" PRId64 ": the renderer produced a non-finite value "
+                     "at pixel (%ld,%ld); not sending it", m.id, m.rect.x + nf % m.rect.w,
+                     m.rect.y + nf / m.rect.w);
+            tf_warn("%s", err);
             if (report_failure(c, m.id, id, err, step)) {
                 status = TF_SERVE_UNDELIVERED;
                 break;
@@ -184,7 +210,7 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     snprintf(tag, sizeof tag, "worker %" PRId64, id);
     tf_log_set_tag(tag);
     backend_ctx bc = {b, s};
-    tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL};
+    tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, s->width, s->height};
     int rc = tf_worker_serve(c, id, &step);
     if (rc == TF_SERVE_LOST)
         tf_error("lost the coordinator: %s", ts_client_error(c));

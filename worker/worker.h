@@ -32,6 +32,8 @@ typedef struct tf_worker_step {
     void (*on_take)(void *ctx, int64_t wait_ns);
     void (*on_op)(void *ctx);
     void (*on_stop)(void *ctx, int64_t t_ns);
+    /* The image a task's rectangle must lie in (0: not checked beyond its size). */
+    int image_w, image_h;
 } tf_worker_step;
 
 /* Join the render: take a worker id (Linda's counter idiom) and announce ("hello", id, kind,

@@ -30,11 +30,17 @@
  *                       HMAC-SHA256(key, "terrafarm-client" || Ns || Nc)
  *   AUTH_OK 13    s->c  32-byte HMAC-SHA256(key, "terrafarm-server" || Ns || Nc): proves the
  *                       server knows the key too (mutual authentication)
- *   ERROR   14    s->c  UTF-8 message, at most 256 bytes; the server closes after sending it
+ *   ERROR   14    s->c  UTF-8 message, at most 256 bytes.  With request id 0 the server closes
+ *                       after sending it; with the id of a request, that one request was
+ *                       refused by the connection's role (capability.h), nothing changed in
+ *                       the space, and the connection stays open.
  *
  * When the HELLO says authentication is required, any frame but AUTH (even a PING) before a
  * successful AUTH closes the connection.  A wrong MAC gets an ERROR and a close, and the server
  * logs "authentication failed from PEER".  The key is never sent (see auth.h).
+ * Before authentication the length field may not exceed TF_HANDSHAKE_FRAME_MAX (so a stranger
+ * cannot make the server buffer more than a handshake); after it, not more than the largest
+ * tuple the connection's role may send.
  * An unknown op, a wrong version, a length out of bounds, a body that does not decode, or a
  * frame in the wrong direction closes that one connection. */
 #ifndef TF_PROTO_H
@@ -95,6 +101,12 @@ const char *tf_op_name(int op);
  * Only the header is validated here; the body is decoded by tf_tuple_decode (or by the auth
  * code) according to op.  This is the function the server runs on each connection's input. */
 long tf_frame_parse(const uint8_t *buf, size_t len, tf_frame *out, char *err, size_t errlen);
+/* The same with a smaller bound on the length field (the server reads only handshake-sized
+ * frames before authentication, and at most its role's largest tuple after). */
+long tf_frame_parse_max(const uint8_t *buf, size_t len, uint32_t max_length, tf_frame *out,
+                        char *err, size_t errlen);
+/* Largest length field accepted before authentication: an AUTH frame. */
+#define TF_HANDSHAKE_FRAME_MAX (TF_FRAME_MIN_LENGTH + 128)
 
 /* ---- growable byte buffer ------------------------------------------------------------------ */
 typedef struct tf_buf {

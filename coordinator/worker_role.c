@@ -1,0 +1,29 @@
+/* worker_role.c: the worker role's rules (see worker_role.h); the guard is the supervisor's
+ * tf_supervisor_admit, which knows leases and worker ids. */
+#include "coordinator/worker_role.h"
+
+#include "farmproto.h"
+
+static const ts_cap_rule worker_rules[] = {
+    {TS_CAP_RD, "scene", 5, 0, NULL},
+    {TS_CAP_IN, "next_worker", 2, 1, tf_supervisor_admit},
+    {TS_CAP_OUT, "hello", 6, 1, tf_supervisor_admit},
+    {TS_CAP_IN, "task", 7, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, "task", 7, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, "result", 8, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, "failed", 4, 0, tf_supervisor_admit},
+};
+
+/* Room beyond the pixels for the result's other fields and for encodings of the pixels that
+ * may be a little larger than raw (compressed chunks of noise). */
+#define RESULT_HEADROOM (64u * 1024u)
+
+void tf_worker_role_init(ts_role *role, tf_supervisor *sup, const tf_tasks *tasks)
+{
+    size_t largest = (size_t)tasks->tw * (size_t)tasks->th * TF_PIXEL_WIRE_BYTES;
+    role->name = "worker";
+    role->rules = worker_rules;
+    role->nrules = (int)(sizeof worker_rules / sizeof worker_rules[0]);
+    role->guard_ctx = sup;
+    role->max_tuple_bytes = largest + largest / 8 + RESULT_HEADROOM;
+}

@@ -84,7 +84,7 @@ int tf_ratelimit_take(tf_ratelimit *rl, long long now_ms, long long *held)
         rl->window_start_ms = now_ms ? now_ms : 1;
         rl->in_window = 0;
     }
-    if (rl->in_window >= TF_RATELIMIT_BURST) {
+    if (rl->in_window >= (rl->burst > 0 ? rl->burst : TF_RATELIMIT_BURST)) {
         rl->suppressed++;
         return 0;
     }

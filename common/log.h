@@ -35,6 +35,7 @@ int tf_vseterr(char *err, size_t errlen, const char *fmt, va_list ap);
 #define TF_RATELIMIT_BURST 20
 #define TF_RATELIMIT_WINDOW_MS 5000
 typedef struct tf_ratelimit {
+    int burst;            /* lines per window; 0: TF_RATELIMIT_BURST */
     long long window_start_ms;
     int in_window;        /* lines emitted in this window */
     long long suppressed; /* lines held back since the last one emitted */

@@ -178,16 +178,22 @@ static tf_worker_stats *add_worker(tf_supervisor *s, int64_t id)
     return w;
 }
 
+/* The task as the supervisor deals it now: its rectangle and the workers it must avoid. */
+static void task_msg_of(const tf_supervisor *s, const task_slot *t, tf_task_msg *m)
+{
+    memset(m, 0, sizeof *m);
+    m->id = t->id;
+    m->rect = tf_task_rect(&s->tasks, (int)t->id);
+    for (int i = 0; i < t->nfailed && m->nexcluded < TF_EXCLUDED_MAX; i++)
+        if (t->failed_count[i] >= FAILURES_TO_EXCLUDE)
+            m->excluded[m->nexcluded++] = t->failed_worker[i];
+}
+
 /* Put a task tuple for `id` in the space, carrying the workers it must avoid. */
 static int deal_copy(tf_supervisor *s, task_slot *t)
 {
     tf_task_msg m;
-    memset(&m, 0, sizeof m);
-    m.id = t->id;
-    m.rect = tf_task_rect(&s->tasks, (int)t->id);
-    for (int i = 0; i < t->nfailed && m.nexcluded < TF_EXCLUDED_MAX; i++)
-        if (t->failed_count[i] >= FAILURES_TO_EXCLUDE)
-            m.excluded[m.nexcluded++] = t->failed_worker[i];
+    task_msg_of(s, t, &m);
     tf_tuple tup;
     if (tf_task_pack(&tup, &m) || ts_space_out(s->space, &tup)) {
         fail(s, "out of memory dealing task %" PRId64, t->id);
@@ -713,6 +719,14 @@ static ts_cap_verdict admit_task_return(tf_supervisor *s, uint64_t conn, const t
     task_slot *t = slot_of(s, m.id);
     tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
     int altered = m.rect.x != r.x || m.rect.y != r.y || m.rect.w != r.w || m.rect.h != r.h;
+    int excl_altered = 0;
+    if (t) {
+        /* A copy dealt earlier may list fewer workers (failures since), never others. */
+        tf_task_msg now;
+        task_msg_of(s, t, &now);
+        for (int i = 0; i < m.nexcluded; i++)
+            excl_altered |= !tf_task_excludes(&now, m.excluded[i]);
+    }
     remove_lease(s, conn, m.id);
     if (t && !t->has_result) {
         t->in_space++;
@@ -722,6 +736,9 @@ static ts_cap_verdict admit_task_return(tf_supervisor *s, uint64_t conn, const t
         return refuse(why, len, "task %" PRId64 " put back with rectangle %dx%d at %d,%d "
                       "instead of %dx%d at %d,%d", m.id, m.rect.w, m.rect.h, m.rect.x, m.rect.y,
                       r.w, r.h, r.x, r.y);
+    if (excl_altered)
+        return refuse(why, len, "task %" PRId64 " put back excluding workers it was not dealt "
+                      "to exclude", m.id);
     return TS_CAP_DISCARD;
 }
 

@@ -63,6 +63,7 @@ typedef struct conn {
     char peer[96];
     char addr[96];         /* peer without the port: the unit of per-address caps */
     ts_cap_usage usage;    /* what it has used of its role */
+    tf_ratelimit refusals; /* its refused requests' log lines */
     int trusted;
     enum conn_state state;
     int dead;
@@ -191,6 +192,7 @@ static conn *conn_new(ts_server *srv, int fd, const char *peer, int trusted)
     snprintf(c->peer, sizeof c->peer, "%s", peer);
     addr_of(peer, c->addr, sizeof c->addr);
     c->trusted = trusted;
+    c->refusals.burst = 40;
     c->state = trusted || !srv->has_key ? READY : NEED_AUTH;
     c->created_ms = c->last_rx_ms = tf_now_ms();
     c->srv = srv;
@@ -548,11 +550,14 @@ static void on_waiter_served(void *ctx, uint64_t waiter_id, tf_tuple *t)
  * and one rate-limited line naming the peer. */
 static void refuse_request(conn *c, const tf_frame *f, const tf_tuple *t, const char *why)
 {
-    static tf_ratelimit rl;
-    char shown[160];
-    tf_tuple_format(t, shown, sizeof shown);
-    tf_warn_limited(&rl, "refused %s %s from %s (%s): %s", tf_op_name(f->op), shown, c->peer,
-                    c->srv->role ? c->srv->role->name : "?", why);
+    /* Per connection (a peer's first refusals are all named), and in all (many peers). */
+    static tf_ratelimit all = {.burst = 200};
+    if (tf_ratelimit_take(&all, (long long)tf_now_ms(), NULL)) {
+        char shown[160];
+        tf_tuple_format(t, shown, sizeof shown);
+        tf_warn_limited(&c->refusals, "refused %s %s from %s (%s): %s", tf_op_name(f->op), shown,
+                        c->peer, c->srv->role ? c->srv->role->name : "?", why);
+    }
     char msg[TF_PROTO_ERROR_MAX];
     snprintf(msg, sizeof msg, "refused: %s", why);
     conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_ERROR, f->request_id, msg, strlen(msg)));

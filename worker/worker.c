@@ -213,11 +213,13 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, s->width, s->height};
     int rc = tf_worker_serve(c, id, &step);
     if (rc == TF_SERVE_LOST)
-        tf_error("lost the coordinator: %s", ts_client_error(c));
+        tf_warn("lost the coordinator: %s", ts_client_error(c));
     else if (rc == TF_SERVE_UNDELIVERED)
-        tf_error("cannot deliver a result: %s", ts_client_error(c));
+        tf_warn("cannot deliver a result (the coordinator deals that task again): %s",
+                ts_client_error(c));
     tf_backend_free(b);
-    return rc == TF_SERVE_STOPPED ? 0 : 1;
+    tf_log_set_tag(NULL);
+    return rc == TF_SERVE_STOPPED ? 0 : TF_WORKER_EXIT_LOST;
 }
 
 tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen)

@@ -117,8 +117,9 @@ class Sealer:
 
 
 class Conn:
-    def __init__(self, host, port, secret_path=None, timeout=30, handshake=True):
-        self.s = socket.create_connection((host, port), timeout=timeout)
+    def __init__(self, host, port, secret_path=None, timeout=30, handshake=True, source=None):
+        self.s = socket.create_connection((host, port), timeout=timeout,
+                                          source_address=(source, 0) if source else None)
         self.req = 0
         self.sealer = None
         self.raw_in = b""

@@ -238,7 +238,7 @@ static int open_output(render *r)
     int queue_chunks = queue_rows / tf_exr_chunk_rows() > 2 ? queue_rows / tf_exr_chunk_rows() : 2;
     r->rows_out = tf_rowwriter_start(writer, r->scene->width, r->scene->height,
                                      tf_exr_chunk_rows(), queue_chunks, r->o->fsync_interval_ms,
-                                     r->preview, r->output, err, sizeof err);
+                                     r->preview, r->plan.working, err, sizeof err);
     if (!r->rows_out) {
         tf_exr_abandon(writer);
         return step_failed(r, 1, err);
@@ -331,7 +331,18 @@ static void stop_unfinished(render *r)
     tf_local_workers_drain(&r->lw, 1.0);
     tf_rowwriter_abandon(r->rows_out);
     r->rows_out = NULL;
-    if (why)
+    if (r->plan.beside) {
+        /* The new render was made beside a finished one, which stays as it was. */
+        char err[1024];
+        tf_output_discard(r->output, &r->plan);
+        if (tf_preview_from_exr(r->output, r->preview, err, sizeof err))
+            tf_warn("%s", err);
+        if (why)
+            tf_error("%s; %s still holds the finished render it held before", why, r->output);
+        else
+            tf_error("%s: the new render stopped (%d of %d rows); the finished render there is "
+                     "kept", r->output, rows, r->scene->height);
+    } else if (why)
         tf_error("%s", why);
     else if (r->no_workers)
         tf_error("%d of %d rows are on disk in %s; continue with --resume", rows,
@@ -349,7 +360,14 @@ static int finish(render *r)
     tf_supervisor_stop_workers(r->sup);
     int finished = tf_rowwriter_finish(r->rows_out, err, sizeof err);
     r->rows_out = NULL;
-    if (finished)
+    if (finished) {
+        tf_output_discard(r->output, &r->plan);
+        if (r->plan.beside)
+            snprintf(err + strlen(err), sizeof err - strlen(err),
+                     "; %s still holds the finished render it held before", r->output);
+        return step_failed(r, 1, err);
+    }
+    if (tf_output_commit(r->output, &r->plan, err, sizeof err))
         return step_failed(r, 1, err);
     tf_local_workers_drain(&r->lw, 5.0);
     for (int i = 0; i < 10 && ts_server_conn_count(r->srv) > 0; i++)
@@ -375,6 +393,8 @@ static int finish(render *r)
 
 static void render_close(render *r)
 {
+    if (r->plan.beside && r->status != 0)
+        remove(r->plan.working); /* a step failed before the render ran */
     if (r->lw.pid && r->srv)
         tf_local_workers_drain(&r->lw, 0);
     if (r->rows_out)

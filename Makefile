@@ -20,7 +20,7 @@ EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/d
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
 
 # -ffp-contract=off: no fused multiply-add contraction, so every machine computes the same
-# bits (DESIGN.md section 4: deterministic terrain and pixels everywhere).
+# bits (docs/contract.md section 4: deterministic terrain and pixels everywhere).
 # -DNDEBUG: the numbered invariants (assert) are checked in `make asan`, not in release builds.
 CFLAGS   ?= -O2 -g -DNDEBUG
 SAN      ?=

@@ -1,4 +1,4 @@
-/* bench_aa.c: adaptive antialiasing versus uniform supersampling (DESIGN.md section 6: "the
+/* bench_aa.c: adaptive antialiasing versus uniform supersampling (docs/contract.md section 6: "the
  * quality of 16 uniform samples per pixel for <= 1/3 the rays").
  *
  * Renders one scene three ways in one run, on all cores (threads take rows):

@@ -1,5 +1,5 @@
 /* bench_opencl.c: the C backend against the OpenCL backend on the same cores, in one run
- * (DESIGN.md section 6: "OpenCL on PoCL >= 1.3x the C backend's throughput on the same cores").
+ * (docs/contract.md section 6: "OpenCL on PoCL >= 1.3x the C backend's throughput on the same cores").
  *
  *   C        T threads (T = online CPUs) take stamp tasks off a shared counter and call
  *            tf_render_rect: the throughput of T forked C workers without the farm around them.

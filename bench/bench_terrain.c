@@ -1,4 +1,4 @@
-/* bench_terrain.c: terrain synthesis speed against DESIGN.md section 6's target of <= 5 ns per
+/* bench_terrain.c: terrain synthesis speed against docs/contract.md section 6's target of <= 5 ns per
  * octave per sample per core for fBm-type terrain.
  *
  * For each of the seven generators it builds the heights (tf_terrain_heights) once on one

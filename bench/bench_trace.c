@@ -1,5 +1,5 @@
 /* bench_trace.c: rays per second of the grid tracer, flat DDA against the max-mipmap hierarchy,
- * measured side by side in one run on the same rays (DESIGN.md section 6, "tracing").
+ * measured side by side in one run on the same rays (docs/contract.md section 6, "tracing").
  *
  * Builds an fBm terrain (tf_fbm2) of (2^k+1)^2 samples for each k given (default 10 and 12),
  * puts a pinhole camera a little above one corner looking across the terrain toward the horizon,

@@ -1,6 +1,6 @@
 #!/bin/bash
 # povray_compare.sh: terrafarm against POV-Ray 3.7 on the same height field, side by side, in one
-# run (DESIGN.md section 6: "the same height field, camera, size and antialiasing in <= 1/3 of
+# run (docs/contract.md section 6: "the same height field, camera, size and antialiasing in <= 1/3 of
 # POV-Ray's time per core").  Method and results: bench/README-povray.md.
 #
 # For each height-field size 2^K+1 it

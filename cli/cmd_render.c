@@ -1,4 +1,4 @@
-/* cmd_render.c: `terrafarm render SCENE [options]`: parse the command line (DESIGN.md section 2)
+/* cmd_render.c: `terrafarm render SCENE [options]`: parse the command line (docs/contract.md section 2)
  * into tf_render_opts and run the coordinator. */
 #include <getopt.h>
 #include <stdio.h>

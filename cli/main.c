@@ -1,4 +1,4 @@
-/* main.c: bin/terrafarm, one executable with subcommands (DESIGN.md section 2).  This file only
+/* main.c: bin/terrafarm, one executable with subcommands (docs/contract.md section 2).  This file only
  * dispatches; each subcommand lives in its own cmd_*.c. */
 #include <stdio.h>
 #include <string.h>

@@ -224,7 +224,20 @@ static int start_space(render *r)
     return 0;
 }
 
-/* 4a. The output file and its writer thread. */
+/* 4a. Fork the local workers.  They are forked before the writer thread starts: a child of a
+ *    multi-threaded process may inherit a lock some other thread held at the fork (ASan's
+ *    allocator's was seen to hang a worker for good), so the coordinator forks while it is
+ *    still one thread.  They wait in `in` until the supervisor deals the first task. */
+static int start_workers(render *r)
+{
+    char err[1024];
+    if (tf_local_workers_start(&r->lw, r->nworkers, r->srv, r->scene, r->hf, r->o->backend, err,
+                               sizeof err))
+        return step_failed(r, 1, err);
+    return 0;
+}
+
+/* 4b. The output file and its writer thread (see start_workers for why it comes second). */
 static int open_output(render *r)
 {
     char err[1024];
@@ -256,13 +269,9 @@ static const char *describe_tasks(const tf_task_spec *spec, char *buf, size_t le
     return buf;
 }
 
-/* 4b. Fork the local workers, and say where networked ones may join. */
-static int start_workers(render *r)
+/* 5a. Say what is rendered and where networked workers may join. */
+static void announce(render *r)
 {
-    char err[1024];
-    if (tf_local_workers_start(&r->lw, r->nworkers, r->srv, r->scene, r->hf, r->o->backend, err,
-                               sizeof err))
-        return step_failed(r, 1, err);
     char wdesc[32];
     describe_tasks(&r->spec, r->tdesc, sizeof r->tdesc);
     if (r->o->watermark > 0)
@@ -283,10 +292,9 @@ static int start_workers(render *r)
         tf_info("rendering %s %dx%d: %d tasks (%s), watermark %s, %d local workers", s->path,
                 s->width, s->height, r->tasks.count, r->tdesc, wdesc, r->nworkers);
     }
-    return 0;
 }
 
-/* 5. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
+/* 5b. Supervise until every row is on disk, the render is interrupted, or no worker can run. */
 static int supervise(render *r)
 {
     tf_progress prog;
@@ -322,7 +330,7 @@ static int supervise(render *r)
     return tf_supervisor_done(r->sup) ? 0 : -1;
 }
 
-/* 5b. A render that did not finish: keep every row already queued, tell how to continue. */
+/* 5c. A render that did not finish: keep every row already queued, tell how to continue. */
 static void stop_unfinished(render *r)
 {
     const char *why = tf_supervisor_error(r->sup);
@@ -428,9 +436,10 @@ int tf_coordinator_run(const tf_render_opts *o)
         r.status = 0;
         goto out;
     }
-    if (load_secret(&r) || build_terrain(&r) || start_space(&r) || open_output(&r) ||
-        start_workers(&r))
+    if (load_secret(&r) || build_terrain(&r) || start_space(&r) || start_workers(&r) ||
+        open_output(&r))
         goto out;
+    announce(&r);
     if (supervise(&r) != 0) {
         stop_unfinished(&r);
         goto out;

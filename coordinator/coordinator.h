@@ -1,4 +1,4 @@
-/* coordinator.h: `terrafarm render`, the coordinator (DESIGN.md sections 2, 3, 5).
+/* coordinator.h: `terrafarm render`, the coordinator (docs/contract.md sections 2, 3, 5).
  *
  * One process, one thread, one event loop (tsserver.h).  In order:
  *   1. load the scene, check the output (resume or refuse to clobber a partial render);

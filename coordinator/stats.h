@@ -1,4 +1,4 @@
-/* stats.h: the run statistics as JSON (--stats FILE.json, DESIGN.md section 5: keep the names). */
+/* stats.h: the run statistics as JSON (--stats FILE.json, docs/contract.md section 5: keep the names). */
 #ifndef TF_STATS_H
 #define TF_STATS_H
 

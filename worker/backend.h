@@ -1,4 +1,4 @@
-/* backend.h: what renders a worker's tasks.  "c" is the portable C renderer (common/render.h)
+/* backend.h: what renders a worker's tasks.  "c" is the portable C renderer (common/render/render.h)
  * on one core; "opencl" runs the same renderer as OpenCL kernels (backend_opencl.c).  A worker
  * creates its backend after fork (OpenCL contexts must not cross a fork). */
 #ifndef TF_BACKEND_H

@@ -1,5 +1,5 @@
 /* backend_opencl.h: the OpenCL backend (PoCL on the CPU, any OpenCL GPU elsewhere): the same
- * renderer as common/render.h, as OpenCL C 1.2 kernels in worker/kernels/. */
+ * renderer as common/render/render.h, as OpenCL C 1.2 kernels in worker/kernels/. */
 #ifndef TF_BACKEND_OPENCL_H
 #define TF_BACKEND_OPENCL_H
 

@@ -169,6 +169,15 @@ static int fail_with_server_error(ts_client *c, const tf_frame *f)
     return fail(c, "coordinator refused: %.*s", (int)n, (const char *)f->body);
 }
 
+/* read_frame, with a server's ERROR frame turned into the client's error. */
+static long read_reply(ts_client *c, tf_frame *f, int64_t deadline)
+{
+    long n = read_frame(c, f, deadline);
+    if (n >= 0 && f->op == TF_OP_ERROR)
+        return fail_with_server_error(c, f);
+    return n;
+}
+
 /* Send op with body t and wait for its reply.  Returns the reply op (>0) with the decoded
  * tuple in *out for TUPLE, or -1. */
 static int request(ts_client *c, uint8_t op, const tf_tuple *t, tf_tuple *out)
@@ -183,11 +192,9 @@ static int request(ts_client *c, uint8_t op, const tf_tuple *t, tf_tuple *out)
     int64_t deadline = deadline_from(c->timeout_ms);
     for (;;) {
         tf_frame f;
-        long n = read_frame(c, &f, deadline);
+        long n = read_reply(c, &f, deadline);
         if (n < 0)
             return -1;
-        if (f.op == TF_OP_ERROR)
-            return fail_with_server_error(c, &f);
         if (f.request_id != req || (f.op != TF_OP_TUPLE && f.op != TF_OP_NONE &&
                                     f.op != TF_OP_OK && f.op != TF_OP_PONG))
             return fail(c, "unexpected %s (request %u) from the coordinator", tf_op_name(f.op),
@@ -322,11 +329,9 @@ void ts_client_close(ts_client *c)
 static int handshake(ts_client *c, const uint8_t *key, int64_t deadline)
 {
     tf_frame f;
-    long n = read_frame(c, &f, deadline);
+    long n = read_reply(c, &f, deadline);
     if (n < 0)
         return -1;
-    if (f.op == TF_OP_ERROR)
-        return fail_with_server_error(c, &f);
     if (f.op != TF_OP_HELLO || f.body_len != 1 + TF_NONCE_BYTES)
         return fail(c, "not a terrafarm coordinator (no HELLO)");
     int required = f.body[0] & TF_HELLO_AUTH_REQUIRED;

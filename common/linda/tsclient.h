@@ -1,5 +1,5 @@
 /* tsclient.h: the blocking tuple-space client a worker uses to talk to the coordinator's
- * tuple-space server (coordinator/tsserver.h) over TCP, a Unix socket, or an inherited
+ * tuple-space server (common/linda/tsserver.h) over TCP, a Unix socket, or an inherited
  * socketpair fd (forked workers).  Protocol: proto.h.
  *
  * One request at a time: every call sends one frame and waits for its reply, so a client must

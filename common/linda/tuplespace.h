@@ -19,7 +19,7 @@
  * (ts_space_out, ts_wait, ts_cancel, ...) on the same space.
  *
  * Accounting: "bytes" of a tuple is tf_tuple_bytes() (its encoded size); the space tracks the
- * current and the highest tuple count and bytes held (DESIGN.md: max_tuple_bytes). */
+ * current and the highest tuple count and bytes held (docs/contract.md: max_tuple_bytes). */
 #ifndef TF_TUPLESPACE_H
 #define TF_TUPLESPACE_H
 

@@ -1,4 +1,4 @@
-/* camera.h: primary rays.  Two projections (DESIGN.md section 4):
+/* camera.h: primary rays.  Two projections (docs/contract.md section 4):
  *
  *   pinhole   a flat virtual screen perpendicular to the view direction; horizontal field of
  *             view fov_deg, square pixels.

@@ -3,7 +3,7 @@
  * The one entry point that matters is tf_render_rect: given the scene, its height field and a
  * rectangle of the image, produce the rectangle's pixels.  This is what a worker does with a task.
  *
- * THE DECOMPOSITION INVARIANT (DESIGN.md section 4): a pixel's value depends only on the scene
+ * THE DECOMPOSITION INVARIANT (docs/contract.md section 4): a pixel's value depends only on the scene
  * and the pixel's coordinates.  tf_render_rect over any rectangle yields, for each of its pixels,
  * exactly the same bits as over any other rectangle containing that pixel.  Adaptive
  * antialiasing decides subdivision from samples at pixel corners; the corner samples on the

@@ -1,5 +1,5 @@
 /* shade.h: what a camera ray sees: terrain materials and lighting, the water plane, the sky and
- * the atmosphere between the eye and whatever the ray ends on (DESIGN.md section 4; Musgrave
+ * the atmosphere between the eye and whatever the ray ends on (docs/contract.md section 4; Musgrave
  * chapters 4.1 and 5).
  *
  *   materials   by altitude and slope: vegetation below the tree line, alpine ground above

@@ -1,10 +1,10 @@
 /* heightfield.c: the height field's shape, its hierarchy of max/min grids, and the exact
- * two-triangle surface the tracer sees (common/heightfield.h).
+ * two-triangle surface the tracer sees (common/terrain/heightfield.h).
  *
  * The heights themselves come from elsewhere (tf_heightfield_build in terrain_build.c generates
  * them from the scene, tests hand them in directly).  This file owns what is built on top of
  * them: maxgrid[L] / mingrid[L] for L = 0..k, the "A grid" of Musgrave 3.3.1 generalised into a
- * max mipmap (and its min twin, for rays travelling below the surface), which common/trace.c
+ * max mipmap (and its min twin, for rays travelling below the surface), which common/render/trace.c
  * walks.  Level 0 holds, per cell, the max/min of its four corner samples; level L holds the
  * max/min of the 2x2 block of level L-1 entries below it; level k is 1x1 (the whole field).
  *

@@ -1,5 +1,5 @@
 #!/bin/sh
-# farm_faults.sh: a task is never lost (DESIGN.md section 3, Faults).
+# farm_faults.sh: a task is never lost (docs/contract.md section 3, Faults).
 #  1. SIGKILL a forked worker mid-render: its task returns to the space and is dealt again
 #     (tasks_redealt >= 1 when it held one), the coordinator carries on, the image is identical.
 #  2. SIGSTOP a networked worker while it holds a task (--lease-timeout 2000): the coordinator

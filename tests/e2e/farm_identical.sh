@@ -1,5 +1,5 @@
 #!/bin/sh
-# farm_identical.sh: the decomposition invariant end to end (DESIGN.md section 4): the same
+# farm_identical.sh: the decomposition invariant end to end (docs/contract.md section 4): the same
 # scene and size give a byte-identical EXR whatever the worker count (1, 2, 4 forked), the task
 # shape (rows:1, rows:7, stamps:16x16, stamps:37x23) and the mix of forked and networked
 # workers.  Also: the finished file is an ordinary OpenEXR file (exrheader reads it).

@@ -1,5 +1,5 @@
 #!/bin/sh
-# farm_security.sh: DESIGN.md section 3, Security.
+# farm_security.sh: docs/contract.md section 3, Security.
 #  1. With --secret-file, a worker with the right secret renders while one with a wrong secret
 #     is refused: it exits non-zero with a clear message; the coordinator logs "authentication
 #     failed from ..."; the render completes, identical to the reference.

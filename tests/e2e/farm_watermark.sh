@@ -1,7 +1,7 @@
 #!/bin/sh
 # farm_watermark.sh: the watermark bounds the tasks dealt beyond the write front
 # (max_outstanding_tasks <= watermark in the statistics) for several watermarks, the image does
-# not depend on it, and --stats holds every key of DESIGN.md section 5 with sane values.
+# not depend on it, and --stats holds every key of docs/contract.md section 5 with sane values.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=240x135
@@ -32,7 +32,7 @@ grep -q 'watermark' "$T/last.err" || fail "unclear refusal: $(cat "$T/last.err")
 [ "$(wc -l <"$T/last.err")" -eq 1 ] || fail "refusal is not one line: $(cat "$T/last.err")"
 say "refused: $(cat "$T/last.err")"
 
-say "every DESIGN.md section 5 key in --stats"
+say "every docs/contract.md section 5 key in --stats"
 python3 - "$T/w8.json" <<'PY' || exit 1
 import json, sys
 s = json.load(open(sys.argv[1]))

@@ -2,7 +2,7 @@
 """tests/tools/failing_worker.py: a networked worker that fails every task it takes.
 
 Usage: failing_worker.py HOST PORT
-Speaks the tuple-space protocol (common/proto.h, tuple encoding in common/tuple.h) and the
+Speaks the tuple-space protocol (common/linda/proto.h, tuple encoding in common/linda/tuple.h) and the
 farm's tuples (common/farmproto.h) directly: takes a worker id, says hello, then for every task
 it is not excluded from puts ("failed", id, worker, "injected failure") back; a task that lists
 it as excluded goes back into the space untouched.  Leaves on the stop task (id -1), which it

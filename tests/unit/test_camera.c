@@ -1,4 +1,4 @@
-/* test_camera.c: the pinhole and panorama cameras (common/camera.c): centre ray along look_at,
+/* test_camera.c: the pinhole and panorama cameras (common/render/camera.c): centre ray along look_at,
  * field-of-view edges, y down, panorama sweep linear in angle, vertical window, bad input. */
 #include <stdarg.h>
 #include <stddef.h>

@@ -1,4 +1,4 @@
-/* test_fractal.c: Musgrave's procedural terrains (common/fractal.c, fractal.h) and the terrain
+/* test_fractal.c: Musgrave's procedural terrains (common/terrain/fractal.c, fractal.h) and the terrain
  * point entry tf_terrain_point (terrain.h).
  *
  * Every generator must be deterministic and finite; the row evaluator the height-field builder

@@ -1,4 +1,4 @@
-/* test_heightfield.c: the height field structure (common/heightfield.c): the max/min mipmap
+/* test_heightfield.c: the height field structure (common/terrain/heightfield.c): the max/min mipmap
  * against brute force, its independence of the thread count, the two-triangle height_at,
  * ownership and argument checks, tf_thread_count. */
 #include <setjmp.h>

@@ -1,4 +1,4 @@
-/* test_noise.c: gradient noise and fBm (common/noise.c, noise.h).
+/* test_noise.c: gradient noise and fBm (common/terrain/noise.c, noise.h).
  *
  * Checks the properties everything downstream relies on: the range [-1, 1], zeros at lattice
  * points, determinism per seed and variety across seeds, continuity with a bounded gradient,

@@ -1,4 +1,4 @@
-/* test_preview.c: the sRGB PNG preview (common/preview.c): the tone curve's fixed points and
+/* test_preview.c: the sRGB PNG preview (common/image/preview.c): the tone curve's fixed points and
  * monotonicity, and a PNG streamed from an EXR read back with libpng (size, format, pixels,
  * black rows for a partial render, clear error for a missing EXR). */
 #include <stdarg.h>

@@ -1,4 +1,4 @@
-/* test_render.c: tf_render_rect (common/render.c) on a small synthetic terrain built by hand.
+/* test_render.c: tf_render_rect (common/render/render.c) on a small synthetic terrain built by hand.
  * The decomposition invariant: the whole image, single rows, single columns, odd stamps (7x5,
  * 13x11) and two threads give memcmp-identical pixels.  Adaptive antialiasing: uniform sky is
  * not subdivided (spp 4, or 5 with its centre probed), a silhouette is; ray counts add up;

@@ -1,4 +1,4 @@
-/* test_shade.c: shading (common/shade.c).  Mist: the closed form equals numerical integration,
+/* test_shade.c: shading (common/render/shade.c).  Mist: the closed form equals numerical integration,
  * the near-level fallback is continuous with it, extinction is per channel, homogeneous fog,
  * sky rays.  Sky gradient and sun glow.  Materials by altitude and slope, water Fresnel, and
  * (with the real tracer) sun shadows.  Height fields for the material tests are filled in by

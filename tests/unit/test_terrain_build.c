@@ -1,4 +1,4 @@
-/* test_terrain_build.c: the height-field build (common/terrain_build.c): tf_terrain_heights and
+/* test_terrain_build.c: the height-field build (common/terrain/terrain_build.c): tf_terrain_heights and
  * tf_heightfield_build.
  *
  * The decomposition invariant starts here: heights must be bit-identical whatever the thread

@@ -1,4 +1,4 @@
-/* test_trace.c: the grid tracer (common/trace.c).  Analytic hits on a flat plane, a tilted plane
+/* test_trace.c: the grid tracer (common/render/trace.c).  Analytic hits on a flat plane, a tilted plane
  * and a single spike; vertical rays land on height_at; thousands of random rays of every kind give
  * bit-identical results from tf_trace and tf_trace_flat, agree with a brute-force test of every
  * triangle, and lie on the surface; rays aimed exactly at shared edges and vertices do not slip

@@ -1,5 +1,5 @@
-/* test_tsserver.c: the tuple-space server and client end to end (coordinator/tsserver.c,
- * common/tsclient.c): over a socketpair and loopback TCP; a blocked in woken by another
+/* test_tsserver.c: the tuple-space server and client end to end (common/linda/tsserver.c,
+ * common/linda/tsclient.c): over a socketpair and loopback TCP; a blocked in woken by another
  * client's out; hooks (on_take, on_out, on_disconnect); garbage, oversized, unknown-op and
  * half frames each dropping only their own connection; authentication with the right and the
  * wrong secret and an op before the handshake.  The server loop runs in a background thread;

@@ -1,4 +1,4 @@
-/* test_tuple.c: tuples and templates (common/tuple.c) and frame parsing (common/proto.c):
+/* test_tuple.c: tuples and templates (common/linda/tuple.c) and frame parsing (common/linda/proto.c):
  * encode/decode round trips of every field type, matching rules, decoder rejection of malformed
  * input, and frame header validation. */
 #include <setjmp.h>

@@ -1,4 +1,4 @@
-/* test_tuplespace.c: the in-process tuple store (coordinator/tuplespace.c): out/inp/rdp, FIFO
+/* test_tuplespace.c: the in-process tuple store (common/linda/tuplespace.c): out/inp/rdp, FIFO
  * order, blocked requests served in arrival order (rd sees, in takes), cancel, re-entrant
  * callbacks, byte accounting, and that the (name, arity[, int]) index keeps lookups independent
  * of unrelated tuples (asserted on the comparison counter, not on time). */

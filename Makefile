@@ -14,7 +14,7 @@ BUILD   ?= build
 BIN     ?= bin
 VERSION := 0.1.0
 
-PKGS      := inih libpng libsodium
+PKGS      := inih libpng libsodium zlib
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
 EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
@@ -81,6 +81,12 @@ $(BUILD)/tests/%: tests/unit/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB_OBJ) $(TEST_LIBS) $(LDLIBS)
 
+# Test tools the end-to-end scripts call (tests/tools/*.c), e.g. exrcmp.
+TOOLS := $(patsubst tests/tools/%.c,$(BUILD)/tools/%,$(wildcard tests/tools/*.c))
+$(BUILD)/tools/%: tests/tools/%.c $(LIB_OBJ)
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
+
 $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
@@ -101,7 +107,7 @@ fuzz: $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/fuzz/%)
 
 REPLAYS := $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/replay/%)
 
-test: $(PROG) $(TESTS) $(REPLAYS)
+test: $(PROG) $(TESTS) $(REPLAYS) $(TOOLS)
 	BUILD=$(BUILD) BIN=$(BIN) tests/run.sh
 
 asan:
@@ -112,7 +118,7 @@ bench: $(PROG) $(BENCHES)
 
 # Every Debian package the build, the tests and the benchmarks use.
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
-            libopenexr-dev openexr ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
+            libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
             iproute2 python3 gnuplot-nox
 # Only the benchmarks' peers need these (make bench-deps).
 BENCH_PKGS := povray redis-server hyperfine linux-perf valgrind

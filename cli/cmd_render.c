@@ -7,6 +7,7 @@
 
 #include "cli/commands.h"
 #include "coordinator/coordinator.h"
+#include "image/exrlayout.h"
 #include "log.h"
 
 static const char usage[] =
@@ -24,6 +25,10 @@ static const char usage[] =
     "      --watermark N         at most N tasks dealt beyond the write front (default: one band\n"
     "                            of tasks plus three per worker)\n"
     "      --size WxH            override the scene's image size\n"
+    "      --pixel half|float    channel type of R, G, B, A (Z and samples stay float; default\n"
+    "                            half). rows:K writes a scanline EXR, stamps:WxH a tiled one\n"
+    "      --verify-chunks       also decode every result's chunks before accepting it (costs\n"
+    "                            the coordinator per-pixel work; structure is always checked)\n"
     "      --backend c|opencl|auto  backend of the local workers (default c; auto: OpenCL if\n"
     "                            a device works, else C with a warning)\n"
     "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
@@ -71,7 +76,7 @@ bad:
 int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
-           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE };
+           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_PIXEL, O_VERIFY_CHUNKS };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -86,6 +91,8 @@ int cmd_render(int argc, char **argv)
         {"stats", required_argument, NULL, O_STATS},
         {"lease-timeout", required_argument, NULL, O_LEASE},
         {"cl-device", required_argument, NULL, O_CL_DEVICE},
+        {"pixel", required_argument, NULL, O_PIXEL},
+        {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -132,6 +139,14 @@ int cmd_render(int argc, char **argv)
         case O_OVERWRITE: o.overwrite = 1; break;
         case O_STATS: o.stats_path = optarg; break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
+        case O_PIXEL:
+            if (tf_pixel_type_parse(optarg, &o.pixel)) {
+                tf_error("--pixel '%s': expected half or float", optarg);
+                return TF_EXIT_USAGE;
+            }
+            o.pixel_given = 1;
+            break;
+        case O_VERIFY_CHUNKS: o.verify_chunks = 1; break;
         case O_LEASE:
             if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))
                 return TF_EXIT_USAGE;

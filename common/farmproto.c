@@ -1,5 +1,6 @@
 /* farmproto.c: see farmproto.h. */
 #include "farmproto.h"
+#include "log.h"
 
 #include <endian.h>
 #include <math.h>
@@ -64,45 +65,15 @@ int tf_task_excludes(const tf_task_msg *m, int64_t worker)
     return 0;
 }
 
-static void put_f32(uint8_t *p, float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, 4);
-    u = htole32(u);
-    memcpy(p, &u, 4);
-}
-
-static float get_f32(const uint8_t *p)
-{
-    uint32_t u;
-    memcpy(&u, p, 4);
-    u = le32toh(u);
-    float f;
-    memcpy(&f, &u, 4);
-    return f;
-}
-
 int tf_result_pack(tf_tuple *t, int64_t id, int64_t worker, const tf_render_counts *c,
-                   int64_t busy_ns, const tf_pixel *px, size_t npx)
+                   int64_t busy_ns, int64_t spp_total, const tf_chunk_payload *p)
 {
-    uint8_t *wire = malloc(npx * TF_PIXEL_WIRE_BYTES + 1);
-    if (!wire)
-        return -1;
-    for (size_t i = 0; i < npx; i++) {
-        uint8_t *p = wire + i * TF_PIXEL_WIRE_BYTES;
-        put_f32(p, px[i].r);
-        put_f32(p + 4, px[i].g);
-        put_f32(p + 8, px[i].b);
-        put_f32(p + 12, px[i].a);
-        put_f32(p + 16, px[i].z);
-        put_f32(p + 20, px[i].spp);
-    }
     tf_tuple_init(t);
-    int rc = tf_tuple_pack(t, "siiiiiib", "result", id, worker, (int64_t)c->primary_rays,
-                           (int64_t)c->shadow_rays, (int64_t)c->external_rays, busy_ns,
-                           (const void *)wire, npx * TF_PIXEL_WIRE_BYTES);
-    free(wire);
-    return rc;
+    return tf_tuple_pack(t, "siiiiiiibbb", "result", id, worker, (int64_t)c->primary_rays,
+                         (int64_t)c->shadow_rays, (int64_t)c->external_rays, busy_ns, spp_total,
+                         (const void *)p->index, p->nchunks * TF_CHUNK_RECORD_BYTES,
+                         (const void *)p->chunks, p->chunks_len, (const void *)p->preview,
+                         p->preview_len);
 }
 
 int tf_result_template(tf_tuple *t, int64_t id, int64_t worker)
@@ -114,21 +85,25 @@ int tf_result_template(tf_tuple *t, int64_t id, int64_t worker)
         return -1;
     if (worker >= 0 ? tf_tuple_add_int(t, worker) : tf_tuple_add_formal(t, TF_FIELD_INT))
         return -1;
-    return tf_tuple_pack(t, "IIIIB");
+    return tf_tuple_pack(t, "IIIIIBBB");
 }
 
 int tf_result_unpack(const tf_tuple *t, tf_result_msg *m)
 {
     const char *name = tf_tuple_name(t);
-    int64_t v[6];
-    if (!name || strcmp(name, "result") || t->nfields != 8)
+    int64_t v[7];
+    size_t index_len;
+    if (!name || strcmp(name, "result") || t->nfields != 11)
         return -1;
-    for (int i = 0; i < 6; i++)
+    for (int i = 0; i < 7; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))
             return -1;
-    if (tf_tuple_get_blob(t, 7, &m->pixels, &m->pixels_len))
+    if (tf_tuple_get_blob(t, 8, &m->index, &index_len) ||
+        tf_tuple_get_blob(t, 9, &m->chunks, &m->chunks_len) ||
+        tf_tuple_get_blob(t, 10, &m->preview, &m->preview_len) ||
+        index_len % TF_CHUNK_RECORD_BYTES)
         return -1;
-    for (int i = 2; i < 6; i++)
+    for (int i = 2; i < 7; i++)
         if (v[i] < 0)
             return -1;
     m->id = v[0];
@@ -136,22 +111,50 @@ int tf_result_unpack(const tf_tuple *t, tf_result_msg *m)
     m->counts.primary_rays = (uint64_t)v[2];
     m->counts.shadow_rays = (uint64_t)v[3];
     m->counts.external_rays = (uint64_t)v[4];
-    m->counts.pixels = m->pixels_len / TF_PIXEL_WIRE_BYTES;
+    m->counts.pixels = 0;
     m->busy_ns = v[5];
+    m->spp_total = v[6];
+    m->nchunks = index_len / TF_CHUNK_RECORD_BYTES;
     return 0;
 }
 
-void tf_pixels_decode(const uint8_t *wire, tf_pixel *px, size_t n)
+int tf_result_check(tf_result_msg *m, const tf_exr_layout *l, const tf_preview_grid *g,
+                    tf_rect r, char *err, size_t errlen)
 {
-    for (size_t i = 0; i < n; i++) {
-        const uint8_t *p = wire + i * TF_PIXEL_WIRE_BYTES;
-        px[i].r = get_f32(p);
-        px[i].g = get_f32(p + 4);
-        px[i].b = get_f32(p + 8);
-        px[i].a = get_f32(p + 12);
-        px[i].z = get_f32(p + 16);
-        px[i].spp = get_f32(p + 20);
+    int64_t first;
+    int count;
+    if (tf_layout_rect_chunks(l, r, &first, &count))
+        return tf_seterr(err, errlen, "the task's rectangle is not whole chunks of the output");
+    if (m->nchunks != (size_t)count)
+        return tf_seterr(err, errlen, "%zu chunks, the task has %d", m->nchunks, count);
+    uint64_t sum = 0;
+    for (int i = 0; i < count; i++) {
+        tf_chunk_rec c;
+        tf_chunk_rec_get(m->index + (size_t)i * TF_CHUNK_RECORD_BYTES, &c);
+        tf_chunk_ref want = tf_layout_chunk(l, first + i);
+        if (c.cx != want.cx || c.cy != want.cy)
+            return tf_seterr(err, errlen, "chunk %d is at (%d, %d), the task's is at (%d, %d)",
+                             i, c.cx, c.cy, want.cx, want.cy);
+        if (c.unpacked < 0 || (uint64_t)c.unpacked != want.unpacked)
+            return tf_seterr(err, errlen, "chunk (%d, %d) claims %lld unpacked bytes, not %llu",
+                             c.cx, c.cy, (long long)c.unpacked,
+                             (unsigned long long)want.unpacked);
+        if (c.packed < 1 || c.packed > c.unpacked)
+            return tf_seterr(err, errlen, "chunk (%d, %d) has %lld packed bytes (1..%lld)", c.cx,
+                             c.cy, (long long)c.packed, (long long)c.unpacked);
+        sum += (uint64_t)c.packed;
     }
+    if (sum != m->chunks_len)
+        return tf_seterr(err, errlen, "the chunks add up to %llu bytes, the blob has %zu",
+                         (unsigned long long)sum, m->chunks_len);
+    int i0, i1, j0, j1;
+    tf_preview_span(g, l->width, l->height, r, &i0, &i1, &j0, &j1);
+    size_t want_preview = (size_t)(i1 - i0) * (size_t)(j1 - j0) * 3;
+    if (m->preview_len != want_preview)
+        return tf_seterr(err, errlen, "preview of %zu bytes, the task's is %zu", m->preview_len,
+                         want_preview);
+    m->counts.pixels = (uint64_t)r.w * (uint64_t)r.h;
+    return 0;
 }
 
 const char *tf_task_rect_problem(tf_rect r, int image_w, int image_h)

@@ -1,16 +1,42 @@
 /* farmproto.h: the render farm's conversation, as tuples in the tuple space (tuple.h).  The
  * coordinator's supervisor and every worker (forked or networked) speak only these:
  *
- *   ("scene", text:S, width:I, height:I, hash:S)        rd by networked workers (tsnet model)
+ *   ("scene", text:S, width:I, height:I, hash:S, layout:S)  rd by networked workers (tsnet)
  *   ("next_worker", n:I)                                in + out n+1: a worker takes an id
  *   ("hello", worker:I, kind:S, host:S, pid:I, backend:S)  a worker announces itself
  *   ("task", id:I, x:I, y:I, w:I, h:I, excluded:B)     a rectangle to render; id < 0 = stop
- *   ("result", id:I, worker:I, primary:I, shadow:I, external:I, busy_ns:I, pixels:B)
+ *   ("result", id:I, worker:I, primary:I, shadow:I, external:I, busy_ns:I, spp_total:I,
+ *              index:B, chunks:B, preview:B)                    the task's finished EXR chunks
  *   ("failed", id:I, worker:I, message:S)              a worker could not render a task
  *
  * `excluded` is a list of little-endian int64 worker ids that must not render this task (it
  * failed on them repeatedly): such a worker puts the tuple back and waits a little.
- * `pixels` is w*h tf_pixels, row-major, each 6 little-endian IEEE floats (r g b a z spp).
+ * `layout` is the output file's shape (image/exrlayout.h, tf_exr_layout_format): "scanline half",
+ * "tiled 64x64 float", ...; workers encode their chunks for exactly that file.
+ *
+ * THE RESULT FORMAT.  Workers encode; the coordinator moves bytes.  A result carries the
+ * task's rectangle as finished OpenEXR chunks, packed (compressed) by the worker with
+ * OpenEXRCore's encode pipeline for the output's layout, ready for exr_write_scanline_chunk /
+ * exr_write_tile_chunk.  primary, shadow, external are the rays the task cost; busy_ns its
+ * render time; spp_total the sum of its pixels' spp channel (for samples_per_pixel_avg: the
+ * coordinator never sees a pixel).  All integers in the blobs little-endian.
+ *   index    n records of TF_CHUNK_RECORD_BYTES (24) bytes, one per chunk, in file order
+ *            (increasing y; tiles left to right within a tile row):
+ *                int32 cx, int32 cy      scanline: 0 and the chunk's row y;
+ *                                        tiled: the tile's indices (x / tile_w, y / tile_h)
+ *                int64 packed            bytes of this chunk in `chunks`, 1 .. unpacked
+ *                                        (packed == unpacked means stored uncompressed, as
+ *                                        OpenEXR does when compression would not help)
+ *                int64 unpacked          bytes it decodes to: w * h * (16 half | 24 float)
+ *   chunks   the n packed chunks, concatenated in index order (length = sum of packed)
+ *   preview  the task's share of the progress preview: the preview pixels whose source pixel
+ *            lies in the rectangle (tf_preview_span), row-major, 3 bytes sRGB each
+ * A result is structurally valid for task T (tf_result_check, no per-pixel work) when: n and
+ * every (cx, cy) are exactly T's chunks in file order (tf_layout_rect_chunks); every unpacked
+ * equals what the layout says for that chunk; 1 <= packed <= unpacked; the packed sizes sum to
+ * the length of `chunks`; and `preview` has exactly T's preview pixels * 3 bytes.  Anything else
+ * is refused: the result is dropped, counted against its worker, and the task dealt again.
+ * (Whether the packed bytes decode is checked only with --verify-chunks.)
  * The stop task (id TF_TASK_STOP) is put back by every worker that takes it, so one tuple stops
  * them all. */
 #ifndef TF_FARMPROTO_H
@@ -19,13 +45,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "image/exrlayout.h"
 #include "image/pixel.h"
 #include "render/counts.h"
 #include "linda/tuple.h"
 
 #define TF_TASK_STOP (-1)
 #define TF_EXCLUDED_MAX 64
-#define TF_PIXEL_WIRE_BYTES 24
 
 typedef struct tf_task_msg {
     int64_t id;
@@ -36,10 +62,15 @@ typedef struct tf_task_msg {
 
 typedef struct tf_result_msg {
     int64_t id, worker;
-    tf_render_counts counts; /* primary, shadow, external (pixels = w*h) */
+    tf_render_counts counts; /* primary, shadow, external; pixels = 0 until checked */
     int64_t busy_ns;
-    const uint8_t *pixels;   /* borrowed from the tuple */
-    size_t pixels_len;
+    int64_t spp_total;
+    const uint8_t *index;    /* borrowed from the tuple: nchunks records */
+    size_t nchunks;
+    const uint8_t *chunks;
+    size_t chunks_len;
+    const uint8_t *preview;
+    size_t preview_len;
 } tf_result_msg;
 
 int tf_task_pack(tf_tuple *t, const tf_task_msg *m);
@@ -50,13 +81,16 @@ int tf_task_template(tf_tuple *t, int64_t id);
 int tf_task_unpack(const tf_tuple *t, tf_task_msg *m);
 int tf_task_excludes(const tf_task_msg *m, int64_t worker);
 
-/* Packs w*h pixels into a result tuple. */
 int tf_result_pack(tf_tuple *t, int64_t id, int64_t worker, const tf_render_counts *c,
-                   int64_t busy_ns, const tf_pixel *px, size_t npx);
+                   int64_t busy_ns, int64_t spp_total, const tf_chunk_payload *p);
 int tf_result_template(tf_tuple *t, int64_t id /* < 0: any */, int64_t worker /* < 0: any */);
+/* Fields and types only: 0, or -1 if t is not a well-formed result tuple. */
 int tf_result_unpack(const tf_tuple *t, tf_result_msg *m);
-/* Decode n pixels from the wire form. */
-void tf_pixels_decode(const uint8_t *wire, tf_pixel *px, size_t n);
+/* The structural check described above, of m against the task rectangle r of an output with
+ * layout l and preview grid g: 0, or -1 with a one-line reason.  Costs O(chunks), never touches
+ * a pixel.  On success m->counts.pixels = r.w * r.h. */
+int tf_result_check(tf_result_msg *m, const tf_exr_layout *l, const tf_preview_grid *g,
+                    tf_rect r, char *err, size_t errlen);
 
 /* Largest task a worker accepts, in pixels (a bound on its buffer, whatever a tuple says). */
 #define TF_TASK_MAX_PIXELS (64u * 1024u * 1024u)

@@ -51,6 +51,8 @@ void tf_render_opts_init(tf_render_opts *o)
     o->lease_timeout_ms = 15000;
     o->max_task_failures = 3;
     o->fsync_interval_ms = 1000;
+    o->pixel = TF_PIXEL_HALF; /* see README: Performance, why half */
+    o->preview_interval_ms = 3000;
 }
 
 /* Everything one render owns.  A step that fails logs one line, sets status and returns -1. */
@@ -62,14 +64,18 @@ typedef struct render {
     char *output, *preview;
     int nworkers;                /* local workers to fork */
     tf_task_spec spec;
+    tf_exr_layout layout;        /* of the output file, from the task shape and --pixel */
+    char layout_text[64];
     tf_exr_meta meta;
     tf_output_plan plan;
     int first_row;               /* rows already on disk */
+    int first_tiles;             /* and tiles of the next tile row (a tiled resume) */
     const char *listen;
     uint8_t key[TF_KEY_BYTES];
     int have_key;
     tf_heightfield *hf;          /* built before forking, for the local workers */
     double hf_s;
+    double setup_cpu_s;          /* CPU time spent before supervising (terrain build included) */
     ts_space *space;
     tf_supervisor *sup;
     ts_server_config cfg;
@@ -129,13 +135,51 @@ static int load_scene(render *r)
     return 0;
 }
 
+/* Scanline-block tasks for a resumed scanline file when no --tasks says otherwise: bands of
+ * about 64 K pixels. */
+static tf_task_spec rows_spec_for(int width)
+{
+    int k = 65536 / (width > 0 ? width : 1);
+    tf_task_spec spec = {TF_TASKS_ROWS, 0, k < 1 ? 1 : k > 64 ? 64 : k};
+    return spec;
+}
+
+/* The output's layout follows the task shape: stamps are tiles of exactly the stamp (as the
+ * tasks clip it to the image), rows a scanline file.  A resume without --tasks (or --pixel)
+ * continues the file's own layout. */
+static void choose_layout(render *r)
+{
+    const tf_render_opts *o = r->o;
+    int pixel = o->pixel;
+    tf_exr_layout have;
+    if (o->resume && tf_output_existing_layout(r->output, &have) &&
+        have.width == r->scene->width && have.height == r->scene->height) {
+        if (!o->tasks_given)
+            r->spec = have.tiled ? (tf_task_spec){TF_TASKS_STAMPS, have.tile_w, have.tile_h}
+                                 : rows_spec_for(have.width);
+        if (!o->pixel_given)
+            pixel = have.pixel;
+    }
+    tf_tasks all;
+    tf_tasks_init(&all, r->scene->width, r->scene->height, 0, r->spec);
+    r->layout = (tf_exr_layout){r->scene->width, r->scene->height,
+                                r->spec.shape == TF_TASKS_STAMPS, 0, 0, pixel};
+    if (r->layout.tiled) {
+        r->layout.tile_w = all.tw;
+        r->layout.tile_h = all.th;
+    }
+    tf_exr_layout_format(&r->layout, r->layout_text, sizeof r->layout_text);
+}
+
 /* 1b. The output: fresh, resume, already complete, or refuse -- before any expensive work. */
 static int plan_output(render *r)
 {
-    tf_output_meta(&r->meta, r->scene, r->o->scene_path);
+    choose_layout(r);
+    tf_output_meta(&r->meta, r->scene, r->o->scene_path, &r->layout);
     if (tf_output_plan_for(r->output, &r->meta, r->o->resume, r->o->overwrite, &r->plan))
         return step_failed(r, 1, NULL);
     r->first_row = r->plan.resume_rows > 0 ? r->plan.resume_rows : 0;
+    r->first_tiles = r->plan.resume_rows >= 0 ? r->plan.resume_tiles : 0;
     return 0;
 }
 
@@ -172,12 +216,12 @@ static int build_terrain(render *r)
     return 0;
 }
 
-static int put_scene_tuples(ts_space *space, const tf_scene *s)
+static int put_scene_tuples(ts_space *space, const tf_scene *s, const char *layout)
 {
     tf_tuple t;
     tf_tuple_init(&t);
-    if (tf_tuple_pack(&t, "ssiis", "scene", s->text, (int64_t)s->width, (int64_t)s->height,
-                      s->hash_hex) ||
+    if (tf_tuple_pack(&t, "ssiiss", "scene", s->text, (int64_t)s->width, (int64_t)s->height,
+                      s->hash_hex, layout) ||
         ts_space_out(space, &t))
         return -1;
     tf_tuple_init(&t);
@@ -193,14 +237,24 @@ static int start_space(render *r)
     char err[1024];
     const tf_render_opts *o = r->o;
     tf_tasks_init(&r->tasks, r->scene->width, r->scene->height, r->first_row, r->spec);
+    tf_tasks_skip(&r->tasks, r->first_tiles);
     r->space = ts_space_new();
-    if (!r->space || put_scene_tuples(r->space, r->scene))
+    if (!r->space || put_scene_tuples(r->space, r->scene, r->layout_text))
         return step_failed(r, 1, "out of memory");
     int expected_workers = r->nworkers > 0 ? r->nworkers : 4;
-    tf_supervisor_config scfg = {r->scene->width, r->scene->height, r->first_row, r->spec,
-                                 o->watermark /* 0: auto, following the connected workers */,
-                                 expected_workers, o->max_task_failures,
-                                 NULL /* the writer comes once the output exists */};
+    tf_supervisor_config scfg;
+    memset(&scfg, 0, sizeof scfg);
+    scfg.width = r->scene->width;
+    scfg.height = r->scene->height;
+    scfg.first_row = r->first_row;
+    scfg.first_tiles = r->first_tiles;
+    scfg.layout = r->layout;
+    scfg.verify_chunks = o->verify_chunks;
+    scfg.spec = r->spec;
+    scfg.watermark = o->watermark; /* 0: auto, following the connected workers */
+    scfg.expected_workers = expected_workers;
+    scfg.max_task_failures = o->max_task_failures;
+    scfg.writer = NULL; /* the writer comes once the output exists */
     r->sup = tf_supervisor_new(r->space, &scfg, err, sizeof err);
     if (!r->sup)
         return step_failed(r, 2, err);
@@ -244,14 +298,12 @@ static int open_output(render *r)
     tf_exr_writer *writer = tf_output_open(r->output, &r->meta, &r->plan, err, sizeof err);
     if (!writer)
         return step_failed(r, 1, err);
-    /* Room for two bands of rows: handing a finished band to the writer must not block the
-     * event loop (every worker waiting for a reply would wait for the compression).  Bands are
-     * capped in pixels (tasks.c), so this stays a few MB whatever the image size. */
-    int queue_rows = 2 * r->tasks.th + 8;
-    int queue_chunks = queue_rows / tf_exr_chunk_rows() > 2 ? queue_rows / tf_exr_chunk_rows() : 2;
-    r->rows_out = tf_rowwriter_start(writer, r->scene->width, r->scene->height,
-                                     tf_exr_chunk_rows(), queue_chunks, r->o->fsync_interval_ms,
-                                     r->preview, r->plan.working, err, sizeof err);
+    /* Room for two bands of results: handing results to the writer must not block the event
+     * loop.  Results are packed chunks, and bands are capped in pixels (tasks.c), so this stays
+     * a few MB whatever the image size. */
+    tf_rowwriter_config wcfg = {2 * r->tasks.cols + 8, r->o->fsync_interval_ms, r->preview,
+                                r->o->preview_interval_ms, r->plan.working};
+    r->rows_out = tf_rowwriter_start(writer, &r->layout, &wcfg, err, sizeof err);
     if (!r->rows_out) {
         tf_exr_abandon(writer);
         return step_failed(r, 1, err);
@@ -283,14 +335,16 @@ static void announce(render *r)
         char host[256], port[32], e[128];
         if (tf_split_hostport(r->cfg.listen, host, sizeof host, port, sizeof port, e, sizeof e))
             snprintf(host, sizeof host, "?");
-        tf_info("rendering %s %dx%d: %d tasks (%s), watermark %s, %d local worker%s, workers "
-                "may join at %s:%d%s",
-                s->path, s->width, s->height, r->tasks.count, r->tdesc, wdesc, r->nworkers,
+        tf_info("rendering %s %dx%d: %d tasks (%s, %s), watermark %s, %d local worker%s, "
+                "workers may join at %s:%d%s",
+                s->path, s->width, s->height, r->tasks.count, r->tdesc, r->layout_text, wdesc,
+                r->nworkers,
                 r->nworkers == 1 ? "" : "s", host, ts_server_port(r->srv),
                 r->have_key ? " (secret required)" : "");
     } else {
-        tf_info("rendering %s %dx%d: %d tasks (%s), watermark %s, %d local workers", s->path,
-                s->width, s->height, r->tasks.count, r->tdesc, wdesc, r->nworkers);
+        tf_info("rendering %s %dx%d: %d tasks (%s, %s), watermark %s, %d local workers",
+                s->path, s->width, s->height, r->tasks.count, r->tdesc, r->layout_text, wdesc,
+                r->nworkers);
     }
 }
 
@@ -391,7 +445,7 @@ static int finish(render *r)
             (long long)st->tasks_redealt);
     if (r->o->stats_path) {
         tf_run_info run = {wall, r->scene->width, r->scene->height, r->scene->path, r->output,
-                           r->tdesc, r->nworkers, r->hf_s};
+                           r->tdesc, r->nworkers, r->hf_s, r->setup_cpu_s, r->layout_text};
         if (tf_stats_write(r->o->stats_path, &run, st, err, sizeof err))
             return step_failed(r, 1, err);
     }
@@ -436,8 +490,11 @@ int tf_coordinator_run(const tf_render_opts *o)
         r.status = 0;
         goto out;
     }
-    if (load_secret(&r) || build_terrain(&r) || start_space(&r) || start_workers(&r) ||
-        open_output(&r))
+    if (load_secret(&r) || build_terrain(&r))
+        goto out;
+    /* all threads of this process; the forked workers are other processes */
+    r.setup_cpu_s = (double)tf_clock_ns(CLOCK_PROCESS_CPUTIME_ID) * 1e-9;
+    if (start_space(&r) || start_workers(&r) || open_output(&r))
         goto out;
     announce(&r);
     if (supervise(&r) != 0) {

@@ -6,7 +6,9 @@
  *      (Musgrave's fork model); networked workers join over TCP and build their own (tsnet);
  *   3. supervise (supervisor.h): deal task tuples up to the watermark, lease them, collect
  *      results in order, write finished rows to the OpenEXR checkpoint, re-deal what is lost;
- *   4. finish the file, write the PNG preview and the statistics. */
+ *   4. finish the file, write the PNG preview and the statistics.
+ * Workers encode their rectangles into the file's OpenEXR chunks themselves; the coordinator only
+ * checks and moves those bytes (supervisor.h, rowwriter.h). */
 #ifndef TF_COORDINATOR_H
 #define TF_COORDINATOR_H
 
@@ -29,6 +31,10 @@ typedef struct tf_render_opts {
     int lease_timeout_ms;      /* a silent worker is dropped after this (default 15000) */
     int max_task_failures;     /* distinct workers a task may fail on before the render stops */
     int fsync_interval_ms;     /* at most this long between durable checkpoints */
+    int pixel;                 /* --pixel: TF_PIXEL_HALF | TF_PIXEL_FLOAT (image/exrlayout.h) */
+    int pixel_given;           /* 1 if --pixel was given (a resume otherwise keeps the file's) */
+    int verify_chunks;         /* --verify-chunks: decode every result's chunks before accepting */
+    int preview_interval_ms;   /* rewrite the progress preview this often (default 3000) */
     int quiet, verbose;
 } tf_render_opts;
 

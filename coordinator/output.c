@@ -62,16 +62,35 @@ static int ensure_parent_dir(const char *path, char *err, size_t errlen)
     return 0;
 }
 
-void tf_output_meta(tf_exr_meta *m, const tf_scene *s, const char *scene_path)
+void tf_output_meta(tf_exr_meta *m, const tf_scene *s, const char *scene_path,
+                    const tf_exr_layout *l)
 {
     memset(m, 0, sizeof *m);
     m->width = s->width;
     m->height = s->height;
+    m->tiled = l->tiled;
+    m->tile_w = l->tile_w;
+    m->tile_h = l->tile_h;
+    m->pixel = l->pixel;
     snprintf(m->scene_hash, sizeof m->scene_hash, "%s", s->hash_hex);
     const char *base = strrchr(scene_path, '/');
     snprintf(m->scene_name, sizeof m->scene_name, "%s", base ? base + 1 : scene_path);
-    /* Everything besides the scene that decides pixel values: the renderer's version. */
-    snprintf(m->settings, sizeof m->settings, "renderer=terrafarm-%s", TF_VERSION);
+    /* Everything besides the scene that decides pixel values: the renderer's version and the
+     * channel type of R, G, B, A. */
+    snprintf(m->settings, sizeof m->settings, "renderer=terrafarm-%s pixel=%s", TF_VERSION,
+             tf_pixel_type_name(l->pixel));
+}
+
+int tf_output_existing_layout(const char *output, tf_exr_layout *l)
+{
+    tf_exr_meta have;
+    int64_t chunks = 0;
+    int complete = 0;
+    char err[1024];
+    if (tf_exr_probe_chunks(output, &have, &chunks, &complete, err, sizeof err) != 0)
+        return 0;
+    *l = tf_exr_meta_layout(&have);
+    return 1;
 }
 
 int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, int overwrite,
@@ -80,12 +99,17 @@ int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, 
     int *resume_rows = &plan->resume_rows, *already_complete = &plan->complete;
     tf_exr_meta have;
     int rows = 0, complete = 0;
+    int64_t chunks = 0;
     char err[1024];
     *resume_rows = -1;
+    plan->resume_tiles = 0;
     *already_complete = 0;
     plan->beside = 0;
     snprintf(plan->working, sizeof plan->working, "%s", output);
-    int r = tf_exr_probe(output, &have, &rows, &complete, err, sizeof err);
+    int r = tf_exr_probe_chunks(output, &have, &chunks, &complete, err, sizeof err);
+    tf_exr_layout have_layout = tf_exr_meta_layout(&have);
+    if (r == 0)
+        rows = tf_layout_rows_in_chunks(&have_layout, chunks);
     if (r == 1) {
         if (resume)
             tf_info("%s: nothing to resume, starting a fresh render", output);
@@ -114,7 +138,7 @@ int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, 
         return 0;
     }
     if (!resume) {
-        if (!complete && rows == 0) {
+        if (!complete && chunks == 0) {
             tf_info("%s: a partial render with no rows is there; it will be replaced", output);
             return 0;
         }
@@ -140,11 +164,23 @@ int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, 
                  have.settings, want->settings);
         return -1;
     }
+    tf_exr_layout want_layout = tf_exr_meta_layout(want);
+    if (have.tiled != want->tiled || have.pixel != want->pixel ||
+        (have.tiled && (have.tile_w != want->tile_w || have.tile_h != want->tile_h))) {
+        char a[64], b[64];
+        tf_exr_layout_format(&have_layout, a, sizeof a);
+        tf_exr_layout_format(&want_layout, b, sizeof b);
+        tf_error("%s: cannot resume: the file is '%s', this render would write '%s' (resume with "
+                 "the same --tasks and --pixel, or without --tasks)",
+                 output, a, b);
+        return -1;
+    }
     if (complete) {
         *already_complete = 1;
         return 0;
     }
     *resume_rows = rows;
+    plan->resume_tiles = (int)(chunks % tf_layout_chunks_x(&have_layout));
     return 0;
 }
 
@@ -200,13 +236,18 @@ tf_exr_writer *tf_output_open(const char *output, const tf_exr_meta *meta,
     }
     int rows_done = 0;
     tf_exr_writer *w = tf_exr_resume(output, meta, &rows_done, err, errlen);
-    if (w && rows_done != plan->resume_rows) {
+    tf_exr_layout l = tf_exr_meta_layout(meta);
+    int tiles = w ? (int)(tf_exr_next_chunk(w) % tf_layout_chunks_x(&l)) : 0;
+    if (w && (rows_done != plan->resume_rows || tiles != plan->resume_tiles)) {
         tf_exr_abandon(w);
         tf_seterr(err, errlen, "%s: changed while starting (%d rows, expected %d)", output,
                   rows_done, plan->resume_rows);
         return NULL;
     }
-    if (w)
+    if (w && tiles > 0)
+        tf_info("resuming %s: %d of %d rows already on disk (and %d tiles of the next tile "
+                "row)", output, rows_done, meta->height, tiles);
+    else if (w)
         tf_info("resuming %s: %d of %d rows already on disk", output, rows_done, meta->height);
     return w;
 }

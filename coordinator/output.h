@@ -22,15 +22,23 @@ char *tf_output_default_path(const char *scene_path);
 /* FILE.exr -> FILE.png (FILE.png appended when there is no .exr), malloc'd. */
 char *tf_output_preview_path(const char *output);
 
-/* The header attributes a render of scene s writes and a resume compares. */
-void tf_output_meta(tf_exr_meta *m, const tf_scene *s, const char *scene_path);
+/* The header attributes a render of scene s into a file of layout l writes and a resume
+ * compares (the pixel type is part of the settings). */
+void tf_output_meta(tf_exr_meta *m, const tf_scene *s, const char *scene_path,
+                    const tf_exr_layout *l);
 
 typedef struct tf_output_plan {
-    int resume_rows;   /* rows to keep (>= 0), or -1: start a fresh file */
+    int resume_rows;   /* whole rows to keep (>= 0), or -1: start a fresh file */
+    int resume_tiles;  /* and, in a tiled file, the tiles of the next tile row on disk */
     int complete;      /* 1: the output is already a finished render of this scene */
     int beside;        /* 1: a finished render is there: render into `working`, then rename */
     char working[4096];/* the file being written (the output itself unless beside) */
 } tf_output_plan;
+
+/* With --resume and no --tasks: the layout of a terrafarm render already at `output` (so the
+ * resume continues its tiles, whatever the default stamp size would be now).  1 and *l filled
+ * if there is one, else 0. */
+int tf_output_existing_layout(const char *output, tf_exr_layout *l);
 
 /* Decide what to do with whatever is at `output`, following --resume / --overwrite.  0 with
  * *plan filled, or -1 after logging why it refuses.  Touches nothing on disk. */

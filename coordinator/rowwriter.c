@@ -1,15 +1,16 @@
-/* rowwriter.c: see rowwriter.h.  A ring of `depth` chunk buffers between one producer (the
+/* rowwriter.c: see rowwriter.h.  A ring of `depth` result tuples between one producer (the
  * supervisor) and one consumer (the writer thread), under one mutex with two condition
  * variables.  INVARIANTS (checked by queue_ok() under the mutex in debug builds, `make asan`):
  *   R1. 0 <= head < depth and 0 <= count <= depth;
- *   R2. slots [head, head + count) modulo depth hold the queued chunks in row order, each of
- *       1..chunk_rows rows, and only the producer touches the slot at head + count;
+ *   R2. slots [head, head + count) modulo depth hold the queued results in file order, each a
+ *       result tuple (11 fields), and only the producer touches the slot at head + count;
  *   R3. rows_written only grows. */
 #include "coordinator/rowwriter.h"
 #include "clock.h"
 
+#include "farmproto.h"
+#include "image/exrencode.h"
 #include "image/png_write.h"
-#include "image/preview.h"
 
 #include <assert.h>
 #include <pthread.h>
@@ -21,39 +22,115 @@
 
 struct tf_rowwriter {
     tf_exr_writer *w;
-    int width, chunk_rows, depth, fsync_ms;
-    tf_pixel **slot;
-    int *slot_rows;
+    tf_exr_layout layout;
+    int depth, fsync_ms, preview_ms;
+    tf_tuple *slot;
     int head, count;
     int stop;          /* 1: finish after the queue drains */
     int failed;
     char error[512];
     int rows_written;
-    tf_png_writer *png;    /* preview, or NULL */
-    uint8_t *rgb;          /* one preview row */
+    /* the progress preview (writer thread only) */
+    char *preview_path;
+    tf_preview_grid grid;
+    uint8_t *preview;      /* grid.pw * grid.ph * 3, black where nothing is rendered yet */
+    int preview_dirty;
+    double preview_last;
     pthread_mutex_t mu;
     pthread_cond_t nonempty, nonfull;
     pthread_t thread;
 };
 
-/* Tone-map rows into the preview; a preview failure only costs the preview. */
-static void preview_rows(tf_rowwriter *rw, const tf_pixel *px, int nrows)
+/* ---- the preview ---------------------------------------------------------------------------- */
+
+/* Paste the preview share of rectangle r (tf_preview_span, row-major RGB) into the preview. */
+static void paste_share(tf_rowwriter *rw, tf_rect r, const uint8_t *share, size_t len)
+{
+    int i0, i1, j0, j1;
+    tf_preview_span(&rw->grid, rw->layout.width, rw->layout.height, r, &i0, &i1, &j0, &j1);
+    size_t line = (size_t)(i1 - i0) * 3;
+    if (!rw->preview || len != line * (size_t)(j1 - j0))
+        return; /* checked by the supervisor; never trusted further */
+    for (int j = j0; j < j1; j++)
+        memcpy(rw->preview + ((size_t)j * (size_t)rw->grid.pw + (size_t)i0) * 3,
+               share + (size_t)(j - j0) * line, line);
+    rw->preview_dirty = 1;
+}
+
+/* Rewrite the PNG (tf_png_* writes PATH.tmp and renames it into place).  A preview failure
+ * only costs the preview: while rendering it is retried at the next interval, silently; a
+ * failure of the final one (`last`) is one warning. */
+static void write_preview(tf_rowwriter *rw, int last)
 {
     char err[512];
-    for (int y = 0; rw->png && y < nrows; y++) {
-        const tf_pixel *row = px + (size_t)y * (size_t)rw->width;
-        for (int x = 0; x < rw->width; x++) {
-            rw->rgb[3 * x + 0] = tf_srgb8(row[x].r);
-            rw->rgb[3 * x + 1] = tf_srgb8(row[x].g);
-            rw->rgb[3 * x + 2] = tf_srgb8(row[x].b);
+    if (!rw->preview || !rw->preview_path)
+        return;
+    tf_png_writer *png = tf_png_create(rw->preview_path, rw->grid.pw, rw->grid.ph, 8, 3, err,
+                                       sizeof err);
+    for (int j = 0; png && j < rw->grid.ph; j++)
+        if (tf_png_write_row(png, rw->preview + (size_t)j * (size_t)rw->grid.pw * 3, err,
+                             sizeof err)) {
+            tf_png_abort(png);
+            png = NULL;
         }
-        if (tf_png_write_row(rw->png, rw->rgb, err, sizeof err)) {
-            fprintf(stderr, "terrafarm: warning: preview: %s\n", err);
-            tf_png_abort(rw->png);
-            rw->png = NULL;
-        }
+    if (!png || tf_png_finish(png, err, sizeof err)) {
+        if (last)
+            tf_warn("preview: %s", err);
+        rw->preview_last = tf_now_msf();
+        return;
     }
+    rw->preview_dirty = 0;
+    rw->preview_last = tf_now_msf();
 }
+
+typedef struct prefill {
+    tf_rowwriter *rw;
+    int64_t chunks, seen;
+    uint8_t *buf;
+    size_t cap;
+} prefill;
+
+static int prefill_chunk(void *user, tf_rect rect, const tf_pixel *px)
+{
+    prefill *p = user;
+    if (p->seen++ >= p->chunks)
+        return 1; /* stop: the rest will come from the render */
+    size_t len = 0;
+    if (tf_preview_share(&p->rw->grid, p->rw->layout.width, p->rw->layout.height, rect, px,
+                         &p->buf, &p->cap, &len))
+        return 1;
+    paste_share(p->rw, rect, p->buf, len);
+    return 0;
+}
+
+/* Open the preview and fill it from the chunks already in the file being resumed (this decodes
+ * them: a resume's one-time cost, not the render path's). */
+static void start_preview(tf_rowwriter *rw, const char *png_path, const char *existing)
+{
+    rw->grid = tf_preview_grid_for(rw->layout.width, rw->layout.height);
+    rw->preview = calloc((size_t)rw->grid.pw * (size_t)rw->grid.ph, 3);
+    rw->preview_path = strdup(png_path);
+    if (!rw->preview || !rw->preview_path) {
+        tf_warn("no preview: out of memory");
+        free(rw->preview);
+        rw->preview = NULL;
+        return;
+    }
+    int64_t on_disk = tf_exr_next_chunk(rw->w);
+    if (on_disk > 0 && existing) {
+        prefill p = {rw, on_disk, 0, NULL, 0};
+        tf_exr_meta meta;
+        int64_t valid = 0;
+        char err[512];
+        tf_exr_read_chunks(existing, &meta, &valid, prefill_chunk, &p, err, sizeof err);
+        free(p.buf);
+        if (p.seen < on_disk)
+            tf_warn("preview: cannot read back %s; it shows only this run's part", existing);
+    }
+    rw->preview_dirty = 1;
+}
+
+/* ---- the thread ----------------------------------------------------------------------------- */
 
 #ifndef NDEBUG
 /* R1 and R2 (call with rw->mu held). */
@@ -61,14 +138,40 @@ static int queue_ok(const tf_rowwriter *rw)
 {
     if (rw->head < 0 || rw->head >= rw->depth || rw->count < 0 || rw->count > rw->depth)
         return 0;
-    for (int i = 0; i < rw->count; i++) {
-        int rows = rw->slot_rows[(rw->head + i) % rw->depth];
-        if (rows < 1 || rows > rw->chunk_rows)
+    for (int i = 0; i < rw->count; i++)
+        if (rw->slot[(rw->head + i) % rw->depth].nfields != 11)
             return 0;
-    }
     return 1;
 }
 #endif
+
+/* Write one result's chunks, in index order, and paste its preview share. */
+static int write_result(tf_rowwriter *rw, const tf_tuple *t, char *err, size_t errlen)
+{
+    tf_result_msg m;
+    if (tf_result_unpack(t, &m))
+        return tf_seterr(err, errlen, "internal error: a queued result does not unpack");
+    size_t off = 0;
+    tf_rect first = {0, 0, 0, 0}, last = {0, 0, 0, 0};
+    for (size_t i = 0; i < m.nchunks; i++) {
+        tf_chunk_rec c;
+        tf_chunk_rec_get(m.index + i * TF_CHUNK_RECORD_BYTES, &c);
+        int64_t index = tf_layout_chunk_index(&rw->layout, c.cx, c.cy);
+        tf_chunk_ref ref = tf_layout_chunk(&rw->layout, index < 0 ? 0 : index);
+        if (i == 0)
+            first = ref.rect;
+        last = ref.rect;
+        if (tf_exr_write_chunk(rw->w, c.cx, c.cy, m.chunks + off, (size_t)c.packed, err,
+                               errlen))
+            return -1;
+        off += (size_t)c.packed;
+    }
+    /* the task's rectangle: its chunks' union (one tile, or full rows) */
+    tf_rect r = {first.x, first.y, last.x + last.w - first.x, last.y + last.h - first.y};
+    if (m.nchunks > 0)
+        paste_share(rw, r, m.preview, m.preview_len);
+    return 0;
+}
 
 static void *writer_main(void *arg)
 {
@@ -79,53 +182,64 @@ static void *writer_main(void *arg)
     pthread_mutex_lock(&rw->mu);
     for (;;) {
         while (rw->count == 0 && !rw->stop) {
-            if (dirty) {
-                /* Idle with unsynced rows: wait at most until the next sync is due. */
-                double due = last_sync + rw->fsync_ms;
-                double wait = due - tf_now_msf();
-                if (wait <= 0)
-                    break;
-                struct timespec ts = tf_realtime_in(wait);
-                pthread_cond_timedwait(&rw->nonempty, &rw->mu, &ts);
-            } else {
+            double now = tf_now_msf(), due = 1e300;
+            if (dirty)
+                due = last_sync + rw->fsync_ms;
+            if (rw->preview_dirty && rw->preview && rw->preview_last + rw->preview_ms < due)
+                due = rw->preview_last + rw->preview_ms;
+            if (due == 1e300) {
                 pthread_cond_wait(&rw->nonempty, &rw->mu);
+                continue;
             }
+            if (due - now <= 0)
+                break;
+            struct timespec ts = tf_realtime_in(due - now);
+            pthread_cond_timedwait(&rw->nonempty, &rw->mu, &ts);
         }
         assert(queue_ok(rw));
         if (rw->count == 0 && rw->stop)
             break;
         int have = rw->count > 0 && !rw->failed;
-        int idx = rw->head, nrows = have ? rw->slot_rows[idx] : 0;
+        tf_tuple item;
+        tf_tuple_init(&item);
+        if (have)
+            tf_tuple_move(&item, &rw->slot[rw->head]);
         pthread_mutex_unlock(&rw->mu);
 
         int rc = 0;
         if (have) {
-            rc = tf_exr_write_rows(rw->w, nrows, rw->slot[idx], err, sizeof err);
+            rc = write_result(rw, &item, err, sizeof err);
+            tf_tuple_clear(&item);
             dirty = 1;
-            if (rc == 0)
-                preview_rows(rw, rw->slot[idx], nrows);
         }
-        if (rc == 0 && dirty && tf_now_msf() - last_sync >= rw->fsync_ms) {
+        double now = tf_now_msf();
+        if (rc == 0 && dirty && now - last_sync >= rw->fsync_ms) {
             rc = tf_exr_sync(rw->w, err, sizeof err);
             last_sync = tf_now_msf();
             dirty = 0;
         }
+        if (rw->preview_dirty && rw->preview && now - rw->preview_last >= rw->preview_ms)
+            write_preview(rw, 0);
+        int rows = tf_exr_next_row(rw->w);
 
         pthread_mutex_lock(&rw->mu);
         if (rc != 0 && !rw->failed) {
             rw->failed = 1;
             snprintf(rw->error, sizeof rw->error, "%s", err);
         }
+        if (rows > rw->rows_written)
+            rw->rows_written = rows;
         if (have) {
-            if (rc == 0)
-                rw->rows_written += nrows;
             rw->head = (rw->head + 1) % rw->depth;
             rw->count--;
             pthread_cond_signal(&rw->nonfull);
         } else if (rw->failed && rw->count > 0) {
             /* after a failure, drop the queue: nothing more may be written past the gap */
-            rw->head = (rw->head + rw->count) % rw->depth;
-            rw->count = 0;
+            while (rw->count > 0) {
+                tf_tuple_clear(&rw->slot[rw->head]);
+                rw->head = (rw->head + 1) % rw->depth;
+                rw->count--;
+            }
             pthread_cond_signal(&rw->nonfull);
         }
     }
@@ -139,76 +253,31 @@ static void free_rowwriter(tf_rowwriter *rw)
         return;
     if (rw->slot)
         for (int i = 0; i < rw->depth; i++)
-            free(rw->slot[i]);
+            tf_tuple_clear(&rw->slot[i]);
     free(rw->slot);
-    free(rw->slot_rows);
-    if (rw->png)
-        tf_png_abort(rw->png);
-    free(rw->rgb);
+    free(rw->preview);
+    free(rw->preview_path);
     free(rw);
 }
 
-typedef struct prefill {
-    tf_rowwriter *rw;
-    int rows;
-} prefill;
-
-static int prefill_row(void *user, int y, const tf_pixel *row)
-{
-    prefill *p = user;
-    if (y >= p->rows)
-        return 1; /* stop: the rest will come from the render */
-    preview_rows(p->rw, row, 1);
-    return 0;
-}
-
-/* Open the preview and feed it the rows already in the file being resumed. */
-static void start_preview(tf_rowwriter *rw, int height, const char *png_path, const char *existing)
-{
-    char err[512];
-    rw->rgb = malloc((size_t)rw->width * 3);
-    rw->png = rw->rgb ? tf_png_create(png_path, rw->width, height, 8, 3, err, sizeof err) : NULL;
-    if (!rw->png) {
-        fprintf(stderr, "terrafarm: warning: no preview: %s\n", rw->rgb ? err : "out of memory");
-        return;
-    }
-    if (rw->rows_written > 0 && existing) {
-        prefill p = {rw, rw->rows_written};
-        tf_exr_meta meta;
-        int valid = 0;
-        tf_exr_read_rows(existing, &meta, &valid, prefill_row, &p, err, sizeof err);
-        if (valid < p.rows && rw->png) {
-            fprintf(stderr, "terrafarm: warning: no preview: cannot read back %s\n", existing);
-            tf_png_abort(rw->png);
-            rw->png = NULL;
-        }
-    }
-}
-
-tf_rowwriter *tf_rowwriter_start(tf_exr_writer *w, int width, int height, int chunk_rows,
-                                 int depth, int fsync_interval_ms, const char *preview_png,
-                                 const char *existing, char *err, size_t errlen)
+tf_rowwriter *tf_rowwriter_start(tf_exr_writer *w, const tf_exr_layout *layout,
+                                 const tf_rowwriter_config *cfg, char *err, size_t errlen)
 {
     tf_rowwriter *rw = calloc(1, sizeof *rw);
     if (!rw)
         goto oom;
     rw->w = w;
-    rw->width = width;
-    rw->chunk_rows = chunk_rows;
-    rw->depth = depth < 1 ? 1 : depth;
-    rw->fsync_ms = fsync_interval_ms > 0 ? fsync_interval_ms : 1000;
+    rw->layout = *layout;
+    rw->depth = cfg->depth < 1 ? 1 : cfg->depth;
+    rw->fsync_ms = cfg->fsync_interval_ms > 0 ? cfg->fsync_interval_ms : 1000;
+    rw->preview_ms = cfg->preview_interval_ms > 0 ? cfg->preview_interval_ms : 3000;
     rw->rows_written = tf_exr_next_row(w);
     rw->slot = calloc((size_t)rw->depth, sizeof *rw->slot);
-    rw->slot_rows = calloc((size_t)rw->depth, sizeof *rw->slot_rows);
-    if (!rw->slot || !rw->slot_rows)
+    if (!rw->slot)
         goto oom;
-    for (int i = 0; i < rw->depth; i++) {
-        rw->slot[i] = malloc((size_t)width * (size_t)chunk_rows * sizeof(tf_pixel));
-        if (!rw->slot[i])
-            goto oom;
-    }
-    if (preview_png)
-        start_preview(rw, height, preview_png, existing);
+    if (cfg->preview_png)
+        start_preview(rw, cfg->preview_png, cfg->existing);
+    rw->preview_last = tf_now_msf() - rw->preview_ms + 500; /* a first picture soon */
     pthread_mutex_init(&rw->mu, NULL);
     pthread_cond_init(&rw->nonempty, NULL);
     pthread_cond_init(&rw->nonfull, NULL);
@@ -224,21 +293,18 @@ oom:
     return NULL;
 }
 
-int tf_rowwriter_put(tf_rowwriter *rw, const void *rows, int nrows)
+int tf_rowwriter_put(tf_rowwriter *rw, tf_tuple *result)
 {
     pthread_mutex_lock(&rw->mu);
     while (rw->count == rw->depth && !rw->failed)
         pthread_cond_wait(&rw->nonfull, &rw->mu);
     if (rw->failed) {
         pthread_mutex_unlock(&rw->mu);
+        tf_tuple_clear(result);
         return -1;
     }
     int idx = (rw->head + rw->count) % rw->depth;
-    pthread_mutex_unlock(&rw->mu);
-    /* The slot is ours until count covers it: the thread never reads past head + count. */
-    memcpy(rw->slot[idx], rows, (size_t)rw->width * (size_t)nrows * sizeof(tf_pixel));
-    pthread_mutex_lock(&rw->mu);
-    rw->slot_rows[idx] = nrows;
+    tf_tuple_move(&rw->slot[idx], result);
     rw->count++;
     assert(queue_ok(rw));
     pthread_cond_signal(&rw->nonempty);
@@ -287,11 +353,8 @@ int tf_rowwriter_finish(tf_rowwriter *rw, char *err, size_t errlen)
         rc = -1;
     } else if (tf_exr_finish(rw->w, err, errlen)) {
         rc = -1;
-    } else if (rw->png) {
-        char perr[512];
-        if (tf_png_finish(rw->png, perr, sizeof perr))
-            fprintf(stderr, "terrafarm: warning: preview: %s\n", perr);
-        rw->png = NULL;
+    } else {
+        write_preview(rw, 1);
     }
     free_rowwriter(rw);
     return rc;
@@ -304,5 +367,7 @@ void tf_rowwriter_abandon(tf_rowwriter *rw)
     if (!rw->failed)
         tf_exr_sync(rw->w, err, sizeof err);
     tf_exr_abandon(rw->w);
+    if (rw->preview_dirty && !rw->failed)
+        write_preview(rw, 0);
     free_rowwriter(rw);
 }

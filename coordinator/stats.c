@@ -72,12 +72,30 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
     fprintf(f, "  \"max_tuple_bytes\": %zu,\n", st->max_tuple_bytes);
     fprintf(f, "  \"local_workers\": %d,\n  \"heightfield_s\": %.3f,\n", run->local_workers,
             run->heightfield_s);
+    fprintf(f, "  \"results_refused\": %lld,\n  \"layout\": ", (long long)st->results_refused);
+    json_string(f, run->layout);
+    fprintf(f, ",\n");
     struct rusage ru;
-    if (getrusage(RUSAGE_SELF, &ru) == 0) /* the coordinator alone: workers are other processes */
+    if (getrusage(RUSAGE_SELF, &ru) == 0) { /* the coordinator alone: workers are other processes */
+        double cpu = (double)ru.ru_utime.tv_sec + ru.ru_utime.tv_usec * 1e-6 +
+                     (double)ru.ru_stime.tv_sec + ru.ru_stime.tv_usec * 1e-6;
+        /* The render path's cost, without the terrain build before forking: per rendered pixel,
+         * and against the workers' render time per pixel (how many such workers one
+         * coordinator core could feed). */
+        double render_cpu = cpu - run->setup_cpu_s;
+        double busy = 0;
+        for (int i = 0; i < st->nworkers; i++)
+            busy += st->workers[i].busy_s;
+        double px = (double)st->pixels;
         fprintf(f, "  \"coordinator_max_rss_kb\": %ld,\n  \"coordinator_cpu_s\": %.3f,\n",
-                ru.ru_maxrss,
-                (double)ru.ru_utime.tv_sec + ru.ru_utime.tv_usec * 1e-6 +
-                    (double)ru.ru_stime.tv_sec + ru.ru_stime.tv_usec * 1e-6);
+                ru.ru_maxrss, cpu);
+        fprintf(f, "  \"coordinator_render_cpu_s\": %.3f,\n", render_cpu);
+        fprintf(f, "  \"coordinator_cpu_ns_per_pixel\": %.2f,\n",
+                px > 0 ? render_cpu * 1e9 / px : 0.0);
+        fprintf(f, "  \"worker_busy_ns_per_pixel\": %.2f,\n", px > 0 ? busy * 1e9 / px : 0.0);
+        fprintf(f, "  \"workers_per_coordinator_core\": %.1f,\n",
+                render_cpu > 0 ? busy / render_cpu : 0.0);
+    }
     fprintf(f, "  \"workers\": [");
     for (int i = 0; i < st->nworkers; i++) {
         const tf_worker_stats *w = &st->workers[i];

@@ -13,6 +13,8 @@ typedef struct tf_run_info {
     const char *tasks;       /* e.g. "stamps:64x64" */
     int local_workers;
     double heightfield_s;    /* time to build the height field before forking */
+    double setup_cpu_s;      /* the coordinator's CPU time up to the end of the terrain build */
+    const char *layout;      /* the output's layout, e.g. "tiled 64x64 half" */
 } tf_run_info;
 
 /* Write atomically (temporary file + rename).  0, or -1 with a message. */

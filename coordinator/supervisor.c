@@ -21,7 +21,16 @@
  * A task's copies: `in_space` task tuples sit in the space, `leased` are held by workers (one
  * lease record each in `leases`).  When both reach zero before a result arrived, the task is
  * lost and is dealt again.  A result for a task that already has one, or is written, is
- * removed from the space and dropped. */
+ * removed from the space and dropped.
+ *
+ * Results.  A result's chunks (farmproto.h) are checked when it arrives (on_out): a lease held
+ * by this connection, then tf_result_check's structure against the task (no per-pixel work),
+ * and with --verify-chunks that every chunk decodes.  A refused result is removed from the
+ * space, counts as a failure of its worker, and the task is dealt again; nothing of it reaches
+ * the file.  An accepted result stays in the space until every task before it is written; then
+ * it is taken out and its tuple handed, as is, to the writer thread (rowwriter.h), which writes
+ * its packed chunks raw.  Tasks are written one by one in id order, which is the file's chunk
+ * order (a tile, or a block of rows). */
 #include "coordinator/supervisor.h"
 #include "clock.h"
 
@@ -35,7 +44,7 @@
 #include <time.h>
 
 #include "farmproto.h"
-#include <endian.h>
+#include "image/exrencode.h"
 #include "log.h"
 
 #define MAX_FAILED_WORKERS 8  /* per task: distinct workers that failed it */
@@ -49,6 +58,7 @@
 typedef struct task_slot {
     int64_t id;          /* task in this slot, -1 if none */
     int has_result;
+    int64_t result_worker; /* whose result was accepted (its tuple waits in the space) */
     int duplicated;      /* a straggler copy was dealt */
     double taken_ms;     /* when a worker first took it (0: not yet) */
     int in_space;        /* task tuples in the space */
@@ -79,9 +89,9 @@ struct tf_supervisor {
     task_slot *ring;
     lease *leases;
     int nleases, cap_leases;
-    int chunk_rows;          /* rows per EXR chunk */
-    tf_pixel *chunk;         /* accumulator: chunk_rows rows of width pixels */
-    int chunk_fill;          /* rows in the accumulator */
+    tf_preview_grid grid;    /* of the output's progress preview */
+    uint8_t *verify_buf;     /* --verify-chunks: inflated bytes */
+    size_t verify_cap;
     int rows_written;        /* rows handed to the writer by this run (plus first_row) */
     int stop_sent;
     char error[512];
@@ -277,95 +287,47 @@ static void withdraw_copies(tf_supervisor *s, task_slot *t)
 
 /* ---- writing ------------------------------------------------------------------------------ */
 
-static int flush_chunk(tf_supervisor *s, int final)
+/* Task id is written next and has its result: take the accepted tuple out of the space and hand
+ * it to the writer thread.  Its chunks are never looked at here (they were checked). */
+static int write_task(tf_supervisor *s, task_slot *t)
 {
-    if (s->chunk_fill == 0 || (s->chunk_fill < s->chunk_rows && !final))
-        return 0;
-    if (tf_rowwriter_put(s->cfg.writer, s->chunk, s->chunk_fill)) {
+    tf_tuple tmpl, got;
+    tf_tuple_init(&got);
+    if (tf_result_template(&tmpl, t->id, t->result_worker) ||
+        ts_space_inp(s->space, &tmpl, &got) != 1) {
+        tf_tuple_clear(&tmpl);
+        fail(s, "internal error: the result of task %" PRId64 " left the space", t->id);
+        return -1;
+    }
+    tf_tuple_clear(&tmpl);
+    if (tf_rowwriter_put(s->cfg.writer, &got)) {
         char err[512];
         tf_rowwriter_error(s->cfg.writer, err, sizeof err);
         fail(s, "%s", err);
         return -1;
     }
-    s->rows_written += s->chunk_fill;
-    s->chunk_fill = 0;
+    tf_rect r = tf_task_rect(&s->tasks, (int)t->id);
+    int end = r.y + r.h;
+    if (r.x + r.w == s->tasks.width && end > s->rows_written) { /* the last task of its rows */
+        s->stats.rows_rendered += end - s->rows_written;
+        s->rows_written = end;
+    }
     return 0;
 }
 
-/* Band `band` has every result: take them out of the space in order and write its rows. */
-static int write_band(tf_supervisor *s, int band)
+/* Advance the write front over every task whose result is in, in id (= file) order. */
+static void write_ready_tasks(tf_supervisor *s)
 {
-    int y0, rows;
-    tf_band_rows(&s->tasks, band, &y0, &rows);
-    int first = tf_band_first_task(&s->tasks, band);
-    int cols = s->tasks.cols;
-    tf_tuple *res = calloc((size_t)cols, sizeof *res);
-    tf_result_msg *msg = calloc((size_t)cols, sizeof *msg);
-    int rc = -1;
-    if (!res || !msg) {
-        fail(s, "out of memory writing rows %d..%d", y0, y0 + rows - 1);
-        goto out;
-    }
-    for (int c = 0; c < cols; c++) {
-        tf_tuple tmpl;
-        if (tf_result_template(&tmpl, first + c, -1) ||
-            ts_space_inp(s->space, &tmpl, &res[c]) != 1 || tf_result_unpack(&res[c], &msg[c])) {
-            tf_tuple_clear(&tmpl);
-            fail(s, "internal error: result of task %d missing from the tuple space", first + c);
-            goto out;
-        }
-        tf_tuple_clear(&tmpl);
-    }
-    for (int row = 0; row < rows; row++) {
-        tf_pixel *dst = s->chunk + (size_t)s->chunk_fill * (size_t)s->tasks.width;
-        for (int c = 0; c < cols; c++) {
-            tf_rect r = tf_task_rect(&s->tasks, first + c);
-            tf_pixels_decode(msg[c].pixels + (size_t)row * (size_t)r.w * TF_PIXEL_WIRE_BYTES,
-                             dst + r.x, (size_t)r.w);
-        }
-        for (int x = 0; x < s->tasks.width; x++)
-            s->stats.spp_sum += dst[x].spp;
-        s->stats.pixels += (uint64_t)s->tasks.width;
-        s->chunk_fill++;
-        if (flush_chunk(s, 0))
-            goto out;
-    }
-    s->stats.rows_rendered += rows;
-    rc = 0;
-out:
-    if (res)
-        for (int c = 0; c < cols; c++)
-            tf_tuple_clear(&res[c]);
-    free(res);
-    free(msg);
-    return rc;
-}
-
-/* Advance the write front over every band whose results are all in. */
-static void write_ready_bands(tf_supervisor *s)
-{
-    while (!s->error[0] && s->write_task < s->tasks.count) {
-        int band = tf_task_band(&s->tasks, (int)s->write_task);
-        int first = tf_band_first_task(&s->tasks, band);
-        int last = first + s->tasks.cols; /* exclusive */
-        if (last > s->next_deal)
+    while (!s->error[0] && s->write_task < s->next_deal) {
+        task_slot *t = slot_of(s, s->write_task);
+        if (!t || !t->has_result)
             return;
-        for (int id = first; id < last; id++) {
-            task_slot *t = slot_of(s, id);
-            if (!t || !t->has_result)
-                return;
-        }
-        if (write_band(s, band))
+        if (write_task(s, t))
             return;
-        for (int id = first; id < last; id++) {
-            task_slot *t = slot_of(s, id);
-            withdraw_copies(s, t);
-            t->id = -1;
-        }
-        s->write_task = last;
+        withdraw_copies(s, t);
+        t->id = -1;
+        s->write_task++;
     }
-    if (s->write_task == s->tasks.count)
-        flush_chunk(s, 1);
 }
 
 /* ---- hooks ---------------------------------------------------------------------------------- */
@@ -469,6 +431,26 @@ static void remove_exact(tf_supervisor *s, const tf_tuple *tuple)
     tf_tuple_clear(&tmpl);
 }
 
+/* The checks of a result against its task (farmproto.h): structure always, and with
+ * --verify-chunks that every chunk decodes.  0 if accepted, else -1 with the reason. */
+static int refuse_result(tf_supervisor *s, tf_result_msg *m, tf_rect r, char *why, size_t len)
+{
+    if (tf_result_check(m, &s->cfg.layout, &s->grid, r, why, len))
+        return -1;
+    if (!s->cfg.verify_chunks)
+        return 0;
+    size_t off = 0;
+    for (size_t i = 0; i < m->nchunks; i++) {
+        tf_chunk_rec c;
+        tf_chunk_rec_get(m->index + i * TF_CHUNK_RECORD_BYTES, &c);
+        if (tf_exr_chunk_decodes(m->chunks + off, (size_t)c.packed, (size_t)c.unpacked,
+                                 &s->verify_buf, &s->verify_cap))
+            return tf_seterr(why, len, "chunk (%d, %d) does not decode", c.cx, c.cy);
+        off += (size_t)c.packed;
+    }
+    return 0;
+}
+
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
     tf_result_msg m;
@@ -487,17 +469,20 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         return;
     }
     tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
-    if (m.pixels_len != (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES) {
-        tf_warn("result of task %" PRId64 " from %s has %zu pixel bytes, expected %zu; dropped",
-                m.id, peer_name(s, conn), m.pixels_len,
-                (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES);
+    char why[256];
+    if (refuse_result(s, &m, r, why, sizeof why)) {
+        /* Only on privileged paths: a worker's result is checked before it enters the space
+         * (tf_supervisor_admit). */
+        tf_warn("result of task %" PRId64 " (%dx%d at %d,%d) from %s refused: %s", m.id, r.w,
+                r.h, r.x, r.y, peer_name(s, conn), why);
+        s->stats.results_refused++;
         remove_exact(s, tuple);
-        s->stats.results_dropped++;
         if (!note_failure(s, t, m.worker))
             redeal_if_lost(s, t);
         return;
     }
     t->has_result = 1;
+    t->result_worker = m.worker;
     if (t->duplicated)
         s->dups_in_flight--;
     withdraw_copies(s, t);
@@ -514,9 +499,10 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     s->stats.primary_rays += m.counts.primary_rays;
     s->stats.shadow_rays += m.counts.shadow_rays;
     s->stats.external_rays += m.counts.external_rays;
-    /* Rows are written by tf_supervisor_step, after the server has flushed its replies: writing
-     * here would make the worker wait for the OK of its out while the coordinator compresses
-     * and writes the band. */
+    s->stats.spp_sum += (double)m.spp_total;
+    s->stats.pixels += m.counts.pixels;
+    /* Results are handed to the writer by tf_supervisor_step, after the server has flushed its
+     * replies: the worker does not wait for anything of the writing. */
 }
 
 static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
@@ -624,15 +610,6 @@ static int holds_lease(const tf_supervisor *s, uint64_t conn, int64_t task)
     return 0;
 }
 
-/* Give up conn's lease on task: the task is dealt again if no other copy is left. */
-static void forfeit(tf_supervisor *s, uint64_t conn, int64_t task)
-{
-    remove_lease(s, conn, task);
-    task_slot *t = slot_of(s, task);
-    if (t && !t->has_result)
-        redeal_if_lost(s, t);
-}
-
 static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
@@ -642,19 +619,6 @@ static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
     tf_vseterr(why, len, fmt, ap);
     va_end(ap);
     return TS_CAP_REFUSE;
-}
-
-/* Index of the first non-finite float in a wire pixel blob, or -1. */
-static long first_non_finite(const uint8_t *wire, size_t len)
-{
-    for (size_t i = 0; i + 4 <= len; i += 4) {
-        uint32_t u;
-        memcpy(&u, wire + i, 4);
-        u = le32toh(u);
-        if ((u & 0x7f800000u) == 0x7f800000u) /* exponent all ones: Inf or NaN */
-            return (long)(i / TF_PIXEL_WIRE_BYTES);
-    }
-    return -1;
 }
 
 static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_worker_stats *w,
@@ -677,17 +641,15 @@ static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_wor
         return TS_CAP_DISCARD;
     }
     tf_rect r = tf_task_rect(&s->tasks, (int)m.id);
-    size_t want = (size_t)r.w * (size_t)r.h * TF_PIXEL_WIRE_BYTES;
-    if (m.pixels_len != want) {
-        forfeit(s, conn, m.id);
-        return refuse(why, len, "result of task %" PRId64 " (%dx%d at %d,%d) has %zu pixel "
-                      "bytes, expected %zu", m.id, r.w, r.h, r.x, r.y, m.pixels_len, want);
-    }
-    long bad = first_non_finite(m.pixels, m.pixels_len);
-    if (bad >= 0) {
-        forfeit(s, conn, m.id);
-        return refuse(why, len, "result of task %" PRId64 " has a non-finite value at pixel "
-                      "(%ld,%ld)", m.id, r.x + bad % r.w, r.y + bad / r.w);
+    char reason[192];
+    if (refuse_result(s, &m, r, reason, sizeof reason)) {
+        /* Dropped before it enters the space, counted against its worker, dealt again. */
+        s->stats.results_refused++;
+        remove_lease(s, conn, m.id);
+        if (!note_failure(s, t, w->id))
+            redeal_if_lost(s, t);
+        return refuse(why, len, "result of task %" PRId64 " (%dx%d at %d,%d): %s", m.id, r.w,
+                      r.h, r.x, r.y, reason);
     }
     return TS_CAP_ALLOW;
 }
@@ -873,6 +835,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     if (s->cfg.max_task_failures < 1)
         s->cfg.max_task_failures = 3;
     tf_tasks_init(&s->tasks, cfg->width, cfg->height, cfg->first_row, cfg->spec);
+    tf_tasks_skip(&s->tasks, cfg->first_tiles);
     s->auto_watermark = cfg->watermark <= 0;
     if (!s->auto_watermark && cfg->watermark < s->tasks.cols) {
         snprintf(err, errlen,
@@ -887,9 +850,8 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
                        : cfg->watermark;
     s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
-    s->chunk_rows = tf_exr_chunk_rows();
-    s->chunk = calloc((size_t)s->chunk_rows * (size_t)cfg->width, sizeof *s->chunk);
-    if (!s->ring || !s->chunk) {
+    s->grid = tf_preview_grid_for(cfg->width, cfg->height);
+    if (!s->ring) {
         tf_seterr(err, errlen, "out of memory");
         tf_supervisor_free(s);
         return NULL;
@@ -910,7 +872,7 @@ void tf_supervisor_free(tf_supervisor *s)
         return;
     free(s->ring);
     free(s->leases);
-    free(s->chunk);
+    free(s->verify_buf);
     free(s->stats.workers);
     free(s);
 }
@@ -930,7 +892,7 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
         return;
     }
     assert(supervisor_ok(s));
-    write_ready_bands(s);
+    write_ready_tasks(s);
     update_watermark(s);
     deal_new_tasks(s);
     deal_duplicate(s);
@@ -939,7 +901,7 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
 
 int tf_supervisor_done(const tf_supervisor *s)
 {
-    return s->write_task == s->tasks.count && s->chunk_fill == 0 && !s->error[0];
+    return s->write_task == s->tasks.count && !s->error[0];
 }
 
 const char *tf_supervisor_error(const tf_supervisor *s) { return s->error[0] ? s->error : NULL; }

@@ -2,10 +2,11 @@
  * space that runs in the coordinator's event-loop thread.
  *
  * It deals ("task", ...) tuples in id order, never more than `watermark` tasks beyond the write
- * front (the first task whose rows are not yet on disk), so the space holds a bounded number of
- * bytes whatever the image size.  Results wait in the space until their whole band is done;
- * then it takes them out in order, writes the band's rows to the OpenEXR checkpoint and makes
- * them durable at a bounded interval (through the writer thread, rowwriter.h).
+ * front (the first task not yet written), so the space holds a bounded number of bytes whatever
+ * the image size.  Results -- finished OpenEXR chunks the workers encoded (farmproto.h) -- are
+ * checked against their task as they arrive and wait in the space until every task before
+ * them is written; then it takes them out in order and hands them to the writer thread
+ * (rowwriter.h), which writes the chunks raw and makes them durable at a bounded interval.
  *
  * Faults.  Every take of a task by a connection is a lease (server hook on_take).  When a
  * connection closes (worker killed, link cut, silence timeout) while it holds leases, those
@@ -44,6 +45,7 @@ typedef struct tf_worker_stats {
 
 typedef struct tf_farm_stats {
     int64_t tasks_total, tasks_redealt, tasks_duplicated, results_dropped, task_failures;
+    int64_t results_refused;  /* failed the result checks (structure, --verify-chunks) */
     int rows_resumed, rows_rendered;
     uint64_t primary_rays, shadow_rays, external_rays;
     double spp_sum;           /* sum of the spp channel over rendered pixels */
@@ -58,6 +60,9 @@ typedef struct tf_farm_stats {
 typedef struct tf_supervisor_config {
     int width, height;
     int first_row;            /* rows [0, first_row) are already on disk */
+    int first_tiles;          /* and, in a tiled file, this many tiles of the next tile row */
+    tf_exr_layout layout;     /* of the output: what results must carry (farmproto.h) */
+    int verify_chunks;        /* --verify-chunks: also check that every chunk decodes */
     tf_task_spec spec;
     int watermark;            /* >= tasks per band (checked); 0 = auto (follows the workers) */
     int expected_workers;     /* auto watermark: workers to plan for before they connect */

@@ -87,9 +87,18 @@ void tf_band_rows(const tf_tasks *t, int band, int *y0, int *rows)
     *rows = t->height - *y0 < t->th ? t->height - *y0 : t->th;
 }
 
+void tf_tasks_skip(tf_tasks *t, int n)
+{
+    if (n < 0 || n >= t->cols || t->count == 0)
+        return;
+    t->skip = n;
+    t->count = t->cols * t->bands - n;
+}
+
 tf_rect tf_task_rect(const tf_tasks *t, int id)
 {
-    int band = id / t->cols, col = id % t->cols;
+    int g = id + t->skip;
+    int band = g / t->cols, col = g % t->cols;
     tf_rect r;
     r.x = col * t->tw;
     r.w = t->width - r.x < t->tw ? t->width - r.x : t->tw;

@@ -21,9 +21,10 @@ typedef struct tf_task_spec {
 typedef struct tf_tasks {
     int width, height;  /* image */
     int first_row;      /* rows before it are already on disk (resume) */
+    int skip;           /* tasks of the first band already on disk (a tiled resume) */
     int tw, th;         /* task size (the last column / band may be smaller) */
     int cols, bands;    /* tasks per band, number of bands */
-    int count;          /* cols * bands */
+    int count;          /* cols * bands - skip */
 } tf_tasks;
 
 /* Parse "rows:K" or "stamps:WxH".  Returns 0, or -1 with a one-line message. */
@@ -33,6 +34,9 @@ int tf_task_spec_parse(const char *text, tf_task_spec *spec, char *err, size_t e
 tf_task_spec tf_task_spec_default(int width, int height, int workers);
 
 void tf_tasks_init(tf_tasks *t, int width, int height, int first_row, tf_task_spec spec);
+/* A resume of a tiled file that holds the first n tiles of the first band: those tasks are not
+ * dealt (ids start after them). */
+void tf_tasks_skip(tf_tasks *t, int n);
 /* Rectangle of task id (0 <= id < count). */
 tf_rect tf_task_rect(const tf_tasks *t, int id);
 /* Band of task id, first task id of a band, and a band's rows [y0, y0 + rows). */

@@ -5,22 +5,24 @@
 #include "farmproto.h"
 
 static const ts_cap_rule worker_rules[] = {
-    {TS_CAP_RD, "scene", 5, 0, NULL},
+    {TS_CAP_RD, "scene", 6, 0, NULL},
     {TS_CAP_IN, "next_worker", 2, 1, tf_supervisor_admit},
     {TS_CAP_OUT, "hello", 6, 1, tf_supervisor_admit},
     {TS_CAP_IN, "task", 7, 0, tf_supervisor_admit},
     {TS_CAP_OUT, "task", 7, 0, tf_supervisor_admit},
-    {TS_CAP_OUT, "result", 8, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, "result", 11, 0, tf_supervisor_admit},
     {TS_CAP_OUT, "failed", 4, 0, tf_supervisor_admit},
 };
 
-/* Room beyond the pixels for the result's other fields and for encodings of the pixels that
- * may be a little larger than raw (compressed chunks of noise). */
+/* A result's chunks never exceed their unpacked size (farmproto.h: 1 <= packed <= unpacked),
+ * at most 24 bytes a pixel (all channels FLOAT); room beyond that for the index, the preview
+ * share and the other fields. */
+#define RESULT_BYTES_PER_PIXEL 24u
 #define RESULT_HEADROOM (64u * 1024u)
 
 void tf_worker_role_init(ts_role *role, tf_supervisor *sup, const tf_tasks *tasks)
 {
-    size_t largest = (size_t)tasks->tw * (size_t)tasks->th * TF_PIXEL_WIRE_BYTES;
+    size_t largest = (size_t)tasks->tw * (size_t)tasks->th * RESULT_BYTES_PER_PIXEL;
     role->name = "worker";
     role->rules = worker_rules;
     role->nrules = (int)(sizeof worker_rules / sizeof worker_rules[0]);

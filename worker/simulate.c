@@ -279,9 +279,15 @@ static void sim_on_stop(void *ctx, int64_t t_ns)
 /* The real worker loop (worker.c) with the simulated step. */
 static void sim_serve(sim_worker *w)
 {
-    tf_worker_step step = {w, sim_render, sim_on_take, sim_on_op, sim_on_stop,
+    tf_exr_layout layout;
+    char err[256];
+    if (tf_worker_fetch_layout(w->client, &layout, err, sizeof err)) {
+        shared_fail(w->sh, "cannot read the output layout", w->client);
+        return;
+    }
+    tf_worker_step step = {w, sim_render, NULL, sim_on_take, sim_on_op, sim_on_stop,
                            w->sh->cfg->image_w, w->sh->cfg->image_h};
-    int rc = tf_worker_serve(w->client, w->id, &step);
+    int rc = tf_worker_serve(w->client, w->id, &layout, &step);
     /* Once the stop tuple is out the coordinator may finish and close while this worker still
      * waits, or sleeps on a straggler's duplicate: losing it then is the end of the render,
      * not a failure. */

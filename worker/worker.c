@@ -11,6 +11,7 @@
 
 #include "worker/backend.h"
 #include "farmproto.h"
+#include "image/exrencode.h"
 #include "log.h"
 
 /* Linda's counter idiom, half of it: in ("next_worker", ?n).  The coordinator binds id n to
@@ -71,9 +72,15 @@ static int report_failure(ts_client *c, int64_t task, int64_t worker, const char
     return rc;
 }
 
-int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
+int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
+                    const tf_worker_step *step)
 {
     char err[1024];
+    tf_exr_encoder *enc = NULL;
+    if (!step->payload && !(enc = tf_exr_encoder_new(layout, err, sizeof err))) {
+        tf_error("%s", err);
+        return TF_SERVE_LOST;
+    }
     tf_tuple tmpl;
     tf_task_template(&tmpl, TF_TASK_ANY);
     int status = TF_SERVE_STOPPED;
@@ -144,7 +151,7 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
             }
             continue;
         }
-        long nf = tf_first_non_finite(px, n);
+        long nf = step->payload ? -1 : tf_first_non_finite(px, n);
         if (nf >= 0) {
             /* Never emit a NaN or an infinity: the file would carry it forever. */
             snprintf(err, sizeof err, "task %" PRId64 ": the renderer produced a non-finite value "
@@ -157,8 +164,27 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
             }
             continue;
         }
+        tf_chunk_payload pay;
+        int64_t spp_total = 0;
+        rc = step->payload ? step->payload(step->ctx, m.rect, px, &pay, &spp_total, err, sizeof err)
+                           : tf_exr_encode_rect(enc, m.rect, px, &pay, err, sizeof err);
+        if (rc) {
+            tf_warn("task %" PRId64 ": %s", m.id, err);
+            if (report_failure(c, m.id, id, err, step)) {
+                status = TF_SERVE_UNDELIVERED;
+                break;
+            }
+            continue;
+        }
+        if (!step->payload) {
+            double spp = 0; /* integer-valued floats: exact in a double */
+            for (size_t i = 0; i < n; i++)
+                spp += px[i].spp;
+            spp_total = (int64_t)spp;
+        }
         tf_tuple result;
-        rc = tf_result_pack(&result, m.id, id, &counts, busy, px, n) || ts_out(c, &result);
+        rc = tf_result_pack(&result, m.id, id, &counts, busy, spp_total, &pay) ||
+             ts_out(c, &result);
         tf_tuple_clear(&result);
         note_op(step);
         if (rc) {
@@ -168,6 +194,7 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step)
     }
     tf_tuple_clear(&tmpl);
     free(px);
+    tf_exr_encoder_free(enc);
     return status;
 }
 
@@ -209,9 +236,15 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     char tag[32];
     snprintf(tag, sizeof tag, "worker %" PRId64, id);
     tf_log_set_tag(tag);
+    tf_exr_layout layout;
+    if (tf_worker_fetch_layout(c, &layout, err, sizeof err)) {
+        tf_error("%s", err);
+        tf_backend_free(b);
+        return 1;
+    }
     backend_ctx bc = {b, s};
-    tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, s->width, s->height};
-    int rc = tf_worker_serve(c, id, &step);
+    tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, NULL, s->width, s->height};
+    int rc = tf_worker_serve(c, id, &layout, &step);
     if (rc == TF_SERVE_LOST)
         tf_warn("lost the coordinator: %s", ts_client_error(c));
     else if (rc == TF_SERVE_UNDELIVERED)
@@ -222,6 +255,27 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     return rc == TF_SERVE_STOPPED ? 0 : TF_WORKER_EXIT_LOST;
 }
 
+int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t errlen)
+{
+    tf_tuple tmpl, got;
+    tf_tuple_init(&tmpl);
+    tf_tuple_init(&got);
+    const char *text;
+    int64_t w, h;
+    int rc = -1;
+    if (tf_tuple_pack(&tmpl, "sSIISS", "scene") || ts_rd(c, &tmpl, &got))
+        tf_seterr(err, errlen, "cannot read the scene tuple: %s", ts_client_error(c));
+    else if (tf_tuple_get_int(&got, 2, &w) || tf_tuple_get_int(&got, 3, &h) ||
+             tf_tuple_get_string(&got, 5, &text) || w < 1 || h < 1 || w > 65536 || h > 65536 ||
+             tf_exr_layout_parse(text, (int)w, (int)h, l))
+        tf_seterr(err, errlen, "malformed output layout in the scene tuple");
+    else
+        rc = 0;
+    tf_tuple_clear(&tmpl);
+    tf_tuple_clear(&got);
+    return rc;
+}
+
 tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen)
 {
     tf_tuple tmpl, got;
@@ -229,7 +283,7 @@ tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err
     tf_tuple_init(&got);
     const char *text, *hash;
     int64_t w, h;
-    if (tf_tuple_pack(&tmpl, "sSIIS", "scene") || ts_rd(c, &tmpl, &got)) {
+    if (tf_tuple_pack(&tmpl, "sSIISS", "scene") || ts_rd(c, &tmpl, &got)) {
         tf_seterr(err, errlen, "%s: cannot read the scene: %s", coordinator, ts_client_error(c));
         goto fail;
     }

@@ -10,6 +10,7 @@
 #include "scene.h"
 #include "linda/tsclient.h"
 #include "render/render.h"
+#include "image/exrlayout.h"
 
 /* Heartbeat interval: well under the coordinator's default 15 s silence timeout. */
 #define TF_WORKER_HEARTBEAT_MS 2000
@@ -30,6 +31,11 @@ typedef struct tf_worker_step {
      * 0, or -1 with one line in err (reported to the coordinator as a task failure). */
     int (*render)(void *ctx, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
                   int64_t *busy_ns, char *err, size_t errlen);
+    /* Optional: the result's payload (its encoded chunks and preview share) and the sum of its
+     * spp channel, instead of encoding px here (the simulated worker sends recorded chunks).
+     * The payload's buffers belong to ctx and stay valid until the next call. */
+    int (*payload)(void *ctx, tf_rect rect, const tf_pixel *px, tf_chunk_payload *out,
+                   int64_t *spp_total, char *err, size_t errlen);
     /* Optional observers: a task was taken after waiting wait_ns for it; a tuple operation was
      * issued (in, out); the stop tuple was seen at monotonic time t_ns. */
     void (*on_take)(void *ctx, int64_t wait_ns);
@@ -50,7 +56,8 @@ enum { TF_SERVE_STOPPED = 0, TF_SERVE_LOST = 1, TF_SERVE_UNDELIVERED = 2 };
  * coordinator was lost while waiting for a task (TF_SERVE_LOST) or while delivering a result
  * (TF_SERVE_UNDELIVERED).  Logs nothing about those two: the caller knows whether the render
  * was ending anyway. */
-int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step);
+int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
+                    const tf_worker_step *step);
 
 /* The real worker: join, build the backend, serve until told to stop.  kind is "forked" or
  * "networked".  Returns an exit status (0 when the render finished; TF_WORKER_EXIT_NOSTART
@@ -59,6 +66,10 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_worker_step *step);
  * owns c. */
 int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, const char *kind,
                    const char *backend);
+
+/* rd the ("scene", ...) tuple for the output's layout, which every result is encoded for.  0, or
+ * -1 with a message. */
+int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t errlen);
 
 /* rd the ("scene", ...) tuple, parse it and apply the render's image size.  NULL with a message
  * on failure (including a scene whose hash differs from the coordinator's). */

@@ -7,12 +7,13 @@
  * sink_write refuses everything, exactly as if the process had been killed at that instant.
  *
  * On-disk invariant of a file being written: header, then the offset table (all zero until
- * tf_exr_finish), then whole chunks in increasing y, each "int32 y, int32 packed size, packed
- * bytes".  OpenEXRCore 3.1.5 sees the zero offset table as invalid and rebuilds it by walking
+ * tf_exr_finish), then whole chunks in file order, each "int32 y, int32 packed size, packed
+ * bytes" (tiles: "int32 tx, ty, level x, level y, packed size, packed bytes").  OpenEXRCore 3.1.5 sees the zero offset table as invalid and rebuilds it by walking
  * those chunk headers (tests/unit/test_exrfile.c checks that it does), so a killed render is
  * readable up to its last whole chunk.
  *
- * Reading and verification.  A chunk counts as done only if its header is the expected y, its
+ * Reading and verification.  A chunk counts as done only if its header names the expected
+ * chunk (y, or tile indices), its
  * packed bytes lie inside the file, and it decodes (ZIP inflate checks its stream).  Chunks
  * are verified from the top; the first one that fails ends the valid prefix, so a torn final
  * chunk is dropped, never trusted.
@@ -33,18 +34,13 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include "image/exrpart.h"
 #include "log.h"
 
-/* Scanlines per chunk: ZIPS, one scanline per chunk.  The coordinator then holds one row, not
- * sixteen, between the workers and the disk (its memory stays flat as images grow wider), and
- * a killed render loses no finished row to an incomplete chunk. */
+/* Scanlines per chunk of a scanline file: ZIPS, one scanline per chunk, so that any rows:K task
+ * is whole chunks a worker can encode alone, and a killed render loses no finished row to an
+ * incomplete chunk. */
 #define TF_EXR_CHUNK_ROWS 1
-#define TF_EXR_COMPRESSION EXR_COMPRESSION_ZIPS
-/* zlib level 1, not zlib's default 6: the coordinator shares the cores with the workers, and
- * on float pixels level 6 buys 1.4% of file size for 13% more of the coordinator's CPU
- * (alps.scene 1920x640: 17.97 -> 18.22 MB, coordinator 1.05 -> 0.92 CPU-s).  Any level reads
- * back the same; a resumed file may mix levels. */
-#define TF_EXR_ZIP_LEVEL 1
 #define TF_EXR_MAX_DIM 65536 /* refuse absurd sizes before allocating anything */
 
 static const char ATTR_HASH[] = "terrafarm.scene_hash";
@@ -121,27 +117,14 @@ static int64_t sink_write(exr_const_context_t ctxt, void *userdata, const void *
 
 /* ---------------------------------------------------------------------------------------------
  * Channel layout.  EXR stores channels sorted by name (A B G R Z spp); we always address them
- * by name, so the order in tf_pixel never matters. */
+ * by name (exrpart.h), so the order in tf_pixel never matters. */
 
-typedef struct channel_map {
-    const char *name;
-    size_t offset; /* byte offset of the float inside one caller pixel */
-} channel_map;
+static const tf_exr_channel GRAY_CHANNELS[] = {{"Y", 0, EXR_PIXEL_FLOAT}};
 
-static const channel_map PIXEL_CHANNELS[] = {
-    {"A", offsetof(tf_pixel, a)}, {"B", offsetof(tf_pixel, b)}, {"G", offsetof(tf_pixel, g)},
-    {"R", offsetof(tf_pixel, r)}, {"Z", offsetof(tf_pixel, z)}, {"spp", offsetof(tf_pixel, spp)},
-};
-#define N_PIXEL_CHANNELS (int)(sizeof PIXEL_CHANNELS / sizeof PIXEL_CHANNELS[0])
-
-static const channel_map GRAY_CHANNELS[] = {{"Y", 0}};
-
-static const channel_map *find_channel(const channel_map *map, int n, const char *name)
+tf_exr_layout tf_exr_meta_layout(const tf_exr_meta *m)
 {
-    for (int i = 0; i < n; i++)
-        if (strcmp(map[i].name, name) == 0)
-            return &map[i];
-    return NULL;
+    tf_exr_layout l = {m->width, m->height, m->tiled, m->tile_w, m->tile_h, m->pixel};
+    return l;
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -151,9 +134,11 @@ struct tf_exr_writer {
     exr_context_t ctx;
     tf_exr_sink sink;
     char *path;
+    tf_exr_layout layout;
     int width, height;
-    int next_row;                /* first row not yet written; chunk aligned until the end */
-    const channel_map *channels;
+    int64_t next_chunk;          /* file-order index of the next chunk to write */
+    int64_t nchunks;
+    const tf_exr_channel *channels;
     int nchannels;
     size_t pixel_bytes;          /* stride of one caller pixel */
     int broken;                  /* a chunk write failed: every later write/sync/finish fails */
@@ -161,7 +146,13 @@ struct tf_exr_writer {
 
 int tf_exr_chunk_rows(void) { return TF_EXR_CHUNK_ROWS; }
 
-int tf_exr_next_row(const tf_exr_writer *w) { return w->next_row; }
+int tf_exr_next_row(const tf_exr_writer *w)
+{
+    return w->next_chunk >= w->nchunks ? w->height
+                                       : tf_layout_rows_in_chunks(&w->layout, w->next_chunk);
+}
+
+int64_t tf_exr_next_chunk(const tf_exr_writer *w) { return w->next_chunk; }
 
 /* One line for a failed OpenEXRCore write step: the errno of the sink wins if it has one,
  * because "No space left on device" is what the user needs to read. */
@@ -197,11 +188,12 @@ static int valid_size(int width, int height)
 
 /* Open `path` (truncating) and start an OpenEXRCore write context on it with one scanline
  * part of the given channels.  The header is not written yet. */
-static tf_exr_writer *writer_open(const char *path, int width, int height,
-                                  const channel_map *channels, int nchannels, size_t pixel_bytes,
-                                  char *err, size_t errlen)
+static tf_exr_writer *writer_open(const char *path, const tf_exr_layout *layout,
+                                  const tf_exr_channel *channels, int nchannels,
+                                  size_t pixel_bytes, char *err, size_t errlen)
 {
-    if (!valid_size(width, height)) {
+    int width = layout->width, height = layout->height;
+    if (!valid_size(width, height) || tf_exr_layout_check(layout, NULL, 0)) {
         tf_seterr(err, errlen, "%s: bad image size %dx%d", path, width, height);
         return NULL;
     }
@@ -212,8 +204,10 @@ static tf_exr_writer *writer_open(const char *path, int width, int height,
         return NULL;
     }
     w->sink.fd = -1;
+    w->layout = *layout;
     w->width = width;
     w->height = height;
+    w->nchunks = tf_layout_chunk_count(layout);
     w->channels = channels;
     w->nchannels = nchannels;
     w->pixel_bytes = pixel_bytes;
@@ -228,20 +222,9 @@ static tf_exr_writer *writer_open(const char *path, int width, int height,
     init.user_data = &w->sink;
     init.write_fn = sink_write;
     last_exr_message[0] = '\0';
-    int part = 0;
     exr_result_t rv = exr_start_write(&w->ctx, path, EXR_WRITE_FILE_DIRECTLY, &init);
     if (rv == EXR_ERR_SUCCESS)
-        rv = exr_add_part(w->ctx, NULL, EXR_STORAGE_SCANLINE, &part);
-    if (rv == EXR_ERR_SUCCESS)
-        rv = exr_initialize_required_attr_simple(w->ctx, part, width, height,
-                                                 TF_EXR_COMPRESSION);
-    if (rv == EXR_ERR_SUCCESS)
-        rv = exr_set_zip_compression_level(w->ctx, part, TF_EXR_ZIP_LEVEL);
-    if (rv == EXR_ERR_SUCCESS)
-        rv = exr_set_lineorder(w->ctx, part, EXR_LINEORDER_INCREASING_Y);
-    for (int i = 0; i < nchannels && rv == EXR_ERR_SUCCESS; i++)
-        rv = exr_add_channel(w->ctx, part, channels[i].name, EXR_PIXEL_FLOAT,
-                             EXR_PERCEPTUALLY_LINEAR, 1, 1);
+        rv = tf_exr_define_part(w->ctx, layout, channels, nchannels);
     if (rv != EXR_ERR_SUCCESS) {
         writer_error(w, err, errlen, "cannot set up the EXR header", rv);
         writer_free(w, 1);
@@ -278,8 +261,10 @@ static int write_header(tf_exr_writer *w, char *err, size_t errlen)
 static tf_exr_writer *pixel_writer_create(const char *path, const tf_exr_meta *meta, char *err,
                                           size_t errlen)
 {
-    tf_exr_writer *w = writer_open(path, meta->width, meta->height, PIXEL_CHANNELS,
-                                   N_PIXEL_CHANNELS, sizeof(tf_pixel), err, errlen);
+    tf_exr_layout layout = tf_exr_meta_layout(meta);
+    int n;
+    const tf_exr_channel *channels = tf_exr_render_channels(meta->pixel, &n);
+    tf_exr_writer *w = writer_open(path, &layout, channels, n, sizeof(tf_pixel), err, errlen);
     if (!w)
         return NULL;
     if (set_string_attrs(w, meta, err, errlen) != 0 || write_header(w, err, errlen) != 0) {
@@ -294,25 +279,54 @@ tf_exr_writer *tf_exr_create(const char *path, const tf_exr_meta *meta, char *er
     return pixel_writer_create(path, meta, err, errlen);
 }
 
-/* Encode and write the chunk starting at row y (chunk aligned) from `rows`, which holds the
- * chunk's rows as width * nrows caller pixels. */
-static int write_chunk(tf_exr_writer *w, int y, const uint8_t *rows, char *err, size_t errlen)
+static int writer_refuses(tf_exr_writer *w, char *err, size_t errlen)
+{
+    if (w->broken || w->sink.write_errno) {
+        tf_seterr(err, errlen, "%s: an earlier write failed%s%s", w->path,
+                  w->sink.write_errno ? ": " : "",
+                  w->sink.write_errno ? strerror(w->sink.write_errno) : "");
+        return 1;
+    }
+    return 0;
+}
+
+static void chunk_failed(tf_exr_writer *w, const tf_chunk_ref *c, exr_result_t rv, char *err,
+                         size_t errlen)
+{
+    char what[96];
+    if (w->layout.tiled)
+        snprintf(what, sizeof what, "cannot write tile (%d, %d)", c->cx, c->cy);
+    else
+        snprintf(what, sizeof what, "cannot write row %d", c->cy);
+    writer_error(w, err, errlen, what, rv);
+    w->broken = 1; /* OpenEXRCore's chunk state is unknown now: write nothing more */
+}
+
+/* Encode and write chunk c from `rows`, which holds the caller rows [y0, ...) as width caller
+ * pixels each. */
+static int encode_chunk(tf_exr_writer *w, const tf_chunk_ref *c, const uint8_t *rows, int y0,
+                        char *err, size_t errlen)
 {
     exr_chunk_info_t cinfo;
     exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
-    exr_result_t rv = exr_write_scanline_chunk_info(w->ctx, 0, y, &cinfo);
+    exr_result_t rv = w->layout.tiled
+                          ? exr_write_tile_chunk_info(w->ctx, 0, c->cx, c->cy, 0, 0, &cinfo)
+                          : exr_write_scanline_chunk_info(w->ctx, 0, c->cy, &cinfo);
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_encoding_initialize(w->ctx, 0, &cinfo, &enc);
     if (rv == EXR_ERR_SUCCESS) {
         size_t line = (size_t)w->width * w->pixel_bytes;
-        for (int c = 0; c < enc.channel_count; c++) {
-            exr_coding_channel_info_t *ch = &enc.channels[c];
-            const channel_map *m = find_channel(w->channels, w->nchannels, ch->channel_name);
+        const uint8_t *origin = rows + (size_t)(c->rect.y - y0) * line +
+                                (size_t)c->rect.x * w->pixel_bytes;
+        for (int i = 0; i < enc.channel_count; i++) {
+            exr_coding_channel_info_t *ch = &enc.channels[i];
+            const tf_exr_channel *m = tf_exr_find_channel(w->channels, w->nchannels,
+                                                          ch->channel_name);
             if (!m) { /* cannot happen: we declared exactly these channels */
                 rv = EXR_ERR_INVALID_ARGUMENT;
                 break;
             }
-            ch->encode_from_ptr = rows + m->offset;
+            ch->encode_from_ptr = origin + m->offset;
             ch->user_pixel_stride = (int32_t)w->pixel_bytes;
             ch->user_line_stride = (int32_t)line;
             ch->user_bytes_per_element = 4;
@@ -325,39 +339,33 @@ static int write_chunk(tf_exr_writer *w, int y, const uint8_t *rows, char *err, 
         rv = exr_encoding_run(w->ctx, 0, &enc);
     exr_encoding_destroy(w->ctx, &enc);
     if (rv != EXR_ERR_SUCCESS) {
-        char what[64];
-        snprintf(what, sizeof what, "cannot write rows %d..%d", y,
-                 y + TF_EXR_CHUNK_ROWS > w->height ? w->height - 1 : y + TF_EXR_CHUNK_ROWS - 1);
-        writer_error(w, err, errlen, what, rv);
+        chunk_failed(w, c, rv, err, errlen);
         return -1;
     }
+    w->next_chunk++;
     return 0;
 }
 
-/* Write nrows caller rows starting at w->next_row; shared by pixel and gray writers. */
+/* Write nrows caller rows starting at the next row; shared by pixel and gray writers. */
 static int write_rows_raw(tf_exr_writer *w, int nrows, const void *px, char *err, size_t errlen)
 {
-    if (w->broken || w->sink.write_errno) {
-        tf_seterr(err, errlen, "%s: an earlier write failed%s%s", w->path,
-                 w->sink.write_errno ? ": " : "",
-                 w->sink.write_errno ? strerror(w->sink.write_errno) : "");
+    if (writer_refuses(w, err, errlen))
+        return -1;
+    int y0 = tf_exr_next_row(w), nx = tf_layout_chunks_x(&w->layout);
+    int unit = w->layout.tiled ? w->layout.tile_h : TF_EXR_CHUNK_ROWS;
+    if (nrows <= 0 || nrows > w->height - y0 || w->next_chunk % nx != 0 ||
+        (nrows % unit != 0 && y0 + nrows != w->height)) {
+        tf_seterr(err, errlen, "%s: cannot write %d rows at row %d of %d (whole chunk rows of %d "
+                  "only)", w->path, nrows, y0, w->height, unit);
         return -1;
     }
-    if (nrows <= 0 || nrows > w->height - w->next_row ||
-        (nrows % TF_EXR_CHUNK_ROWS != 0 && w->next_row + nrows != w->height)) {
-        tf_seterr(err, errlen, "%s: cannot write %d rows at row %d of %d (whole chunks of %d only)",
-                 w->path, nrows, w->next_row, w->height, TF_EXR_CHUNK_ROWS);
-        return -1;
-    }
-    int end = w->next_row + nrows; /* <= height: no overflow */
-    const uint8_t *rows = px;
-    size_t chunk_bytes = (size_t)w->width * w->pixel_bytes * TF_EXR_CHUNK_ROWS;
-    for (int y = w->next_row; y < end; y += TF_EXR_CHUNK_ROWS, rows += chunk_bytes) {
-        if (write_chunk(w, y, rows, err, errlen) != 0) {
-            w->broken = 1; /* OpenEXRCore's chunk state is unknown now: write nothing more */
+    int end = y0 + nrows;
+    while (w->next_chunk < w->nchunks) {
+        tf_chunk_ref c = tf_layout_chunk(&w->layout, w->next_chunk);
+        if (c.rect.y >= end)
+            break;
+        if (encode_chunk(w, &c, px, y0, err, errlen) != 0)
             return -1;
-        }
-        w->next_row = y + TF_EXR_CHUNK_ROWS < end ? y + TF_EXR_CHUNK_ROWS : end;
     }
     return 0;
 }
@@ -367,14 +375,34 @@ int tf_exr_write_rows(tf_exr_writer *w, int nrows, const tf_pixel *px, char *err
     return write_rows_raw(w, nrows, px, err, errlen);
 }
 
-int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen)
+int tf_exr_write_chunk(tf_exr_writer *w, int cx, int cy, const void *packed, size_t len,
+                       char *err, size_t errlen)
 {
-    if (w->broken || w->sink.write_errno) {
-        tf_seterr(err, errlen, "%s: an earlier write failed%s%s", w->path,
-                 w->sink.write_errno ? ": " : "",
-                 w->sink.write_errno ? strerror(w->sink.write_errno) : "");
+    if (writer_refuses(w, err, errlen))
+        return -1;
+    int64_t index = tf_layout_chunk_index(&w->layout, cx, cy);
+    if (index < 0 || index != w->next_chunk || len == 0 || len > INT32_MAX) {
+        tf_seterr(err, errlen, "%s: chunk (%d, %d) of %zu bytes is not the next chunk to write "
+                  "(index %lld)", w->path, cx, cy, len, (long long)w->next_chunk);
         return -1;
     }
+    tf_chunk_ref c = tf_layout_chunk(&w->layout, index);
+    last_exr_message[0] = '\0';
+    exr_result_t rv = w->layout.tiled
+                          ? exr_write_tile_chunk(w->ctx, 0, cx, cy, 0, 0, packed, len)
+                          : exr_write_scanline_chunk(w->ctx, 0, cy, packed, len);
+    if (rv != EXR_ERR_SUCCESS || w->sink.write_errno) {
+        chunk_failed(w, &c, rv, err, errlen);
+        return -1;
+    }
+    w->next_chunk++;
+    return 0;
+}
+
+int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen)
+{
+    if (writer_refuses(w, err, errlen))
+        return -1;
     if (fsync(w->sink.fd) != 0) {
         tf_seterr(err, errlen, "%s: fsync failed: %s", w->path, strerror(errno));
         return -1;
@@ -384,9 +412,9 @@ int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen)
 
 int tf_exr_finish(tf_exr_writer *w, char *err, size_t errlen)
 {
-    if (w->broken || w->next_row != w->height) {
+    if (w->broken || w->next_chunk != w->nchunks) {
         tf_seterr(err, errlen, "%s: cannot finish: only %d of %d rows written", w->path,
-                 w->next_row, w->height);
+                  w->broken ? 0 : tf_exr_next_row(w), w->height);
         writer_free(w, 1);
         return -1;
     }
@@ -419,8 +447,8 @@ void tf_exr_abandon(tf_exr_writer *w)
 int tf_exr_write_gray(const char *path, int width, int height, const float *data, char *err,
                       size_t errlen)
 {
-    tf_exr_writer *w = writer_open(path, width, height, GRAY_CHANNELS, 1, sizeof(float), err,
-                                   errlen);
+    tf_exr_layout layout = {width, height, 0, 0, 0, TF_PIXEL_FLOAT};
+    tf_exr_writer *w = writer_open(path, &layout, GRAY_CHANNELS, 1, sizeof(float), err, errlen);
     if (!w)
         return -1;
     exr_result_t rv = exr_attr_set_string(w->ctx, 0, ATTR_VERSION, TF_VERSION);
@@ -442,7 +470,10 @@ typedef struct exr_reader {
     const char *path;
     int64_t file_size;
     tf_exr_meta meta;
-    int nchunks;
+    tf_exr_layout layout;
+    const tf_exr_channel *channels;
+    int nchannels;
+    int64_t nchunks;
 } exr_reader;
 
 static void reader_close(exr_reader *r)
@@ -467,7 +498,8 @@ static int copy_string_attr(exr_reader *r, const char *name, char *out, size_t o
     return 0;
 }
 
-/* The part must be a single ZIP scanline part holding exactly our six FLOAT channels. */
+/* The part must be a single scanline ZIPS part or a one-level tiled ZIP part holding exactly
+ * our six channels, of the types of one pixel type (exrpart.h). */
 static int check_layout(exr_reader *r, char *err, size_t errlen)
 {
     exr_storage_t storage;
@@ -477,22 +509,13 @@ static int check_layout(exr_reader *r, char *err, size_t errlen)
     int nparts = 0;
     if (exr_get_count(r->ctx, &nparts) != EXR_ERR_SUCCESS || nparts != 1 ||
         exr_get_storage(r->ctx, 0, &storage) != EXR_ERR_SUCCESS ||
-        storage != EXR_STORAGE_SCANLINE ||
-        exr_get_compression(r->ctx, 0, &comp) != EXR_ERR_SUCCESS || comp != TF_EXR_COMPRESSION ||
+        (storage != EXR_STORAGE_SCANLINE && storage != EXR_STORAGE_TILED) ||
+        exr_get_compression(r->ctx, 0, &comp) != EXR_ERR_SUCCESS ||
         exr_get_data_window(r->ctx, 0, &dw) != EXR_ERR_SUCCESS || dw.min.x != 0 ||
         dw.min.y != 0 || exr_get_channels(r->ctx, 0, &chl) != EXR_ERR_SUCCESS ||
-        chl->num_channels != N_PIXEL_CHANNELS) {
+        chl->num_channels != 6) {
         tf_seterr(err, errlen, "%s: not a terrafarm render (unexpected EXR layout)", r->path);
         return -1;
-    }
-    for (int i = 0; i < chl->num_channels; i++) {
-        const exr_attr_chlist_entry_t *e = &chl->entries[i];
-        if (!find_channel(PIXEL_CHANNELS, N_PIXEL_CHANNELS, e->name.str) ||
-            e->pixel_type != EXR_PIXEL_FLOAT || e->x_sampling != 1 || e->y_sampling != 1) {
-            tf_seterr(err, errlen, "%s: not a terrafarm render (channel %s)", r->path,
-                     e->name.str);
-            return -1;
-        }
     }
     int64_t w = (int64_t)dw.max.x + 1, h = (int64_t)dw.max.y + 1;
     if (w > TF_EXR_MAX_DIM || h > TF_EXR_MAX_DIM || !valid_size((int)w, (int)h)) {
@@ -500,9 +523,46 @@ static int check_layout(exr_reader *r, char *err, size_t errlen)
                  r->path, w, h);
         return -1;
     }
-    r->meta.width = (int)w;
-    r->meta.height = (int)h;
-    r->nchunks = (r->meta.height + TF_EXR_CHUNK_ROWS - 1) / TF_EXR_CHUNK_ROWS;
+    tf_exr_layout l = {(int)w, (int)h, storage == EXR_STORAGE_TILED, 0, 0, TF_PIXEL_FLOAT};
+    if (l.tiled) {
+        uint32_t tw = 0, th = 0;
+        exr_tile_level_mode_t lm;
+        exr_tile_round_mode_t rm;
+        if (exr_get_tile_descriptor(r->ctx, 0, &tw, &th, &lm, &rm) != EXR_ERR_SUCCESS ||
+            lm != EXR_TILE_ONE_LEVEL || tw < 1 || th < 1 || tw > TF_EXR_MAX_DIM ||
+            th > TF_EXR_MAX_DIM) {
+            tf_seterr(err, errlen, "%s: not a terrafarm render (tiles)", r->path);
+            return -1;
+        }
+        l.tile_w = (int)tw;
+        l.tile_h = (int)th;
+    }
+    for (int i = 0; i < chl->num_channels; i++)
+        if (!strcmp(chl->entries[i].name.str, "R") &&
+            chl->entries[i].pixel_type == EXR_PIXEL_HALF)
+            l.pixel = TF_PIXEL_HALF;
+    if (comp != tf_exr_layout_compression(&l)) {
+        tf_seterr(err, errlen, "%s: not a terrafarm render (compression)", r->path);
+        return -1;
+    }
+    r->channels = tf_exr_render_channels(l.pixel, &r->nchannels);
+    for (int i = 0; i < chl->num_channels; i++) {
+        const exr_attr_chlist_entry_t *e = &chl->entries[i];
+        const tf_exr_channel *m = tf_exr_find_channel(r->channels, r->nchannels, e->name.str);
+        if (!m || e->pixel_type != m->type || e->x_sampling != 1 || e->y_sampling != 1) {
+            tf_seterr(err, errlen, "%s: not a terrafarm render (channel %s)", r->path,
+                     e->name.str);
+            return -1;
+        }
+    }
+    r->layout = l;
+    r->meta.width = l.width;
+    r->meta.height = l.height;
+    r->meta.tiled = l.tiled;
+    r->meta.tile_w = l.tile_w;
+    r->meta.tile_h = l.tile_h;
+    r->meta.pixel = l.pixel;
+    r->nchunks = tf_layout_chunk_count(&l);
     return 0;
 }
 
@@ -546,15 +606,23 @@ static int reader_open(exr_reader *r, const char *path, char *err, size_t errlen
     return 0;
 }
 
-/* Locate chunk `index` and check its header against the file: right y, right row count, packed
- * bytes entirely inside the file.  Returns 0 if plausible. */
-static int locate_chunk(exr_reader *r, int index, exr_chunk_info_t *cinfo)
+static exr_result_t chunk_info(exr_context_t ctx, const tf_exr_layout *l, const tf_chunk_ref *c,
+                               exr_chunk_info_t *cinfo)
 {
-    int y = index * TF_EXR_CHUNK_ROWS;
-    if (exr_read_scanline_chunk_info(r->ctx, 0, y, cinfo) != EXR_ERR_SUCCESS)
+    return l->tiled ? exr_read_tile_chunk_info(ctx, 0, c->cx, c->cy, 0, 0, cinfo)
+                    : exr_read_scanline_chunk_info(ctx, 0, c->cy, cinfo);
+}
+
+/* Locate chunk c and check its header against the file: the right chunk and size, packed
+ * bytes entirely inside the file.  Returns 0 if plausible. */
+static int locate_chunk(exr_reader *r, const tf_chunk_ref *c, exr_chunk_info_t *cinfo)
+{
+    if (chunk_info(r->ctx, &r->layout, c, cinfo) != EXR_ERR_SUCCESS)
         return -1;
-    int rows = r->meta.height - y < TF_EXR_CHUNK_ROWS ? r->meta.height - y : TF_EXR_CHUNK_ROWS;
-    if (cinfo->start_y != y || cinfo->height != rows || cinfo->width != r->meta.width)
+    /* tile chunk infos hold tile indices in start_x / start_y, scanline ones the first row */
+    int sx = r->layout.tiled ? c->cx : 0, sy = c->cy;
+    if (cinfo->start_x != sx || cinfo->start_y != sy || cinfo->height != c->rect.h ||
+        cinfo->width != c->rect.w)
         return -1;
     if (cinfo->packed_size == 0 || cinfo->data_offset > (uint64_t)r->file_size ||
         cinfo->packed_size > (uint64_t)r->file_size - cinfo->data_offset)
@@ -562,19 +630,20 @@ static int locate_chunk(exr_reader *r, int index, exr_chunk_info_t *cinfo)
     return 0;
 }
 
-/* Decode the located chunk into out (width * rows pixels).  Returns 0 if it decoded. */
-static int decode_chunk(exr_reader *r, const exr_chunk_info_t *cinfo, tf_pixel *out)
+/* Decode the located chunk into out (rect.w * rect.h pixels).  Returns 0 if it decoded. */
+static int decode_chunk(exr_reader *r, const exr_chunk_info_t *cinfo, const tf_chunk_ref *c,
+                        tf_pixel *out)
 {
     exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
     exr_result_t rv = exr_decoding_initialize(r->ctx, 0, cinfo, &dec);
     if (rv == EXR_ERR_SUCCESS) {
-        for (int c = 0; c < dec.channel_count; c++) {
-            exr_coding_channel_info_t *ch = &dec.channels[c];
-            const channel_map *m = find_channel(PIXEL_CHANNELS, N_PIXEL_CHANNELS,
-                                                ch->channel_name);
+        for (int i = 0; i < dec.channel_count; i++) {
+            exr_coding_channel_info_t *ch = &dec.channels[i];
+            const tf_exr_channel *m = tf_exr_find_channel(r->channels, r->nchannels,
+                                                          ch->channel_name);
             ch->decode_to_ptr = m ? (uint8_t *)out + m->offset : NULL;
             ch->user_pixel_stride = (int32_t)sizeof(tf_pixel);
-            ch->user_line_stride = (int32_t)(sizeof(tf_pixel) * (size_t)r->meta.width);
+            ch->user_line_stride = (int32_t)(sizeof(tf_pixel) * (size_t)c->rect.w);
             ch->user_bytes_per_element = 4;
             ch->user_data_type = EXR_PIXEL_FLOAT;
         }
@@ -588,24 +657,25 @@ static int decode_chunk(exr_reader *r, const exr_chunk_info_t *cinfo, tf_pixel *
 
 /* Called for each verified chunk in order with its decoded pixels; nonzero stops the walk. */
 typedef int (*chunk_fn)(void *user, exr_reader *r, const exr_chunk_info_t *cinfo,
-                        const tf_pixel *px);
+                        const tf_chunk_ref *c, const tf_pixel *px);
 
-/* Verify chunks from the top; returns the number of leading whole, decodable chunks, or -1 if
- * fn failed or memory ran out (message in err). */
-static int walk_chunks(exr_reader *r, chunk_fn fn, void *user, char *err, size_t errlen)
+/* Verify chunks from the first; returns the number of leading whole, decodable chunks, or -1
+ * if fn failed or memory ran out (message in err). */
+static int64_t walk_chunks(exr_reader *r, chunk_fn fn, void *user, char *err, size_t errlen)
 {
-    size_t n = (size_t)r->meta.width * TF_EXR_CHUNK_ROWS;
-    tf_pixel *px = malloc(n * sizeof *px);
+    tf_chunk_ref c0 = tf_layout_chunk(&r->layout, 0); /* the largest chunk */
+    tf_pixel *px = malloc((size_t)c0.rect.w * (size_t)c0.rect.h * sizeof *px);
     if (!px) {
         tf_seterr(err, errlen, "%s: out of memory", r->path);
         return -1;
     }
-    int good = 0;
+    int64_t good = 0;
     for (; good < r->nchunks; good++) {
         exr_chunk_info_t cinfo;
-        if (locate_chunk(r, good, &cinfo) != 0 || decode_chunk(r, &cinfo, px) != 0)
+        tf_chunk_ref c = tf_layout_chunk(&r->layout, good);
+        if (locate_chunk(r, &c, &cinfo) != 0 || decode_chunk(r, &cinfo, &c, px) != 0)
             break;
-        if (fn && fn(user, r, &cinfo, px) != 0) {
+        if (fn && fn(user, r, &cinfo, &c, px) != 0) {
             good = -1;
             break;
         }
@@ -614,16 +684,10 @@ static int walk_chunks(exr_reader *r, chunk_fn fn, void *user, char *err, size_t
     return good;
 }
 
-static int rows_in_chunks(const exr_reader *r, int chunks)
-{
-    int rows = chunks * TF_EXR_CHUNK_ROWS;
-    return rows < r->meta.height ? rows : r->meta.height;
-}
-
 /* Was the file finished (offset table written by exr_finish)?  Asked of a second context
  * with chunk reconstruction disabled, so only a real offset table can answer yes.  With
  * whole_file set, the last chunk must also end exactly at the end of the file. */
-static int offset_table_valid_ext(const char *path, int nchunks, int whole_file)
+static int offset_table_valid_ext(const char *path, const tf_exr_layout *l, int whole_file)
 {
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     init.error_handler_fn = remember_exr_error;
@@ -632,72 +696,78 @@ static int offset_table_valid_ext(const char *path, int nchunks, int whole_file)
     exr_context_t ctx = NULL;
     exr_chunk_info_t cinfo;
     struct stat st;
+    tf_chunk_ref last = tf_layout_chunk(l, tf_layout_chunk_count(l) - 1);
     int ok = stat(path, &st) == 0 && exr_start_read(&ctx, path, &init) == EXR_ERR_SUCCESS &&
-             exr_read_scanline_chunk_info(ctx, 0, (nchunks - 1) * TF_EXR_CHUNK_ROWS, &cinfo) ==
-                 EXR_ERR_SUCCESS &&
+             chunk_info(ctx, l, &last, &cinfo) == EXR_ERR_SUCCESS &&
              (!whole_file || cinfo.data_offset + cinfo.packed_size == (uint64_t)st.st_size);
     if (ctx)
         exr_finish(&ctx);
     return ok;
 }
 
-static int offset_table_valid(const char *path, int nchunks)
-{
-    return offset_table_valid_ext(path, nchunks, 0);
-}
-
 /* A finished file whose last chunk lies wholly inside it: every chunk was written before the
  * offset table (exr_finish), so it is complete without decoding each chunk -- which for a
  * large image would cost seconds on every new render over an old output. */
-static int finished_and_whole(const char *path, int nchunks)
+static int finished_and_whole(const char *path, const tf_exr_layout *l)
 {
-    return offset_table_valid_ext(path, nchunks, 1);
+    return offset_table_valid_ext(path, l, 1);
 }
 
-int tf_exr_probe(const char *path, tf_exr_meta *meta, int *rows_done, int *complete, char *err,
-                 size_t errlen)
+int tf_exr_probe_chunks(const char *path, tf_exr_meta *meta, int64_t *chunks_done,
+                        int *complete, char *err, size_t errlen)
 {
     exr_reader r;
     int rc = reader_open(&r, path, err, errlen);
     if (rc != 0)
         return rc;
-    if (finished_and_whole(path, r.nchunks)) {
+    if (finished_and_whole(path, &r.layout)) {
         *meta = r.meta;
-        *rows_done = r.meta.height;
+        *chunks_done = r.nchunks;
         *complete = 1;
         reader_close(&r);
         return 0;
     }
-    int good = walk_chunks(&r, NULL, NULL, err, errlen);
+    int64_t good = walk_chunks(&r, NULL, NULL, err, errlen);
     if (good >= 0) {
         *meta = r.meta;
-        *rows_done = rows_in_chunks(&r, good);
-        *complete = good == r.nchunks && offset_table_valid(path, r.nchunks);
+        *chunks_done = good;
+        *complete = good == r.nchunks && offset_table_valid_ext(path, &r.layout, 0);
     }
     reader_close(&r);
     return good < 0 ? -1 : 0;
 }
 
-/* ---------------------------------------------------------------------------------------------
- * Streaming rows back. */
-
-typedef struct row_stream {
-    tf_exr_row_fn fn;
-    void *user;
-} row_stream;
-
-static int stream_chunk_rows(void *user, exr_reader *r, const exr_chunk_info_t *cinfo,
-                             const tf_pixel *px)
+int tf_exr_probe(const char *path, tf_exr_meta *meta, int *rows_done, int *complete, char *err,
+                 size_t errlen)
 {
-    row_stream *s = user;
-    for (int i = 0; i < cinfo->height; i++)
-        if (s->fn(s->user, cinfo->start_y + i, px + (size_t)i * (size_t)r->meta.width) != 0)
-            return -1;
-    return 0;
+    int64_t chunks = 0;
+    int rc = tf_exr_probe_chunks(path, meta, &chunks, complete, err, errlen);
+    if (rc == 0) {
+        tf_exr_layout l = tf_exr_meta_layout(meta);
+        *rows_done = tf_layout_rows_in_chunks(&l, chunks);
+    }
+    return rc;
 }
 
-int tf_exr_read_rows(const char *path, tf_exr_meta *meta, int *rows_valid, tf_exr_row_fn fn,
-                     void *user, char *err, size_t errlen)
+/* ---------------------------------------------------------------------------------------------
+ * Streaming chunks and rows back. */
+
+typedef struct chunk_stream {
+    tf_exr_chunk_fn fn;
+    void *user;
+} chunk_stream;
+
+static int stream_chunk(void *user, exr_reader *r, const exr_chunk_info_t *cinfo,
+                        const tf_chunk_ref *c, const tf_pixel *px)
+{
+    (void)r;
+    (void)cinfo;
+    chunk_stream *s = user;
+    return s->fn(s->user, c->rect, px);
+}
+
+int tf_exr_read_chunks(const char *path, tf_exr_meta *meta, int64_t *chunks_valid,
+                       tf_exr_chunk_fn fn, void *user, char *err, size_t errlen)
 {
     exr_reader r;
     if (errlen > 0)
@@ -707,15 +777,67 @@ int tf_exr_read_rows(const char *path, tf_exr_meta *meta, int *rows_valid, tf_ex
         tf_seterr(err, errlen, "%s: no such file", path);
     if (rc != 0)
         return -1;
-    *meta = r.meta; /* filled before the first row arrives, so fn may size things from it */
-    row_stream s = {fn, user};
-    int good = walk_chunks(&r, stream_chunk_rows, &s, err, errlen);
+    *meta = r.meta; /* filled before the first chunk arrives, so fn may size things from it */
+    chunk_stream s = {fn, user};
+    int64_t good = walk_chunks(&r, stream_chunk, &s, err, errlen);
     if (good < 0 && errlen > 0 && !err[0])
-        tf_seterr(err, errlen, "%s: reading stopped by the row consumer", path);
+        tf_seterr(err, errlen, "%s: reading stopped by the chunk consumer", path);
     if (good >= 0)
-        *rows_valid = rows_in_chunks(&r, good);
+        *chunks_valid = good;
     reader_close(&r);
     return good < 0 ? -1 : 0;
+}
+
+/* Rows from chunks: a band of one chunk row (a tile row, or one scanline) is assembled, then
+ * handed on row by row once its last chunk arrived. */
+typedef struct row_stream {
+    tf_exr_row_fn fn;
+    void *user;
+    const tf_exr_meta *meta;
+    tf_pixel *band;
+    int band_y, band_h;
+    int failed_alloc;
+} row_stream;
+
+static int band_chunk(void *user, tf_rect rect, const tf_pixel *px)
+{
+    row_stream *s = user;
+    int width = s->meta->width;
+    if (!s->band) {
+        int bh = s->meta->tiled ? s->meta->tile_h : 1;
+        s->band = malloc((size_t)width * (size_t)bh * sizeof *s->band);
+        if (!s->band) {
+            s->failed_alloc = 1;
+            return -1;
+        }
+    }
+    s->band_y = rect.y;
+    s->band_h = rect.h;
+    for (int y = 0; y < rect.h; y++)
+        memcpy(s->band + (size_t)y * (size_t)width + rect.x, px + (size_t)y * (size_t)rect.w,
+               (size_t)rect.w * sizeof *px);
+    if (rect.x + rect.w < width)
+        return 0; /* the band is not complete yet */
+    for (int y = 0; y < rect.h; y++)
+        if (s->fn(s->user, rect.y + y, s->band + (size_t)y * (size_t)width) != 0)
+            return -1;
+    return 0;
+}
+
+int tf_exr_read_rows(const char *path, tf_exr_meta *meta, int *rows_valid, tf_exr_row_fn fn,
+                     void *user, char *err, size_t errlen)
+{
+    row_stream s = {fn, user, meta, NULL, 0, 0, 0};
+    int64_t chunks = 0;
+    int rc = tf_exr_read_chunks(path, meta, &chunks, band_chunk, &s, err, errlen);
+    if (rc != 0 && s.failed_alloc)
+        tf_seterr(err, errlen, "%s: out of memory", path);
+    if (rc == 0) {
+        tf_exr_layout l = tf_exr_meta_layout(meta);
+        *rows_valid = tf_layout_rows_in_chunks(&l, chunks);
+    }
+    free(s.band);
+    return rc;
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -740,6 +862,16 @@ static int describe_meta_change(const char *path, const tf_exr_meta *have,
                  "('%.80s' vs '%.80s')", path, have->settings, want->settings);
         return 1;
     }
+    tf_exr_layout a = tf_exr_meta_layout(have), b = tf_exr_meta_layout(want);
+    if (a.tiled != b.tiled || a.pixel != b.pixel ||
+        (a.tiled && (a.tile_w != b.tile_w || a.tile_h != b.tile_h))) {
+        char la[64], lb[64];
+        tf_exr_layout_format(&a, la, sizeof la);
+        tf_exr_layout_format(&b, lb, sizeof lb);
+        tf_seterr(err, errlen, "%s: the file's layout changed since the partial render ('%s' "
+                  "vs '%s')", path, la, lb);
+        return 1;
+    }
     return 0;
 }
 
@@ -753,31 +885,26 @@ typedef struct raw_copy {
 
 /* Copy one verified chunk's packed bytes into the new file, untouched. */
 static int copy_chunk_raw(void *user, exr_reader *r, const exr_chunk_info_t *cinfo,
-                          const tf_pixel *px)
+                          const tf_chunk_ref *c, const tf_pixel *px)
 {
     (void)px;
-    raw_copy *c = user;
-    if (cinfo->packed_size > c->cap) {
-        void *p = realloc(c->buf, (size_t)cinfo->packed_size);
+    raw_copy *rc = user;
+    if (cinfo->packed_size > rc->cap) {
+        void *p = realloc(rc->buf, (size_t)cinfo->packed_size);
         if (!p) {
-            snprintf(c->err, c->errlen, "%s: out of memory", r->path);
+            snprintf(rc->err, rc->errlen, "%s: out of memory", r->path);
             return -1;
         }
-        c->buf = p;
-        c->cap = (size_t)cinfo->packed_size;
+        rc->buf = p;
+        rc->cap = (size_t)cinfo->packed_size;
     }
-    exr_result_t rv = exr_read_chunk(r->ctx, 0, cinfo, c->buf);
+    exr_result_t rv = exr_read_chunk(r->ctx, 0, cinfo, rc->buf);
     if (rv != EXR_ERR_SUCCESS) {
-        set_error(c->err, c->errlen, r->path, "cannot read a verified chunk", rv);
+        set_error(rc->err, rc->errlen, r->path, "cannot read a verified chunk", rv);
         return -1;
     }
-    rv = exr_write_scanline_chunk(c->w->ctx, 0, cinfo->start_y, c->buf, cinfo->packed_size);
-    if (rv != EXR_ERR_SUCCESS) {
-        writer_error(c->w, c->err, c->errlen, "cannot copy a chunk", rv);
-        return -1;
-    }
-    c->w->next_row = cinfo->start_y + cinfo->height;
-    return 0;
+    return tf_exr_write_chunk(rc->w, c->cx, c->cy, rc->buf, (size_t)cinfo->packed_size, rc->err,
+                              rc->errlen);
 }
 
 static int fsync_parent_dir(const char *path, char *err, size_t errlen)
@@ -826,7 +953,7 @@ tf_exr_writer *tf_exr_resume(const char *path, const tf_exr_meta *expect, int *r
 
     tf_exr_writer *w = pixel_writer_create(tmp, &r.meta, err, errlen);
     raw_copy copy = {w, NULL, 0, err, errlen};
-    int good = w ? walk_chunks(&r, copy_chunk_raw, &copy, err, errlen) : -1;
+    int64_t good = w ? walk_chunks(&r, copy_chunk_raw, &copy, err, errlen) : -1;
     free(copy.buf);
     reader_close(&r);
     if (good < 0 || tf_exr_sync(w, err, errlen) != 0) {
@@ -850,6 +977,6 @@ tf_exr_writer *tf_exr_resume(const char *path, const tf_exr_meta *expect, int *r
         writer_free(w, 1);
         return NULL;
     }
-    *rows_done = w->next_row;
+    *rows_done = tf_exr_next_row(w);
     return w;
 }

@@ -36,6 +36,20 @@ static void free_writer(tf_png_writer *w, int remove_tmp)
     free(w);
 }
 
+/* libpng's own handlers print to stderr; ours stay quiet (the caller reports one line) and
+ * return through the setjmp, as libpng requires of an error handler. */
+static void quiet_png_error(png_structp png, png_const_charp msg)
+{
+    (void)msg;
+    png_longjmp(png, 1);
+}
+
+static void quiet_png_warning(png_structp png, png_const_charp msg)
+{
+    (void)png;
+    (void)msg;
+}
+
 tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_depth, int channels,
                              char *err, size_t errlen)
 {
@@ -69,7 +83,7 @@ tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_de
         free_writer(w, 0);
         return NULL;
     }
-    w->png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
+    w->png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, quiet_png_error, quiet_png_warning);
     w->info = w->png ? png_create_info_struct(w->png) : NULL;
     if (!w->info) {
         tf_seterr(err, errlen, "%s: libpng initialisation failed", path);

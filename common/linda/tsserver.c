@@ -555,7 +555,7 @@ static void refuse_request(conn *c, const tf_frame *f, const tf_tuple *t, const 
     if (tf_ratelimit_take(&all, (long long)tf_now_ms(), NULL)) {
         char shown[160];
         tf_tuple_format(t, shown, sizeof shown);
-        tf_warn_limited(&c->refusals, "refused %s %s from %s (%s): %s", tf_op_name(f->op), shown,
+        tf_warn_limited(&c->refusals, "%s %s from %s (%s) refused: %s", tf_op_name(f->op), shown,
                         c->peer, c->srv->role ? c->srv->role->name : "?", why);
     }
     char msg[TF_PROTO_ERROR_MAX];

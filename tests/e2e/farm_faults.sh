@@ -9,7 +9,7 @@ e2e_init
 SIZE=480x270
 
 say "reference: -j 2, $SIZE"
-render -q -j 2 --size $SIZE -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
+render -q -j 2 --size $SIZE --tasks rows:8 -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
 full=$(wc -c <"$T/ref.exr")
 
 

@@ -14,7 +14,7 @@ e2e_init
 SIZE=480x270
 GARBAGE="$TF_ROOT/tests/tools/garbage.py"
 
-render -q -j 2 --size $SIZE -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
+render -q -j 2 --size $SIZE --tasks rows:4 -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
 head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/good.key"
 head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/bad.key"
 chmod 600 "$T/good.key" "$T/bad.key"

@@ -92,7 +92,16 @@ rows_on_disk() {
     kill -KILL $pp 2>/dev/null; wait $pp 2>/dev/null
     sed -n 's/.*resuming .*: \([0-9][0-9]*\) of [0-9]* rows already on disk.*/\1/p' "$T/probe/out"
     grep -q 'already complete' "$T/probe/out" && echo complete
+    [ -n "${PROBE_TILES:-}" ] && { sed -n 's/.*rows already on disk (and \([0-9]*\) tiles.*/\1/p' "$T/probe/out"; echo; } >"$T/probe.tiles"
     rm -rf "$T/probe"
+}
+
+# tiles_on_disk FILE: for a tiled output, "ROWS TILES": whole rows on disk, and tiles of the
+# next tile row on disk beside them.
+tiles_on_disk() {
+    td_rows=$(PROBE_TILES=1 rows_on_disk "$1")
+    td_tiles=$(head -1 "$T/probe.tiles")
+    echo "$td_rows ${td_tiles:-0}"
 }
 
 # no_leftovers PIDS...: none of these processes may still exist (zombies excluded).
@@ -117,4 +126,13 @@ make_partial() {
     done
     kill -KILL $mp_pid; wait $mp_pid 2>/dev/null
     sleep 0.1   # its forked workers follow it (PR_SET_PDEATHSIG)
+}
+
+# same_pixels A B WHAT: the two renders must hold bit-identical decoded pixels (for files whose
+# layout differs -- scanline vs tiled, another tile size -- where cmp cannot apply).
+EXRCMP=${TF_BUILD:-$TF_ROOT/build}/tools/exrcmp
+same_pixels() {
+    [ -x "$EXRCMP" ] || fail "no $EXRCMP (make build/tools/exrcmp)"
+    out=$("$EXRCMP" "$1" "$2" 2>&1) || fail "$3: $2 and $1 differ: $out"
+    say "$3: $out, as the reference"
 }

@@ -28,6 +28,10 @@ close() {
         say "$3: byte-identical to the C backend's image"
         return 0
     fi
+    if "$EXRCMP" "$T/ref.exr" "$2" >/dev/null 2>&1; then   # another layout (rows:1: scanline)
+        say "$3: pixels identical to the C backend's image"
+        return 0
+    fi
     python3 - "$1" "$4" "$3" <<'PY' || fail "$3: statistics differ from the C backend's by more than 1%"
 import json, sys
 a, b = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))

@@ -7,12 +7,16 @@
 # resume's copy of the verified chunks, and at ~60% and ~90% (plus a random few milliseconds,
 # so they fall anywhere, mid-write included).  Forked workers die with their coordinator (PR_SET_PDEATHSIG).
 # Prints, per interruption, rows on disk after the kill and rows the next run resumed.
+# RESUME_TASKS (default rows:1, a scanline file) picks the task shape: resume_kill_tiled.sh
+# runs the same interruptions on a tiled file (stamps).
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=800x450
 H=450
-ARGS="-j 2 --size $SIZE --tasks rows:1"
-PROBE_ARGS="--size $SIZE --tasks rows:1"
+TASKS=${RESUME_TASKS:-rows:1}
+ARGS="-j 2 --size $SIZE --tasks $TASKS"
+PROBE_ARGS="--size $SIZE --tasks $TASKS"
+say "tasks $TASKS"
 
 say "reference: uninterrupted render, $SIZE"
 render -q $ARGS -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
@@ -145,4 +149,4 @@ if command -v exrheader >/dev/null 2>&1; then
     exrheader "$OUT" >/dev/null 2>&1 || fail "exrheader cannot read the resumed file"
     say "exrheader reads the resumed file"
 fi
-echo "resume_kill: 7 interruptions, 0 rows on disk lost, image identical"
+echo "resume_kill ($TASKS): 7 interruptions, 0 rows on disk lost, image identical"

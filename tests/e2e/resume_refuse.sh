@@ -1,6 +1,7 @@
 #!/bin/sh
 # resume_refuse.sh: what --resume, --overwrite and a plain render do with what is at the output.
-#  - a changed scene, size or render setting is refused with a message naming what changed,
+#  - a changed scene, size or render setting (renderer version, --pixel) or a --tasks whose file
+#    layout differs (tiles asked of a scanline file) is refused with a message naming it,
 #    and nothing on disk is modified (checksum before/after);
 #  - a plain render (no --resume) on a partial output is refused, telling the user to choose
 #    --resume or --overwrite; --overwrite then works;
@@ -58,6 +59,10 @@ PY
 cp "$T/p.exr" "$T/keep.exr"; cp "$T/other.exr" "$T/p.exr"; sum_keep=$sum0; sum0=$(cksum <"$T/p.exr")
 refused "changed render settings" "settings changed" "$T/hills.scene" $ARGS --resume
 cp "$T/keep.exr" "$T/p.exr"; rm "$T/keep.exr" "$T/other.exr"; sum0=$sum_keep
+# The channel type is a setting; the file's layout (scanline rows:2 here) must match --tasks.
+refused "another pixel type" "settings changed" "$T/hills.scene" $ARGS --pixel float --resume
+refused "tiles asked of a scanline file" "the file is 'scanline half'" "$T/hills.scene" -j 2 \
+    --size $SIZE --tasks stamps:32x32 --resume
 
 refused "plain render on a partial output" "--resume.*--overwrite" "$T/hills.scene" $ARGS
 

@@ -62,10 +62,14 @@ def task_fields(tid, rect, excluded=b""):
     return [(STRING, "task"), (INT, tid)] + [(INT, v) for v in rect] + [(BLOB, excluded)]
 
 
-def result_fields(tid, worker, npx, value=0.5):
-    px = struct.pack("<6f", value, value, value, 1.0, 10.0, 4.0) * npx
-    return [(STRING, "result"), (INT, tid), (INT, worker), (INT, npx), (INT, 0), (INT, 0),
-            (INT, 1000), (BLOB, px)]
+def result_fields(tid, worker, index=b"", chunks=b"", preview=b""):
+    """A result tuple (common/farmproto.h, THE RESULT FORMAT) with the given blobs."""
+    return [(STRING, "result"), (INT, tid), (INT, worker), (INT, 1), (INT, 0), (INT, 0),
+            (INT, 1000), (INT, 4), (BLOB, index), (BLOB, chunks), (BLOB, preview)]
+
+
+def chunk_rec(cx, cy, packed, unpacked):
+    return struct.pack("<iiqq", cx, cy, packed, unpacked)
 
 
 def main():
@@ -81,10 +85,11 @@ def main():
     expect(c, "a second hello", OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"),
                                       (STRING, "x"), (INT, 1), (STRING, "c")])
     expect(c, "taking the scene tuple", IN,
-           [(STRING, "scene"), (STRING, None), (INT, None), (INT, None), (STRING, None)])
+           [(STRING, "scene"), (STRING, None), (INT, None), (INT, None), (STRING, None),
+            (STRING, None)])
     expect(c, "replacing the scene", OUT,
            [(STRING, "scene"), (STRING, "[image]\nwidth = 16\n"), (INT, width), (INT, height),
-            (STRING, "0" * 64)])
+            (STRING, "0" * 64), (STRING, "scanline half")])
     expect(c, "stealing a result", INP, [(STRING, "result")] + [(INT, None)] * 6 + [(BLOB, None)])
     expect(c, "reading a result", RDP, [(STRING, "result")] + [(INT, None)] * 6 + [(BLOB, None)])
     expect(c, "reading a task without taking it", RD, TASK_TMPL)
@@ -97,28 +102,25 @@ def main():
     expect(c, "a failure of a task it does not hold", OUT,
            [(STRING, "failed"), (INT, 0), (INT, me), (STRING, "forged")])
     expect(c, "a result for a task it does not hold (a duplicate)", OUT,
-           result_fields(0, me, 4))
+           result_fields(0, me, chunk_rec(0, 0, 4, 4), b"abcd"))
     expect(c, "an unknown tuple", OUT, [(STRING, "x"), (INT, 1)])
     expect(c, "a template without a name", INP, [(STRING, None), (INT, None)])
 
     tid, rect, excl = take(c)
-    npx = rect[2] * rect[3]
     print("holding task %d (%dx%d at %d,%d)" % (tid, rect[2], rect[3], rect[0], rect[1]))
     expect(c, "a second task while holding one (hoarding)", IN, TASK_TMPL)
-    expect(c, "a result signed with another worker's id", OUT, result_fields(tid, me + 1, npx))
-    expect(c, "a result for another task", OUT, result_fields(tid + 1, me, npx))
-    expect(c, "a result with an empty pixel blob", OUT,
-           result_fields(tid, me, 0)[:-1] + [(BLOB, b"")])
+    expect(c, "a result signed with another worker's id", OUT, result_fields(tid, me + 1))
+    expect(c, "a result for another task", OUT, result_fields(tid + 1, me))
+    expect(c, "a result with empty blobs (no chunk at all)", OUT, result_fields(tid, me))
 
     tid, rect, excl = take(c)
     npx = rect[2] * rect[3]
-    expect(c, "a short result", OUT, result_fields(tid, me, npx - 1))
+    expect(c, "a short result (a chunk of one byte for the whole task)", OUT,
+           result_fields(tid, me, chunk_rec(0, rect[1], 1, 1), b"x"))
     tid, rect, excl = take(c)
     npx = rect[2] * rect[3]
-    expect(c, "a result with NaN pixels", OUT, result_fields(tid, me, npx, float("nan")))
-    tid, rect, excl = take(c)
-    npx = rect[2] * rect[3]
-    expect(c, "a result with infinite pixels", OUT, result_fields(tid, me, npx, float("inf")))
+    expect(c, "a result whose chunk sizes do not add up", OUT,
+           result_fields(tid, me, chunk_rec(0, rect[1], 64, npx * 24), b"y" * 10))
     tid, rect, excl = take(c)
     expect(c, "a task put back with a shifted rectangle", OUT,
            task_fields(tid, [rect[0], rect[1] + 1, rect[2], rect[3]], excl))

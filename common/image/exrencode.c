@@ -1,0 +1,230 @@
+/* exrencode.c: see exrencode.h. */
+#include "image/exrencode.h"
+
+#include <openexr.h>
+#include <zlib.h>
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "image/exrpart.h"
+#include "image/preview.h"
+#include "log.h"
+
+struct tf_exr_encoder {
+    exr_context_t ctx;
+    tf_exr_layout layout;
+    tf_preview_grid grid;
+    const tf_exr_channel *channels;
+    int nchannels;
+    /* the payload being built */
+    uint8_t *index, *chunks, *preview;
+    size_t index_cap, chunks_cap, preview_cap;
+    size_t nchunks, chunks_len;
+    int failed;                 /* out of memory in the capture step */
+    char last_error[200];
+};
+
+static void note_error(exr_const_context_t ctxt, exr_result_t code, const char *msg)
+{
+    (void)ctxt;
+    (void)code;
+    (void)msg; /* reported through the return codes; details are not worth a global */
+}
+
+/* The encoder's context writes its header nowhere. */
+static int64_t discard_write(exr_const_context_t ctxt, void *userdata, const void *buffer,
+                             uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb)
+{
+    (void)ctxt, (void)userdata, (void)buffer, (void)offset, (void)error_cb;
+    return (int64_t)sz;
+}
+
+static int grow(uint8_t **buf, size_t *cap, size_t need)
+{
+    if (need <= *cap)
+        return 0;
+    size_t n = *cap ? *cap : 4096;
+    while (n < need)
+        n *= 2;
+    uint8_t *p = realloc(*buf, n);
+    if (!p)
+        return -1;
+    *buf = p;
+    *cap = n;
+    return 0;
+}
+
+/* The pipeline's last step: instead of writing the chunk to a file, append it to the payload. */
+static exr_result_t capture_chunk(exr_encode_pipeline_t *enc)
+{
+    tf_exr_encoder *e = enc->encoding_user_data;
+    const tf_exr_layout *l = &e->layout;
+    size_t n = enc->compressed_bytes;
+    if (grow(&e->index, &e->index_cap, (e->nchunks + 1) * TF_CHUNK_RECORD_BYTES) ||
+        grow(&e->chunks, &e->chunks_cap, e->chunks_len + n)) {
+        e->failed = 1;
+        return EXR_ERR_OUT_OF_MEMORY;
+    }
+    memcpy(e->chunks + e->chunks_len, enc->compressed_buffer, n);
+    e->chunks_len += n;
+    tf_chunk_rec rec;
+    /* OpenEXRCore's tile chunk info holds tile indices in start_x / start_y */
+    rec.cx = l->tiled ? enc->chunk.start_x : 0;
+    rec.cy = enc->chunk.start_y;
+    rec.packed = (int64_t)n;
+    rec.unpacked = (int64_t)enc->chunk.unpacked_size;
+    tf_chunk_rec_put(e->index + e->nchunks * TF_CHUNK_RECORD_BYTES, &rec);
+    e->nchunks++;
+    return EXR_ERR_SUCCESS;
+}
+
+tf_exr_encoder *tf_exr_encoder_new(const tf_exr_layout *l, char *err, size_t errlen)
+{
+    if (tf_exr_layout_check(l, err, errlen))
+        return NULL;
+    tf_exr_encoder *e = calloc(1, sizeof *e);
+    if (!e) {
+        tf_seterr(err, errlen, "out of memory for the chunk encoder");
+        return NULL;
+    }
+    e->layout = *l;
+    e->grid = tf_preview_grid_for(l->width, l->height);
+    e->channels = tf_exr_render_channels(l->pixel, &e->nchannels);
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = note_error;
+    init.write_fn = discard_write;
+    init.user_data = e;
+    exr_result_t rv = exr_start_write(&e->ctx, "<chunk encoder>", EXR_WRITE_FILE_DIRECTLY, &init);
+    if (rv == EXR_ERR_SUCCESS)
+        rv = tf_exr_define_part(e->ctx, l, e->channels, e->nchannels);
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_write_header(e->ctx);
+    if (rv != EXR_ERR_SUCCESS) {
+        tf_seterr(err, errlen, "cannot set up the chunk encoder: %s",
+                  exr_get_default_error_message(rv));
+        tf_exr_encoder_free(e);
+        return NULL;
+    }
+    return e;
+}
+
+void tf_exr_encoder_free(tf_exr_encoder *e)
+{
+    if (!e)
+        return;
+    if (e->ctx)
+        exr_finish(&e->ctx); /* its "file" is the discarding sink */
+    free(e->index);
+    free(e->chunks);
+    free(e->preview);
+    free(e);
+}
+
+/* Encode the chunk c of rectangle r (whose pixels px start at r's top-left). */
+static exr_result_t encode_chunk(tf_exr_encoder *e, tf_rect r, const tf_pixel *px,
+                                 const tf_chunk_ref *c)
+{
+    exr_chunk_info_t cinfo;
+    exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+    exr_result_t rv = e->layout.tiled
+                          ? exr_write_tile_chunk_info(e->ctx, 0, c->cx, c->cy, 0, 0, &cinfo)
+                          : exr_write_scanline_chunk_info(e->ctx, 0, c->cy, &cinfo);
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_encoding_initialize(e->ctx, 0, &cinfo, &enc);
+    if (rv == EXR_ERR_SUCCESS) {
+        const tf_pixel *origin = px + (size_t)(c->rect.y - r.y) * (size_t)r.w + (c->rect.x - r.x);
+        for (int i = 0; i < enc.channel_count; i++) {
+            exr_coding_channel_info_t *ch = &enc.channels[i];
+            const tf_exr_channel *m = tf_exr_find_channel(e->channels, e->nchannels,
+                                                          ch->channel_name);
+            if (!m) {
+                rv = EXR_ERR_INVALID_ARGUMENT;
+                break;
+            }
+            ch->encode_from_ptr = (const uint8_t *)origin + m->offset;
+            ch->user_pixel_stride = (int32_t)sizeof(tf_pixel);
+            ch->user_line_stride = (int32_t)(sizeof(tf_pixel) * (size_t)r.w);
+            ch->user_bytes_per_element = 4;
+            ch->user_data_type = EXR_PIXEL_FLOAT;
+        }
+    }
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_encoding_choose_default_routines(e->ctx, 0, &enc);
+    if (rv == EXR_ERR_SUCCESS) {
+        enc.encoding_user_data = e;
+        enc.yield_until_ready_fn = NULL; /* no file order to wait for: nothing is written here */
+        enc.write_fn = capture_chunk;
+        rv = exr_encoding_run(e->ctx, 0, &enc);
+    }
+    exr_encoding_destroy(e->ctx, &enc);
+    return rv;
+}
+
+int tf_preview_share(const tf_preview_grid *g, int width, int height, tf_rect r,
+                     const tf_pixel *px, uint8_t **buf, size_t *cap, size_t *len)
+{
+    int i0, i1, j0, j1;
+    tf_preview_span(g, width, height, r, &i0, &i1, &j0, &j1);
+    size_t n = (size_t)(i1 - i0) * (size_t)(j1 - j0) * 3;
+    if (grow(buf, cap, n ? n : 1))
+        return -1;
+    uint8_t *o = *buf;
+    for (int j = j0; j < j1; j++) {
+        const tf_pixel *row = px + (size_t)(tf_preview_source(g, j, height) - r.y) * (size_t)r.w;
+        for (int i = i0; i < i1; i++) {
+            const tf_pixel *p = row + (tf_preview_source(g, i, width) - r.x);
+            *o++ = tf_srgb8(p->r);
+            *o++ = tf_srgb8(p->g);
+            *o++ = tf_srgb8(p->b);
+        }
+    }
+    *len = n;
+    return 0;
+}
+
+int tf_exr_encode_rect(tf_exr_encoder *e, tf_rect r, const tf_pixel *px, tf_chunk_payload *out,
+                       char *err, size_t errlen)
+{
+    int64_t first;
+    int count;
+    if (tf_layout_rect_chunks(&e->layout, r, &first, &count))
+        return tf_seterr(err, errlen, "task %dx%d at %d,%d is not whole chunks of the output",
+                         r.w, r.h, r.x, r.y);
+    e->nchunks = 0;
+    e->chunks_len = 0;
+    e->failed = 0;
+    for (int i = 0; i < count; i++) {
+        tf_chunk_ref c = tf_layout_chunk(&e->layout, first + i);
+        exr_result_t rv = encode_chunk(e, r, px, &c);
+        if (rv != EXR_ERR_SUCCESS)
+            return tf_seterr(err, errlen, "cannot encode chunk (%d, %d): %s", c.cx, c.cy,
+                             e->failed ? "out of memory" : exr_get_default_error_message(rv));
+    }
+    size_t plen = 0;
+    if (tf_preview_share(&e->grid, e->layout.width, e->layout.height, r, px, &e->preview,
+                         &e->preview_cap, &plen))
+        return tf_seterr(err, errlen, "out of memory for the preview");
+    out->index = e->index;
+    out->nchunks = e->nchunks;
+    out->chunks = e->chunks;
+    out->chunks_len = e->chunks_len;
+    out->preview = e->preview;
+    out->preview_len = plen;
+    return 0;
+}
+
+int tf_exr_chunk_decodes(const uint8_t *packed, size_t packed_len, size_t unpacked,
+                         uint8_t **scratch, size_t *cap)
+{
+    if (packed_len == 0 || packed_len > unpacked)
+        return -1;
+    if (packed_len == unpacked)
+        return 0; /* stored raw */
+    if (grow(scratch, cap, unpacked + 1))
+        return -1;
+    uLongf out = (uLongf)unpacked + 1; /* room for one byte more: a longer stream is caught */
+    int rc = uncompress(*scratch, &out, packed, (uLong)packed_len);
+    return rc == Z_OK && out == (uLongf)unpacked ? 0 : -1;
+}

@@ -1,0 +1,212 @@
+/* test_results.c: the result format of farmproto.h and its checks.  A worker's real encoder
+ * (image/exrencode.c) packs a rectangle; the result tuple round-trips; tf_result_check accepts
+ * it for its own task and refuses every structural lie (other chunk coordinates, another
+ * task's rectangle, wrong unpacked or packed sizes, blob lengths that do not add up, a wrong
+ * preview size); tf_exr_chunk_decodes refuses packed bytes that do not inflate to the chunk's
+ * size.  Also the layout's geometry (partial edge tiles, the preview span partitioning the
+ * preview among tasks). */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <stdint.h>
+#include <cmocka.h>
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "farmproto.h"
+#include "image/exrencode.h"
+
+#define W 100
+#define H 45
+
+static tf_pixel *image(int w, int h)
+{
+    tf_pixel *px = malloc(sizeof *px * (size_t)w * (size_t)h);
+    assert_non_null(px);
+    for (int i = 0; i < w * h; i++)
+        px[i] = (tf_pixel){(float)(i % 97) * 0.01f, (float)(i % 13) * 0.1f, 0.25f, 1.0f,
+                           (float)i, (float)(1 + i % 5)};
+    return px;
+}
+
+/* Encode task rectangle r of layout l and pack it as task 7 of worker 3. */
+static tf_exr_encoder *enc;
+static void pack_rect(const tf_exr_layout *l, tf_rect r, tf_tuple *t)
+{
+    char err[256];
+    tf_pixel *px = image(r.w, r.h);
+    enc = tf_exr_encoder_new(l, err, sizeof err);
+    assert_non_null(enc);
+    tf_chunk_payload p;
+    assert_int_equal(tf_exr_encode_rect(enc, r, px, &p, err, sizeof err), 0);
+    tf_render_counts c = {10, 5, 2, 0};
+    assert_int_equal(tf_result_pack(t, 7, 3, &c, 1234, 99, &p), 0);
+    free(px);
+}
+
+static void test_round_trip_and_check(void **state)
+{
+    (void)state;
+    tf_exr_layout tiled = {W, H, 1, 16, 16, TF_PIXEL_HALF};
+    tf_preview_grid g = tf_preview_grid_for(W, H);
+    tf_rect r = {96, 32, 4, 13}; /* the partial corner tile */
+    tf_tuple t;
+    pack_rect(&tiled, r, &t);
+    tf_result_msg m;
+    char err[256];
+    assert_int_equal(tf_result_unpack(&t, &m), 0);
+    assert_int_equal(m.id, 7);
+    assert_int_equal(m.worker, 3);
+    assert_int_equal(m.spp_total, 99);
+    assert_int_equal(m.nchunks, 1);
+    assert_int_equal(tf_result_check(&m, &tiled, &g, r, err, sizeof err), 0);
+    assert_int_equal(m.counts.pixels, 4 * 13);
+    /* the same bytes answer no other task */
+    tf_rect other = {80, 32, 16, 13};
+    assert_int_equal(tf_result_check(&m, &tiled, &g, other, err, sizeof err), -1);
+    assert_non_null(strstr(err, "chunk 0 is at (6, 2), the task's is at (5, 2)"));
+    /* nor a file of another layout */
+    tf_exr_layout floats = tiled;
+    floats.pixel = TF_PIXEL_FLOAT;
+    assert_int_equal(tf_result_check(&m, &floats, &g, r, err, sizeof err), -1);
+    assert_non_null(strstr(err, "unpacked"));
+    tf_tuple_clear(&t);
+    tf_exr_encoder_free(enc);
+}
+
+/* Rewrite one index record or blob of a packed result and expect a refusal naming `words`. */
+static void expect_refused(const tf_exr_layout *l, tf_rect r, int field, size_t at,
+                           const void *bytes, size_t n, size_t new_len, const char *words)
+{
+    tf_tuple t;
+    pack_rect(l, r, &t);
+    tf_field *f = &t.f[field];
+    if (new_len != (size_t)-1)
+        f->v.bytes.len = (uint32_t)new_len;
+    if (bytes)
+        memcpy(f->v.bytes.ptr + at, bytes, n);
+    tf_result_msg m;
+    char err[256] = "";
+    tf_preview_grid g = tf_preview_grid_for(l->width, l->height);
+    int rc = tf_result_unpack(&t, &m);
+    if (rc == 0)
+        rc = tf_result_check(&m, l, &g, r, err, sizeof err);
+    assert_int_equal(rc, -1);
+    if (words && !strstr(err, words))
+        fail_msg("refusal '%s' does not say '%s'", err, words);
+    tf_tuple_clear(&t);
+    tf_exr_encoder_free(enc);
+}
+
+static void test_lies_refused(void **state)
+{
+    (void)state;
+    tf_exr_layout rows = {W, H, 0, 0, 0, TF_PIXEL_HALF};
+    tf_rect r = {0, 7, W, 3}; /* rows 7..9: three chunks */
+    int32_t y = 8;
+    expect_refused(&rows, r, 8, 4, &y, 4, (size_t)-1, "chunk 0 is at (0, 8)");
+    int64_t big = 1 << 20, zero = 0;
+    expect_refused(&rows, r, 8, 16, &big, 8, (size_t)-1, "unpacked bytes");
+    expect_refused(&rows, r, 8, 8, &big, 8, (size_t)-1, "packed bytes");
+    expect_refused(&rows, r, 8, 8, &zero, 8, (size_t)-1, "packed bytes");
+    expect_refused(&rows, r, 8, 0, NULL, 0, 2 * TF_CHUNK_RECORD_BYTES, "2 chunks, the task has 3");
+    expect_refused(&rows, r, 8, 0, NULL, 0, 2 * TF_CHUNK_RECORD_BYTES + 5, NULL); /* not records */
+    expect_refused(&rows, r, 9, 0, NULL, 0, 10, "add up");
+    expect_refused(&rows, r, 10, 0, NULL, 0, 3, "preview");
+    /* a task that is not whole chunks of the file */
+    tf_rect half = {0, 7, W / 2, 3};
+    tf_tuple t;
+    pack_rect(&rows, r, &t);
+    tf_result_msg m;
+    char err[256];
+    tf_preview_grid g = tf_preview_grid_for(W, H);
+    assert_int_equal(tf_result_unpack(&t, &m), 0);
+    assert_int_equal(tf_result_check(&m, &rows, &g, half, err, sizeof err), -1);
+    tf_tuple_clear(&t);
+    tf_exr_encoder_free(enc);
+}
+
+static void test_chunk_decodes(void **state)
+{
+    (void)state;
+    tf_exr_layout tiled = {W, H, 1, 32, 16, TF_PIXEL_FLOAT};
+    tf_rect r = {32, 16, 32, 16};
+    tf_tuple t;
+    pack_rect(&tiled, r, &t);
+    tf_result_msg m;
+    assert_int_equal(tf_result_unpack(&t, &m), 0);
+    tf_chunk_rec c;
+    tf_chunk_rec_get(m.index, &c);
+    uint8_t *scratch = NULL;
+    size_t cap = 0;
+    assert_int_equal(tf_exr_chunk_decodes(m.chunks, (size_t)c.packed, (size_t)c.unpacked,
+                                          &scratch, &cap), 0);
+    assert_true(c.packed < c.unpacked); /* these pixels compress */
+    uint8_t *bad = malloc((size_t)c.packed);
+    memcpy(bad, m.chunks, (size_t)c.packed);
+    bad[c.packed / 2] ^= 0x5a; /* zlib's checksum catches a flipped byte */
+    assert_int_equal(tf_exr_chunk_decodes(bad, (size_t)c.packed, (size_t)c.unpacked, &scratch,
+                                          &cap), -1);
+    memset(bad, 0, (size_t)c.packed);
+    assert_int_equal(tf_exr_chunk_decodes(bad, (size_t)c.packed, (size_t)c.unpacked, &scratch,
+                                          &cap), -1);
+    /* a stream that inflates to fewer bytes than the chunk's */
+    assert_int_equal(tf_exr_chunk_decodes(m.chunks, (size_t)c.packed, (size_t)c.unpacked - 4,
+                                          &scratch, &cap), -1);
+    free(bad);
+    free(scratch);
+    tf_tuple_clear(&t);
+    tf_exr_encoder_free(enc);
+}
+
+static void test_geometry(void **state)
+{
+    (void)state;
+    tf_exr_layout l = {W, H, 1, 37, 23, TF_PIXEL_HALF};
+    assert_int_equal(tf_layout_chunks_x(&l), 3);
+    assert_int_equal(tf_layout_chunks_y(&l), 2);
+    tf_chunk_ref c = tf_layout_chunk(&l, 5);
+    assert_int_equal(c.cx, 2);
+    assert_int_equal(c.cy, 1);
+    assert_int_equal(c.rect.w, W - 74);
+    assert_int_equal(c.rect.h, H - 23);
+    assert_int_equal(c.unpacked, (uint64_t)(W - 74) * (H - 23) * 16);
+    assert_int_equal(tf_layout_rows_in_chunks(&l, 4), 23);
+    assert_int_equal(tf_layout_rows_in_chunks(&l, 6), H);
+    /* every preview pixel belongs to exactly one tile, for several image sizes */
+    int sizes[][2] = {{W, H}, {2049, 1000}, {5000, 3}, {1, 1}, {1025, 1025}};
+    for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; k++) {
+        int w = sizes[k][0], h = sizes[k][1];
+        tf_exr_layout t = {w, h, 1, 37, 23, TF_PIXEL_HALF};
+        tf_preview_grid g = tf_preview_grid_for(w, h);
+        assert_true(g.pw <= TF_PREVIEW_MAX_SIDE && g.ph <= TF_PREVIEW_MAX_SIDE);
+        int *owner = calloc((size_t)g.pw * (size_t)g.ph, sizeof *owner);
+        for (int64_t i = 0; i < tf_layout_chunk_count(&t); i++) {
+            tf_chunk_ref ch = tf_layout_chunk(&t, i);
+            int i0, i1, j0, j1;
+            tf_preview_span(&g, w, h, ch.rect, &i0, &i1, &j0, &j1);
+            for (int j = j0; j < j1; j++)
+                for (int x = i0; x < i1; x++) {
+                    owner[j * g.pw + x]++;
+                    int sx = tf_preview_source(&g, x, w), sy = tf_preview_source(&g, j, h);
+                    assert_true(sx >= ch.rect.x && sx < ch.rect.x + ch.rect.w);
+                    assert_true(sy >= ch.rect.y && sy < ch.rect.y + ch.rect.h);
+                }
+        }
+        for (int i = 0; i < g.pw * g.ph; i++)
+            assert_int_equal(owner[i], 1);
+        free(owner);
+    }
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_round_trip_and_check),
+        cmocka_unit_test(test_lies_refused),
+        cmocka_unit_test(test_chunk_decodes),
+        cmocka_unit_test(test_geometry),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

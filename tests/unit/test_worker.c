@@ -49,8 +49,9 @@ static int fake_render(void *ctx, tf_rect r, tf_pixel *px, tf_render_counts *cou
 static void *serve_main(void *arg)
 {
     run *rn = arg;
-    tf_worker_step step = {NULL, fake_render, NULL, NULL, NULL, IMG_W, IMG_H};
-    rn->status = tf_worker_serve(rn->c, 7, &step);
+    tf_worker_step step = {NULL, fake_render, NULL, NULL, NULL, NULL, IMG_W, IMG_H};
+    tf_exr_layout layout = {IMG_W, IMG_H, 0, 0, 0, TF_PIXEL_HALF};
+    rn->status = tf_worker_serve(rn->c, 7, &layout, &step);
     rn->done = 1;
     return NULL;
 }
@@ -82,7 +83,7 @@ static void test_malformed_tasks_become_failures(void **state)
     put_task(space, 2, 0, 0, 1 << 20, 1 << 20); /* larger than any task */
     put_task(space, 3, 60, 0, 8, 8);           /* past the right edge */
     put_task(space, NAN_TASK, 1, 1, 4, 4);     /* the renderer makes a NaN */
-    put_task(space, 5, 8, 8, 4, 4);            /* fine */
+    put_task(space, 5, 0, 8, IMG_W, 4);        /* fine: four whole rows of a scanline file */
     put_task(space, TF_TASK_STOP, 0, 0, 0, 0);
     pthread_t th;
     assert_int_equal(pthread_create(&th, NULL, serve_main, &rn), 0);
@@ -111,7 +112,7 @@ static void test_malformed_tasks_become_failures(void **state)
     assert_int_equal(ts_space_inp(space, &tmpl, &got), 1);
     tf_result_msg m;
     assert_int_equal(tf_result_unpack(&got, &m), 0);
-    assert_int_equal(m.pixels_len, 16 * TF_PIXEL_WIRE_BYTES);
+    assert_int_equal(m.nchunks, 4); /* a scanline file: one chunk per row of the task */
     tf_tuple_clear(&got);
     tf_tuple_clear(&tmpl);
     ts_client_close(rn.c);

@@ -229,9 +229,9 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     }
     int64_t id;
     if (tf_worker_join(c, kind, tf_backend_name(b), &id)) {
-        tf_error("cannot join the render: %s", ts_client_error(c));
+        tf_warn("cannot join the render: %s", ts_client_error(c));
         tf_backend_free(b);
-        return 1;
+        return TF_WORKER_EXIT_LOST;
     }
     char tag[32];
     snprintf(tag, sizeof tag, "worker %" PRId64, id);

@@ -23,7 +23,8 @@
  *   OK       8    s->c  empty (out stored)
  *   PING     9    c->s  empty; a PONG comes back only if the request id is non-zero
  *   PONG    10    s->c  empty
- *   HELLO   11    s->c  u8 flags (bit 0: authentication required), then 32-byte server nonce Ns.
+ *   HELLO   11    s->c  u8 flags (bit 0: authentication required; bit 1: frames sealed after
+ *                       AUTH_OK, linda/seal.h), then 32-byte server nonce Ns.
  *                       Sent first, unsolicited, on every connection accepted from the
  *                       listening socket (never on fds added with ts_server_add_fd).
  *   AUTH    12    c->s  32-byte client nonce Nc, then 32-byte
@@ -79,6 +80,7 @@ enum tf_op {
 #define TF_OP_MAX TF_OP_ERROR
 
 #define TF_HELLO_AUTH_REQUIRED 0x01
+#define TF_HELLO_SEALED 0x02 /* after AUTH_OK every byte is in sealed records (seal.h) */
 
 /* A decoded frame header; body points into the caller's buffer (not a copy). */
 typedef struct tf_frame {

@@ -31,6 +31,7 @@
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <sodium.h>
 #include <sys/epoll.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -43,6 +44,7 @@
 
 #include "log.h"
 #include "linda/proto.h"
+#include "linda/seal.h"
 #include "linda/sock.h"
 
 #define TS_READ_CHUNK 65536
@@ -68,7 +70,10 @@ typedef struct conn {
     enum conn_state state;
     int dead;
     uint8_t ns[TF_NONCE_BYTES];
-    tf_buf in, out;
+    tf_buf in, out;        /* plaintext frames in and out */
+    int sealed;            /* after AUTH_OK with a key: records on the wire (seal.h) */
+    tf_seal tx, rx;
+    tf_buf raw, wire;      /* sealed: records read but not opened yet, records not yet sent */
     int64_t created_ms, last_rx_ms;
     int waiting;           /* a blocked IN/RD is queued in the space */
     int pending_take;      /* ... and whether it is an IN */
@@ -198,6 +203,8 @@ static conn *conn_new(ts_server *srv, int fd, const char *peer, int trusted)
     c->srv = srv;
     tf_buf_init(&c->in);
     tf_buf_init(&c->out);
+    tf_buf_init(&c->raw);
+    tf_buf_init(&c->wire);
     c->next = srv->conns;
     if (srv->conns)
         srv->conns->prev = c;
@@ -247,6 +254,10 @@ static void conn_destroy(conn *c)
     }
     tf_buf_free(&c->in);
     tf_buf_free(&c->out);
+    tf_buf_free(&c->raw);
+    tf_buf_free(&c->wire);
+    sodium_memzero(&c->tx, sizeof c->tx);
+    sodium_memzero(&c->rx, sizeof c->rx);
     free(c);
 }
 
@@ -294,13 +305,25 @@ static void conn_drop(conn *c, const char *why)
     conn_close(c);
 }
 
-/* Write as much queued output as the socket takes.  -1 if the connection broke. */
+/* Write as much queued output as the socket takes.  -1 if the connection broke.  A sealed
+ * connection's plaintext is sealed into records first. */
 static int conn_flush(conn *c)
 {
-    while (c->out.len > 0) {
-        ssize_t n = send(c->fd, tf_buf_head(&c->out), c->out.len, MSG_NOSIGNAL);
+    tf_buf *q = &c->out;
+    if (c->sealed) {
+        if (c->out.len > 0) {
+            if (tf_seal_append(&c->tx, &c->wire, tf_buf_head(&c->out), c->out.len) != 0) {
+                errno = ENOMEM;
+                return -1;
+            }
+            tf_buf_consume(&c->out, c->out.len);
+        }
+        q = &c->wire;
+    }
+    while (q->len > 0) {
+        ssize_t n = send(c->fd, tf_buf_head(q), q->len, MSG_NOSIGNAL);
         if (n > 0) {
-            tf_buf_consume(&c->out, (size_t)n);
+            tf_buf_consume(q, (size_t)n);
             continue;
         }
         if (n < 0 && errno == EINTR)
@@ -319,7 +342,7 @@ static int conn_check_out(conn *c, int append_rc)
         conn_drop(c, "out of memory queuing a reply");
         return -1;
     }
-    if (c->out.len > c->srv->max_out) {
+    if (c->out.len + c->wire.len > c->srv->max_out) {
         conn_drop(c, "too many unread replies (client not reading)");
         return -1;
     }
@@ -344,7 +367,7 @@ static void send_hello(conn *c)
 {
     uint8_t body[1 + TF_NONCE_BYTES];
     tf_auth_nonce(c->ns);
-    body[0] = c->srv->has_key ? TF_HELLO_AUTH_REQUIRED : 0;
+    body[0] = c->srv->has_key ? TF_HELLO_AUTH_REQUIRED | TF_HELLO_SEALED : 0;
     memcpy(body + 1, c->ns, TF_NONCE_BYTES);
     conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_HELLO, 0, body, sizeof body));
 }
@@ -685,8 +708,27 @@ static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
     uint8_t proof[TF_MAC_BYTES];
     tf_auth_server_mac(c->srv->key, c->ns, nc, proof);
     c->state = READY;
-    conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_AUTH_OK, f->request_id, proof,
-                                          sizeof proof));
+    if (conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_AUTH_OK, f->request_id, proof,
+                                              sizeof proof)) != 0)
+        return 0;
+    /* AUTH_OK goes out in clear; every byte after it, both ways, is sealed (seal.h). */
+    if (tf_buf_append(&c->wire, tf_buf_head(&c->out), c->out.len) != 0) {
+        tf_seterr(err, errlen, "out of memory");
+        return -1;
+    }
+    tf_buf_consume(&c->out, c->out.len);
+    tf_seal_init(c->srv->key, c->ns, nc, 0, &c->tx, &c->rx);
+    c->sealed = 1;
+    if (c->in.len > (size_t)f->body_len + TF_FRAME_HEADER) {
+        /* Bytes after AUTH in the same read are already sealed records: back to raw. */
+        size_t extra = c->in.len - ((size_t)f->body_len + TF_FRAME_HEADER);
+        if (tf_buf_append(&c->raw, tf_buf_head(&c->in) + f->body_len + TF_FRAME_HEADER,
+                          extra) != 0) {
+            tf_seterr(err, errlen, "out of memory");
+            return -1;
+        }
+        c->in.len -= extra;
+    }
     return 0;
 }
 
@@ -763,29 +805,71 @@ static void conn_process_input(conn *c)
     }
 }
 
+/* A sealed connection: open the complete records read so far into c->in, serving frames as
+ * they become whole, while c->in has room (at most one maximal frame plus one record: a
+ * partial frame can always take one more record, and a buffer that full holds a whole frame).
+ * -1 once the connection was dropped. */
+static int unseal_and_serve(conn *c)
+{
+    size_t limit = (size_t)conn_max_frame(c) + 4;
+    for (;;) {
+        if (c->waiting && c->in.len >= TS_MAX_PIPELINE)
+            return 0;
+        if (c->in.len >= limit || c->raw.len == 0)
+            return 0;
+        char err[160];
+        long n = tf_seal_open(&c->rx, tf_buf_head(&c->raw), c->raw.len, &c->in, err, sizeof err);
+        if (n < 0) {
+            conn_drop(c, err);
+            return -1;
+        }
+        if (n == 0)
+            return 0;
+        tf_buf_consume(&c->raw, (size_t)n);
+        conn_process_input(c);
+        if (c->dead)
+            return -1;
+    }
+}
+
 /* Read what is available (bounded), then serve it. */
 static void conn_readable(conn *c)
 {
     conn_touch(c); /* input, replies and interest may all change */
+    if (c->sealed && unseal_and_serve(c) != 0)
+        return;
     for (;;) {
         if (c->waiting && c->in.len >= TS_MAX_PIPELINE)
             break;
         /* Never buffer more than one maximal frame: the parser refuses longer lengths, so a
-         * buffer this full always holds a complete frame to consume first. */
-        size_t limit = (size_t)conn_max_frame(c) + 4;
-        size_t room = c->in.len < limit ? limit - c->in.len : 0;
+         * buffer this full always holds a complete frame to consume first.  Sealed: one record
+         * at a time, opened as room allows. */
+        tf_buf *dst = c->sealed ? &c->raw : &c->in;
+        size_t limit = c->sealed ? (size_t)TF_SEAL_RECORD_MAX + TF_SEAL_ABYTES + 4
+                                 : (size_t)conn_max_frame(c) + 4;
+        size_t room = dst->len < limit ? limit - dst->len : 0;
         size_t want = room < TS_READ_CHUNK ? room : TS_READ_CHUNK;
         if (want == 0)
             break;
-        if (tf_buf_reserve(&c->in, want) != 0) {
+        if (tf_buf_reserve(dst, want) != 0) {
             conn_drop(c, "out of memory buffering input");
             return;
         }
-        ssize_t n = recv(c->fd, c->in.data + c->in.off + c->in.len, want, 0);
+        ssize_t n = recv(c->fd, dst->data + dst->off + dst->len, want, 0);
         if (n > 0) {
-            c->in.len += (size_t)n;
+            dst->len += (size_t)n;
             c->last_rx_ms = tf_now_ms();
-            conn_process_input(c);
+            if (c->sealed) {
+                if (unseal_and_serve(c) != 0)
+                    return;
+            } else {
+                int was_sealed = c->sealed;
+                conn_process_input(c);
+                if (c->dead)
+                    return;
+                if (!was_sealed && c->sealed && unseal_and_serve(c) != 0)
+                    return; /* records that came with the AUTH */
+            }
             if (c->dead)
                 return;
             continue;
@@ -794,7 +878,7 @@ static void conn_readable(conn *c)
             continue;
         if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
             break;
-        if (n == 0 && c->in.len > 0)
+        if (n == 0 && (c->in.len > 0 || c->raw.len > 0))
             conn_drop(c, "closed in the middle of a frame");
         else if (n == 0)
             conn_close(c);
@@ -811,7 +895,7 @@ static void sync_conn_interest(conn *c)
     uint32_t want = 0;
     if (!(c->waiting && c->in.len >= TS_MAX_PIPELINE))
         want |= EPOLLIN;
-    if (c->out.len > 0)
+    if (c->out.len > 0 || c->wire.len > 0)
         want |= EPOLLOUT;
     if (c->ep_added && want == c->ep_events)
         return;
@@ -835,7 +919,7 @@ static void flush_dirty(ts_server *srv)
         c->dirty = 0;
         if (c->dead)
             continue;
-        if (c->out.len > 0 && conn_flush(c) != 0) {
+        if ((c->out.len > 0 || c->wire.len > 0) && conn_flush(c) != 0) {
             conn_drop(c, strerror(errno));
             continue;
         }

@@ -123,6 +123,7 @@ class Conn:
         self.req = 0
         self.sealer = None
         self.raw_in = b""
+        self.plain_in = b""
         if not handshake:
             return
         op, body = self.recv()
@@ -154,13 +155,21 @@ class Conn:
         return data
 
     def recv(self):
-        (length,) = struct.unpack("<I", self.recv_exact(4))
-        rest = self.recv_exact(length)
-        if self.sealer:
-            plain = self.sealer.open(length, rest)
-            (length,) = struct.unpack_from("<I", plain)
-            rest = plain[4:]
-        return rest[1], rest[6:]
+        if not self.sealer:
+            (length,) = struct.unpack("<I", self.recv_exact(4))
+            rest = self.recv_exact(length)
+            return rest[1], rest[6:]
+        # Sealed: the records' plaintexts form the frame stream (a record may hold part of a
+        # frame or several).
+        while True:
+            if len(self.plain_in) >= 4:
+                (length,) = struct.unpack_from("<I", self.plain_in)
+                if len(self.plain_in) >= 4 + length:
+                    rest = self.plain_in[4:4 + length]
+                    self.plain_in = self.plain_in[4 + length:]
+                    return rest[1], rest[6:]
+            (rlen,) = struct.unpack("<I", self.recv_exact(4))
+            self.plain_in += self.sealer.open(rlen, self.recv_exact(rlen))
 
     def send_frame(self, op, req, body=b""):
         f = frame(op, req, body)

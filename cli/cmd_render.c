@@ -29,6 +29,10 @@ static const char usage[] =
     "                            half). rows:K writes a scanline EXR, stamps:WxH a tiled one\n"
     "      --verify-chunks       also decode every result's chunks before accepting it (costs\n"
     "                            the coordinator per-pixel work; structure is always checked)\n"
+    "      --verify FRACTION     render that fraction of tasks (chosen from the scene hash) and\n"
+    "                            every unchecked worker's results a second time on another\n"
+    "                            worker and compare the bytes; a third render decides, the liar is\n"
+    "                            excluded and its tasks dealt again (default 0: off)\n"
     "      --backend c|opencl|auto  backend of the local workers (default c; auto: OpenCL if\n"
     "                            a device works, else C with a warning)\n"
     "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
@@ -76,7 +80,7 @@ bad:
 int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
-           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_PIXEL, O_VERIFY_CHUNKS };
+           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_PIXEL, O_VERIFY_CHUNKS, O_VERIFY };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -93,6 +97,7 @@ int cmd_render(int argc, char **argv)
         {"cl-device", required_argument, NULL, O_CL_DEVICE},
         {"pixel", required_argument, NULL, O_PIXEL},
         {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
+        {"verify", required_argument, NULL, O_VERIFY},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -147,6 +152,15 @@ int cmd_render(int argc, char **argv)
             o.pixel_given = 1;
             break;
         case O_VERIFY_CHUNKS: o.verify_chunks = 1; break;
+        case O_VERIFY: {
+            char *end;
+            o.verify_fraction = strtod(optarg, &end);
+            if (end == optarg || *end || !(o.verify_fraction >= 0 && o.verify_fraction <= 1)) {
+                tf_error("--verify '%s': expected a fraction from 0 to 1", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        }
         case O_LEASE:
             if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))
                 return TF_EXIT_USAGE;

@@ -29,6 +29,7 @@
 #include "coordinator/output.h"
 #include "coordinator/stats.h"
 #include "coordinator/supervisor.h"
+#include "coordinator/verify.h"
 #include "coordinator/worker_role.h"
 #include "linda/tsserver.h"
 #include "linda/tuplespace.h"
@@ -250,6 +251,8 @@ static int start_space(render *r)
     scfg.first_tiles = r->first_tiles;
     scfg.layout = r->layout;
     scfg.verify_chunks = o->verify_chunks;
+    scfg.verify_fraction = o->verify_fraction;
+    scfg.verify_seed = tf_verify_seed(r->scene->hash_hex);
     scfg.spec = r->spec;
     scfg.watermark = o->watermark; /* 0: auto, following the connected workers */
     scfg.expected_workers = expected_workers;
@@ -432,8 +435,13 @@ static int finish(render *r)
     if (tf_output_commit(r->output, &r->plan, err, sizeof err))
         return step_failed(r, 1, err);
     tf_local_workers_drain(&r->lw, 5.0);
-    for (int i = 0; i < 10 && ts_server_conn_count(r->srv) > 0; i++)
-        ts_server_run_once(r->srv, 20); /* let networked workers read the stop tuple */
+    /* Let networked workers read the stop tuple: one that is finishing a task (a straggler's
+     * copy, a spot check) takes it when it asks for the next; at most 5 s, and only while a
+     * worker that joined is still connected. */
+    for (int i = 0; i < 250 && ts_server_conn_count(r->srv) > 0 &&
+                    (i < 10 || tf_supervisor_live_workers(r->sup) > 0);
+         i++)
+        ts_server_run_once(r->srv, 20);
     double wall = tf_now_s() - r->t_start;
     const tf_farm_stats *st = tf_supervisor_stats(r->sup);
     uint64_t rays = st->primary_rays + st->shadow_rays;

@@ -37,6 +37,7 @@
 #include <assert.h>
 #include <inttypes.h>
 #include <math.h>
+#include <sodium.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -44,6 +45,7 @@
 #include <time.h>
 
 #include "farmproto.h"
+#include "coordinator/verify.h"
 #include "image/exrencode.h"
 #include "log.h"
 
@@ -66,7 +68,15 @@ typedef struct task_slot {
     int nfailed;
     int64_t failed_worker[MAX_FAILED_WORKERS];
     int failed_count[MAX_FAILED_WORKERS];
+    /* --verify (see "spot checks"): CHECK_SECOND or CHECK_THIRD while a check copy is out;
+     * who rendered it first and second, and the digests of their results */
+    int check;
+    int64_t check_worker[2];
+    uint8_t digest[2][TF_DIGEST_BYTES];
+    int replacing;       /* the third render sided with the second: its result replaces the first */
 } task_slot;
+
+enum { CHECK_NONE = 0, CHECK_SECOND = 1, CHECK_THIRD = 2 };
 
 typedef struct lease {
     uint64_t conn;
@@ -81,6 +91,10 @@ struct tf_supervisor {
     int64_t write_task, next_deal;
     int ring_size;
     int64_t next_worker_id;  /* the counter tuple's value, put back on every join */
+    /* --verify: addresses of excluded liars; no new worker may join from them (a liar that
+     * came back under a new id would side with its own lies) */
+    char excluded_addr[32][96];
+    int nexcluded_addr;
     int auto_watermark;      /* watermark follows the connected workers */
     int watermark;           /* in force now */
     int dups_in_flight;      /* duplicate copies dealt whose task has no result yet */
@@ -197,6 +211,9 @@ static void task_msg_of(const tf_supervisor *s, const task_slot *t, tf_task_msg 
     for (int i = 0; i < t->nfailed && m->nexcluded < TF_EXCLUDED_MAX; i++)
         if (t->failed_count[i] >= FAILURES_TO_EXCLUDE)
             m->excluded[m->nexcluded++] = t->failed_worker[i];
+    /* a check copy goes to a worker that has not rendered it yet */
+    for (int i = 0; i < t->check && m->nexcluded < TF_EXCLUDED_MAX; i++)
+        m->excluded[m->nexcluded++] = t->check_worker[i];
 }
 
 /* Put a task tuple for `id` in the space, carrying the workers it must avoid. */
@@ -260,7 +277,7 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
 /* A copy of task t was lost (its worker died or gave up): deal it again if no copy is left. */
 static void redeal_if_lost(tf_supervisor *s, task_slot *t)
 {
-    if (t->has_result || t->in_space > 0 || t->leased > 0 || s->error[0])
+    if ((t->has_result && !t->check) || t->in_space > 0 || t->leased > 0 || s->error[0])
         return;
     t->in_space++;
     s->stats.tasks_redealt++;
@@ -300,6 +317,9 @@ static int write_task(tf_supervisor *s, task_slot *t)
         return -1;
     }
     tf_tuple_clear(&tmpl);
+    tf_worker_stats *w = worker_by_id(s, t->result_worker);
+    if (w)
+        w->written++;
     if (tf_rowwriter_put(s->cfg.writer, &got)) {
         char err[512];
         tf_rowwriter_error(s->cfg.writer, err, sizeof err);
@@ -315,12 +335,25 @@ static int write_task(tf_supervisor *s, task_slot *t)
     return 0;
 }
 
+/* --verify: a result is written once its check (if any) agreed, and only if its worker has
+ * passed a check, so a liar is caught before anything of it reaches the file.  A farm of one
+ * worker cannot check anything: its results are written unchecked. */
+static int writable(tf_supervisor *s, const task_slot *t)
+{
+    if (s->cfg.verify_fraction <= 0)
+        return 1;
+    if (t->check)
+        return 0;
+    tf_worker_stats *w = worker_by_id(s, t->result_worker);
+    return !w || w->checked || tf_supervisor_live_workers(s) < 2;
+}
+
 /* Advance the write front over every task whose result is in, in id (= file) order. */
 static void write_ready_tasks(tf_supervisor *s)
 {
     while (!s->error[0] && s->write_task < s->next_deal) {
         task_slot *t = slot_of(s, s->write_task);
-        if (!t || !t->has_result)
+        if (!t || !t->has_result || !writable(s, t))
             return;
         if (write_task(s, t))
             return;
@@ -451,6 +484,8 @@ static int refuse_result(tf_supervisor *s, tf_result_msg *m, tf_rect r, char *wh
     return 0;
 }
 
+static void start_check(tf_supervisor *s, task_slot *t, const tf_result_msg *m);
+
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
     tf_result_msg m;
@@ -461,6 +496,11 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     }
     remove_lease(s, conn, m.id);
     task_slot *t = slot_of(s, m.id);
+    int replaced = t && t->replacing;
+    if (replaced) {
+        t->has_result = 0; /* the first result was a lie and left the space: this one counts */
+        t->replacing = 0;
+    }
     if (!t || t->has_result) {
         /* This very tuple, never "a result of this id": that would take the first (valid)
          * one out and leave this later one to be written. */
@@ -485,7 +525,10 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     t->result_worker = m.worker;
     if (t->duplicated)
         s->dups_in_flight--;
+    t->duplicated = 0;
     withdraw_copies(s, t);
+    if (!replaced) /* a third render that already decided needs no check */
+        start_check(s, t, &m);
     s->results_seen++;
     s->mean_task_ms += ((double)m.busy_ns * 1e-6 - s->mean_task_ms) / (double)s->results_seen;
     tf_worker_stats *w = worker_by_id(s, m.worker);
@@ -576,12 +619,177 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
             continue;
         if (t->leased > 0)
             t->leased--;
-        if (t->has_result)
+        if (t->has_result) {
+            redeal_if_lost(s, t); /* a check copy, if one is out: dealt again */
             continue;
+        }
         tf_warn("worker %s left holding task %" PRId64, peer ? peer : "?", id);
         if (!note_failure(s, t, worker))
             redeal_if_lost(s, t);
     }
+}
+
+/* ---- spot checks (--verify, verify.h) -------------------------------------------------------
+ * A task whose first result is accepted is checked when the seeded choice picks it, or when its
+ * worker has not passed a check yet: a check copy is dealt to a worker that has not rendered
+ * it (the task tuple excludes those that have), and until the check is over the result is not
+ * written.  The second result is never stored, only its digest compared: equal, both workers
+ * have passed a check; different, a third copy goes to a third worker, whose result sides with
+ * one of the two.  The other is excluded (its connection closed, every request refused), its
+ * results still in the space are taken out and their tasks dealt again; if the first was the
+ * liar, the third result replaces it.  Results of a liar already written cannot be rewritten
+ * in place: the render then stops with a line saying so (but none can be: a worker's results
+ * are written only once it has passed a check). */
+
+static void start_check(tf_supervisor *s, task_slot *t, const tf_result_msg *m)
+{
+    if (s->cfg.verify_fraction <= 0 || tf_supervisor_live_workers(s) < 2)
+        return;
+    tf_worker_stats *w = worker_by_id(s, m->worker);
+    if (!tf_verify_selected(s->cfg.verify_seed, s->cfg.verify_fraction, t->id) &&
+        (!w || w->checked))
+        return;
+    t->check = CHECK_SECOND;
+    t->check_worker[0] = m->worker;
+    tf_result_digest(m, t->digest[0]);
+    s->stats.verify_checks++;
+    t->in_space++;
+    deal_copy(s, t);
+}
+
+/* Worker `liar` disagreed with two others about task `task`: exclude it, deal again every
+ * task whose accepted result is its. */
+/* "10.0.0.7:5123" -> "10.0.0.7"; labels without a port ("local worker 2") stay whole. */
+static void address_of(const char *peer, char *addr, size_t len)
+{
+    snprintf(addr, len, "%s", peer);
+    char *colon = strrchr(addr, ':');
+    if (colon && (addr[0] != '[' || colon[-1] == ']'))
+        *colon = '\0';
+}
+
+static int address_excluded(const tf_supervisor *s, const char *peer)
+{
+    char addr[96];
+    address_of(peer, addr, sizeof addr);
+    for (int i = 0; i < s->nexcluded_addr; i++)
+        if (!strcmp(s->excluded_addr[i], addr))
+            return 1;
+    return 0;
+}
+
+static void exclude_liar(tf_supervisor *s, int64_t liar, int64_t task)
+{
+    tf_worker_stats *w = worker_by_id(s, liar);
+    if (!w || w->excluded)
+        return;
+    w->excluded = 1;
+    s->stats.workers_excluded++;
+    const char *peer = w->conn ? peer_name(s, w->conn) : "gone";
+    if (w->conn && s->nexcluded_addr < 32)
+        address_of(peer, s->excluded_addr[s->nexcluded_addr++], sizeof s->excluded_addr[0]);
+    tf_warn("worker %" PRId64 " (%s, %s) lied: its result of task %" PRId64 " differs from two "
+            "other workers'; excluded, and every task it rendered is dealt again",
+            liar, w->host, peer, task);
+    if (w->written > 0) {
+        fail(s, "worker %" PRId64 " (%s) lied, and %" PRId64 " of its results are already in "
+             "the output, which cannot be rewritten in place; render again with --overwrite",
+             liar, w->host, w->written);
+        return;
+    }
+    int redealt = 0;
+    for (int64_t id = s->write_task; id < s->next_deal; id++) {
+        task_slot *t = slot_of(s, id);
+        if (!t || !t->has_result || t->result_worker != liar || t->replacing)
+            continue;
+        tf_tuple tmpl, got;
+        tf_tuple_init(&got);
+        if (tf_result_template(&tmpl, id, liar) == 0 && ts_space_inp(s->space, &tmpl, &got) == 1)
+            tf_tuple_clear(&got);
+        tf_tuple_clear(&tmpl);
+        withdraw_copies(s, t);
+        t->has_result = 0;
+        t->check = CHECK_NONE;
+        t->in_space++;
+        s->stats.tasks_redealt++;
+        deal_copy(s, t);
+        redealt++;
+    }
+    if (redealt)
+        tf_info("re-dealing %d task%s rendered by worker %" PRId64, redealt,
+                redealt == 1 ? "" : "s", liar);
+    if (w->conn)
+        ts_server_close_conn(s->srv, w->conn);
+}
+
+/* A result for a task whose check copy is out, from a worker that has not rendered it: decide.
+ * The result is never stored except when it replaces a lying first one (TS_CAP_ALLOW). */
+static ts_cap_verdict admit_check(tf_supervisor *s, uint64_t conn, task_slot *t,
+                                  const tf_result_msg *m)
+{
+    uint8_t d[TF_DIGEST_BYTES];
+    tf_result_digest(m, d);
+    remove_lease(s, conn, t->id);
+    s->stats.verify_busy_s += (double)m->busy_ns * 1e-9;
+    if (t->check == CHECK_SECOND) {
+        if (sodium_memcmp(d, t->digest[0], TF_DIGEST_BYTES) == 0) {
+            tf_worker_stats *a = worker_by_id(s, t->check_worker[0]), *b = worker_by_id(s, m->worker);
+            if (a)
+                a->checked = 1;
+            if (b)
+                b->checked = 1;
+            t->check = CHECK_NONE;
+            withdraw_copies(s, t);
+            return TS_CAP_DISCARD;
+        }
+        s->stats.verify_mismatches++;
+        tf_warn("task %" PRId64 ": workers %" PRId64 " and %" PRId64 " rendered different bytes; "
+                "a third worker decides", t->id, t->check_worker[0], m->worker);
+        t->check = CHECK_THIRD;
+        t->check_worker[1] = m->worker;
+        memcpy(t->digest[1], d, TF_DIGEST_BYTES);
+        withdraw_copies(s, t);
+        t->in_space++;
+        deal_copy(s, t);
+        return TS_CAP_DISCARD;
+    }
+    /* CHECK_THIRD */
+    withdraw_copies(s, t);
+    t->check = CHECK_NONE;
+    tf_worker_stats *third = worker_by_id(s, m->worker);
+    if (sodium_memcmp(d, t->digest[0], TF_DIGEST_BYTES) == 0) {
+        tf_worker_stats *first = worker_by_id(s, t->check_worker[0]);
+        if (first)
+            first->checked = 1;
+        if (third)
+            third->checked = 1;
+        exclude_liar(s, t->check_worker[1], t->id);
+        return TS_CAP_DISCARD;
+    }
+    if (sodium_memcmp(d, t->digest[1], TF_DIGEST_BYTES) == 0) {
+        if (third)
+            third->checked = 1;
+        tf_worker_stats *second = worker_by_id(s, t->check_worker[1]);
+        if (second)
+            second->checked = 1;
+        /* The first was the liar: its stored result leaves, this one takes its place. */
+        t->replacing = 1;
+        tf_tuple tmpl, got;
+        tf_tuple_init(&got);
+        if (tf_result_template(&tmpl, t->id, t->check_worker[0]) == 0 &&
+            ts_space_inp(s->space, &tmpl, &got) == 1)
+            tf_tuple_clear(&got);
+        tf_tuple_clear(&tmpl);
+        tf_worker_stats *first = worker_by_id(s, t->check_worker[0]);
+        if (first && first->written == 0 && first->tasks > 0)
+            first->tasks--; /* that result no longer counts as its */
+        exclude_liar(s, t->check_worker[0], t->id);
+        return TS_CAP_ALLOW;
+    }
+    fail(s, "task %" PRId64 ": workers %" PRId64 ", %" PRId64 " and %" PRId64 " rendered three "
+         "different results; a pixel should depend only on the scene: stopping", t->id,
+         t->check_worker[0], t->check_worker[1], m->worker);
+    return TS_CAP_DISCARD;
 }
 
 /* ---- admission: the farm's checks on a worker's requests, before the space sees them ------
@@ -634,7 +842,9 @@ static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_wor
         return refuse(why, len, "result for task %" PRId64 ", which this connection does not "
                       "hold", m.id);
     task_slot *t = slot_of(s, m.id);
-    if (!t || t->has_result) {
+    int checking = t && t->has_result && t->check && m.worker != t->check_worker[0] &&
+                   (t->check == CHECK_SECOND || m.worker != t->check_worker[1]);
+    if (!t || (t->has_result && !checking)) {
         /* A straggler's second copy, or a task already written: the first result won. */
         remove_lease(s, conn, m.id);
         s->stats.results_dropped++;
@@ -651,6 +861,8 @@ static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_wor
         return refuse(why, len, "result of task %" PRId64 " (%dx%d at %d,%d): %s", m.id, r.w,
                       r.h, r.x, r.y, reason);
     }
+    if (checking)
+        return admit_check(s, conn, t, &m);
     return TS_CAP_ALLOW;
 }
 
@@ -690,7 +902,7 @@ static ts_cap_verdict admit_task_return(tf_supervisor *s, uint64_t conn, const t
             excl_altered |= !tf_task_excludes(&now, m.excluded[i]);
     }
     remove_lease(s, conn, m.id);
-    if (t && !t->has_result) {
+    if (t && (!t->has_result || t->check)) { /* a task, or its check copy */
         t->in_space++;
         deal_copy(s, t);
     }
@@ -711,12 +923,18 @@ ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blockin
     tf_supervisor *s = ctx;
     const char *name = tf_tuple_name(tuple);
     tf_worker_stats *w = worker_by_conn(s, conn);
-    if (!strcmp(name, "next_worker"))
-        return w ? refuse(why, len, "joins twice (already worker %" PRId64 ")", w->id)
-                 : TS_CAP_ALLOW;
+    if (!strcmp(name, "next_worker")) {
+        if (w)
+            return refuse(why, len, "joins twice (already worker %" PRId64 ")", w->id);
+        if (s->nexcluded_addr > 0 && address_excluded(s, peer_name(s, conn)))
+            return refuse(why, len, "joins from an address whose worker failed a spot check");
+        return TS_CAP_ALLOW;
+    }
     if (!w)
         return refuse(why, len, "%s (\"%s\", ...) before joining (take (\"next_worker\", ?n) "
                       "first)", ts_cap_op_name(op), name);
+    if (w->excluded)
+        return refuse(why, len, "worker %" PRId64 " is excluded (it failed a spot check)", w->id);
     if (!strcmp(name, "hello")) {
         int64_t id, pid;
         const char *str;
@@ -860,6 +1078,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         s->ring[i].id = -1;
     s->rows_written = cfg->first_row;
     s->stats.tasks_total = s->tasks.count;
+    s->stats.verify_fraction = cfg->verify_fraction;
     s->stats.rows_resumed = cfg->first_row;
     s->stats.watermark = s->watermark;
     update_watermark(s);

@@ -111,6 +111,7 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
             break;
         }
         if (tf_task_excludes(&m, id)) {
+            tf_debug("task %" PRId64 " excludes this worker: put back", m.id);
             put_back(c, &task, step);
             usleep(200 * 1000); /* let a worker that can render it take it */
             continue;
@@ -229,9 +230,14 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     }
     int64_t id;
     if (tf_worker_join(c, kind, tf_backend_name(b), &id)) {
-        tf_warn("cannot join the render: %s", ts_client_error(c));
+        /* A refusal (this address is excluded) is final; a lost connection is not. */
+        int refused = strstr(ts_client_error(c), "refused:") != NULL;
+        if (refused)
+            tf_error("cannot join the render: %s", ts_client_error(c));
+        else
+            tf_warn("cannot join the render: %s", ts_client_error(c));
         tf_backend_free(b);
-        return TF_WORKER_EXIT_LOST;
+        return refused ? 1 : TF_WORKER_EXIT_LOST;
     }
     char tag[32];
     snprintf(tag, sizeof tag, "worker %" PRId64, id);

@@ -22,7 +22,7 @@ port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/
 python3 "$PROXY" 127.0.0.1 "$port" 200 "$T/capture.bin" >"$T/proxy.out" 2>&1 &
 proxy=$!; e2e_track $proxy
 i=0
-until grep -q 'listening on' "$T/proxy.out"; do
+until grep -q 'listening on' "$T/proxy.out" 2>/dev/null; do
     i=$((i + 1)); [ $i -gt 100 ] && fail "the proxy did not start: $(cat "$T/proxy.out")"
     sleep 0.1
 done

@@ -133,12 +133,17 @@ bench-deps:
 	@$(MAKE) --no-print-directory deps DEB_PKGS="$(BENCH_PKGS)"
 
 # The OpenCL backend reads its kernels at run time: beside the executable (bin/../worker/kernels)
-# in a checkout, from PREFIX/share/terrafarm/kernels once installed.
+# in a checkout, from PREFIX/share/terrafarm/kernels once installed.  The kernel build also
+# reads the C renderer's headers it shares (SOURCE_FILES in worker/backend_opencl.c): from the
+# checkout's common/, or installed flat beside the kernels.
 PREFIX ?= /usr/local
+KERNEL_SHARED := common/portable.h common/render/constants.h common/render/sample_math.h \
+                 common/render/trace_math.h common/terrain/noise_kernel.h
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
 	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels
-	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
+	install -m 644 $(KERNELS) $(wildcard worker/kernels/*.h) $(KERNEL_SHARED) \
+	  $(DESTDIR)$(PREFIX)/share/terrafarm/kernels/
 
 clean:
 	rm -rf build build-asan bin

@@ -40,9 +40,14 @@
 #include "log.h"
 
 #define KERNEL_FILE "terrafarm.cl" /* the file that marks a kernel directory */
+/* The program's sources, concatenated in this order.  A name with a folder is one of the C
+ * renderer's own headers, shared with the kernels (common/portable.h explains how): it is found
+ * beside the kernels once installed (make install copies it there), else in the checkout's
+ * common/ (kernel directory/../../common/NAME). */
 #define SOURCE_FILES                                                                            \
-    {"tf_cl_params.h", "terrafarm.cl", "packet.cl", "packet_trace.cl", "packet_shade.cl",       \
-     "packet_render.cl"}
+    {"tf_cl_params.h", "render/constants.h", "terrafarm.cl", "packet.cl", "common/portable.h",  \
+     "terrain/noise_kernel.h", "render/sample_math.h", "render/trace_math.h", "packet_trace.cl", \
+     "packet_shade.cl", "packet_render.cl"}
 /* passed to the kernels as -DTF_STREAM and -DTF_PIX, so host and device cannot disagree */
 #define CORNERS_PER_ITEM 128 /* TF_STREAM: the batch of samples, the corners per tf_corners8 item */
 #define PIXELS_PER_ITEM 64   /* TF_PIX: pixels per tf_pixels8 work-item */
@@ -279,11 +284,28 @@ static int choose_device(cl_device_id *out, char *name, size_t namelen, char *er
 
 /* ---------------------------------------------------------------- program */
 
+/* Read source `name` of SOURCE_FILES for kernel directory dir: a plain name from dir; a shared
+ * header ("render/constants.h", "common/portable.h") from dir by its base name (installed),
+ * else from the checkout's common/ beside dir.  NULL if none is readable; *where gets the path
+ * last tried. */
+static char *read_source(const char *dir, const char *name, size_t *len, char *where,
+                         size_t wherelen)
+{
+    const char *slash = strrchr(name, '/');
+    snprintf(where, wherelen, "%s/%s", dir, slash ? slash + 1 : name);
+    char *src = read_text(where, len);
+    if (src || !slash)
+        return src;
+    const char *under_common = strncmp(name, "common/", 7) == 0 ? name + 7 : name;
+    snprintf(where, wherelen, "%s/../../common/%s", dir, under_common);
+    return read_text(where, len);
+}
+
 /* Build the program from SOURCE_FILES, concatenated in that order.  On failure the build log
  * goes to stderr (it is many lines; the error itself stays one line). */
 static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t errlen)
 {
-    char dir[PATH_MAX], path[PATH_MAX + 32];
+    char dir[PATH_MAX], path[PATH_MAX + 64], missing_path[PATH_MAX + 64] = "";
     if (find_kernel_dir(dir, sizeof dir, err, errlen))
         return -1;
     const char *names[] = SOURCE_FILES;
@@ -292,13 +314,20 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
     char *src[NSRC];
     int missing = -1;
     for (int i = 0; i < NSRC; i++) {
-        snprintf(path, sizeof path, "%s/%s", dir, names[i]);
-        src[i] = read_text(path, &len[i]);
-        if (!src[i] && missing < 0)
+        src[i] = read_source(dir, names[i], &len[i], path, sizeof path);
+        if (!src[i] && missing < 0) {
             missing = i;
+            snprintf(missing_path, sizeof missing_path, "%s", path);
+        }
     }
     if (missing >= 0) {
-        tf_seterr(err, errlen, "cannot read the OpenCL kernel source %s/%s", dir, names[missing]);
+        if (strchr(names[missing], '/'))
+            tf_seterr(err, errlen,
+                      "cannot read the shared OpenCL kernel header %s (looked beside the "
+                      "kernels in %s, then in the checkout at %s)",
+                      names[missing], dir, missing_path);
+        else
+            tf_seterr(err, errlen, "cannot read the OpenCL kernel source %s", missing_path);
         for (int i = 0; i < NSRC; i++)
             free(src[i]);
         return -1;
@@ -354,17 +383,6 @@ static void put3(double *P, int k, tf_vec3 v)
     P[k + 2] = v.z;
 }
 
-/* pow(2^i, -H) for i < TF_CL_AMP_TABLE, as tf_octaves_plan computes it for lacunarity 2. */
-static void fill_amp_table(double *amp, double H)
-{
-    double frequency = 1.0;
-    amp[0] = 1.0;
-    for (int i = 1; i < TF_CL_AMP_TABLE; i++) {
-        frequency *= 2.0;
-        amp[i] = pow(frequency, -H);
-    }
-}
-
 /* Copy what tf_renderer_new derived into the P[] / I[] blocks. */
 static void fill_params(const tf_renderer *r, double *P, int *I)
 {
@@ -409,13 +427,10 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     put3(P, TFP_SKY_HORIZON, s->sky.horizon);
     put3(P, TFP_SKY_ZENITH, s->sky.zenith);
     P[TFP_THRESHOLD] = r->threshold;
-    fill_amp_table(P + TFP_AMP_H08, 0.8); /* shade.c: BUMP_H */
-    fill_amp_table(P + TFP_AMP_H05, 0.5); /* shade.c: snow line and ripples */
-    /* shade.c make_snow_plan: SNOW_OCTAVES = 5 whole octaves of the H 0.5 table */
-    double snow_sum = 0;
-    for (int i = 0; i < 5; i++)
-        snow_sum += fabs(P[TFP_AMP_H05 + i]);
-    P[TFP_SNOW_BOUND] = snow_sum * (1.0 + 1e-9);
+    /* the shader's own octave weights and snow bound (shade.h) */
+    tf_shade_octave_weights(TF_BUMP_H, P + TFP_AMP_H08, TF_CL_AMP_TABLE);
+    tf_shade_octave_weights(TF_SNOW_H, P + TFP_AMP_H05, TF_CL_AMP_TABLE); /* = TF_RIPPLE_H */
+    P[TFP_SNOW_BOUND] = tf_shade_snow_fbm_bound();
 
     I[TFI_N] = hf->n;
     I[TFI_CELLS] = hf->cells;

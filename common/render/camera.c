@@ -4,8 +4,7 @@
 #include <math.h>
 #include <stdio.h>
 #include "log.h"
-
-#define DEG2RAD (3.14159265358979323846 / 180.0)
+#include "render/sample_math.h"
 
 /* forward, right, up from position, look_at and the scene's up hint. */
 static int build_basis(tf_camera *cam, const tf_scene *s, char *err, size_t errlen)
@@ -33,7 +32,7 @@ static int init_pinhole(tf_camera *cam, const tf_scene *s, char *err, size_t err
         tf_seterr(err, errlen, "camera: pinhole fov_deg must be in (0, 180), got %g", fov);
         return -1;
     }
-    cam->half_w = tan(0.5 * fov * DEG2RAD);
+    cam->half_w = tan(0.5 * fov * TF_DEG2RAD);
     cam->half_h = cam->half_w * (double)cam->height / (double)cam->width;
     return 0;
 }
@@ -56,11 +55,11 @@ static int init_panorama(tf_camera *cam, const tf_scene *s, char *err, size_t er
     tf_vec3 level = v3_sub(cam->forward, v3_scale(cam->pano_up, rise));
     cam->pano_forward = v3_norm(level);
     cam->pano_right = v3_cross(cam->pano_forward, cam->pano_up);
-    cam->sweep = sweep * DEG2RAD;
+    cam->sweep = sweep * TF_DEG2RAD;
     /* look_at direction on the unit cylinder: height = tan(elevation) = rise / |level| */
     cam->v_centre = rise / v3_len(level);
     if (vfov > 0)
-        cam->v_half = tan(0.5 * vfov * DEG2RAD);
+        cam->v_half = tan(0.5 * vfov * TF_DEG2RAD);
     else /* square pixels at the centre line: one pixel is sweep/width radians = arc length */
         cam->v_half = 0.5 * cam->sweep * (double)cam->height / (double)cam->width;
     return 0;
@@ -84,18 +83,8 @@ int tf_camera_init(tf_camera *cam, const tf_scene *s, char *err, size_t errlen)
     return init_pinhole(cam, s, err, errlen);
 }
 
+/* The ray itself is sample_math.h's tf_camera_ray, which the OpenCL kernels share. */
 tf_vec3 tf_camera_dir(const tf_camera *cam, double x, double y)
 {
-    double u = x / (double)cam->width - 0.5;  /* -0.5 .. 0.5, left to right */
-    double v = 0.5 - y / (double)cam->height; /* 0.5 .. -0.5, top to bottom */
-    if (cam->kind == TF_CAMERA_PANORAMA) {
-        double theta = u * cam->sweep;
-        tf_vec3 horizontal = v3_add(v3_scale(cam->pano_forward, cos(theta)),
-                                    v3_scale(cam->pano_right, sin(theta)));
-        double height = cam->v_centre + 2.0 * v * cam->v_half;
-        return v3_norm(v3_add(horizontal, v3_scale(cam->pano_up, height)));
-    }
-    tf_vec3 d = v3_add(cam->forward, v3_scale(cam->right, 2.0 * u * cam->half_w));
-    d = v3_add(d, v3_scale(cam->up, 2.0 * v * cam->half_h));
-    return v3_norm(d);
+    return tf_camera_ray(cam, x, y);
 }

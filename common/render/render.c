@@ -28,6 +28,7 @@
 #include <string.h>
 #include "log.h"
 #include "render/render_internal.h"
+#include "render/sample_math.h"
 
 tf_renderer *tf_renderer_new(const tf_scene *s, const tf_heightfield *hf, char *err, size_t errlen)
 {
@@ -77,23 +78,11 @@ void tf_render_point(const tf_renderer *r, double x, double y, tf_sample *out,
     tf_shade_ray(&r->shader, r->camera.position, dir, out, shadow_rays);
 }
 
-/* Jitter of lattice point (X, Y): two values in [-1/2, 1/2), from the seed and (X, Y) only. */
-static void lattice_jitter(const tf_renderer *r, int64_t X, int64_t Y, double *jx, double *jy)
-{
-    uint64_t h = tf_hash64(r->jitter_key ^ (uint64_t)X);
-    h = tf_hash64(h ^ ((uint64_t)Y * 0x9e3779b97f4a7c15ULL));
-    *jx = tf_hash_unit(h) - 0.5;
-    *jy = tf_hash_unit(h ^ 0xd1b54a32d192ed03ULL) - 0.5;
-}
-
 void tf_render_lattice_sample(const tf_renderer *r, int64_t X, int64_t Y, tf_sample *out,
                               uint64_t *shadow_rays)
 {
-    double jx, jy;
-    lattice_jitter(r, X, Y, &jx, &jy);
-    /* N is a power of two: the divisions are exact scalings, identical everywhere */
-    double x = ((double)X + jx) / (double)r->lattice;
-    double y = ((double)Y + jy) / (double)r->lattice;
+    double x, y;
+    tf_lattice_position(r->jitter_key, (double)r->lattice, X, Y, &x, &y);
     tf_render_point(r, x, y, out, shadow_rays);
 }
 
@@ -101,10 +90,7 @@ void tf_render_lattice_sample(const tf_renderer *r, int64_t X, int64_t Y, tf_sam
  * curve the preview and the benchmark's PSNR use), clamped to the displayable [0, 1] since
  * differences above white or below black never show.  sqrt is correctly rounded in IEEE and in
  * OpenCL C, so the kernel makes the same decisions bit for bit. */
-double tf_display_level(double v)
-{
-    return v > 0 ? (v < 1 ? sqrt(v) : 1) : 0;
-}
+double tf_display_level(double v) { return tf_display_level_of(v); }
 
 /* The largest per-channel range of display levels over n samples (n <= 5). */
 static double display_range(const tf_sample *const s[], int n)
@@ -176,11 +162,7 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
         s[2] = cached_sample(r, pc, px, py, q.i, q.j + q.size, &spp, tally);
         s[3] = cached_sample(r, pc, px, py, q.i + q.size, q.j + q.size, &spp, tally);
         if (q.size > 1) {
-            /* The threshold grows 8x per level (N/size cubed, exact in double): a quad's error
-             * weighs in the pixel by its share of the area (4x per level) and its 5-sample
-             * estimate is already better than the corners' (another 2x). */
-            double ratio = (double)(N / q.size);
-            double split_threshold = r->threshold * ratio * ratio * ratio;
+            double split_threshold = tf_aa_split_threshold(r->threshold, N, q.size);
             if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
                 int h = q.size / 2;
                 s[4] = cached_sample(r, pc, px, py, q.i + h, q.j + h, &spp, tally);
@@ -191,21 +173,18 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
                     stack[sp++] = (quad){q.i, q.j, h};
                     continue;
                 }
-                /* probed leaf: area (size^2 lattice cells) times corners/8 + centre/2 */
-                double w = 0.125 * (double)q.size * (double)q.size;
-                sum_r += w * ((double)s[0]->r + s[1]->r + s[2]->r + s[3]->r + 4.0 * s[4]->r);
-                sum_g += w * ((double)s[0]->g + s[1]->g + s[2]->g + s[3]->g + 4.0 * s[4]->g);
-                sum_b += w * ((double)s[0]->b + s[1]->b + s[2]->b + s[3]->b + 4.0 * s[4]->b);
-                sum_a += w * ((double)s[0]->a + s[1]->a + s[2]->a + s[3]->a + 4.0 * s[4]->a);
+                int z = q.size;
+                sum_r += tf_aa_probed_leaf(z, s[0]->r, s[1]->r, s[2]->r, s[3]->r, s[4]->r);
+                sum_g += tf_aa_probed_leaf(z, s[0]->g, s[1]->g, s[2]->g, s[3]->g, s[4]->g);
+                sum_b += tf_aa_probed_leaf(z, s[0]->b, s[1]->b, s[2]->b, s[3]->b, s[4]->b);
+                sum_a += tf_aa_probed_leaf(z, s[0]->a, s[1]->a, s[2]->a, s[3]->a, s[4]->a);
                 continue;
             }
         }
-        /* flat (or smallest) leaf: area (size^2 lattice cells) times the mean of its corners */
-        double w = 0.25 * (double)q.size * (double)q.size;
-        sum_r += w * ((double)s[0]->r + s[1]->r + s[2]->r + s[3]->r);
-        sum_g += w * ((double)s[0]->g + s[1]->g + s[2]->g + s[3]->g);
-        sum_b += w * ((double)s[0]->b + s[1]->b + s[2]->b + s[3]->b);
-        sum_a += w * ((double)s[0]->a + s[1]->a + s[2]->a + s[3]->a);
+        sum_r += tf_aa_flat_leaf(q.size, s[0]->r, s[1]->r, s[2]->r, s[3]->r);
+        sum_g += tf_aa_flat_leaf(q.size, s[0]->g, s[1]->g, s[2]->g, s[3]->g);
+        sum_b += tf_aa_flat_leaf(q.size, s[0]->b, s[1]->b, s[2]->b, s[3]->b);
+        sum_a += tf_aa_flat_leaf(q.size, s[0]->a, s[1]->a, s[2]->a, s[3]->a);
     }
 
     float zmin = TF_SKY_DIST;

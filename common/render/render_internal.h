@@ -15,10 +15,9 @@
 #include "render/render.h"
 #include "render/shade.h"
 
-#define TF_AA_MAX_DEPTH 6        /* 64x64 quads, 4225 samples: the most a pixel can take */
-/* A quad whose corners' display range exceeds this fraction of its split threshold gets its
- * centre sample (the probe) before the split decision; below it the corners are trusted. */
-#define TF_AA_PROBE_FRACTION 0.1
+/* TF_AA_MAX_DEPTH (the deepest subdivision) and TF_AA_PROBE_FRACTION (when a quad gets its
+ * centre probe): render/constants.h, shared with the OpenCL kernels. */
+#include "render/constants.h"
 
 struct tf_renderer {
     const tf_scene *scene;

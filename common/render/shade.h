@@ -28,6 +28,7 @@
 #include "terrain/heightfield.h"
 #include "terrain/noise.h"
 #include "scene.h"
+#include "render/constants.h"
 #include "render/trace.h"
 #include "vec.h"
 
@@ -54,7 +55,7 @@ typedef struct tf_sample {
     float dist;
 } tf_sample;
 
-#define TF_SKY_DIST 1e30f
+/* TF_SKY_DIST: render/constants.h */
 
 void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
 
@@ -68,6 +69,14 @@ void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *o
 tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays);
 tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
                        uint64_t *shadow_rays);
+
+/* For the OpenCL host, which uploads what the shader uses instead of deriving it again:
+ * tf_shade_octave_weights puts in amp[0 .. n-1] (n <= 32) the full-weight octave weights of
+ * the texture fBm plan of exponent H (TF_BUMP_H, or TF_SNOW_H = TF_RIPPLE_H), lacunarity 2;
+ * tf_shade_snow_fbm_bound is the strict bound on |snow line fBm| that snow shading tests
+ * against (tf_snow_line_matters). */
+void tf_shade_octave_weights(double H, double *amp, int n);
+double tf_shade_snow_fbm_bound(void);
 
 /* Sky radiance in direction dir (unit), before mist. */
 tf_vec3 tf_sky_color(const tf_shader *sh, tf_vec3 dir);

@@ -4,7 +4,7 @@
  * T1 = (A, B, C) and T2 = (A, C, D) with A = (ci, cj), B = (ci+1, cj), C = (ci+1, cj+1),
  * D = (ci, cj+1).  Triangles are tested exactly and watertight: every vertex is sheared into
  * ray space once (Woop, Benthin & Wald 2013), and every edge function is computed by the one
- * function edge_fn() from those vertex images, so an edge shared by two triangles gets values of
+ * function tf_edge_fn() from those vertex images, so an edge shared by two triangles gets values of
  * exactly opposite sign in both, and a point on it is accepted by at least one (values whose sign
  * rounding could flip are snapped to 0, which both accept).
  *
@@ -38,6 +38,10 @@
 #include <math.h>
 #include "render/trace.h"
 
+/* The arithmetic of the walk and the triangle tests, shared with the OpenCL kernels
+ * (packet_trace.cl); what is here is the walk itself. */
+#include "render/trace_math.h"
+
 /* A triangle hit found so far. */
 typedef struct candidate {
     double t;
@@ -45,8 +49,7 @@ typedef struct candidate {
     int tri; /* 0: (A, B, C), 1: (A, C, D) */
 } candidate;
 
-/* A vertex sheared into ray space: x, y in the plane across the ray, z scaled along it. */
-typedef struct sheared { double x, y, z; } sheared;
+typedef tf_sheared sheared; /* a vertex in ray space (trace_math.h) */
 
 /* Everything a walk needs about one ray, computed once. */
 typedef struct ray_ctx {
@@ -67,12 +70,12 @@ typedef struct ray_ctx {
 
 static inline double xcross(const ray_ctx *r, int X)
 {
-    return ((double)X * r->hf->cell - r->o[0]) * r->inv_dx;
+    return tf_grid_cross((double)X, r->hf->cell, r->o[0], r->inv_dx);
 }
 
 static inline double ycross(const ray_ctx *r, int Y)
 {
-    return ((double)Y * r->hf->cell - r->o[1]) * r->inv_dy;
+    return tf_grid_cross((double)Y, r->hf->cell, r->o[1], r->inv_dy);
 }
 
 /* Crossing of the grid line where the ray leaves column ci (cells), or +inf if it never does. */
@@ -88,29 +91,13 @@ static inline double exit_y(const ray_ctx *r, int cj)
 
 /* ---- triangle tests ----------------------------------------------------------------------- */
 
-/* Twice the signed area of (origin, p, q) in ray space.  edge_fn(q, p) == -edge_fn(p, q)
- * exactly (the two products just trade places), and a value within the rounding error of the
- * subtraction is returned as 0, so no sign is ever wrong, only undecided. */
-static inline double edge_fn(sheared p, sheared q)
-{
-    double a = p.x * q.y, b = p.y * q.x, e = a - b;
-    if (fabs(e) <= 8 * DBL_EPSILON * (fabs(a) + fabs(b)))
-        return 0;
-    return e;
-}
-
 /* Triangle with barycentric edge values u, v, w (for vertices with ray-space depths za, zb, zc):
  * a hit if all three share a sign (either side: rays from below hit the underside). */
 static inline void try_triangle(const ray_ctx *r, double u, double v, double w, double za,
                                 double zb, double zc, int ci, int cj, int tri, candidate *best)
 {
-    if ((u < 0 || v < 0 || w < 0) && (u > 0 || v > 0 || w > 0))
-        return;
-    double det = u + v + w;
-    if (det == 0)
-        return; /* the ray lies in the triangle's plane, or the triangle is edge-on */
-    double t = (u * za + v * zb + w * zc) / det;
-    if (t > r->tmin && t < r->tmax && t < best->t) {
+    double t;
+    if (tf_triangle_hit(u, v, w, za, zb, zc, r->tmin, r->tmax, best->t, &t)) {
         best->t = t;
         best->ci = ci;
         best->cj = cj;
@@ -118,14 +105,11 @@ static inline void try_triangle(const ray_ctx *r, double u, double v, double w, 
     }
 }
 
-/* A vertex sheared into ray space, given its offsets from the ray origin already permuted to
- * ray-space order (ax = offset on axis kx, ay on ky, az on kz):
- * (ax - shx * az, ay - shy * az, shz * az). */
+/* tf_shear (trace_math.h) of a vertex with the ray's shear constants. */
 static inline sheared shear_rel(double ax, double ay, double az, double shx, double shy,
                                 double shz)
 {
-    sheared s = {ax - shx * az, ay - shy * az, shz * az};
-    return s;
+    return tf_shear(ax, ay, az, shx, shy, shz);
 }
 
 /* Both triangles of cell (ci, cj).  The four corners' offsets from the origin are
@@ -152,8 +136,8 @@ static void test_triangles(const ray_ctx *r, int ci, int cj, candidate *best)
         a = shear_rel(x0, y0, za, shx, shy, shz), b = shear_rel(x1, y0, zb, shx, shy, shz);
         c = shear_rel(x1, y1, zc, shx, shy, shz), d = shear_rel(x0, y1, zd, shx, shy, shz);
     }
-    double e_ab = edge_fn(a, b), e_bc = edge_fn(b, c), e_ca = edge_fn(c, a);
-    double e_cd = edge_fn(c, d), e_da = edge_fn(d, a);
+    double e_ab = tf_edge_fn(a, b), e_bc = tf_edge_fn(b, c), e_ca = tf_edge_fn(c, a);
+    double e_cd = tf_edge_fn(c, d), e_da = tf_edge_fn(d, a);
     /* T1 = (A, B, C): A's weight is the area across from it, edge BC; and so on. */
     try_triangle(r, e_bc, e_ca, e_ab, a.z, b.z, c.z, ci, cj, 0, best);
     /* T2 = (A, C, D); its diagonal edge AC is T1's CA reversed. */
@@ -201,30 +185,6 @@ static int cell_of(const tf_heightfield *hf, double v)
     return i;
 }
 
-/* Narrow [*t0, *t1] to the slab lo <= o + t*d <= hi.  Returns 0 if it becomes empty. */
-static int clip_slab(double o, double d, double lo, double hi, double *t0, double *t1)
-{
-    if (d == 0)
-        return o >= lo && o <= hi;
-    double ta = (lo - o) / d, tb = (hi - o) / d;
-    if (ta > tb) {
-        double s = ta;
-        ta = tb;
-        tb = s;
-    }
-    if (ta > *t0)
-        *t0 = ta;
-    if (tb < *t1)
-        *t1 = tb;
-    return *t0 <= *t1;
-}
-
-static double safe_inverse(double v)
-{
-    double inv = 1.0 / v;
-    return isinf(inv) ? copysign(DBL_MAX, v) : inv;
-}
-
 /* Prepare a walk.  Returns 0 if the ray cannot meet the terrain in (tmin, tmax). */
 static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmin,
                      double tmax)
@@ -241,10 +201,10 @@ static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d,
     /* The box, its top widened so hits at exactly hmin or hmax stay inside after rounding. */
     const double top = (double)hf->cells * hf->cell;
     const double hmin = hf->hmin, hmax = hf->hmax;
-    const double zpad = 1e-9 * (fabs(hmin) + fabs(hmax) + fabs(o.z) + (hmax - hmin)) + DBL_MIN;
+    const double zpad = tf_box_zpad(hmin, hmax, o.z);
     double t0 = tmin, t1 = tmax;
-    if (!clip_slab(o.x, d.x, 0, top, &t0, &t1) || !clip_slab(o.y, d.y, 0, top, &t0, &t1) ||
-        !clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1) || !isfinite(t0) ||
+    if (!tf_clip_slab(o.x, d.x, 0, top, &t0, &t1) || !tf_clip_slab(o.y, d.y, 0, top, &t0, &t1) ||
+        !tf_clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1) || !isfinite(t0) ||
         !isfinite(t1))
         return 0;
     r->t0 = t0;
@@ -252,28 +212,13 @@ static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d,
 
     r->sx = d.x > 0 ? 1 : d.x < 0 ? -1 : 0;
     r->sy = d.y > 0 ? 1 : d.y < 0 ? -1 : 0;
-    r->inv_dx = r->sx ? safe_inverse(d.x) : 0;
-    r->inv_dy = r->sy ? safe_inverse(d.y) : 0;
+    r->inv_dx = r->sx ? tf_safe_inverse(d.x) : 0;
+    r->inv_dy = r->sy ? tf_safe_inverse(d.y) : 0;
     r->ci = cell_of(hf, o.x + t0 * d.x);
     r->cj = cell_of(hf, o.y + t0 * d.y);
 
-    /* Crossing parameters carry an absolute error of a few ulps of (|X*cell| + |ox|) * |inv_dx|;
-     * 1e-12 of that bound is thousands of times the error. */
-    double tie = 0;
-    if (r->sx)
-        tie += (top + fabs(o.x)) * fabs(r->inv_dx);
-    if (r->sy)
-        tie += (top + fabs(o.y)) * fabs(r->inv_dy);
-    tie *= 1e-12;
-    /* Altitude slack: rounding of z(t) itself, plus how far the ray (and the surface under it,
-     * whose slope is at most (hmax - hmin) / cell per axis) moves within tie_tol. */
-    double tabs = fabs(t0) > fabs(t1) ? fabs(t0) : fabs(t1);
-    double hscale = fabs(hmin) > fabs(hmax) ? fabs(hmin) : fabs(hmax);
-    double slope = (hmax - hmin) / hf->cell;
-    double margin = 1e-9 * (fabs(o.z) + fabs(d.z) * tabs + hscale + (hmax - hmin)) +
-                    2 * tie * (fabs(d.z) + 2 * slope * (fabs(d.x) + fabs(d.y)));
-    r->tie_tol = isfinite(tie) ? tie : INFINITY;
-    r->margin = isfinite(margin) ? margin : INFINITY;
+    tf_walk_tolerances(top, hf->cell, hmin, hmax, o, d, r->sx != 0, r->sy != 0, r->inv_dx,
+                       r->inv_dy, t0, t1, &r->tie_tol, &r->margin);
 
     /* Ray space: kz is the dominant axis of d. */
     double ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
@@ -289,11 +234,7 @@ static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d,
 /* Is the altitude span z_in..z_out wholly above hi or wholly below lo (by the margin)? */
 static inline int culled(double z_in, double z_out, float hi, float lo, double margin)
 {
-    double zlo = z_in < z_out ? z_in : z_out;
-    if (zlo > hi + margin)
-        return 1;
-    double zhi = z_in < z_out ? z_out : z_in;
-    return zhi < lo - margin;
+    return tf_span_culled(z_in, z_out, hi, lo, margin);
 }
 
 /* Fill *hit from the winning candidate. */
@@ -302,11 +243,9 @@ static void finish_hit(const ray_ctx *r, const candidate *c, tf_hit *hit)
     const tf_heightfield *hf = r->hf;
     const float *h = hf->h + (size_t)c->cj * hf->n + c->ci;
     double ha = h[0], hb = h[1], hd = h[hf->n], hc = h[hf->n + 1];
-    tf_vec3 n = c->tri == 0 ? v3(-(hb - ha), -(hc - hb), hf->cell)
-                            : v3(-(hc - hd), -(hd - ha), hf->cell);
     hit->t = c->t;
     hit->p = v3(r->o[0] + c->t * r->d[0], r->o[1] + c->t * r->d[1], r->o[2] + c->t * r->d[2]);
-    hit->n = v3_norm(n);
+    hit->n = tf_hit_normal(ha, hb, hc, hd, hf->cell, c->tri == 0);
     hit->ci = c->ci;
     hit->cj = c->cj;
 }
@@ -417,8 +356,10 @@ static int walk_hier(const ray_ctx *r, candidate *best)
     }
     for (;;) {
         const int bi = ci >> level, bj = cj >> level;
-        double tx = sx ? ((double)((bi + x_ahead) << level) * cell - ox) * inv_dx : INFINITY;
-        double ty = sy ? ((double)((bj + y_ahead) << level) * cell - oy) * inv_dy : INFINITY;
+        double tx = sx ? tf_grid_cross((double)((bi + x_ahead) << level), cell, ox, inv_dx)
+                       : INFINITY;
+        double ty = sy ? tf_grid_cross((double)((bj + y_ahead) << level), cell, oy, inv_dy)
+                       : INFINITY;
         double tc = tx <= ty ? tx : ty;
         double t_out = tc < t1 ? tc : t1;
         if (t_out < t_cur)
@@ -466,34 +407,36 @@ static int walk_hier(const ray_ctx *r, candidate *best)
 
 /* ---- public entry points ---------------------------------------------------------------------- */
 
-int tf_trace_flat(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax,
-                  tf_hit *hit)
+/* Trace one ray with the flat or the hierarchical walk (the same hit, bit for bit); the hit is
+ * filled in when `hit` is not NULL. */
+static int trace_ray(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin,
+                     double tmax, int flat, tf_hit *hit)
 {
     ray_ctx r;
     candidate best = {INFINITY, 0, 0, 0};
-    if (!setup_ray(&r, hf, origin, dir, tmin, tmax) || !walk_flat(&r, &best))
+    if (!setup_ray(&r, hf, origin, dir, tmin, tmax))
+        return 0;
+    if (!(flat ? walk_flat(&r, &best) : walk_hier(&r, &best)))
         return 0;
     if (hit)
         finish_hit(&r, &best, hit);
     return 1;
+}
+
+int tf_trace_flat(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax,
+                  tf_hit *hit)
+{
+    return trace_ray(hf, origin, dir, tmin, tmax, 1, hit);
 }
 
 int tf_trace(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax,
              tf_hit *hit)
 {
-    ray_ctx r;
-    candidate best = {INFINITY, 0, 0, 0};
-    if (!setup_ray(&r, hf, origin, dir, tmin, tmax) || !walk_hier(&r, &best))
-        return 0;
-    if (hit)
-        finish_hit(&r, &best, hit);
-    return 1;
+    return trace_ray(hf, origin, dir, tmin, tmax, 0, hit);
 }
 
 /* The first cell whose test hits ends the walk, so this is already an early exit. */
 int tf_occluded(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax)
 {
-    ray_ctx r;
-    candidate best = {INFINITY, 0, 0, 0};
-    return setup_ray(&r, hf, origin, dir, tmin, tmax) && walk_hier(&r, &best);
+    return trace_ray(hf, origin, dir, tmin, tmax, 0, NULL);
 }

@@ -10,9 +10,9 @@
 void tf_noise_init(tf_noise *nz, uint64_t seed)
 {
     nz->seed = seed;
-    for (int i = 0; i < 256; i++)
+    for (int i = 0; i < TF_NOISE_LATTICE; i++)
         nz->perm[i] = (uint16_t)i;
-    for (int i = 255; i > 0; i--) {
+    for (int i = TF_NOISE_LATTICE - 1; i > 0; i--) {
         /* The modulo bias (at most 256 / 2^64) is irrelevant; what matters is that the same seed
          * gives the same permutation everywhere. */
         uint64_t r = tf_hash64(seed ^ (0xd1b54a32d192ed03ULL * (uint64_t)(i + 1)));
@@ -21,8 +21,8 @@ void tf_noise_init(tf_noise *nz, uint64_t seed)
         nz->perm[i] = nz->perm[j];
         nz->perm[j] = tmp;
     }
-    for (int i = 0; i < 256; i++)
-        nz->perm[256 + i] = nz->perm[i];
+    for (int i = 0; i < TF_NOISE_LATTICE; i++)
+        nz->perm[TF_NOISE_LATTICE + i] = nz->perm[i];
 }
 
 double tf_noise2(const tf_noise *nz, double x, double y)

@@ -7,10 +7,11 @@
 #define TF_NOISE_H
 
 #include <stdint.h>
+#include "terrain/noise_kernel.h"
 
 struct tf_noise {
     uint64_t seed;
-    uint16_t perm[512]; /* permutation of 0..255, repeated */
+    uint16_t perm[TF_NOISE_PERM]; /* permutation of 0..255, repeated */
 };
 typedef struct tf_noise tf_noise;
 
@@ -24,15 +25,6 @@ double tf_fbm2(const tf_noise *nz, double x, double y, double H, double lacunari
 double tf_fbm3(const tf_noise *nz, double x, double y, double z, double H, double lacunarity,
                double octaves);
 
-/* A 64-bit integer hash (splitmix64 finaliser) and a uniform double in [0,1) from it: the one
- * source of deterministic "randomness" everywhere (generators, jitter). */
-static inline uint64_t tf_hash64(uint64_t x)
-{
-    x += 0x9e3779b97f4a7c15ULL;
-    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-    return x ^ (x >> 31);
-}
-static inline double tf_hash_unit(uint64_t x) { return (double)(tf_hash64(x) >> 11) * 0x1.0p-53; }
+/* tf_hash64 and tf_hash_unit: noise_kernel.h (shared with the OpenCL kernels). */
 
 #endif

@@ -22,40 +22,19 @@
 #include <stdint.h>
 #include "terrain/noise.h"
 
-/* Beyond 2^52 a double has no fractional part: the lattice is meaningless there (and the
- * conversion to an integer would overflow for inf / NaN).  Noise is 0 outside this range. */
-#define TF_NOISE_COORD_LIMIT 0x1p52
+/* The constants (TF_NOISE_COORD_LIMIT, TF_NOISE2_SCALE, the gradients' TF_C1, TF_S1, TF_H1),
+ * tf_fade, tf_noise_column and the column and blend arithmetic are in noise_kernel.h, which the
+ * OpenCL kernels share. */
 
-/* sqrt(2) and sqrt(2/3) rounded down in the 5th digit: see the range note above. */
-#define TF_NOISE2_SCALE 1.41421
-#define TF_NOISE3_SCALE 0.816496
-
-/* 16 unit gradients evenly spaced on the circle (22.5 degrees apart): nearly isotropic, and a
- * table of constants (not cos/sin at run time) so every libm gives the same bits. */
-#define TF_C1 0.92387953251128674
-#define TF_S1 0.38268343236508977
-#define TF_H1 0.70710678118654752
-static const double tf_grad2[16][2] = {
+/* 16 unit gradients evenly spaced on the circle (22.5 degrees apart): nearly isotropic. */
+static const double tf_grad2[TF_NOISE_GRADS][2] = {
     {1, 0},       {TF_C1, TF_S1},   {TF_H1, TF_H1},   {TF_S1, TF_C1},
     {0, 1},       {-TF_S1, TF_C1},  {-TF_H1, TF_H1},  {-TF_C1, TF_S1},
     {-1, 0},      {-TF_C1, -TF_S1}, {-TF_H1, -TF_H1}, {-TF_S1, -TF_C1},
     {0, -1},      {TF_S1, -TF_C1},  {TF_H1, -TF_H1},  {TF_C1, -TF_S1},
 };
 
-static inline double tf_fade(double t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }
-
-/* floor() for |x| < TF_NOISE_COORD_LIMIT without the libm call: truncate, then step down for
- * negative non-integers.  *fraction = x - floor(x).  One int->double conversion only (the
- * conversions were the hottest instructions of the row loop), and the step down is done on
- * the double too, which is exact below 2^53, so the bits equal x - (double)floor(x). */
-static inline int64_t tf_floor_split(double x, double *fraction)
-{
-    int64_t i = (int64_t)x;
-    double d = (double)i;
-    int below = x < d;
-    *fraction = x - (d - (below ? 1.0 : 0.0));
-    return i - below;
-}
+/* tf_floor_split, tf_noise_axis and tf_noise_axis_of: noise_kernel.h. */
 
 static inline int64_t tf_floor_i64(double x)
 {
@@ -63,53 +42,26 @@ static inline int64_t tf_floor_i64(double x)
     return tf_floor_split(x, &fraction);
 }
 
-/* The y half of a 2D noise evaluation.  ok == 0 marks an out-of-range y (noise is then 0). */
-typedef struct tf_noise_axis {
-    int lattice;    /* floor(y) & 255 */
-    int ok;
-    double f0, f1;  /* y - floor(y), and that minus 1 */
-    double fade;    /* tf_fade(f0) */
-} tf_noise_axis;
+static inline void tf_noise_axis_set(tf_noise_axis *a, double y) { *a = tf_noise_axis_of(y); }
 
-static inline void tf_noise_axis_set(tf_noise_axis *a, double y)
-{
-    a->ok = fabs(y) < TF_NOISE_COORD_LIMIT;
-    int64_t yi = a->ok ? tf_floor_i64(y) : 0;
-    a->lattice = (int)(yi & 255);
-    a->f0 = a->ok ? y - (double)yi : 0.0;
-    a->f1 = a->f0 - 1.0;
-    a->fade = tf_fade(a->f0);
-}
-
-/* The noise along one lattice column: with the y half fixed, the two corners (X, Y) and
- * (X, Y + 1) of column X blend (by the y fade) into a linear function of the x offset from X,
- * slope * (x - X) + intercept.  Both the point kernel and the row evaluator build the noise
- * from these column lines, so they perform the same operations and agree to the bit. */
-typedef struct tf_noise_column {
-    double slope, intercept;
-} tf_noise_column;
-
+/* The noise along one lattice column (tf_noise_column, noise_kernel.h).  Both the point kernel
+ * and the row evaluator build the noise from these column lines, so they perform the same
+ * operations and agree to the bit. */
 static inline tf_noise_column tf_noise_column_at(const tf_noise *nz, int64_t xi,
                                                  const tf_noise_axis *ay)
 {
     const uint16_t *p = nz->perm;
     /* perm holds 0..255 twice, so perm[X] + Y + 1 <= 511 stays in bounds. */
-    int a = p[xi & 255] + ay->lattice;
-    const double *g0 = tf_grad2[p[a] & 15], *g1 = tf_grad2[p[a + 1] & 15];
-    double e0 = g0[1] * ay->f0, e1 = g1[1] * ay->f1;
-    tf_noise_column c;
-    c.slope = g0[0] + ay->fade * (g1[0] - g0[0]);
-    c.intercept = e0 + ay->fade * (e1 - e0);
-    return c;
+    int a = p[xi & (TF_NOISE_LATTICE - 1)] + ay->lattice;
+    const double *g0 = tf_grad2[p[a] & (TF_NOISE_GRADS - 1)];
+    const double *g1 = tf_grad2[p[a + 1] & (TF_NOISE_GRADS - 1)];
+    return tf_noise_column_line(g0[0], g0[1], g1[0], g1[1], ay->f0, ay->f1, ay->fade);
 }
 
 /* Noise at x offset fx from the column `left`, with `right` the next column. */
 static inline double tf_noise_blend(double fx, tf_noise_column left, tf_noise_column right)
 {
-    double u = tf_fade(fx);
-    double l = left.slope * fx + left.intercept;
-    double r = right.slope * (fx - 1.0) + right.intercept;
-    return (l + u * (r - l)) * TF_NOISE2_SCALE;
+    return tf_noise_blend_faded(fx, tf_fade(fx), left, right);
 }
 
 /* 2D noise at (x, y) where `ay` was set from y. */
@@ -134,17 +86,26 @@ typedef struct tf_octaves {
     double amp[TF_MAX_OCTAVES + 1];
 } tf_octaves;
 
-/* octaves is clamped to [1, TF_MAX_OCTAVES]; a NaN counts as 1. */
-static inline void tf_octaves_plan(tf_octaves *o, double H, double lacunarity, double octaves)
+/* The shape of a plan of `octaves` octaves, clamped to [1, TF_MAX_OCTAVES] (a NaN counts as
+ * 1): *whole octaves at full weight and a *remainder fraction of one more; returns the number
+ * of noise evaluations. */
+static inline int tf_octaves_split(double octaves, int *whole, double *remainder)
 {
     if (!(octaves >= 1.0))
         octaves = 1.0;
     if (octaves > TF_MAX_OCTAVES)
         octaves = TF_MAX_OCTAVES;
-    int whole = (int)octaves;
-    double remainder = octaves - whole;
+    *whole = (int)octaves;
+    *remainder = octaves - *whole;
+    return *whole + (*remainder > 0.0);
+}
+
+static inline void tf_octaves_plan(tf_octaves *o, double H, double lacunarity, double octaves)
+{
+    int whole;
+    double remainder;
     o->lacunarity = lacunarity;
-    o->count = whole + (remainder > 0.0);
+    o->count = tf_octaves_split(octaves, &whole, &remainder);
     double frequency = 1.0;
     o->amp[0] = 1.0;
     for (int i = 1; i < o->count; i++) {

@@ -16,6 +16,9 @@
  *   C order, so match_c_backend and other_scenes also demand memcmp-identical pixels there (a
  *   wrong lane mask that touched a few pixels would still pass the tolerance).
  *   bad_device / bad_kernel_dir / bad_rect   one-line errors, no crash.
+ *   installed_kernel_dir   the kernels and the C headers they share (make install's flat
+ *                       layout, found through TERRAFARM_KERNELS) build and give the C pixels;
+ *                       without a shared header the error is one line naming it.
  * Every test skips (cmocka skip()) with a message when no OpenCL platform exists. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -25,6 +28,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #define CL_TARGET_OPENCL_VERSION 120
 #include <CL/cl.h>
@@ -324,6 +328,81 @@ static void bad_kernel_dir(void **state)
     assert_null(strchr(err, '\n'));
 }
 
+/* Copy file `from` into directory `dir` under its base name. */
+static int copy_into(const char *from, const char *dir)
+{
+    const char *base = strrchr(from, '/');
+    char to[8192];
+    snprintf(to, sizeof to, "%s/%s", dir, base ? base + 1 : from);
+    FILE *in = fopen(from, "rb"), *out = in ? fopen(to, "wb") : NULL;
+    char buf[65536];
+    size_t n;
+    int ok = in && out;
+    while (ok && (n = fread(buf, 1, sizeof buf, in)) > 0)
+        ok = fwrite(buf, 1, n, out) == n;
+    if (in)
+        fclose(in);
+    if (out && fclose(out) != 0)
+        ok = 0;
+    return ok ? 0 : -1;
+}
+
+/* What `make install` puts in PREFIX/share/terrafarm/kernels: the kernel files and the C
+ * renderer's headers they share (the Makefile's KERNEL_SHARED), all in one directory. */
+static const char *const installed_files[] = {
+    "worker/kernels/tf_cl_params.h", "worker/kernels/terrafarm.cl",
+    "worker/kernels/packet.cl",      "worker/kernels/packet_trace.cl",
+    "worker/kernels/packet_shade.cl", "worker/kernels/packet_render.cl",
+    "common/portable.h",             "common/render/constants.h",
+    "common/render/sample_math.h",   "common/render/trace_math.h",
+    "common/terrain/noise_kernel.h",
+};
+
+static void installed_kernel_dir(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    const char *root = getenv("TF_ROOT");
+    char dir[] = "/tmp/tf-test-kernels-XXXXXX", from[4096], err[1024] = "";
+    assert_non_null(mkdtemp(dir));
+    size_t nfiles = sizeof installed_files / sizeof installed_files[0];
+    for (size_t i = 0; i < nfiles; i++) {
+        snprintf(from, sizeof from, "%s/%s", root ? root : ".", installed_files[i]);
+        assert_int_equal(copy_into(from, dir), 0);
+    }
+    setenv("TERRAFARM_KERNELS", dir, 1);
+    tf_cl_backend *b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    if (!b)
+        print_message("installed layout: %s\n", err);
+    assert_non_null(b);
+    enum { RW = 24, RH = 16 };
+    tf_pixel img[RW * RH];
+    assert_int_equal(tf_cl_backend_render(b, (tf_rect){40, 30, RW, RH}, img, NULL, err,
+                                          sizeof err), 0);
+    if (on_pocl_cpu(b))
+        for (int y = 0; y < RH; y++)
+            assert_memory_equal(&img[y * RW], &fx.c_img[(size_t)(30 + y) * W + 40],
+                                sizeof img[0] * RW);
+    tf_cl_backend_free(b);
+
+    /* without one of the shared headers: one line naming it */
+    char gone[4096];
+    snprintf(gone, sizeof gone, "%s/sample_math.h", dir);
+    assert_int_equal(unlink(gone), 0);
+    b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    unsetenv("TERRAFARM_KERNELS");
+    assert_null(b);
+    print_message("without sample_math.h: %s\n", err);
+    assert_non_null(strstr(err, "render/sample_math.h"));
+    assert_null(strchr(err, '\n'));
+    for (size_t i = 0; i < nfiles; i++) {
+        const char *base = strrchr(installed_files[i], '/') + 1;
+        snprintf(gone, sizeof gone, "%s/%s", dir, base);
+        unlink(gone);
+    }
+    rmdir(dir);
+}
+
 static void bad_rect(void **state)
 {
     (void)state;
@@ -343,7 +422,7 @@ int main(void)
         cmocka_unit_test(aa_depths_and_tiny_images),
         cmocka_unit_test(bad_device),
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
-        cmocka_unit_test(bad_rect),
+        cmocka_unit_test(installed_kernel_dir), cmocka_unit_test(bad_rect),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

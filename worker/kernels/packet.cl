@@ -3,11 +3,13 @@
  *
  * A work-item of packet_render.cl gathers up to 128 lattice samples (from neighbouring pixels,
  * so their rays are coherent) and hands them to lattice_samples (packet_shade.cl), which
- * shades them eight at a time and walks their rays with walk_stream (packet_trace.cl).  Every
- * packet function NAME8 computes, in each active lane, exactly what its C twin NAME in
- * common/ (trace.c, shade.c, camera.c, render.c, noise.c: the scalar renderer of the C
- * backend) computes for that lane's sample: the same operations in the same order, so the
- * OpenCL pixels are the C pixels to the bit (tests/unit/test_opencl.c checks it).
+ * shades them eight at a time and walks their rays with walk_stream (packet_trace.cl).  The
+ * per-sample math is the C renderer's own source (common/portable.h, render/sample_math.h,
+ * render/trace_math.h, terrain/noise_kernel.h), compiled on these types; every packet function
+ * NAME8 of the schedules computes, in each active lane, exactly what its C counterpart NAME in
+ * common/render (trace.c, shade.c, render.c) computes for that lane's sample: the same
+ * operations in the same order, so the OpenCL pixels are the C pixels to the bit
+ * (tests/unit/test_opencl.c checks it).
  *
  * Conventions:
  *   - A lane mask is an lv (long8): -1 for active lanes, 0 for idle ones -- what comparisons of
@@ -42,6 +44,31 @@ dv v3p_dot(v3p a, v3p b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 v3p v3p_select(v3p a, v3p b, lv m)
 {
     return v3p_make(select(a.x, b.x, m), select(a.y, b.y, m), select(a.z, b.z, m));
+}
+
+/* v3_norm per lane: lanes of length 0 (or NaN) keep their vector, as in the scalar code. */
+v3p v3p_norm(v3p a)
+{
+    dv l = sqrt(v3p_dot(a, a));
+    return v3p_select(a, v3p_scale(a, 1.0 / l), l > 0.0);
+}
+
+/* v3_lerp per lane: a + (b - a) t, each component in the scalar order. */
+v3p v3p_lerp(v3p a, v3p b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
+}
+
+/* v3_lerp between two shared vectors: (b - a) is the scalar difference, then per lane. */
+v3p v3p_lerp_ss(vec3 a, vec3 b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
+}
+
+/* v3_lerp from a packet vector to a shared one. */
+v3p v3p_lerp_ps(v3p a, vec3 b, dv t)
+{
+    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
 }
 
 /* Is some lane of mask m set?  OpenCL's any() tests every lane's sign bit; PoCL compiles that

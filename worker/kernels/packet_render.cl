@@ -39,13 +39,6 @@
 #define TF_QUEUED 0x80000000u
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
 
-/* render.c's tf_display_level per lane: sqrt of the linear value clamped to [0, 1]; never
- * NaN. */
-dv display_level8(dv v)
-{
-    return select(select((dv)(1), sqrt(v), v < 1), (dv)(0), !(v > 0));
-}
-
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
                           __global const float *h, __global const float2 *mm,
                           __global const ushort *perm, int rx, int ry, int cw, int ch,
@@ -72,7 +65,7 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
     dv lvl[TF_STREAM_PACKETS][3];
     for (int p = 0; p * TF_LANES < n; p++)
         for (int ch = 0; ch < 3; ch++)
-            lvl[p][ch] = display_level8(convert_double8(s[p][ch]));
+            lvl[p][ch] = tf_display_level_of(convert_double8(s[p][ch]));
     for (int e = 0; e < n; e++) {
         for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
             out[(size_t)(base + e) * TF_CL_SAMPLE_FLOATS + m] = s[e / TF_LANES][m][e % TF_LANES];
@@ -189,8 +182,7 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
         s[2] = slot_of(ps, side, t.i, t.j + t.size);
         s[3] = slot_of(ps, side, t.i + t.size, t.j + t.size);
         if (t.size > 1) {
-            double ratio = (double)(N / t.size);
-            double split_threshold = threshold * ratio * ratio * ratio;
+            double split_threshold = tf_aa_split_threshold(threshold, N, t.size);
             lvl[0] = levels_of(ps, side, t.i, t.j);
             lvl[1] = levels_of(ps, side, t.i + t.size, t.j);
             lvl[2] = levels_of(ps, side, t.i, t.j + t.size);
@@ -212,21 +204,20 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
                     ps->sp += 4;
                     continue;
                 }
-                double wt = 0.125 * (double)t.size * (double)t.size;
-                ps->sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0] + 4.0 * s[4][0]);
-                ps->sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1] + 4.0 * s[4][1]);
-                ps->sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2] + 4.0 * s[4][2]);
-                ps->sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3] + 4.0 * s[4][3]);
+                int z = t.size;
+                ps->sum_r += tf_aa_probed_leaf(z, s[0][0], s[1][0], s[2][0], s[3][0], s[4][0]);
+                ps->sum_g += tf_aa_probed_leaf(z, s[0][1], s[1][1], s[2][1], s[3][1], s[4][1]);
+                ps->sum_b += tf_aa_probed_leaf(z, s[0][2], s[1][2], s[2][2], s[3][2], s[4][2]);
+                ps->sum_a += tf_aa_probed_leaf(z, s[0][3], s[1][3], s[2][3], s[3][3], s[4][3]);
                 continue;
             }
         }
         ps->sp--;
         ps->asked = min(ps->asked, ps->sp);
-        double wt = 0.25 * (double)t.size * (double)t.size;
-        ps->sum_r += wt * ((double)s[0][0] + s[1][0] + s[2][0] + s[3][0]);
-        ps->sum_g += wt * ((double)s[0][1] + s[1][1] + s[2][1] + s[3][1]);
-        ps->sum_b += wt * ((double)s[0][2] + s[1][2] + s[2][2] + s[3][2]);
-        ps->sum_a += wt * ((double)s[0][3] + s[1][3] + s[2][3] + s[3][3]);
+        ps->sum_r += tf_aa_flat_leaf(t.size, s[0][0], s[1][0], s[2][0], s[3][0]);
+        ps->sum_g += tf_aa_flat_leaf(t.size, s[0][1], s[1][1], s[2][1], s[3][1]);
+        ps->sum_b += tf_aa_flat_leaf(t.size, s[0][2], s[1][2], s[2][2], s[3][2]);
+        ps->sum_a += tf_aa_flat_leaf(t.size, s[0][3], s[1][3], s[2][3], s[3][3]);
     }
     /* an entry below the top changes only by being popped (asked follows every pop down), so
      * each is asked once */
@@ -321,7 +312,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         for (int b = 0; b * TF_LANES < q.n; b++) {
             dv lvl[3];
             for (int ch = 0; ch < 3; ch++)
-                lvl[ch] = display_level8(convert_double8(smp[b][ch]));
+                lvl[ch] = tf_display_level_of(convert_double8(smp[b][ch]));
             for (int l = 0; l < TF_LANES && b * TF_LANES + l < q.n; l++) {
                 int e = b * TF_LANES + l;
                 pixel_state *s = &ps[q.pixel[e]];

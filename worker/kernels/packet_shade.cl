@@ -3,12 +3,16 @@
  * shaded in SIMD eight at a time, one sample per lane of the dv / lv / iv types of packet.cl,
  * with all their shadow rays walked as a second stream.
  *
- * Every function NAME8 here is the packet twin of NAME in common/shade.c, camera.c, render.c
- * or noise.c (the scalar renderer of the C backend).  The one rule, on which the bit-identity
- * of the OpenCL and C backends rests:
+ * The formulas are the C renderer's own (common/render/sample_math.h and
+ * common/terrain/noise_kernel.h, compiled here on packets); this file holds their packet
+ * schedule and what reads memory: the texture octave loops (fbm_with_gradient8, tf_fbm2_8,
+ * sharing lattice lookups between lanes), the permutation and gradient lookups, the height
+ * reads of the vertex normals, and the shading split around the batch's shadow walk.  Each
+ * function NAME8 left here is the packet form of NAME in common/render/shade.c or render.c.
+ * The one rule, on which the bit-identity of the OpenCL and C backends rests:
  *
  *   In every active lane, a packet function performs exactly the floating-point operations of
- *   its C twin, in the same order, on the same operands.
+ *   its C counterpart, in the same order, on the same operands.
  *
  * So: FP contraction stays off (terrafarm.cl's pragma), no fma / mad / native_ / half_
  * functions, no reassociation (a scalar a * b * c stays (a * b) * c, a constant difference
@@ -18,7 +22,8 @@
  *
  * How the scalar control flow becomes lanes:
  *   - A branch becomes a lane mask (lv: -1 active, 0 idle): both sides are evaluated and merged
- *     with select().  A side no active lane needs is skipped altogether with `if (any_lane(mask))`
+ *     with select() (TF_SEL in the shared headers).  A side no active lane needs is skipped
+ *     altogether with `if (any_lane(mask))` (TF_ANY)
  *     -- that is where the time is saved: the terrain, water and sky shaders, the bump fBm, the
  *     snow-line fBm and the shadow rays run only for packets in which some lane needs them.
  *   - A loop whose trip count differs per lane (the fBm octaves, which follow each sample's
@@ -39,31 +44,6 @@
 
 /* ---------------------------------------------------------------- small packet helpers */
 
-/* v3_norm per lane: lanes of length 0 (or NaN) keep their vector, as in the scalar code. */
-v3p v3p_norm(v3p a)
-{
-    dv l = sqrt(v3p_dot(a, a));
-    return v3p_select(a, v3p_scale(a, 1.0 / l), l > 0.0);
-}
-
-/* v3_lerp per lane: a + (b - a) t, each component in the scalar order. */
-v3p v3p_lerp(v3p a, v3p b, dv t)
-{
-    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
-}
-
-/* v3_lerp between two constant colours: (b - a) is the scalar difference, then per lane. */
-v3p v3p_lerp_ss(vec3 a, vec3 b, dv t)
-{
-    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
-}
-
-/* v3_lerp from a packet colour to a constant one. */
-v3p v3p_lerp_ps(v3p a, vec3 b, dv t)
-{
-    return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
-}
-
 /* The same mask as an iv (for select on int8 / float8). */
 iv mask_i(lv m) { return convert_int8(m); }
 
@@ -78,54 +58,21 @@ dv height_sample8(const world *w, iv i, iv j)
     return gather_f(w->h, k, (lv)(-1));
 }
 
-/* ---------------------------------------------------------------- hashing (tf_hash64) */
-
-ulong8 tf_hash64_8(ulong8 x)
-{
-    x += 0x9e3779b97f4a7c15UL;
-    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9UL;
-    x = (x ^ (x >> 27)) * 0x94d049bb133111ebUL;
-    return x ^ (x >> 31);
-}
-
-dv tf_hash_unit8(ulong8 x) { return convert_double8(tf_hash64_8(x) >> 11) * 0x1.0p-53; }
-
 /* ---------------------------------------------------------------- noise (noise_impl.h) */
 
-dv tf_fade8(dv t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }
+/* tf_fade, tf_floor_split, the y axis (tf_noise_axis_of), the column line and the blend are
+ * noise_kernel.h's; what is here is the lattice side: permutation loads and gradients per
+ * lane, and the x axis split so that fbm_with_gradient8 can share lookups between lanes.
+ * tf_floor_split is only called on lanes whose |x| < 2^52 matter; the callers zero the others
+ * first so every conversion is in range. */
 
-/* tf_floor_split per lane.  Only called on lanes whose |x| < 2^52 matter; the caller zeroes
- * the others first so every conversion is in range. */
-lv tf_floor_split8(dv x, dv *fraction)
-{
-    lv i = convert_long8(x); /* rounds toward zero, as the C cast */
-    dv d = convert_double8(i);
-    lv below = x < d; /* -1 where below */
-    *fraction = x - (d - select((dv)(0.0), (dv)(1.0), below));
-    return i + below;
-}
-
-typedef struct noise_axis8 { iv lattice; lv ok; dv f0, f1, fade; } noise_axis8;
-
-TF_INLINE noise_axis8 noise_axis_set8(dv y)
-{
-    noise_axis8 a;
-    dv unused;
-    a.ok = fabs(y) < TF_NOISE_COORD_LIMIT;
-    lv yi = tf_floor_split8(select((dv)(0.0), y, a.ok), &unused);
-    yi = select((lv)(0), yi, a.ok);
-    a.lattice = convert_int8(yi & 255);
-    a.f0 = select((dv)(0.0), y - convert_double8(yi), a.ok);
-    a.f1 = a.f0 - 1.0;
-    a.fade = tf_fade8(a.f0);
-    return a;
-}
+typedef tf_noise_axis noise_axis8;
 
 /* p[k] per lane, k in 0..511 (the permutation has 512 entries); written out lane by lane,
  * which PoCL turns into straight loads (a lane loop stays a loop through memory). */
 iv perm8(__global const ushort *p, iv k)
 {
-    k &= 511;
+    k &= TF_NOISE_PERM - 1;
     return convert_int8((ushort8)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5],
                                   p[k.s6], p[k.s7]));
 }
@@ -171,15 +118,11 @@ TF_INLINE column_grads8 column_grads8_select(column_grads8 a, column_grads8 b, l
 }
 
 /* The column line slope * (x - X) + intercept from its gradients and the y axis. */
-typedef struct column_line8 { dv slope, intercept; } column_line8;
+typedef tf_noise_column column_line8;
 
 TF_INLINE column_line8 column_line8_of(const column_grads8 *g, const noise_axis8 *ay)
 {
-    column_line8 c;
-    dv e0 = g->g0y * ay->f0, e1 = g->g1y * ay->f1;
-    c.slope = g->g0x + ay->fade * (g->g1x - g->g0x);
-    c.intercept = e0 + ay->fade * (e1 - e0);
-    return c;
+    return tf_noise_column_line(g->g0x, g->g0y, g->g1x, g->g1y, ay->f0, ay->f1, ay->fade);
 }
 
 /* noise2_axis's x side, which depends on x alone. */
@@ -195,9 +138,9 @@ TF_INLINE noise_xaxis8 noise_xaxis_frac8(dv x)
 {
     noise_xaxis8 a;
     a.ok = fabs(x) < TF_NOISE_COORD_LIMIT;
-    lv xl = tf_floor_split8(select((dv)(0.0), x, a.ok), &a.f);
-    a.xi = convert_int8(xl & 255);
-    a.u = tf_fade8(a.f);
+    lv xl = tf_floor_split(select((dv)(0.0), x, a.ok), &a.f);
+    a.xi = convert_int8(xl & (TF_NOISE_LATTICE - 1));
+    a.u = tf_fade(a.f);
     return a;
 }
 
@@ -205,7 +148,7 @@ TF_INLINE noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
 {
     noise_xaxis8 a = noise_xaxis_frac8(x);
     a.pl = perm8(p, a.xi);
-    a.pr = perm8(p, (a.xi + 1) & 255);
+    a.pr = perm8(p, (a.xi + 1) & (TF_NOISE_LATTICE - 1));
     return a;
 }
 
@@ -213,9 +156,7 @@ TF_INLINE noise_xaxis8 noise_xaxis_set8(__global const ushort *p, dv x)
 TF_INLINE dv noise2_lines8(const noise_xaxis8 *ax, const column_line8 *left,
                            const column_line8 *right, lv ok_y)
 {
-    dv l = left->slope * ax->f + left->intercept;
-    dv r = right->slope * (ax->f - 1.0) + right->intercept;
-    return select((dv)(0.0), (l + ax->u * (r - l)) * TF_NOISE2_SCALE, ax->ok & ok_y);
+    return select((dv)(0.0), tf_noise_blend_faded(ax->f, ax->u, *left, *right), ax->ok & ok_y);
 }
 
 /* noise2_axis per lane, from its two axes. */
@@ -243,7 +184,7 @@ dv tf_fbm2_8(__global const ushort *p, __global const double *amp, dv x, dv y, d
         double a = amp[i];
         if (remainder > 0.0 && i == whole)
             a *= remainder;
-        noise_axis8 ay = noise_axis_set8(y);
+        noise_axis8 ay = tf_noise_axis_of(y);
         noise_xaxis8 ax = noise_xaxis_set8(p, x);
         result += a * noise2_axes8(p, &ax, &ay);
         x *= 2.0;
@@ -263,7 +204,7 @@ dv tf_fbm2_8(__global const ushort *p, __global const double *amp, dv x, dv y, d
 dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, dv octaves,
                       double salt, lv mask, dv *gx, dv *gy)
 {
-    const double eps = 1e-3;
+    const double eps = TF_FBM_GRADIENT_EPS;
     __global const double *amp = w->P + amp_table;
     __global const ushort *p = w->perm;
     dv qx = x / scale + salt, qy = y / scale - salt;
@@ -283,7 +224,7 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
         lv in = convert_long8(count > i);
         dv a = (dv)(amp[i]);
         a = select(a, a * remainder, partial & convert_long8(whole == i));
-        noise_axis8 ay = noise_axis_set8(y0), ay1 = noise_axis_set8(y1);
+        noise_axis8 ay = tf_noise_axis_of(y0), ay1 = tf_noise_axis_of(y1);
         noise_xaxis8 ax = noise_xaxis_set8(p, x0), ax1 = noise_xaxis_frac8(x1);
 
         /* (x0, y0) */
@@ -299,7 +240,7 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
         if (any_lane(xmoved)) {
             iv moved = mask_i(xmoved);
             ax1.pl = select(ax.pl, perm8(p, ax1.xi), moved);
-            ax1.pr = select(ax.pr, perm8(p, (ax1.xi + 1) & 255), moved);
+            ax1.pr = select(ax.pr, perm8(p, (ax1.xi + 1) & (TF_NOISE_LATTICE - 1)), moved);
             column_grads8 gl1 = column_grads8_at(p, ax1.pl, ay.lattice);
             column_grads8 gr1 = column_grads8_at(p, ax1.pr, ay.lattice);
             column_line8 l1 = column_line8_of(&gl1, &ay), r1 = column_line8_of(&gr1, &ay);
@@ -331,42 +272,7 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
     return f;
 }
 
-/* ---------------------------------------------------------------- camera (camera_dir) */
-
-v3p camera_dir8(const world *w, dv x, dv y)
-{
-    dv u = x / (double)w->I[TFI_WIDTH] - 0.5;
-    dv v = 0.5 - y / (double)w->I[TFI_HEIGHT];
-    if (w->I[TFI_CAM_KIND] == 1) {
-        dv theta = u * w->P[TFP_SWEEP];
-        v3p horizontal = v3p_add(v3p_scale(v3p_splat(pvec(w, TFP_PANO_FORWARD)), cos(theta)),
-                                 v3p_scale(v3p_splat(pvec(w, TFP_PANO_RIGHT)), sin(theta)));
-        dv height = w->P[TFP_V_CENTRE] + 2.0 * v * w->P[TFP_V_HALF];
-        return v3p_norm(v3p_add(horizontal, v3p_scale(v3p_splat(pvec(w, TFP_PANO_UP)), height)));
-    }
-    v3p d = v3p_add(v3p_splat(pvec(w, TFP_CAM_FORWARD)),
-                    v3p_scale(v3p_splat(pvec(w, TFP_CAM_RIGHT)), 2.0 * u * w->P[TFP_HALF_W]));
-    d = v3p_add(d, v3p_scale(v3p_splat(pvec(w, TFP_CAM_UP)), 2.0 * v * w->P[TFP_HALF_H]));
-    return v3p_norm(d);
-}
-
 /* ---------------------------------------------------------------- shading (shade.c) */
-
-dv smoothstep8(dv e0, dv e1, dv x)
-{
-    dv t = (x - e0) / (e1 - e0);
-    t = select(select(t, (dv)(1.0), t > 1.0), (dv)(0.0), t < 0.0);
-    return t * t * (3.0 - 2.0 * t);
-}
-
-dv visible_octaves8(const world *w, double scale, dv dist, double max_octaves)
-{
-    dv footprint = 2.0 * dist * w->P[TFP_PIXEL_ANGLE];
-    dv octaves = log2(scale / footprint) + 1.0;
-    octaves = select(select(octaves, (dv)(max_octaves), octaves > max_octaves), (dv)(0.0),
-                     octaves < 0.0);
-    return select((dv)(max_octaves), octaves, footprint > 0.0);
-}
 
 v3p vertex_normal8(const world *w, iv i, iv j)
 {
@@ -375,9 +281,9 @@ v3p vertex_normal8(const world *w, iv i, iv j)
     iv hi_j = select(j, j + 1, j + 1 < n), lo_j = select(j, j - 1, j > 0);
     dv span_x = convert_double8(hi_i - lo_i) * w->cell;
     dv span_y = convert_double8(hi_j - lo_j) * w->cell;
-    dv dzdx = (height_sample8(w, i + 1, j) - height_sample8(w, i - 1, j)) / span_x;
-    dv dzdy = (height_sample8(w, i, j + 1) - height_sample8(w, i, j - 1)) / span_y;
-    return v3p_norm(v3p_make(-dzdx, -dzdy, (dv)(1.0)));
+    return tf_vertex_normal_of(height_sample8(w, i - 1, j), height_sample8(w, i + 1, j),
+                               height_sample8(w, i, j - 1), height_sample8(w, i, j + 1), span_x,
+                               span_y);
 }
 
 /* smooth_normal: the triangle of the cell that holds p picks n10 or n01; both cases are the
@@ -387,83 +293,28 @@ v3p smooth_normal8(const world *w, iv ci, iv cj, v3p p)
     ci = select(select(ci, (iv)(w->cells - 1), ci >= w->cells), (iv)(0), ci < 0);
     cj = select(select(cj, (iv)(w->cells - 1), cj >= w->cells), (iv)(0), cj < 0);
     dv fx = p.x / w->cell - convert_double8(ci), fy = p.y / w->cell - convert_double8(cj);
-    fx = select(select(fx, (dv)(1.0), fx > 1.0), (dv)(0.0), fx < 0.0);
-    fy = select(select(fy, (dv)(1.0), fy > 1.0), (dv)(0.0), fy < 0.0);
+    fx = tf_clamp01(fx);
+    fy = tf_clamp01(fy);
     v3p n00 = vertex_normal8(w, ci, cj), n11 = vertex_normal8(w, ci + 1, cj + 1);
-    lv lower = fx >= fy; /* n10 side */
-    iv lower_i = mask_i(lower);
+    iv lower_i = mask_i(fx >= fy); /* n10 side */
     v3p nside = vertex_normal8(w, select(ci, ci + 1, lower_i), select(cj + 1, cj, lower_i));
-    dv big = select(fy, fx, lower), small = select(fx, fy, lower);
-    v3p n = v3p_add(v3p_add(v3p_scale(n00, 1 - big), v3p_scale(nside, big - small)),
-                    v3p_scale(n11, small));
-    return v3p_norm(n);
+    return tf_smooth_normal_blend(n00, nside, n11, fx, fy);
 }
 
-lv snow_line_matters8(const world *w, dv z)
-{
-    double reach = w->P[TFP_SNOW_JITTER] * w->P[TFP_SNOW_BOUND] + w->P[TFP_BAND];
-    double lo = w->P[TFP_SNOW_LINE] - reach, hi = w->P[TFP_SNOW_LINE] + reach;
-    double slack = 1e-9 * (fabs(lo) + fabs(hi) + reach);
-    return (z >= lo - slack) & (z <= hi + slack);
-}
-
+/* shade.c's tf_sky_color and tf_mist_apply per lane. */
 v3p sky_color8(const world *w, v3p dir)
 {
-    dv up = select((dv)(0.0), dir.z, dir.z > 0.0);
-    dv wt = 1.0 - (1.0 - up) * (1.0 - up) * (1.0 - up);
-    v3p c = v3p_lerp_ss(pvec(w, TFP_SKY_HORIZON), pvec(w, TFP_SKY_ZENITH), wt);
-    dv cg = v3p_dot(dir, v3p_splat(pvec(w, TFP_SUN_DIR)));
-    lv glowing = cg > 0.0;
-    if (any_lane(glowing)) {
-        dv c2 = cg * cg, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16;
-        dv c64 = c32 * c32, c256 = c64 * c64 * c64 * c64;
-        dv glow = 0.03 * c8 + 0.08 * c64 + 0.25 * c256;
-        c = v3p_select(c, v3p_add(c, v3p_scale(v3p_splat(pvec(w, TFP_SUN_LIGHT)), glow)),
-                       glowing);
-    }
-    return c;
-}
-
-/* mist_depth per lane (len may be INFINITY in some lanes: the sky). */
-dv mist_depth8(const world *w, v3p origin, v3p dir, dv len)
-{
-    double density = w->P[TFP_MIST_DENSITY], k = w->P[TFP_MIST_K];
-    lv inf = isinf(len);
-    if (w->I[TFI_MIST_HOMOG] || k == 0)
-        return select(density * len, (dv)(INFINITY), inf);
-    /* finite lanes: mist_depth_exp (k != 0 here) */
-    dv z1 = origin.z, z2 = origin.z + dir.z * len;
-    dv x = k * fabs(z2 - z1);
-    lv thin = x < 1e-5;
-    dv mean_density = exp(-k * 0.5 * (z1 + z2));
-    lv thick = ~inf & ~thin;
-    if (any_lane(thick))
-        mean_density = select(mean_density, exp(-k * fmin(z1, z2)) * (-expm1(-x) / x), thick);
-    dv finite = density * len * mean_density;
-    /* infinite lanes */
-    dv endless = select(density * exp(-k * origin.z) / (k * dir.z), (dv)(INFINITY),
-                        dir.z <= 1e-12);
-    return select(finite, endless, inf);
-}
-
-dv transparency8(dv tau, double extinction)
-{
-    if (extinction <= 0)
-        return (dv)(1.0);
-    return exp(-tau * extinction);
+    return tf_sky_radiance(pvec(w, TFP_SKY_HORIZON), pvec(w, TFP_SKY_ZENITH),
+                           pvec(w, TFP_SUN_DIR), pvec(w, TFP_SUN_LIGHT), dir);
 }
 
 v3p mist_apply8(const world *w, v3p c, v3p origin, v3p dir, dv len)
 {
     if (!w->I[TFI_MIST_ENABLED] || w->P[TFP_MIST_DENSITY] <= 0)
         return c;
-    dv tau = mist_depth8(w, origin, dir, len);
-    vec3 ext = pvec(w, TFP_MIST_EXT), mc = pvec(w, TFP_MIST_COLOR);
-    dv sr = transparency8(tau, ext.x);
-    dv sg = transparency8(tau, ext.y);
-    dv sb = transparency8(tau, ext.z);
-    return v3p_make(sr * c.x + (1 - sr) * mc.x, sg * c.y + (1 - sg) * mc.y,
-                    sb * c.z + (1 - sb) * mc.z);
+    dv tau = tf_mist_depth(w->P[TFP_MIST_DENSITY], w->P[TFP_MIST_K], w->I[TFI_MIST_HOMOG],
+                           origin.z, dir.z, len);
+    return tf_mist_blend(c, tau, pvec(w, TFP_MIST_EXT), pvec(w, TFP_MIST_COLOR));
 }
 
 /* sunlit's first half for the lanes of `mask`: the lanes that cast a shadow ray (sunlit's
@@ -479,40 +330,24 @@ lv sunlit_cast8(const world *w, v3p p, v3p ng, lv mask, v3p *start)
     return cast;
 }
 
+/* shade.c's terrain_albedo: tf_terrain_albedo with the snow line's fBm for the lanes where it
+ * can matter (tf_snow_line_matters). */
 v3p terrain_albedo8(const world *w, v3p p, v3p n, dv variation, lv mask)
 {
-    const vec3 ALBEDO_VEGETATION = {0.040, 0.075, 0.022};
-    const vec3 ALBEDO_ALPINE = {0.120, 0.105, 0.070};
-    const vec3 ALBEDO_ROCK = {0.200, 0.180, 0.160};
-    const vec3 ALBEDO_SNOW = {0.800, 0.820, 0.860};
-    const vec3 ALBEDO_SAND = {0.330, 0.290, 0.200};
-    dv slope = acos(select(n.z, (dv)(1.0), n.z > 1.0)) / DEG2RAD;
-    double rock_deg = w->P[TFP_ROCK_SLOPE];
-    double band = w->P[TFP_BAND];
-    double tree_line = w->P[TFP_TREE_LINE], sea_level = w->P[TFP_SEA_LEVEL];
-    double extent = w->P[TFP_EXTENT];
-
-    dv w_veg = smoothstep8((dv)(tree_line + band), (dv)(tree_line - band), p.z);
-    dv w_sand = smoothstep8((dv)(sea_level + 0.8 * band), (dv)(sea_level + 0.2 * band), p.z);
-    dv w_rock = smoothstep8((dv)(rock_deg - ROCK_BLEND_DEG), (dv)(rock_deg + ROCK_BLEND_DEG),
-                            slope);
+    dv slope = tf_slope_deg(n.z);
+    double extent = w->P[TFP_EXTENT], jitter = w->P[TFP_SNOW_JITTER];
     dv snow_line = (dv)(w->P[TFP_SNOW_LINE]);
-    if (w->P[TFP_SNOW_JITTER] > 0) {
-        lv snowy = mask & snow_line_matters8(w, p.z);
+    if (jitter > 0) {
+        lv snowy = mask & tf_snow_line_matters(w->P[TFP_SNOW_LINE], jitter, w->P[TFP_SNOW_BOUND],
+                                               w->P[TFP_BAND], p.z);
         if (any_lane(snowy)) {
-            dv f = tf_fbm2_8(w->perm, w->P + TFP_AMP_H05, p.x / (extent / 12.0) + 37.5,
-                             p.y / (extent / 12.0) - 11.25, SNOW_OCTAVES);
-            snow_line = select(snow_line, snow_line + w->P[TFP_SNOW_JITTER] * f, snowy);
+            dv f = tf_fbm2_8(w->perm, w->P + TFP_AMP_H05, tf_snow_u(p.x, extent),
+                             tf_snow_v(p.y, extent), TF_SNOW_OCTAVES);
+            snow_line = select(snow_line, snow_line + jitter * f, snowy);
         }
     }
-    dv w_snow = smoothstep8(snow_line - band, snow_line + band, p.z) *
-                (1.0 - smoothstep8((dv)(rock_deg), (dv)(rock_deg + SNOW_SLIDE_DEG), slope));
-
-    v3p c = v3p_lerp_ss(ALBEDO_ALPINE, ALBEDO_VEGETATION, w_veg);
-    c = v3p_lerp_ps(c, ALBEDO_SAND, w_sand);
-    c = v3p_lerp_ps(c, ALBEDO_ROCK, w_rock);
-    c = v3p_scale(c, 1.0 + COLOUR_VARIATION * variation);
-    return v3p_lerp_ps(c, ALBEDO_SNOW, w_snow);
+    return tf_terrain_albedo(w->P[TFP_TREE_LINE], w->P[TFP_SEA_LEVEL], w->P[TFP_ROCK_SLOPE],
+                             w->P[TFP_BAND], p.z, slope, snow_line, variation);
 }
 
 /* ---------------------------------------------------------------- shading around the shadows
@@ -540,22 +375,22 @@ void terrain_before8(const world *w, const hitp *hit, lv mask, shading8 *sh)
     v3p n = smooth_normal8(w, hit->ci, hit->cj, hit->p);
     v3p nb = n;
     dv variation = 0.0;
-    dv octaves = visible_octaves8(w, w->P[TFP_BUMP_SCALE], hit->t, BUMP_OCTAVES);
+    dv octaves = tf_visible_octaves(w->P[TFP_PIXEL_ANGLE], w->P[TFP_BUMP_SCALE], hit->t,
+                                    TF_BUMP_OCTAVES);
     if (w->I[TFI_TEXTURED] && w->P[TFP_BUMP] > 0) {
         lv bumped = mask & (octaves > 0.0);
         if (any_lane(bumped)) {
             dv gx, gy;
             dv var = fbm_with_gradient8(w, hit->p.x, hit->p.y, w->P[TFP_BUMP_SCALE],
                                         TFP_AMP_H08, octaves, 0.0, bumped, &gx, &gy);
-            double amp = w->P[TFP_BUMP];
-            v3p nbump = v3p_norm(v3p_add(n, v3p_make(-amp * gx, -amp * gy, (dv)(0.0))));
+            v3p nbump = tf_bump_normal(n, w->P[TFP_BUMP], gx, gy);
             variation = select(variation, var, bumped);
-            nb = v3p_select(nb, nbump, bumped & ~(nbump.z < 0.05));
+            nb = v3p_select(nb, nbump, bumped);
         }
     }
     v3p albedo = terrain_albedo8(w, hit->p, n, variation, mask);
     dv cos_sun = v3p_dot(nb, v3p_splat(pvec(w, TFP_SUN_DIR)));
-    v3p light = v3p_scale(v3p_splat(pvec(w, TFP_SKY_LIGHT)), 0.5 + 0.5 * nb.z);
+    v3p light = tf_sky_light_on(pvec(w, TFP_SKY_LIGHT), nb.z);
     sh->albedo = v3p_select(sh->albedo, albedo, mask);
     sh->light = v3p_select(sh->light, light, mask);
     sh->sun_gain = select(sh->sun_gain, cos_sun, mask);
@@ -566,23 +401,19 @@ void terrain_before8(const world *w, const hitp *hit, lv mask, shading8 *sh)
 void water_before8(const world *w, v3p p, v3p dir, dv dist, lv mask, shading8 *sh)
 {
     v3p n = v3p_splat(v3(0, 0, 1));
-    dv octaves = visible_octaves8(w, w->P[TFP_RIPPLE_SCALE], dist, RIPPLE_OCTAVES);
+    dv octaves = tf_visible_octaves(w->P[TFP_PIXEL_ANGLE], w->P[TFP_RIPPLE_SCALE], dist,
+                                    TF_RIPPLE_OCTAVES);
     if (w->I[TFI_TEXTURED] && w->P[TFP_BUMP] > 0) {
         lv rippled = mask & (octaves > 0.0);
         if (any_lane(rippled)) {
             dv gx, gy;
-            fbm_with_gradient8(w, p.x, p.y, w->P[TFP_RIPPLE_SCALE], TFP_AMP_H05, octaves, 71.0,
-                               rippled, &gx, &gy);
-            v3p nr = v3p_norm(v3p_make(-RIPPLE_STRENGTH * gx, -RIPPLE_STRENGTH * gy, (dv)(1.0)));
-            n = v3p_select(n, nr, rippled);
+            fbm_with_gradient8(w, p.x, p.y, w->P[TFP_RIPPLE_SCALE], TFP_AMP_H05, octaves,
+                               TF_RIPPLE_SALT, rippled, &gx, &gy);
+            n = v3p_select(n, tf_ripple_normal(gx, gy), rippled);
         }
     }
-    dv cos_i = -v3p_dot(dir, n);
-    cos_i = select(cos_i, (dv)(1e-3), cos_i < 1e-3);
-    v3p refl = v3p_add(dir, v3p_scale(n, 2.0 * cos_i));
-    refl.z = select(refl.z, -refl.z, refl.z < 0.0);
-    dv m = 1.0 - cos_i, m2 = m * m;
-    dv fresnel = FRESNEL_R0 + (1.0 - FRESNEL_R0) * m2 * m2 * m;
+    v3p refl;
+    dv fresnel = tf_water_surface(dir, n, &refl);
     vec3 sun = pvec(w, TFP_SUN_DIR);
     sh->light = v3p_select(sh->light, v3p_splat(pvec(w, TFP_SKY_LIGHT)), mask);
     sh->sun_gain = select(sh->sun_gain, (dv)(sun.z), mask);
@@ -596,7 +427,6 @@ void water_before8(const world *w, v3p p, v3p dir, dv dist, lv mask, shading8 *s
  * colour, the sun added where `lit`. */
 v3p shading_finish8(const world *w, const shading8 *sh, lv terrain, lv water, lv lit)
 {
-    const vec3 WATER_BODY = {0.010, 0.028, 0.040};
     v3p light = v3p_select(sh->light,
                            v3p_add(sh->light, v3p_scale(v3p_splat(pvec(w, TFP_SUN_LIGHT)),
                                                         sh->sun_gain)),
@@ -605,25 +435,20 @@ v3p shading_finish8(const world *w, const shading8 *sh, lv terrain, lv water, lv
     if (any_lane(terrain))
         c = v3p_select(c, v3p_mul(sh->albedo, light), terrain);
     if (any_lane(water)) {
-        v3p body = v3p_mul(v3p_splat(WATER_BODY), light);
-        c = v3p_select(c, v3p_lerp(body, sh->refl_sky, sh->fresnel), water);
+        c = v3p_select(c, tf_water_color(light, sh->refl_sky, sh->fresnel), water);
     }
     return c;
 }
 
 /* ---------------------------------------------------------------- the lattice (render.c) */
 
-/* The camera ray directions of lattice points (X, Y) (lattice_sample's jitter and camera). */
+/* The camera ray directions of lattice points (X, Y) (render.c's lattice_sample and
+ * camera.c's tf_camera_dir). */
 v3p lattice_dir8(const world *w, ulong jitter_key, lv X, lv Y)
 {
-    ulong8 h = tf_hash64_8((ulong8)(jitter_key) ^ as_ulong8(X));
-    h = tf_hash64_8(h ^ (as_ulong8(Y) * 0x9e3779b97f4a7c15UL));
-    dv jx = tf_hash_unit8(h) - 0.5;
-    dv jy = tf_hash_unit8(h ^ 0xd1b54a32d192ed03UL) - 0.5;
-    double N = (double)w->I[TFI_LATTICE];
-    dv x = (convert_double8(X) + jx) / N;
-    dv y = (convert_double8(Y) + jy) / N;
-    return camera_dir8(w, x, y);
+    dv x, y;
+    tf_lattice_position(jitter_key, (double)w->I[TFI_LATTICE], X, Y, &x, &y);
+    return tf_camera_ray(&w->cam, x, y);
 }
 
 /* The samples at n <= TF_STREAM lattice points: sample k is lane k % 8 of packet k / 8 of
@@ -639,13 +464,13 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
     const vec3 sun = pvec(w, TFP_SUN_DIR);
     const v3p zero = v3p_splat(v3(0, 0, 0));
     lv mask[TF_STREAM_PACKETS];
-    ray_stream cam; /* d: the directions, tmax: the water distances (FAR_AWAY: none) */
+    ray_stream cam; /* d: the directions, tmax: the water distances (TF_FAR_AWAY: none) */
     cam.n = n;
     for (int p = 0; p < np; p++) {
         for (int l = 0; l < TF_LANES; l++)
             mask[p][l] = p * TF_LANES + l < n ? -1 : 0;
         v3p dir = lattice_dir8(w, jitter_key, X[p], Y[p]);
-        dv t_water = (dv)(FAR_AWAY);
+        dv t_water = (dv)(TF_FAR_AWAY);
         t_water = select(t_water, (sea - origin.z) / dir.z, (dir.z < 0.0) & (origin.z > sea));
         cam.o[p] = origin;
         cam.d[p] = dir;
@@ -668,7 +493,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
     shadow.n = 0;
     for (int p = 0; p < np; p++) {
         terrain[p] = mask[p] & found[p];
-        water[p] = mask[p] & ~terrain[p] & (cam.tmax[p] < FAR_AWAY);
+        water[p] = mask[p] & ~terrain[p] & (cam.tmax[p] < TF_FAR_AWAY);
         shading8 *s = &sh[p];
         s->albedo = s->light = s->refl_sky = s->start = zero;
         s->sun_gain = s->fresnel = (dv)(0.0);
@@ -690,7 +515,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
             shadow.o[q].z[r] = s->start.z[l];
             shadow.d[q] = v3p_splat(sun);
             shadow.tmin[q][r] = 0.0;
-            shadow.tmax[q][r] = FAR_AWAY;
+            shadow.tmax[q][r] = TF_FAR_AWAY;
         }
     }
     lv blocked[TF_STREAM_PACKETS], lit[TF_STREAM_PACKETS];

@@ -1,6 +1,8 @@
 /* packet_trace.cl: trace.c's hierarchical grid walk (tf_trace / tf_occluded with walk_hier,
  * setup_ray, test_cell, fix_stale_axis) for eight rays at a time, one per lane, and
- * walk_stream, which deals a batch of rays to the eight lanes.
+ * walk_stream, which deals a batch of rays to the eight lanes.  The arithmetic -- box clipping,
+ * tolerances, crossings, culling, the triangle test, the hit normal -- is trace.c's own, from
+ * common/render/trace_math.h; what is here is the walk's schedule.
  *
  * Each lane runs its own walk (its own level, cell, stale axis and event time), so the lanes
  * need not agree on anything: a step is computed for all lanes, and each lane takes the branch
@@ -68,8 +70,15 @@ dv to_d(lv v) { return convert_double8(v); }
 /* Component k (0, 1, 2 per lane) of (a0, a1, a2). */
 dv pick3(dv a0, dv a1, dv a2, lv k) { return select(select(a0, a1, k == 1), a2, k == 2); }
 
-dv xcross8(const world *w, const rayp *r, lv X) { return (to_d(X) * w->cell - r->o.x) * r->inv_dx; }
-dv ycross8(const world *w, const rayp *r, lv Y) { return (to_d(Y) * w->cell - r->o.y) * r->inv_dy; }
+dv xcross8(const world *w, const rayp *r, lv X)
+{
+    return tf_grid_cross(to_d(X), w->cell, r->o.x, r->inv_dx);
+}
+
+dv ycross8(const world *w, const rayp *r, lv Y)
+{
+    return tf_grid_cross(to_d(Y), w->cell, r->o.y, r->inv_dy);
+}
 
 /* cell_of per lane; the two correction loops run while some lane still moves. */
 lv cell_of8(const world *w, dv v)
@@ -90,25 +99,6 @@ lv cell_of8(const world *w, dv v)
     return i;
 }
 
-/* clip_slab per lane: narrows [*t0, *t1]; the lanes whose interval stays non-empty. */
-lv clip_slab8(dv o, dv d, double lo, double hi, dv *t0, dv *t1)
-{
-    lv flat = d == 0;
-    dv ta = (lo - o) / d, tb = (hi - o) / d;
-    lv swap = ta > tb;
-    dv a = select(ta, tb, swap), b = select(tb, ta, swap);
-    dv n0 = select(*t0, a, a > *t0), n1 = select(*t1, b, b < *t1);
-    *t0 = select(n0, *t0, flat);
-    *t1 = select(n1, *t1, flat);
-    return select(n0 <= n1, (o >= lo) & (o <= hi), flat);
-}
-
-dv safe_inverse8(dv v)
-{
-    dv inv = 1.0 / v;
-    return select(inv, copysign((dv)(DBL_MAX), v), isinf(inv));
-}
-
 /* setup_ray per lane: the lanes of `mask` whose ray can meet the height field. */
 lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
 {
@@ -121,45 +111,25 @@ lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
 
     const double top = (double)w->cells * w->cell;
     const double hmin = w->P[TFP_HMIN], hmax = w->P[TFP_HMAX];
-    const dv zpad = 1e-9 * (fabs(hmin) + fabs(hmax) + fabs(o.z) + (hmax - hmin)) + DBL_MIN;
+    const dv zpad = tf_box_zpad(hmin, hmax, o.z);
     dv t0 = tmin, t1 = tmax;
-    mask &= clip_slab8(o.x, d.x, 0, top, &t0, &t1);
-    mask &= clip_slab8(o.y, d.y, 0, top, &t0, &t1);
-    dv zlo = hmin - zpad, zhi = hmax + zpad;
-    {
-        /* clip_slab8 with per-lane bounds (the z slab's padding depends on o.z) */
-        lv flat = d.z == 0;
-        dv ta = (zlo - o.z) / d.z, tb = (zhi - o.z) / d.z;
-        lv swap = ta > tb;
-        dv a = select(ta, tb, swap), b = select(tb, ta, swap);
-        dv n0 = select(t0, a, a > t0), n1 = select(t1, b, b < t1);
-        t0 = select(n0, t0, flat);
-        t1 = select(n1, t1, flat);
-        mask &= select(n0 <= n1, (o.z >= zlo) & (o.z <= zhi), flat);
-    }
+    mask &= tf_clip_slab(o.x, d.x, (dv)(0), (dv)(top), &t0, &t1);
+    mask &= tf_clip_slab(o.y, d.y, (dv)(0), (dv)(top), &t0, &t1);
+    mask &= tf_clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1);
     mask &= isfinite(t0) & isfinite(t1);
     r->t0 = t0;
     r->t1 = t1;
 
     r->sx = select(select((lv)(0), (lv)(-1), d.x < 0), (lv)(1), d.x > 0);
     r->sy = select(select((lv)(0), (lv)(-1), d.y < 0), (lv)(1), d.y > 0);
-    r->inv_dx = select((dv)(0), safe_inverse8(d.x), r->sx != 0);
-    r->inv_dy = select((dv)(0), safe_inverse8(d.y), r->sy != 0);
+    r->inv_dx = select((dv)(0), tf_safe_inverse(d.x), r->sx != 0);
+    r->inv_dy = select((dv)(0), tf_safe_inverse(d.y), r->sy != 0);
     /* idle lanes get harmless positions so the correction loops stay short */
     r->ci = cell_of8(w, select((dv)(0), o.x + t0 * d.x, mask));
     r->cj = cell_of8(w, select((dv)(0), o.y + t0 * d.y, mask));
 
-    dv tie = 0;
-    tie = select(tie, tie + (top + fabs(o.x)) * fabs(r->inv_dx), r->sx != 0);
-    tie = select(tie, tie + (top + fabs(o.y)) * fabs(r->inv_dy), r->sy != 0);
-    tie *= 1e-12;
-    dv tabs = select(fabs(t1), fabs(t0), fabs(t0) > fabs(t1));
-    const double hscale = fabs(hmin) > fabs(hmax) ? fabs(hmin) : fabs(hmax);
-    const double slope = (hmax - hmin) / w->cell;
-    dv margin = 1e-9 * (fabs(o.z) + fabs(d.z) * tabs + hscale + (hmax - hmin)) +
-                2 * tie * (fabs(d.z) + 2 * slope * (fabs(d.x) + fabs(d.y)));
-    r->tie_tol = select((dv)(INFINITY), tie, isfinite(tie));
-    r->margin = select((dv)(INFINITY), margin, isfinite(margin));
+    tf_walk_tolerances(top, w->cell, hmin, hmax, o, d, r->sx != 0, r->sy != 0, r->inv_dx,
+                       r->inv_dy, t0, t1, &r->tie_tol, &r->margin);
 
     dv ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
     r->kz = select(select((lv)(2), (lv)(1), ay >= az), select((lv)(2), (lv)(0), ax >= az),
@@ -173,31 +143,22 @@ lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
     return mask;
 }
 
-typedef struct shearedp { dv x, y, z; } shearedp;
+typedef tf_sheared shearedp;
 
+/* Vertex (i, j) per lane, its offsets from the origin permuted to each lane's ray space. */
 shearedp shear_vertex8(const world *w, const rayp *r, lv i, lv j, lv mask)
 {
     dv hz = gather_f(w->h, j * w->n + i, mask);
     dv a0 = to_d(i) * w->cell - r->o.x, a1 = to_d(j) * w->cell - r->o.y, a2 = hz - r->o.z;
-    dv az = pick3(a0, a1, a2, r->kz);
-    shearedp s = {pick3(a0, a1, a2, r->kx) - r->shx * az, pick3(a0, a1, a2, r->ky) - r->shy * az,
-                  r->shz * az};
-    return s;
-}
-
-dv edge_fn8(shearedp p, shearedp q)
-{
-    dv a = p.x * q.y, b = p.y * q.x, e = a - b;
-    return select(e, (dv)(0), fabs(e) <= 8 * DBL_EPSILON * (fabs(a) + fabs(b)));
+    return tf_shear(pick3(a0, a1, a2, r->kx), pick3(a0, a1, a2, r->ky), pick3(a0, a1, a2, r->kz),
+                    r->shx, r->shy, r->shz);
 }
 
 void try_triangle8(const rayp *r, dv u, dv v, dv w, dv za, dv zb, dv zc, lv ci, lv cj, int tri,
                    lv mask, candp *best)
 {
-    lv mixed = ((u < 0) | (v < 0) | (w < 0)) & ((u > 0) | (v > 0) | (w > 0));
-    dv det = u + v + w;
-    dv t = (u * za + v * zb + w * zc) / det;
-    lv take = mask & ~mixed & (det != 0) & (t > r->tmin) & (t < r->tmax) & (t < best->t);
+    dv t = best->t;
+    lv take = mask & tf_triangle_hit(u, v, w, za, zb, zc, r->tmin, r->tmax, best->t, &t);
     best->t = select(best->t, t, take);
     best->ci = select(best->ci, ci, take);
     best->cj = select(best->cj, cj, take);
@@ -208,8 +169,8 @@ void test_triangles8(const world *w, const rayp *r, lv ci, lv cj, lv mask, candp
 {
     shearedp a = shear_vertex8(w, r, ci, cj, mask), b = shear_vertex8(w, r, ci + 1, cj, mask);
     shearedp c = shear_vertex8(w, r, ci + 1, cj + 1, mask), d = shear_vertex8(w, r, ci, cj + 1, mask);
-    dv e_ab = edge_fn8(a, b), e_bc = edge_fn8(b, c), e_ca = edge_fn8(c, a);
-    dv e_cd = edge_fn8(c, d), e_da = edge_fn8(d, a);
+    dv e_ab = tf_edge_fn(a, b), e_bc = tf_edge_fn(b, c), e_ca = tf_edge_fn(c, a);
+    dv e_cd = tf_edge_fn(c, d), e_da = tf_edge_fn(d, a);
     try_triangle8(r, e_bc, e_ca, e_ab, a.z, b.z, c.z, ci, cj, 0, mask, best);
     try_triangle8(r, e_cd, e_da, -e_ca, a.z, c.z, d.z, ci, cj, 1, mask, best);
 }
@@ -247,7 +208,7 @@ lv test_cell8(const world *w, const rayp *r, lv ci, lv cj, dv tx, dv ty, lv mask
  * and step sign per lane. */
 lv entered8(const world *w, dv o, dv inv, lv s, lv j, dv t_event, lv strict)
 {
-    dv t = (to_d(j + select((lv)(0), (lv)(1), s < 0)) * w->cell - o) * inv;
+    dv t = tf_grid_cross(to_d(j + select((lv)(0), (lv)(1), s < 0)), w->cell, o, inv);
     return select(t <= t_event, t < t_event, strict);
 }
 
@@ -351,8 +312,7 @@ TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, co
     dv t_out = select(t1, tc, tc < t1);
     t_out = select(t_out, s->t_cur, t_out < s->t_cur);
     dv z_in = oz + s->t_cur * dz, z_out = oz + t_out * dz;
-    dv zlo = select(z_out, z_in, z_in < z_out), zhi = select(z_in, z_out, z_in < z_out);
-    lv culled = (zlo > hi + r->margin) | (zhi < lo - r->margin);
+    lv culled = tf_span_culled(z_in, z_out, hi, lo, r->margin);
     lv keep = active & ~culled;
 
     *hit = (lv)(0);
@@ -402,13 +362,9 @@ void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *h
     lv base = c->cj * w->n + c->ci;
     dv ha = gather_f(w->h, base, mask), hb = gather_f(w->h, base + 1, mask);
     dv hd = gather_f(w->h, base + w->n, mask), hc = gather_f(w->h, base + w->n + 1, mask);
-    lv first = c->tri == 0;
-    v3p n = v3p_make(select(-(hc - hd), -(hb - ha), first), select(-(hd - ha), -(hc - hb), first),
-                     (dv)(w->cell));
     hit->t = c->t;
     hit->p = v3p_make(r->o.x + c->t * r->d.x, r->o.y + c->t * r->d.y, r->o.z + c->t * r->d.z);
-    dv len = sqrt(v3p_dot(n, n));
-    hit->n = v3p_select(n, v3p_scale(n, 1.0 / len), len > 0);
+    hit->n = tf_hit_normal(ha, hb, hc, hd, w->cell, c->tri == 0);
     hit->ci = convert_int8(c->ci);
     hit->cj = convert_int8(c->cj);
 }

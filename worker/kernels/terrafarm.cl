@@ -1,30 +1,13 @@
-/* terrafarm.cl: the base of the OpenCL kernels -- the renderer's constants, the scalar vec3 and
- * the world (the buffers and height-field shape every kernel reads).  The host
- * (worker/backend_opencl.c) prepends tf_cl_params.h (the P[] / I[] indices) and appends
- * packet.cl, packet_trace.cl, packet_shade.cl and packet_render.cl, which hold the renderer
- * itself: common/render.c, shade.c, camera.c, trace.c and noise.c run eight samples at a time
- * (see worker/kernels/README.md).  The constants below are those files' constants: when one
- * changes there, change it here. */
+/* terrafarm.cl: the base of the OpenCL kernels -- the scalar vec3, the camera and the world
+ * (the buffers and height-field shape every kernel reads).  The host (worker/backend_opencl.c)
+ * builds one program from, in this order: tf_cl_params.h (the P[] / I[] indices),
+ * common/render/constants.h (the numbers the C renderer and the kernels share), this file,
+ * packet.cl (the packet types), common/portable.h, common/terrain/noise_kernel.h and
+ * common/render/sample_math.h (the per-sample math, the C renderer's own source), then
+ * packet_trace.cl, packet_shade.cl and packet_render.cl, which schedule that math eight samples
+ * at a time (see worker/kernels/README.md). */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
-
-#define TF_AA_MAX_DEPTH 6
-#define TF_AA_PROBE_FRACTION 0.1 /* render_internal.h */
-#define TF_SKY_DIST 1e30f
-#define FAR_AWAY 1e30
-#define DEG2RAD (3.14159265358979323846 / 180.0)
-#define TF_NOISE_COORD_LIMIT 0x1p52
-#define TF_NOISE2_SCALE 1.41421
-
-/* shade.c constants: keep in step with common/shade.c */
-#define ROCK_BLEND_DEG 6.0
-#define SNOW_SLIDE_DEG 15.0
-#define BUMP_OCTAVES 4.0
-#define SNOW_OCTAVES 5.0
-#define RIPPLE_OCTAVES 3.0
-#define RIPPLE_STRENGTH 0.06
-#define COLOUR_VARIATION 0.15
-#define FRESNEL_R0 0.02
 
 /* ---------------------------------------------------------------- vectors (vec.h) */
 
@@ -32,11 +15,19 @@ typedef struct vec3 { double x, y, z; } vec3;
 
 vec3 v3(double x, double y, double z) { vec3 r = {x, y, z}; return r; }
 
-/* noise_impl.h's gradient table, by its constants: grad_x8 in packet_shade.cl computes the
- * table's entries from them */
-#define TF_C1 0.92387953251128674
-#define TF_S1 0.38268343236508977
-#define TF_H1 0.70710678118654752
+/* ---------------------------------------------------------------- the camera (camera.h)
+ *
+ * camera.h's tf_camera with the fields sample_math.h's tf_camera_ray reads, under the same
+ * names; make_world fills it from the values the host copied out of the C camera. */
+#define TF_CAMERA_PANORAMA 1 /* enum tf_camera_kind; I[TFI_CAM_KIND] is 1 for a panorama */
+
+typedef struct tf_camera {
+    int kind, width, height;
+    vec3 forward, right, up;
+    double half_w, half_h;
+    vec3 pano_forward, pano_right, pano_up;
+    double sweep, v_centre, v_half;
+} tf_camera;
 
 /* ---------------------------------------------------------------- the world */
 
@@ -53,6 +44,7 @@ typedef struct world {
     /* I[TFI_LEVEL_OFFSET + L] for L < 16 in two vectors: the walk looks a level's offset up with
      * one permute instead of a gather (packet_trace.cl level_offset8) */
     long8 offset_lo, offset_hi;
+    tf_camera cam;
 } world;
 
 vec3 pvec(const world *w, int k) { return v3(w->P[k], w->P[k + 1], w->P[k + 2]); }
@@ -76,5 +68,19 @@ world make_world(__global const double *P, __global const int *I, __global const
         off[L] = L < w.levels ? I[TFI_LEVEL_OFFSET + L] : 0;
     w.offset_lo = vload8(0, off);
     w.offset_hi = vload8(1, off);
+    w.cam.kind = I[TFI_CAM_KIND];
+    w.cam.width = I[TFI_WIDTH];
+    w.cam.height = I[TFI_HEIGHT];
+    w.cam.forward = pvec(&w, TFP_CAM_FORWARD);
+    w.cam.right = pvec(&w, TFP_CAM_RIGHT);
+    w.cam.up = pvec(&w, TFP_CAM_UP);
+    w.cam.half_w = P[TFP_HALF_W];
+    w.cam.half_h = P[TFP_HALF_H];
+    w.cam.pano_forward = pvec(&w, TFP_PANO_FORWARD);
+    w.cam.pano_right = pvec(&w, TFP_PANO_RIGHT);
+    w.cam.pano_up = pvec(&w, TFP_PANO_UP);
+    w.cam.sweep = P[TFP_SWEEP];
+    w.cam.v_centre = P[TFP_V_CENTRE];
+    w.cam.v_half = P[TFP_V_HALF];
     return w;
 }

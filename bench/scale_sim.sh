@@ -5,7 +5,10 @@
 # (`terrafarm render -j 0`, networked workers only, output in /dev/shm) and one process of W
 # simulated workers (`terrafarm worker --simulate MODEL -j W`), each a thread with its own
 # connection that sleeps its task's modelled cost (from the cost map MODEL) and puts back a
-# result of the right size.  Tasks are 8x8-pixel stamps; the image is sized so every worker gets
+# result of real content: the packed OpenEXR chunks of a real render (--payloads), recorded once
+# at the start (RECORD_SIZE of SCENE with 8x8 stamps, -j 2), so the coordinator receives, checks
+# and writes what a real farm sends.  The coordinator's CPU (render path) and the simulator's
+# CPU are reported apart.  Tasks are 8x8-pixel stamps; the image is sized so every worker gets
 # TPW tasks on average (near 16:9), and --pixel-us is chosen so the average task costs TASK_MS.
 # Watermark = F * W + one band of tasks, for each F.
 #
@@ -24,17 +27,25 @@ WM=${WM:-"1 2 4"}
 TPW=${TPW:-16}
 OUT=${OUT:-bench/results}
 SCENE=${SCENE:-scenes/default.scene}
+RECORD_SIZE=${RECORD_SIZE:-960x544}
 mkdir -p "$OUT"
 CSV="$OUT/scale_sim.csv"
 PORT=$((20000 + $$ % 20000))
 EXR=/dev/shm/terrafarm-scale-sim-$$.exr
 LOG=$(mktemp)
-trap 'rm -f "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats"' EXIT
+REC=/dev/shm/terrafarm-scale-payloads-$$.exr
+trap 'rm -f "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$REC" "${REC%.exr}.png"' EXIT
 
 [ -x "$TF" ] || { echo "scale_sim.sh: build first (make)" >&2; exit 1; }
 [ -r "$MODEL" ] || { echo "scale_sim.sh: no cost map $MODEL (terrafarm bench SCENE --cost-map $MODEL)" >&2; exit 1; }
 
-echo "workers,task_ms,watermark,tasks,width,height,wall_s,modelled_s,efficiency,ops_per_s,take_mean_ms,take_p50_ms,take_p99_ms,redealt,duplicated,coord_wall_s" >"$CSV"
+echo "recording the payloads: $SCENE at $RECORD_SIZE, stamps:8x8" >&2
+"$TF" render "$SCENE" -j 2 --size "$RECORD_SIZE" --tasks stamps:8x8 -o "$REC" --overwrite -q
+echo "recorded $(wc -c <"$REC") bytes for $RECORD_SIZE pixels" >&2
+grep -m1 'model name' /proc/cpuinfo | sed 's/.*: /cpu: /' >&2
+echo "load before: $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+
+echo "workers,task_ms,watermark,tasks,width,height,wall_s,modelled_s,efficiency,ops_per_s,take_mean_ms,take_p50_ms,take_p99_ms,redealt,duplicated,coord_wall_s,coord_render_cpu_s,sim_cpu_s,out_bytes,load1" >"$CSV"
 for ms in $TASK_MS; do
   for w in $WORKERS; do
     n=$((w * TPW))
@@ -55,13 +66,15 @@ for ms in $TASK_MS; do
         i=$((i + 1)); [ $i -lt 200 ] || { echo "scale_sim.sh: coordinator did not start" >&2; exit 1; }
         sleep 0.05
       done
-      "$TF" worker --connect 127.0.0.1:$PORT --simulate "$MODEL" -j $w --pixel-us "$pixel_us" \
-        -q --timeout 30000 >"$LOG"
+      /usr/bin/time -f '%U %S' -o "$LOG.time" \
+        "$TF" worker --connect 127.0.0.1:$PORT --simulate "$MODEL" -j $w --pixel-us "$pixel_us" \
+        --payloads "$REC" -q --timeout 30000 >"$LOG"
       wait $coord
+      sim_cpu=$(awk '{ printf "%.2f", $1 + $2 }' "$LOG.time")
       line=$(cat "$LOG")
       get() { echo "$line" | tr ' ' '\n' | sed -n "s/^$1=//p"; }
       js() { sed -n "s/^ *\"$1\": *\([0-9.]*\).*/\1/p" "$LOG.stats" | head -1; }
-      row="$w,$ms,$wm,$(get tasks),$width,$height,$(get wall_s),$(get modelled_s),$(get efficiency),$(get ops_per_s),$(get take_mean_ms),$(get take_p50_ms),$(get take_p99_ms),$(js tasks_redealt),$(js tasks_duplicated),$(js wall_s)"
+      row="$w,$ms,$wm,$(get tasks),$width,$height,$(get wall_s),$(get modelled_s),$(get efficiency),$(get ops_per_s),$(get take_mean_ms),$(get take_p50_ms),$(get take_p99_ms),$(js tasks_redealt),$(js tasks_duplicated),$(js wall_s),$(js coordinator_render_cpu_s),$sim_cpu,$(wc -c <"$EXR"),$(cut -d' ' -f1 /proc/loadavg)"
       echo "$row" | tee -a "$CSV"
     done
   done

@@ -27,6 +27,8 @@ static const char usage[] =
     "      --size WxH            override the scene's image size\n"
     "      --pixel half|float    channel type of R, G, B, A (Z and samples stay float; default\n"
     "                            half). rows:K writes a scanline EXR, stamps:WxH a tiled one\n"
+    "      --preview-interval MS rewrite the progress preview (FILE.png) at most this often\n"
+    "                            while rendering (default 5000; it is also written at the end)\n"
     "      --verify-chunks       also decode every result's chunks before accepting it (costs\n"
     "                            the coordinator per-pixel work; structure is always checked)\n"
     "      --verify FRACTION     render that fraction of tasks (chosen from the scene hash) and\n"
@@ -80,7 +82,8 @@ bad:
 int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
-           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_PIXEL, O_VERIFY_CHUNKS, O_VERIFY };
+           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_PIXEL, O_VERIFY_CHUNKS, O_VERIFY,
+           O_PREVIEW_INTERVAL };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -98,6 +101,7 @@ int cmd_render(int argc, char **argv)
         {"pixel", required_argument, NULL, O_PIXEL},
         {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
         {"verify", required_argument, NULL, O_VERIFY},
+        {"preview-interval", required_argument, NULL, O_PREVIEW_INTERVAL},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -161,6 +165,10 @@ int cmd_render(int argc, char **argv)
             }
             break;
         }
+        case O_PREVIEW_INTERVAL:
+            if (parse_int("--preview-interval", optarg, 100, 86400000, &o.preview_interval_ms))
+                return TF_EXIT_USAGE;
+            break;
         case O_LEASE:
             if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))
                 return TF_EXIT_USAGE;

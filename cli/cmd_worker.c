@@ -30,12 +30,15 @@ static const char usage[] =
     "                            map MODEL (terrafarm bench SCENE --cost-map MODEL) instead of\n"
     "                            rendering; -j N threads in this process; prints a report line\n"
     "      --pixel-us U          with --simulate: modelled cost of an average pixel (default 50)\n"
+    "      --payloads FILE.exr   with --simulate: answer tasks with the packed chunks of this\n"
+    "                            finished render (same --tasks and --pixel), as real workers\n"
+    "                            would; without it simulated results are encoded black pixels\n"
     "  -q, --quiet / -v, --verbose\n"
     "  -h, --help\n";
 
 int cmd_worker(int argc, char **argv)
 {
-    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE };
+    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE, O_PAYLOADS };
     static const struct option longopts[] = {
         {"connect", required_argument, NULL, 'c'},
         {"secret-file", required_argument, NULL, O_SECRET},
@@ -44,13 +47,14 @@ int cmd_worker(int argc, char **argv)
         {"timeout", required_argument, NULL, O_TIMEOUT},
         {"simulate", required_argument, NULL, O_SIMULATE},
         {"pixel-us", required_argument, NULL, O_PIXEL_US},
+        {"payloads", required_argument, NULL, O_PAYLOADS},
         {"cl-device", required_argument, NULL, O_CL_DEVICE},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
-    const char *connect = NULL, *secret = NULL, *backend = "c", *model = NULL;
+    const char *connect = NULL, *secret = NULL, *backend = "c", *model = NULL, *payloads = NULL;
     double pixel_us = 50.0;
     int nproc = 0, timeout_ms = 10000, ch;
     char *end;
@@ -82,6 +86,7 @@ int cmd_worker(int argc, char **argv)
             }
             break;
         case O_SIMULATE: model = optarg; break;
+        case O_PAYLOADS: payloads = optarg; break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
         case O_PIXEL_US:
             pixel_us = strtod(optarg, &end);
@@ -108,6 +113,6 @@ int cmd_worker(int argc, char **argv)
         return TF_EXIT_USAGE;
     }
     signal(SIGPIPE, SIG_IGN);
-    tf_networked_opts o = {connect, secret, timeout_ms, nproc, backend, model, pixel_us};
+    tf_networked_opts o = {connect, secret, timeout_ms, nproc, backend, model, pixel_us, payloads};
     return tf_networked_worker_run(&o) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
 }

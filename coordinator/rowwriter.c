@@ -36,6 +36,7 @@ struct tf_rowwriter {
     uint8_t *preview;      /* grid.pw * grid.ph * 3, black where nothing is rendered yet */
     int preview_dirty;
     double preview_last;
+    double preview_cost_ms;   /* how long the last rewrite took */
     pthread_mutex_t mu;
     pthread_cond_t nonempty, nonfull;
     pthread_t thread;
@@ -65,8 +66,11 @@ static void write_preview(tf_rowwriter *rw, int last)
     char err[512];
     if (!rw->preview || !rw->preview_path)
         return;
+    double t0 = tf_now_msf();
     tf_png_writer *png = tf_png_create(rw->preview_path, rw->grid.pw, rw->grid.ph, 8, 3, err,
                                        sizeof err);
+    if (png) /* stored while rendering (a memcpy and a checksum); the final one compressed */
+        tf_png_fast(png, last ? 1 : 0);
     for (int j = 0; png && j < rw->grid.ph; j++)
         if (tf_png_write_row(png, rw->preview + (size_t)j * (size_t)rw->grid.pw * 3, err,
                              sizeof err)) {
@@ -81,6 +85,7 @@ static void write_preview(tf_rowwriter *rw, int last)
     }
     rw->preview_dirty = 0;
     rw->preview_last = tf_now_msf();
+    rw->preview_cost_ms = rw->preview_last - t0;
 }
 
 typedef struct prefill {
@@ -270,7 +275,7 @@ tf_rowwriter *tf_rowwriter_start(tf_exr_writer *w, const tf_exr_layout *layout,
     rw->layout = *layout;
     rw->depth = cfg->depth < 1 ? 1 : cfg->depth;
     rw->fsync_ms = cfg->fsync_interval_ms > 0 ? cfg->fsync_interval_ms : 1000;
-    rw->preview_ms = cfg->preview_interval_ms > 0 ? cfg->preview_interval_ms : 3000;
+    rw->preview_ms = cfg->preview_interval_ms > 0 ? cfg->preview_interval_ms : 5000;
     rw->rows_written = tf_exr_next_row(w);
     rw->slot = calloc((size_t)rw->depth, sizeof *rw->slot);
     if (!rw->slot)

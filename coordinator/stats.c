@@ -102,8 +102,22 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
         fprintf(f, "  \"coordinator_cpu_ns_per_pixel\": %.2f,\n",
                 px > 0 ? render_cpu * 1e9 / px : 0.0);
         fprintf(f, "  \"worker_busy_ns_per_pixel\": %.2f,\n", px > 0 ? busy * 1e9 / px : 0.0);
+        /* Workers' CPU time, where the coordinator can know it: its forked workers, reaped by
+         * now (their render and encoding; the terrain was built before the fork).  busy_s is
+         * wall time and grows on a loaded machine; CPU time does not. */
+        struct rusage rc;
+        int all_forked = st->nworkers > 0;
+        for (int i = 0; i < st->nworkers; i++)
+            all_forked &= strcmp(st->workers[i].kind, "forked") == 0;
+        double wcpu = 0;
+        if (all_forked && getrusage(RUSAGE_CHILDREN, &rc) == 0)
+            wcpu = (double)rc.ru_utime.tv_sec + rc.ru_utime.tv_usec * 1e-6 +
+                   (double)rc.ru_stime.tv_sec + rc.ru_stime.tv_usec * 1e-6;
+        fprintf(f, "  \"worker_cpu_ns_per_pixel\": %.2f,\n", px > 0 ? wcpu * 1e9 / px : 0.0);
+        /* how many workers one coordinator core feeds: workers' CPU (else busy time) per
+         * coordinator render-path CPU second */
         fprintf(f, "  \"workers_per_coordinator_core\": %.1f,\n",
-                render_cpu > 0 ? busy / render_cpu : 0.0);
+                render_cpu > 0 ? (wcpu > 0 ? wcpu : busy) / render_cpu : 0.0);
     }
     fprintf(f, "  \"workers\": [");
     for (int i = 0; i < st->nworkers; i++) {

@@ -13,6 +13,7 @@
 #include "clock.h"
 #include "log.h"
 #include "scene.h"
+#include "worker/payloads.h"
 #include "linda/auth.h"
 #include "linda/tsclient.h"
 #include "terrain/heightfield.h"
@@ -106,7 +107,8 @@ static int run_one(const char *connect, const uint8_t *key, int timeout_ms, cons
 /* --simulate: n synthetic workers on the cost map at path; prints one report line on stdout
  * (key=value pairs, for scripts such as bench/scale_sim.sh). */
 static int run_simulated(const char *connect, const uint8_t *key, int timeout_ms,
-                         const tf_scene *s, const char *path, int n, double pixel_us)
+                         const tf_scene *s, const char *path, int n, double pixel_us,
+                         const char *payloads_path)
 {
     char err[1024];
     tf_cost_map map;
@@ -114,12 +116,23 @@ static int run_simulated(const char *connect, const uint8_t *key, int timeout_ms
         tf_error("%s", err);
         return 1;
     }
+    tf_payloads *payloads = NULL;
+    if (payloads_path && !(payloads = tf_payloads_load(payloads_path, err, sizeof err))) {
+        tf_error("%s", err);
+        tf_cost_map_free(&map);
+        return 1;
+    }
+    if (!payloads)
+        tf_warn("simulated workers without --payloads send encoded black pixels, which compress "
+                "to almost nothing: the coordinator's load is not a real farm's");
     tf_info("joining %s as %d simulated workers: %dx%d render, %.1f us per average pixel",
             connect, n, s->width, s->height, pixel_us);
-    tf_sim_config cfg = {connect, key, timeout_ms, n, pixel_us, &map, s->width, s->height};
+    tf_sim_config cfg = {connect, key, timeout_ms, n, pixel_us, &map, s->width, s->height,
+                         payloads};
     tf_sim_report r;
     int rc = tf_simulate_run(&cfg, &r, err, sizeof err);
     tf_cost_map_free(&map);
+    tf_payloads_free(payloads);
     printf("simulated workers=%d tasks=%lld ops=%lld wall_s=%.3f modelled_s=%.3f "
            "slept_s=%.3f efficiency=%.4f ops_per_s=%.0f take_mean_ms=%.3f take_p50_ms=%.3f "
            "take_p99_ms=%.3f take_max_ms=%.3f oversleep_ms=%.3f\n",
@@ -193,9 +206,23 @@ int tf_networked_worker_run(const tf_networked_opts *o)
         return 1;
     }
     if (model) {
+        if (o->payloads) { /* refuse a recording that cannot stand in before joining */
+            tf_exr_layout l;
+            tf_payloads *rec = tf_worker_fetch_layout(c, &l, err, sizeof err) == 0
+                                   ? tf_payloads_load(o->payloads, err, sizeof err)
+                                   : NULL;
+            int fits = rec && tf_payloads_fit(rec, &l, err, sizeof err) == 0;
+            tf_payloads_free(rec);
+            if (!fits) {
+                tf_error("%s", err);
+                ts_client_close(c);
+                tf_scene_free(s);
+                return 1;
+            }
+        }
         ts_client_close(c);
         int status = run_simulated(connect, k, timeout_ms, s, model, nproc ? nproc : 16,
-                                   pixel_us);
+                                   pixel_us, o->payloads);
         tf_scene_free(s);
         return status;
     }

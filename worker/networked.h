@@ -18,6 +18,7 @@ typedef struct tf_networked_opts {
     const char *backend;        /* "c" | "opencl" | "auto" */
     const char *simulate_model; /* cost map path: simulated workers; NULL: real ones */
     double pixel_us;            /* simulated cost of an average pixel */
+    const char *payloads;       /* simulated workers send this recording's chunks (payloads.h) */
 } tf_networked_opts;
 
 /* Run until the render is finished.  Returns the process exit status (0, or 1 after one

@@ -3,6 +3,7 @@
  * all released together from a start line so the measured wall time starts with a full farm. */
 #include "worker/simulate.h"
 #include "worker/worker.h"
+#include "worker/payloads.h"
 #include "clock.h"
 
 #include <errno.h>
@@ -191,6 +192,8 @@ typedef struct sim_shared {
 
 typedef struct sim_worker {
     sim_shared *sh;
+    tf_exr_layout layout;
+    tf_payload_buf buf;
     ts_client *client;
     pthread_t thread;
     int64_t id;
@@ -259,6 +262,16 @@ static int sim_render(void *ctx, tf_rect rect, tf_pixel *px, tf_render_counts *c
     return 0;
 }
 
+/* With a recording: the recorded chunks that stand in for this task's. */
+static int sim_payload(void *ctx, tf_rect rect, const tf_pixel *px, tf_chunk_payload *out,
+                       int64_t *spp_total, char *err, size_t errlen)
+{
+    (void)px;
+    sim_worker *w = ctx;
+    return tf_payloads_for(w->sh->cfg->payloads, &w->layout, rect, &w->buf, out, spp_total, err,
+                           errlen);
+}
+
 static void sim_on_take(void *ctx, int64_t wait_ns)
 {
     note_latency(ctx, (double)wait_ns * 1e-6);
@@ -279,15 +292,24 @@ static void sim_on_stop(void *ctx, int64_t t_ns)
 /* The real worker loop (worker.c) with the simulated step. */
 static void sim_serve(sim_worker *w)
 {
-    tf_exr_layout layout;
-    char err[256];
-    if (tf_worker_fetch_layout(w->client, &layout, err, sizeof err)) {
+    char err[512];
+    const tf_payloads *rec = w->sh->cfg->payloads;
+    if (tf_worker_fetch_layout(w->client, &w->layout, err, sizeof err)) {
         shared_fail(w->sh, "cannot read the output layout", w->client);
         return;
     }
-    tf_worker_step step = {w, sim_render, NULL, sim_on_take, sim_on_op, sim_on_stop,
-                           w->sh->cfg->image_w, w->sh->cfg->image_h};
-    int rc = tf_worker_serve(w->client, w->id, &layout, &step);
+    if (rec && tf_payloads_fit(rec, &w->layout, err, sizeof err)) {
+        pthread_mutex_lock(&w->sh->lock);
+        w->sh->failed++;
+        if (!w->sh->error[0])
+            snprintf(w->sh->error, sizeof w->sh->error, "%s", err);
+        pthread_mutex_unlock(&w->sh->lock);
+        return;
+    }
+    tf_worker_step step = {w, sim_render, rec ? sim_payload : NULL, sim_on_take, sim_on_op,
+                           sim_on_stop, w->sh->cfg->image_w, w->sh->cfg->image_h};
+    int rc = tf_worker_serve(w->client, w->id, &w->layout, &step);
+    tf_payload_buf_free(&w->buf);
     /* Once the stop tuple is out the coordinator may finish and close while this worker still
      * waits, or sleeps on a straggler's duplicate: losing it then is the end of the render,
      * not a failure. */

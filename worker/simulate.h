@@ -3,7 +3,9 @@
  *
  * A simulated worker speaks the real farm protocol (farmproto.h) over its own tuple-space
  * connection, exactly like `terrafarm worker`, but instead of tracing rays it sleeps the
- * *modelled* cost of its task and puts back a result of the right size (zero pixels).  Many of
+ * *modelled* cost of its task and puts back a result of the right size: with a recording
+ * (--payloads, worker/payloads.h) the packed chunks of a real render, sized and compressed as
+ * real results are; without one, encoded black pixels.  Many of
  * them run as threads of one process, so a 2-core machine can host a farm of 1024.
  *
  * The model is a cost map: a coarse grid of relative cost densities over the image, measured
@@ -55,6 +57,7 @@ typedef struct tf_sim_config {
     double pixel_us;         /* modelled cost of an average pixel */
     const tf_cost_map *map;
     int image_w, image_h;    /* the render's size (from the scene tuple) */
+    const struct tf_payloads *payloads; /* recorded chunks to send (payloads.h), or NULL */
 } tf_sim_config;
 
 typedef struct tf_sim_report {

@@ -97,6 +97,13 @@ typedef int (*tf_exr_chunk_fn)(void *user, tf_rect rect, const tf_pixel *px);
 int tf_exr_read_chunks(const char *path, tf_exr_meta *meta, int64_t *chunks_valid,
                        tf_exr_chunk_fn fn, void *user, char *err, size_t errlen);
 
+/* The same walk, also handing over each chunk's packed bytes as they are in the file (for a
+ * recording of real chunks: worker/payloads.h). */
+typedef int (*tf_exr_packed_fn)(void *user, const tf_chunk_ref *chunk, const uint8_t *packed,
+                                size_t len, const tf_pixel *px);
+int tf_exr_read_packed_chunks(const char *path, tf_exr_meta *meta, int64_t *chunks_valid,
+                              tf_exr_packed_fn fn, void *user, char *err, size_t errlen);
+
 /* Write a single-channel FLOAT image (channel "Y"), e.g. height field export. */
 int tf_exr_write_gray(const char *path, int width, int height, const float *data, char *err,
                       size_t errlen);

@@ -108,6 +108,14 @@ tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_de
     return w;
 }
 
+void tf_png_fast(tf_png_writer *w, int level)
+{
+    if (setjmp(png_jmpbuf(w->png)))
+        return;
+    png_set_compression_level(w->png, level);
+    png_set_filter(w->png, PNG_FILTER_TYPE_BASE, PNG_FILTER_NONE);
+}
+
 /* The setjmp lives here, apart from the caller's locals, so nothing live across it changes. */
 static int write_raw_row(tf_png_writer *w, png_const_bytep src)
 {

@@ -12,6 +12,10 @@ typedef struct tf_png_writer tf_png_writer;
  * finish, so an existing file is never left half-written. */
 tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_depth, int channels,
                              char *err, size_t errlen);
+/* Trade size for speed: no row filter and zlib `level` (0: stored, 1: fastest), for the progress
+ * preview the coordinator rewrites every few seconds while a render runs.  Call before the
+ * first row. */
+void tf_png_fast(tf_png_writer *w, int level);
 /* One row of width * channels samples: uint8_t for depth 8, uint16_t (host order) for depth 16. */
 int tf_png_write_row(tf_png_writer *w, const void *row, char *err, size_t errlen);
 /* Finish, close, rename into place.  Frees w whatever happens. */

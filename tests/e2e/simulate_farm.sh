@@ -45,6 +45,34 @@ assert sum(w["tasks"] for w in ws) >= 48, ws
 assert sum(w["busy_s"] for w in ws) > 0, ws
 PY
 
+grep -q 'without --payloads' "$T/sim.err" || fail "no warning about black payloads: $(cat "$T/sim.err")"
+
+say "--payloads: the packed chunks of a real 32x24 render stand in for the simulated results"
+render -q -j 1 --size 32x24 --tasks stamps:8x8 -o "$T/rec.exr" || fail "recording: $(cat "$T/last.err")"
+"$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size 64x48 --tasks stamps:8x8 --verify-chunks \
+    -o "$T/sim2.exr" --stats "$T/sim2.json" 2>"$T/coord3.err" &
+coord=$!; e2e_track $coord
+port=$(e2e_port "$T/coord3.err") || fail "coordinator printed no port: $(cat "$T/coord3.err")"
+"$TF_BIN" worker --connect 127.0.0.1:$port --simulate "$T/m.cost" -j 8 --pixel-us 20 -q \
+    --payloads "$T/rec.exr" >"$T/sim2.out" 2>"$T/sim2.err" || fail "simulated workers: $(cat "$T/sim2.err")"
+wait_exit $coord 20
+[ $rc -eq 0 ] || fail "coordinator exit $rc: $(cat "$T/coord3.err")"
+[ "$(jstat results_refused "$T/sim2.json")" -eq 0 ] || fail "recorded chunks were refused: $(grep refused "$T/coord3.err")"
+"$EXRCMP" "$T/sim2.exr" "$T/sim2.exr" >/dev/null || fail "the simulated render does not decode"
+rec=$(wc -c <"$T/rec.exr") sim=$(wc -c <"$T/sim2.exr")
+[ "$sim" -gt $((3 * rec)) ] || fail "4x the recording's area in $sim bytes, the recording has $rec: not its chunks"
+say "recording $rec bytes, the 4x larger simulated render $sim bytes; chunks decode (--verify-chunks)"
+"$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size 64x48 --tasks rows:4 \
+    -o "$T/sim3.exr" 2>"$T/coord4.err" &
+coord=$!; e2e_track $coord
+port=$(e2e_port "$T/coord4.err") || fail "coordinator printed no port"
+"$TF_BIN" worker --connect 127.0.0.1:$port --simulate "$T/m.cost" -j 2 --payloads "$T/rec.exr" \
+    2>"$T/fit.err"; rc=$?
+[ $rc -eq 1 ] && [ "$(wc -l <"$T/fit.err")" -eq 1 ] && grep -q 'cannot stand in' "$T/fit.err" ||
+    fail "a recording of tiles for a scanline render: rc $rc: $(cat "$T/fit.err")"
+say "refused: $(cat "$T/fit.err")"
+kill $coord 2>/dev/null
+
 say "a malformed cost map: one line, exit 1"
 printf 'terrafarm-cost-map 1 2 2 4 4 1\n1 1\n1 x\n' >"$T/bad.cost"
 "$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size 16x16 -o "$T/bad.exr" 2>"$T/coord2.err" &

@@ -8,6 +8,9 @@
  * thread; tuples it outs wake network waiters immediately, whose replies go out on the next
  * iteration).
  *
+ * With a key, every byte after the handshake travels in sealed records (seal.h), and every
+ * request is checked against the connection's role (capability.h) before the space sees it.
+ *
  * Connections are non-blocking, with a bounded input buffer (one frame of at most TF_MAX_FRAME)
  * and a bounded output buffer (a client that stops reading its replies is dropped when more
  * than max_output_bytes are queued).  Any malformed, oversized, unknown-op, wrong-version or

@@ -324,12 +324,14 @@ while [ "$(count_lines "$TMP/part.coord.log" 'joined: networked')" -lt 2 ]; do
 done
 sleep 0.5
 kill -0 "$COORD" 2>/dev/null || fail "the render finished before the partition (make LARGE bigger)"
-ip -n "$NS_LAN" link set p-w1 down && ip -n "$NS_LAN" link set p-w2 down ||
+if ! { ip -n "$NS_LAN" link set p-w1 down && ip -n "$NS_LAN" link set p-w2 down; }; then
     fail "cannot pull the cables"
+fi
 note "both workers' cables pulled for 5 s (2.5 leases)"
 sleep 5
-ip -n "$NS_LAN" link set p-w1 up && ip -n "$NS_LAN" link set p-w2 up ||
+if ! { ip -n "$NS_LAN" link set p-w1 up && ip -n "$NS_LAN" link set p-w2 up; }; then
     fail "cannot plug the cables back"
+fi
 finish "$COORD" "coordinator (render across a partition)"
 finish "$W1" "worker 1 (render across a partition)"
 finish "$W2" "worker 2 (render across a partition)"

@@ -948,6 +948,12 @@ ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blockin
         return TS_CAP_ALLOW;
     }
     if (!strcmp(name, "task") && op == TS_CAP_IN) {
+        /* Any task, never one chosen by id or place: a client may not pick the task it wants
+         * to fail or to sit on. */
+        for (int i = 1; i < tuple->nfields; i++)
+            if (!tuple->f[i].formal)
+                return refuse(why, len, "takes a task by a template with actual fields (only "
+                              "(\"task\", ?id, ?x, ?y, ?w, ?h, ?excluded) is a worker's)");
         int64_t held = -1;
         if (lease_count(s, conn, &held) > 0)
             return refuse(why, len, "takes another task while holding task %" PRId64

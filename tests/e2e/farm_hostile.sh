@@ -41,7 +41,7 @@ wait_exit $hostile 30
 same "$T/ref.exr" "$T/hostile.exr" "render under attack"
 for what in 'more than 1 time' 'before joining' 'not allowed to a worker' 'forged stop task' \
     'invented\|failure reported as worker 9999' 'which this connection does not hold' \
-    'one at a time' 'signed as worker' 'result of task [0-9]* ([0-9]*x[0-9]* at' \
+    'one at a time' 'actual fields' 'signed as worker' 'result of task [0-9]* ([0-9]*x[0-9]* at' \
     'shifted\|instead of' 'excluding workers'; do
     grep "from 127.0.0.1:[0-9]* (worker) refused: " "$T/coord.err" | grep -q "$what" ||
         fail "the coordinator's log does not name the refused attempt '$what': $(grep refused "$T/coord.err" | head -30)"

@@ -109,6 +109,8 @@ def main():
     tid, rect, excl = take(c)
     print("holding task %d (%dx%d at %d,%d)" % (tid, rect[2], rect[3], rect[0], rect[1]))
     expect(c, "a second task while holding one (hoarding)", IN, TASK_TMPL)
+    expect(c, "a task chosen by id", INP, [(STRING, "task"), (INT, tid + 1)] + [(INT, None)] * 4 +
+           [(BLOB, None)])
     expect(c, "a result signed with another worker's id", OUT, result_fields(tid, me + 1))
     expect(c, "a result for another task", OUT, result_fields(tid + 1, me))
     expect(c, "a result with empty blobs (no chunk at all)", OUT, result_fields(tid, me))

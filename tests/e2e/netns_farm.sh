@@ -308,6 +308,7 @@ kill "$W2" 2>/dev/null
 wait "$W2" 2>/dev/null
 forget "$W2"
 ip -n "$NS_LAN" link set p-w2 up || fail "cannot plug worker 2 back in"
+LIMIT=100 # the partition and the reconnections come on top of the render (slow under ASan)
 start_coordinator part "$LARGE" --tasks rows:4 --lease-timeout 2000
 start "$NS_W1" "$TMP/part.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1 --timeout 30000

@@ -14,7 +14,7 @@ BUILD   ?= build
 BIN     ?= bin
 VERSION := 0.1.0
 
-PKGS      := inih libpng libsodium zlib
+PKGS      := inih libpng libsodium zlib gdal
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
 EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
@@ -40,8 +40,8 @@ IMAGE_SRC   := $(wildcard common/image/*.c)
 RENDER_SRC  := $(wildcard common/render/*.c)
 # 4. linda: tuples, the wire protocol, sockets, authentication, the store, client and server
 LINDA_SRC   := $(wildcard common/linda/*.c)
-# 5. the farm's tuples (task, result, failure, scene), spoken by both sides
-FARM_SRC    := common/farmproto.c
+# 5. the farm's tuples (task, result, failure, scene, height map), spoken by both sides
+FARM_SRC    := common/farmproto.c common/heightmap_tuples.c
 # 6. worker: the worker loop, its C and OpenCL backends, the simulated worker
 WORKER_SRC  := $(wildcard worker/*.c)
 # 7. coordinator: the farm's policy (dealer and watermark, leases, in-order writer, progress)
@@ -119,7 +119,8 @@ bench: $(PROG) $(BENCHES)
 # Every Debian package the build, the tests and the benchmarks use.
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
-            iproute2 python3 gnuplot-nox
+            iproute2 python3 gnuplot-nox libgdal-dev gdal-bin openssh-server openssh-client \
+            slurm-wlm munge
 # Only the benchmarks' peers need these (make bench-deps).
 BENCH_PKGS := povray redis-server hyperfine linux-perf valgrind
 deps:

@@ -39,7 +39,7 @@ static const char usage[] =
     "every image is bit-identical, and print speedup, parallel efficiency, rays/s, the\n"
     "workers' mean busy fraction, tasks re-dealt and the external-sample overhead.\n"
     "\n"
-    "  -w, --workers LIST        comma-separated worker counts (default 1,2)\n"
+    "  -j, -w, --workers LIST    comma-separated worker counts (default 1,2)\n"
     "  -r, --repeat R            runs per worker count; the median wall time counts (default 3)\n"
     "      --tasks SPEC          rows:K or stamps:WxH, passed to render\n"
     "      --watermark N         passed to render\n"
@@ -138,9 +138,10 @@ static int parse_args(int argc, char **argv, bench_opts *o)
     tf_task_spec spec;
     optind = 1;
     opterr = 0;
-    while ((c = getopt_long(argc, argv, ":w:r:qh", longopts, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, ":w:j:r:qh", longopts, NULL)) != -1) {
         switch (c) {
         case 'w':
+        case 'j': /* -j as in render, worker and heightfield */
             if (parse_counts(optarg, o))
                 return -1;
             break;

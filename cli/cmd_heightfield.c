@@ -1,15 +1,18 @@
-/* cmd_heightfield.c: `terrafarm heightfield SCENE -o FILE.png|FILE.exr`: export the scene's
+/* cmd_heightfield.c: `terrafarm heightfield SCENE -o FILE.png|.exr|.tif`: export the scene's
  * terrain heights, the same samples the renderer traces (tf_terrain_heights, the first half of
  * tf_heightfield_build; the max/min grids are not needed here, which saves their memory).
  *
  * PNG: 16-bit grayscale, [hmin, hmax] mapped linearly to 0..65535.  EXR: one FLOAT channel "Y"
- * of world heights.  Row order in both: image row r holds terrain row j = r, i.e. world
+ * of world heights.  GeoTIFF (geotiff_write.h): Float32 world heights, north-up with a
+ * geotransform (and a CRS with --srs), the way GIS tools and real DEMs have them.  Row order in
+ * PNG and EXR: image row r holds terrain row j = r, i.e. world
  * y = r * cell, so row 0 is the NEAR (south, y = 0) edge and the last row the far edge; image
  * column c is world x = c * cell.  That order is chosen for POV-Ray: its height_field puts the
  * image's last row at local z = 0 and splits each cell along the (x+1, z)-(x, z+1) diagonal;
  * mirrored in z by the printed transform, that split becomes terrafarm's own (ci, cj)-(ci+1,
  * cj+1) diagonal, so POV-Ray traces exactly the triangles the terrafarm tracer does. */
 #include <getopt.h>
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -18,20 +21,27 @@
 
 #include "cli/commands.h"
 #include "image/exrfile.h"
+#include "image/geotiff_write.h"
 #include "log.h"
 #include "image/png_write.h"
 #include "scene.h"
 #include "terrain/terrain_build.h"
 
 static const char usage[] =
-    "usage: terrafarm heightfield SCENE -o FILE.png|FILE.exr [--threads N] [--size-exp K]\n"
+    "usage: terrafarm heightfield SCENE -o FILE.png|FILE.exr|FILE.tif [-j N] [--size-exp K]\n"
+    "                             [--srs SRS] [--origin EAST,NORTH]\n"
     "\n"
     "Export the terrain of SCENE as a height field image.\n"
     "\n"
     "  -o, --output FILE     FILE.png: 16-bit grayscale, the height range [hmin, hmax]\n"
     "                        mapped to 0..65535 (readable by POV-Ray's height_field);\n"
-    "                        FILE.exr: one float channel Y of world heights\n"
-    "  -t, --threads N       threads for the terrain synthesis (default: online CPUs)\n"
+    "                        FILE.exr: one float channel Y of world heights;\n"
+    "                        FILE.tif: a Float32 GeoTIFF of world heights, north-up (its\n"
+    "                        first row is the far edge), georeferenced\n"
+    "      --srs SRS         GeoTIFF: its CRS, e.g. EPSG:32632 (default: none, only the\n"
+    "                        geotransform); world units are then the CRS's metres\n"
+    "      --origin E,N      GeoTIFF: easting and northing of sample (0, 0) (default 0,0)\n"
+    "  -j, --threads N       threads for the terrain synthesis (default: online CPUs)\n"
     "  -k, --size-exp K      override the scene's size_exp: (2^K + 1)^2 samples, K in 1..13\n"
     "  -h, --help            this text\n"
     "\n"
@@ -47,6 +57,8 @@ struct hf_options {
     const char *output;
     int threads;
     int size_exp; /* 0 = the scene's */
+    const char *srs;
+    double east0, north0;
 };
 
 static int ends_with(const char *s, const char *suffix)
@@ -72,18 +84,35 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},   {"threads", required_argument, NULL, 't'},
         {"size-exp", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
+        {"srs", required_argument, NULL, 's'},      {"origin", required_argument, NULL, 'O'},
         {NULL, 0, NULL, 0},
     };
     memset(o, 0, sizeof *o);
     opterr = 0;
     optind = 1;
     int c;
-    while ((c = getopt_long(argc, argv, ":o:t:k:h", longopts, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, ":o:t:j:k:h", longopts, NULL)) != -1) {
         switch (c) {
         case 'o':
             o->output = optarg;
             break;
+        case 's':
+            o->srs = optarg;
+            break;
+        case 'O': {
+            char *end;
+            o->east0 = strtod(optarg, &end);
+            if (end == optarg || *end != ',' ||
+                (o->north0 = strtod(end + 1, &end), *end != '\0') || !isfinite(o->east0) ||
+                !isfinite(o->north0)) {
+                tf_error("heightfield: --origin wants EAST,NORTH (two numbers), not '%s'",
+                         optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        }
         case 't':
+        case 'j':
             if (parse_int(optarg, 0, 1024, &o->threads) != 0) {
                 tf_error("heightfield: --threads wants an integer 0..1024, not '%s'", optarg);
                 return TF_EXIT_USAGE;
@@ -115,11 +144,12 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
     }
     o->scene_path = argv[optind];
     if (!o->output) {
-        tf_error("heightfield: -o FILE.png or -o FILE.exr is required");
+        tf_error("heightfield: -o FILE.png, -o FILE.exr or -o FILE.tif is required");
         return TF_EXIT_USAGE;
     }
-    if (!ends_with(o->output, ".png") && !ends_with(o->output, ".exr")) {
-        tf_error("heightfield: output '%s' must end in .png or .exr", o->output);
+    if (!ends_with(o->output, ".png") && !ends_with(o->output, ".exr") &&
+        !ends_with(o->output, ".tif") && !ends_with(o->output, ".tiff")) {
+        tf_error("heightfield: output '%s' must end in .png, .exr or .tif", o->output);
         return TF_EXIT_USAGE;
     }
     return -1;
@@ -167,12 +197,18 @@ static int write_png(const char *path, const float *h, int n, float lo, float hi
     return tf_png_finish(w, err, errlen);
 }
 
-static void print_placement(const char *path, int n, double extent, float lo, float hi, int png)
+static void print_placement(const char *path, int n, double extent, float lo, float hi, int png,
+                            int tif)
 {
     double range = (double)hi - (double)lo;
     printf("wrote %s: %dx%d samples, cell %.9g\n", path, n, n, extent / (n - 1));
     printf("world extent: x, y in [0, %.9g]\n", extent);
     printf("height range: [%.9g, %.9g] (hmin, hmax)\n", (double)lo, (double)hi);
+    if (tif) {
+        printf("GeoTIFF band 1 holds world heights, north-up (first row = far edge y = %.9g)\n",
+               extent);
+        return;
+    }
     if (!png) {
         printf("EXR channel Y holds world heights; row r is world y = r * cell (row 0 = y 0)\n");
         return;
@@ -205,7 +241,8 @@ int cmd_heightfield(int argc, char **argv)
         terrain.size_exp = o.size_exp;
     int n = (1 << terrain.size_exp) + 1;
 
-    float *h = tf_terrain_heights(&terrain, o.threads, err, sizeof err);
+    double extent;
+    float *h = tf_terrain_heights(&terrain, o.threads, &extent, err, sizeof err);
     if (!h) {
         tf_error("%s", err);
         tf_scene_free(scene);
@@ -214,15 +251,18 @@ int cmd_heightfield(int argc, char **argv)
     float lo, hi;
     height_range(h, (size_t)n * (size_t)n, &lo, &hi);
     int png = ends_with(o.output, ".png");
+    int tif = ends_with(o.output, ".tif") || ends_with(o.output, ".tiff");
     int rc = png ? write_png(o.output, h, n, lo, hi, err, sizeof err)
-                 : tf_exr_write_gray(o.output, n, n, h, err, sizeof err);
+             : tif ? tf_geotiff_write_heights(o.output, n, h, extent / (n - 1), o.east0, o.north0,
+                                              o.srs, err, sizeof err)
+                   : tf_exr_write_gray(o.output, n, n, h, err, sizeof err);
     free(h);
     if (rc != 0) {
         tf_error("%s", err);
         tf_scene_free(scene);
         return TF_EXIT_FAIL;
     }
-    print_placement(o.output, n, terrain.extent, lo, hi, png);
+    print_placement(o.output, n, extent, lo, hi, png, tif);
     tf_scene_free(scene);
     return TF_EXIT_OK;
 }

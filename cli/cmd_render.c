@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "clock.h"
 #include "cli/commands.h"
 #include "coordinator/coordinator.h"
 #include "image/exrlayout.h"
@@ -44,7 +45,8 @@ static const char usage[] =
     "      --resume              continue an interrupted render of the same scene into the same output\n"
     "      --overwrite           discard a partial render (or a foreign file) at the output\n"
     "      --stats FILE.json     write the run statistics\n"
-    "      --lease-timeout MS    drop a worker silent this long and re-deal its task (default 15000)\n"
+    "      --lease-timeout T     drop a worker silent this long and re-deal its task (default 15s;\n"
+    "                            T is a number with ms, s, m or h; a bare number is milliseconds)\n"
     "  -q, --quiet               errors only\n"
     "  -v, --verbose             more detail (workers joining, re-dealt tasks)\n"
     "  -h, --help                this help\n";
@@ -170,9 +172,16 @@ int cmd_render(int argc, char **argv)
                 return TF_EXIT_USAGE;
             break;
         case O_LEASE:
-            if (parse_int("--lease-timeout", optarg, 100, 86400000, &o.lease_timeout_ms))
+        {
+            int64_t ms;
+            if (tf_parse_duration_ms(optarg, &ms) || ms < 100 || ms > 86400000) {
+                tf_error("--lease-timeout '%s': expected a duration from 100ms to 24h (e.g. 15s, "
+                         "500ms, 2m; a bare number is milliseconds)", optarg);
                 return TF_EXIT_USAGE;
+            }
+            o.lease_timeout_ms = (int)ms;
             break;
+        }
         case 'q': o.quiet = 1; break;
         case 'v': o.verbose = 1; break;
         case 'h': fputs(usage, stdout); return TF_EXIT_OK;

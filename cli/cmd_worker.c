@@ -2,11 +2,13 @@
  * worker.  Its life (connect, fetch the scene, build the terrain, fork N workers) is in
  * worker/networked.c; with --simulate MODEL it joins as synthetic workers (worker/simulate.h). */
 #include <getopt.h>
+#include <stdint.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "clock.h"
 #include "cli/commands.h"
 #include "log.h"
 #include "worker/networked.h"
@@ -24,8 +26,8 @@ static const char usage[] =
     "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
     "                            (same as TERRAFARM_CL_DEVICE)\n"
     "  -j, --workers N           worker processes on this machine (default: online CPUs)\n"
-    "      --timeout MS          keep trying to reach the coordinator for MS milliseconds\n"
-    "                            (default 10000)\n"
+    "      --timeout T           keep trying to reach the coordinator for T (default 10s; T is\n"
+    "                            a number with ms, s, m or h; a bare number is milliseconds)\n"
     "      --simulate MODEL      synthetic workers: sleep each task's modelled cost from the cost\n"
     "                            map MODEL (terrafarm bench SCENE --cost-map MODEL) instead of\n"
     "                            rendering; -j N threads in this process; prints a report line\n"
@@ -79,12 +81,16 @@ int cmd_worker(int argc, char **argv)
             }
             break;
         case O_TIMEOUT:
-            timeout_ms = (int)strtol(optarg, &end, 10);
-            if (end == optarg || *end || timeout_ms < 1) {
-                tf_error("--timeout '%s': expected a positive number of milliseconds", optarg);
+        {
+            int64_t ms;
+            if (tf_parse_duration_ms(optarg, &ms) || ms < 1 || ms > INT32_MAX) {
+                tf_error("--timeout '%s': expected a positive duration (e.g. 10s, 500ms, 2m; a "
+                         "bare number is milliseconds)", optarg);
                 return TF_EXIT_USAGE;
             }
+            timeout_ms = (int)ms;
             break;
+        }
         case O_SIMULATE: model = optarg; break;
         case O_PAYLOADS: payloads = optarg; break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;

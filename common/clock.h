@@ -16,6 +16,12 @@ static inline int64_t tf_now_ms(void) { return tf_now_ns() / 1000000; }
 static inline double tf_now_msf(void) { return (double)tf_now_ns() * 1e-6; }
 static inline double tf_now_s(void) { return (double)tf_now_ns() * 1e-9; }
 
+/* A duration as written on the command line: a number and an optional unit, "ms", "s", "m"
+ * (minutes) or "h", e.g. "500ms", "15s", "1.5s", "2m"; a bare number is milliseconds (so
+ * "15000" is still 15 s).  No sign, no blanks.  Rounded to whole milliseconds.  Returns 0 and
+ * *ms, or -1 if text is not such a duration or exceeds 30 days. */
+int tf_parse_duration_ms(const char *text, int64_t *ms);
+
 /* The CLOCK_REALTIME instant `ms` milliseconds from now (ms may be fractional). */
 struct timespec tf_realtime_in(double ms);
 

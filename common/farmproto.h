@@ -2,6 +2,9 @@
  * coordinator's supervisor and every worker (forked or networked) speak only these:
  *
  *   ("scene", text:S, width:I, height:I, hash:S, layout:S)  rd by networked workers (tsnet)
+ *   ("heightmap", bytes:I, chunks:I, sha256:S)          generator = file: the height map's
+ *   ("heightmap_chunk", index:I, data:B)                bytes, rd by networked workers
+ *                                                       (heightmap_tuples.h)
  *   ("next_worker", n:I)                                in + out n+1: a worker takes an id
  *   ("hello", worker:I, kind:S, host:S, pid:I, backend:S)  a worker announces itself
  *   ("task", id:I, x:I, y:I, w:I, h:I, excluded:B)     a rectangle to render; id < 0 = stop

@@ -63,6 +63,10 @@ enum key_type {
     KT_GENERATOR, /* enum tf_generator by name */
     KT_CAMERA,    /* enum tf_camera_kind by name */
     KT_ENVELOPE,  /* list of up to TF_ENVELOPE_MAX^2 doubles, may continue on indented lines */
+    KT_PATH,      /* char[max] file name without control characters */
+    KT_SHA256,    /* char[65]: 64 hex digits, stored in lower case */
+    KT_NODATA,    /* enum tf_nodata by name */
+    KT_FIRST_ROW, /* enum tf_first_row by name */
 };
 
 struct key_def {
@@ -102,7 +106,8 @@ static const struct key_def KEYS[] = {
     {SEC_TERRAIN, "generator", KT_GENERATOR, F(terrain.generator), 0, 0, 0, 1, {0}},
     {SEC_TERRAIN, "seed", KT_U64, F(terrain.seed), 0, 0, 0, 1, {0}},
     {SEC_TERRAIN, "size_exp", KT_INT, F(terrain.size_exp), 1, 13, 0, 0, {9}},
-    {SEC_TERRAIN, "extent", KT_DOUBLE, F(terrain.extent), 0, BIG, 1, 0, {1000}},
+    /* extent: above 0; generator = file also takes 0 (the default there): from the raster */
+    {SEC_TERRAIN, "extent", KT_DOUBLE, F(terrain.extent), 0, BIG, 0, 0, {1000}},
     {SEC_TERRAIN, "height_scale", KT_DOUBLE, F(terrain.height_scale), 0, BIG, 0, 0, {200}},
     {SEC_TERRAIN, "feature_size", KT_DOUBLE, F(terrain.feature_size), 0, BIG, 1, 0, {400}},
     {SEC_TERRAIN, "octaves", KT_DOUBLE, F(terrain.octaves), 1, 30, 0, 0, {8}},
@@ -126,6 +131,18 @@ static const struct key_def KEYS[] = {
     {SEC_TERRAIN, "thermal_iterations", KT_INT, F(terrain.thermal_iterations), 0, 10000, 0, 0,
      {0}},
     {SEC_TERRAIN, "talus", KT_DOUBLE, F(terrain.talus_deg), 0, 90, 0, 0, {35}},
+    {SEC_TERRAIN, "path", KT_PATH, F(terrain.file_path), 0, TF_SCENE_PATH_MAX, 0, 0, {0}},
+    {SEC_TERRAIN, "sha256", KT_SHA256, F(terrain.file_sha256), 0, 0, 0, 0, {0}},
+    {SEC_TERRAIN, "vertical_scale", KT_DOUBLE, F(terrain.vertical_scale), -BIG, BIG, 0, 0, {1}},
+    {SEC_TERRAIN, "vertical_offset", KT_DOUBLE, F(terrain.vertical_offset), -BIG, BIG, 0, 0,
+     {0}},
+    {SEC_TERRAIN, "nodata", KT_NODATA, F(terrain.nodata), 0, 0, 0, 0, {TF_NODATA_FILL}},
+    {SEC_TERRAIN, "first_row", KT_FIRST_ROW, F(terrain.first_row), 0, 0, 0, 0,
+     {TF_FIRST_ROW_AUTO}},
+    {SEC_TERRAIN, "crop_x", KT_INT, F(terrain.crop_x), 0, 1 << 20, 0, 0, {0}},
+    {SEC_TERRAIN, "crop_y", KT_INT, F(terrain.crop_y), 0, 1 << 20, 0, 0, {0}},
+    {SEC_TERRAIN, "crop_width", KT_INT, F(terrain.crop_width), 0, 1 << 20, 0, 0, {0}},
+    {SEC_TERRAIN, "crop_height", KT_INT, F(terrain.crop_height), 0, 1 << 20, 0, 0, {0}},
 
     {SEC_MATERIALS, "sea_level", KT_DOUBLE, F(materials.sea_level), -BIG, BIG, 0, 0, {0}},
     {SEC_MATERIALS, "tree_line", KT_DOUBLE, F(materials.tree_line), -BIG, BIG, 0, 0, {80}},
@@ -147,10 +164,14 @@ static const struct key_def KEYS[] = {
 #define KEY_COUNT ((int)(sizeof KEYS / sizeof KEYS[0]))
 
 static const char *const GENERATOR_NAMES[] = {"fbm", "hetero", "hybrid", "ridged",
-                                              "midpoint", "fault", "subdivide"};
+                                              "midpoint", "fault", "subdivide", "file"};
 #define GENERATOR_COUNT ((int)(sizeof GENERATOR_NAMES / sizeof GENERATOR_NAMES[0]))
 static const char *const CAMERA_NAMES[] = {"pinhole", "panorama"};
 #define CAMERA_COUNT 2
+static const char *const NODATA_NAMES[] = {"fill", "sea"};
+#define NODATA_COUNT 2
+static const char *const FIRST_ROW_NAMES[] = {"auto", "north", "south"};
+#define FIRST_ROW_COUNT 3
 
 const char *tf_generator_name(enum tf_generator g)
 {
@@ -497,6 +518,42 @@ static int add_envelope_numbers(struct parser *p, int key, const char *value)
     return 0;
 }
 
+/* A file name: no control characters, shorter than the key's buffer.  (inih has already cut
+ * a " ;" comment and the blanks at either end, so what is left survives the canonical form.) */
+static int parse_path_value(struct parser *p, int key, const char *value, char *out)
+{
+    const struct key_def *k = &KEYS[key];
+    size_t n = strlen(value);
+    if (n >= (size_t)k->max) {
+        fail_at(p, p->line, "%s: too long (%zu bytes, at most %d)", k->name, n, (int)k->max - 1);
+        return -1;
+    }
+    for (size_t i = 0; i < n; i++) {
+        unsigned char c = (unsigned char)value[i];
+        if (c < 0x20 || c == 0x7f) {
+            fail_at(p, p->line, "%s: contains a control character", k->name);
+            return -1;
+        }
+    }
+    memcpy(out, value, n + 1);
+    return 0;
+}
+
+static int parse_sha256_value(struct parser *p, int key, const char *value, char *out)
+{
+    char q[64];
+    size_t n = strspn(value, "0123456789abcdefABCDEF");
+    if (n != 64 || value[n] != '\0') {
+        quote(q, sizeof q, value, strlen(value));
+        fail_at(p, p->line, "%s: expected 64 hexadecimal digits, got \"%s\"", KEYS[key].name, q);
+        return -1;
+    }
+    for (size_t i = 0; i < 64; i++)
+        out[i] = (char)tolower((unsigned char)value[i]);
+    out[64] = '\0';
+    return 0;
+}
+
 /* Store `value` for KEYS[key] in the scene, or fail_at. */
 static int set_value(struct parser *p, int key, const char *value)
 {
@@ -543,6 +600,20 @@ static int set_value(struct parser *p, int key, const char *value)
         return 0;
     case KT_ENVELOPE:
         return add_envelope_numbers(p, key, value);
+    case KT_PATH:
+        return parse_path_value(p, key, value, (char *)dst);
+    case KT_SHA256:
+        return parse_sha256_value(p, key, value, (char *)dst);
+    case KT_NODATA:
+        if ((i = parse_name_value(p, key, value, NODATA_NAMES, NODATA_COUNT)) < 0)
+            return -1;
+        memcpy(dst, &i, sizeof i);
+        return 0;
+    case KT_FIRST_ROW:
+        if ((i = parse_name_value(p, key, value, FIRST_ROW_NAMES, FIRST_ROW_COUNT)) < 0)
+            return -1;
+        memcpy(dst, &i, sizeof i);
+        return 0;
     }
     return -1;
 }
@@ -569,10 +640,14 @@ static void set_defaults(tf_scene *s)
             break;
         case KT_GENERATOR:
         case KT_CAMERA:
+        case KT_NODATA:
+        case KT_FIRST_ROW:
             memcpy(dst, &i, sizeof i);
             break;
         case KT_ENVELOPE:
-            break; /* calloc'd: all zero */
+        case KT_PATH:
+        case KT_SHA256:
+            break; /* calloc'd: all zero, the empty string */
         }
     }
 }
@@ -822,11 +897,33 @@ static void check_camera(struct parser *p)
                 "(above 0, below 180)", s->camera.fov_deg);
 }
 
+/* generator = file needs a path, and its extent defaults to 0 (from the raster); every other
+ * generator needs an extent above 0. */
+static void check_terrain_file(struct parser *p)
+{
+    tf_terrain *t = &p->s->terrain;
+    int kext = key_index_by_name(SEC_TERRAIN, "extent");
+    int kgen = key_index_by_name(SEC_TERRAIN, "generator");
+    if (t->generator == TF_GEN_FILE) {
+        if (!t->file_path[0])
+            fail_at(p, blame_line(p, kgen), "path: missing (generator = file needs the height "
+                    "map's file name)");
+        else if (!p->key_line[kext])
+            t->extent = 0;
+        return;
+    }
+    if (!(t->extent > 0))
+        fail_at(p, blame_line(p, kext), "extent: %.17g is out of range above 0..%.17g (0, from "
+                "the raster, is only for generator = file)", t->extent, BIG);
+}
+
 static void check_semantics(struct parser *p)
 {
     check_required(p);
     if (!p->failed)
         check_envelope(p);
+    if (!p->failed)
+        check_terrain_file(p);
     if (!p->failed)
         check_camera(p);
 }
@@ -858,6 +955,8 @@ void tf_scene_free(tf_scene *s)
         return;
     free(s->path);
     free(s->text);
+    free(s->heightmap);
+    free(s->heightmap_name);
     free(s);
 }
 
@@ -914,6 +1013,129 @@ tf_scene *tf_scene_parse_text(const char *name, const char *text, size_t len, ch
     return s;
 }
 
+static void sha256_hex(const uint8_t *data, size_t len, char out[65])
+{
+    static const char hex[] = "0123456789abcdef";
+    uint8_t h[32];
+    crypto_hash_sha256(h, data, len);
+    for (int i = 0; i < 32; i++) {
+        out[2 * i] = hex[h[i] >> 4];
+        out[2 * i + 1] = hex[h[i] & 15];
+    }
+    out[64] = '\0';
+}
+
+int tf_scene_attach_heightmap(tf_scene *s, uint8_t *bytes, size_t len, const char *name,
+                              char *err, size_t errlen)
+{
+    char hex[65];
+    if (sodium_init() < 0)
+        (void)0; /* as in tf_scene_rehash: hashing needs no entropy */
+    sha256_hex(bytes, len, hex);
+    tf_terrain *t = &s->terrain;
+    if (t->file_sha256[0] && strcmp(t->file_sha256, hex)) {
+        free(bytes);
+        return tf_seterr(err, errlen, "%s: height map %s has SHA-256 %.16s..., but the scene "
+                         "pins sha256 = %.16s...", s->path, name, hex, t->file_sha256);
+    }
+    char *copy = strdup(name);
+    if (!copy) {
+        free(bytes);
+        return tf_seterr(err, errlen, "%s: out of memory", s->path);
+    }
+    free(s->heightmap);
+    free(s->heightmap_name);
+    s->heightmap = bytes;
+    s->heightmap_len = len;
+    s->heightmap_name = copy;
+    memcpy(t->file_sha256, hex, sizeof hex);
+    t->file_bytes = bytes;
+    t->file_len = len;
+    t->file_name = copy;
+    t->file_sea_level = s->materials.sea_level;
+    tf_scene_rehash(s);
+    return 0;
+}
+
+/* The height map's path: absolute as written, else relative to the scene file's folder.
+ * malloc'd, or NULL on out of memory. */
+static char *resolve_heightmap_path(const char *scene_path, const char *file_path)
+{
+    const char *slash = strrchr(scene_path, '/');
+    if (file_path[0] == '/' || !slash)
+        return strdup(file_path);
+    size_t dir = (size_t)(slash - scene_path) + 1, n = strlen(file_path);
+    char *out = malloc(dir + n + 1);
+    if (out) {
+        memcpy(out, scene_path, dir);
+        memcpy(out + dir, file_path, n + 1);
+    }
+    return out;
+}
+
+/* Read the whole height map file (at most TF_HEIGHTMAP_MAX_BYTES) and attach it. */
+static int load_heightmap(tf_scene *s, char *err, size_t errlen)
+{
+    char *path = resolve_heightmap_path(s->path, s->terrain.file_path);
+    if (!path)
+        return tf_seterr(err, errlen, "%s: out of memory", s->path);
+    int rc = -1;
+    uint8_t *buf = NULL;
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        tf_seterr(err, errlen, "%s: height map %s: cannot open: %s", s->path, path,
+                  strerror(errno));
+        goto out;
+    }
+    size_t cap = 1 << 20, len = 0;
+    buf = malloc(cap);
+    while (buf) {
+        if (len == cap) {
+            if (cap > TF_HEIGHTMAP_MAX_BYTES) /* read one byte past the bound: too large */
+                break;
+            size_t grown = cap * 2 > TF_HEIGHTMAP_MAX_BYTES ? TF_HEIGHTMAP_MAX_BYTES + 1 : cap * 2;
+            uint8_t *b = realloc(buf, grown);
+            if (!b) {
+                free(buf);
+                buf = NULL;
+                break;
+            }
+            buf = b;
+            cap = grown;
+        }
+        size_t got = fread(buf + len, 1, cap - len, f);
+        len += got;
+        if (got == 0)
+            break;
+    }
+    if (!buf) {
+        tf_seterr(err, errlen, "%s: height map %s: out of memory", s->path, path);
+        goto out;
+    }
+    if (ferror(f)) {
+        tf_seterr(err, errlen, "%s: height map %s: cannot read: %s", s->path, path,
+                  strerror(errno));
+        goto out;
+    }
+    if (len > TF_HEIGHTMAP_MAX_BYTES) {
+        tf_seterr(err, errlen, "%s: height map %s: too large (more than %zu MiB)", s->path, path,
+                  TF_HEIGHTMAP_MAX_BYTES >> 20);
+        goto out;
+    }
+    if (len == 0) {
+        tf_seterr(err, errlen, "%s: height map %s: empty file", s->path, path);
+        goto out;
+    }
+    rc = tf_scene_attach_heightmap(s, buf, len, path, err, errlen);
+    buf = NULL; /* owned by the scene, or freed */
+out:
+    if (f)
+        fclose(f);
+    free(buf);
+    free(path);
+    return rc;
+}
+
 tf_scene *tf_scene_load(const char *path, char *err, size_t errlen)
 {
     FILE *f = fopen(path, "rb");
@@ -939,6 +1161,10 @@ tf_scene *tf_scene_load(const char *path, char *err, size_t errlen)
     else
         s = tf_scene_parse_text(path, buf, n, err, errlen);
     free(buf);
+    if (s && s->terrain.generator == TF_GEN_FILE && load_heightmap(s, err, errlen) != 0) {
+        tf_scene_free(s);
+        return NULL;
+    }
     return s;
 }
 
@@ -1037,6 +1263,20 @@ static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
     case KT_ENVELOPE:
         if (s->terrain.envelope_n > 0)
             canonical_envelope(b, &s->terrain);
+        break;
+    case KT_PATH:
+    case KT_SHA256:
+        if (*(const char *)src) /* an empty value is not written: the key is absent */
+            sb_printf(b, "%s = %s\n", k->name, (const char *)src);
+        break;
+    case KT_NODATA:
+        memcpy(&i, src, sizeof i);
+        sb_printf(b, "%s = %s\n", k->name, (i >= 0 && i < NODATA_COUNT) ? NODATA_NAMES[i] : "?");
+        break;
+    case KT_FIRST_ROW:
+        memcpy(&i, src, sizeof i);
+        sb_printf(b, "%s = %s\n", k->name,
+                  (i >= 0 && i < FIRST_ROW_COUNT) ? FIRST_ROW_NAMES[i] : "?");
         break;
     }
 }

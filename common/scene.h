@@ -24,7 +24,16 @@ enum tf_generator {
     TF_GEN_MIDPOINT,  /* diamond-square under Koh & Hearn's control envelope */
     TF_GEN_FAULT,     /* Krten's fault lines + wind / rain erosion filters */
     TF_GEN_SUBDIVIDE, /* Ammeter & Mikhailyuk recursive subdivision (M, E, W) */
+    TF_GEN_FILE,      /* a height map read from a raster file (terrain/heightmap_file.c) */
 };
+
+/* generator = file: what a nodata sample becomes */
+enum tf_nodata { TF_NODATA_FILL, TF_NODATA_SEA };
+/* generator = file: which edge the raster's first row is (auto: north unless the
+ * georeferencing says the rows run south to north) */
+enum tf_first_row { TF_FIRST_ROW_AUTO, TF_FIRST_ROW_NORTH, TF_FIRST_ROW_SOUTH };
+
+#define TF_SCENE_PATH_MAX 192 /* a path value fits on one scene line (inih: 200 bytes a line) */
 
 #define TF_ENVELOPE_MAX 9 /* control grid up to 9x9 points (2^3+1) */
 
@@ -62,6 +71,23 @@ typedef struct tf_terrain {
     /* optional post-processes */
     int thermal_iterations; /* thermal weathering; 0 = off */
     double talus_deg;       /* talus angle for thermal weathering */
+
+    /* generator = file (terrain/heightmap_file.c; scenes/README.md) */
+    char file_path[TF_SCENE_PATH_MAX]; /* as written; relative to the scene file's folder */
+    char file_sha256[65];   /* hex SHA-256 of the file: pinned by the scene, or set on load */
+    double vertical_scale;  /* world height = raster value * vertical_scale + vertical_offset */
+    double vertical_offset;
+    int nodata;             /* enum tf_nodata */
+    int first_row;          /* enum tf_first_row */
+    int crop_x, crop_y;     /* crop window in raster pixels; width/height 0 = to the edge */
+    int crop_width, crop_height;
+    /* Not part of the file format: the height map's bytes, borrowed from the tf_scene that
+     * owns them (tf_scene_load reads them; a networked worker receives them, see
+     * heightmap_tuples.h), its name for messages, and the sea level for nodata = sea. */
+    const uint8_t *file_bytes;
+    size_t file_len;
+    const char *file_name;
+    double file_sea_level;
 } tf_terrain;
 
 typedef struct tf_scene {
@@ -115,6 +141,12 @@ typedef struct tf_scene {
         int max_depth;         /* subdivision levels; 3 -> up to 8x8 subpixels, 81 samples */
     } antialias;
 
+    /* generator = file: the height map's bytes (terrain.file_bytes borrows them) and where
+     * they came from (the path resolved against the scene's folder, or the coordinator). */
+    uint8_t *heightmap;
+    size_t heightmap_len;
+    char *heightmap_name;
+
     uint8_t hash[32];          /* SHA-256 of the canonical form (see tf_scene_canonical) */
     char hash_hex[65];
 } tf_scene;
@@ -122,9 +154,21 @@ typedef struct tf_scene {
 /* Parse a scene file.  On error returns NULL and writes one line "FILE:LINE: key: what is wrong"
  * to err (no trailing newline).  The result owns path and text. */
 tf_scene *tf_scene_load(const char *path, char *err, size_t errlen);
-/* Parse scene text; `name` is used in messages.  Same contract as tf_scene_load. */
+/* Largest height map file tf_scene_load reads (generator = file). */
+#define TF_HEIGHTMAP_MAX_BYTES ((size_t)512 << 20)
+
+/* Parse scene text; `name` is used in messages.  Same contract as tf_scene_load, except that a
+ * generator = file scene gets no height map bytes: tf_scene_load reads them from the file, a
+ * networked worker receives them and calls tf_scene_attach_heightmap. */
 tf_scene *tf_scene_parse_text(const char *name, const char *text, size_t len, char *err, size_t errlen);
 void tf_scene_free(tf_scene *s);
+
+/* Give a generator = file scene its height map: takes ownership of bytes (malloc'd, len
+ * bytes), named `name` in messages.  Their SHA-256 becomes terrain.file_sha256 and enters the
+ * scene hash; if the scene pins a sha256 that differs, fails with one line in err (bytes are
+ * freed either way on failure).  Returns 0 or -1. */
+int tf_scene_attach_heightmap(tf_scene *s, uint8_t *bytes, size_t len, const char *name,
+                              char *err, size_t errlen);
 
 /* Override the image size (render --size) and recompute the hash. */
 void tf_scene_set_size(tf_scene *s, int width, int height);

@@ -19,12 +19,14 @@
 #include "image/exrfile.h"
 #include "farmproto.h"
 #include "terrain/heightfield.h"
+#include "terrain/terrain_build.h"
 #include "log.h"
 #include "image/preview.h"
 #include "coordinator/progress.h"
 #include "coordinator/rowwriter.h"
 #include "linda/proto.h"
 #include "linda/sock.h"
+#include "heightmap_tuples.h"
 #include "scene.h"
 #include "coordinator/local_workers.h"
 #include "coordinator/output.h"
@@ -207,6 +209,14 @@ static int load_secret(render *r)
 static int build_terrain(render *r)
 {
     char err[1024];
+    if (r->nworkers <= 0 && r->scene->terrain.generator == TF_GEN_FILE) {
+        /* networked workers build their own, but a height map is decoded here once, so a bad
+         * file is one line now rather than a failure on every worker that joins */
+        float *h = tf_terrain_heights(&r->scene->terrain, 0, NULL, err, sizeof err);
+        if (!h)
+            return step_failed(r, 1, err);
+        free(h);
+    }
     if (r->nworkers <= 0)
         return 0; /* networked workers build their own */
     double t0 = tf_now_s();
@@ -224,7 +234,7 @@ static int put_scene_tuples(ts_space *space, const tf_scene *s, const char *layo
     tf_tuple_init(&t);
     if (tf_tuple_pack(&t, "ssiiss", "scene", s->text, (int64_t)s->width, (int64_t)s->height,
                       s->hash_hex, layout) ||
-        ts_space_out(space, &t))
+        ts_space_out(space, &t) || tf_heightmap_tuples_put(space, s))
         return -1;
     tf_tuple_init(&t);
     if (tf_tuple_pack(&t, "si", "next_worker", (int64_t)1) || ts_space_out(space, &t))

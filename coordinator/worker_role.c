@@ -6,6 +6,8 @@
 
 static const ts_cap_rule worker_rules[] = {
     {TS_CAP_RD, "scene", 6, 0, NULL},
+    {TS_CAP_RD, "heightmap", 4, 0, NULL},       /* generator = file: heightmap_tuples.h */
+    {TS_CAP_RD, "heightmap_chunk", 3, 0, NULL},
     {TS_CAP_IN, "next_worker", 2, 1, tf_supervisor_admit},
     {TS_CAP_OUT, "hello", 6, 1, tf_supervisor_admit},
     {TS_CAP_IN, "task", 7, 0, tf_supervisor_admit},

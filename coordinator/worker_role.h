@@ -2,7 +2,8 @@
  * farm's use of linda/capability.h).  A worker, forked or networked, holding the secret or
  * not, can only render:
  *
- *   rd  ("scene", ...)            read the scene (any number of times: reconnections)
+ *   rd  ("scene", ...)            read the scene (any number of times: reconnections), and
+ *   rd  ("heightmap"...)          a generator = file scene's height map (heightmap_tuples.h)
  *   in  ("next_worker", ?n)       once: take a worker id, bound to the connection there and
  *                                 then (the supervisor puts the counter back itself)
  *   out ("hello", id, ...)        once, with its own id

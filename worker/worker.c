@@ -12,6 +12,7 @@
 #include "worker/backend.h"
 #include "farmproto.h"
 #include "image/exrencode.h"
+#include "heightmap_tuples.h"
 #include "log.h"
 
 /* Linda's counter idiom, half of it: in ("next_worker", ?n).  The coordinator binds id n to
@@ -306,6 +307,10 @@ tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err
         goto fail;
     }
     tf_scene_set_size(s, (int)w, (int)h);
+    if (tf_heightmap_fetch(c, s, coordinator, err, errlen)) { /* generator = file only */
+        tf_scene_free(s);
+        goto fail;
+    }
     if (strcmp(s->hash_hex, hash)) {
         snprintf(err, errlen,
                  "%s: the scene hashes differently here (%.12s vs %.12s): mismatched terrafarm "

@@ -17,6 +17,7 @@
 
 #include "terrain/fractal.h"
 #include "terrain/heightfield.h"
+#include "terrain/heightmap_file.h"
 #include "terrain/noise.h"
 #include "terrain/terrain.h"
 #include "log.h"
@@ -106,13 +107,43 @@ static ptrdiff_t first_non_finite(const float *h, size_t count)
     return -1;
 }
 
-float *tf_terrain_heights(const tf_terrain *t, int threads, char *err, size_t errlen)
+/* generator = file: the height map's samples, then thermal weathering if asked. */
+static float *file_heights(const tf_terrain *t, int threads, double *extent, char *err,
+                           size_t errlen)
 {
+    float *h = tf_heightmap_heights(t, extent, err, errlen);
+    if (!h)
+        return NULL;
+    int n = (1 << t->size_exp) + 1;
+    if (!(*extent > 0.0) || !isfinite(*extent)) {
+        tf_seterr(err, errlen, "%s: the terrain's side comes out as %g; set extent",
+                  t->file_name ? t->file_name : t->file_path, *extent);
+        free(h);
+        return NULL;
+    }
+    threads = resolve_threads(threads, n);
+    if (t->thermal_iterations > 0 &&
+        tf_weather_thermal(h, n, *extent / (double)(n - 1), t, threads, err, errlen) != 0) {
+        free(h);
+        return NULL;
+    }
+    return h;
+}
+
+float *tf_terrain_heights(const tf_terrain *t, int threads, double *extent, char *err,
+                          size_t errlen)
+{
+    double side = t->extent;
+    if (!extent)
+        extent = &side;
     if (t->size_exp < 1 || t->size_exp > TF_TERRAIN_MAX_SIZE_EXP) {
         tf_seterr(err, errlen, "terrain: size_exp %d out of range 1..%d", t->size_exp,
                  TF_TERRAIN_MAX_SIZE_EXP);
         return NULL;
     }
+    if (t->generator == TF_GEN_FILE)
+        return file_heights(t, threads, extent, err, errlen);
+    *extent = t->extent;
     if (!(t->extent > 0.0) || !isfinite(t->extent) || !isfinite(t->height_scale)) {
         tf_seterr(err, errlen, "terrain: extent must be positive and height_scale finite");
         return NULL;
@@ -169,11 +200,12 @@ float *tf_terrain_heights(const tf_terrain *t, int threads, char *err, size_t er
 
 tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, size_t errlen)
 {
-    float *h = tf_terrain_heights(&s->terrain, threads, err, errlen);
+    double extent;
+    float *h = tf_terrain_heights(&s->terrain, threads, &extent, err, errlen);
     if (!h)
         return NULL;
     /* tf_heightfield_wrap owns h from here, and frees it if it fails. */
-    tf_heightfield *hf = tf_heightfield_wrap(h, s->terrain.size_exp, s->terrain.extent, threads);
+    tf_heightfield *hf = tf_heightfield_wrap(h, s->terrain.size_exp, extent, threads);
     if (!hf) {
         int n = (1 << s->terrain.size_exp) + 1;
         tf_seterr(err, errlen, "out of memory: max/min grids of a %dx%d height field", n, n);

@@ -16,7 +16,10 @@
  * Point generators are evaluated with `threads` threads (<= 0: all online CPUs), each taking
  * every threads-th row, so the bits never depend on the thread count.  Grid generators fill
  * the grid, then heights are scaled by height_scale, then thermal weathering runs if asked.
+ * generator = file reads the height map (heightmap_file.h) instead.  *extent (if not NULL)
+ * gets the world size of a side: t->extent, or for a height map what its georeferencing says.
  * Returns NULL with one line in err on failure (bad size, out of memory, non-finite output). */
-float *tf_terrain_heights(const tf_terrain *t, int threads, char *err, size_t errlen);
+float *tf_terrain_heights(const tf_terrain *t, int threads, double *extent, char *err,
+                          size_t errlen);
 
 #endif

@@ -34,6 +34,7 @@ for p in $pkgs OpenEXR OpenCL; do
     libpng) dev=libpng-dev run=libpng16-16 ;;
     libsodium) dev=libsodium-dev run=libsodium23 ;;
     zlib) dev=zlib1g-dev run=zlib1g ;;
+    gdal) dev=libgdal-dev run=libgdal32 ;;
     OpenEXR) dev=libopenexr-dev run=libopenexr-3-1-30 ;;
     OpenCL) dev=ocl-icd-opencl-dev run=ocl-icd-libopencl1 ;;
     *) fail "the Makefile links '$p', unknown to this test: add its Debian packages" ;;

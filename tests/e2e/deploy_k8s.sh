@@ -58,6 +58,8 @@ def arg_after(args, flag):
 
 cargs = [str(a) for a in c["args"]]
 check(cargs[0] == "render", "the coordinator does not run `terrafarm render`")
+check("--resume" in cargs, "the coordinator Job must pass --resume: a restarted pod would "
+      "otherwise refuse its own partial image")
 check(arg_after(cargs, "--listen") == "0.0.0.0:%d" % port["port"], "coordinator --listen")
 w = workers["spec"]["containers"][0]
 wargs = [str(a) for a in w["args"]]

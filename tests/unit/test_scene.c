@@ -97,7 +97,7 @@ static void test_error_wrong_type(void **state)
     expect_error_text(MINIMAL "[mist]\nenabled = maybe\n", "t.scene:11: enabled: unknown value \"maybe\"");
     const char *bad_gen = "[terrain]\ngenerator = perlin\n";
     expect_error_text(bad_gen, "t.scene:2: generator: unknown value \"perlin\" (expected "
-                               "fbm|hetero|hybrid|ridged|midpoint|fault|subdivide)");
+                               "fbm|hetero|hybrid|ridged|midpoint|fault|subdivide|file)");
     expect_error_text(MINIMAL "[antialias]\nmax_depth = 0x3\n", "t.scene:11: max_depth: trailing junk \"x3\"");
     expect_error_text(MINIMAL "seed_x = 1\n", "t.scene:10: seed_x: unknown key");
 }
@@ -522,6 +522,83 @@ static void test_generator_names(void **state)
     assert_string_equal(tf_generator_name((enum tf_generator)99), "unknown");
 }
 
+/* generator = file: path required, extent 0 (from the raster) unless set, the canonical form
+ * keeps the file keys and is itself a valid scene; a procedural scene may not take extent 0. */
+#define FILE_SCENE                                                                                 \
+    "[image]\nwidth = 64\nheight = 32\n[camera]\nposition = 0 0 10\nlook_at = 100 100 0\n"         \
+    "[terrain]\ngenerator = file\nseed = 5\n"
+
+static void test_file_generator_keys(void **state)
+{
+    (void)state;
+    char err[512];
+    expect_error_text(FILE_SCENE, "t.scene:8: path: missing (generator = file needs");
+    tf_scene *s = parse(FILE_SCENE "path = dem/alps.tif\nnodata = sea\nfirst_row = south\n"
+                        "crop_x = 3\ncrop_width = 100\nvertical_scale = 0.5\n"
+                        "vertical_offset = -20\n", err, sizeof err);
+    assert_non_null(s);
+    assert_true(s->terrain.generator == TF_GEN_FILE);
+    assert_string_equal(s->terrain.file_path, "dem/alps.tif");
+    assert_true(s->terrain.extent == 0);
+    assert_true(s->terrain.nodata == TF_NODATA_SEA && s->terrain.first_row == TF_FIRST_ROW_SOUTH);
+    assert_true(s->terrain.crop_x == 3 && s->terrain.crop_width == 100);
+    assert_true(s->terrain.vertical_scale == 0.5 && s->terrain.vertical_offset == -20);
+    assert_null(s->heightmap); /* parse_text never reads files */
+    char *c = tf_scene_canonical(s);
+    assert_non_null(strstr(c, "\npath = dem/alps.tif\n"));
+    assert_non_null(strstr(c, "\nextent = 0\n"));
+    assert_null(strstr(c, "sha256")); /* no file attached, none pinned: the key is absent */
+    tf_scene *again = parse(c, err, sizeof err);
+    assert_non_null(again);
+    assert_string_equal(s->hash_hex, again->hash_hex);
+    free(c);
+    tf_scene_free(again);
+    tf_scene_free(s);
+    expect_error_text(MINIMAL "extent = 0\n", "t.scene:10: extent: 0 is out of range above 0..");
+    expect_error_text(FILE_SCENE "path = a.tif\nsha256 = 12ab\n",
+                      "t.scene:11: sha256: expected 64 hexadecimal digits");
+    expect_error_text(FILE_SCENE "path = a.tif\nnodata = zero\n",
+                      "t.scene:11: nodata: unknown value \"zero\" (expected fill|sea)");
+}
+
+/* The height map's SHA-256 enters the scene hash; a pinned sha256 must match. */
+static void test_file_hash_follows_bytes(void **state)
+{
+    (void)state;
+    char err[512];
+    tf_scene *a = parse(FILE_SCENE "path = m.png\n", err, sizeof err);
+    tf_scene *b = parse(FILE_SCENE "path = m.png\n", err, sizeof err);
+    assert_non_null(a);
+    assert_non_null(b);
+    char before[65];
+    memcpy(before, a->hash_hex, sizeof before);
+    assert_int_equal(tf_scene_attach_heightmap(a, (uint8_t *)strdup("abc"), 3, "m.png", err,
+                                               sizeof err), 0);
+    assert_int_equal(tf_scene_attach_heightmap(b, (uint8_t *)strdup("abd"), 3, "m.png", err,
+                                               sizeof err), 0);
+    assert_string_not_equal(a->hash_hex, before);
+    assert_string_not_equal(a->hash_hex, b->hash_hex);
+    /* SHA-256("abc") */
+    assert_string_equal(a->terrain.file_sha256,
+                        "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    assert_true(a->terrain.file_bytes == a->heightmap && a->terrain.file_len == 3);
+    /* the canonical form pins the hash: parsed again, the other bytes are refused */
+    char *c = tf_scene_canonical(a);
+    tf_scene *pinned = parse(c, err, sizeof err);
+    free(c);
+    assert_non_null(pinned);
+    assert_string_equal(pinned->hash_hex, a->hash_hex);
+    assert_int_equal(tf_scene_attach_heightmap(pinned, (uint8_t *)strdup("abd"), 3, "m.png", err,
+                                               sizeof err), -1);
+    assert_non_null(strstr(err, "pins sha256"));
+    assert_int_equal(tf_scene_attach_heightmap(pinned, (uint8_t *)strdup("abc"), 3, "m.png", err,
+                                               sizeof err), 0);
+    assert_string_equal(pinned->hash_hex, a->hash_hex);
+    tf_scene_free(pinned);
+    tf_scene_free(a);
+    tf_scene_free(b);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -547,6 +624,8 @@ int main(void)
         cmocka_unit_test(test_canonical_roundtrip),
         cmocka_unit_test(test_every_example_scene_parses),
         cmocka_unit_test(test_generator_names),
+        cmocka_unit_test(test_file_generator_keys),
+        cmocka_unit_test(test_file_hash_follows_bytes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

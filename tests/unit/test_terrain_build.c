@@ -52,11 +52,11 @@ static void test_threaded_build_equals_single_threaded(void **state)
     for (size_t g = 0; g < 4; g++) {
         tf_terrain t = terrain(point_gens[g], 7);
         size_t bytes = (size_t)129 * 129 * sizeof(float);
-        float *one = tf_terrain_heights(&t, 1, err, sizeof err);
+        float *one = tf_terrain_heights(&t, 1, NULL, err, sizeof err);
         assert_non_null(one);
         static const int counts[] = {2, 3, 4, 7, 200};
         for (size_t c = 0; c < sizeof counts / sizeof counts[0]; c++) {
-            float *many = tf_terrain_heights(&t, counts[c], err, sizeof err);
+            float *many = tf_terrain_heights(&t, counts[c], NULL, err, sizeof err);
             assert_non_null(many);
             assert_memory_equal(one, many, bytes);
             free(many);
@@ -72,7 +72,7 @@ static void test_samples_are_scaled_points_on_the_grid(void **state)
     tf_terrain t = terrain(TF_GEN_HYBRID, 5);
     int n = 33;
     double cell = t.extent / (n - 1);
-    float *h = tf_terrain_heights(&t, 2, err, sizeof err);
+    float *h = tf_terrain_heights(&t, 2, NULL, err, sizeof err);
     assert_non_null(h);
     tf_noise nz;
     tf_noise_init(&nz, t.seed);
@@ -94,7 +94,7 @@ static void test_grid_generator_is_scaled(void **state)
     float *raw = malloc((size_t)n * n * sizeof *raw);
     assert_non_null(raw);
     assert_int_equal(tf_gen_midpoint(raw, 5, &t, 1, err, sizeof err), 0);
-    float *h = tf_terrain_heights(&t, 1, err, sizeof err);
+    float *h = tf_terrain_heights(&t, 1, NULL, err, sizeof err);
     assert_non_null(h);
     int nonzero = 0;
     for (int i = 0; i < n * n; i++) {
@@ -113,7 +113,7 @@ static void test_build_wraps_heights(void **state)
     tf_scene s;
     memset(&s, 0, sizeof s);
     s.terrain = terrain(TF_GEN_RIDGED, 6);
-    float *h = tf_terrain_heights(&s.terrain, 1, err, sizeof err);
+    float *h = tf_terrain_heights(&s.terrain, 1, NULL, err, sizeof err);
     assert_non_null(h);
     tf_heightfield *hf = tf_heightfield_build(&s, 3, err, sizeof err);
     assert_non_null(hf);
@@ -135,24 +135,24 @@ static void test_bad_parameters_are_one_line_errors(void **state)
     (void)state;
     char err[256];
     tf_terrain t = terrain(TF_GEN_FBM, 0);
-    assert_null(tf_terrain_heights(&t, 1, err, sizeof err));
+    assert_null(tf_terrain_heights(&t, 1, NULL, err, sizeof err));
     assert_non_null(strstr(err, "size_exp"));
     assert_null(strchr(err, '\n'));
     t.size_exp = 14;
-    assert_null(tf_terrain_heights(&t, 1, err, sizeof err));
+    assert_null(tf_terrain_heights(&t, 1, NULL, err, sizeof err));
     assert_non_null(strstr(err, "size_exp"));
     t.size_exp = 4;
     t.feature_size = 0.0;
-    assert_null(tf_terrain_heights(&t, 1, err, sizeof err));
+    assert_null(tf_terrain_heights(&t, 1, NULL, err, sizeof err));
     assert_non_null(strstr(err, "feature_size"));
     t.feature_size = 100.0;
     t.extent = -1.0;
-    assert_null(tf_terrain_heights(&t, 1, err, sizeof err));
+    assert_null(tf_terrain_heights(&t, 1, NULL, err, sizeof err));
     assert_non_null(strstr(err, "extent"));
     /* Heights that overflow float are refused, not passed on to the tracer as inf. */
     t.extent = 1000.0;
     t.height_scale = 1e300;
-    assert_null(tf_terrain_heights(&t, 1, err, sizeof err));
+    assert_null(tf_terrain_heights(&t, 1, NULL, err, sizeof err));
     assert_non_null(strstr(err, "non-finite"));
 }
 
@@ -174,7 +174,7 @@ static void test_out_of_memory_is_reported(void **state)
         char err[256] = "";
         int ok = setrlimit(RLIMIT_AS, &lim) == 0;
         tf_terrain t = terrain(TF_GEN_FBM, 13);
-        float *h = ok ? tf_terrain_heights(&t, 1, err, sizeof err) : NULL;
+        float *h = ok ? tf_terrain_heights(&t, 1, NULL, err, sizeof err) : NULL;
         ssize_t w = write(fds[1], err, strlen(err));
         (void)w;
         _exit(ok && h == NULL ? 0 : 1);

@@ -1,0 +1,46 @@
+/* raster.h: a height map raster as decoded from a file's bytes, before it becomes a terrain
+ * grid (heightmap_file.c does that: crop, nodata, vertical scale, orientation, resampling).
+ *
+ * Three decoders, chosen by heightmap_file.c from the first bytes: 16-bit (or 8-bit) grayscale
+ * PNG with libpng (raster_png.c), OpenEXR with OpenEXRCore (raster_exr.c), and everything else
+ * -- GeoTIFF above all -- through GDAL (raster_gdal.c), which also reads the georeferencing.
+ * Every decoder works on bytes in memory, never on a path, so a networked worker that received
+ * the bytes from the coordinator decodes exactly what the coordinator decoded.
+ *
+ * Hostile input: every decoder checks the declared size against TF_RASTER_MAX_SIDE and
+ * TF_RASTER_MAX_PIXELS before allocating, and reports one line "NAME: what is wrong". */
+#ifndef TF_RASTER_H
+#define TF_RASTER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define TF_RASTER_MAX_SIDE 65536
+#define TF_RASTER_MAX_PIXELS ((size_t)1 << 27) /* 512 MiB of floats */
+
+typedef struct tf_raster {
+    int width, height;
+    float *v;          /* width * height values, row-major, first row first; NaN = nodata */
+    /* georeferencing (GDAL only): pixel (c, r)'s corner is at
+     * (gt[0] + c * gt[1] + r * gt[2], gt[3] + c * gt[4] + r * gt[5]) */
+    int has_georef;
+    double gt[6];
+    int geographic;    /* coordinates are degrees of longitude and latitude */
+    double semi_major; /* geographic: the ellipsoid's semi-major axis in metres */
+    double unit_m;     /* projected: metres per coordinate unit (1 for metres, 0.3048 feet) */
+} tf_raster;
+
+/* Each returns 0 and fills r (r->v malloc'd), or -1 with one line in err naming `name`. */
+int tf_raster_read_png(const uint8_t *data, size_t len, const char *name, tf_raster *r,
+                       char *err, size_t errlen);
+int tf_raster_read_exr(const uint8_t *data, size_t len, const char *name, tf_raster *r,
+                       char *err, size_t errlen);
+int tf_raster_read_gdal(const uint8_t *data, size_t len, const char *name, tf_raster *r,
+                        char *err, size_t errlen);
+void tf_raster_free(tf_raster *r);
+
+/* 0 if width x height is within the limits, else -1 with "NAME: ... too large" in err. */
+int tf_raster_check_size(long long width, long long height, const char *name, char *err,
+                         size_t errlen);
+
+#endif

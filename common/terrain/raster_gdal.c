@@ -1,0 +1,162 @@
+/* raster_gdal.c: a height map in any self-contained raster format GDAL reads (GeoTIFF above
+ * all; also Erdas Imagine, ASCII grids, SRTM .hgt, USGS DEM, netCDF, GeoPackage, JPEG 2000,
+ * ...), decoded from memory through GDAL's /vsimem/ file system.  See raster.h.
+ *
+ * Band 1 is read as Float32 (Float32 rasters bit for bit); the band's nodata value, and NaN,
+ * become nodata.  The georeferencing comes along: the geotransform, whether the CRS is
+ * geographic (degrees) and the ellipsoid, or the projected CRS's linear unit.
+ *
+ * Only drivers that read a single file are allowed (ALLOWED_DRIVERS): a VRT could make GDAL
+ * open other files on this machine, and formats that need sidecar files would decode
+ * differently on a networked worker, which has only the bytes. */
+#include "terrain/raster.h"
+
+#include <gdal.h>
+#include <cpl_conv.h>
+#include <cpl_error.h>
+#include <cpl_vsi.h>
+#include <ogr_srs_api.h>
+
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "log.h"
+
+static const char *const ALLOWED_DRIVERS[] = {
+    "GTiff", "COG", "HFA", "AAIGrid", "GSAG", "GSBG", "GS7BG", "SRTMHGT", "USGSDEM", "BT",
+    "Terragen", "netCDF", "GPKG", "JP2OpenJPEG", "PNG", "GIF", "BMP", "JPEG", "XYZ",
+    "NWT_GRD", "PCIDSK", "RMF", "KEA", "HDF5Image", "ERS", NULL};
+
+static pthread_once_t gdal_once = PTHREAD_ONCE_INIT;
+
+static void gdal_init(void)
+{
+    GDALAllRegister();
+    /* never list a directory or look for sidecars in /vsimem, never touch the network */
+    CPLSetConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", "EMPTY_DIR");
+    CPLSetConfigOption("GDAL_HTTP_TIMEOUT", "1");
+    CPLSetConfigOption("CPL_VSIL_CURL_ALLOWED_EXTENSIONS", "none");
+}
+
+/* Georeferencing of ds into r (has_georef stays 0 without a usable geotransform). */
+static void read_georef(GDALDatasetH ds, tf_raster *r)
+{
+    double gt[6];
+    if (GDALGetGeoTransform(ds, gt) != CE_None)
+        return;
+    /* GDAL's default (0, 1, 0, 0, 0, 1) means "no geotransform" */
+    if (gt[0] == 0 && gt[1] == 1 && gt[2] == 0 && gt[3] == 0 && gt[4] == 0 && gt[5] == 1)
+        return;
+    memcpy(r->gt, gt, sizeof gt);
+    r->has_georef = 1;
+    r->unit_m = 1.0;
+    OGRSpatialReferenceH srs = GDALGetSpatialRef(ds);
+    if (!srs)
+        return;
+    if (OSRIsGeographic(srs)) {
+        OGRErr e;
+        r->geographic = 1;
+        r->semi_major = OSRGetSemiMajor(srs, &e);
+        if (e != OGRERR_NONE || !(r->semi_major > 0))
+            r->semi_major = 6378137.0;
+    } else if (OSRIsProjected(srs)) {
+        double u = OSRGetLinearUnits(srs, NULL);
+        if (u > 0)
+            r->unit_m = u;
+    }
+}
+
+/* GDAL's last message, on one line and without our /vsimem/ prefix: ": what", or "". */
+static void last_gdal_message(char *out, size_t outlen, const char *vpath)
+{
+    const char *m = CPLGetLastErrorMsg();
+    out[0] = '\0';
+    if (!m || !*m || outlen < 8)
+        return;
+    size_t k = snprintf(out, outlen, ": ");
+    size_t vlen = strlen(vpath);
+    for (const char *c = m; *c && k + 1 < outlen && k < 170; c++) {
+        if (strncmp(c, vpath, vlen) == 0) { /* "VPATH: " or "VPATH, ": said already */
+            c += vlen - 1; /* the loop's c++ steps past the path */
+            if ((c[1] == ':' || c[1] == ',') && c[2] == ' ')
+                c += 2;
+            continue;
+        }
+        out[k++] = (*c >= 0x20 && *c < 0x7f) ? *c : ' ';
+    }
+    out[k] = '\0';
+}
+
+int tf_raster_read_gdal(const uint8_t *data, size_t len, const char *name, tf_raster *r,
+                        char *err, size_t errlen)
+{
+    memset(r, 0, sizeof *r);
+    pthread_once(&gdal_once, gdal_init);
+    /* A private /vsimem name that keeps the file's base name (SRTMHGT reads it) */
+    static int counter;
+    const char *base = strrchr(name, '/');
+    base = base ? base + 1 : name;
+    char vpath[256];
+    snprintf(vpath, sizeof vpath, "/vsimem/terrafarm-%ld-%d/%.120s", (long)getpid(),
+             __atomic_add_fetch(&counter, 1, __ATOMIC_RELAXED), base);
+    VSILFILE *f = VSIFileFromMemBuffer(vpath, (GByte *)data, (vsi_l_offset)len, FALSE);
+    if (!f)
+        return tf_seterr(err, errlen, "%s: out of memory", name);
+    VSIFCloseL(f);
+
+    CPLPushErrorHandler(CPLQuietErrorHandler);
+    CPLErrorReset();
+    GDALDatasetH ds = GDALOpenEx(vpath, GDAL_OF_RASTER | GDAL_OF_READONLY,
+                                 (const char *const *)ALLOWED_DRIVERS, NULL, NULL);
+    int rc = -1;
+    char why[192];
+    if (!ds) {
+        last_gdal_message(why, sizeof why, vpath);
+        tf_seterr(err, errlen, "%s: not a raster image terrafarm can read (PNG, OpenEXR, or a "
+                  "single-file format of GDAL's such as GeoTIFF)%s", name, why);
+        goto out;
+    }
+    if (GDALGetRasterCount(ds) < 1) {
+        tf_seterr(err, errlen, "%s: raster has no bands", name);
+        goto out;
+    }
+    int w = GDALGetRasterXSize(ds), h = GDALGetRasterYSize(ds);
+    if (tf_raster_check_size(w, h, name, err, errlen) != 0)
+        goto out;
+    GDALRasterBandH band = GDALGetRasterBand(ds, 1);
+    size_t count = (size_t)w * (size_t)h;
+    r->v = malloc(count * sizeof *r->v);
+    if (!r->v) {
+        tf_seterr(err, errlen, "%s: out of memory for a %dx%d height map", name, w, h);
+        goto out;
+    }
+    if (GDALRasterIO(band, GF_Read, 0, 0, w, h, r->v, w, h, GDT_Float32, 0, 0) != CE_None) {
+        last_gdal_message(why, sizeof why, vpath);
+        tf_seterr(err, errlen, "%s: pixels do not decode (corrupt or truncated)%s", name, why);
+        goto out;
+    }
+    int has_nodata = 0;
+    double nodata = GDALGetRasterNoDataValue(band, &has_nodata);
+    float nodata_f = (float)nodata;
+    for (size_t i = 0; i < count; i++)
+        if (!isfinite(r->v[i]) || (has_nodata && r->v[i] == nodata_f))
+            r->v[i] = NAN;
+    r->width = w;
+    r->height = h;
+    read_georef(ds, r);
+    rc = 0;
+out:
+    if (rc != 0) {
+        free(r->v);
+        r->v = NULL;
+    }
+    if (ds)
+        GDALClose(ds);
+    CPLPopErrorHandler();
+    VSIUnlink(vpath);
+    return rc;
+}

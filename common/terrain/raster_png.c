@@ -1,0 +1,140 @@
+/* raster_png.c: a grayscale PNG height map (8 or 16 bits per sample; terrafarm heightfield
+ * writes 16-bit ones) decoded from memory with libpng.  See raster.h.
+ *
+ * The PNG's codes are the raster's values (0..65535 for 16 bits); the scene's vertical_scale
+ * and vertical_offset turn them into heights.  A grayscale+alpha PNG's transparent samples
+ * (alpha 0) are nodata.  Colour and palette images are refused: a height map is one channel.
+ * libpng reports errors by longjmp: every allocation that can outlive it is made before
+ * setjmp or freed after it. */
+#include "terrain/raster.h"
+
+#include <png.h>
+#include <math.h>
+#include <setjmp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+
+typedef struct png_source {
+    const uint8_t *data;
+    size_t len, pos;
+    char message[160]; /* libpng's own error text */
+} png_source;
+
+static void read_bytes(png_structp png, png_bytep out, size_t n)
+{
+    png_source *src = png_get_io_ptr(png);
+    if (n > src->len - src->pos) {
+        snprintf(src->message, sizeof src->message, "truncated (file ends inside the image)");
+        png_longjmp(png, 1);
+    }
+    memcpy(out, src->data + src->pos, n);
+    src->pos += n;
+}
+
+static void on_error(png_structp png, png_const_charp msg)
+{
+    png_source *src = png_get_error_ptr(png);
+    if (!src->message[0])
+        snprintf(src->message, sizeof src->message, "%s", msg);
+    png_longjmp(png, 1);
+}
+
+static void on_warning(png_structp png, png_const_charp msg)
+{
+    (void)png;
+    (void)msg; /* benign (unknown chunks, ...): the pixels are what matter */
+}
+
+int tf_raster_read_png(const uint8_t *data, size_t len, const char *name, tf_raster *r,
+                       char *err, size_t errlen)
+{
+    memset(r, 0, sizeof *r);
+    /* The IHDR's size, checked before libpng (which refuses sizes above its own limit with
+     * a vaguer message): signature, chunk length, "IHDR", width, height, all big-endian. */
+    if (len >= 24 && memcmp(data + 12, "IHDR", 4) == 0) {
+        unsigned long long w = (unsigned long long)data[16] << 24 | data[17] << 16 |
+                               data[18] << 8 | data[19];
+        unsigned long long h = (unsigned long long)data[20] << 24 | data[21] << 16 |
+                               data[22] << 8 | data[23];
+        if (tf_raster_check_size((long long)w, (long long)h, name, err, errlen) != 0)
+            return -1;
+    }
+    png_source src = {data, len, 0, ""};
+    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &src, on_error, on_warning);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    if (!info) {
+        png_destroy_read_struct(&png, NULL, NULL);
+        return tf_seterr(err, errlen, "%s: out of memory", name);
+    }
+    /* volatile: modified between setjmp and a longjmp back to it */
+    float *volatile values = NULL;
+    uint8_t *volatile row = NULL;
+    int rc = -1;
+    if (setjmp(png_jmpbuf(png))) {
+        tf_seterr(err, errlen, "%s: not a readable PNG: %s", name,
+                  src.message[0] ? src.message : "corrupt");
+        goto out;
+    }
+    png_set_read_fn(png, &src, read_bytes);
+    png_read_info(png, info);
+    png_uint_32 w = png_get_image_width(png, info), h = png_get_image_height(png, info);
+    int depth = png_get_bit_depth(png, info), type = png_get_color_type(png, info);
+    if (type != PNG_COLOR_TYPE_GRAY && type != PNG_COLOR_TYPE_GRAY_ALPHA) {
+        tf_seterr(err, errlen, "%s: a colour PNG; a height map must be grayscale (one channel)",
+                  name);
+        goto out;
+    }
+    if (tf_raster_check_size(w, h, name, err, errlen) != 0)
+        goto out;
+    if (depth < 8)
+        png_set_expand_gray_1_2_4_to_8(png);
+    if (png_get_interlace_type(png, info) != PNG_INTERLACE_NONE) {
+        tf_seterr(err, errlen, "%s: an interlaced PNG; save it without interlacing", name);
+        goto out;
+    }
+    png_read_update_info(png, info);
+    int channels = type == PNG_COLOR_TYPE_GRAY_ALPHA ? 2 : 1;
+    int bytes = depth == 16 ? 2 : 1;
+    size_t rowbytes = png_get_rowbytes(png, info);
+    if (rowbytes != (size_t)w * (size_t)channels * (size_t)bytes) {
+        tf_seterr(err, errlen, "%s: unexpected PNG row layout", name);
+        goto out;
+    }
+    values = malloc((size_t)w * h * sizeof(float));
+    row = malloc(rowbytes);
+    if (!values || !row) {
+        tf_seterr(err, errlen, "%s: out of memory for a %ux%u height map", name, (unsigned)w,
+                  (unsigned)h);
+        goto out;
+    }
+    for (png_uint_32 y = 0; y < h; y++) {
+        png_read_row(png, row, NULL);
+        float *out = values + (size_t)y * w;
+        for (png_uint_32 x = 0; x < w; x++) {
+            const uint8_t *s = row + (size_t)x * (size_t)channels * (size_t)bytes;
+            unsigned v, a; /* PNG samples are big-endian */
+            if (bytes == 2) {
+                v = (unsigned)s[0] << 8 | s[1];
+                a = channels == 2 ? ((unsigned)s[2] << 8 | s[3]) : 1;
+            } else {
+                v = s[0];
+                a = channels == 2 ? s[1] : 1;
+            }
+            out[x] = a == 0 ? NAN : (float)v;
+        }
+    }
+    png_read_end(png, NULL);
+    r->width = (int)w;
+    r->height = (int)h;
+    r->v = values;
+    values = NULL;
+    rc = 0;
+out:
+    png_destroy_read_struct(&png, &info, NULL);
+    free(values);
+    free(row);
+    return rc;
+}

@@ -1,0 +1,124 @@
+#!/bin/sh
+# heightmap_file.sh: generator = file end to end.
+#  - terrafarm's own terrain, exported as a float EXR, a Float32 GeoTIFF (georeferenced, UTM)
+#    and a 16-bit PNG, renders the same image as the procedural scene it came from:
+#    bit-identical pixels from EXR and GeoTIFF, within 16-bit quantisation from PNG (and not
+#    within it when the PNG's rows are read the wrong way up: the comparison can fail);
+#  - a relative path is relative to the scene file, not the working directory;
+#  - --resume refuses when the height map file changed under an unchanged scene text;
+#  - missing, empty, not-a-raster, corrupt, truncated, huge-dimension, nodata-only and
+#    non-square height maps each fail with one line naming the file.
+. "$(dirname "$0")/lib.sh"
+e2e_init
+command -v gdal_create >/dev/null 2>&1 || skip "gdal-bin is not installed (make deps)"
+EXRCMP=${TF_BUILD:-$TF_ROOT/build}/tools/exrcmp
+[ -x "$EXRCMP" ] || skip "no $EXRCMP (run make test)"
+SIZE=200x112
+mkdir -p "$T/maps" "$T/elsewhere"
+
+# scene NAME TERRAIN-LINES...: the default scene with its [terrain] block replaced.
+scene() {
+    sc_out=$T/$1.scene; shift
+    { sed -n '1,/^\[terrain\]/p' "$SCENE"; printf '%s\n' "$@"; echo
+      sed -n '/^\[materials\]/,$p' "$SCENE"; } >"$sc_out"
+}
+
+"$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 -j 2 --size $SIZE -q -o "$T/ref.exr" ||
+    fail "procedural reference render failed"
+"$TF_BIN" heightfield "$SCENE" -o "$T/maps/hf.exr" >/dev/null || fail "export to EXR failed"
+"$TF_BIN" heightfield "$SCENE" -o "$T/maps/hf.tif" --srs EPSG:32632 --origin 400000,5100000 \
+    >/dev/null || fail "export to GeoTIFF failed"
+"$TF_BIN" heightfield "$SCENE" -o "$T/maps/hf.png" >"$T/png.txt" || fail "export to PNG failed"
+lo=$(sed -n 's/^height range: \[\([^,]*\), \([^]]*\)\].*/\1/p' "$T/png.txt")
+hi=$(sed -n 's/^height range: \[\([^,]*\), \([^]]*\)\].*/\2/p' "$T/png.txt")
+vscale=$(python3 -c "print(($hi - ($lo)) / 65535)")
+gdalinfo "$T/maps/hf.tif" | grep -q 'UTM zone 32N' || fail "the GeoTIFF has no CRS"
+
+# render NAME: render $T/NAME.scene from another directory (relative paths: the scene's folder)
+render_scene() {
+    (cd "$T/elsewhere" && "$TF_BIN" render "../$1.scene" --listen 127.0.0.1:0 -j 2 --size $SIZE \
+        -q -o "$T/$1.exr" 2>"$T/$1.err") || fail "$1: render failed: $(cat "$T/$1.err")"
+}
+scene exr "generator = file" "seed = 1" "path = maps/hf.exr" "first_row = south" "extent = 1000"
+scene tif "generator = file" "seed = 1" "path = maps/hf.tif"
+scene png "generator = file" "seed = 1" "path = maps/hf.png" "first_row = south" \
+    "extent = 1000" "vertical_scale = $vscale" "vertical_offset = $lo"
+scene pngflip "generator = file" "seed = 1" "path = maps/hf.png" "first_row = north" \
+    "extent = 1000" "vertical_scale = $vscale" "vertical_offset = $lo"
+for s in exr tif png pngflip; do render_scene $s; done
+"$EXRCMP" "$T/ref.exr" "$T/exr.exr" >"$T/cmp" || fail "EXR height map: pixels differ: $(cat "$T/cmp")"
+say "float EXR height map: bit-identical to the procedural render ($(cat "$T/cmp"))"
+"$EXRCMP" "$T/ref.exr" "$T/tif.exr" >"$T/cmp" || fail "GeoTIFF height map: pixels differ: $(cat "$T/cmp")"
+say "Float32 GeoTIFF (UTM, extent from the georeferencing): bit-identical ($(cat "$T/cmp"))"
+# 16-bit codes move heights by up to half a step (~0.002 m here): a few silhouette pixels flip
+"$EXRCMP" "$T/ref.exr" "$T/png.exr" --close 0.005 0.0005 >"$T/cmp" ||
+    fail "16-bit PNG height map: beyond quantisation: $(cat "$T/cmp")"
+say "16-bit PNG height map: within quantisation ($(cat "$T/cmp"))"
+if "$EXRCMP" "$T/ref.exr" "$T/pngflip.exr" --close 0.005 0.0005 >"$T/cmp"; then
+    fail "a PNG read upside down passed the comparison: $(cat "$T/cmp")"
+fi
+say "the same PNG read north-first fails the comparison ($(cat "$T/cmp"))"
+
+# --resume refuses a changed height map (same scene text, different file bytes)
+cp "$T/tif.exr" "$T/done.exr"
+sed 's/^seed *=.*/seed = 2/' "$SCENE" >"$T/seed2.scene"
+"$TF_BIN" heightfield "$T/seed2.scene" -o "$T/maps/hf.tif" --srs EPSG:32632 \
+    --origin 400000,5100000 >/dev/null || fail "second export failed"
+if "$TF_BIN" render "$T/tif.scene" --listen 127.0.0.1:0 -j 2 --size $SIZE -q -o "$T/done.exr" \
+    --resume 2>"$T/resume.err"; then
+    fail "--resume accepted a changed height map"
+fi
+grep -q "scene changed" "$T/resume.err" || fail "--resume: unexpected message: $(cat "$T/resume.err")"
+say "--resume with a changed height map refused: $(cat "$T/resume.err")"
+
+# bad NAME WORDS FILE-SETUP: a scene whose height map is broken must fail with one line that
+# names the file and says WORDS.
+bad() {
+    name=$1 words=$2 file=$3
+    scene "bad_$name" "generator = file" "seed = 1" "path = maps/$file"
+    if "$TF_BIN" render "$T/bad_$name.scene" --listen 127.0.0.1:0 -j 1 --size 32x18 -q \
+        -o "$T/bad.exr" --overwrite 2>"$T/bad.err"; then
+        fail "$name: accepted"
+    fi
+    [ "$(grep -c . "$T/bad.err")" -eq 1 ] || fail "$name: not one line: $(cat "$T/bad.err")"
+    grep -q "maps/$file" "$T/bad.err" || fail "$name: message does not name the file: $(cat "$T/bad.err")"
+    grep -qi -e "$words" "$T/bad.err" || fail "$name: message does not say '$words': $(cat "$T/bad.err")"
+    say "$name: $(cat "$T/bad.err")"
+}
+bad missing "cannot open" nothere.tif
+: >"$T/maps/empty.tif"; bad empty "empty" empty.tif
+echo "this is not a raster" >"$T/maps/text.tif"; bad not_a_raster "not a raster" text.tif
+python3 -c "import os,sys; sys.stdout.buffer.write(b'II*\x00' + os.urandom(4000))" \
+    >"$T/maps/garbage.tif"; bad corrupt "not a raster\|corrupt" garbage.tif
+head -c 3000 "$T/maps/hf.png" >"$T/maps/cut.png"; bad truncated_png "truncated\|not a readable PNG" cut.png
+gdal_translate -q -co COMPRESS=DEFLATE "$T/maps/hf.tif" "$T/maps/whole.tif" || fail "gdal_translate"
+head -c $(( $(wc -c <"$T/maps/whole.tif") / 2 )) "$T/maps/whole.tif" >"$T/maps/cut.tif"
+bad truncated_tif "corrupt or truncated\|not a raster" cut.tif
+head -c 2000 "$T/maps/hf.exr" >"$T/maps/cut.exr"; bad truncated_exr "OpenEXR" cut.exr
+# a PNG header declaring 100000 x 100000 16-bit pixels, with a valid CRC
+python3 - "$T/maps/huge.png" <<'PY'
+import struct, sys, zlib
+def chunk(kind, data):
+    return struct.pack('>I', len(data)) + kind + data + struct.pack('>I', zlib.crc32(kind + data))
+ihdr = struct.pack('>IIBBBBB', 100000, 100000, 16, 0, 0, 0, 0)
+open(sys.argv[1], 'wb').write(b'\x89PNG\r\n\x1a\n' + chunk(b'IHDR', ihdr) +
+    chunk(b'IDAT', zlib.compress(b'\0' * 1000)) + chunk(b'IEND', b''))
+PY
+bad huge_png "too large\|exceeds" huge.png
+gdal_create -q -of GTiff -outsize 70000 70000 -ot Byte -co SPARSE_OK=TRUE "$T/maps/huge.tif" 2>/dev/null ||
+    gdal_create -of GTiff -outsize 70000 70000 -ot Byte -co SPARSE_OK=TRUE "$T/maps/huge.tif" >/dev/null
+bad huge_tif "too large" huge.tif
+gdal_create -of GTiff -outsize 33 33 -ot Float32 -burn -9999 -a_nodata -9999 \
+    "$T/maps/nodata.tif" >/dev/null || fail "gdal_create"
+bad nodata_only "no data" nodata.tif
+# a coordinator without local workers (-j 0) still decodes the map once: one line, at once
+if timeout 20 "$TF_BIN" render "$T/bad_nodata_only.scene" --listen 127.0.0.1:0 -j 0 -q \
+    -o "$T/bad.exr" --overwrite 2>"$T/bad.err"; then
+    fail "-j 0: a nodata-only height map was accepted"
+fi
+[ "$(grep -c . "$T/bad.err")" -eq 1 ] && grep -q "maps/nodata.tif: no data" "$T/bad.err" ||
+    fail "-j 0: expected one line about maps/nodata.tif: $(cat "$T/bad.err")"
+say "-j 0 (networked workers only): $(cat "$T/bad.err")"
+gdal_create -of GTiff -outsize 65 33 -ot Float32 -burn 5 "$T/maps/wide.tif" >/dev/null
+bad not_square "not a square" wide.tif
+exit 0

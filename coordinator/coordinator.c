@@ -367,7 +367,7 @@ static int supervise(render *r)
 {
     tf_progress prog;
     tf_progress_init(&prog, r->scene->height, r->first_row, r->o->quiet, tf_now_s());
-    double last_wait_note = tf_now_s();
+    double last_wait_note = tf_now_s(), last_reap = 0;
     while (!interrupted && !tf_supervisor_done(r->sup) && !tf_supervisor_error(r->sup)) {
         if (ts_server_run_once(r->srv, 50) < 0) {
             tf_error("event loop failed: %s", strerror(errno));
@@ -375,7 +375,10 @@ static int supervise(render *r)
         }
         double t = tf_now_s();
         tf_supervisor_step(r->sup, t * 1000.0);
-        tf_local_workers_reap(&r->lw, 1);
+        if (t - last_reap >= 0.05) { /* a waitpid per worker: not at every event */
+            tf_local_workers_reap(&r->lw, 1);
+            last_reap = t;
+        }
         const tf_farm_stats *st = tf_supervisor_stats(r->sup);
         int live = tf_supervisor_live_workers(r->sup);
         tf_progress_update(&prog, t, tf_rowwriter_rows_written(r->rows_out),

@@ -174,6 +174,8 @@ static int write_result(tf_rowwriter *rw, const tf_tuple *t, char *err, size_t e
             return -1;
         off += (size_t)c.packed;
     }
+    if (tf_exr_flush(rw->w, err, errlen)) /* one write per result, and the file grows by results */
+        return -1;
     /* the task's rectangle: its chunks' union (one tile, or full rows) */
     tf_rect r = {first.x, first.y, last.x + last.w - first.x, last.y + last.h - first.y};
     if (m.nchunks > 0)
@@ -242,8 +244,8 @@ static void *writer_main(void *arg)
         if (have) {
             rw->head_taken = 0;
             rw->head = (rw->head + 1) % rw->depth;
-            rw->count--;
-            pthread_cond_signal(&rw->nonfull);
+            if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
+                pthread_cond_signal(&rw->nonfull);
         } else if (rw->failed && rw->count > 0) {
             /* after a failure, drop the queue: nothing more may be written past the gap */
             while (rw->count > 0) {
@@ -316,9 +318,9 @@ int tf_rowwriter_put(tf_rowwriter *rw, tf_tuple *result)
     }
     int idx = (rw->head + rw->count) % rw->depth;
     tf_tuple_move(&rw->slot[idx], result);
-    rw->count++;
+    if (rw->count++ == 0) /* the thread sleeps only on an empty queue */
+        pthread_cond_signal(&rw->nonempty);
     assert(queue_ok(rw));
-    pthread_cond_signal(&rw->nonempty);
     pthread_mutex_unlock(&rw->mu);
     return 0;
 }

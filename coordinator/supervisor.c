@@ -14,6 +14,7 @@
  *       copy of a task already written), and for an outstanding task the number of leases
  *       naming it never exceeds its slot's `leased`.
  *   S5. rows_written only grows, and rows_written <= height.
+ *   S6. live_workers is the number of announced workers whose connection is open.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -111,6 +112,7 @@ struct tf_supervisor {
     char error[512];
     tf_farm_stats stats;
     int cap_workers;
+    int live_workers;        /* workers connected and announced: kept, not counted per step */
 };
 
 /* ---- invariants (S1-S5 above), for assert() in debug builds ------------------------------ */
@@ -141,6 +143,11 @@ static int supervisor_ok(const tf_supervisor *s)
         if (n > s->ring[task % s->ring_size].leased)
             return 0; /* S4 */
     }
+    int live = 0;
+    for (int i = 0; i < s->stats.nworkers; i++)
+        live += s->stats.workers[i].conn != 0;
+    if (live != s->live_workers)
+        return 0; /* S6 */
     return s->rows_written <= s->cfg.height; /* S5 */
 }
 #endif
@@ -560,6 +567,8 @@ static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
             snprintf(w->kind, sizeof w->kind, "%s", kind);
             snprintf(w->host, sizeof w->host, "%s", host);
             snprintf(w->backend, sizeof w->backend, "%s", backend);
+            if (!w->conn)
+                s->live_workers++;
             w->conn = conn;
             const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
             tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)", id,
@@ -605,8 +614,11 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
     tf_supervisor *s = ctx;
     tf_worker_stats *w = worker_by_conn(s, conn);
     int64_t worker = w ? w->id : -(int64_t)conn; /* a connection that never said hello */
-    if (w)
-        w->conn = 0;
+    for (int i = 0; w && i < s->stats.nworkers; i++)
+        if (s->stats.workers[i].conn == conn) {
+            s->stats.workers[i].conn = 0;
+            s->live_workers--;
+        }
     for (int i = 0; i < s->nleases;) {
         if (s->leases[i].conn != conn) {
             i++;
@@ -1155,8 +1167,5 @@ const tf_farm_stats *tf_supervisor_stats(tf_supervisor *s)
 
 int tf_supervisor_live_workers(const tf_supervisor *s)
 {
-    int n = 0;
-    for (int i = 0; i < s->stats.nworkers; i++)
-        n += s->stats.workers[i].conn != 0;
-    return n;
+    return s->live_workers; /* == entries of stats.workers with conn != 0 (S6) */
 }

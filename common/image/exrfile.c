@@ -1,6 +1,7 @@
 /* exrfile.c: the render's OpenEXR output and checkpoint (see exrfile.h), on OpenEXRCore.
  *
- * Writing.  Every byte goes through sink_write(), a pwrite loop on our own descriptor, so that
+ * Writing.  Every byte goes through sink_write(), a write-behind buffer and pwrite loop on our
+ * own descriptor, so that
  * (1) tf_exr_sync can fsync it, (2) the first failing write (ENOSPC, EIO, ...) is remembered
  * with its errno and reported as one line naming the file, and (3) tf_exr_abandon can close the
  * file without OpenEXRCore writing another byte: it sets sink.abandoned, after which
@@ -8,7 +9,8 @@
  *
  * On-disk invariant of a file being written: header, then the offset table (all zero until
  * tf_exr_finish), then whole chunks in file order, each "int32 y, int32 packed size, packed
- * bytes" (tiles: "int32 tx, ty, level x, level y, packed size, packed bytes").  OpenEXRCore 3.1.5 sees the zero offset table as invalid and rebuilds it by walking
+ * bytes" (tiles: "int32 tx, ty, level x, level y, packed size, packed bytes").  OpenEXRCore
+ * 3.1.5 sees the zero offset table as invalid and rebuilds it by walking
  * those chunk headers (tests/unit/test_exrfile.c checks that it does), so a killed render is
  * readable up to its last whole chunk.
  *
@@ -85,21 +87,20 @@ typedef struct tf_exr_sink {
     int fd;
     int write_errno;  /* first failure, 0 if none */
     int abandoned;    /* once set, nothing more reaches the file */
+    /* Write-behind: OpenEXRCore writes each chunk as two small writes (its header, its bytes),
+     * in increasing offsets.  Contiguous writes gather here and reach the file in one pwrite
+     * when the buffer fills, before any other write, and on sink_flush (sync, finish, abandon):
+     * two syscalls per chunk become one per SINK_BUFFER bytes.  The file is still always a
+     * prefix of what was written, so a kill leaves whole chunks and at most one torn one. */
+    uint8_t *buf;
+    size_t len;
+    uint64_t buf_off;  /* file offset of buf[0] */
 } tf_exr_sink;
 
-static int64_t sink_write(exr_const_context_t ctxt, void *userdata, const void *buffer,
-                          uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb)
+#define SINK_BUFFER (256 * 1024)
+
+static int sink_pwrite(tf_exr_sink *s, const uint8_t *p, uint64_t sz, uint64_t offset)
 {
-    (void)ctxt;
-    (void)error_cb;
-    tf_exr_sink *s = userdata;
-    if (s->abandoned)
-        return -1;
-    if (sz > (uint64_t)INT64_MAX || offset > (uint64_t)INT64_MAX - sz) {
-        s->write_errno = s->write_errno ? s->write_errno : EFBIG;
-        return -1;
-    }
-    const uint8_t *p = buffer;
     uint64_t done = 0;
     while (done < sz) {
         ssize_t n = pwrite(s->fd, p + done, (size_t)(sz - done), (off_t)(offset + done));
@@ -112,7 +113,52 @@ static int64_t sink_write(exr_const_context_t ctxt, void *userdata, const void *
         }
         done += (uint64_t)n;
     }
-    return (int64_t)sz;
+    return 0;
+}
+
+/* Write the buffered bytes out.  0, or -1 with write_errno set. */
+static int sink_flush(tf_exr_sink *s)
+{
+    if (s->write_errno)
+        return -1;
+    if (s->len == 0)
+        return 0;
+    int rc = sink_pwrite(s, s->buf, s->len, s->buf_off);
+    s->len = 0;
+    return rc;
+}
+
+static int64_t sink_write(exr_const_context_t ctxt, void *userdata, const void *buffer,
+                          uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb)
+{
+    (void)ctxt;
+    (void)error_cb;
+    tf_exr_sink *s = userdata;
+    if (s->abandoned || s->write_errno)
+        return -1;
+    if (sz > (uint64_t)INT64_MAX || offset > (uint64_t)INT64_MAX - sz) {
+        s->write_errno = EFBIG;
+        return -1;
+    }
+    if (!s->buf)
+        s->buf = malloc(SINK_BUFFER); /* without it, every write goes straight through */
+    int contiguous = s->len > 0 && offset == s->buf_off + s->len;
+    if (s->buf && (contiguous || s->len == 0) && s->len + sz <= SINK_BUFFER) {
+        if (s->len == 0)
+            s->buf_off = offset;
+        memcpy(s->buf + s->len, buffer, (size_t)sz);
+        s->len += (size_t)sz;
+        return (int64_t)sz;
+    }
+    if (sink_flush(s))
+        return -1;
+    if (s->buf && sz <= SINK_BUFFER) {
+        s->buf_off = offset;
+        memcpy(s->buf, buffer, (size_t)sz);
+        s->len = (size_t)sz;
+        return (int64_t)sz;
+    }
+    return sink_pwrite(s, buffer, sz, offset) ? -1 : (int64_t)sz;
 }
 
 /* ---------------------------------------------------------------------------------------------
@@ -171,12 +217,18 @@ static void writer_free(tf_exr_writer *w, int abandon)
 {
     if (!w)
         return;
-    if (abandon)
+    if (abandon) {
+        /* what was handed to the sink counts as written (as after a write() that returned);
+         * nothing after this instant reaches the file */
+        if (w->sink.fd >= 0)
+            sink_flush(&w->sink);
         w->sink.abandoned = 1;
+    }
     if (w->ctx)
         exr_finish(&w->ctx);
     if (w->sink.fd >= 0)
         close(w->sink.fd);
+    free(w->sink.buf);
     free(w->path);
     free(w);
 }
@@ -250,6 +302,8 @@ static int set_string_attrs(tf_exr_writer *w, const tf_exr_meta *meta, char *err
 static int write_header(tf_exr_writer *w, char *err, size_t errlen)
 {
     exr_result_t rv = exr_write_header(w->ctx);
+    if (rv == EXR_ERR_SUCCESS && sink_flush(&w->sink)) /* a file that cannot take it: now */
+        rv = EXR_ERR_WRITE_IO;
     if (rv != EXR_ERR_SUCCESS) {
         writer_error(w, err, errlen, "cannot write the EXR header", rv);
         return -1;
@@ -360,12 +414,22 @@ static int write_rows_raw(tf_exr_writer *w, int nrows, const void *px, char *err
         return -1;
     }
     int end = y0 + nrows;
+    int64_t first_chunk = w->next_chunk;
     while (w->next_chunk < w->nchunks) {
         tf_chunk_ref c = tf_layout_chunk(&w->layout, w->next_chunk);
         if (c.rect.y >= end)
             break;
         if (encode_chunk(w, &c, px, y0, err, errlen) != 0)
             return -1;
+    }
+    /* this path (tests, the height-field export) reports a failed write at the call that
+     * made it; the coordinator's raw chunk writes learn of it at the next flush or sync */
+    if (sink_flush(&w->sink)) {
+        tf_seterr(err, errlen, "%s: cannot write rows %d..%d: %s", w->path, y0, end - 1,
+                  strerror(w->sink.write_errno));
+        w->broken = 1;
+        w->next_chunk = first_chunk; /* none of this call's rows counts as written */
+        return -1;
     }
     return 0;
 }
@@ -399,10 +463,25 @@ int tf_exr_write_chunk(tf_exr_writer *w, int cx, int cy, const void *packed, siz
     return 0;
 }
 
+int tf_exr_flush(tf_exr_writer *w, char *err, size_t errlen)
+{
+    if (writer_refuses(w, err, errlen))
+        return -1;
+    if (sink_flush(&w->sink)) {
+        tf_seterr(err, errlen, "%s: cannot write: %s", w->path, strerror(w->sink.write_errno));
+        return -1;
+    }
+    return 0;
+}
+
 int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen)
 {
     if (writer_refuses(w, err, errlen))
         return -1;
+    if (sink_flush(&w->sink)) {
+        tf_seterr(err, errlen, "%s: cannot write: %s", w->path, strerror(w->sink.write_errno));
+        return -1;
+    }
     if (fsync(w->sink.fd) != 0) {
         tf_seterr(err, errlen, "%s: fsync failed: %s", w->path, strerror(errno));
         return -1;
@@ -420,6 +499,8 @@ int tf_exr_finish(tf_exr_writer *w, char *err, size_t errlen)
     }
     last_exr_message[0] = '\0';
     exr_result_t rv = exr_finish(&w->ctx); /* writes the offset table through sink_write */
+    if (rv == EXR_ERR_SUCCESS)
+        sink_flush(&w->sink);
     if (rv != EXR_ERR_SUCCESS || w->sink.write_errno) {
         writer_error(w, err, errlen, "cannot finish the EXR file", rv);
         writer_free(w, 1);

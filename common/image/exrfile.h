@@ -57,7 +57,10 @@ int64_t tf_exr_next_chunk(const tf_exr_writer *w);
  * bytes, untouched (OpenEXRCore's raw chunk write).  0, or -1 with a message. */
 int tf_exr_write_chunk(tf_exr_writer *w, int cx, int cy, const void *packed, size_t len,
                        char *err, size_t errlen);
-/* Make everything written so far durable (fsync). */
+/* Hand what the write-behind buffer holds to the file (one pwrite; no fsync).  tf_exr_write_chunk
+ * buffers: the coordinator flushes after each result, so a result costs one write.  0 or -1. */
+int tf_exr_flush(tf_exr_writer *w, char *err, size_t errlen);
+/* Make everything written so far durable (flush and fsync). */
 int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen);
 /* All rows written: finish the file (offset table), fsync, close, free. */
 int tf_exr_finish(tf_exr_writer *w, char *err, size_t errlen);

@@ -1,0 +1,52 @@
+#!/bin/bash
+# rss_flat.sh: the coordinator's peak memory as the image grows (DESIGN.md section 6: "flat as
+# the image grows"), for both output kinds: tiled (--tasks stamps:64x64) and scanline
+# (--tasks rows:8), at 1024^2, 2048^2, 4096^2 and 8192^2.  A real coordinator (-j 0) is served by
+# simulated workers (terrafarm worker --simulate ... --payloads) that answer at once with the
+# packed chunks of a real render of the same layout, recorded first, so the coordinator
+# receives, checks and writes real bytes at full speed without rendering 67 Mpixels here.
+# Prints one line per run: kind, size, coordinator_max_rss_kb, output bytes, wall and
+# render-path CPU of the coordinator.
+#
+# usage: bench/rss_flat.sh   (env: SIZES="1024 2048 4096 8192" DIR=/tmp)
+set -eu
+cd "$(dirname "$0")/.."
+TF=${TF:-bin/terrafarm}
+SCENE=scenes/default.scene
+SIZES=${SIZES:-"1024 2048 4096 8192"}
+DIR=$(mktemp -d "${DIR:-/tmp}/tf-rss.XXXXXX")
+trap 'rm -rf "$DIR"' EXIT
+MODEL=bench/default.cost
+grep -m1 'model name' /proc/cpuinfo | sed 's/.*: /cpu: /'
+echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
+
+# record KIND WIDTH: a real render of the layout the runs need (scanline needs the width)
+record() {
+    case $1 in
+    tiled) "$TF" render "$SCENE" -j 2 --size 512x512 --tasks stamps:64x64 -o "$DIR/rec-tiled.exr" -q ;;
+    scanline) "$TF" render "$SCENE" -j 2 --size "$2"x16 --tasks rows:8 -o "$DIR/rec-scan-$2.exr" -q ;;
+    esac
+}
+
+echo "kind,size,coordinator_max_rss_kb,out_bytes,wall_s,coordinator_render_cpu_s"
+record tiled 0
+for kind in tiled scanline; do
+  for n in $SIZES; do
+    if [ $kind = tiled ]; then tasks=stamps:64x64 rec="$DIR/rec-tiled.exr"
+    else tasks=rows:8 rec="$DIR/rec-scan-$n.exr"; record scanline $n; fi
+    "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size ${n}x$n --tasks $tasks \
+      -o "$DIR/out.exr" --overwrite --stats "$DIR/s.json" 2>"$DIR/coord.err" &
+    coord=$!
+    port=""
+    for i in $(seq 100); do
+      port=$(sed -n 's/.*workers may join at [^ ]*:\([0-9][0-9]*\).*/\1/p' "$DIR/coord.err")
+      [ -n "$port" ] && break; sleep 0.05
+    done
+    "$TF" worker --connect 127.0.0.1:$port --simulate "$MODEL" -j 16 --pixel-us 0.001 \
+      --payloads "$rec" -q >/dev/null
+    wait $coord
+    js() { sed -n "s/^ *\"$1\": *\([0-9.]*\).*/\1/p" "$DIR/s.json" | head -1; }
+    echo "$kind,${n}x$n,$(js coordinator_max_rss_kb),$(wc -c <"$DIR/out.exr"),$(js wall_s),$(js coordinator_render_cpu_s)"
+    rm -f "$DIR/out.exr" "$DIR/out.png"
+  done
+done

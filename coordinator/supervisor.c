@@ -14,7 +14,8 @@
  *       copy of a task already written), and for an outstanding task the number of leases
  *       naming it never exceeds its slot's `leased`.
  *   S5. rows_written only grows, and rows_written <= height.
- *   S6. live_workers is the number of announced workers whose connection is open.
+ *   S6. live_workers is the number of joined workers (the id bound to a connection when it took
+ *       the counter, then announced) whose connection is open.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -401,8 +402,11 @@ static void on_join(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         return;
     }
     tf_worker_stats *w = add_worker(s, id);
-    if (w)
+    if (w) {
+        if (!w->conn)
+            s->live_workers++; /* S6 */
         w->conn = conn;
+    }
 }
 
 static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)

@@ -53,6 +53,8 @@ note() { echo "netns_farm: $*"; }
 command -v ip >/dev/null 2>&1 || skip "ip (iproute2) is not installed"
 command -v timeout >/dev/null 2>&1 || skip "timeout (coreutils) is not installed"
 [ -x "$TF" ] || fail "$TF is not built (run make)"
+# Under AddressSanitizer (make asan) everything runs several times slower.
+if ldd "$TF" 2>/dev/null | grep -q libasan; then LIMIT=150; fi
 
 # ---- cleanup: every process we started (by pid), then every namespace, then the temp dir ----
 PIDS=""
@@ -308,7 +310,7 @@ kill "$W2" 2>/dev/null
 wait "$W2" 2>/dev/null
 forget "$W2"
 ip -n "$NS_LAN" link set p-w2 up || fail "cannot plug worker 2 back in"
-LIMIT=100 # the partition and the reconnections come on top of the render (slow under ASan)
+LIMIT=$((LIMIT + 55)) # the partition and the reconnections come on top of the render
 start_coordinator part "$LARGE" --tasks rows:4 --lease-timeout 2000
 start "$NS_W1" "$TMP/part.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1 --timeout 30000

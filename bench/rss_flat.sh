@@ -1,7 +1,9 @@
 #!/bin/bash
-# rss_flat.sh: the coordinator's peak memory as the image grows (DESIGN.md section 6: "flat as
-# the image grows"), for both output kinds: tiled (--tasks stamps:64x64) and scanline
-# (--tasks rows:8), at 1024^2, 2048^2, 4096^2 and 8192^2.  A real coordinator (-j 0) is served by
+# rss_flat.sh: the coordinator's peak memory as the image grows (docs/contract.md section 6: "flat
+# as the image grows"), for both output kinds, at 1024^2, 2048^2, 4096^2 and 8192^2, each with
+# fixed task shapes (tiled stamps:64x64, scanline rows:8: a band of tasks -- the watermark's unit
+# -- then grows with the width) and with bands capped at 128 K pixels as the default stamps are
+# (tiled stamps:128xH, scanline rows:K with 128 K pixels a band).  A real coordinator (-j 0) is served by
 # simulated workers (terrafarm worker --simulate ... --payloads) that answer at once with the
 # packed chunks of a real render of the same layout, recorded first, so the coordinator
 # receives, checks and writes real bytes at full speed without rendering 67 Mpixels here.
@@ -20,20 +22,26 @@ MODEL=bench/default.cost
 grep -m1 'model name' /proc/cpuinfo | sed 's/.*: /cpu: /'
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 
-# record KIND WIDTH: a real render of the layout the runs need (scanline needs the width)
+# record TASKS WIDTH: a real render of the layout a run needs (scanline: of its width)
 record() {
     case $1 in
-    tiled) "$TF" render "$SCENE" -j 2 --size 512x512 --tasks stamps:64x64 -o "$DIR/rec-tiled.exr" -q ;;
-    scanline) "$TF" render "$SCENE" -j 2 --size "$2"x16 --tasks rows:8 -o "$DIR/rec-scan-$2.exr" -q ;;
+    stamps:*) "$TF" render "$SCENE" -j 2 --size 1024x256 --tasks $1 -o "$DIR/rec.exr" -q --overwrite ;;
+    rows:*) "$TF" render "$SCENE" -j 2 --size "$2"x32 --tasks $1 -o "$DIR/rec.exr" -q --overwrite ;;
     esac
 }
 
-echo "kind,size,coordinator_max_rss_kb,out_bytes,wall_s,coordinator_render_cpu_s"
-record tiled 0
-for kind in tiled scanline; do
+echo "kind,tasks,size,coordinator_max_rss_kb,out_bytes,wall_s,coordinator_render_cpu_s,cpu_ns_per_pixel"
+for kind in tiled tiled-capped scanline scanline-capped; do
   for n in $SIZES; do
-    if [ $kind = tiled ]; then tasks=stamps:64x64 rec="$DIR/rec-tiled.exr"
-    else tasks=rows:8 rec="$DIR/rec-scan-$n.exr"; record scanline $n; fi
+    cap=$((131072 / n)); [ $cap -gt 128 ] && cap=128
+    case $kind in
+    tiled) tasks=stamps:64x64 ;;
+    tiled-capped) tasks=stamps:128x$cap ;;
+    scanline) tasks=rows:8 ;;
+    scanline-capped) tasks=rows:$cap ;;
+    esac
+    record $tasks $n
+    rec="$DIR/rec.exr"
     "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size ${n}x$n --tasks $tasks \
       -o "$DIR/out.exr" --overwrite --stats "$DIR/s.json" 2>"$DIR/coord.err" &
     coord=$!
@@ -46,7 +54,7 @@ for kind in tiled scanline; do
       --payloads "$rec" -q >/dev/null
     wait $coord
     js() { sed -n "s/^ *\"$1\": *\([0-9.]*\).*/\1/p" "$DIR/s.json" | head -1; }
-    echo "$kind,${n}x$n,$(js coordinator_max_rss_kb),$(wc -c <"$DIR/out.exr"),$(js wall_s),$(js coordinator_render_cpu_s)"
+    echo "$kind,$tasks,${n}x$n,$(js coordinator_max_rss_kb),$(wc -c <"$DIR/out.exr"),$(js wall_s),$(js coordinator_render_cpu_s),$(js coordinator_cpu_ns_per_pixel)"
     rm -f "$DIR/out.exr" "$DIR/out.png"
   done
 done

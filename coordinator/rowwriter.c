@@ -3,9 +3,8 @@
  * variables.  INVARIANTS (checked by queue_ok() under the mutex in debug builds, `make asan`):
  *   R1. 0 <= head < depth and 0 <= count <= depth;
  *   R2. slots [head, head + count) modulo depth hold the queued results in file order, each a
- *       result tuple (11 fields) -- except the head slot while the writer thread writes the
- *       result it took from there (head_taken) --, and only the producer touches the slot at
- *       head + count;
+ *       result tuple (11 fields), and only the producer touches the slot at head + count (the
+ *       thread takes a result out of the ring, under the mutex, before writing it);
  *   R3. rows_written only grows. */
 #include "coordinator/rowwriter.h"
 #include "clock.h"
@@ -28,7 +27,6 @@ struct tf_rowwriter {
     int depth, fsync_ms, preview_ms;
     tf_tuple *slot;
     int head, count;
-    int head_taken;        /* the writer thread holds the head slot's result (R2) */
     int stop;          /* 1: finish after the queue drains */
     int failed;
     char error[512];
@@ -146,7 +144,7 @@ static int queue_ok(const tf_rowwriter *rw)
 {
     if (rw->head < 0 || rw->head >= rw->depth || rw->count < 0 || rw->count > rw->depth)
         return 0;
-    for (int i = rw->head_taken ? 1 : 0; i < rw->count; i++)
+    for (int i = 0; i < rw->count; i++)
         if (rw->slot[(rw->head + i) % rw->depth].nfields != 11)
             return 0;
     return 1;
@@ -212,9 +210,11 @@ static void *writer_main(void *arg)
         int have = rw->count > 0 && !rw->failed;
         tf_tuple item;
         tf_tuple_init(&item);
-        if (have) {
+        if (have) { /* take it out of the ring: R2 holds for what stays queued */
             tf_tuple_move(&item, &rw->slot[rw->head]);
-            rw->head_taken = 1; /* still counted (the queue stays full) until written */
+            rw->head = (rw->head + 1) % rw->depth;
+            if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
+                pthread_cond_signal(&rw->nonfull);
         }
         pthread_mutex_unlock(&rw->mu);
 
@@ -241,12 +241,7 @@ static void *writer_main(void *arg)
         }
         if (rows > rw->rows_written)
             rw->rows_written = rows;
-        if (have) {
-            rw->head_taken = 0;
-            rw->head = (rw->head + 1) % rw->depth;
-            if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
-                pthread_cond_signal(&rw->nonfull);
-        } else if (rw->failed && rw->count > 0) {
+        if (!have && rw->failed && rw->count > 0) {
             /* after a failure, drop the queue: nothing more may be written past the gap */
             while (rw->count > 0) {
                 tf_tuple_clear(&rw->slot[rw->head]);

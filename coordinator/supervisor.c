@@ -457,6 +457,7 @@ static void on_task_returned(tf_supervisor *s, uint64_t conn, const tf_tuple *tu
         t->in_space++;
 }
 
+
 /* A connection's peer, for messages only (the lookup scans the connections). */
 static const char *peer_name(const tf_supervisor *s, uint64_t conn)
 {
@@ -495,6 +496,12 @@ static int refuse_result(tf_supervisor *s, tf_result_msg *m, tf_rect r, char *wh
     return 0;
 }
 
+/* Take this very result out of the space (not "a result of task id from worker w": a second
+ * tuple claiming the same id and worker must never take the accepted one with it). */
+static void drop_result(tf_supervisor *s, const tf_tuple *tuple)
+{
+    remove_exact(s, tuple);
+}
 static void start_check(tf_supervisor *s, task_slot *t, const tf_result_msg *m);
 
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
@@ -513,9 +520,7 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         t->replacing = 0;
     }
     if (!t || t->has_result) {
-        /* This very tuple, never "a result of this id": that would take the first (valid)
-         * one out and leave this later one to be written. */
-        remove_exact(s, tuple);
+        drop_result(s, tuple);
         s->stats.results_dropped++;
         return;
     }
@@ -527,7 +532,7 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         tf_warn("result of task %" PRId64 " (%dx%d at %d,%d) from %s refused: %s", m.id, r.w,
                 r.h, r.x, r.y, peer_name(s, conn), why);
         s->stats.results_refused++;
-        remove_exact(s, tuple);
+        drop_result(s, tuple);
         if (!note_failure(s, t, m.worker))
             redeal_if_lost(s, t);
         return;

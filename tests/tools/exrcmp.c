@@ -6,7 +6,9 @@
  *                                      more than 2/255 in R, G or B and the mean absolute RGB
  *                                      difference is at most M
  * Prints one line: pixels, identical, mean_abs_rgb, far (> 2/255), max_abs_rgb.
- * Built by `make test` into $(BUILD)/tools/exrcmp; used by tests/e2e/heightmap_file.sh. */
+ * Built by `make test` into $(BUILD)/tools/exrcmp; used by tests/e2e/heightmap_file.sh and, to
+ * compare renders whose file layouts differ (scanline vs tiled, tile sizes), by same_pixels in
+ * tests/e2e/lib.sh. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>

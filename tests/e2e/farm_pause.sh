@@ -8,7 +8,7 @@
 # dropped as silent on waking and the networked one exited.
 . "$(dirname "$0")/lib.sh"
 e2e_init
-SIZE=480x270
+SIZE=960x540
 LEASE=1500
 
 render -q -j 2 --size $SIZE --tasks rows:2 -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"

@@ -38,8 +38,8 @@ farm() {
     c=$!; e2e_track $c
     wait_exit $coord 120
     crc=$rc
-    wait_exit $a 30; [ $rc -eq 0 ] || fail "$tag: honest worker exited $rc: $(cat "$T/$tag.a.err")"
-    wait_exit $c 30; [ $rc -eq 0 ] || fail "$tag: honest worker exited $rc: $(cat "$T/$tag.c.err")"
+    wait_exit $a 30; [ $rc -eq 0 ] || fail "$tag: honest worker exited $rc (coordinator $crc: $(grep -v 'rows ' "$T/$tag.err" | tail -3)): $(grep -v 'debug: task' "$T/$tag.a.err")"
+    wait_exit $c 30; [ $rc -eq 0 ] || fail "$tag: honest worker exited $rc (coordinator $crc: $(grep -v 'rows ' "$T/$tag.err" | tail -3)): $(grep -v 'debug: task' "$T/$tag.c.err")"
     wait_exit $liar 30
     kill $proxy 2>/dev/null
     rc=$crc

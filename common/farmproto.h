@@ -99,4 +99,12 @@ int tf_result_unpack(const tf_tuple *t, tf_result_msg *m);
 int tf_result_check(tf_result_msg *m, const tf_exr_layout *l, const tf_preview_grid *g,
                     tf_rect r, char *err, size_t errlen);
 
+/* Largest task a worker accepts, in pixels (a bound on its buffer, whatever a tuple says). */
+#define TF_TASK_MAX_PIXELS (64u * 1024u * 1024u)
+/* Why a task rectangle cannot be rendered in an image_w x image_h image (0: size unknown, only
+ * the rectangle itself is checked), or NULL if it can. */
+const char *tf_task_rect_problem(tf_rect r, int image_w, int image_h);
+/* Index of the first pixel with a non-finite channel, or -1. */
+long tf_first_non_finite(const tf_pixel *px, size_t n);
+
 #endif

@@ -72,7 +72,16 @@ int tf_stats_write(const char *path, const tf_run_info *run, const tf_farm_stats
     fprintf(f, "  \"max_tuple_bytes\": %zu,\n", st->max_tuple_bytes);
     fprintf(f, "  \"local_workers\": %d,\n  \"heightfield_s\": %.3f,\n", run->local_workers,
             run->heightfield_s);
-    fprintf(f, "  \"results_refused\": %lld,\n  \"layout\": ", (long long)st->results_refused);
+    fprintf(f, "  \"results_refused\": %lld,\n", (long long)st->results_refused);
+    double busy = 0;
+    for (int i = 0; i < st->nworkers; i++)
+        busy += st->workers[i].busy_s;
+    fprintf(f, "  \"verify_fraction\": %.4f,\n  \"verify_checks\": %lld,\n"
+               "  \"verify_mismatches\": %lld,\n  \"workers_excluded\": %lld,\n"
+               "  \"verify_busy_s\": %.3f,\n  \"verify_cost\": %.4f,\n  \"layout\": ",
+            st->verify_fraction, (long long)st->verify_checks, (long long)st->verify_mismatches,
+            (long long)st->workers_excluded, st->verify_busy_s,
+            busy > 0 ? st->verify_busy_s / busy : 0.0);
     json_string(f, run->layout);
     fprintf(f, ",\n");
     struct rusage ru;

@@ -12,7 +12,7 @@
 CC      ?= cc
 BUILD   ?= build
 BIN     ?= bin
-VERSION := 0.1.0
+VERSION := 0.2.0
 
 PKGS      := inih libpng libsodium zlib gdal
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)

@@ -37,7 +37,7 @@ int tf_task_unpack(const tf_tuple *t, tf_task_msg *m)
     int64_t v[6];
     const uint8_t *ex;
     size_t exlen;
-    if (!name || strcmp(name, "task") || t->nfields != 8)
+    if (!name || strcmp(name, "task") || t->nfields != TF_TASK_FIELDS)
         return -1;
     for (int i = 0; i < 6; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))
@@ -97,7 +97,7 @@ int tf_result_unpack(const tf_tuple *t, tf_result_msg *m)
     const char *name = tf_tuple_name(t);
     int64_t v[7];
     size_t index_len;
-    if (!name || strcmp(name, "result") || t->nfields != 11)
+    if (!name || strcmp(name, "result") || t->nfields != TF_RESULT_FIELDS)
         return -1;
     for (int i = 0; i < 7; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))

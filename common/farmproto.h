@@ -83,6 +83,10 @@ typedef struct tf_result_msg {
 int tf_task_pack(tf_tuple *t, const tf_task_msg *m);
 /* Template for any task (id = TF_TASK_ANY) or for one task id. */
 #define TF_TASK_ANY INT64_MIN
+/* Fields of a task tuple and of a result tuple (the layouts above). */
+#define TF_TASK_FIELDS 8
+#define TF_RESULT_FIELDS 11
+
 int tf_task_template(tf_tuple *t, int64_t id);
 /* 0, or -1 if t is not a well-formed task tuple. */
 int tf_task_unpack(const tf_tuple *t, tf_task_msg *m);

@@ -10,9 +10,9 @@ static const ts_cap_rule worker_rules[] = {
     {TS_CAP_RD, "heightmap_chunk", 3, 0, NULL},
     {TS_CAP_IN, "next_worker", 2, 1, tf_supervisor_admit},
     {TS_CAP_OUT, "hello", 6, 1, tf_supervisor_admit},
-    {TS_CAP_IN, "task", 7, 0, tf_supervisor_admit},
-    {TS_CAP_OUT, "task", 7, 0, tf_supervisor_admit},
-    {TS_CAP_OUT, "result", 11, 0, tf_supervisor_admit},
+    {TS_CAP_IN, "task", TF_TASK_FIELDS, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, "task", TF_TASK_FIELDS, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, "result", TF_RESULT_FIELDS, 0, tf_supervisor_admit},
     {TS_CAP_OUT, "failed", 4, 0, tf_supervisor_admit},
 };
 

@@ -21,7 +21,8 @@ from tfwire import (BLOB, DOUBLE, ERROR, IN, INP, INT, OK, OP_NAMES, OUT, RD, RD
                     TUPLE, Conn, dec)
 
 HOARDERS = 4
-TASK_TMPL = [(STRING, "task")] + [(INT, None)] * 5 + [(BLOB, None)]
+# ("task", id, frame, x, y, w, h, excluded)
+TASK_TMPL = [(STRING, "task")] + [(INT, None)] * 6 + [(BLOB, None)]
 failures = []
 
 
@@ -55,11 +56,12 @@ def take(c):
     if op != TUPLE:
         raise SystemExit("cannot take a task: %s" % OP_NAMES.get(op, op))
     f = dec(body)
-    return f[1], f[2:6], f[6]
+    return f[1], f[3:7], f[7]
 
 
-def task_fields(tid, rect, excluded=b""):
-    return [(STRING, "task"), (INT, tid)] + [(INT, v) for v in rect] + [(BLOB, excluded)]
+def task_fields(tid, rect, excluded=b"", frame=-1):
+    return ([(STRING, "task"), (INT, tid), (INT, frame)] + [(INT, v) for v in rect] +
+            [(BLOB, excluded)])
 
 
 def result_fields(tid, worker, index=b"", chunks=b"", preview=b""):
@@ -109,7 +111,7 @@ def main():
     tid, rect, excl = take(c)
     print("holding task %d (%dx%d at %d,%d)" % (tid, rect[2], rect[3], rect[0], rect[1]))
     expect(c, "a second task while holding one (hoarding)", IN, TASK_TMPL)
-    expect(c, "a task chosen by id", INP, [(STRING, "task"), (INT, tid + 1)] + [(INT, None)] * 4 +
+    expect(c, "a task chosen by id", INP, [(STRING, "task"), (INT, tid + 1)] + [(INT, None)] * 5 +
            [(BLOB, None)])
     expect(c, "a result signed with another worker's id", OUT, result_fields(tid, me + 1))
     expect(c, "a result for another task", OUT, result_fields(tid + 1, me))

@@ -31,10 +31,11 @@ typedef struct run {
     volatile int done;
 } run;
 
-static int fake_render(void *ctx, tf_rect r, tf_pixel *px, tf_render_counts *counts,
+static int fake_render(void *ctx, int frame, tf_rect r, tf_pixel *px, tf_render_counts *counts,
                        int64_t *busy_ns, char *err, size_t errlen)
 {
     (void)ctx;
+    (void)frame;
     (void)err;
     (void)errlen;
     for (int i = 0; i < r.w * r.h; i++)
@@ -61,6 +62,7 @@ static void put_task(ts_space *space, int64_t id, int x, int y, int w, int h)
     tf_task_msg m;
     memset(&m, 0, sizeof m);
     m.id = id;
+    m.frame = -1; /* a still */
     m.rect = (tf_rect){x, y, w, h};
     tf_tuple t;
     assert_int_equal(tf_task_pack(&t, &m), 0);

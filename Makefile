@@ -12,9 +12,9 @@
 CC      ?= cc
 BUILD   ?= build
 BIN     ?= bin
-VERSION := 0.1.0
+VERSION := 0.2.0
 
-PKGS      := inih libpng libsodium gdal zlib libmicrohttpd jansson
+PKGS      := inih libpng libsodium zlib gdal libmicrohttpd jansson
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
 EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
@@ -100,12 +100,6 @@ $(BUILD)/replay/%: tests/fuzz/%.c tests/fuzz/replay_main.c $(LIB_OBJ)
 fuzz: $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/fuzz/%)
 
 REPLAYS := $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/replay/%)
-
-# Helper programs of the e2e tests (tests/tools/*.c), e.g. exrcmp.
-TOOLS := $(patsubst tests/tools/%.c,$(BUILD)/tools/%,$(wildcard tests/tools/*.c))
-$(BUILD)/tools/%: tests/tools/%.c $(LIB_OBJ)
-	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
 
 test: $(PROG) $(TESTS) $(REPLAYS) $(TOOLS)
 	BUILD=$(BUILD) BIN=$(BIN) tests/run.sh

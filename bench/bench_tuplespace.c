@@ -6,8 +6,11 @@
  * in("task", ?int, ?int) (or BRPOP) until a poison task (i = -1).  Reported: tasks per second
  * (each task is one out round trip + one in round trip) and the out->in latency per task
  * (median, p99), measured with CLOCK_MONOTONIC in one process.
- * Usage: bench_tuplespace [-n CONSUMERS] [-t TASKS] [--redis PORT]
- * Output: one line "system=... consumers=N tasks=T ops_per_s=X median_us=Y p99_us=Z". */
+ * With --sealed the same run is done twice, in clear and then with a secret (the HMAC handshake
+ * and sealed records of linda/seal.h on every connection), and a third line gives the ratio:
+ * the cost of encryption in tasks/s, measured against the clear baseline of the same run.
+ * Usage: bench_tuplespace [-n CONSUMERS] [-t TASKS] [--redis PORT | --sealed]
+ * Output: one line "system=... consumers=N tasks=T ops_per_s=X median_us=Y p99_us=Z" per run. */
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -23,7 +26,8 @@
 #include "log.h"
 #include "linda/tsclient.h"
 
-static int consumers = 4, tasks = 20000, redis_port = 0;
+static int consumers = 4, tasks = 20000, redis_port = 0, sealed_compare = 0;
+static const uint8_t *client_key; /* NULL: in clear */
 static char ts_addr[64];
 static double *latency_us; /* one per task, written by the consumer that took it */
 
@@ -46,7 +50,7 @@ static void *server_main(void *arg)
 static ts_client *ts_connect(void)
 {
     char err[256];
-    ts_client *c = ts_client_connect(ts_addr, NULL, 5000, err, sizeof err);
+    ts_client *c = ts_client_connect(ts_addr, client_key, 5000, err, sizeof err);
     if (!c)
         tf_die(1, "%s", err);
     return c;
@@ -209,6 +213,65 @@ static int cmp_double(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
+typedef struct run_result {
+    double ops_per_s, median_us, p99_us;
+} run_result;
+
+/* One run of the producer and consumers; key: the server's secret key, or NULL. */
+static run_result run(const uint8_t *key)
+{
+    ts_space *space = NULL;
+    ts_server *srv = NULL;
+    pthread_t server_thread;
+    client_key = key;
+    if (!redis_port) {
+        char err[256];
+        space = ts_space_new();
+        ts_server_config cfg = {.listen = "127.0.0.1:0", .key = key};
+        srv = ts_server_new(space, &cfg, NULL, err, sizeof err);
+        if (!srv)
+            tf_die(1, "%s", err);
+        snprintf(ts_addr, sizeof ts_addr, "127.0.0.1:%d", ts_server_port(srv));
+        pthread_create(&server_thread, NULL, server_main, srv);
+    }
+    pthread_t th[257];
+    memset(latency_us, 0, (size_t)tasks * sizeof *latency_us);
+    int64_t t0 = now_ns();
+    for (int i = 0; i < consumers; i++)
+        pthread_create(&th[i], NULL, redis_port ? redis_consumer : ts_consumer, NULL);
+    pthread_create(&th[consumers], NULL, redis_port ? redis_producer : ts_producer, NULL);
+    for (int i = 0; i <= consumers; i++)
+        pthread_join(th[i], NULL);
+    double secs = (double)(now_ns() - t0) / 1e9;
+    qsort(latency_us, (size_t)tasks, sizeof *latency_us, cmp_double);
+    run_result r = {tasks / secs, latency_us[tasks / 2], latency_us[(size_t)(tasks * 0.99)]};
+    printf("system=%s consumers=%d tasks=%d ops_per_s=%.0f median_us=%.1f p99_us=%.1f\n",
+           redis_port ? "redis" : key ? "tuplespace-sealed" : "tuplespace", consumers, tasks,
+           r.ops_per_s, r.median_us, r.p99_us);
+    if (srv) {
+        server_stop = 1;
+        pthread_join(server_thread, NULL);
+        server_stop = 0;
+        ts_server_free(srv);
+        ts_space_free(space);
+    }
+    return r;
+}
+
+static void print_cpu_model(void)
+{
+    FILE *f = fopen("/proc/cpuinfo", "r");
+    char line[256];
+    while (f && fgets(line, sizeof line, f))
+        if (!strncmp(line, "model name", 10)) {
+            char *colon = strchr(line, ':');
+            printf("cpu=%s", colon ? colon + 2 : line);
+            break;
+        }
+    if (f)
+        fclose(f);
+}
+
 int main(int argc, char **argv)
 {
     for (int i = 1; i < argc; i++) {
@@ -218,42 +281,23 @@ int main(int argc, char **argv)
             tasks = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--redis") && i + 1 < argc)
             redis_port = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--sealed"))
+            sealed_compare = 1;
         else
-            tf_die(2, "usage: bench_tuplespace [-n CONSUMERS] [-t TASKS] [--redis PORT]");
+            tf_die(2, "usage: bench_tuplespace [-n CONSUMERS] [-t TASKS] [--redis PORT | --sealed]");
     }
     if (consumers < 1 || consumers > 256 || tasks < 1 || tasks > 10000000)
         tf_die(2, "bad -n or -t");
     latency_us = calloc((size_t)tasks, sizeof *latency_us);
-    ts_space *space = NULL;
-    ts_server *srv = NULL;
-    pthread_t server_thread;
-    if (!redis_port) {
-        char err[256];
-        space = ts_space_new();
-        ts_server_config cfg = {.listen = "127.0.0.1:0"};
-        srv = ts_server_new(space, &cfg, NULL, err, sizeof err);
-        if (!srv)
-            tf_die(1, "%s", err);
-        snprintf(ts_addr, sizeof ts_addr, "127.0.0.1:%d", ts_server_port(srv));
-        pthread_create(&server_thread, NULL, server_main, srv);
-    }
-    pthread_t th[257];
-    int64_t t0 = now_ns();
-    for (int i = 0; i < consumers; i++)
-        pthread_create(&th[i], NULL, redis_port ? redis_consumer : ts_consumer, NULL);
-    pthread_create(&th[consumers], NULL, redis_port ? redis_producer : ts_producer, NULL);
-    for (int i = 0; i <= consumers; i++)
-        pthread_join(th[i], NULL);
-    double secs = (double)(now_ns() - t0) / 1e9;
-    qsort(latency_us, (size_t)tasks, sizeof *latency_us, cmp_double);
-    printf("system=%s consumers=%d tasks=%d ops_per_s=%.0f median_us=%.1f p99_us=%.1f\n",
-           redis_port ? "redis" : "tuplespace", consumers, tasks, tasks / secs,
-           latency_us[tasks / 2], latency_us[(size_t)(tasks * 0.99)]);
-    if (srv) {
-        server_stop = 1;
-        pthread_join(server_thread, NULL);
-        ts_server_free(srv);
-        ts_space_free(space);
+    print_cpu_model();
+    run_result clear = run(NULL);
+    if (sealed_compare) {
+        uint8_t key[TF_KEY_BYTES];
+        tf_secret_from_bytes("bench_tuplespace secret, 32 bytes", 33, key);
+        run_result sealed = run(key);
+        printf("sealed/clear: ops_per_s %.3f, median latency %.3f, p99 latency %.3f\n",
+               sealed.ops_per_s / clear.ops_per_s, sealed.median_us / clear.median_us,
+               sealed.p99_us / clear.p99_us);
     }
     free(latency_us);
     return 0;

@@ -40,6 +40,10 @@ static const char usage[] =
     "                            while rendering (default 5000; it is also written at the end)\n"
     "      --verify-chunks       also decode every result's chunks before accepting it (costs\n"
     "                            the coordinator per-pixel work; structure is always checked)\n"
+    "      --verify FRACTION     render that fraction of tasks (chosen from the scene hash) and\n"
+    "                            every unchecked worker's results a second time on another\n"
+    "                            worker and compare the bytes; a third render decides, the liar is\n"
+    "                            excluded and its tasks dealt again (default 0: off)\n"
     "      --backend c|opencl|auto  backend of the local workers (default c; auto: OpenCL if\n"
     "                            a device works, else C with a warning)\n"
     "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
@@ -89,7 +93,7 @@ int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
            O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE, O_PIXEL,
-           O_VERIFY_CHUNKS, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE };
+           O_VERIFY_CHUNKS, O_VERIFY, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -109,6 +113,7 @@ int cmd_render(int argc, char **argv)
         {"movie", required_argument, NULL, O_MOVIE},
         {"pixel", required_argument, NULL, O_PIXEL},
         {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
+        {"verify", required_argument, NULL, O_VERIFY},
         {"preview-interval", required_argument, NULL, O_PREVIEW_INTERVAL},
         {"http", required_argument, NULL, O_HTTP},
         {"http-token-file", required_argument, NULL, O_HTTP_TOKEN},
@@ -194,6 +199,15 @@ int cmd_render(int argc, char **argv)
             o.pixel_given = 1;
             break;
         case O_VERIFY_CHUNKS: o.verify_chunks = 1; break;
+        case O_VERIFY: {
+            char *end;
+            o.verify_fraction = strtod(optarg, &end);
+            if (end == optarg || *end || !(o.verify_fraction >= 0 && o.verify_fraction <= 1)) {
+                tf_error("--verify '%s': expected a fraction from 0 to 1", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        }
         case O_PREVIEW_INTERVAL:
             if (parse_int("--preview-interval", optarg, 100, 86400000, &o.preview_interval_ms))
                 return TF_EXIT_USAGE;

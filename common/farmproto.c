@@ -3,6 +3,7 @@
 #include "log.h"
 
 #include <endian.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -36,7 +37,7 @@ int tf_task_unpack(const tf_tuple *t, tf_task_msg *m)
     int64_t v[6];
     const uint8_t *ex;
     size_t exlen;
-    if (!name || strcmp(name, "task") || t->nfields != 8)
+    if (!name || strcmp(name, "task") || t->nfields != TF_TASK_FIELDS)
         return -1;
     for (int i = 0; i < 6; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))
@@ -96,7 +97,7 @@ int tf_result_unpack(const tf_tuple *t, tf_result_msg *m)
     const char *name = tf_tuple_name(t);
     int64_t v[7];
     size_t index_len;
-    if (!name || strcmp(name, "result") || t->nfields != 11)
+    if (!name || strcmp(name, "result") || t->nfields != TF_RESULT_FIELDS)
         return -1;
     for (int i = 0; i < 7; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))
@@ -158,4 +159,27 @@ int tf_result_check(tf_result_msg *m, const tf_exr_layout *l, const tf_preview_g
                          want_preview);
     m->counts.pixels = (uint64_t)r.w * (uint64_t)r.h;
     return 0;
+}
+
+const char *tf_task_rect_problem(tf_rect r, int image_w, int image_h)
+{
+    if (r.w < 1 || r.h < 1)
+        return "empty rectangle";
+    if ((uint64_t)r.w * (uint64_t)r.h > TF_TASK_MAX_PIXELS)
+        return "rectangle larger than any task";
+    if (r.x < 0 || r.y < 0)
+        return "rectangle outside the image";
+    if (image_w > 0 && image_h > 0 &&
+        ((int64_t)r.x + r.w > image_w || (int64_t)r.y + r.h > image_h))
+        return "rectangle outside the image";
+    return NULL;
+}
+
+long tf_first_non_finite(const tf_pixel *px, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(px[i].r) || !isfinite(px[i].g) || !isfinite(px[i].b) ||
+            !isfinite(px[i].a) || !isfinite(px[i].z) || !isfinite(px[i].spp))
+            return (long)i;
+    return -1;
 }

@@ -83,6 +83,10 @@ typedef struct tf_result_msg {
 int tf_task_pack(tf_tuple *t, const tf_task_msg *m);
 /* Template for any task (id = TF_TASK_ANY) or for one task id. */
 #define TF_TASK_ANY INT64_MIN
+/* Fields of a task tuple and of a result tuple (the layouts above). */
+#define TF_TASK_FIELDS 8
+#define TF_RESULT_FIELDS 11
+
 int tf_task_template(tf_tuple *t, int64_t id);
 /* 0, or -1 if t is not a well-formed task tuple. */
 int tf_task_unpack(const tf_tuple *t, tf_task_msg *m);
@@ -98,5 +102,13 @@ int tf_result_unpack(const tf_tuple *t, tf_result_msg *m);
  * a pixel.  On success m->counts.pixels = r.w * r.h. */
 int tf_result_check(tf_result_msg *m, const tf_exr_layout *l, const tf_preview_grid *g,
                     tf_rect r, char *err, size_t errlen);
+
+/* Largest task a worker accepts, in pixels (a bound on its buffer, whatever a tuple says). */
+#define TF_TASK_MAX_PIXELS (64u * 1024u * 1024u)
+/* Why a task rectangle cannot be rendered in an image_w x image_h image (0: size unknown, only
+ * the rectangle itself is checked), or NULL if it can. */
+const char *tf_task_rect_problem(tf_rect r, int image_w, int image_h);
+/* Index of the first pixel with a non-finite channel, or -1. */
+long tf_first_non_finite(const tf_pixel *px, size_t n);
 
 #endif

@@ -1,5 +1,6 @@
 /* log.c: see log.h. */
 #include "log.h"
+#include "clock.h"
 
 #include <stdarg.h>
 #include <stdio.h>
@@ -75,4 +76,37 @@ int tf_seterr(char *err, size_t errlen, const char *fmt, ...)
     tf_vseterr(err, errlen, fmt, ap);
     va_end(ap);
     return -1;
+}
+
+int tf_ratelimit_take(tf_ratelimit *rl, long long now_ms, long long *held)
+{
+    if (rl->window_start_ms == 0 || now_ms - rl->window_start_ms >= TF_RATELIMIT_WINDOW_MS) {
+        rl->window_start_ms = now_ms ? now_ms : 1;
+        rl->in_window = 0;
+    }
+    if (rl->in_window >= (rl->burst > 0 ? rl->burst : TF_RATELIMIT_BURST)) {
+        rl->suppressed++;
+        return 0;
+    }
+    rl->in_window++;
+    if (held)
+        *held = rl->suppressed;
+    rl->suppressed = 0;
+    return 1;
+}
+
+void tf_warn_limited(tf_ratelimit *rl, const char *fmt, ...)
+{
+    long long held = 0;
+    if (!tf_ratelimit_take(rl, (long long)tf_now_ms(), &held))
+        return;
+    char line[1800];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(line, sizeof line, fmt, ap);
+    va_end(ap);
+    if (held > 0)
+        tf_warn("%s (%lld similar messages suppressed)", line, held);
+    else
+        tf_warn("%s", line);
 }

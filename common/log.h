@@ -28,4 +28,21 @@ void tf_die(int status, const char *fmt, ...) __attribute__((format(printf, 2, 3
 int tf_seterr(char *err, size_t errlen, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 int tf_vseterr(char *err, size_t errlen, const char *fmt, va_list ap);
 
+/* A rate limiter for a repeated message (one static instance per message site): at most
+ * TF_RATELIMIT_BURST lines per TF_RATELIMIT_WINDOW_MS; the first line after a window in which
+ * some were held back says how many.  A peer that provokes a warning a hundred thousand times
+ * costs a few lines a second, not a flooded log.  Not thread-safe (one thread per site). */
+#define TF_RATELIMIT_BURST 20
+#define TF_RATELIMIT_WINDOW_MS 5000
+typedef struct tf_ratelimit {
+    int burst;            /* lines per window; 0: TF_RATELIMIT_BURST */
+    long long window_start_ms;
+    int in_window;        /* lines emitted in this window */
+    long long suppressed; /* lines held back since the last one emitted */
+} tf_ratelimit;
+void tf_warn_limited(tf_ratelimit *rl, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* 1 when a line may be written now (and counts it), 0 when it is held back; *held (may be
+ * NULL) receives the number held back before this one (reset once reported). */
+int tf_ratelimit_take(tf_ratelimit *rl, long long now_ms, long long *held);
+
 #endif

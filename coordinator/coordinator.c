@@ -37,11 +37,16 @@
 #include "coordinator/output.h"
 #include "coordinator/stats.h"
 #include "coordinator/supervisor.h"
+#include "coordinator/verify.h"
+#include "coordinator/worker_role.h"
 #include "linda/tsserver.h"
 #include "linda/tuplespace.h"
 #include "worker/worker.h"
 
 #define DEFAULT_LISTEN "127.0.0.1:7878"
+/* Workers' outs are refused once the space holds this much (results wait there for their
+ * band, bounded by the watermark; this is the backstop). */
+#define MAX_SPACE_BYTES (1024u * 1024u * 1024u)
 
 static volatile sig_atomic_t interrupted;
 
@@ -93,6 +98,7 @@ typedef struct render {
     ts_space *space;
     tf_supervisor *sup;
     ts_server_config cfg;
+    ts_role worker_role;         /* every connection's role (worker_role.h) */
     ts_server *srv;
     tf_local_workers lw;
     tf_finisher *finisher;       /* finishes each frame's file off the event loop */
@@ -427,7 +433,7 @@ static tf_rowwriter *open_frame_writer(void *ctx, int job, char *err, size_t err
      * loop.  Results are packed chunks, and bands are capped in pixels (tasks.c), so this stays
      * a few MB whatever the image size. */
     tf_rowwriter_config wcfg = {2 * r->tasks.cols + 8, r->o->fsync_interval_ms, fo->preview,
-                                r->o->preview_interval_ms, fo->output};
+                                r->o->preview_interval_ms, fo->plan.working};
     tf_rowwriter *w = tf_rowwriter_start(writer, &r->layout, &wcfg, err, errlen);
     if (!w)
         tf_exr_abandon(writer);
@@ -479,6 +485,8 @@ static int start_space(render *r)
     scfg.hooks = (tf_frame_hooks){r, open_frame_writer, finish_frame_writer};
     scfg.layout = r->layout;
     scfg.verify_chunks = o->verify_chunks;
+    scfg.verify_fraction = o->verify_fraction;
+    scfg.verify_seed = tf_verify_seed(r->scene->hash_hex);
     scfg.spec = r->spec;
     scfg.watermark = o->watermark; /* 0: auto, following the connected workers */
     scfg.expected_workers = expected_workers;
@@ -490,6 +498,9 @@ static int start_space(render *r)
     r->cfg.listen = r->listen;
     r->cfg.key = r->have_key ? r->key : NULL;
     r->cfg.silence_timeout_ms = o->lease_timeout_ms;
+    tf_worker_role_init(&r->worker_role, r->sup, &r->tasks);
+    r->cfg.role = &r->worker_role;
+    r->cfg.max_space_bytes = MAX_SPACE_BYTES;
     ts_server_hooks hooks = tf_supervisor_hooks(r->sup);
     if (r->dash) { /* the dashboard watches the traffic (results for its preview) */
         hooks = tf_dashboard_hooks(r->dash, hooks);
@@ -671,6 +682,37 @@ static int supervise(render *r)
     return tf_supervisor_done(r->sup) && !r->finish_error[0] ? 0 : -1;
 }
 
+/* Outputs rendered beside a finished render (output.h, "never lose a finished output"): after
+ * a render that did not finish, each partial file beside one is removed and the preview of the
+ * kept render rebuilt; returns how many.  After one that finished, each replaces its old file. */
+static int discard_beside(render *r)
+{
+    int n = 0;
+    for (int i = 0; i < r->nouts; i++) {
+        frame_output *fo = &r->outs[i];
+        if (!fo->plan.beside)
+            continue;
+        char err[1024];
+        tf_output_discard(fo->output, &fo->plan);
+        if (tf_preview_from_exr(fo->output, fo->preview, err, sizeof err))
+            tf_warn("%s", err);
+        fo->plan.beside = 0;
+        n++;
+    }
+    return n;
+}
+
+static int commit_beside(render *r, char *err, size_t errlen)
+{
+    for (int i = 0; i < r->nouts; i++) {
+        frame_output *fo = &r->outs[i];
+        if (fo->plan.beside && tf_output_commit(fo->output, &fo->plan, err, errlen))
+            return -1;
+        fo->plan.beside = 0;
+    }
+    return 0;
+}
+
 /* 5c. A render that did not finish: keep every row already queued, tell how to continue. */
 static void stop_unfinished(render *r)
 {
@@ -690,6 +732,7 @@ static void stop_unfinished(render *r)
         tf_finisher_wait(r->finisher, r->finish_error, sizeof r->finish_error);
     if (!why && r->finish_error[0])
         why = r->finish_error;
+    int kept = discard_beside(r);
     const char *where = wj < r->njobs ? r->outs[r->job_out[wj]].output : "?";
     char frames[128] = "";
     if (r->animated)
@@ -698,10 +741,16 @@ static void stop_unfinished(render *r)
     int fw;
     r->rows_on_disk = render_rows(r, &fw);
     tf_dashboard_frames(r->dash, fw, r->nouts - r->njobs + tf_supervisor_stats(r->sup)->frames_done);
-    if (why) {
-        tf_error("%s", why);
+    if (why)
         snprintf(r->error, sizeof r->error, "%s", why);
-    } else if (r->stopped)
+    if (why && kept)
+        tf_error("%s; the finished render at the output was kept as it was", why);
+    else if (kept)
+        tf_error("the new render stopped (%d of %d rows in %s); the finished render there is kept",
+                 rows, r->scene->height, where);
+    else if (why)
+        tf_error("%s", why);
+    else if (r->stopped)
         tf_error("stopped from the dashboard: %s%d of %d rows are on disk in %s; continue with "
                  "--resume", frames, rows, r->scene->height, where);
     else if (r->no_workers)
@@ -740,11 +789,22 @@ static int finish(render *r)
 {
     char err[1024];
     tf_supervisor_stop_workers(r->sup);
-    if (tf_finisher_wait(r->finisher, err, sizeof err))
+    if (tf_finisher_wait(r->finisher, err, sizeof err)) {
+        if (discard_beside(r))
+            snprintf(err + strlen(err), sizeof err - strlen(err),
+                     "; the finished render at the output was kept as it was");
+        return step_failed(r, 1, err);
+    }
+    if (commit_beside(r, err, sizeof err))
         return step_failed(r, 1, err);
     tf_local_workers_drain(&r->lw, 5.0);
-    for (int i = 0; i < 10 && ts_server_conn_count(r->srv) > 0; i++)
-        ts_server_run_once(r->srv, 20); /* let networked workers read the stop tuple */
+    /* Let networked workers read the stop tuple: one that is finishing a task (a straggler's
+     * copy, a spot check) takes it when it asks for the next; at most 5 s, and only while a
+     * worker that joined is still connected. */
+    for (int i = 0; i < 250 && ts_server_conn_count(r->srv) > 0 &&
+                    (i < 10 || tf_supervisor_live_workers(r->sup) > 0);
+         i++)
+        ts_server_run_once(r->srv, 20);
     double wall = tf_now_s() - r->t_start;
     const tf_farm_stats *st = tf_supervisor_stats(r->sup);
     uint64_t rays = st->primary_rays + st->shadow_rays;
@@ -805,6 +865,10 @@ static void run_on_done(render *r)
 
 static void render_close(render *r)
 {
+    if (r->status != 0)
+        for (int i = 0; i < r->nouts; i++)
+            if (r->outs[i].plan.beside)
+                remove(r->outs[i].plan.working); /* a step failed before the render ran */
     if (r->lw.pid && r->srv)
         tf_local_workers_drain(&r->lw, 0);
     if (r->sup) {

@@ -44,6 +44,7 @@ typedef struct tf_render_opts {
     int pixel;                 /* --pixel: TF_PIXEL_HALF | TF_PIXEL_FLOAT (image/exrlayout.h) */
     int pixel_given;           /* 1 if --pixel was given (a resume otherwise keeps the file's) */
     int verify_chunks;         /* --verify-chunks: decode every result's chunks before accepting */
+    double verify_fraction;    /* --verify: fraction of tasks rendered twice (supervisor.h) */
     int preview_interval_ms;   /* rewrite the progress preview this often (default 5000) */
     const char *http;          /* --http HOST:PORT | none; NULL = 127.0.0.1:7880 (ephemeral if busy) */
     const char *http_token_file; /* the dashboard's token (else derived from the secret) */

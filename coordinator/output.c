@@ -5,7 +5,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "log.h"
 
@@ -102,6 +104,8 @@ int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, 
     *resume_rows = -1;
     plan->resume_tiles = 0;
     *already_complete = 0;
+    plan->beside = 0;
+    snprintf(plan->working, sizeof plan->working, "%s", output);
     int r = tf_exr_probe_chunks(output, &have, &chunks, &complete, err, sizeof err);
     tf_exr_layout have_layout = tf_exr_meta_layout(&have);
     if (r == 0)
@@ -119,6 +123,14 @@ int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, 
                  output, err);
         return -1;
     }
+    if (complete && !resume) {
+        /* Never lose a finished render: the new one is made beside it. */
+        plan->beside = 1;
+        snprintf(plan->working, sizeof plan->working, "%s.rendering.tmp", output);
+        tf_info("%s: a finished render is there; it is replaced only once the new one is "
+                "complete", output);
+        return 0;
+    }
     if (overwrite) {
         if (!complete)
             tf_info("%s: discarding a partial render of %d/%d rows (--overwrite)", output, rows,
@@ -128,10 +140,6 @@ int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, 
     if (!resume) {
         if (!complete && chunks == 0) {
             tf_info("%s: a partial render with no rows is there; it will be replaced", output);
-            return 0;
-        }
-        if (complete) {
-            tf_info("%s: a finished render is there; it will be replaced", output);
             return 0;
         }
         tf_error("%s holds a partial render (%d of %d rows on disk): use --resume to continue it "
@@ -217,6 +225,10 @@ static tf_exr_writer *create_output(const char *output, const tf_exr_meta *meta,
 tf_exr_writer *tf_output_open(const char *output, const tf_exr_meta *meta,
                               const tf_output_plan *plan, char *err, size_t errlen)
 {
+    if (plan->beside) {
+        remove(plan->working); /* a leftover of an earlier attempt */
+        return tf_exr_create(plan->working, meta, err, errlen);
+    }
     if (plan->resume_rows < 0) {
         if (ensure_parent_dir(output, err, errlen))
             return NULL;
@@ -238,4 +250,42 @@ tf_exr_writer *tf_output_open(const char *output, const tf_exr_meta *meta,
     else if (w)
         tf_info("resuming %s: %d of %d rows already on disk", output, rows_done, meta->height);
     return w;
+}
+
+/* fsync the directory holding path, so a rename in it is durable. */
+static void sync_parent_dir(const char *path)
+{
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s", path);
+    char *slash = strrchr(dir, '/');
+    if (slash == dir)
+        slash[1] = '\0';
+    else if (slash)
+        *slash = '\0';
+    else
+        snprintf(dir, sizeof dir, ".");
+    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd >= 0) {
+        fsync(fd);
+        close(fd);
+    }
+}
+
+int tf_output_commit(const char *output, const tf_output_plan *plan, char *err, size_t errlen)
+{
+    if (!plan->beside)
+        return 0;
+    if (rename(plan->working, output) != 0)
+        return tf_seterr(err, errlen, "%s: cannot replace it with the new render %s: %s", output,
+                         plan->working, strerror(errno));
+    sync_parent_dir(output);
+    return 0;
+}
+
+void tf_output_discard(const char *output, const tf_output_plan *plan)
+{
+    if (!plan->beside)
+        return;
+    (void)output;
+    remove(plan->working);
 }

@@ -3,7 +3,14 @@
  * decides whether to start fresh, resume the rows already on disk, report the render complete,
  * or refuse (a partial render without --resume, a changed scene); then it opens the file so
  * that at every instant the path holds either what was there before or a valid resumable
- * render. */
+ * render.
+ *
+ * A finished render is never lost: a new render over one (plain or --overwrite) renders
+ * beside it, into OUTPUT.rendering.tmp, and replaces it only once complete
+ * (tf_output_commit, an atomic rename); until then, and if the new render fails (a full disk,
+ * an interrupt), OUTPUT is the finished render it was (tf_output_discard removes the partial
+ * file beside it).  Such a render cannot be resumed: it is started again.  A partial render at
+ * OUTPUT is continued in place with --resume, or replaced at once with --overwrite. */
 #ifndef TF_OUTPUT_H
 #define TF_OUTPUT_H
 
@@ -24,6 +31,8 @@ typedef struct tf_output_plan {
     int resume_rows;   /* whole rows to keep (>= 0), or -1: start a fresh file */
     int resume_tiles;  /* and, in a tiled file, the tiles of the next tile row on disk */
     int complete;      /* 1: the output is already a finished render of this scene */
+    int beside;        /* 1: a finished render is there: render into `working`, then rename */
+    char working[4096];/* the file being written (the output itself unless beside) */
 } tf_output_plan;
 
 /* With --resume and no --tasks: the layout of a terrafarm render already at `output` (so the
@@ -41,5 +50,11 @@ int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, 
  * A writer, or NULL with one line in err. */
 tf_exr_writer *tf_output_open(const char *output, const tf_exr_meta *meta,
                               const tf_output_plan *plan, char *err, size_t errlen);
+/* After the writer finished: a render made beside a finished one replaces it now.  0 or -1
+ * with one line in err. */
+int tf_output_commit(const char *output, const tf_output_plan *plan, char *err, size_t errlen);
+/* After a render that did not finish: a partial file beside a finished render is removed (the
+ * finished render stays).  Nothing for other renders. */
+void tf_output_discard(const char *output, const tf_output_plan *plan);
 
 #endif

@@ -53,6 +53,17 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
     json_object_set_new(o, "local_workers", json_integer(run->local_workers));
     json_object_set_new(o, "heightfield_s", seconds(run->heightfield_s));
     json_object_set_new(o, "results_refused", json_integer(st->results_refused));
+    double verify_busy_base = 0; /* every worker's busy time, for verify_cost */
+    for (int i = 0; i < st->nworkers; i++)
+        verify_busy_base += st->workers[i].busy_s;
+    json_object_set_new(o, "verify_fraction", rounded(st->verify_fraction, 1e4));
+    json_object_set_new(o, "verify_checks", json_integer(st->verify_checks));
+    json_object_set_new(o, "verify_mismatches", json_integer(st->verify_mismatches));
+    json_object_set_new(o, "workers_excluded", json_integer(st->workers_excluded));
+    json_object_set_new(o, "verify_busy_s", seconds(st->verify_busy_s));
+    json_object_set_new(o, "verify_cost",
+                        rounded(verify_busy_base > 0 ? st->verify_busy_s / verify_busy_base : 0.0,
+                                1e4));
     json_object_set_new(o, "layout", json_string(run->layout ? run->layout : ""));
     struct rusage ru;
     if (getrusage(RUSAGE_SELF, &ru) == 0) { /* the coordinator alone: workers are other processes */

@@ -16,7 +16,8 @@
  *       copy of a task already written), and for an outstanding task the number of leases
  *       naming it never exceeds its slot's `leased`.
  *   S5. A job's rows_written only grows, and rows_written <= height.
- *   S6. live_workers is the number of announced workers whose connection is open.
+ *   S6. live_workers is the number of joined workers (the id bound to a connection when it took
+ *       the counter, then announced) whose connection is open.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -39,6 +40,8 @@
 
 #include <assert.h>
 #include <inttypes.h>
+#include <math.h>
+#include <sodium.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -47,6 +50,7 @@
 
 #include "coordinator/events.h"
 #include "farmproto.h"
+#include "coordinator/verify.h"
 #include "image/exrencode.h"
 #include "log.h"
 
@@ -69,7 +73,15 @@ typedef struct task_slot {
     int nfailed;
     int64_t failed_worker[MAX_FAILED_WORKERS];
     int failed_count[MAX_FAILED_WORKERS];
+    /* --verify (see "spot checks"): CHECK_SECOND or CHECK_THIRD while a check copy is out;
+     * who rendered it first and second, and the digests of their results */
+    int check;
+    int64_t check_worker[2];
+    uint8_t digest[2][TF_DIGEST_BYTES];
+    int replacing;       /* the third render sided with the second: its result replaces the first */
 } task_slot;
+
+enum { CHECK_NONE = 0, CHECK_SECOND = 1, CHECK_THIRD = 2 };
 
 typedef struct lease {
     uint64_t conn;
@@ -97,6 +109,11 @@ struct tf_supervisor {
     tf_supervisor_config cfg;
     int64_t write_task, next_deal;
     int ring_size;
+    int64_t next_worker_id;  /* the counter tuple's value, put back on every join */
+    /* --verify: addresses of excluded liars; no new worker may join from them (a liar that
+     * came back under a new id would side with its own lies) */
+    char excluded_addr[32][96];
+    int nexcluded_addr;
     int auto_watermark;      /* watermark follows the connected workers */
     int watermark;           /* in force now */
     int dups_in_flight;      /* duplicate copies dealt whose task has no result yet */
@@ -260,17 +277,26 @@ static tf_worker_stats *add_worker(tf_supervisor *s, int64_t id)
     return w;
 }
 
+/* The task as the supervisor deals it now: its rectangle and the workers it must avoid. */
+static void task_msg_of(const tf_supervisor *s, const task_slot *t, tf_task_msg *m)
+{
+    memset(m, 0, sizeof *m);
+    m->id = t->id;
+    m->frame = job_of(s, t->id)->job.frame;
+    m->rect = rect_of(s, t->id);
+    for (int i = 0; i < t->nfailed && m->nexcluded < TF_EXCLUDED_MAX; i++)
+        if (t->failed_count[i] >= FAILURES_TO_EXCLUDE)
+            m->excluded[m->nexcluded++] = t->failed_worker[i];
+    /* a check copy goes to a worker that has not rendered it yet */
+    for (int i = 0; i < t->check && m->nexcluded < TF_EXCLUDED_MAX; i++)
+        m->excluded[m->nexcluded++] = t->check_worker[i];
+}
+
 /* Put a task tuple for `id` in the space, carrying the workers it must avoid. */
 static int deal_copy(tf_supervisor *s, task_slot *t)
 {
     tf_task_msg m;
-    memset(&m, 0, sizeof m);
-    m.id = t->id;
-    m.frame = job_of(s, t->id)->job.frame;
-    m.rect = rect_of(s, t->id);
-    for (int i = 0; i < t->nfailed && m.nexcluded < TF_EXCLUDED_MAX; i++)
-        if (t->failed_count[i] >= FAILURES_TO_EXCLUDE)
-            m.excluded[m.nexcluded++] = t->failed_worker[i];
+    task_msg_of(s, t, &m);
     tf_tuple tup;
     if (tf_task_pack(&tup, &m) || ts_space_out(s->space, &tup)) {
         fail(s, "out of memory dealing task %" PRId64, t->id);
@@ -353,7 +379,7 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
 /* A copy of task t was lost (its worker died or gave up): deal it again if no copy is left. */
 static void redeal_if_lost(tf_supervisor *s, task_slot *t)
 {
-    if (t->has_result || t->in_space > 0 || t->leased > 0 || s->error[0])
+    if ((t->has_result && !t->check) || t->in_space > 0 || t->leased > 0 || s->error[0])
         return;
     t->in_space++;
     s->stats.tasks_redealt++;
@@ -395,6 +421,9 @@ static int write_task(tf_supervisor *s, job_state *j, task_slot *t)
         return -1;
     }
     tf_tuple_clear(&tmpl);
+    tf_worker_stats *w = worker_by_id(s, t->result_worker);
+    if (w)
+        w->written++;
     if (tf_rowwriter_put(j->writer, &got)) {
         char err[512];
         tf_rowwriter_error(j->writer, err, sizeof err);
@@ -429,6 +458,19 @@ static int finish_job(tf_supervisor *s, job_state *j)
     return 0;
 }
 
+/* --verify: a result is written once its check (if any) agreed, and only if its worker has
+ * passed a check, so a liar is caught before anything of it reaches the file.  A farm of one
+ * worker cannot check anything: its results are written unchecked. */
+static int writable(tf_supervisor *s, const task_slot *t)
+{
+    if (s->cfg.verify_fraction <= 0)
+        return 1;
+    if (t->check)
+        return 0;
+    tf_worker_stats *w = worker_by_id(s, t->result_worker);
+    return !w || w->checked || tf_supervisor_live_workers(s) < 2;
+}
+
 /* Advance the write front over every task whose result is in, in id (= file) order, and over
  * the end of each job whose tasks are then all queued. */
 static void write_ready_tasks(tf_supervisor *s)
@@ -445,7 +487,7 @@ static void write_ready_tasks(tf_supervisor *s)
         if (s->write_task >= s->next_deal)
             return;
         task_slot *t = slot_of(s, s->write_task);
-        if (!t || !t->has_result)
+        if (!t || !t->has_result || !writable(s, t))
             return;
         if (write_task(s, j, t))
             return;
@@ -471,10 +513,38 @@ static void remove_lease(tf_supervisor *s, uint64_t conn, int64_t task)
         }
 }
 
+/* A connection took the worker counter: its worker id is bound to the connection here, once,
+ * and the counter goes back at once (by the supervisor, so no worker can hold it). */
+static void on_join(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
+{
+    int64_t id;
+    if (tuple->nfields != 2 || tf_tuple_get_int(tuple, 1, &id))
+        return;
+    if (id >= s->next_worker_id)
+        s->next_worker_id = id + 1;
+    tf_tuple next;
+    tf_tuple_init(&next);
+    if (tf_tuple_pack(&next, "si", "next_worker", s->next_worker_id) ||
+        ts_space_out(s->space, &next)) {
+        fail(s, "out of memory putting the worker counter back");
+        return;
+    }
+    tf_worker_stats *w = add_worker(s, id);
+    if (w) {
+        if (!w->conn)
+            s->live_workers++; /* S6 */
+        w->conn = conn;
+    }
+}
+
 static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)
 {
     tf_supervisor *s = ctx;
     const char *name = tf_tuple_name(tuple);
+    if (name && !strcmp(name, "next_worker")) {
+        on_join(s, conn, tuple);
+        return;
+    }
     if (!name || strcmp(name, "task"))
         return;
     tf_task_msg m;
@@ -560,6 +630,7 @@ static void drop_result(tf_supervisor *s, const tf_tuple *tuple)
 {
     remove_exact(s, tuple);
 }
+static void start_check(tf_supervisor *s, task_slot *t, const tf_result_msg *m);
 
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
@@ -571,6 +642,11 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     }
     remove_lease(s, conn, m.id);
     task_slot *t = slot_of(s, m.id);
+    int replaced = t && t->replacing;
+    if (replaced) {
+        t->has_result = 0; /* the first result was a lie and left the space: this one counts */
+        t->replacing = 0;
+    }
     if (!t || t->has_result) {
         drop_result(s, tuple);
         s->stats.results_dropped++;
@@ -579,6 +655,8 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     tf_rect r = rect_of(s, m.id);
     char why[256];
     if (refuse_result(s, &m, r, why, sizeof why)) {
+        /* Only on privileged paths: a worker's result is checked before it enters the space
+         * (tf_supervisor_admit). */
         tf_warn("result of task %" PRId64 " (%dx%d at %d,%d) from %s refused: %s", m.id, r.w,
                 r.h, r.x, r.y, peer_name(s, conn), why);
         s->stats.results_refused++;
@@ -593,7 +671,10 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     s->last_accepted = m.id;
     if (t->duplicated)
         s->dups_in_flight--;
+    t->duplicated = 0;
     withdraw_copies(s, t);
+    if (!replaced) /* a third render that already decided needs no check */
+        start_check(s, t, &m);
     s->results_seen++;
     s->mean_task_ms += ((double)m.busy_ns * 1e-6 - s->mean_task_ms) / (double)s->results_seen;
     tf_worker_stats *w = worker_by_id(s, m.worker);
@@ -697,13 +778,368 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
             continue;
         if (t->leased > 0)
             t->leased--;
-        if (t->has_result)
+        if (t->has_result) {
+            redeal_if_lost(s, t); /* a check copy, if one is out: dealt again */
             continue;
+        }
         tf_warn("worker %s left holding task %" PRId64, peer ? peer : "?", id);
         tf_events_add(s->events, TF_EV_FAILURE, worker, id, "left holding the task");
         if (!note_failure(s, t, worker))
             redeal_if_lost(s, t);
     }
+}
+
+/* ---- spot checks (--verify, verify.h) -------------------------------------------------------
+ * A task whose first result is accepted is checked when the seeded choice picks it, or when its
+ * worker has not passed a check yet: a check copy is dealt to a worker that has not rendered
+ * it (the task tuple excludes those that have), and until the check is over the result is not
+ * written.  The second result is never stored, only its digest compared: equal, both workers
+ * have passed a check; different, a third copy goes to a third worker, whose result sides with
+ * one of the two.  The other is excluded (its connection closed, every request refused), its
+ * results still in the space are taken out and their tasks dealt again; if the first was the
+ * liar, the third result replaces it.  Results of a liar already written cannot be rewritten
+ * in place: the render then stops with a line saying so (but none can be: a worker's results
+ * are written only once it has passed a check). */
+
+static void start_check(tf_supervisor *s, task_slot *t, const tf_result_msg *m)
+{
+    if (s->cfg.verify_fraction <= 0 || tf_supervisor_live_workers(s) < 2)
+        return;
+    tf_worker_stats *w = worker_by_id(s, m->worker);
+    if (!tf_verify_selected(s->cfg.verify_seed, s->cfg.verify_fraction, t->id) &&
+        (!w || w->checked))
+        return;
+    t->check = CHECK_SECOND;
+    t->check_worker[0] = m->worker;
+    tf_result_digest(m, t->digest[0]);
+    s->stats.verify_checks++;
+    t->in_space++;
+    deal_copy(s, t);
+}
+
+/* Worker `liar` disagreed with two others about task `task`: exclude it, deal again every
+ * task whose accepted result is its. */
+/* "10.0.0.7:5123" -> "10.0.0.7"; labels without a port ("local worker 2") stay whole. */
+static void address_of(const char *peer, char *addr, size_t len)
+{
+    snprintf(addr, len, "%s", peer);
+    char *colon = strrchr(addr, ':');
+    if (colon && (addr[0] != '[' || colon[-1] == ']'))
+        *colon = '\0';
+}
+
+static int address_excluded(const tf_supervisor *s, const char *peer)
+{
+    char addr[96];
+    address_of(peer, addr, sizeof addr);
+    for (int i = 0; i < s->nexcluded_addr; i++)
+        if (!strcmp(s->excluded_addr[i], addr))
+            return 1;
+    return 0;
+}
+
+static void exclude_liar(tf_supervisor *s, int64_t liar, int64_t task)
+{
+    tf_worker_stats *w = worker_by_id(s, liar);
+    if (!w || w->excluded)
+        return;
+    w->excluded = 1;
+    s->stats.workers_excluded++;
+    const char *peer = w->conn ? peer_name(s, w->conn) : "gone";
+    if (w->conn && s->nexcluded_addr < 32)
+        address_of(peer, s->excluded_addr[s->nexcluded_addr++], sizeof s->excluded_addr[0]);
+    tf_warn("worker %" PRId64 " (%s, %s) lied: its result of task %" PRId64 " differs from two "
+            "other workers'; excluded, and every task it rendered is dealt again",
+            liar, w->host, peer, task);
+    if (w->written > 0) {
+        fail(s, "worker %" PRId64 " (%s) lied, and %" PRId64 " of its results are already in "
+             "the output, which cannot be rewritten in place; render again with --overwrite",
+             liar, w->host, w->written);
+        return;
+    }
+    int redealt = 0;
+    for (int64_t id = s->write_task; id < s->next_deal; id++) {
+        task_slot *t = slot_of(s, id);
+        if (!t || !t->has_result || t->result_worker != liar || t->replacing)
+            continue;
+        tf_tuple tmpl, got;
+        tf_tuple_init(&got);
+        if (tf_result_template(&tmpl, id, liar) == 0 && ts_space_inp(s->space, &tmpl, &got) == 1)
+            tf_tuple_clear(&got);
+        tf_tuple_clear(&tmpl);
+        withdraw_copies(s, t);
+        t->has_result = 0;
+        t->check = CHECK_NONE;
+        t->in_space++;
+        s->stats.tasks_redealt++;
+        deal_copy(s, t);
+        redealt++;
+    }
+    if (redealt)
+        tf_info("re-dealing %d task%s rendered by worker %" PRId64, redealt,
+                redealt == 1 ? "" : "s", liar);
+    if (w->conn)
+        ts_server_close_conn(s->srv, w->conn);
+}
+
+/* A result for a task whose check copy is out, from a worker that has not rendered it: decide.
+ * The result is never stored except when it replaces a lying first one (TS_CAP_ALLOW). */
+static ts_cap_verdict admit_check(tf_supervisor *s, uint64_t conn, task_slot *t,
+                                  const tf_result_msg *m)
+{
+    uint8_t d[TF_DIGEST_BYTES];
+    tf_result_digest(m, d);
+    remove_lease(s, conn, t->id);
+    s->stats.verify_busy_s += (double)m->busy_ns * 1e-9;
+    if (t->check == CHECK_SECOND) {
+        if (sodium_memcmp(d, t->digest[0], TF_DIGEST_BYTES) == 0) {
+            tf_worker_stats *a = worker_by_id(s, t->check_worker[0]), *b = worker_by_id(s, m->worker);
+            if (a)
+                a->checked = 1;
+            if (b)
+                b->checked = 1;
+            t->check = CHECK_NONE;
+            withdraw_copies(s, t);
+            return TS_CAP_DISCARD;
+        }
+        s->stats.verify_mismatches++;
+        tf_warn("task %" PRId64 ": workers %" PRId64 " and %" PRId64 " rendered different bytes; "
+                "a third worker decides", t->id, t->check_worker[0], m->worker);
+        t->check = CHECK_THIRD;
+        t->check_worker[1] = m->worker;
+        memcpy(t->digest[1], d, TF_DIGEST_BYTES);
+        withdraw_copies(s, t);
+        t->in_space++;
+        deal_copy(s, t);
+        return TS_CAP_DISCARD;
+    }
+    /* CHECK_THIRD */
+    withdraw_copies(s, t);
+    t->check = CHECK_NONE;
+    tf_worker_stats *third = worker_by_id(s, m->worker);
+    if (sodium_memcmp(d, t->digest[0], TF_DIGEST_BYTES) == 0) {
+        tf_worker_stats *first = worker_by_id(s, t->check_worker[0]);
+        if (first)
+            first->checked = 1;
+        if (third)
+            third->checked = 1;
+        exclude_liar(s, t->check_worker[1], t->id);
+        return TS_CAP_DISCARD;
+    }
+    if (sodium_memcmp(d, t->digest[1], TF_DIGEST_BYTES) == 0) {
+        if (third)
+            third->checked = 1;
+        tf_worker_stats *second = worker_by_id(s, t->check_worker[1]);
+        if (second)
+            second->checked = 1;
+        /* The first was the liar: its stored result leaves, this one takes its place. */
+        t->replacing = 1;
+        tf_tuple tmpl, got;
+        tf_tuple_init(&got);
+        if (tf_result_template(&tmpl, t->id, t->check_worker[0]) == 0 &&
+            ts_space_inp(s->space, &tmpl, &got) == 1)
+            tf_tuple_clear(&got);
+        tf_tuple_clear(&tmpl);
+        tf_worker_stats *first = worker_by_id(s, t->check_worker[0]);
+        if (first && first->written == 0 && first->tasks > 0)
+            first->tasks--; /* that result no longer counts as its */
+        exclude_liar(s, t->check_worker[0], t->id);
+        return TS_CAP_ALLOW;
+    }
+    fail(s, "task %" PRId64 ": workers %" PRId64 ", %" PRId64 " and %" PRId64 " rendered three "
+         "different results; a pixel should depend only on the scene: stopping", t->id,
+         t->check_worker[0], t->check_worker[1], m->worker);
+    return TS_CAP_DISCARD;
+}
+
+/* ---- admission: the farm's checks on a worker's requests, before the space sees them ------
+ * The guard of the worker role (coordinator/worker_role.c).  Everything a worker sends is
+ * checked against what the supervisor knows: the worker id bound to its connection when it
+ * took the counter, the leases it holds, the task a result answers.  A refusal changes nothing
+ * (the server replies ERROR and logs it); a request that breaks the rules on a task the
+ * connection holds also forfeits that lease, so the task is dealt again at once. */
+
+static int lease_count(const tf_supervisor *s, uint64_t conn, int64_t *first)
+{
+    int n = 0;
+    for (int i = 0; i < s->nleases; i++)
+        if (s->leases[i].conn == conn) {
+            if (n++ == 0 && first)
+                *first = s->leases[i].task;
+        }
+    return n;
+}
+
+static int holds_lease(const tf_supervisor *s, uint64_t conn, int64_t task)
+{
+    for (int i = 0; i < s->nleases; i++)
+        if (s->leases[i].conn == conn && s->leases[i].task == task)
+            return 1;
+    return 0;
+}
+
+static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    tf_vseterr(why, len, fmt, ap);
+    va_end(ap);
+    return TS_CAP_REFUSE;
+}
+
+static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_worker_stats *w,
+                                   const tf_tuple *tuple, char *why, size_t len)
+{
+    tf_result_msg m;
+    if (tf_result_unpack(tuple, &m))
+        return refuse(why, len, "malformed result tuple");
+    if (m.worker != w->id)
+        return refuse(why, len, "result signed as worker %" PRId64 " by worker %" PRId64,
+                      m.worker, w->id);
+    if (!holds_lease(s, conn, m.id))
+        return refuse(why, len, "result for task %" PRId64 ", which this connection does not "
+                      "hold", m.id);
+    task_slot *t = slot_of(s, m.id);
+    int checking = t && t->has_result && t->check && m.worker != t->check_worker[0] &&
+                   (t->check == CHECK_SECOND || m.worker != t->check_worker[1]);
+    if (!t || (t->has_result && !checking)) {
+        /* A straggler's second copy, or a task already written: the first result won. */
+        remove_lease(s, conn, m.id);
+        s->stats.results_dropped++;
+        return TS_CAP_DISCARD;
+    }
+    tf_rect r = rect_of(s, m.id);
+    char reason[192];
+    if (refuse_result(s, &m, r, reason, sizeof reason)) {
+        /* Dropped before it enters the space, counted against its worker, dealt again. */
+        s->stats.results_refused++;
+        remove_lease(s, conn, m.id);
+        if (!note_failure(s, t, w->id))
+            redeal_if_lost(s, t);
+        return refuse(why, len, "result of task %" PRId64 " (%dx%d at %d,%d): %s", m.id, r.w,
+                      r.h, r.x, r.y, reason);
+    }
+    if (checking)
+        return admit_check(s, conn, t, &m);
+    return TS_CAP_ALLOW;
+}
+
+/* A worker puts back a task it will not render (it is excluded).  Only a task it holds, and
+ * the supervisor deals its own copy: the worker's tuple is never stored, so a rectangle or an
+ * exclusion list cannot be altered on the way. */
+static ts_cap_verdict admit_task_return(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple,
+                                        char *why, size_t len)
+{
+    tf_task_msg m;
+    if (tf_task_unpack(tuple, &m))
+        return refuse(why, len, "malformed task tuple");
+    if (m.id == TF_TASK_STOP) {
+        /* The stop task goes round every worker: the one who took it puts it back. */
+        tf_tuple tmpl;
+        size_t present = 0;
+        if (tf_task_template(&tmpl, TF_TASK_STOP) == 0)
+            present = ts_space_count(s->space, &tmpl);
+        tf_tuple_clear(&tmpl);
+        if (!s->stop_sent || present > 0 || m.rect.w || m.rect.h || m.rect.x || m.rect.y ||
+            m.nexcluded)
+            return refuse(why, len, "forged stop task");
+        return TS_CAP_ALLOW;
+    }
+    if (!holds_lease(s, conn, m.id))
+        return refuse(why, len, "puts back task %" PRId64 ", which this connection does not "
+                      "hold", m.id);
+    task_slot *t = slot_of(s, m.id);
+    tf_rect r = rect_of(s, m.id);
+    int altered = m.rect.x != r.x || m.rect.y != r.y || m.rect.w != r.w || m.rect.h != r.h ||
+                  m.frame != job_of(s, m.id)->job.frame;
+    int excl_altered = 0;
+    if (t) {
+        /* A copy dealt earlier may list fewer workers (failures since), never others. */
+        tf_task_msg now;
+        task_msg_of(s, t, &now);
+        for (int i = 0; i < m.nexcluded; i++)
+            excl_altered |= !tf_task_excludes(&now, m.excluded[i]);
+    }
+    remove_lease(s, conn, m.id);
+    if (t && (!t->has_result || t->check)) { /* a task, or its check copy */
+        t->in_space++;
+        deal_copy(s, t);
+    }
+    if (altered)
+        return refuse(why, len, "task %" PRId64 " put back with rectangle %dx%d at %d,%d "
+                      "instead of %dx%d at %d,%d", m.id, m.rect.w, m.rect.h, m.rect.x, m.rect.y,
+                      r.w, r.h, r.x, r.y);
+    if (excl_altered)
+        return refuse(why, len, "task %" PRId64 " put back excluding workers it was not dealt "
+                      "to exclude", m.id);
+    return TS_CAP_DISCARD;
+}
+
+ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blocking,
+                                   const tf_tuple *tuple, char *why, size_t len)
+{
+    (void)blocking;
+    tf_supervisor *s = ctx;
+    const char *name = tf_tuple_name(tuple);
+    tf_worker_stats *w = worker_by_conn(s, conn);
+    if (!strcmp(name, "next_worker")) {
+        if (w)
+            return refuse(why, len, "joins twice (already worker %" PRId64 ")", w->id);
+        if (s->nexcluded_addr > 0 && address_excluded(s, peer_name(s, conn)))
+            return refuse(why, len, "joins from an address whose worker failed a spot check");
+        return TS_CAP_ALLOW;
+    }
+    if (!w)
+        return refuse(why, len, "%s (\"%s\", ...) before joining (take (\"next_worker\", ?n) "
+                      "first)", ts_cap_op_name(op), name);
+    if (w->excluded)
+        return refuse(why, len, "worker %" PRId64 " is excluded (it failed a spot check)", w->id);
+    if (!strcmp(name, "hello")) {
+        int64_t id, pid;
+        const char *str;
+        if (tf_tuple_get_int(tuple, 1, &id) || tf_tuple_get_string(tuple, 2, &str) ||
+            tf_tuple_get_string(tuple, 3, &str) || tf_tuple_get_int(tuple, 4, &pid) ||
+            tf_tuple_get_string(tuple, 5, &str))
+            return refuse(why, len, "malformed hello tuple");
+        if (id != w->id)
+            return refuse(why, len, "hello as worker %" PRId64 " from worker %" PRId64, id,
+                          w->id);
+        return TS_CAP_ALLOW;
+    }
+    if (!strcmp(name, "task") && op == TS_CAP_IN) {
+        /* Any task, never one chosen by id or place: a client may not pick the task it wants
+         * to fail or to sit on. */
+        for (int i = 1; i < tuple->nfields; i++)
+            if (!tuple->f[i].formal)
+                return refuse(why, len, "takes a task by a template with actual fields (only "
+                              "(\"task\", ?id, ?x, ?y, ?w, ?h, ?excluded) is a worker's)");
+        int64_t held = -1;
+        if (lease_count(s, conn, &held) > 0)
+            return refuse(why, len, "takes another task while holding task %" PRId64
+                          " (one at a time)", held);
+        return TS_CAP_ALLOW;
+    }
+    if (!strcmp(name, "task"))
+        return admit_task_return(s, conn, tuple, why, len);
+    if (!strcmp(name, "result"))
+        return admit_result(s, conn, w, tuple, why, len);
+    if (!strcmp(name, "failed")) {
+        int64_t id, worker;
+        const char *msg;
+        if (tf_tuple_get_int(tuple, 1, &id) || tf_tuple_get_int(tuple, 2, &worker) ||
+            tf_tuple_get_string(tuple, 3, &msg))
+            return refuse(why, len, "malformed failed tuple");
+        if (worker != w->id)
+            return refuse(why, len, "failure reported as worker %" PRId64 " by worker %" PRId64,
+                          worker, w->id);
+        if (!holds_lease(s, conn, id))
+            return refuse(why, len, "failure of task %" PRId64 ", which this connection does not "
+                          "hold", id);
+        return TS_CAP_ALLOW;
+    }
+    return refuse(why, len, "%s (\"%s\", ...) is not a worker's", ts_cap_op_name(op), name);
 }
 
 ts_server_hooks tf_supervisor_hooks(tf_supervisor *sup)
@@ -841,6 +1277,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     for (int i = 0; i < s->ring_size; i++)
         s->ring[i].id = -1;
     s->stats.tasks_total = s->total_tasks;
+    s->stats.verify_fraction = cfg->verify_fraction;
     s->stats.watermark = s->watermark;
     update_watermark(s);
     return s;

@@ -51,6 +51,9 @@ typedef struct tf_worker_stats {
     int64_t tasks;
     uint64_t rays;
     double busy_s;
+    int checked;       /* --verify: passed a spot check (its results may be written) */
+    int excluded;      /* --verify: caught lying; every request refused */
+    int64_t written;   /* its results handed to the writer */
 } tf_worker_stats;
 
 /* One frame of a sequence (docs/contract.md: "frames"). */
@@ -64,6 +67,11 @@ typedef struct tf_frame_stats {
 typedef struct tf_farm_stats {
     int64_t tasks_total, tasks_redealt, tasks_duplicated, results_dropped, task_failures;
     int64_t results_refused;  /* failed the result checks (structure, --verify-chunks) */
+    /* --verify: checks dealt (a second render of a task), mismatches (a third render decided),
+     * workers excluded for lying, and the worker time the checks cost */
+    int64_t verify_checks, verify_mismatches, workers_excluded;
+    double verify_busy_s;
+    double verify_fraction;
     int rows_resumed, rows_rendered;
     uint64_t primary_rays, shadow_rays, external_rays;
     double spp_sum;           /* sum of the spp channel over rendered pixels */
@@ -101,6 +109,8 @@ typedef struct tf_supervisor_config {
     tf_frame_hooks hooks;
     tf_exr_layout layout;     /* of the output: what results must carry (farmproto.h) */
     int verify_chunks;        /* --verify-chunks: also check that every chunk decodes */
+    double verify_fraction;   /* --verify: fraction of tasks rendered twice (0: none) */
+    uint64_t verify_seed;     /* which ones (verify.h) */
     tf_task_spec spec;
     int watermark;            /* >= tasks per band (checked); 0 = auto (follows the workers) */
     int expected_workers;     /* auto watermark: workers to plan for before they connect */
@@ -121,6 +131,12 @@ int tf_supervisor_take_open_writers(tf_supervisor *sup, tf_rowwriter **out, int 
 void tf_supervisor_attach(tf_supervisor *sup, ts_server *srv);
 /* Hooks for ts_server_new (ctx = the supervisor). */
 ts_server_hooks tf_supervisor_hooks(tf_supervisor *sup);
+
+/* The guard of the worker role (capability.h, coordinator/worker_role.c; ctx = the
+ * supervisor): checks a worker connection's request against the supervisor's state (its bound
+ * worker id, its leases, the task a result answers). */
+ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blocking,
+                                   const tf_tuple *tuple, char *why, size_t len);
 
 /* Deal, duplicate for stragglers, write, sync.  Call after every server iteration. */
 void tf_supervisor_step(tf_supervisor *sup, double now_ms);

@@ -21,36 +21,87 @@
 #include "worker/simulate.h"
 #include "worker/worker.h"
 
-/* Connect, retrying while the coordinator is not (yet) listening, for at most timeout_ms: a
- * worker started before its coordinator (a boot script, a batch job) simply waits for it.
- * Any other failure (refused secret, bad address) is final at once. */
+/* A connection failure that trying again cannot cure: the coordinator refused us (a wrong
+ * secret, a refused request), or what answered is not a terrafarm coordinator. */
+static int failure_is_final(const char *err)
+{
+    static const char *final[] = {"refused:", "authentication failed", "requires a secret",
+                                  "does not authenticate", "failed to prove",
+                                  "not a terrafarm coordinator", "cannot resolve",
+                                  "Name or service not known"};
+    for (size_t i = 0; i < sizeof final / sizeof final[0]; i++)
+        if (strstr(err, final[i]))
+            return 1;
+    return 0;
+}
+
+/* Connect, retrying with backoff (250 ms doubling to 4 s) for at most timeout_ms while the
+ * coordinator cannot be reached: a worker started before its coordinator (a boot script, a
+ * batch job) waits for it, and one that lost it (a pause, a partition, a restart, an address
+ * made to wait after failed handshakes) comes back.  A final failure (wrong secret, not a
+ * coordinator) ends at once. */
 static ts_client *connect_patiently(const char *hostport, const uint8_t *key, int timeout_ms,
                                     char *err, size_t errlen)
 {
     int64_t t0 = tf_now_ms();
+    int backoff_ms = 250;
     for (;;) {
-        ts_client *c = ts_client_connect(hostport, key, timeout_ms, err, errlen);
-        if (c || !strstr(err, "Connection refused"))
+        int64_t left = timeout_ms - (tf_now_ms() - t0);
+        ts_client *c = ts_client_connect(hostport, key, left > 1000 ? (int)left : 1000, err,
+                                         errlen);
+        if (c || failure_is_final(err))
             return c;
-        double waited_ms = (double)(tf_now_ms() - t0);
-        if (waited_ms + 250 > timeout_ms)
+        if (tf_now_ms() - t0 + backoff_ms > timeout_ms)
             return NULL;
-        usleep(250 * 1000);
+        usleep((useconds_t)backoff_ms * 1000);
+        backoff_ms = backoff_ms * 2 > 4000 ? 4000 : backoff_ms * 2;
     }
 }
 
-static int run_one(const char *connect, const uint8_t *key, int timeout_ms, const tf_scene *s,
-                   const tf_heightfield *hf, const char *backend)
+/* After a reconnection: is the coordinator still rendering the scene this worker built? */
+static int same_render(ts_client *c, const char *connect, const tf_scene *s)
 {
     char err[1024];
-    ts_client *c = connect_patiently(connect, key, timeout_ms, err, sizeof err);
-    if (!c) {
+    tf_scene *now = tf_worker_fetch_scene(c, connect, err, sizeof err);
+    if (!now) {
         tf_error("%s", err);
-        return 1;
+        return 0;
     }
-    int status = tf_worker_loop(c, s, hf, "networked", backend);
-    ts_client_close(c);
-    return status;
+    int same = !strcmp(now->hash_hex, s->hash_hex) && now->width == s->width &&
+               now->height == s->height;
+    if (!same)
+        tf_error("%s now renders another scene (%.12s, %dx%d); leaving", connect, now->hash_hex,
+                 now->width, now->height);
+    tf_scene_free(now);
+    return same;
+}
+
+/* One worker process: serve the render, reconnecting (and joining again under a new id) each
+ * time the coordinator is lost, until the stop tuple or --timeout without a coordinator.  A
+ * result held when the connection broke is not resent: the coordinator dealt its task again
+ * when the connection closed.  first: an open connection to start with, or NULL. */
+static int run_one(const char *connect, const uint8_t *key, int timeout_ms, const tf_scene *s,
+                   const tf_heightfield *hf, const char *backend, ts_client *first)
+{
+    char err[1024];
+    for (int round = 0;; round++) {
+        ts_client *c = round == 0 && first ? first
+                                           : connect_patiently(connect, key, timeout_ms, err,
+                                                               sizeof err);
+        if (!c) {
+            tf_error("%s%s", round ? "cannot reconnect: " : "", err);
+            return 1;
+        }
+        if (round > 0 && !same_render(c, connect, s)) {
+            ts_client_close(c);
+            return 1;
+        }
+        int status = tf_worker_loop(c, s, hf, "networked", backend);
+        ts_client_close(c);
+        if (status != TF_WORKER_EXIT_LOST)
+            return status;
+        tf_info("reconnecting to %s (for up to %.1f s)", connect, timeout_ms / 1000.0);
+    }
 }
 
 /* --simulate: n synthetic workers on the cost map at path; prints one report line on stdout
@@ -111,7 +162,7 @@ static int run_processes(int nproc, const char *connect, const uint8_t *key, int
         pid_t p = fork();
         if (p == 0) {
             prctl(PR_SET_PDEATHSIG, SIGTERM);
-            _exit(run_one(connect, key, timeout_ms, s, hf, backend));
+            _exit(run_one(connect, key, timeout_ms, s, hf, backend, NULL));
         }
         pids[i] = p;
         if (p < 0)
@@ -189,8 +240,7 @@ int tf_networked_worker_run(const tf_networked_opts *o)
     }
     int status;
     if (nproc == 1) {
-        status = tf_worker_loop(c, s, hf, "networked", backend);
-        ts_client_close(c);
+        status = run_one(connect, k, timeout_ms, s, hf, backend, c);
     } else {
         ts_client_close(c);
         status = run_processes(nproc, connect, k, timeout_ms, s, hf, backend);

@@ -308,7 +308,7 @@ static void sim_serve(sim_worker *w)
         return;
     }
     tf_worker_step step = {w, sim_render, rec ? sim_payload : NULL, sim_on_take, sim_on_op,
-                           sim_on_stop};
+                           sim_on_stop, w->sh->cfg->image_w, w->sh->cfg->image_h};
     int rc = tf_worker_serve(w->client, w->id, &w->layout, &step);
     tf_payload_buf_free(&w->buf);
     /* Once the stop tuple is out the coordinator may finish and close while this worker still

@@ -15,21 +15,20 @@
 #include "heightmap_tuples.h"
 #include "log.h"
 
-/* Linda's counter idiom: in ("next_worker", ?n), out ("next_worker", n + 1). */
+/* Linda's counter idiom, half of it: in ("next_worker", ?n).  The coordinator binds id n to
+ * this connection and puts the counter back itself (coordinator/worker_role.h): a worker that
+ * could hold the counter could stop every other worker from joining. */
 static int take_worker_id(ts_client *c, int64_t *id)
 {
-    tf_tuple tmpl, got, next;
+    tf_tuple tmpl, got;
     tf_tuple_init(&tmpl);
     tf_tuple_init(&got);
-    tf_tuple_init(&next);
     int rc = tf_tuple_pack(&tmpl, "sI", "next_worker") || ts_in(c, &tmpl, &got) ||
-                     tf_tuple_get_int(&got, 1, id) ||
-                     tf_tuple_pack(&next, "si", "next_worker", *id + 1) || ts_out(c, &next)
+                     tf_tuple_get_int(&got, 1, id)
                  ? -1
                  : 0;
     tf_tuple_clear(&tmpl);
     tf_tuple_clear(&got);
-    tf_tuple_clear(&next);
     return rc;
 }
 
@@ -101,7 +100,8 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
             break;
         }
         if (tf_task_unpack(&task, &m)) {
-            tf_warn("ignoring a malformed task tuple");
+            static tf_ratelimit rl;
+            tf_warn_limited(&rl, "ignoring a malformed task tuple");
             tf_tuple_clear(&task);
             continue;
         }
@@ -112,6 +112,7 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
             break;
         }
         if (tf_task_excludes(&m, id)) {
+            tf_debug("task %" PRId64 " excludes this worker: put back", m.id);
             put_back(c, &task, step);
             usleep(200 * 1000); /* let a worker that can render it take it */
             continue;
@@ -119,6 +120,19 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
         tf_tuple_clear(&task);
         if (step->on_take)
             step->on_take(step->ctx, t1 - t0);
+        /* Whatever a task tuple says, it can only become a reported failure here, never a
+         * crash or an exit: no size, a size no image has, or a rectangle outside the image. */
+        const char *bad = tf_task_rect_problem(m.rect, step->image_w, step->image_h);
+        if (bad) {
+            snprintf(err, sizeof err, "task %" PRId64 " (%dx%d at %d,%d): %s", m.id, m.rect.w,
+                     m.rect.h, m.rect.x, m.rect.y, bad);
+            tf_warn("%s", err);
+            if (report_failure(c, m.id, id, err, step)) {
+                status = TF_SERVE_UNDELIVERED;
+                break;
+            }
+            continue;
+        }
         size_t n = (size_t)m.rect.w * (size_t)m.rect.h;
         if (n > px_cap) {
             tf_pixel *np = realloc(px, n * sizeof *px);
@@ -133,6 +147,19 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
         int64_t busy = 0;
         if (step->render(step->ctx, m.frame, m.rect, px, &counts, &busy, err, sizeof err)) {
             tf_warn("task %" PRId64 ": %s", m.id, err);
+            if (report_failure(c, m.id, id, err, step)) {
+                status = TF_SERVE_UNDELIVERED;
+                break;
+            }
+            continue;
+        }
+        long nf = step->payload ? -1 : tf_first_non_finite(px, n);
+        if (nf >= 0) {
+            /* Never emit a NaN or an infinity: the file would carry it forever. */
+            snprintf(err, sizeof err, "task %" PRId64 ": the renderer produced a non-finite value "
+                     "at pixel (%ld,%ld); not sending it", m.id, m.rect.x + nf % m.rect.w,
+                     m.rect.y + nf / m.rect.w);
+            tf_warn("%s", err);
             if (report_failure(c, m.id, id, err, step)) {
                 status = TF_SERVE_UNDELIVERED;
                 break;
@@ -272,9 +299,14 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     }
     int64_t id;
     if (tf_worker_join(c, kind, tf_backend_name(b), &id)) {
-        tf_error("cannot join the render: %s", ts_client_error(c));
+        /* A refusal (this address is excluded) is final; a lost connection is not. */
+        int refused = strstr(ts_client_error(c), "refused:") != NULL;
+        if (refused)
+            tf_error("cannot join the render: %s", ts_client_error(c));
+        else
+            tf_warn("cannot join the render: %s", ts_client_error(c));
         tf_backend_free(b);
-        return 1;
+        return refused ? 1 : TF_WORKER_EXIT_LOST;
     }
     char tag[32];
     snprintf(tag, sizeof tag, "worker %" PRId64, id);
@@ -286,15 +318,17 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
         return 1;
     }
     backend_ctx bc = {b, s, -1, {{0}}, 0};
-    tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, NULL};
+    tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, NULL, s->width, s->height};
     int rc = tf_worker_serve(c, id, &layout, &step);
     backend_ctx_free(&bc);
     if (rc == TF_SERVE_LOST)
-        tf_error("lost the coordinator: %s", ts_client_error(c));
+        tf_warn("lost the coordinator: %s", ts_client_error(c));
     else if (rc == TF_SERVE_UNDELIVERED)
-        tf_error("cannot deliver a result: %s", ts_client_error(c));
+        tf_warn("cannot deliver a result (the coordinator deals that task again): %s",
+                ts_client_error(c));
     tf_backend_free(b);
-    return rc == TF_SERVE_STOPPED ? 0 : 1;
+    tf_log_set_tag(NULL);
+    return rc == TF_SERVE_STOPPED ? 0 : TF_WORKER_EXIT_LOST;
 }
 
 int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t errlen)

@@ -18,6 +18,9 @@
 /* Exit status of a worker that could not start at all (e.g. no OpenCL device): the coordinator
  * does not restart it. */
 #define TF_WORKER_EXIT_NOSTART 3
+/* tf_worker_loop lost its coordinator (connection closed, reset, a refused request): a
+ * networked worker reconnects (worker/networked.c); a forked one is restarted. */
+#define TF_WORKER_EXIT_LOST 4
 
 /* What a worker does with a task, the one thing that differs between the real worker (the C
  * or OpenCL backend traces rays) and the simulated one (worker/simulate.c sleeps a modelled
@@ -39,6 +42,8 @@ typedef struct tf_worker_step {
     void (*on_take)(void *ctx, int64_t wait_ns);
     void (*on_op)(void *ctx);
     void (*on_stop)(void *ctx, int64_t t_ns);
+    /* The image a task's rectangle must lie in (0: not checked beyond its size). */
+    int image_w, image_h;
 } tf_worker_step;
 
 /* Join the render: take a worker id (Linda's counter idiom) and announce ("hello", id, kind,
@@ -57,7 +62,8 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
 
 /* The real worker: join, build the backend, serve until told to stop.  kind is "forked" or
  * "networked".  Returns an exit status (0 when the render finished; TF_WORKER_EXIT_NOSTART
- * when the backend cannot start); prints one line on failure.  Closes nothing: the caller
+ * when the backend cannot start; TF_WORKER_EXIT_LOST when the connection was lost); prints one
+ * line on failure.  Closes nothing: the caller
  * owns c. */
 int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, const char *kind,
                    const char *backend);

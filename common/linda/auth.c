@@ -52,8 +52,21 @@ int tf_secret_load(const char *path, uint8_t key[TF_KEY_BYTES], char *err, size_
         return -1;
     }
     struct stat st;
-    if (fstat(fd, &st) == 0 && (st.st_mode & (S_IRWXG | S_IRWXO)))
-        tf_warn("secret file %s is accessible by group or others (chmod 600 it)", path);
+    if (fstat(fd, &st) != 0) {
+        int saved = errno;
+        close(fd);
+        tf_seterr(err, errlen, "cannot stat secret file %s: %s", path, strerror(saved));
+        return -1;
+    }
+    if (st.st_mode & (S_IRGRP | S_IROTH)) {
+        /* Anyone who can read it can join the farm (and, with the frames sealed under keys
+         * derived from it, read the scene): refuse rather than warn. */
+        close(fd);
+        tf_seterr(err, errlen, "secret file %s is readable by %s (mode %04o): chmod 600 it",
+                  path, (st.st_mode & S_IROTH) ? "others" : "its group",
+                  (unsigned)(st.st_mode & 07777));
+        return -1;
+    }
     uint8_t buf[TF_SECRET_FILE_MAX + 1];
     ssize_t n = read_bounded(fd, buf, sizeof buf);
     int saved = errno;
@@ -69,6 +82,13 @@ int tf_secret_load(const char *path, uint8_t key[TF_KEY_BYTES], char *err, size_
     }
     while (n > 0 && (buf[n - 1] == '\n' || buf[n - 1] == '\r'))
         n--;
+    if (n > 0 && n < TF_SECRET_MIN_BYTES) {
+        sodium_memzero(buf, sizeof buf);
+        tf_seterr(err, errlen, "secret file %s holds %zd bytes; at least %d are needed (e.g. "
+                  "head -c 32 /dev/urandom | od -An -tx1 >%s)", path, n, TF_SECRET_MIN_BYTES,
+                  path);
+        return -1;
+    }
     int rc = tf_secret_from_bytes(buf, (size_t)n, key);
     sodium_memzero(buf, sizeof buf);
     if (rc != 0) {

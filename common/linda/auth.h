@@ -19,13 +19,15 @@
 #define TF_MAC_BYTES 32
 /* Largest secret file accepted. */
 #define TF_SECRET_FILE_MAX 4096
+/* Shortest secret accepted from a file (a 1-byte secret was guessed in 121 tries). */
+#define TF_SECRET_MIN_BYTES 16
 
 /* Initialise libsodium (idempotent, thread-safe).  0 or -1. */
 int tf_auth_init(void);
 
-/* Load the secret file and derive the key.  Warns (one line) when the file is readable by group
- * or others.  0, or -1 with a reason in err (unreadable, empty, larger than
- * TF_SECRET_FILE_MAX). */
+/* Load the secret file and derive the key.  0, or -1 with a reason in err: unreadable, empty,
+ * shorter than TF_SECRET_MIN_BYTES, larger than TF_SECRET_FILE_MAX, or readable by its group
+ * or by others (chmod 600 it). */
 int tf_secret_load(const char *path, uint8_t key[TF_KEY_BYTES], char *err, size_t errlen);
 /* Derive the key from secret bytes held in memory (tests, embedding).  0 or -1 (empty). */
 int tf_secret_from_bytes(const void *secret, size_t len, uint8_t key[TF_KEY_BYTES]);

@@ -32,12 +32,20 @@ const char *tf_op_name(int op)
 
 long tf_frame_parse(const uint8_t *buf, size_t len, tf_frame *out, char *err, size_t errlen)
 {
+    return tf_frame_parse_max(buf, len, TF_MAX_FRAME, out, err, errlen);
+}
+
+long tf_frame_parse_max(const uint8_t *buf, size_t len, uint32_t max_length, tf_frame *out,
+                        char *err, size_t errlen)
+{
     if (len < 4)
         return 0;
     uint32_t length = get_u32(buf);
-    if (length < TF_FRAME_MIN_LENGTH || length > TF_MAX_FRAME) {
+    if (max_length > TF_MAX_FRAME)
+        max_length = TF_MAX_FRAME;
+    if (length < TF_FRAME_MIN_LENGTH || length > max_length) {
         tf_seterr(err, errlen, "frame length %u out of bounds [%u, %u]", length,
-                 TF_FRAME_MIN_LENGTH, TF_MAX_FRAME);
+                 TF_FRAME_MIN_LENGTH, max_length);
         return -1;
     }
     if (len >= 5 && buf[4] != TF_PROTO_VERSION) {

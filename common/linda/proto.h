@@ -23,18 +23,25 @@
  *   OK       8    s->c  empty (out stored)
  *   PING     9    c->s  empty; a PONG comes back only if the request id is non-zero
  *   PONG    10    s->c  empty
- *   HELLO   11    s->c  u8 flags (bit 0: authentication required), then 32-byte server nonce Ns.
+ *   HELLO   11    s->c  u8 flags (bit 0: authentication required; bit 1: frames sealed after
+ *                       AUTH_OK, linda/seal.h), then 32-byte server nonce Ns.
  *                       Sent first, unsolicited, on every connection accepted from the
  *                       listening socket (never on fds added with ts_server_add_fd).
  *   AUTH    12    c->s  32-byte client nonce Nc, then 32-byte
  *                       HMAC-SHA256(key, "terrafarm-client" || Ns || Nc)
  *   AUTH_OK 13    s->c  32-byte HMAC-SHA256(key, "terrafarm-server" || Ns || Nc): proves the
  *                       server knows the key too (mutual authentication)
- *   ERROR   14    s->c  UTF-8 message, at most 256 bytes; the server closes after sending it
+ *   ERROR   14    s->c  UTF-8 message, at most 256 bytes.  With request id 0 the server closes
+ *                       after sending it; with the id of a request, that one request was
+ *                       refused by the connection's role (capability.h), nothing changed in
+ *                       the space, and the connection stays open.
  *
  * When the HELLO says authentication is required, any frame but AUTH (even a PING) before a
  * successful AUTH closes the connection.  A wrong MAC gets an ERROR and a close, and the server
  * logs "authentication failed from PEER".  The key is never sent (see auth.h).
+ * Before authentication the length field may not exceed TF_HANDSHAKE_FRAME_MAX (so a stranger
+ * cannot make the server buffer more than a handshake); after it, not more than the largest
+ * tuple the connection's role may send.
  * An unknown op, a wrong version, a length out of bounds, a body that does not decode, or a
  * frame in the wrong direction closes that one connection. */
 #ifndef TF_PROTO_H
@@ -73,6 +80,7 @@ enum tf_op {
 #define TF_OP_MAX TF_OP_ERROR
 
 #define TF_HELLO_AUTH_REQUIRED 0x01
+#define TF_HELLO_SEALED 0x02 /* after AUTH_OK every byte is in sealed records (seal.h) */
 
 /* A decoded frame header; body points into the caller's buffer (not a copy). */
 typedef struct tf_frame {
@@ -95,6 +103,12 @@ const char *tf_op_name(int op);
  * Only the header is validated here; the body is decoded by tf_tuple_decode (or by the auth
  * code) according to op.  This is the function the server runs on each connection's input. */
 long tf_frame_parse(const uint8_t *buf, size_t len, tf_frame *out, char *err, size_t errlen);
+/* The same with a smaller bound on the length field (the server reads only handshake-sized
+ * frames before authentication, and at most its role's largest tuple after). */
+long tf_frame_parse_max(const uint8_t *buf, size_t len, uint32_t max_length, tf_frame *out,
+                        char *err, size_t errlen);
+/* Largest length field accepted before authentication: an AUTH frame. */
+#define TF_HANDSHAKE_FRAME_MAX (TF_FRAME_MIN_LENGTH + 128)
 
 /* ---- growable byte buffer ------------------------------------------------------------------ */
 typedef struct tf_buf {

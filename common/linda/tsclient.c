@@ -24,8 +24,10 @@
 #include <sys/un.h>
 #include <time.h>
 #include <unistd.h>
+#include <sodium.h>
 
 #include "linda/proto.h"
+#include "linda/seal.h"
 #include "linda/sock.h"
 #include "log.h"
 
@@ -35,6 +37,9 @@ struct ts_client {
     int timeout_ms;
     uint32_t next_req;
     tf_buf in, out;
+    int sealed;            /* records on the wire after AUTH_OK (seal.h) */
+    tf_seal tx, rx;        /* tx under send_lock */
+    tf_buf raw, wire;      /* records read but not opened; records being sent */
     char err[256];
     pthread_mutex_t send_lock;
     /* heartbeat */
@@ -67,6 +72,8 @@ static ts_client *client_new(int fd)
     c->next_req = 1;
     tf_buf_init(&c->in);
     tf_buf_init(&c->out);
+    tf_buf_init(&c->raw);
+    tf_buf_init(&c->wire);
     pthread_mutex_init(&c->send_lock, NULL);
     pthread_mutex_init(&c->hb_lock, NULL);
     pthread_cond_init(&c->hb_cond, NULL);
@@ -82,6 +89,21 @@ ts_client *ts_client_from_fd(int fd)
 }
 
 /* Send every byte of buf; the caller holds send_lock.  0 or -1 with errno. */
+static int send_all(int fd, const uint8_t *buf, size_t len);
+
+/* Send plaintext bytes (whole frames), sealed when the connection is; call under send_lock. */
+static int send_plain(ts_client *c, const uint8_t *buf, size_t len)
+{
+    if (!c->sealed)
+        return send_all(c->fd, buf, len);
+    c->wire.len = c->wire.off = 0;
+    if (tf_seal_append(&c->tx, &c->wire, buf, len) != 0) {
+        errno = ENOMEM;
+        return -1;
+    }
+    return send_all(c->fd, tf_buf_head(&c->wire), c->wire.len);
+}
+
 static int send_all(int fd, const uint8_t *buf, size_t len)
 {
     while (len > 0) {
@@ -110,7 +132,7 @@ static int send_frame(ts_client *c, uint8_t op, uint32_t req, const tf_tuple *t,
         pthread_mutex_unlock(&c->send_lock);
         return fail(c, "request too large for one frame (%u bytes at most)", TF_MAX_FRAME);
     }
-    rc = send_all(c->fd, tf_buf_head(&c->out), c->out.len);
+    rc = send_plain(c, tf_buf_head(&c->out), c->out.len);
     int saved = errno;
     pthread_mutex_unlock(&c->send_lock);
     if (rc != 0)
@@ -124,6 +146,15 @@ static long read_frame(ts_client *c, tf_frame *f, int64_t deadline)
 {
     char err[160];
     for (;;) {
+        while (c->sealed && c->raw.len > 0) {
+            long k = tf_seal_open(&c->rx, tf_buf_head(&c->raw), c->raw.len, &c->in, err,
+                                  sizeof err);
+            if (k < 0)
+                return fail(c, "bad record from the coordinator: %s", err);
+            if (k == 0)
+                break;
+            tf_buf_consume(&c->raw, (size_t)k);
+        }
         long n = tf_frame_parse(tf_buf_head(&c->in), c->in.len, f, err, sizeof err);
         if (n < 0)
             return fail(c, "bad frame from the coordinator: %s", err);
@@ -144,16 +175,17 @@ static long read_frame(ts_client *c, tf_frame *f, int64_t deadline)
             return fail(c, "poll: %s", strerror(errno));
         if (pr == 0)
             continue;
-        if (tf_buf_reserve(&c->in, 65536) != 0)
+        tf_buf *dst = c->sealed ? &c->raw : &c->in;
+        if (tf_buf_reserve(dst, 65536) != 0)
             return fail(c, "out of memory reading a reply");
-        ssize_t r = recv(c->fd, c->in.data + c->in.off + c->in.len, 65536, 0);
+        ssize_t r = recv(c->fd, dst->data + dst->off + dst->len, 65536, 0);
         if (r < 0 && (errno == EINTR || errno == EAGAIN))
             continue;
         if (r < 0)
             return fail(c, "lost the coordinator connection: %s", strerror(errno));
         if (r == 0)
             return fail(c, "the coordinator closed the connection");
-        c->in.len += (size_t)r;
+        dst->len += (size_t)r;
     }
 }
 
@@ -272,7 +304,7 @@ static void *heartbeat_main(void *arg)
         uint8_t frame[TF_FRAME_HEADER] = {TF_FRAME_MIN_LENGTH, 0, 0, 0, TF_PROTO_VERSION,
                                           TF_OP_PING, 0, 0, 0, 0};
         pthread_mutex_lock(&c->send_lock);
-        int rc = send_all(c->fd, frame, sizeof frame);
+        int rc = send_plain(c, frame, sizeof frame);
         pthread_mutex_unlock(&c->send_lock);
         if (rc != 0)
             break;
@@ -317,6 +349,10 @@ void ts_client_close(ts_client *c)
         close(c->fd);
     tf_buf_free(&c->in);
     tf_buf_free(&c->out);
+    tf_buf_free(&c->raw);
+    tf_buf_free(&c->wire);
+    sodium_memzero(&c->tx, sizeof c->tx);
+    sodium_memzero(&c->rx, sizeof c->rx);
     pthread_mutex_destroy(&c->send_lock);
     pthread_mutex_destroy(&c->hb_lock);
     pthread_cond_destroy(&c->hb_cond);
@@ -335,6 +371,7 @@ static int handshake(ts_client *c, const uint8_t *key, int64_t deadline)
     if (f.op != TF_OP_HELLO || f.body_len != 1 + TF_NONCE_BYTES)
         return fail(c, "not a terrafarm coordinator (no HELLO)");
     int required = f.body[0] & TF_HELLO_AUTH_REQUIRED;
+    int sealed = f.body[0] & TF_HELLO_SEALED;
     uint8_t ns[TF_NONCE_BYTES];
     memcpy(ns, f.body + 1, TF_NONCE_BYTES);
     tf_buf_consume(&c->in, (size_t)n);
@@ -362,6 +399,17 @@ static int handshake(ts_client *c, const uint8_t *key, int64_t deadline)
         !tf_auth_server_mac_ok(key, ns, nc, f.body))
         return fail(c, "the coordinator failed to prove it knows the secret");
     tf_buf_consume(&c->in, (size_t)n);
+    if (!sealed)
+        return fail(c, "the coordinator does not seal its frames (an older terrafarm?): "
+                    "refusing to send the render in clear");
+    /* Everything after AUTH_OK is sealed: bytes already read past it are records. */
+    if (c->in.len > 0) {
+        if (tf_buf_append(&c->raw, tf_buf_head(&c->in), c->in.len) != 0)
+            return fail(c, "out of memory");
+        tf_buf_consume(&c->in, c->in.len);
+    }
+    tf_seal_init(key, ns, nc, 1, &c->tx, &c->rx);
+    c->sealed = 1;
     return 0;
 }
 

@@ -31,6 +31,7 @@
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <sodium.h>
 #include <sys/epoll.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -43,11 +44,18 @@
 
 #include "log.h"
 #include "linda/proto.h"
+#include "linda/seal.h"
 #include "linda/sock.h"
 
 #define TS_READ_CHUNK 65536
 #define TS_MAX_PIPELINE 65536 /* input bytes buffered behind a blocked request */
 #define TS_POLL_CAP_MS 250    /* longest poll when timeouts must be enforced */
+#define TS_STALL_MS 1000      /* a gap this long between iterations is a stall (see enforce_timeouts) */
+#define TS_PENALTY_SLOTS 64   /* addresses remembered for failed handshakes */
+#define TS_PENALTY_FREE_FAILS 3 /* failures from one address before it must wait */
+#define TS_PENALTY_BASE_MS 250
+#define TS_PENALTY_MAX_MS 30000
+#define TS_ACCEPT_PAUSE_MS 100 /* out of file descriptors: stop accepting this long */
 
 enum conn_state { NEED_AUTH, READY };
 
@@ -55,11 +63,17 @@ typedef struct conn {
     uint64_t id;
     int fd;
     char peer[96];
+    char addr[96];         /* peer without the port: the unit of per-address caps */
+    ts_cap_usage usage;    /* what it has used of its role */
+    tf_ratelimit refusals; /* its refused requests' log lines */
     int trusted;
     enum conn_state state;
     int dead;
     uint8_t ns[TF_NONCE_BYTES];
-    tf_buf in, out;
+    tf_buf in, out;        /* plaintext frames in and out */
+    int sealed;            /* after AUTH_OK with a key: records on the wire (seal.h) */
+    tf_seal tx, rx;
+    tf_buf raw, wire;      /* sealed: records read but not opened yet, records not yet sent */
     int64_t created_ms, last_rx_ms;
     int waiting;           /* a blocked IN/RD is queued in the space */
     int pending_take;      /* ... and whether it is an IN */
@@ -73,9 +87,21 @@ typedef struct conn {
     struct conn *next, *prev;
 } conn;
 
+/* Failed handshakes from one address (see note_auth_failure). */
+typedef struct auth_penalty {
+    char addr[96];
+    int failures;
+    int64_t until_ms, last_ms;
+} auth_penalty;
+
 struct ts_server {
     ts_space *space;
     ts_server_hooks hooks;
+    const ts_role *role;
+    size_t max_space_bytes;
+    int max_unauth, max_unauth_per_addr, max_per_addr;
+    auth_penalty penalties[TS_PENALTY_SLOTS];
+    int64_t accept_paused_until;
     int has_key;
     uint8_t key[TF_KEY_BYTES];
     int silence_ms, handshake_ms, max_conns;
@@ -127,6 +153,12 @@ ts_server *ts_server_new(ts_space *space, const ts_server_config *cfg,
     srv->max_out = cfg->max_output_bytes > 0 ? cfg->max_output_bytes
                                              : 2 * (size_t)TF_MAX_FRAME + (1u << 20);
     srv->max_conns = cfg->max_connections > 0 ? cfg->max_connections : 4096;
+    srv->role = cfg->role;
+    srv->max_space_bytes = cfg->max_space_bytes;
+    srv->max_unauth = cfg->max_unauthenticated > 0 ? cfg->max_unauthenticated : 64;
+    srv->max_unauth_per_addr =
+        cfg->max_unauthenticated_per_address > 0 ? cfg->max_unauthenticated_per_address : 8;
+    srv->max_per_addr = cfg->max_per_address > 0 ? cfg->max_per_address : 1024;
     srv->listen_fd = -1;
     srv->next_id = 1;
     srv->epfd = epoll_create1(EPOLL_CLOEXEC);
@@ -153,6 +185,7 @@ ts_space *ts_server_space(const ts_server *srv) { return srv->space; }
 
 /* ---- connections ---- */
 static void conn_touch(conn *c);
+static void addr_of(const char *peer, char *addr, size_t len);
 
 static conn *conn_new(ts_server *srv, int fd, const char *peer, int trusted)
 {
@@ -162,12 +195,16 @@ static conn *conn_new(ts_server *srv, int fd, const char *peer, int trusted)
     c->id = srv->next_id++;
     c->fd = fd;
     snprintf(c->peer, sizeof c->peer, "%s", peer);
+    addr_of(peer, c->addr, sizeof c->addr);
     c->trusted = trusted;
+    c->refusals.burst = 40;
     c->state = trusted || !srv->has_key ? READY : NEED_AUTH;
     c->created_ms = c->last_rx_ms = tf_now_ms();
     c->srv = srv;
     tf_buf_init(&c->in);
     tf_buf_init(&c->out);
+    tf_buf_init(&c->raw);
+    tf_buf_init(&c->wire);
     c->next = srv->conns;
     if (srv->conns)
         srv->conns->prev = c;
@@ -217,6 +254,10 @@ static void conn_destroy(conn *c)
     }
     tf_buf_free(&c->in);
     tf_buf_free(&c->out);
+    tf_buf_free(&c->raw);
+    tf_buf_free(&c->wire);
+    sodium_memzero(&c->tx, sizeof c->tx);
+    sodium_memzero(&c->rx, sizeof c->rx);
     free(c);
 }
 
@@ -259,17 +300,30 @@ static void conn_close(conn *c)
 /* Log why and close: the one line naming the peer. */
 static void conn_drop(conn *c, const char *why)
 {
-    tf_warn("dropping tuple-space connection from %s: %s", c->peer, why);
+    static tf_ratelimit rl;
+    tf_warn_limited(&rl, "dropping tuple-space connection from %s: %s", c->peer, why);
     conn_close(c);
 }
 
-/* Write as much queued output as the socket takes.  -1 if the connection broke. */
+/* Write as much queued output as the socket takes.  -1 if the connection broke.  A sealed
+ * connection's plaintext is sealed into records first. */
 static int conn_flush(conn *c)
 {
-    while (c->out.len > 0) {
-        ssize_t n = send(c->fd, tf_buf_head(&c->out), c->out.len, MSG_NOSIGNAL);
+    tf_buf *q = &c->out;
+    if (c->sealed) {
+        if (c->out.len > 0) {
+            if (tf_seal_append(&c->tx, &c->wire, tf_buf_head(&c->out), c->out.len) != 0) {
+                errno = ENOMEM;
+                return -1;
+            }
+            tf_buf_consume(&c->out, c->out.len);
+        }
+        q = &c->wire;
+    }
+    while (q->len > 0) {
+        ssize_t n = send(c->fd, tf_buf_head(q), q->len, MSG_NOSIGNAL);
         if (n > 0) {
-            tf_buf_consume(&c->out, (size_t)n);
+            tf_buf_consume(q, (size_t)n);
             continue;
         }
         if (n < 0 && errno == EINTR)
@@ -288,7 +342,7 @@ static int conn_check_out(conn *c, int append_rc)
         conn_drop(c, "out of memory queuing a reply");
         return -1;
     }
-    if (c->out.len > c->srv->max_out) {
+    if (c->out.len + c->wire.len > c->srv->max_out) {
         conn_drop(c, "too many unread replies (client not reading)");
         return -1;
     }
@@ -313,7 +367,7 @@ static void send_hello(conn *c)
 {
     uint8_t body[1 + TF_NONCE_BYTES];
     tf_auth_nonce(c->ns);
-    body[0] = c->srv->has_key ? TF_HELLO_AUTH_REQUIRED : 0;
+    body[0] = c->srv->has_key ? TF_HELLO_AUTH_REQUIRED | TF_HELLO_SEALED : 0;
     memcpy(body + 1, c->ns, TF_NONCE_BYTES);
     conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_HELLO, 0, body, sizeof body));
 }
@@ -333,20 +387,157 @@ uint64_t ts_server_add_fd(ts_server *srv, int fd, const char *peer)
     return c->id;
 }
 
+/* ---- admission: caps per address and for strangers, failed-handshake penalties ---- */
+
+/* "1.2.3.4:5678" -> "1.2.3.4", "[::1]:5" -> "[::1]"; labels without a port stay whole. */
+static void addr_of(const char *peer, char *addr, size_t len)
+{
+    snprintf(addr, len, "%s", peer);
+    char *colon = strrchr(addr, ':');
+    if (colon && (addr[0] != '[' || colon[-1] == ']'))
+        *colon = '\0';
+}
+
+static auth_penalty *penalty_for(ts_server *srv, const char *addr, int create)
+{
+    auth_penalty *oldest = &srv->penalties[0];
+    for (int i = 0; i < TS_PENALTY_SLOTS; i++) {
+        auth_penalty *p = &srv->penalties[i];
+        if (p->addr[0] && !strcmp(p->addr, addr))
+            return p;
+        if (p->last_ms < oldest->last_ms)
+            oldest = p;
+    }
+    if (!create)
+        return NULL;
+    memset(oldest, 0, sizeof *oldest);
+    snprintf(oldest->addr, sizeof oldest->addr, "%s", addr);
+    return oldest;
+}
+
+/* After TS_PENALTY_FREE_FAILS failures an address waits 250 ms, then 500, 1 s, ... up to 30 s
+ * before its next connection is even accepted: guessing a secret online becomes hopeless. */
+static void note_auth_failure(ts_server *srv, const char *addr)
+{
+    auth_penalty *p = penalty_for(srv, addr, 1);
+    int64_t now = tf_now_ms();
+    p->failures++;
+    p->last_ms = now;
+    if (p->failures >= TS_PENALTY_FREE_FAILS) {
+        int shift = p->failures - TS_PENALTY_FREE_FAILS;
+        int64_t wait = shift > 16 ? TS_PENALTY_MAX_MS : (int64_t)TS_PENALTY_BASE_MS << shift;
+        p->until_ms = now + (wait > TS_PENALTY_MAX_MS ? TS_PENALTY_MAX_MS : wait);
+    }
+}
+
+static void note_auth_success(ts_server *srv, const char *addr)
+{
+    auth_penalty *p = penalty_for(srv, addr, 0);
+    if (p)
+        memset(p, 0, sizeof *p);
+}
+
+/* The oldest connection still in the handshake (from addr, or from anywhere if NULL). */
+static conn *oldest_unauthenticated(ts_server *srv, const char *addr, size_t *count)
+{
+    conn *oldest = NULL;
+    size_t n = 0;
+    for (conn *c = srv->conns; c; c = c->next) {
+        if (c->state != NEED_AUTH || (addr && strcmp(c->addr, addr)))
+            continue;
+        n++;
+        if (!oldest || c->created_ms <= oldest->created_ms)
+            oldest = c;
+    }
+    if (count)
+        *count = n;
+    return oldest;
+}
+
+static void evict(conn *c, const char *why)
+{
+    static tf_ratelimit rl;
+    tf_warn_limited(&rl, "closing unauthenticated tuple-space connection from %s: %s", c->peer,
+                    why);
+    conn_close(c);
+}
+
+static void pause_accepting(ts_server *srv)
+{
+    srv->accept_paused_until = tf_now_ms() + TS_ACCEPT_PAUSE_MS;
+    if (srv->listen_added && epoll_ctl(srv->epfd, EPOLL_CTL_DEL, srv->listen_fd, NULL) == 0)
+        srv->listen_added = 0;
+}
+
+/* Decide whether a new connection from peer may stay; may close older strangers to make room.
+ * 0: keep it; -1: refuse it (logged). */
+static int admit(ts_server *srv, const char *peer)
+{
+    static tf_ratelimit rl_penalty, rl_cap;
+    char addr[96];
+    addr_of(peer, addr, sizeof addr);
+    int64_t now = tf_now_ms();
+    auth_penalty *p = penalty_for(srv, addr, 0);
+    if (p && p->until_ms > now) {
+        tf_warn_limited(&rl_penalty, "refusing tuple-space connection from %s: %d failed "
+                        "handshakes from %s, next try allowed in %lld ms",
+                        peer, p->failures, addr, (long long)(p->until_ms - now));
+        return -1;
+    }
+    if (srv->has_key) {
+        size_t here, all;
+        conn *old_here = oldest_unauthenticated(srv, addr, &here);
+        conn *old_all = oldest_unauthenticated(srv, NULL, &all);
+        if (here >= (size_t)srv->max_unauth_per_addr && old_here)
+            evict(old_here, "too many unfinished handshakes from this address");
+        else if (all >= (size_t)srv->max_unauth && old_all)
+            evict(old_all, "too many unfinished handshakes");
+    }
+    size_t same = 0;
+    for (conn *c = srv->conns; c; c = c->next)
+        same += c->state == READY && !strcmp(c->addr, addr);
+    if (same >= (size_t)srv->max_per_addr) {
+        tf_warn_limited(&rl_cap, "refusing tuple-space connection from %s: %zu connections "
+                        "from %s already", peer, same, addr);
+        return -1;
+    }
+    if (srv->nconns >= (size_t)srv->max_conns) {
+        conn *old = oldest_unauthenticated(srv, NULL, NULL);
+        if (!old) {
+            tf_warn_limited(&rl_cap, "refusing tuple-space connection from %s: %d connections "
+                            "open", peer, srv->max_conns);
+            return -1;
+        }
+        evict(old, "connection limit reached");
+    }
+    return 0;
+}
+
 static void accept_all(ts_server *srv)
 {
+    static tf_ratelimit rl;
     for (;;) {
         char peer[96];
         int fd = tf_sock_accept(srv->listen_fd, peer, sizeof peer);
         if (fd < 0) {
-            if (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR &&
-                errno != ECONNABORTED)
-                tf_warn("tuple-space accept failed: %s", strerror(errno));
+            if (errno == EMFILE || errno == ENFILE || errno == ENOBUFS || errno == ENOMEM) {
+                /* Out of descriptors: free one held by a stranger, else stop accepting for a
+                 * moment (the listener would otherwise stay readable and spin the loop). */
+                conn *old = oldest_unauthenticated(srv, NULL, NULL);
+                if (old) {
+                    evict(old, "out of file descriptors");
+                    continue;
+                }
+                tf_warn_limited(&rl, "tuple-space accept failed: %s; pausing new connections",
+                                strerror(errno));
+                pause_accepting(srv);
+            } else if (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR &&
+                       errno != ECONNABORTED) {
+                tf_warn_limited(&rl, "tuple-space accept failed: %s", strerror(errno));
+            }
             return;
         }
-        if (srv->nconns >= (size_t)srv->max_conns) {
-            tf_warn("refusing tuple-space connection from %s: %d connections open", peer,
-                    srv->max_conns);
+        if (admit(srv, peer) != 0) {
             close(fd);
             continue;
         }
@@ -378,12 +569,51 @@ static void on_waiter_served(void *ctx, uint64_t waiter_id, tf_tuple *t)
         reply_tuple(c, TF_OP_TUPLE, c->pending_req, t);
 }
 
+/* A request its role does not allow: an ERROR reply for that request (the connection stays),
+ * and one rate-limited line naming the peer. */
+static void refuse_request(conn *c, const tf_frame *f, const tf_tuple *t, const char *why)
+{
+    /* Per connection (a peer's first refusals are all named), and in all (many peers). */
+    static tf_ratelimit all = {.burst = 200};
+    if (tf_ratelimit_take(&all, (long long)tf_now_ms(), NULL)) {
+        char shown[160];
+        tf_tuple_format(t, shown, sizeof shown);
+        tf_warn_limited(&c->refusals, "%s %s from %s (%s) refused: %s", tf_op_name(f->op), shown,
+                        c->peer, c->srv->role ? c->srv->role->name : "?", why);
+    }
+    char msg[TF_PROTO_ERROR_MAX];
+    snprintf(msg, sizeof msg, "refused: %s", why);
+    conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_ERROR, f->request_id, msg, strlen(msg)));
+}
+
 static int handle_out(conn *c, const tf_frame *f, char *err, size_t errlen)
 {
     tf_tuple t, seen;
     if (tf_tuple_decode(f->body, f->body_len, &t, 0, err, errlen) != 0)
         return -1;
     ts_server *srv = c->srv;
+    if (srv->role) {
+        char why[TF_PROTO_ERROR_MAX - 16];
+        ts_cap_verdict v = ts_cap_check(srv->role, &c->usage, c->id, TS_CAP_OUT, 0, &t, why,
+                                        sizeof why);
+        if (v == TS_CAP_ALLOW && srv->max_space_bytes) {
+            ts_space_stats st;
+            ts_space_get_stats(srv->space, &st);
+            if (st.bytes + tf_tuple_bytes(&t) > srv->max_space_bytes) {
+                snprintf(why, sizeof why, "the tuple space is full (%zu of %zu bytes)", st.bytes,
+                         srv->max_space_bytes);
+                v = TS_CAP_REFUSE;
+            }
+        }
+        if (v != TS_CAP_ALLOW) {
+            if (v == TS_CAP_REFUSE && !c->dead)
+                refuse_request(c, f, &t, why);
+            else if (!c->dead)
+                reply_tuple(c, TF_OP_OK, f->request_id, NULL); /* discarded: not stored */
+            tf_tuple_clear(&t);
+            return 0;
+        }
+    }
     int want_copy = srv->hooks.on_out != NULL;
     if (want_copy && tf_tuple_copy(&seen, &t) != 0) {
         tf_tuple_clear(&t);
@@ -414,6 +644,18 @@ static int handle_take_or_read(conn *c, const tf_frame *f, char *err, size_t err
     ts_server *srv = c->srv;
     int take = f->op == TF_OP_IN || f->op == TF_OP_INP;
     int rc = 0;
+    if (srv->role) {
+        char why[TF_PROTO_ERROR_MAX - 16];
+        int blocking = f->op == TF_OP_IN || f->op == TF_OP_RD;
+        ts_cap_verdict v = ts_cap_check(srv->role, &c->usage, c->id, take ? TS_CAP_IN : TS_CAP_RD,
+                                        blocking, &tmpl, why, sizeof why);
+        if (v != TS_CAP_ALLOW) {
+            if (!c->dead)
+                refuse_request(c, f, &tmpl, v == TS_CAP_REFUSE ? why : "not served");
+            tf_tuple_clear(&tmpl);
+            return 0;
+        }
+    }
     if (f->op == TF_OP_IN || f->op == TF_OP_RD) {
         c->waiting = 1;
         c->pending_take = take;
@@ -456,15 +698,37 @@ static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
     }
     const uint8_t *nc = f->body, *mac = f->body + TF_NONCE_BYTES;
     if (!tf_auth_client_mac_ok(c->srv->key, c->ns, nc, mac)) {
-        tf_warn("authentication failed from %s", c->peer);
+        static tf_ratelimit rl;
+        tf_warn_limited(&rl, "authentication failed from %s", c->peer);
+        note_auth_failure(c->srv, c->addr);
         conn_refuse(c, "authentication failed");
         return 0;
     }
+    note_auth_success(c->srv, c->addr);
     uint8_t proof[TF_MAC_BYTES];
     tf_auth_server_mac(c->srv->key, c->ns, nc, proof);
     c->state = READY;
-    conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_AUTH_OK, f->request_id, proof,
-                                          sizeof proof));
+    if (conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_AUTH_OK, f->request_id, proof,
+                                              sizeof proof)) != 0)
+        return 0;
+    /* AUTH_OK goes out in clear; every byte after it, both ways, is sealed (seal.h). */
+    if (tf_buf_append(&c->wire, tf_buf_head(&c->out), c->out.len) != 0) {
+        tf_seterr(err, errlen, "out of memory");
+        return -1;
+    }
+    tf_buf_consume(&c->out, c->out.len);
+    tf_seal_init(c->srv->key, c->ns, nc, 0, &c->tx, &c->rx);
+    c->sealed = 1;
+    if (c->in.len > (size_t)f->body_len + TF_FRAME_HEADER) {
+        /* Bytes after AUTH in the same read are already sealed records: back to raw. */
+        size_t extra = c->in.len - ((size_t)f->body_len + TF_FRAME_HEADER);
+        if (tf_buf_append(&c->raw, tf_buf_head(&c->in) + f->body_len + TF_FRAME_HEADER,
+                          extra) != 0) {
+            tf_seterr(err, errlen, "out of memory");
+            return -1;
+        }
+        c->in.len -= extra;
+    }
     return 0;
 }
 
@@ -472,7 +736,8 @@ static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
 static int handle_frame(conn *c, const tf_frame *f, char *err, size_t errlen)
 {
     if (c->state == NEED_AUTH && f->op != TF_OP_AUTH) {
-        tf_warn("unauthenticated %s from %s refused", tf_op_name(f->op), c->peer);
+        static tf_ratelimit rl;
+        tf_warn_limited(&rl, "unauthenticated %s from %s refused", tf_op_name(f->op), c->peer);
         conn_refuse(c, "authentication required");
         return 0;
     }
@@ -497,13 +762,26 @@ static int handle_frame(conn *c, const tf_frame *f, char *err, size_t errlen)
     }
 }
 
+/* The largest length field c may send now: a handshake before authentication, then the
+ * largest tuple its role allows (plus the frame header), then TF_MAX_FRAME. */
+static uint32_t conn_max_frame(const conn *c)
+{
+    if (c->state == NEED_AUTH)
+        return TF_HANDSHAKE_FRAME_MAX;
+    const ts_role *role = c->srv->role;
+    if (role && role->max_tuple_bytes && role->max_tuple_bytes < TF_MAX_FRAME - 64)
+        return (uint32_t)role->max_tuple_bytes + 64;
+    return TF_MAX_FRAME;
+}
+
 /* Parse and serve the complete frames in c's input buffer (see the ordering invariant). */
 static void conn_process_input(conn *c)
 {
     char err[160];
     while (!c->dead && c->in.len > 0) {
         tf_frame f;
-        long n = tf_frame_parse(tf_buf_head(&c->in), c->in.len, &f, err, sizeof err);
+        long n = tf_frame_parse_max(tf_buf_head(&c->in), c->in.len, conn_max_frame(c), &f, err,
+                                    sizeof err);
         if (n < 0) {
             conn_drop(c, err);
             return;
@@ -527,28 +805,71 @@ static void conn_process_input(conn *c)
     }
 }
 
+/* A sealed connection: open the complete records read so far into c->in, serving frames as
+ * they become whole, while c->in has room (at most one maximal frame plus one record: a
+ * partial frame can always take one more record, and a buffer that full holds a whole frame).
+ * -1 once the connection was dropped. */
+static int unseal_and_serve(conn *c)
+{
+    size_t limit = (size_t)conn_max_frame(c) + 4;
+    for (;;) {
+        if (c->waiting && c->in.len >= TS_MAX_PIPELINE)
+            return 0;
+        if (c->in.len >= limit || c->raw.len == 0)
+            return 0;
+        char err[160];
+        long n = tf_seal_open(&c->rx, tf_buf_head(&c->raw), c->raw.len, &c->in, err, sizeof err);
+        if (n < 0) {
+            conn_drop(c, err);
+            return -1;
+        }
+        if (n == 0)
+            return 0;
+        tf_buf_consume(&c->raw, (size_t)n);
+        conn_process_input(c);
+        if (c->dead)
+            return -1;
+    }
+}
+
 /* Read what is available (bounded), then serve it. */
 static void conn_readable(conn *c)
 {
     conn_touch(c); /* input, replies and interest may all change */
+    if (c->sealed && unseal_and_serve(c) != 0)
+        return;
     for (;;) {
         if (c->waiting && c->in.len >= TS_MAX_PIPELINE)
             break;
         /* Never buffer more than one maximal frame: the parser refuses longer lengths, so a
-         * buffer this full always holds a complete frame to consume first. */
-        size_t room = (size_t)TF_MAX_FRAME + 4 - c->in.len;
+         * buffer this full always holds a complete frame to consume first.  Sealed: one record
+         * at a time, opened as room allows. */
+        tf_buf *dst = c->sealed ? &c->raw : &c->in;
+        size_t limit = c->sealed ? (size_t)TF_SEAL_RECORD_MAX + TF_SEAL_ABYTES + 4
+                                 : (size_t)conn_max_frame(c) + 4;
+        size_t room = dst->len < limit ? limit - dst->len : 0;
         size_t want = room < TS_READ_CHUNK ? room : TS_READ_CHUNK;
         if (want == 0)
             break;
-        if (tf_buf_reserve(&c->in, want) != 0) {
+        if (tf_buf_reserve(dst, want) != 0) {
             conn_drop(c, "out of memory buffering input");
             return;
         }
-        ssize_t n = recv(c->fd, c->in.data + c->in.off + c->in.len, want, 0);
+        ssize_t n = recv(c->fd, dst->data + dst->off + dst->len, want, 0);
         if (n > 0) {
-            c->in.len += (size_t)n;
+            dst->len += (size_t)n;
             c->last_rx_ms = tf_now_ms();
-            conn_process_input(c);
+            if (c->sealed) {
+                if (unseal_and_serve(c) != 0)
+                    return;
+            } else {
+                int was_sealed = c->sealed;
+                conn_process_input(c);
+                if (c->dead)
+                    return;
+                if (!was_sealed && c->sealed && unseal_and_serve(c) != 0)
+                    return; /* records that came with the AUTH */
+            }
             if (c->dead)
                 return;
             continue;
@@ -557,7 +878,7 @@ static void conn_readable(conn *c)
             continue;
         if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
             break;
-        if (n == 0 && c->in.len > 0)
+        if (n == 0 && (c->in.len > 0 || c->raw.len > 0))
             conn_drop(c, "closed in the middle of a frame");
         else if (n == 0)
             conn_close(c);
@@ -574,7 +895,7 @@ static void sync_conn_interest(conn *c)
     uint32_t want = 0;
     if (!(c->waiting && c->in.len >= TS_MAX_PIPELINE))
         want |= EPOLLIN;
-    if (c->out.len > 0)
+    if (c->out.len > 0 || c->wire.len > 0)
         want |= EPOLLOUT;
     if (c->ep_added && want == c->ep_events)
         return;
@@ -598,7 +919,7 @@ static void flush_dirty(ts_server *srv)
         c->dirty = 0;
         if (c->dead)
             continue;
-        if (c->out.len > 0 && conn_flush(c) != 0) {
+        if ((c->out.len > 0 || c->wire.len > 0) && conn_flush(c) != 0) {
             conn_drop(c, strerror(errno));
             continue;
         }
@@ -609,8 +930,20 @@ static void flush_dirty(ts_server *srv)
 static void enforce_timeouts(ts_server *srv)
 {
     int64_t now = tf_now_ms();
-    if (now - srv->last_timeout_check_ms < 100) /* timeouts are seconds: check 10 times a second */
+    int64_t gap = now - srv->last_timeout_check_ms;
+    if (gap < 100) /* timeouts are seconds: check 10 times a second */
         return;
+    if (srv->last_timeout_check_ms > 0 && gap > TS_STALL_MS) {
+        /* The server itself did not run for a while (SIGSTOP, a paused VM, a long step): what
+         * peers sent meanwhile has just been read, and silence during the stall is ours, not
+         * theirs.  Every silence timer starts again. */
+        static tf_ratelimit rl;
+        if (srv->silence_ms > 0 && gap > srv->silence_ms / 2)
+            tf_warn_limited(&rl, "the tuple-space server did not run for %.1f s (paused?); "
+                            "restarting every connection's silence timer", (double)gap / 1000);
+        for (conn *c = srv->conns; c; c = c->next)
+            c->last_rx_ms = now;
+    }
     srv->last_timeout_check_ms = now;
     for (conn *c = srv->conns, *next; c; c = next) {
         next = c->next;
@@ -627,7 +960,7 @@ static void enforce_timeouts(ts_server *srv)
  * epoll_wait's event array, or 0 if it cannot be allocated. */
 static size_t sync_interest(ts_server *srv)
 {
-    if (srv->listen_fd >= 0 && !srv->listen_added) {
+    if (srv->listen_fd >= 0 && !srv->listen_added && tf_now_ms() >= srv->accept_paused_until) {
         struct epoll_event ev = {.events = EPOLLIN, .data.ptr = NULL};
         if (epoll_ctl(srv->epfd, EPOLL_CTL_ADD, srv->listen_fd, &ev) == 0)
             srv->listen_added = 1;
@@ -694,6 +1027,14 @@ int ts_server_run_once(ts_server *srv, int timeout_ms)
 }
 
 size_t ts_server_conn_count(const ts_server *srv) { return srv->nconns; }
+
+size_t ts_server_unauthenticated_count(const ts_server *srv)
+{
+    size_t n = 0;
+    for (const conn *c = srv->conns; c; c = c->next)
+        n += c->state == NEED_AUTH;
+    return n;
+}
 
 size_t ts_server_conn_ids(const ts_server *srv, uint64_t *ids, size_t max)
 {

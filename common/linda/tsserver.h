@@ -8,12 +8,23 @@
  * thread; tuples it outs wake network waiters immediately, whose replies go out on the next
  * iteration).
  *
+ * With a key, every byte after the handshake travels in sealed records (seal.h), and every
+ * request is checked against the connection's role (capability.h) before the space sees it.
+ *
  * Connections are non-blocking, with a bounded input buffer (one frame of at most TF_MAX_FRAME)
  * and a bounded output buffer (a client that stops reading its replies is dropped when more
  * than max_output_bytes are queued).  Any malformed, oversized, unknown-op, wrong-version or
  * unauthenticated frame closes that connection only, logging one line that names the peer.
  * A connection that sends nothing (not even a PING) for silence_timeout_ms is closed; so is
- * one that has not finished the authentication handshake within handshake_timeout_ms.  When a
+ * one that has not finished the authentication handshake within handshake_timeout_ms.  The
+ * silence is judged only after what arrived has been read, and never across a stall of the
+ * server itself (the process stopped, a VM paused, a long step between iterations): when the
+ * clock jumps between two iterations, every silence timer starts again.
+ *
+ * Bounded resources: before authentication only handshake-sized frames are read (proto.h);
+ * unauthenticated connections have their own caps (see the config) and deadline; an address
+ * that fails the handshake repeatedly is made to wait, doubling, before it may try again;
+ * every repeated warning is rate-limited (log.h).  When a
  * connection closes, its blocked requests are cancelled and on_disconnect runs.
  *
  * Hooks (all optional) let the coordinator lease tasks: on_take runs when a connection removes a
@@ -29,6 +40,7 @@
 #include <stdint.h>
 
 #include "linda/auth.h"
+#include "linda/capability.h"
 #include "linda/tuple.h"
 #include "linda/tuplespace.h"
 
@@ -54,6 +66,19 @@ typedef struct ts_server_config {
     int handshake_timeout_ms; /* <= 0: 5000 */
     size_t max_output_bytes;  /* <= 0: 2 * TF_MAX_FRAME + 1 MiB (room for one largest reply) */
     int max_connections;      /* <= 0: 4096; accepted connections beyond it are closed */
+    /* The role of every connection, accepted or added by fd (capability.h); NULL: every
+     * connection is privileged (the tuple space as plain Linda: tests, benchmarks). */
+    const ts_role *role;
+    /* With a role: an out is refused once the space would hold more than this many bytes
+     * (tf_tuple_bytes); 0: no limit. */
+    size_t max_space_bytes;
+    /* Connections that have not finished the handshake: at most this many in all and from
+     * one address; a new one beyond either cap closes the oldest such connection (so idle
+     * strangers cannot lock real workers out: a worker needs one round trip).  <= 0: 64, 8. */
+    int max_unauthenticated, max_unauthenticated_per_address;
+    /* Authenticated (or loopback) connections from one address beyond this are refused.
+     * <= 0: 1024. */
+    int max_per_address;
 } ts_server_config;
 
 /* Create the server over space (not owned: the caller frees it after the server).  cfg and
@@ -79,6 +104,9 @@ uint64_t ts_server_add_fd(ts_server *srv, int fd, const char *peer);
  * happens) for socket events, accept, read, serve, write, enforce timeouts.  Returns the number
  * of sockets that had events, or -1 on a fatal poll error (EINTR counts as 0 events). */
 int ts_server_run_once(ts_server *srv, int timeout_ms);
+
+/* Accepted connections that have not finished the handshake. */
+size_t ts_server_unauthenticated_count(const ts_server *srv);
 
 /* Open connections (authenticated or not) and their ids. */
 size_t ts_server_conn_count(const ts_server *srv);

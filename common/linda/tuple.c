@@ -451,8 +451,22 @@ char *tf_tuple_format(const tf_tuple *t, char *buf, size_t buflen)
             appendf(buf, buflen, &used, "%s%" PRId64, sep, f->v.i);
         else if (f->type == TF_FIELD_DOUBLE)
             appendf(buf, buflen, &used, "%s%.17g", sep, f->v.d);
-        else if (f->type == TF_FIELD_STRING)
-            appendf(buf, buflen, &used, "%s\"%.64s\"", sep, (const char *)f->v.bytes.ptr);
+        else if (f->type == TF_FIELD_STRING) {
+            /* Peer-supplied text goes into log lines: control bytes and quotes are escaped so a
+             * tuple cannot forge a line of its own. */
+            char shown[64 * 4 + 4];
+            size_t k = 0;
+            for (uint32_t j = 0; j < f->v.bytes.len && j < 64; j++) {
+                unsigned char ch = f->v.bytes.ptr[j];
+                if (ch < 0x20 || ch >= 0x7f || ch == '"' || ch == '\\')
+                    k += (size_t)snprintf(shown + k, sizeof shown - k, "\\x%02x", ch);
+                else
+                    shown[k++] = (char)ch;
+            }
+            shown[k] = '\0';
+            appendf(buf, buflen, &used, "%s\"%s%s\"", sep, shown,
+                    f->v.bytes.len > 64 ? "..." : "");
+        }
         else
             appendf(buf, buflen, &used, "%sblob[%" PRIu32 "]", sep, f->v.bytes.len);
     }

@@ -7,6 +7,8 @@
 #     an unknown op, a half frame then close, ...) sent to the port of a render in progress,
 #     with and without a secret, each close only their own connection; the render completes
 #     and its image is identical.
+#  3. Secret files: one shorter than 16 bytes, and one readable by others, are refused by
+#     both `render` and `worker` with one line naming the file, before anything starts.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=480x270
@@ -54,4 +56,23 @@ n=$(grep -c 'dropping tuple-space connection' "$T/garbage.err")
 say "coordinator dropped $n bad connections"
 [ "$n" -ge 6 ] || fail "expected at least 6 dropped connections: $(cat "$T/garbage.err")"
 same "$T/ref.exr" "$T/garbage.exr" "render under garbage"
-echo "farm_security: wrong secret refused, garbage dropped, renders intact"
+say "3. weak secret files are refused"
+printf 'short secret\n' >"$T/short.key"; chmod 600 "$T/short.key"
+cp "$T/good.key" "$T/open.key"; chmod 644 "$T/open.key"
+for k in short open; do
+    for cmd in render worker; do
+        if [ $cmd = render ]; then
+            "$TF_BIN" render "$SCENE" -j 0 --size 32x18 --secret-file "$T/$k.key" \
+                --listen 127.0.0.1:0 -o "$T/weak.exr" 2>"$T/weak.err" </dev/null
+        else
+            "$TF_BIN" worker --connect 127.0.0.1:9 --secret-file "$T/$k.key" -j 1 2>"$T/weak.err"
+        fi
+        rc=$?
+        [ $rc -ne 0 ] || fail "$cmd accepted the $k secret file"
+        [ "$(wc -l <"$T/weak.err")" -eq 1 ] || fail "$cmd: refusal of the $k secret is not one line: $(cat "$T/weak.err")"
+        grep -q "$T/$k.key" "$T/weak.err" || fail "$cmd: refusal does not name the file: $(cat "$T/weak.err")"
+        say "$cmd, $k secret: $(cat "$T/weak.err")"
+    done
+done
+[ ! -e "$T/weak.exr" ] || fail "a refused secret left an output file"
+echo "farm_security: wrong secret refused, garbage dropped, weak secrets refused, renders intact"

@@ -81,8 +81,7 @@ class Conn:
 def main():
     c = Conn(sys.argv[1], int(sys.argv[2]))
     op, body = c.call(IN, [(STRING, "next_worker"), (INT, None)])
-    me = dec(body)[1]
-    c.call(OUT, [(STRING, "next_worker"), (INT, me + 1)])
+    me = dec(body)[1]  # the coordinator binds this id to the connection and restores the counter
     c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, "failing"),
                  (INT, os.getpid()), (STRING, "c")])
     # ("task", id, frame, x, y, w, h, excluded)

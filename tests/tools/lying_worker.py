@@ -98,7 +98,7 @@ def main():
     tiled, tw, th, pixel = layout_of(scene[5].decode())
     op, body = c.call(IN, [(STRING, "next_worker"), (INT, None)])
     me = dec(body)[1]
-    c.call(OUT, [(STRING, "next_worker"), (INT, me + 1)])
+    # the coordinator binds this id to the connection and restores the counter itself
     c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, "lying"),
                  (INT, os.getpid()), (STRING, "c")])
     # ("task", id, frame, x, y, w, h, excluded)

@@ -1,0 +1,72 @@
+#!/bin/sh
+# farm_verify.sh: spot checks catch a lying worker (--verify, coordinator/verify.h; issue 13).
+# Three networked workers; one of them is a real `terrafarm worker` whose results pass through
+# tests/tools/lying_proxy.py (connecting from 127.0.0.2, a machine of its own), which changes one byte of every result's packed chunks (sizes
+# kept: the structural checks cannot see it).  With --verify 0.2 the coordinator must catch it
+# (a mismatch decided by a third render), exclude it, deal its tasks again, and finish with an
+# image identical to a clean render; the statistics report the checks and their cost.  Without
+# --verify the same liar gets its lies into the file (checked too, so the test can fail).
+. "$(dirname "$0")/lib.sh"
+e2e_init
+SIZE=480x270
+TASKS=rows:2
+PROXY="$TF_ROOT/tests/tools/lying_proxy.py"
+
+render -q -j 1 --size $SIZE --tasks $TASKS -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
+
+# farm TAG EXTRA...: coordinator (-j 0) + an honest worker, a liar through the proxy, and a
+# second honest worker; waits for the coordinator (status in $rc).
+farm() {
+    tag=$1; shift
+    "$TF_BIN" render "$SCENE" -j 0 --size $SIZE --tasks $TASKS --listen 127.0.0.1:0 \
+        -o "$T/$tag.exr" --stats "$T/$tag.json" "$@" 2>"$T/$tag.err" &
+    coord=$!; e2e_track $coord
+    port=$(e2e_port "$T/$tag.err") || fail "coordinator printed no port: $(cat "$T/$tag.err")"
+    python3 "$PROXY" 127.0.0.1 "$port" 127.0.0.2 >"$T/$tag.proxy" 2>&1 &
+    proxy=$!; e2e_track $proxy
+    i=0
+    until grep -q 'listening on' "$T/$tag.proxy" 2>/dev/null; do
+        i=$((i + 1)); [ $i -gt 100 ] && fail "the proxy did not start: $(cat "$T/$tag.proxy")"
+        sleep 0.1
+    done
+    pport=$(sed -n 's/listening on //p' "$T/$tag.proxy")
+    "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -v 2>"$T/$tag.a.err" &
+    a=$!; e2e_track $a
+    "$TF_BIN" worker --connect 127.0.0.1:$pport -j 1 -q --timeout 2000 2>"$T/$tag.liar.err" &
+    liar=$!; e2e_track $liar
+    "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -v 2>"$T/$tag.c.err" &
+    c=$!; e2e_track $c
+    wait_exit $coord 120
+    crc=$rc
+    wait_exit $a 30; [ $rc -eq 0 ] || fail "$tag: honest worker exited $rc (coordinator $crc: $(grep -v 'rows ' "$T/$tag.err" | tail -3)): $(grep -v 'debug: task' "$T/$tag.a.err")"
+    wait_exit $c 30; [ $rc -eq 0 ] || fail "$tag: honest worker exited $rc (coordinator $crc: $(grep -v 'rows ' "$T/$tag.err" | tail -3)): $(grep -v 'debug: task' "$T/$tag.c.err")"
+    wait_exit $liar 30
+    kill $proxy 2>/dev/null
+    rc=$crc
+}
+
+say "1. --verify 0.2 with one lying worker among three"
+farm verify --verify 0.2
+[ $rc -eq 0 ] || fail "render with --verify exited $rc: $(tail -5 "$T/verify.err")"
+grep -q 'altered a result' "$T/verify.proxy" || fail "the liar never lied"
+same "$T/ref.exr" "$T/verify.exr" "--verify 0.2 with a liar"
+excluded=$(jstat workers_excluded "$T/verify.json")
+mism=$(jstat verify_mismatches "$T/verify.json")
+checks=$(jstat verify_checks "$T/verify.json")
+cost=$(jstat verify_cost "$T/verify.json")
+[ "$excluded" -ge 1 ] || fail "no worker excluded: $(grep -i 'lied\|verify\|differen' "$T/verify.err")"
+[ "$mism" -ge 1 ] || fail "no mismatch counted"
+grep -q 'lied: its result of task' "$T/verify.err" || fail "the log does not name the liar"
+say "$(grep -m1 'lied:' "$T/verify.err")"
+say "checks $checks, mismatches $mism, workers excluded $excluded, verify_cost $cost of the workers' time"
+
+say "2. the same liar without --verify: its lies reach the file"
+farm noverify
+[ $rc -eq 0 ] || fail "render without --verify exited $rc: $(tail -5 "$T/noverify.err")"
+if cmp -s "$T/ref.exr" "$T/noverify.exr"; then
+    grep -q 'altered a result' "$T/noverify.proxy" && fail "lies were told but the image is identical: the test cannot see lies"
+    say "(the liar rendered nothing this time)"
+else
+    say "without --verify the image differs from the reference, as expected"
+fi
+echo "farm_verify: liar caught and excluded, image identical; checks=$checks cost=$cost"

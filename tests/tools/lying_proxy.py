@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""tests/tools/lying_proxy.py: makes a real worker a liar.  A TCP proxy for a coordinator
+without a secret (loopback: frames in clear, common/linda/proto.h) that passes everything
+through but changes one byte in the middle of the packed chunks of every result the worker
+puts (("result", ...) field 9, common/farmproto.h), keeping every size: the result stays
+structurally valid, only its pixels lie.  Only --verify (coordinator/verify.h) can tell.
+
+Usage: lying_proxy.py HOST PORT [SOURCE_ADDRESS]
+It connects to the coordinator from SOURCE_ADDRESS (e.g. 127.0.0.2), as a machine of its own.
+Prints "listening on PORT" once ready, then one line per altered result; runs until killed."""
+import socket
+import struct
+import sys
+import threading
+
+OUT = 1
+
+
+def field_span(body, index):
+    """(offset, length) of field `index` of the tuple encoded in body, or None."""
+    n, pos = body[0], 1
+    for i in range(n):
+        tag = body[pos]
+        pos += 1
+        if tag & 0x80:
+            if i == index:
+                return None
+            continue
+        if tag in (1, 2):
+            span = (pos, 8)
+            pos += 8
+        else:
+            (ln,) = struct.unpack_from("<I", body, pos)
+            span = (pos + 4, ln)
+            pos += 4 + ln
+        if i == index:
+            return span
+    return None
+
+
+def lie(frame):
+    """frame: one whole frame (length field included).  Returns it, altered if a result."""
+    if len(frame) < 11 or frame[5] != OUT:
+        return frame
+    body = bytearray(frame[10:])
+    first = field_span(body, 0)
+    if not first or bytes(body[first[0]:first[0] + first[1]]) != b"result":
+        return frame
+    span = field_span(body, 9)
+    if not span or span[1] == 0:
+        return frame
+    body[span[0] + span[1] // 2] ^= 0x01
+    print("altered a result", flush=True)
+    return frame[:10] + bytes(body)
+
+
+def worker_to_coordinator(src, dst):
+    buf = b""
+    try:
+        while True:
+            data = src.recv(65536)
+            if not data:
+                break
+            buf += data
+            while len(buf) >= 4:
+                (length,) = struct.unpack_from("<I", buf)
+                if len(buf) < 4 + length:
+                    break
+                frame, buf = buf[:4 + length], buf[4 + length:]
+                dst.sendall(lie(frame))
+    except OSError:
+        pass
+    for s in (src, dst):
+        try:
+            s.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+
+
+def coordinator_to_worker(src, dst):
+    try:
+        while True:
+            data = src.recv(65536)
+            if not data:
+                break
+            dst.sendall(data)
+    except OSError:
+        pass
+    for s in (src, dst):
+        try:
+            s.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+
+
+def main():
+    host, port = sys.argv[1], int(sys.argv[2])
+    source = (sys.argv[3], 0) if len(sys.argv) > 3 else None
+    ls = socket.socket()
+    ls.bind(("127.0.0.1", 0))
+    ls.listen(64)
+    print("listening on %d" % ls.getsockname()[1], flush=True)
+    while True:
+        c, _ = ls.accept()
+        try:
+            s = socket.create_connection((host, port), source_address=source)
+        except OSError:
+            c.close()
+            continue
+        threading.Thread(target=worker_to_coordinator, args=(c, s), daemon=True).start()
+        threading.Thread(target=coordinator_to_worker, args=(s, c), daemon=True).start()
+
+
+if __name__ == "__main__":
+    main()

@@ -62,10 +62,19 @@ BENCHES   := $(BENCH_SRC:bench/%.c=$(BUILD)/bench/%)
 LIB       := $(BUILD)/libterrafarm.a
 PROG      := $(BIN)/terrafarm
 
-.PHONY: all test asan bench bench-deps fuzz deps clean install
+.PHONY: all test asan bench bench-deps fuzz deps clean install FORCE
 all: $(PROG)
 
-$(BUILD)/%.o: %.c
+# Every object depends on the compiler flags it was built with (the version among them), so
+# changing CFLAGS or VERSION rebuilds what it must instead of linking stale objects.
+FLAGS_STAMP := $(BUILD)/cflags.txt
+$(FLAGS_STAMP): FORCE
+	@mkdir -p $(dir $@)
+	@printf '%s\n' '$(subst ','\'',$(ALL_CFLAGS))' >$@.new
+	@if cmp -s $@.new $@; then rm -f $@.new; else mv -f $@.new $@; fi
+FORCE:
+
+$(BUILD)/%.o: %.c $(FLAGS_STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -MMD -MP -c $< -o $@
 

@@ -97,6 +97,12 @@ $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 # libFuzzer targets (clang).  The harness sources are plain LLVMFuzzerTestOneInput files; the
 # test suite also links each one with tests/fuzz/replay_main.c (gcc) to replay the corpus.
 FUZZ_LIB_SRC := $(LIB_SRC)
+# Helper programs of the e2e tests (tests/tools/*.c), e.g. exrcmp.
+TOOLS := $(patsubst tests/tools/%.c,$(BUILD)/tools/%,$(wildcard tests/tools/*.c))
+$(BUILD)/tools/%: tests/tools/%.c $(LIB_OBJ)
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
+
 $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB_SRC)
 	@mkdir -p $(dir $@)
 	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon \

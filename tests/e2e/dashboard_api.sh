@@ -203,11 +203,21 @@ pid=$!; e2e_track $pid
 url=$(dashboard_url "$T/seq.err" $pid)
 freeze_workers $pid
 python3 - "$url" "$T" <<'PY' || { thaw_workers $pid; fail "polling the sequence's API"; }
-import sys, time, urllib.request
+import json, sys, time, urllib.request
 base, d = sys.argv[1], sys.argv[2]
+# The snapshot the API serves is refreshed every 200 ms: wait (up to 30 s, the workers frozen)
+# until it shows the render under way with tasks out, then keep that view.
+for attempt in range(300):
+    got = {}
+    for name in ("status", "tasks"):
+        with urllib.request.urlopen(base + "api/" + name, timeout=10) as r:
+            got[name] = r.read()
+    st, tk = json.loads(got["status"]), json.loads(got["tasks"])
+    if st.get("state") == "rendering" and tk.get("tasks"):
+        break
+    time.sleep(0.1)
 for name in ("status", "tasks"):
-    with urllib.request.urlopen(base + "api/" + name, timeout=10) as r:
-        open(d + "/seq_frozen_" + name + ".json", "wb").write(r.read())
+    open(d + "/seq_frozen_" + name + ".json", "wb").write(got[name])
 PY
 thaw_workers $pid
 python3 - "$url" "$T" >"$T/seq_poll.out" 2>&1 <<'PY' || { cat "$T/seq_poll.out"; fail "polling the sequence's API"; }

@@ -12,8 +12,9 @@
 #      scenes/default.scene at 240x135; both workers take tasks; the image is bit-identical
 #      (cmp) to a local render of the same scene and size.
 #   3. The same at a larger size with --tasks rows:4, --lease-timeout 2000 and a watermark that
-#      lets every task be dealt (see below why); once both workers are rendering, worker 2's
-#      cable is pulled at the switch (ip link set down).  The coordinator hears nothing more
+#      lets every task be dealt (see below why); once the coordinator's dashboard shows worker
+#      2 holding a task (the worker frozen meanwhile), its cable is pulled at the switch (ip link
+#      set down).  The coordinator hears nothing more
 #      from it, drops it after the lease timeout and deals its task again (tasks_redealt >= 1
 #      in --stats); worker 1 finishes the render and the image still equals the local render.
 #   4. A partition: every worker's cable is pulled for longer than the lease (2.5 leases), then
@@ -32,6 +33,7 @@ ROOT=${TF_ROOT:-$(cd "$(dirname "$0")/../.." && pwd)}
 TF=${TF_BIN:-$ROOT/bin/terrafarm}
 SCENE=$ROOT/scenes/default.scene
 PORT=7878
+HTTP_PORT=7879            # the coordinator's dashboard, read to see which task worker 2 holds
 COORD_IP=10.77.0.1
 SMALL=240x135
 LARGE=2048x1152        # ~7 s of one core here: after the cut, worker 1 alone still needs well
@@ -196,38 +198,51 @@ child_of() {
     echo "$first"
 }
 
-# cut_while_rendering PID PORT: pull the cable at switch port PORT while the worker under PID
-# (a `timeout` started by start) is rendering a task, so it surely holds a lease.  A worker
-# between tasks holds none: the coordinator may already have its result and the `in` for the
-# next task be lost with the cable, and then nothing is there to re-deal.  So: stop the worker
-# for a moment (SIGSTOP), look where its main thread is (/proc/PID/syscall is "-1 ..." when it
-# was stopped in user space, i.e. tracing rays; a syscall number when it was waiting on the
-# network), and cut only then; it is continued a few milliseconds later either way, well
-# inside the 2 s lease, so the cut, not the pause, is what silences it.
-cut_while_rendering() {
+# worker_task ID: the task the coordinator has dealt to worker ID and not yet had back (its
+# dashboard's /api/workers "task"), or "none"; read over the coordinator's own namespace.
+worker_task() {
+    ip netns exec "$NS_COORD" "$TF" status "$COORD_IP:$HTTP_PORT" --secret-file "$TMP/secret" \
+        --json 2>/dev/null | python3 -c '
+import json, sys
+try:
+    w = [w for w in json.load(sys.stdin)["workers"] if w["id"] == int(sys.argv[1])]
+    print(w[0]["task"] if w and w[0]["task"] is not None else "none")
+except Exception:
+    print("none")' "$1"
+}
+
+# cut_while_holding PID PORT: pull the cable at switch port PORT while the worker under PID
+# (a `timeout` started by start; worker id 2 at the coordinator) holds a task it has not
+# returned, so there is a lease to expire.  A worker between tasks holds none: the coordinator
+# may already have its result and the `in` for the next task be lost with the cable, and then
+# nothing is there to re-deal.  Timing cannot tell the two apart (a fast machine returns a task
+# in a few milliseconds), so ask the coordinator: freeze the worker (SIGSTOP: it can send
+# nothing more), give the coordinator 0.5 s to take in whatever was already on the wire, and
+# read worker 2's task from the dashboard.  If it holds one, cut the cable before it runs again;
+# if not, let it run a moment and look again.  The freeze is well inside the 2 s lease, so the
+# cut, not the pause, is what silences it.
+cut_while_holding() {
     wpid=$(child_of "$1")
     [ -n "$wpid" ] || fail "cannot find the worker process under pid $1"
     tries=0
     while :; do
         kill -STOP "$wpid" 2>/dev/null || fail "worker 2 exited before the cut"
         STOPPED=$wpid
-        nr=-1
-        if [ -r "/proc/$wpid/syscall" ]; then
-            read -r nr _ <"/proc/$wpid/syscall" || nr=-1
-        fi
-        [ "$nr" = "-1" ] && break
+        sleep 0.5
+        held=$(worker_task 2)
+        [ "$held" != none ] && break
         kill -CONT "$wpid"
         STOPPED=""
         tries=$((tries + 1))
-        [ "$tries" -le 500 ] || fail "worker 2 was never caught rendering"
-        sleep 0.01
+        [ "$tries" -le 20 ] || fail "worker 2 was never seen holding a task"
+        sleep 0.05
     done
     ip -n "$NS_LAN" link set "$2" down
     rc=$?
     kill -CONT "$wpid"
     STOPPED=""
     [ "$rc" -eq 0 ] || fail "cannot cut the cable at $2"
-    note "worker 2 caught mid-task after $tries look(s)"
+    note "worker 2 frozen holding task $held (after $tries miss(es)); cable cut"
 }
 
 # ---- 1. the secret is checked across the network ----
@@ -266,24 +281,29 @@ note "$SMALL across 2 hosts: identical to the local render; tasks per worker:" \
 # of that task well before the lease expires (the render recovers, tasks_duplicated counts it,
 # but nothing is re-dealt).  Here worker 1 keeps rendering fresh tasks, so it is the lease that
 # notices the silent worker and deals its task again.
-start_coordinator cut "$LARGE" --tasks rows:4 --lease-timeout 2000 --watermark 1000
+start_coordinator cut "$LARGE" --tasks rows:4 --lease-timeout 2000 --watermark 1000 \
+    --http "$COORD_IP:$HTTP_PORT"
+# One after the other, so that worker 2 is the second to join: id 2 at the coordinator (the
+# coordinator logs each join at -v).
+wait_joined() {
+    i=0
+    while [ "$(count_lines "$TMP/cut.coord.log" 'joined: networked')" -lt "$1" ]; do
+        kill -0 "$COORD" 2>/dev/null || { cat "$TMP/cut.coord.log"; fail "coordinator exited early"; }
+        i=$((i + 1))
+        [ "$i" -le 200 ] || { cat "$TMP/cut.coord.log"; fail "worker $1 did not join"; }
+        sleep 0.1
+    done
+}
 start "$NS_W1" "$TMP/cut.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1
 W1=$LAST
+wait_joined 1
 start "$NS_W2" "$TMP/cut.w2.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1
 W2=$LAST
-# Both have said hello (the coordinator logs each join at -v); let worker 2 get into its tasks.
-i=0
-while [ "$(count_lines "$TMP/cut.coord.log" 'joined: networked')" -lt 2 ]; do
-    kill -0 "$COORD" 2>/dev/null || { cat "$TMP/cut.coord.log"; fail "coordinator exited early"; }
-    i=$((i + 1))
-    [ "$i" -le 200 ] || { cat "$TMP/cut.coord.log"; fail "the two workers did not join"; }
-    sleep 0.1
-done
-sleep 0.3
+wait_joined 2
 kill -0 "$COORD" 2>/dev/null || fail "the render finished before the cut (make LARGE bigger)"
-cut_while_rendering "$W2" p-w2
+cut_while_holding "$W2" p-w2
 cut_at=$(date +%s)
 note "cut worker 2's cable (p-w2 down) mid-render"
 finish "$COORD" "coordinator (render with a cut cable)"

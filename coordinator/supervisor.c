@@ -18,6 +18,8 @@
  *   S5. A job's rows_written only grows, and rows_written <= height.
  *   S6. live_workers is the number of joined workers (the id bound to a connection when it took
  *       the counter, then announced) whose connection is open.
+ *   S7. pending_checks is the number of outstanding tasks in CHECK_PENDING, and each of those
+ *       has its result (--verify: a check waiting for a second worker).
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -73,15 +75,17 @@ typedef struct task_slot {
     int nfailed;
     int64_t failed_worker[MAX_FAILED_WORKERS];
     int failed_count[MAX_FAILED_WORKERS];
-    /* --verify (see "spot checks"): CHECK_SECOND or CHECK_THIRD while a check copy is out;
-     * who rendered it first and second, and the digests of their results */
+    /* --verify (see "spot checks"): CHECK_PENDING while its check waits for a second worker,
+     * CHECK_SECOND or CHECK_THIRD while a check copy is out; who rendered it first and second,
+     * and the digests of their results */
     int check;
     int64_t check_worker[2];
     uint8_t digest[2][TF_DIGEST_BYTES];
     int replacing;       /* the third render sided with the second: its result replaces the first */
 } task_slot;
 
-enum { CHECK_NONE = 0, CHECK_SECOND = 1, CHECK_THIRD = 2 };
+/* CHECK_SECOND and CHECK_THIRD are also how many of check_worker a check copy excludes. */
+enum { CHECK_NONE = 0, CHECK_SECOND = 1, CHECK_THIRD = 2, CHECK_PENDING = 3 };
 
 typedef struct lease {
     uint64_t conn;
@@ -125,6 +129,8 @@ struct tf_supervisor {
     tf_preview_grid grid;    /* of the output's progress preview */
     uint8_t *verify_buf;     /* --verify-chunks: inflated bytes */
     size_t verify_cap;
+    int64_t pending_checks;  /* --verify: tasks in CHECK_PENDING */
+    int told_pending;        /* the "only worker" line was logged since the last pending start */
     int stop_sent;
     char error[512];
     tf_farm_stats stats;
@@ -138,6 +144,7 @@ struct tf_supervisor {
 #ifndef NDEBUG
 static int supervisor_ok(const tf_supervisor *s)
 {
+    int64_t pending = 0;
     if (!(0 <= s->write_task && s->write_task <= s->next_deal &&
           s->next_deal <= s->total_tasks))
         return 0; /* S1 */
@@ -161,7 +168,14 @@ static int supervisor_ok(const tf_supervisor *s)
             return 0; /* S2 */
         if (t->in_space < 0 || t->leased < 0)
             return 0; /* S3 */
+        if (t->check == CHECK_PENDING) {
+            if (!t->has_result)
+                return 0; /* S7 */
+            pending++;
+        }
     }
+    if (pending != s->pending_checks)
+        return 0; /* S7 */
     for (int i = 0; i < s->nleases; i++) {
         int64_t task = s->leases[i].task;
         if (task < 0 || task >= s->next_deal)
@@ -287,8 +301,9 @@ static void task_msg_of(const tf_supervisor *s, const task_slot *t, tf_task_msg 
     for (int i = 0; i < t->nfailed && m->nexcluded < TF_EXCLUDED_MAX; i++)
         if (t->failed_count[i] >= FAILURES_TO_EXCLUDE)
             m->excluded[m->nexcluded++] = t->failed_worker[i];
-    /* a check copy goes to a worker that has not rendered it yet */
-    for (int i = 0; i < t->check && m->nexcluded < TF_EXCLUDED_MAX; i++)
+    /* a check copy goes to a worker that has not rendered it yet (a pending check deals none) */
+    int checked_by = t->check == CHECK_PENDING ? 0 : t->check;
+    for (int i = 0; i < checked_by && m->nexcluded < TF_EXCLUDED_MAX; i++)
         m->excluded[m->nexcluded++] = t->check_worker[i];
 }
 
@@ -379,7 +394,8 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
 /* A copy of task t was lost (its worker died or gave up): deal it again if no copy is left. */
 static void redeal_if_lost(tf_supervisor *s, task_slot *t)
 {
-    if ((t->has_result && !t->check) || t->in_space > 0 || t->leased > 0 || s->error[0])
+    if ((t->has_result && (!t->check || t->check == CHECK_PENDING)) || t->in_space > 0 ||
+        t->leased > 0 || s->error[0])
         return;
     t->in_space++;
     s->stats.tasks_redealt++;
@@ -459,8 +475,9 @@ static int finish_job(tf_supervisor *s, job_state *j)
 }
 
 /* --verify: a result is written once its check (if any) agreed, and only if its worker has
- * passed a check, so a liar is caught before anything of it reaches the file.  A farm of one
- * worker cannot check anything: its results are written unchecked. */
+ * passed a check, so a liar is caught before anything of it reaches the file.  A worker that is
+ * alone in the farm is not trusted for being alone: its results wait (pending checks) until a
+ * second worker joins and checks them; the watermark bounds how many wait. */
 static int writable(tf_supervisor *s, const task_slot *t)
 {
     if (s->cfg.verify_fraction <= 0)
@@ -468,7 +485,7 @@ static int writable(tf_supervisor *s, const task_slot *t)
     if (t->check)
         return 0;
     tf_worker_stats *w = worker_by_id(s, t->result_worker);
-    return !w || w->checked || tf_supervisor_live_workers(s) < 2;
+    return !w || w->checked;
 }
 
 /* Advance the write front over every task whose result is in, in id (= file) order, and over
@@ -803,18 +820,45 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
 
 static void start_check(tf_supervisor *s, task_slot *t, const tf_result_msg *m)
 {
-    if (s->cfg.verify_fraction <= 0 || tf_supervisor_live_workers(s) < 2)
+    if (s->cfg.verify_fraction <= 0)
         return;
     tf_worker_stats *w = worker_by_id(s, m->worker);
     if (!tf_verify_selected(s->cfg.verify_seed, s->cfg.verify_fraction, t->id) &&
         (!w || w->checked))
         return;
-    t->check = CHECK_SECOND;
     t->check_worker[0] = m->worker;
     tf_result_digest(m, t->digest[0]);
     s->stats.verify_checks++;
+    if (tf_supervisor_live_workers(s) < 2) { /* nobody else to render it: wait for someone */
+        t->check = CHECK_PENDING;
+        s->pending_checks++;
+        if (!s->told_pending) {
+            tf_info("--verify: worker %" PRId64 " is the only worker; its results wait until a "
+                    "second worker joins to check them", m->worker);
+            s->told_pending = 1;
+        }
+        return;
+    }
+    t->check = CHECK_SECOND;
     t->in_space++;
     deal_copy(s, t);
+}
+
+/* Deal the check copies of pending checks once a second worker is there to render them. */
+static void start_pending_checks(tf_supervisor *s)
+{
+    if (s->pending_checks == 0 || tf_supervisor_live_workers(s) < 2)
+        return;
+    for (int64_t id = s->write_task; id < s->next_deal && s->pending_checks > 0; id++) {
+        task_slot *t = slot_of(s, id);
+        if (!t || t->check != CHECK_PENDING)
+            continue;
+        s->pending_checks--;
+        t->check = CHECK_SECOND;
+        t->in_space++;
+        deal_copy(s, t);
+    }
+    s->told_pending = 0;
 }
 
 /* Worker `liar` disagreed with two others about task `task`: exclude it, deal again every
@@ -869,6 +913,8 @@ static void exclude_liar(tf_supervisor *s, int64_t liar, int64_t task)
         tf_tuple_clear(&tmpl);
         withdraw_copies(s, t);
         t->has_result = 0;
+        if (t->check == CHECK_PENDING)
+            s->pending_checks--;
         t->check = CHECK_NONE;
         t->in_space++;
         s->stats.tasks_redealt++;
@@ -1002,6 +1048,10 @@ static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_wor
         return refuse(why, len, "result for task %" PRId64 ", which this connection does not "
                       "hold", m.id);
     task_slot *t = slot_of(s, m.id);
+    if (t && t->has_result && t->check == CHECK_PENDING && m.worker != t->check_worker[0]) {
+        t->check = CHECK_SECOND; /* another worker's copy (a straggler's) is the check */
+        s->pending_checks--;
+    }
     int checking = t && t->has_result && t->check && m.worker != t->check_worker[0] &&
                    (t->check == CHECK_SECOND || m.worker != t->check_worker[1]);
     if (!t || (t->has_result && !checking)) {
@@ -1063,7 +1113,8 @@ static ts_cap_verdict admit_task_return(tf_supervisor *s, uint64_t conn, const t
             excl_altered |= !tf_task_excludes(&now, m.excluded[i]);
     }
     remove_lease(s, conn, m.id);
-    if (t && (!t->has_result || t->check)) { /* a task, or its check copy */
+    if (t && (!t->has_result || (t->check && t->check != CHECK_PENDING))) {
+        /* a task, or its check copy */
         t->in_space++;
         deal_copy(s, t);
     }
@@ -1340,6 +1391,7 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
     if (writer_failed(s))
         return;
     assert(supervisor_ok(s));
+    start_pending_checks(s);
     write_ready_tasks(s);
     update_watermark(s);
     deal_new_tasks(s);

@@ -87,6 +87,8 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
     int status = TF_SERVE_STOPPED;
     tf_pixel *px = NULL;
     size_t px_cap = 0;
+    unsigned seed = (unsigned)getpid() ^ (unsigned)tf_now_ns() ^ (unsigned)id * 2654435761u;
+    int bounces = 0; /* excluded tasks taken in a row */
     for (;;) {
         tf_tuple task;
         tf_task_msg m;
@@ -114,9 +116,15 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
         if (tf_task_excludes(&m, id)) {
             tf_debug("task %" PRId64 " excludes this worker: put back", m.id);
             put_back(c, &task, step);
-            usleep(200 * 1000); /* let a worker that can render it take it */
+            /* Let a worker that can render it take it.  The pause is random: two workers each
+             * holding the other's task and pausing alike would otherwise take the same tuples
+             * back in the same order forever (a livelock seen with --verify check copies). */
+            if (bounces < 4)
+                bounces++;
+            usleep((useconds_t)(30 + rand_r(&seed) % (60u << bounces)) * 1000u);
             continue;
         }
+        bounces = 0;
         tf_tuple_clear(&task);
         if (step->on_take)
             step->on_take(step->ctx, t1 - t0);

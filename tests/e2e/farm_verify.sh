@@ -4,25 +4,19 @@
 # tests/tools/lying_proxy.py (connecting from 127.0.0.2, a machine of its own), which changes one byte of every result's packed chunks (sizes
 # kept: the structural checks cannot see it).  With --verify 0.2 the coordinator must catch it
 # (a mismatch decided by a third render), exclude it, deal its tasks again, and finish with an
-# image identical to a clean render; the statistics report the checks and their cost.  Without
+# image identical to a clean render; the statistics report the checks and their cost.  The liar
+# joins first and renders alone for a moment: its results must wait for a check all the same.  Without
 # --verify the same liar gets its lies into the file (checked too, so the test can fail).
 . "$(dirname "$0")/lib.sh"
 e2e_init
-# KNOWN DEFECT (issue 13 stays open): on this loaded 2-core machine the run below fails or hangs
-# some of the time -- a liar that is the only worker for a moment has results written unchecked
-# and the render then stops ("worker N lied, and K of its results are already in the output"),
-# and in one run the coordinator did not finish within 120 s (not diagnosed).  By hand the same
-# farm catches and excludes the liar and completes with the right image.  Until that is fixed
-# the test skips unless TF_TEST_VERIFY=1; it is kept whole so it can be run and fixed.
-[ "${TF_TEST_VERIFY:-0}" = 1 ] || skip "--verify with a lying worker: known defect, see the comment at the top of tests/e2e/farm_verify.sh (TF_TEST_VERIFY=1 runs it)"
 SIZE=480x270
 TASKS=rows:2
 PROXY="$TF_ROOT/tests/tools/lying_proxy.py"
 
 render -q -j 1 --size $SIZE --tasks $TASKS -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
 
-# farm TAG EXTRA...: coordinator (-j 0) + an honest worker, a liar through the proxy, and a
-# second honest worker; waits for the coordinator (status in $rc).
+# farm TAG EXTRA...: coordinator (-j 0) + a liar through the proxy, alone at first, then two
+# honest workers; waits for the coordinator (status in $rc).
 farm() {
     tag=$1; shift
     "$TF_BIN" render "$SCENE" -j 0 --size $SIZE --tasks $TASKS --listen 127.0.0.1:0 \
@@ -37,20 +31,20 @@ farm() {
         sleep 0.1
     done
     pport=$(sed -n 's/listening on //p' "$T/$tag.proxy")
+    # The liar comes first and is alone for a while: a lone worker cannot be checked by anyone,
+    # so with --verify its results must wait for the others (nothing of it may reach the file
+    # unchecked).  The honest workers join once it has told its first lie.
+    "$TF_BIN" worker --connect 127.0.0.1:$pport -j 1 -q --timeout 2000 2>"$T/$tag.liar.err" &
+    liar=$!; e2e_track $liar
+    i=0
+    until grep -q 'altered a result' "$T/$tag.proxy" 2>/dev/null; do
+        i=$((i + 1)); [ $i -gt 600 ] && fail "$tag: the liar never rendered: $(cat "$T/$tag.liar.err")"
+        sleep 0.1
+    done
     "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -v 2>"$T/$tag.a.err" &
     a=$!; e2e_track $a
     "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -v 2>"$T/$tag.c.err" &
     c=$!; e2e_track $c
-    # The liar joins once both honest workers render: a worker alone cannot be checked (a
-    # known limit of --verify: results taken while it is the only worker are written
-    # unchecked; see the README's Security section).
-    i=0
-    until grep -q 'debug: task' "$T/$tag.a.err" 2>/dev/null && grep -q 'debug: task' "$T/$tag.c.err" 2>/dev/null; do
-        i=$((i + 1)); [ $i -gt 600 ] && fail "$tag: the honest workers never started rendering"
-        sleep 0.1
-    done
-    "$TF_BIN" worker --connect 127.0.0.1:$pport -j 1 -q --timeout 2000 2>"$T/$tag.liar.err" &
-    liar=$!; e2e_track $liar
     wait_exit $coord 120
     crc=$rc
     wait_exit $a 30; [ $rc -eq 0 ] || fail "$tag: honest worker exited $rc (coordinator $crc: $(grep -v 'rows ' "$T/$tag.err" | tail -3)): $(grep -v 'debug: task' "$T/$tag.a.err")"
@@ -72,6 +66,8 @@ cost=$(jstat verify_cost "$T/verify.json")
 [ "$excluded" -ge 1 ] || fail "no worker excluded: $(grep -i 'lied\|verify\|differen' "$T/verify.err")"
 [ "$mism" -ge 1 ] || fail "no mismatch counted"
 grep -q 'lied: its result of task' "$T/verify.err" || fail "the log does not name the liar"
+grep -q 'is the only worker; its results wait' "$T/verify.err" ||
+    fail "the lone liar's results were not held for a check: $(grep -i verify "$T/verify.err")"
 say "$(grep -m1 'lied:' "$T/verify.err")"
 say "checks $checks, mismatches $mism, workers excluded $excluded, verify_cost $cost of the workers' time"
 

@@ -4,7 +4,7 @@
 # $T, and a trap that kills every process the script started (recorded with e2e_track, plus
 # their children) and removes $T, whether the script passes, fails or is interrupted.
 # tests/run.sh sets TF_BIN (the binary under test: bin/terrafarm or the ASan build) and
-# TF_ROOT; run by hand, both default to this checkout.
+# TF_ROOT; run by hand, both default to this checkout.  TF_KEEP_LOGS=1 keeps $T.
 #
 # Conventions: say() prints what is checked; fail() prints one reason and exits 1; skip()
 # exits 77 with the reason as its last line.  Never a fixed port: coordinators listen on
@@ -26,7 +26,11 @@ e2e_cleanup() {
         kill -CONT "$p" 2>/dev/null
     done
     for p in $E2E_PIDS; do wait "$p" 2>/dev/null; done
-    [ -n "${T:-}" ] && rm -rf "$T"
+    if [ -n "${TF_KEEP_LOGS:-}" ] && [ -n "${T:-}" ]; then
+        echo "logs kept in $T"
+    elif [ -n "${T:-}" ]; then
+        rm -rf "$T"
+    fi
 }
 
 e2e_init() {

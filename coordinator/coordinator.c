@@ -5,6 +5,7 @@
 #include "clock.h"
 
 #include <errno.h>
+#include <inttypes.h>
 #include <malloc.h>
 #include <signal.h>
 #include <stdio.h>
@@ -440,6 +441,35 @@ static tf_rowwriter *open_frame_writer(void *ctx, int job, char *err, size_t err
     return w;
 }
 
+/* --verify caught a liar whose results are in job `job`'s file: close it as the partial render
+ * it is, reopen it through the resume path keeping its first keep_chunks chunks, and start a new
+ * writer thread on it. */
+static tf_rowwriter *rewind_frame_writer(void *ctx, int job, tf_rowwriter *w, int64_t keep_chunks,
+                                         char *err, size_t errlen)
+{
+    render *r = ctx;
+    frame_output *fo = &r->outs[r->job_out[job]];
+    tf_rowwriter_abandon(w);
+    int rows = 0;
+    tf_exr_writer *writer = tf_exr_resume_prefix(fo->plan.working, &fo->meta, keep_chunks, &rows,
+                                                 err, errlen);
+    if (!writer)
+        return NULL;
+    if (tf_exr_next_chunk(writer) != keep_chunks) {
+        tf_seterr(err, errlen, "%s: cannot take back a liar's chunks: %" PRId64 " chunks verify "
+                  "on disk, %" PRId64 " expected", fo->plan.working, tf_exr_next_chunk(writer),
+                  keep_chunks);
+        tf_exr_abandon(writer);
+        return NULL;
+    }
+    tf_rowwriter_config wcfg = {2 * r->tasks.cols + 8, r->o->fsync_interval_ms, fo->preview,
+                                r->o->preview_interval_ms, fo->plan.working};
+    tf_rowwriter *nw = tf_rowwriter_start(writer, &r->layout, &wcfg, err, errlen);
+    if (!nw)
+        tf_exr_abandon(writer);
+    return nw;
+}
+
 /* Every task of job `job` is queued: finish its file (offset table, fsync) and its preview,
  * in a thread of its own (finisher.h). */
 static int finish_frame_writer(void *ctx, int job, tf_rowwriter *w, char *err, size_t errlen)
@@ -482,11 +512,11 @@ static int start_space(render *r)
     scfg.height = r->scene->height;
     scfg.njobs = r->njobs;
     scfg.jobs = r->jobs;
-    scfg.hooks = (tf_frame_hooks){r, open_frame_writer, finish_frame_writer};
+    scfg.hooks = (tf_frame_hooks){r, open_frame_writer, finish_frame_writer, rewind_frame_writer};
     scfg.layout = r->layout;
     scfg.verify_chunks = o->verify_chunks;
     scfg.verify_fraction = o->verify_fraction;
-    scfg.verify_seed = tf_verify_seed(r->scene->hash_hex);
+    scfg.verify_seed = tf_verify_seed();
     scfg.spec = r->spec;
     scfg.watermark = o->watermark; /* 0: auto, following the connected workers */
     scfg.expected_workers = expected_workers;

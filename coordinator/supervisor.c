@@ -15,7 +15,8 @@
  *   S4. Every lease names a dealt task (0 <= task < next_deal; a straggler may still hold a
  *       copy of a task already written), and for an outstanding task the number of leases
  *       naming it never exceeds its slot's `leased`.
- *   S5. A job's rows_written only grows, and rows_written <= height.
+ *   S5. A job's rows_written <= height, and it only grows, except in a rewind (--verify takes
+ *       back what a caught liar wrote, "spot checks"), which moves write_task back too.
  *   S6. live_workers is the number of joined workers (the id bound to a connection when it took
  *       the counter, then announced) whose connection is open.
  *   S7. pending_checks is the number of outstanding tasks in CHECK_PENDING, and each of those
@@ -124,6 +125,7 @@ struct tf_supervisor {
     double mean_task_ms;     /* running mean of task render times (busy_ns of results) */
     int64_t results_seen;
     task_slot *ring;
+    int64_t *written_by;     /* --verify: the worker whose result of each task was written */
     lease *leases;
     int nleases, cap_leases;
     tf_preview_grid grid;    /* of the output's progress preview */
@@ -440,6 +442,8 @@ static int write_task(tf_supervisor *s, job_state *j, task_slot *t)
     tf_worker_stats *w = worker_by_id(s, t->result_worker);
     if (w)
         w->written++;
+    if (s->written_by)
+        s->written_by[t->id] = t->result_worker;
     if (tf_rowwriter_put(j->writer, &got)) {
         char err[512];
         tf_rowwriter_error(j->writer, err, sizeof err);
@@ -882,6 +886,100 @@ static int address_excluded(const tf_supervisor *s, const char *peer)
     return 0;
 }
 
+/* The ring, grown to hold at least `need` outstanding tasks (slots keep their ids). */
+static int grow_ring(tf_supervisor *s, int64_t need)
+{
+    int size = s->ring_size;
+    while (size < need)
+        size *= 2;
+    if (size == s->ring_size)
+        return 0;
+    task_slot *ring = calloc((size_t)size, sizeof *ring);
+    if (!ring)
+        return -1;
+    for (int i = 0; i < size; i++)
+        ring[i].id = -1;
+    for (int64_t id = s->write_task; id < s->next_deal; id++)
+        ring[id % size] = s->ring[id % s->ring_size];
+    free(s->ring);
+    s->ring = ring;
+    s->ring_size = size;
+    return 0;
+}
+
+/* Worker w lied and some of its results are already written: take them back through the
+ * resume path.  The write job's file is closed as a partial render and reopened keeping only
+ * the chunks before the liar's first written task (hooks.rewind: the shorter file is made
+ * beside and renamed over it, so a crash meanwhile leaves a resumable partial either way);
+ * every task from there to the write front is dealt again, whoever wrote it, and the write
+ * front moves back.  0 when done; -1 when it cannot be (the render stops, saying why). */
+static int rewind_liar(tf_supervisor *s, tf_worker_stats *w)
+{
+    job_state *j = s->write_job < s->njobs ? &s->jobs[s->write_job] : NULL;
+    int64_t k0 = -1, before = 0;
+    for (int64_t id = 0; s->written_by && id < s->write_task; id++)
+        if (s->written_by[id] == w->id) {
+            if (j && id >= j->first_id) {
+                k0 = id;
+                break;
+            }
+            before++;
+        }
+    if (before > 0 || k0 < 0 || !j || !j->writer || !s->cfg.hooks.rewind) {
+        fail(s, "worker %" PRId64 " (%s) lied, and %" PRId64 " of its results are in a frame "
+             "already finished, which cannot be taken back; render that frame again with "
+             "--overwrite", w->id, w->host, w->written);
+        return -1;
+    }
+    int64_t old_write = s->write_task;
+    tf_rect r0 = rect_of(s, k0);
+    int64_t keep = 0;
+    int count = 0;
+    char err[1024] = "cannot rewind the output";
+    if (grow_ring(s, s->next_deal - k0) ||
+        tf_layout_rect_chunks(&s->cfg.layout, r0, &keep, &count)) {
+        fail(s, "worker %" PRId64 " lied: cannot take back its results (out of memory)", w->id);
+        return -1;
+    }
+    tf_rowwriter *nw = s->cfg.hooks.rewind(s->cfg.hooks.ctx, (int)(j - s->jobs), j->writer, keep,
+                                           err, sizeof err);
+    j->writer = nw;
+    if (!nw) {
+        fail(s, "%s", err);
+        return -1;
+    }
+    tf_warn("worker %" PRId64 " lied after passing a check: taking back the %" PRId64 " tasks "
+            "written since its first written result (task %" PRId64 ", row %d): the output is "
+            "rewound to %" PRId64 " chunks and they are dealt again", w->id, old_write - k0, k0,
+            r0.y, keep);
+    tf_events_add(s->events, TF_EV_REDEAL, w->id, k0, "rewound the output to task %" PRId64
+                  " to take back what a liar wrote", k0);
+    s->write_task = k0;
+    for (int64_t id = k0; id < old_write; id++) {
+        task_slot *t = &s->ring[id % s->ring_size];
+        memset(t, 0, sizeof *t);
+        t->id = id;
+        for (int i = 0; i < s->nleases; i++) /* a straggler may still hold a copy (S4) */
+            t->leased += s->leases[i].task == id;
+        tf_worker_stats *by = worker_by_id(s, s->written_by[id]);
+        if (by && by->written > 0)
+            by->written--;
+        s->written_by[id] = 0;
+        t->in_space = 1;
+        s->stats.tasks_redealt++;
+        deal_copy(s, t);
+    }
+    int frame = (int)(j - s->jobs);
+    int rows = r0.y > j->job.first_row ? r0.y : j->job.first_row;
+    if (rows < j->rows_written) {
+        s->stats.rows_rendered -= j->rows_written - rows;
+        s->stats.frames[frame].rows_rendered -= j->rows_written - rows;
+        j->rows_written = rows;
+    }
+    w->written = 0;
+    return 0;
+}
+
 static void exclude_liar(tf_supervisor *s, int64_t liar, int64_t task)
 {
     tf_worker_stats *w = worker_by_id(s, liar);
@@ -895,12 +993,8 @@ static void exclude_liar(tf_supervisor *s, int64_t liar, int64_t task)
     tf_warn("worker %" PRId64 " (%s, %s) lied: its result of task %" PRId64 " differs from two "
             "other workers'; excluded, and every task it rendered is dealt again",
             liar, w->host, peer, task);
-    if (w->written > 0) {
-        fail(s, "worker %" PRId64 " (%s) lied, and %" PRId64 " of its results are already in "
-             "the output, which cannot be rewritten in place; render again with --overwrite",
-             liar, w->host, w->written);
+    if (w->written > 0 && rewind_liar(s, w))
         return;
-    }
     int redealt = 0;
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
         task_slot *t = slot_of(s, id);
@@ -1319,8 +1413,11 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
                        : cfg->watermark;
     s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
+    if (cfg->verify_fraction > 0)
+        s->written_by = calloc((size_t)(s->total_tasks > 0 ? s->total_tasks : 1),
+                               sizeof *s->written_by);
     s->grid = tf_preview_grid_for(cfg->width, cfg->height);
-    if (!s->ring) {
+    if (!s->ring || (cfg->verify_fraction > 0 && !s->written_by)) {
         tf_seterr(err, errlen, "out of memory");
         tf_supervisor_free(s);
         return NULL;
@@ -1339,6 +1436,7 @@ void tf_supervisor_free(tf_supervisor *s)
     if (!s)
         return;
     free(s->ring);
+    free(s->written_by);
     free(s->leases);
     free(s->verify_buf);
     free(s->stats.workers);

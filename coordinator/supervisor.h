@@ -100,6 +100,12 @@ typedef struct tf_frame_hooks {
     /* Every task of job `job` is queued to w: finish the file (w is the callee's from now on).
      * 0, or -1 with one line in err (the render stops). */
     int (*finish)(void *ctx, int job, tf_rowwriter *w, char *err, size_t errlen);
+    /* --verify caught a liar whose results job `job` already wrote: close w (the callee's from
+     * now on) and reopen the output keeping only its first keep_chunks chunks, through the
+     * resume path.  The new writer, or NULL with one line in err (the render stops).  NULL
+     * hook: such a liar stops the render. */
+    tf_rowwriter *(*rewind)(void *ctx, int job, tf_rowwriter *w, int64_t keep_chunks, char *err,
+                            size_t errlen);
 } tf_frame_hooks;
 
 typedef struct tf_supervisor_config {

@@ -6,11 +6,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-uint64_t tf_verify_seed(const char *scene_hash_hex)
+uint64_t tf_verify_seed(void)
 {
-    char head[17];
-    snprintf(head, sizeof head, "%s", scene_hash_hex ? scene_hash_hex : "");
-    return strtoull(head, NULL, 16) ^ 0x9e3779b97f4a7c15ull;
+    uint64_t seed;
+    randombytes_buf(&seed, sizeof seed);
+    return seed;
 }
 
 /* splitmix64: a well-mixed 64-bit value of (seed, id). */

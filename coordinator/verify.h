@@ -4,7 +4,8 @@
  * re-renders a seeded, reproducible fraction of tasks (and every result of a worker that has
  * not yet passed a check) on a different worker and compares the results' digests; on a
  * mismatch a third worker decides, the one that disagrees is excluded and every task it
- * rendered is dealt again (supervisor.c, "spot checks").  This file holds the two pure
+ * rendered is dealt again, those already written too, through a rewind of the output
+ * (supervisor.c, "spot checks").  This file holds the two pure
  * parts: which tasks are checked, and the digest of a result. */
 #ifndef TF_VERIFY_H
 #define TF_VERIFY_H
@@ -15,8 +16,9 @@
 
 #define TF_DIGEST_BYTES 32
 
-/* The seed of a render's choice: from the scene hash (hex), so a rerun checks the same tasks. */
-uint64_t tf_verify_seed(const char *scene_hash_hex);
+/* The seed of a render's choice: random, and never sent anywhere.  A seed a worker could know
+ * (the scene hash was one) would let a liar lie only on the tasks that will not be checked. */
+uint64_t tf_verify_seed(void);
 /* 1 if task id is among the fraction checked under seed (fraction <= 0: never, >= 1: always). */
 int tf_verify_selected(uint64_t seed, double fraction, int64_t id);
 /* BLAKE2b-256 of what a result says about its pixels: index, chunks and preview share. */

@@ -740,9 +740,10 @@ static int decode_chunk(exr_reader *r, const exr_chunk_info_t *cinfo, const tf_c
 typedef int (*chunk_fn)(void *user, exr_reader *r, const exr_chunk_info_t *cinfo,
                         const tf_chunk_ref *c, const tf_pixel *px);
 
-/* Verify chunks from the first; returns the number of leading whole, decodable chunks, or -1
- * if fn failed or memory ran out (message in err). */
-static int64_t walk_chunks(exr_reader *r, chunk_fn fn, void *user, char *err, size_t errlen)
+/* Verify chunks from the first, at most `limit` of them; returns the number of leading whole,
+ * decodable chunks, or -1 if fn failed or memory ran out (message in err). */
+static int64_t walk_chunks_upto(exr_reader *r, int64_t limit, chunk_fn fn, void *user, char *err,
+                                size_t errlen)
 {
     tf_chunk_ref c0 = tf_layout_chunk(&r->layout, 0); /* the largest chunk */
     tf_pixel *px = malloc((size_t)c0.rect.w * (size_t)c0.rect.h * sizeof *px);
@@ -751,7 +752,7 @@ static int64_t walk_chunks(exr_reader *r, chunk_fn fn, void *user, char *err, si
         return -1;
     }
     int64_t good = 0;
-    for (; good < r->nchunks; good++) {
+    for (; good < r->nchunks && good < limit; good++) {
         exr_chunk_info_t cinfo;
         tf_chunk_ref c = tf_layout_chunk(&r->layout, good);
         if (locate_chunk(r, &c, &cinfo) != 0 || decode_chunk(r, &cinfo, &c, px) != 0)
@@ -763,6 +764,11 @@ static int64_t walk_chunks(exr_reader *r, chunk_fn fn, void *user, char *err, si
     }
     free(px);
     return good;
+}
+
+static int64_t walk_chunks(exr_reader *r, chunk_fn fn, void *user, char *err, size_t errlen)
+{
+    return walk_chunks_upto(r, INT64_MAX, fn, user, err, errlen);
 }
 
 /* Was the file finished (offset table written by exr_finish)?  Asked of a second context
@@ -1063,6 +1069,12 @@ static int fsync_parent_dir(const char *path, char *err, size_t errlen)
 tf_exr_writer *tf_exr_resume(const char *path, const tf_exr_meta *expect, int *rows_done,
                              char *err, size_t errlen)
 {
+    return tf_exr_resume_prefix(path, expect, INT64_MAX, rows_done, err, errlen);
+}
+
+tf_exr_writer *tf_exr_resume_prefix(const char *path, const tf_exr_meta *expect,
+                                    int64_t keep_chunks, int *rows_done, char *err, size_t errlen)
+{
     exr_reader r;
     int rc = reader_open(&r, path, err, errlen);
     if (rc == 1)
@@ -1085,7 +1097,7 @@ tf_exr_writer *tf_exr_resume(const char *path, const tf_exr_meta *expect, int *r
 
     tf_exr_writer *w = pixel_writer_create(tmp, &r.meta, err, errlen);
     raw_copy copy = {w, NULL, 0, err, errlen};
-    int64_t good = w ? walk_chunks(&r, copy_chunk_raw, &copy, err, errlen) : -1;
+    int64_t good = w ? walk_chunks_upto(&r, keep_chunks, copy_chunk_raw, &copy, err, errlen) : -1;
     free(copy.buf);
     reader_close(&r);
     if (good < 0 || tf_exr_sync(w, err, errlen) != 0) {

@@ -84,6 +84,12 @@ int tf_exr_probe_chunks(const char *path, tf_exr_meta *meta, int64_t *chunks_don
  * is the number of whole rows on disk; tf_exr_next_chunk(w) says which chunk comes next. */
 tf_exr_writer *tf_exr_resume(const char *path, const tf_exr_meta *expect, int *rows_done,
                              char *err, size_t errlen);
+/* The same, keeping at most the first keep_chunks chunks of the file: the chunks after them are
+ * dropped as a torn tail would be (the new prefix is made beside and renamed over PATH, so PATH
+ * is at every instant the old partial or the shorter one).  --verify uses it to take back
+ * chunks a liar wrote (coordinator/supervisor.c, "rewind"). */
+tf_exr_writer *tf_exr_resume_prefix(const char *path, const tf_exr_meta *expect,
+                                    int64_t keep_chunks, int *rows_done, char *err, size_t errlen);
 
 /* Read back rows [0, *rows_valid) of a (possibly partial) file, chunk row by chunk row, calling
  * fn(user, y, row_pixels) for each row in order.  *meta is filled before the first call, so fn

@@ -19,11 +19,12 @@ render -q -j 1 --size $SIZE --tasks $TASKS -o "$T/ref.exr" || fail "reference re
 # honest workers; waits for the coordinator (status in $rc).
 farm() {
     tag=$1; shift
-    "$TF_BIN" render "$SCENE" -j 0 --size $SIZE --tasks $TASKS --listen 127.0.0.1:0 \
+    honest_first=${HONEST_FIRST:-0}
+    "$TF_BIN" render "$SCENE" -j 0 --size $SIZE --tasks ${FARM_TASKS:-$TASKS} --listen 127.0.0.1:0 \
         -o "$T/$tag.exr" --stats "$T/$tag.json" "$@" 2>"$T/$tag.err" &
     coord=$!; e2e_track $coord
     port=$(e2e_port "$T/$tag.err") || fail "coordinator printed no port: $(cat "$T/$tag.err")"
-    python3 "$PROXY" 127.0.0.1 "$port" 127.0.0.2 >"$T/$tag.proxy" 2>&1 &
+    python3 "$PROXY" 127.0.0.1 "$port" 127.0.0.2 "$honest_first" >"$T/$tag.proxy" 2>&1 &
     proxy=$!; e2e_track $proxy
     i=0
     until grep -q 'listening on' "$T/$tag.proxy" 2>/dev/null; do
@@ -37,7 +38,7 @@ farm() {
     "$TF_BIN" worker --connect 127.0.0.1:$pport -j 1 -q --timeout 2000 2>"$T/$tag.liar.err" &
     liar=$!; e2e_track $liar
     i=0
-    until grep -q 'altered a result' "$T/$tag.proxy" 2>/dev/null; do
+    until grep -q 'altered a result\|passed a result' "$T/$tag.proxy" 2>/dev/null; do
         i=$((i + 1)); [ $i -gt 600 ] && fail "$tag: the liar never rendered: $(cat "$T/$tag.liar.err")"
         sleep 0.1
     done
@@ -71,7 +72,24 @@ grep -q 'is the only worker; its results wait' "$T/verify.err" ||
 say "$(grep -m1 'lied:' "$T/verify.err")"
 say "checks $checks, mismatches $mism, workers excluded $excluded, verify_cost $cost of the workers' time"
 
-say "2. the same liar without --verify: its lies reach the file"
+say "2. a liar that earns trust first: honest for its first 3 results, then lying"
+# It passes its first check, so its later results are written unless the seeded 10% picks
+# them: lies reach the file before one is caught.  The coordinator must take them back (the
+# output rewound through the resume path, every task since dealt again) and still finish with
+# the clean image.
+HONEST_FIRST=3 FARM_TASKS=rows:1 farm trusted --verify 0.1
+[ $rc -eq 0 ] || fail "render with a trusted liar exited $rc: $(grep -v 'rows ' "$T/trusted.err" | tail -5)"
+grep -q 'altered a result' "$T/trusted.proxy" || fail "the trusted liar never lied"
+render -q -j 1 --size $SIZE --tasks rows:1 -o "$T/ref1.exr" || fail "reference render (rows:1): $(cat "$T/last.err")"
+same "$T/ref1.exr" "$T/trusted.exr" "--verify 0.1 with a liar that passed a check first"
+[ "$(jstat workers_excluded "$T/trusted.json")" -ge 1 ] || fail "the trusted liar was not excluded"
+if grep -q 'lied after passing a check: taking back' "$T/trusted.err"; then
+    say "$(grep -m1 'taking back' "$T/trusted.err" | sed 's/^terrafarm: warning: //')"
+else
+    say "(the liar was caught before any of its lies was written this time)"
+fi
+
+say "3. the same liar without --verify: its lies reach the file"
 farm noverify
 [ $rc -eq 0 ] || fail "render without --verify exited $rc: $(tail -5 "$T/noverify.err")"
 if cmp -s "$T/ref.exr" "$T/noverify.exr"; then

@@ -5,8 +5,10 @@ through but changes one byte in the middle of the packed chunks of every result 
 puts (("result", ...) field 9, common/farmproto.h), keeping every size: the result stays
 structurally valid, only its pixels lie.  Only --verify (coordinator/verify.h) can tell.
 
-Usage: lying_proxy.py HOST PORT [SOURCE_ADDRESS]
+Usage: lying_proxy.py HOST PORT [SOURCE_ADDRESS [HONEST_FIRST]]
 It connects to the coordinator from SOURCE_ADDRESS (e.g. 127.0.0.2), as a machine of its own.
+With HONEST_FIRST = N it passes the first N results through untouched (a liar that earns trust
+by passing its first checks, then lies: "passed a result" lines for those).
 Prints "listening on PORT" once ready, then one line per altered result; runs until killed."""
 import socket
 import struct
@@ -14,6 +16,7 @@ import sys
 import threading
 
 OUT = 1
+honest_left = 0
 
 
 def field_span(body, index):
@@ -48,6 +51,11 @@ def lie(frame):
         return frame
     span = field_span(body, 9)
     if not span or span[1] == 0:
+        return frame
+    global honest_left
+    if honest_left > 0:
+        honest_left -= 1
+        print("passed a result", flush=True)
         return frame
     body[span[0] + span[1] // 2] ^= 0x01
     print("altered a result", flush=True)
@@ -95,7 +103,9 @@ def coordinator_to_worker(src, dst):
 
 def main():
     host, port = sys.argv[1], int(sys.argv[2])
-    source = (sys.argv[3], 0) if len(sys.argv) > 3 else None
+    source = (sys.argv[3], 0) if len(sys.argv) > 3 and sys.argv[3] else None
+    global honest_left
+    honest_left = int(sys.argv[4]) if len(sys.argv) > 4 else 0
     ls = socket.socket()
     ls.bind(("127.0.0.1", 0))
     ls.listen(64)

@@ -479,6 +479,50 @@ static void test_resume_equals_uninterrupted_write(void **state)
     free(px);
 }
 
+/* The rewind of --verify: a partial file cut back to its first K chunks through the resume
+ * path (chunks after K dropped although they are whole), then rewritten with other pixels and
+ * finished, reads back as those pixels, byte for byte the same file as one written straight. */
+static void test_resume_prefix_takes_back_whole_chunks(void **state)
+{
+    (void)state;
+    tf_exr_meta m = test_meta(W, H);
+    tf_pixel *good = random_image(W, H, 5), *lies = random_image(W, H, 6);
+    int c = tf_exr_chunk_rows();
+    const char *whole = scratch_path("honest.exr");
+    const char *part = scratch_path("rewound.exr");
+    write_file(whole, &m, good, H, 1);
+    /* 2 chunks of good rows, then 3 chunks of lies, all whole */
+    tf_pixel *mixed = malloc(sizeof *mixed * W * H);
+    memcpy(mixed, good, sizeof *mixed * W * 2 * c);
+    memcpy(mixed + 2 * c * W, lies + 2 * c * W, sizeof *mixed * W * 3 * c);
+    write_file(part, &m, mixed, 5 * c, 0);
+
+    char err[512] = "";
+    int rows = -1;
+    tf_exr_writer *w = tf_exr_resume_prefix(part, &m, 2, &rows, err, sizeof err);
+    assert_non_null(w);
+    assert_int_equal(rows, 2 * c);
+    assert_int_equal(tf_exr_next_chunk(w), 2);
+    tf_exr_meta got;
+    int r2 = -1, complete = -1;
+    assert_int_equal(tf_exr_probe(part, &got, &r2, &complete, err, sizeof err), 0);
+    assert_int_equal(r2, 2 * c); /* on disk at once, before anything else is written */
+    assert_int_equal(tf_exr_write_rows(w, H - 2 * c, good + 2 * c * W, err, sizeof err), 0);
+    assert_int_equal(tf_exr_finish(w, err, sizeof err), 0);
+    long sa, sb;
+    assert_true(file_checksum(whole, &sa) == file_checksum(part, &sb));
+    assert_int_equal(sa, sb);
+    /* keep 0: back to a header and no rows */
+    write_file(part, &m, mixed, 3 * c, 0);
+    w = tf_exr_resume_prefix(part, &m, 0, &rows, err, sizeof err);
+    assert_non_null(w);
+    assert_int_equal(rows, 0);
+    tf_exr_abandon(w);
+    free(mixed);
+    free(good);
+    free(lies);
+}
+
 static void expect_refusal(const char *path, const tf_exr_meta *want, const char *words)
 {
     long size_before, size_after;
@@ -664,6 +708,7 @@ int main(void)
         cmocka_unit_test(test_all_rows_without_offset_table_is_not_complete),
         cmocka_unit_test(test_torn_last_chunk_dropped_at_every_offset),
         cmocka_unit_test(test_resume_equals_uninterrupted_write),
+        cmocka_unit_test(test_resume_prefix_takes_back_whole_chunks),
         cmocka_unit_test(test_resume_refuses_changes_and_touches_nothing),
         cmocka_unit_test(test_probe_missing_and_foreign_files),
         cmocka_unit_test(test_write_rows_rejects_misaligned_rows),

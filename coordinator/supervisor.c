@@ -57,7 +57,7 @@
 #include "image/exrencode.h"
 #include "log.h"
 
-#define MAX_FAILED_WORKERS 8  /* per task: distinct workers that failed it */
+#define MAX_FAILED_WORKERS 64 /* per task: distinct workers that failed it (= TF_EXCLUDED_MAX) */
 #define AUTO_WM_PER_WORKER 3   /* auto watermark: tasks dealt ahead per worker, beyond a band */
 #define AUTO_WM_MAX_WORKERS 4096
 #define MAX_DUPLICATES_IN_FLIGHT 2
@@ -363,6 +363,22 @@ static void deal_new_tasks(tf_supervisor *s)
     }
 }
 
+/* 1 if a connected worker in good standing has not failed task t yet. */
+static int untried_worker_left(const tf_supervisor *s, const task_slot *t)
+{
+    for (int i = 0; i < s->stats.nworkers; i++) {
+        const tf_worker_stats *w = &s->stats.workers[i];
+        if (!w->conn || w->excluded)
+            continue;
+        int failed = 0;
+        for (int k = 0; k < t->nfailed && !failed; k++)
+            failed = t->failed_worker[k] == w->id;
+        if (!failed)
+            return 1;
+    }
+    return 0;
+}
+
 /* Record that `worker` failed task t; returns 1 if the task has now failed everywhere. */
 static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
 {
@@ -383,7 +399,11 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
     if (t->failed_count[i] == FAILURES_TO_EXCLUDE)
         tf_events_add(s->events, TF_EV_EXCLUSION, worker, t->id, "worker %" PRId64
                       " is no longer dealt task %" PRId64, worker, t->id);
-    if (t->nfailed >= s->cfg.max_task_failures) {
+    /* A task has failed everywhere when --max-task-failures different workers failed it and no
+     * connected worker is left that has not: many connections of one client failing a task
+     * (each joins as a worker of its own) cannot stop a render that real workers can finish. */
+    if (t->nfailed >= s->cfg.max_task_failures &&
+        (t->nfailed == MAX_FAILED_WORKERS || !untried_worker_left(s, t))) {
         char what[128];
         fail(s, "%s failed on %d different workers; stopping (rows written so far are kept: "
                 "rerun with --resume)",

@@ -1,7 +1,8 @@
 #!/bin/sh
 # farm_failures.sh: issue 4, "a task that fails repeatedly on one worker is not dealt to it
 # again; a task that fails everywhere stops the render with a clear error, and the rows written
-# so far remain valid for --resume".  The failing workers are tests/tools/failing_worker.py,
+# so far remain valid for --resume"; and many failing connections of one client beside a real
+# worker cannot stop a render (issue 13).  The failing workers are tests/tools/failing_worker.py,
 # which joins like any networked worker and answers every task with ("failed", ...).
 . "$(dirname "$0")/lib.sh"
 e2e_init
@@ -49,6 +50,23 @@ wait_exit $coord 30
 [ $rc -ne 0 ] || fail "a render whose tasks fail everywhere exited 0"
 grep -q 'failed on 3 different workers' "$T/b.err" || fail "no clear error: $(tail -3 "$T/b.err")"
 say "$(grep 'failed on 3 different workers' "$T/b.err")"
+
+say "one real worker and four failing connections of one client: the render still completes"
+# Each connection joins as a worker of its own and fails every task it takes; a task has not
+# failed everywhere while a connected worker that has not failed it (the real one) is left.
+"$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 $ARGS -o "$T/c.exr" 2>"$T/c.err" &
+coord=$!; e2e_track $coord
+port=$(e2e_port "$T/c.err") || fail "the coordinator printed no port: $(cat "$T/c.err")"
+"$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -q 2>"$T/cw.err" &
+worker=$!; e2e_track $worker
+for n in 1 2 3 4; do
+    python3 "$FAILER" 127.0.0.1 "$port" >"$T/sybil$n.out" 2>&1 &
+    p=$!; e2e_track $p
+done
+wait_exit $coord 60
+[ $rc -eq 0 ] || fail "four failing connections stopped the render: exit $rc: $(grep -v 'rows ' "$T/c.err" | tail -3)"
+same "$T/ref.exr" "$T/c.exr" "render with four failing connections beside a real worker"
+say "$(grep -c 'failed task' "$T/c.err") failures reported by the failing connections"
 
 say "the rows written so far remain valid: --resume with real workers completes the image"
 render -q -j 2 $ARGS --resume -o "$T/b.exr" || fail "resume after the failure: $(cat "$T/last.err")"

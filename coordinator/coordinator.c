@@ -422,14 +422,10 @@ static int build_terrain(render *r)
     return 0;
 }
 
-/* Job `job`'s output, opened as planned, and its writer thread. */
-static tf_rowwriter *open_frame_writer(void *ctx, int job, char *err, size_t errlen)
+/* The writer thread of frame output fo over its open file (closed if the thread cannot start). */
+static tf_rowwriter *start_frame_writer(render *r, frame_output *fo, tf_exr_writer *writer,
+                                        char *err, size_t errlen)
 {
-    render *r = ctx;
-    frame_output *fo = &r->outs[r->job_out[job]];
-    tf_exr_writer *writer = tf_output_open(fo->output, &fo->meta, &fo->plan, err, errlen);
-    if (!writer)
-        return NULL;
     /* Room for two bands of results: handing results to the writer must not block the event
      * loop.  Results are packed chunks, and bands are capped in pixels (tasks.c), so this stays
      * a few MB whatever the image size. */
@@ -439,6 +435,15 @@ static tf_rowwriter *open_frame_writer(void *ctx, int job, char *err, size_t err
     if (!w)
         tf_exr_abandon(writer);
     return w;
+}
+
+/* Job `job`'s output, opened as planned, and its writer thread. */
+static tf_rowwriter *open_frame_writer(void *ctx, int job, char *err, size_t errlen)
+{
+    render *r = ctx;
+    frame_output *fo = &r->outs[r->job_out[job]];
+    tf_exr_writer *writer = tf_output_open(fo->output, &fo->meta, &fo->plan, err, errlen);
+    return writer ? start_frame_writer(r, fo, writer, err, errlen) : NULL;
 }
 
 /* --verify caught a liar whose results are in job `job`'s file: close it as the partial render
@@ -462,12 +467,7 @@ static tf_rowwriter *rewind_frame_writer(void *ctx, int job, tf_rowwriter *w, in
         tf_exr_abandon(writer);
         return NULL;
     }
-    tf_rowwriter_config wcfg = {2 * r->tasks.cols + 8, r->o->fsync_interval_ms, fo->preview,
-                                r->o->preview_interval_ms, fo->plan.working};
-    tf_rowwriter *nw = tf_rowwriter_start(writer, &r->layout, &wcfg, err, errlen);
-    if (!nw)
-        tf_exr_abandon(writer);
-    return nw;
+    return start_frame_writer(r, fo, writer, err, errlen);
 }
 
 /* Every task of job `job` is queued: finish its file (offset table, fsync) and its preview,

@@ -45,7 +45,7 @@ echo "recorded $(wc -c <"$REC") bytes for $RECORD_SIZE pixels" >&2
 grep -m1 'model name' /proc/cpuinfo | sed 's/.*: /cpu: /' >&2
 echo "load before: $(cut -d' ' -f1-3 /proc/loadavg)" >&2
 
-echo "workers,task_ms,watermark,tasks,width,height,wall_s,modelled_s,efficiency,ops_per_s,take_mean_ms,take_p50_ms,take_p99_ms,redealt,duplicated,coord_wall_s,coord_render_cpu_s,sim_cpu_s,out_bytes,load1" >"$CSV"
+echo "workers,task_ms,watermark,tasks,width,height,wall_s,modelled_s,efficiency,ops_per_s,take_mean_ms,take_p50_ms,take_p99_ms,redealt,duplicated,coord_wall_s,coord_render_cpu_s,sim_cpu_s,out_bytes,load1,bound_efficiency" >"$CSV"
 for ms in $TASK_MS; do
   for w in $WORKERS; do
     n=$((w * TPW))
@@ -74,7 +74,7 @@ for ms in $TASK_MS; do
       line=$(cat "$LOG")
       get() { echo "$line" | tr ' ' '\n' | sed -n "s/^$1=//p"; }
       js() { sed -n "s/^ *\"$1\": *\([0-9.]*\).*/\1/p" "$LOG.stats" | head -1; }
-      row="$w,$ms,$wm,$(get tasks),$width,$height,$(get wall_s),$(get modelled_s),$(get efficiency),$(get ops_per_s),$(get take_mean_ms),$(get take_p50_ms),$(get take_p99_ms),$(js tasks_redealt),$(js tasks_duplicated),$(js wall_s),$(js coordinator_render_cpu_s),$sim_cpu,$(wc -c <"$EXR"),$(cut -d' ' -f1 /proc/loadavg)"
+      row="$w,$ms,$wm,$(get tasks),$width,$height,$(get wall_s),$(get modelled_s),$(get efficiency),$(get ops_per_s),$(get take_mean_ms),$(get take_p50_ms),$(get take_p99_ms),$(js tasks_redealt),$(js tasks_duplicated),$(js wall_s),$(js coordinator_render_cpu_s),$sim_cpu,$(wc -c <"$EXR"),$(cut -d' ' -f1 /proc/loadavg),$(get bound_efficiency)"
       echo "$row" | tee -a "$CSV"
     done
   done

@@ -21,6 +21,8 @@
  *       the counter, then announced) whose connection is open.
  *   S7. pending_checks is the number of outstanding tasks in CHECK_PENDING, and each of those
  *       has its result (--verify: a check waiting for a second worker).
+ *   S8. The indexes agree with what they index: lease_of_conn counts each connection's leases
+ *       and names one of them; worker_of_conn names the entry of every open worker connection.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -53,6 +55,7 @@
 
 #include "coordinator/events.h"
 #include "farmproto.h"
+#include "coordinator/idmap.h"
 #include "coordinator/verify.h"
 #include "image/exrencode.h"
 #include "log.h"
@@ -63,6 +66,7 @@
 #define MAX_DUPLICATES_IN_FLIGHT 2
 #define STRAGGLER_FACTOR 3.0   /* a task is a straggler when held this many mean task times */
 #define STRAGGLER_MIN_MS 500.0
+#define STRAGGLER_SCAN_MS 20.0 /* the straggler scan runs at most this often */
 #define FAILURES_TO_EXCLUDE 2 /* failures of one task on one worker before it is excluded */
 
 typedef struct task_slot {
@@ -128,11 +132,15 @@ struct tf_supervisor {
     int64_t *written_by;     /* --verify: the worker whose result of each task was written */
     lease *leases;
     int nleases, cap_leases;
+    /* Indexes (idmap.h): connection -> its entry in stats.workers; connection -> (its number
+     * of leases << 32 | the index in leases of one of them). */
+    tf_idmap worker_of_conn, lease_of_conn;
     tf_preview_grid grid;    /* of the output's progress preview */
     uint8_t *verify_buf;     /* --verify-chunks: inflated bytes */
     size_t verify_cap;
     int64_t pending_checks;  /* --verify: tasks in CHECK_PENDING */
     int told_pending;        /* the "only worker" line was logged since the last pending start */
+    double last_straggler_scan_ms;
     int stop_sent;
     char error[512];
     tf_farm_stats stats;
@@ -195,6 +203,25 @@ static int supervisor_ok(const tf_supervisor *s)
         live += s->stats.workers[i].conn != 0;
     if (live != s->live_workers)
         return 0; /* S6 */
+    for (int i = 0; i < s->nleases; i++) {
+        int64_t v;
+        int n = 0;
+        for (int j = 0; j < s->nleases; j++)
+            n += s->leases[j].conn == s->leases[i].conn;
+        if (!tf_idmap_get(&s->lease_of_conn, s->leases[i].conn, &v) || (v >> 32) != n ||
+            (v & 0xffffffff) >= (uint64_t)s->nleases ||
+            s->leases[v & 0xffffffff].conn != s->leases[i].conn)
+            return 0; /* S8 */
+    }
+    if (s->lease_of_conn.n > (size_t)s->nleases)
+        return 0; /* S8 */
+    for (int i = 0; i < s->stats.nworkers; i++) {
+        int64_t v;
+        if (s->stats.workers[i].conn &&
+            (!tf_idmap_get(&s->worker_of_conn, s->stats.workers[i].conn, &v) ||
+             s->stats.workers[i].conn != s->stats.workers[v].conn))
+            return 0; /* S8 */
+    }
     for (int j = 0; j < s->njobs; j++)
         if (s->jobs[j].rows_written > s->cfg.height)
             return 0; /* S5 */
@@ -259,6 +286,9 @@ static void fail(tf_supervisor *s, const char *fmt, ...)
 
 static tf_worker_stats *worker_by_id(tf_supervisor *s, int64_t id)
 {
+    /* ids come from the counter, 1, 2, 3, ..., and workers are added as they join */
+    if (id >= 1 && id <= s->stats.nworkers && s->stats.workers[id - 1].id == id)
+        return &s->stats.workers[id - 1];
     for (int i = 0; i < s->stats.nworkers; i++)
         if (s->stats.workers[i].id == id)
             return &s->stats.workers[i];
@@ -267,10 +297,97 @@ static tf_worker_stats *worker_by_id(tf_supervisor *s, int64_t id)
 
 static tf_worker_stats *worker_by_conn(tf_supervisor *s, uint64_t conn)
 {
-    for (int i = 0; i < s->stats.nworkers; i++)
-        if (s->stats.workers[i].conn == conn)
-            return &s->stats.workers[i];
+    int64_t i;
+    if (tf_idmap_get(&s->worker_of_conn, conn, &i) && i < s->stats.nworkers &&
+        s->stats.workers[i].conn == conn)
+        return &s->stats.workers[i];
     return NULL;
+}
+
+/* Worker w's connection is conn from now on (0: closed). */
+static void bind_conn(tf_supervisor *s, tf_worker_stats *w, uint64_t conn)
+{
+    if (w->conn && w->conn != conn)
+        tf_idmap_del(&s->worker_of_conn, w->conn);
+    w->conn = conn;
+    if (conn && tf_idmap_put(&s->worker_of_conn, conn, w - s->stats.workers))
+        fail(s, "out of memory indexing a worker");
+}
+
+/* ---- leases: who holds which task copy ---- */
+
+/* The index in leases of conn's lease of task, or -1. */
+static int find_lease(const tf_supervisor *s, uint64_t conn, int64_t task)
+{
+    int64_t v;
+    if (!tf_idmap_get(&s->lease_of_conn, conn, &v))
+        return -1;
+    int i = (int)(v & 0xffffffff);
+    if (i < s->nleases && s->leases[i].conn == conn && s->leases[i].task == task)
+        return i;
+    for (i = 0; i < s->nleases; i++) /* a connection with several leases (none does today) */
+        if (s->leases[i].conn == conn && s->leases[i].task == task)
+            return i;
+    return -1;
+}
+
+/* How many leases conn holds; one of their tasks in *first. */
+static int lease_count(const tf_supervisor *s, uint64_t conn, int64_t *first)
+{
+    int64_t v;
+    if (!tf_idmap_get(&s->lease_of_conn, conn, &v))
+        return 0;
+    if (first)
+        *first = s->leases[v & 0xffffffff].task;
+    return (int)(v >> 32);
+}
+
+static int add_lease(tf_supervisor *s, uint64_t conn, int64_t task)
+{
+    if (s->nleases == s->cap_leases) {
+        int cap = s->cap_leases ? 2 * s->cap_leases : 64;
+        lease *nl = realloc(s->leases, (size_t)cap * sizeof *nl);
+        if (!nl)
+            return -1;
+        s->leases = nl;
+        s->cap_leases = cap;
+    }
+    int64_t v, n = 0, at = s->nleases;
+    if (tf_idmap_get(&s->lease_of_conn, conn, &v)) {
+        n = v >> 32;
+        at = v & 0xffffffff;
+    }
+    if (tf_idmap_put(&s->lease_of_conn, conn, (n + 1) << 32 | at))
+        return -1;
+    s->leases[s->nleases++] = (lease){conn, task};
+    return 0;
+}
+
+/* Remove leases[i] (the last one moves into its place); returns its task. */
+static int64_t remove_lease_at(tf_supervisor *s, int i)
+{
+    lease gone = s->leases[i];
+    int last = --s->nleases;
+    int64_t v;
+    if (i != last) {
+        lease moved = s->leases[last];
+        s->leases[i] = moved;
+        if (tf_idmap_get(&s->lease_of_conn, moved.conn, &v) && (v & 0xffffffff) == last)
+            tf_idmap_put(&s->lease_of_conn, moved.conn, (v >> 32) << 32 | i); /* no growth */
+    }
+    if (tf_idmap_get(&s->lease_of_conn, gone.conn, &v)) {
+        int64_t n = (v >> 32) - 1;
+        if (n <= 0) {
+            tf_idmap_del(&s->lease_of_conn, gone.conn);
+        } else {
+            int other = -1; /* the index may have named the removed one: find another */
+            for (int k = 0; k < s->nleases && other < 0; k++)
+                if (s->leases[k].conn == gone.conn)
+                    other = k;
+            tf_idmap_put(&s->lease_of_conn, gone.conn, n << 32 | (other < 0 ? 0 : other));
+        }
+    }
+    return gone.task;
 }
 
 static tf_worker_stats *add_worker(tf_supervisor *s, int64_t id)
@@ -544,14 +661,13 @@ static void write_ready_tasks(tf_supervisor *s)
 
 static void remove_lease(tf_supervisor *s, uint64_t conn, int64_t task)
 {
-    for (int i = 0; i < s->nleases; i++)
-        if (s->leases[i].conn == conn && s->leases[i].task == task) {
-            s->leases[i] = s->leases[--s->nleases];
-            task_slot *t = slot_of(s, task);
-            if (t && t->leased > 0)
-                t->leased--;
-            return;
-        }
+    int i = find_lease(s, conn, task);
+    if (i < 0)
+        return;
+    remove_lease_at(s, i);
+    task_slot *t = slot_of(s, task);
+    if (t && t->leased > 0)
+        t->leased--;
 }
 
 /* A connection took the worker counter: its worker id is bound to the connection here, once,
@@ -574,7 +690,7 @@ static void on_join(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     if (w) {
         if (!w->conn)
             s->live_workers++; /* S6 */
-        w->conn = conn;
+        bind_conn(s, w, conn);
     }
 }
 
@@ -598,17 +714,10 @@ static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)
      * space hands it straight to a waiting worker, on_take for the taker runs before on_out
      * for the returner. */
     t->in_space--;
-    if (s->nleases == s->cap_leases) {
-        int cap = s->cap_leases ? 2 * s->cap_leases : 64;
-        lease *nl = realloc(s->leases, (size_t)cap * sizeof *nl);
-        if (!nl) {
-            fail(s, "out of memory recording a lease");
-            return;
-        }
-        s->leases = nl;
-        s->cap_leases = cap;
+    if (add_lease(s, conn, m.id)) {
+        fail(s, "out of memory recording a lease");
+        return;
     }
-    s->leases[s->nleases++] = (lease){conn, m.id};
     t->leased++;
     if (t->taken_ms == 0)
         t->taken_ms = tf_now_msf();
@@ -751,7 +860,7 @@ static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
             snprintf(w->backend, sizeof w->backend, "%s", backend);
             if (!w->conn)
                 s->live_workers++;
-            w->conn = conn;
+            bind_conn(s, w, conn);
             const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
             tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)", id,
                      kind, host, pid, backend, peer ? peer : "?");
@@ -802,18 +911,17 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
     int64_t worker = w ? w->id : -(int64_t)conn; /* a connection that never said hello */
     for (int i = 0; w && i < s->stats.nworkers; i++)
         if (s->stats.workers[i].conn == conn) {
-            s->stats.workers[i].conn = 0;
+            bind_conn(s, &s->stats.workers[i], 0);
             s->live_workers--;
         }
     if (w)
         tf_events_add(s->events, TF_EV_LEAVE, w->id, -1, "connection closed (%s)", peer ? peer : "?");
-    for (int i = 0; i < s->nleases;) {
-        if (s->leases[i].conn != conn) {
-            i++;
-            continue;
-        }
-        int64_t id = s->leases[i].task;
-        s->leases[i] = s->leases[--s->nleases];
+    int64_t held;
+    while (lease_count(s, conn, &held) > 0) {
+        int i = find_lease(s, conn, held);
+        if (i < 0)
+            break; /* cannot be: the index names a lease of conn */
+        int64_t id = remove_lease_at(s, i);
         task_slot *t = slot_of(s, id);
         if (!t)
             continue;
@@ -1119,23 +1227,9 @@ static ts_cap_verdict admit_check(tf_supervisor *s, uint64_t conn, task_slot *t,
  * (the server replies ERROR and logs it); a request that breaks the rules on a task the
  * connection holds also forfeits that lease, so the task is dealt again at once. */
 
-static int lease_count(const tf_supervisor *s, uint64_t conn, int64_t *first)
-{
-    int n = 0;
-    for (int i = 0; i < s->nleases; i++)
-        if (s->leases[i].conn == conn) {
-            if (n++ == 0 && first)
-                *first = s->leases[i].task;
-        }
-    return n;
-}
-
 static int holds_lease(const tf_supervisor *s, uint64_t conn, int64_t task)
 {
-    for (int i = 0; i < s->nleases; i++)
-        if (s->leases[i].conn == conn && s->leases[i].task == task)
-            return 1;
-    return 0;
+    return find_lease(s, conn, task) >= 0;
 }
 
 static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
@@ -1323,6 +1417,12 @@ static void deal_duplicate(tf_supervisor *s)
 {
     if (s->dups_in_flight >= MAX_DUPLICATES_IN_FLIGHT || s->results_seen == 0)
         return;
+    /* It scans every outstanding task: not on every step (thousands a second with hundreds of
+     * workers), a few times within the shortest patience instead. */
+    double now = tf_now_msf();
+    if (now - s->last_straggler_scan_ms < STRAGGLER_SCAN_MS)
+        return;
+    s->last_straggler_scan_ms = now;
     ts_space_stats st;
     ts_space_get_stats(s->space, &st);
     if (st.waiters == 0)
@@ -1334,7 +1434,7 @@ static void deal_duplicate(tf_supervisor *s)
         if (t && t->in_space > 0 && !t->has_result)
             return; /* an undealt copy is waiting: idle workers will take it */
     }
-    double now = tf_now_msf(), patience = STRAGGLER_FACTOR * s->mean_task_ms;
+    double patience = STRAGGLER_FACTOR * s->mean_task_ms;
     if (patience < STRAGGLER_MIN_MS)
         patience = STRAGGLER_MIN_MS;
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
@@ -1457,6 +1557,8 @@ void tf_supervisor_free(tf_supervisor *s)
         return;
     free(s->ring);
     free(s->written_by);
+    tf_idmap_free(&s->worker_of_conn);
+    tf_idmap_free(&s->lease_of_conn);
     free(s->leases);
     free(s->verify_buf);
     free(s->stats.workers);

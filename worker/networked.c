@@ -135,10 +135,12 @@ static int run_simulated(const char *connect, const uint8_t *key, int timeout_ms
     tf_payloads_free(payloads);
     printf("simulated workers=%d tasks=%lld ops=%lld wall_s=%.3f modelled_s=%.3f "
            "slept_s=%.3f efficiency=%.4f ops_per_s=%.0f take_mean_ms=%.3f take_p50_ms=%.3f "
-           "take_p99_ms=%.3f take_max_ms=%.3f oversleep_ms=%.3f\n",
+           "take_p99_ms=%.3f take_max_ms=%.3f oversleep_ms=%.3f bound_s=%.3f "
+           "bound_efficiency=%.4f\n",
            r.workers, (long long)r.tasks, (long long)r.ops, r.wall_s, r.modelled_s,
            r.slept_s, r.efficiency, r.wall_s > 0 ? (double)r.ops / r.wall_s : 0.0, r.take_mean_ms,
-           r.take_p50_ms, r.take_p99_ms, r.take_max_ms, r.slept_over_ms);
+           r.take_p50_ms, r.take_p99_ms, r.take_max_ms, r.slept_over_ms, r.bound_s,
+           r.bound_efficiency);
     fflush(stdout);
     if (rc) {
         tf_error("%s", err);

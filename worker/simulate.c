@@ -175,6 +175,12 @@ double tf_cost_map_rect(const tf_cost_map *m, int image_w, int image_h, tf_rect 
 
 /* ---- simulated workers ------------------------------------------------------------------- */
 
+/* A task served: where it is (the dealing order is by y, then x) and its modelled cost. */
+typedef struct sim_task {
+    int y, x;
+    int64_t cost_ns;
+} sim_task;
+
 typedef struct sim_shared {
     const tf_sim_config *cfg;
     pthread_cond_t gate;            /* the start line: workers wait here until released */
@@ -187,6 +193,8 @@ typedef struct sim_shared {
     double modelled_ns, oversleep_ns;
     float *take_ms;                 /* dealing latencies of every worker */
     size_t ntake, cap_take;
+    sim_task *done;                 /* every task served, for the schedule bound */
+    size_t ndone, cap_done;
     char error[512];
 } sim_shared;
 
@@ -201,6 +209,8 @@ typedef struct sim_worker {
     double modelled_ns, oversleep_ns;
     float *take_ms;
     size_t ntake, cap_take;
+    sim_task *done;
+    size_t ndone, cap_done;
 } sim_worker;
 
 static void shared_fail(sim_shared *sh, const char *what, const ts_client *c)
@@ -258,6 +268,16 @@ static int sim_render(void *ctx, int frame, tf_rect rect, tf_pixel *px,
     w->oversleep_ns += (double)sleep_cost(t0, cost_ns);
     w->modelled_ns += (double)cost_ns;
     w->tasks++;
+    if (w->ndone == w->cap_done) {
+        size_t cap = w->cap_done ? 2 * w->cap_done : 64;
+        sim_task *d = realloc(w->done, cap * sizeof *d);
+        if (d) {
+            w->done = d;
+            w->cap_done = cap;
+        }
+    }
+    if (w->ndone < w->cap_done) /* a lost record only weakens the bound */
+        w->done[w->ndone++] = (sim_task){rect.y, rect.x, cost_ns};
     *counts = (tf_render_counts){0, 0, 0, (uint64_t)n};
     *busy_ns = cost_ns;
     return 0;
@@ -339,9 +359,23 @@ static void merge(sim_shared *sh, sim_worker *w)
         memcpy(sh->take_ms + sh->ntake, w->take_ms, w->ntake * sizeof *w->take_ms);
         sh->ntake += w->ntake;
     }
+    if (sh->ndone + w->ndone > sh->cap_done) {
+        size_t cap = 2 * (sh->ndone + w->ndone);
+        sim_task *d = realloc(sh->done, cap * sizeof *d);
+        if (d) {
+            sh->done = d;
+            sh->cap_done = cap;
+        }
+    }
+    if (sh->ndone + w->ndone <= sh->cap_done) {
+        memcpy(sh->done + sh->ndone, w->done, w->ndone * sizeof *w->done);
+        sh->ndone += w->ndone;
+    }
     pthread_mutex_unlock(&sh->lock);
     free(w->take_ms);
     w->take_ms = NULL;
+    free(w->done);
+    w->done = NULL;
 }
 
 static void *sim_thread(void *arg)
@@ -369,6 +403,51 @@ static void *sim_thread(void *arg)
     return NULL;
 }
 
+static int cmp_task(const void *a, const void *b)
+{
+    const sim_task *p = a, *q = b;
+    return p->y != q->y ? (p->y > q->y) - (p->y < q->y) : (p->x > q->x) - (p->x < q->x);
+}
+
+/* The schedule bound: the makespan of the tasks served (each once), dealt in the coordinator's
+ * order to whichever of `workers` is free first, with no cost between tasks -- what a farm with
+ * a free coordinator and free network would reach with these tasks.  Its distance to the
+ * measured wall time is the coordinator's (and the transport's) share of the loss; its own
+ * distance to a perfect 1.0 is the tasks' granularity (the last ones finish alone). */
+static double schedule_bound_s(sim_task *t, size_t n, int workers)
+{
+    if (n == 0 || workers <= 0)
+        return 0;
+    qsort(t, n, sizeof *t, cmp_task);
+    int64_t *heap = calloc((size_t)workers, sizeof *heap); /* min-heap of free times */
+    if (!heap)
+        return 0;
+    int64_t end = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (i > 0 && t[i].y == t[i - 1].y && t[i].x == t[i - 1].x)
+            continue; /* a straggler's duplicate: the work counts once */
+        int64_t fin = heap[0] + t[i].cost_ns;
+        if (fin > end)
+            end = fin;
+        heap[0] = fin; /* the earliest free worker takes it; sift the root down */
+        for (size_t k = 0, w = (size_t)workers;;) {
+            size_t l = 2 * k + 1, r = l + 1, m = k;
+            if (l < w && heap[l] < heap[m])
+                m = l;
+            if (r < w && heap[r] < heap[m])
+                m = r;
+            if (m == k)
+                break;
+            int64_t tmp = heap[k];
+            heap[k] = heap[m];
+            heap[m] = tmp;
+            k = m;
+        }
+    }
+    free(heap);
+    return (double)end * 1e-9;
+}
+
 static int cmp_float(const void *a, const void *b)
 {
     float x = *(const float *)a, y = *(const float *)b;
@@ -392,6 +471,9 @@ static void summarise(sim_shared *sh, tf_sim_report *rep)
                           ? rep->modelled_s / rep->workers / rep->wall_s
                           : 0.0;
     rep->slept_over_ms = sh->tasks ? sh->oversleep_ns / (double)sh->tasks * 1e-6 : 0.0;
+    rep->bound_s = schedule_bound_s(sh->done, sh->ndone, rep->workers);
+    rep->bound_efficiency = rep->bound_s > 0 ? rep->modelled_s / rep->workers / rep->bound_s
+                                             : 0.0;
     if (sh->ntake == 0)
         return;
     qsort(sh->take_ms, sh->ntake, sizeof *sh->take_ms, cmp_float);
@@ -484,6 +566,7 @@ out:
         ts_client_close(ws[i].client);
     free(ws);
     free(sh.take_ms);
+    free(sh.done);
     pthread_cond_destroy(&sh.gate);
     pthread_mutex_destroy(&sh.lock);
     return rc;

@@ -70,6 +70,9 @@ typedef struct tf_sim_report {
     double efficiency;       /* (modelled_s / workers) / wall_s */
     double take_mean_ms, take_p50_ms, take_p99_ms, take_max_ms; /* dealing latency: in(task) */
     double slept_over_ms;    /* mean oversleep beyond the modelled cost (timer slack) */
+    double bound_s;          /* the schedule bound: these tasks on these workers, in dealing
+                              * order, with nothing between tasks (simulate.c) */
+    double bound_efficiency; /* (modelled_s / workers) / bound_s: the best this run could be */
 } tf_sim_report;
 
 /* Run cfg->workers simulated workers until the coordinator's stop tuple.  0 when every worker

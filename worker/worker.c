@@ -89,14 +89,28 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
     size_t px_cap = 0;
     unsigned seed = (unsigned)getpid() ^ (unsigned)tf_now_ns() ^ (unsigned)id * 2654435761u;
     int bounces = 0; /* excluded tasks taken in a row */
+    /* The next task, taken with the last result (ts_out_in), and how long that took. */
+    tf_tuple next;
+    tf_tuple_init(&next);
+    int have_next = 0;
+    int64_t next_wait = 0;
     for (;;) {
         tf_tuple task;
         tf_task_msg m;
         tf_tuple_init(&task);
-        int64_t t0 = tf_now_ns();
-        int rc = ts_in(c, &tmpl, &task);
-        int64_t t1 = tf_now_ns();
-        note_op(step);
+        int64_t t0 = tf_now_ns(), t1;
+        int rc = 0;
+        if (have_next) {
+            task = next; /* moved */
+            tf_tuple_init(&next);
+            have_next = 0;
+            t1 = t0;
+            t0 -= next_wait;
+        } else {
+            rc = ts_in(c, &tmpl, &task);
+            t1 = tf_now_ns();
+            note_op(step);
+        }
         if (rc) {
             status = TF_SERVE_LOST;
             break;
@@ -192,16 +206,22 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
                 spp += px[i].spp;
             spp_total = (int64_t)spp;
         }
+        /* The result goes with the request for the next task: one round trip per task. */
         tf_tuple result;
+        int64_t s0 = tf_now_ns();
         rc = tf_result_pack(&result, m.id, id, &counts, busy, spp_total, &pay) ||
-             ts_out(c, &result);
+             ts_out_in(c, &result, &tmpl, &next);
+        next_wait = tf_now_ns() - s0;
         tf_tuple_clear(&result);
         note_op(step);
         if (rc) {
+            tf_tuple_clear(&next);
             status = TF_SERVE_UNDELIVERED;
             break;
         }
+        have_next = 1;
     }
+    tf_tuple_clear(&next);
     tf_tuple_clear(&tmpl);
     free(px);
     tf_exr_encoder_free(enc);

@@ -210,18 +210,31 @@ static long read_reply(ts_client *c, tf_frame *f, int64_t deadline)
     return n;
 }
 
+static uint32_t next_request_id(ts_client *c)
+{
+    uint32_t req = c->next_req++;
+    if (c->next_req == 0)
+        c->next_req = 1; /* 0 is reserved for unsolicited frames */
+    return req;
+}
+
+static int await_reply(ts_client *c, uint32_t req, tf_tuple *out, int64_t deadline);
+
 /* Send op with body t and wait for its reply.  Returns the reply op (>0) with the decoded
  * tuple in *out for TUPLE, or -1. */
 static int request(ts_client *c, uint8_t op, const tf_tuple *t, tf_tuple *out)
 {
     if (c->dead)
         return -1;
-    uint32_t req = c->next_req++;
-    if (c->next_req == 0)
-        c->next_req = 1; /* 0 is reserved for unsolicited frames */
+    uint32_t req = next_request_id(c);
     if (send_frame(c, op, req, t, NULL, 0) != 0)
         return -1;
-    int64_t deadline = deadline_from(c->timeout_ms);
+    return await_reply(c, req, out, deadline_from(c->timeout_ms));
+}
+
+/* Read the reply to request req (replies come in request order). */
+static int await_reply(ts_client *c, uint32_t req, tf_tuple *out, int64_t deadline)
+{
     for (;;) {
         tf_frame f;
         long n = read_reply(c, &f, deadline);
@@ -251,6 +264,35 @@ static int expect(ts_client *c, int got, int want1, int want2)
         return fail(c, "coordinator answered %s where %s was expected", tf_op_name(got),
                     tf_op_name(want1));
     return 0;
+}
+
+int ts_out_in(ts_client *c, const tf_tuple *t, const tf_tuple *tmpl, tf_tuple *out)
+{
+    tf_tuple_init(out);
+    if (tf_tuple_has_formals(t)) {
+        snprintf(c->err, sizeof c->err, "ts_out: a tuple may not contain formals");
+        return -1;
+    }
+    if (c->dead)
+        return -1;
+    uint32_t put = next_request_id(c), take = next_request_id(c);
+    pthread_mutex_lock(&c->send_lock);
+    c->out.len = c->out.off = 0;
+    int rc = tf_frame_append_tuple(&c->out, TF_OP_OUT, put, t) ||
+             tf_frame_append_tuple(&c->out, TF_OP_IN, take, tmpl);
+    if (rc != 0) {
+        pthread_mutex_unlock(&c->send_lock);
+        return fail(c, "request too large for one frame (%u bytes at most)", TF_MAX_FRAME);
+    }
+    rc = send_plain(c, tf_buf_head(&c->out), c->out.len);
+    int saved = errno;
+    pthread_mutex_unlock(&c->send_lock);
+    if (rc != 0)
+        return fail(c, "lost the coordinator connection: %s", strerror(saved));
+    int64_t deadline = deadline_from(c->timeout_ms);
+    if (expect(c, await_reply(c, put, NULL, deadline), TF_OP_OK, TF_OP_OK) != 0)
+        return -1;
+    return expect(c, await_reply(c, take, out, deadline), TF_OP_TUPLE, TF_OP_TUPLE);
 }
 
 int ts_out(ts_client *c, const tf_tuple *t)

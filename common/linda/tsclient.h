@@ -46,6 +46,12 @@ int ts_rd(ts_client *c, const tf_tuple *tmpl, tf_tuple *out);
 /* Non-blocking: 1 found (into *out), 0 no match now, -1 error. */
 int ts_inp(ts_client *c, const tf_tuple *tmpl, tf_tuple *out);
 int ts_rdp(ts_client *c, const tf_tuple *tmpl, tf_tuple *out);
+/* ts_out(t) then ts_in(tmpl, out) in one round trip: both requests leave in one write and
+ * their replies are read in order (the server serves a connection's requests in order, so the
+ * in is admitted after the out is stored).  A worker returns a result and takes its next task
+ * this way: half the wake-ups and system calls per task on both sides.  0 or -1 (after an
+ * error nothing says whether the out was stored). */
+int ts_out_in(ts_client *c, const tf_tuple *t, const tf_tuple *tmpl, tf_tuple *out);
 /* Round trip a PING/PONG.  0 or -1. */
 int ts_ping(ts_client *c);
 

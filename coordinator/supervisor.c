@@ -60,7 +60,8 @@
 #include "image/exrencode.h"
 #include "log.h"
 
-#define MAX_FAILED_WORKERS 64 /* per task: distinct workers that failed it (= TF_EXCLUDED_MAX) */
+#define MAX_FAILED_WORKERS 8  /* per task: distinct workers that failed it, remembered */
+#define MAX_TASK_FAILURES 64  /* per task: failures after which it has failed everywhere */
 #define AUTO_WM_PER_WORKER 3   /* auto watermark: tasks dealt ahead per worker, beyond a band */
 #define AUTO_WM_MAX_WORKERS 4096
 #define MAX_DUPLICATES_IN_FLIGHT 2
@@ -78,6 +79,7 @@ typedef struct task_slot {
     int in_space;        /* task tuples in the space */
     int leased;          /* copies held by workers */
     int nfailed;
+    int failures;        /* every failure of it, remembered or not */
     int64_t failed_worker[MAX_FAILED_WORKERS];
     int failed_count[MAX_FAILED_WORKERS];
     /* --verify (see "spot checks"): CHECK_PENDING while its check waits for a second worker,
@@ -500,6 +502,7 @@ static int untried_worker_left(const tf_supervisor *s, const task_slot *t)
 static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
 {
     s->stats.task_failures++;
+    t->failures++;
     int i;
     for (i = 0; i < t->nfailed; i++)
         if (t->failed_worker[i] == worker)
@@ -518,9 +521,11 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
                       " is no longer dealt task %" PRId64, worker, t->id);
     /* A task has failed everywhere when --max-task-failures different workers failed it and no
      * connected worker is left that has not: many connections of one client failing a task
-     * (each joins as a worker of its own) cannot stop a render that real workers can finish. */
+     * (each joins as a worker of its own) cannot stop a render that real workers can finish.
+     * Past MAX_FAILED_WORKERS the last entry is reused, so a huge farm failing a task for real
+     * stops at MAX_TASK_FAILURES instead of dealing it round forever. */
     if (t->nfailed >= s->cfg.max_task_failures &&
-        (t->nfailed == MAX_FAILED_WORKERS || !untried_worker_left(s, t))) {
+        (t->failures >= MAX_TASK_FAILURES || !untried_worker_left(s, t))) {
         char what[128];
         fail(s, "%s failed on %d different workers; stopping (rows written so far are kept: "
                 "rerun with --resume)",
@@ -1542,8 +1547,9 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         tf_supervisor_free(s);
         return NULL;
     }
-    for (int i = 0; i < s->ring_size; i++)
-        s->ring[i].id = -1;
+    /* The ring is not initialised: a slot is only read for an outstanding task (slot_of checks
+     * the range first), and dealing a task fills its slot.  Sized for the largest automatic
+     * watermark, it is megabytes that are never touched on a small farm. */
     s->stats.tasks_total = s->total_tasks;
     s->stats.verify_fraction = cfg->verify_fraction;
     s->stats.watermark = s->watermark;

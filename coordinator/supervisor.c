@@ -944,16 +944,18 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
 }
 
 /* ---- spot checks (--verify, verify.h) -------------------------------------------------------
- * A task whose first result is accepted is checked when the seeded choice picks it, or when its
+ * A task whose first result is accepted is checked when the random choice picks it, or when its
  * worker has not passed a check yet: a check copy is dealt to a worker that has not rendered
  * it (the task tuple excludes those that have), and until the check is over the result is not
- * written.  The second result is never stored, only its digest compared: equal, both workers
- * have passed a check; different, a third copy goes to a third worker, whose result sides with
- * one of the two.  The other is excluded (its connection closed, every request refused), its
+ * written.  With no second worker connected the check waits (CHECK_PENDING) until one joins.
+ * The second result is never stored, only its digest compared: equal, both workers have
+ * passed a check; different, a third copy goes to a third worker, whose result sides with one
+ * of the two.  The other is excluded (its connection closed, every request refused), its
  * results still in the space are taken out and their tasks dealt again; if the first was the
- * liar, the third result replaces it.  Results of a liar already written cannot be rewritten
- * in place: the render then stops with a line saying so (but none can be: a worker's results
- * are written only once it has passed a check). */
+ * liar, the third result replaces it.  A worker that passed a check and lied later may have
+ * lies on disk already: chunks are never rewritten in place, so the output is rewound instead
+ * (rewind_liar: reopened through the resume path without them, every task since dealt again);
+ * only a frame already finished cannot be, and the render then stops saying so. */
 
 static void start_check(tf_supervisor *s, task_slot *t, const tf_result_msg *m)
 {

@@ -1,12 +1,12 @@
 /* verify.h: spot checks that use the determinism invariant (--verify FRACTION).  A pixel
  * depends only on the scene and its coordinates, and a task's encoded chunks only on its
  * pixels, so any task rendered twice by honest workers gives the same bytes.  The supervisor
- * re-renders a seeded, reproducible fraction of tasks (and every result of a worker that has
- * not yet passed a check) on a different worker and compares the results' digests; on a
- * mismatch a third worker decides, the one that disagrees is excluded and every task it
- * rendered is dealt again, those already written too, through a rewind of the output
- * (supervisor.c, "spot checks").  This file holds the two pure
- * parts: which tasks are checked, and the digest of a result. */
+ * re-renders a random fraction of tasks (its seed never leaves the coordinator) and every
+ * result of a worker that has not yet passed a check, on a different worker, and compares the
+ * results' digests; on a mismatch a third worker decides, the one that disagrees is excluded
+ * and every task it rendered is dealt again, those already written too, through a rewind of
+ * the output (supervisor.c, "spot checks").  This file holds the two pure parts: which tasks
+ * are checked, and the digest of a result. */
 #ifndef TF_VERIFY_H
 #define TF_VERIFY_H
 

@@ -73,7 +73,7 @@ say "$(grep -m1 'lied:' "$T/verify.err")"
 say "checks $checks, mismatches $mism, workers excluded $excluded, verify_cost $cost of the workers' time"
 
 say "2. a liar that earns trust first: honest for its first 3 results, then lying"
-# It passes its first check, so its later results are written unless the seeded 10% picks
+# It passes its first check, so its later results are written unless the random 10% picks
 # them: lies reach the file before one is caught.  The coordinator must take them back (the
 # output rewound through the resume path, every task since dealt again) and still finish with
 # the clean image.

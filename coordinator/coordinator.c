@@ -96,6 +96,7 @@ typedef struct render {
     tf_heightfield *hf;          /* built before forking, for the local workers */
     double hf_s;
     double setup_cpu_s;          /* CPU time spent before supervising (terrain build included) */
+    double supervise_cpu_s;      /* CPU time in supervise() alone */
     ts_space *space;
     tf_supervisor *sup;
     ts_server_config cfg;
@@ -859,7 +860,8 @@ static int finish(render *r)
             if (r->outs[i].plan.complete)
                 skipped[nskipped++] = r->outs[i].frame;
         tf_run_info run = {wall, r->scene->width, r->scene->height, r->scene->path, r->pattern,
-                           r->tdesc, r->nworkers, r->hf_s, r->setup_cpu_s, r->layout_text,
+                           r->tdesc, r->nworkers, r->hf_s, r->setup_cpu_s, r->supervise_cpu_s,
+                           r->layout_text,
                            r->t_start, r->animated, skipped, nskipped};
         int bad = tf_stats_write(r->o->stats_path, &run, st, err, sizeof err);
         free(skipped);
@@ -964,7 +966,10 @@ int tf_coordinator_run(const tf_render_opts *o)
     if (start_space(&r) || start_workers(&r) || open_output(&r) || serve_dashboard(&r))
         goto out;
     announce(&r);
-    if (supervise(&r) != 0) {
+    double cpu0 = (double)tf_clock_ns(CLOCK_PROCESS_CPUTIME_ID) * 1e-9;
+    int supervised = supervise(&r);
+    r.supervise_cpu_s = (double)tf_clock_ns(CLOCK_PROCESS_CPUTIME_ID) * 1e-9 - cpu0;
+    if (supervised != 0) {
         stop_unfinished(&r);
         goto out;
     }

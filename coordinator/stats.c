@@ -100,6 +100,13 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
         json_object_set_new(o, "workers_per_coordinator_core",
                             rounded(render_cpu > 0 ? (wcpu > 0 ? wcpu : busy) / render_cpu : 0.0,
                                     10.0));
+        /* The same for the event loop alone: what a long render costs per pixel, without the
+         * per-render start-up (forking local workers) and finish (offset table, the final
+         * preview), which a short render pays in full. */
+        double sup = run->supervise_cpu_s;
+        json_object_set_new(o, "coordinator_supervise_cpu_s", seconds(sup));
+        json_object_set_new(o, "workers_per_coordinator_core_supervising",
+                            rounded(sup > 0 ? (wcpu > 0 ? wcpu : busy) / sup : 0.0, 10.0));
     }
     json_t *workers = json_array();
     for (int i = 0; i < st->nworkers; i++) {

@@ -14,6 +14,7 @@ typedef struct tf_run_info {
     int local_workers;
     double heightfield_s;    /* time to build the height field before forking */
     double setup_cpu_s;      /* the coordinator's CPU time up to the end of the terrain build */
+    double supervise_cpu_s;  /* its CPU time in the event loop alone (no start-up, no finish) */
     const char *layout;      /* the output's layout, e.g. "tiled 64x64 half" */
     double start_s;          /* when the run started (tf_now_s), for frames' start_s / done_s */
     int sequence;            /* an [animation] scene: write "frames" and "frames_skipped" */

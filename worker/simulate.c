@@ -340,6 +340,23 @@ static void sim_serve(sim_worker *w)
                     w->client);
 }
 
+/* Append k items of `size` bytes to the growing array *dst (*n used of *cap); if memory runs
+ * out they are dropped (a sample lost from a percentile or the bound, nothing else). */
+static void append_all(void **dst, size_t *n, size_t *cap, const void *src, size_t k,
+                       size_t size)
+{
+    if (*n + k > *cap) {
+        size_t c = 2 * (*n + k);
+        void *p = realloc(*dst, c * size);
+        if (!p)
+            return;
+        *dst = p;
+        *cap = c;
+    }
+    memcpy((char *)*dst + *n * size, src, k * size);
+    *n += k;
+}
+
 static void merge(sim_shared *sh, sim_worker *w)
 {
     pthread_mutex_lock(&sh->lock);
@@ -347,30 +364,10 @@ static void merge(sim_shared *sh, sim_worker *w)
     sh->ops += w->ops;
     sh->modelled_ns += w->modelled_ns;
     sh->oversleep_ns += w->oversleep_ns;
-    if (sh->ntake + w->ntake > sh->cap_take) {
-        size_t cap = 2 * (sh->ntake + w->ntake);
-        float *n = realloc(sh->take_ms, cap * sizeof *n);
-        if (n) {
-            sh->take_ms = n;
-            sh->cap_take = cap;
-        }
-    }
-    if (sh->ntake + w->ntake <= sh->cap_take) {
-        memcpy(sh->take_ms + sh->ntake, w->take_ms, w->ntake * sizeof *w->take_ms);
-        sh->ntake += w->ntake;
-    }
-    if (sh->ndone + w->ndone > sh->cap_done) {
-        size_t cap = 2 * (sh->ndone + w->ndone);
-        sim_task *d = realloc(sh->done, cap * sizeof *d);
-        if (d) {
-            sh->done = d;
-            sh->cap_done = cap;
-        }
-    }
-    if (sh->ndone + w->ndone <= sh->cap_done) {
-        memcpy(sh->done + sh->ndone, w->done, w->ndone * sizeof *w->done);
-        sh->ndone += w->ndone;
-    }
+    append_all((void **)&sh->take_ms, &sh->ntake, &sh->cap_take, w->take_ms, w->ntake,
+               sizeof *w->take_ms);
+    append_all((void **)&sh->done, &sh->ndone, &sh->cap_done, w->done, w->ndone,
+               sizeof *w->done);
     pthread_mutex_unlock(&sh->lock);
     free(w->take_ms);
     w->take_ms = NULL;

@@ -118,16 +118,26 @@ static int send_all(int fd, const uint8_t *buf, size_t len)
     return 0;
 }
 
-/* Send one frame (body: raw bytes or a tuple). */
-static int send_frame(ts_client *c, uint8_t op, uint32_t req, const tf_tuple *t,
-                      const void *raw, size_t rawlen)
+/* One frame to send: its op, request id, and body (a tuple, or raw bytes). */
+typedef struct frame_spec {
+    uint8_t op;
+    uint32_t req;
+    const tf_tuple *t;
+    const void *raw;
+    size_t rawlen;
+} frame_spec;
+
+/* Send n frames in one write (under send_lock, so a heartbeat cannot come between them). */
+static int send_frames(ts_client *c, int n, const frame_spec *f)
 {
     if (c->dead)
         return -1;
     pthread_mutex_lock(&c->send_lock);
     c->out.len = c->out.off = 0;
-    int rc = t ? tf_frame_append_tuple(&c->out, op, req, t)
-               : tf_frame_append_raw(&c->out, op, req, raw, rawlen);
+    int rc = 0;
+    for (int i = 0; i < n && rc == 0; i++)
+        rc = f[i].t ? tf_frame_append_tuple(&c->out, f[i].op, f[i].req, f[i].t)
+                    : tf_frame_append_raw(&c->out, f[i].op, f[i].req, f[i].raw, f[i].rawlen);
     if (rc != 0) {
         pthread_mutex_unlock(&c->send_lock);
         return fail(c, "request too large for one frame (%u bytes at most)", TF_MAX_FRAME);
@@ -138,6 +148,14 @@ static int send_frame(ts_client *c, uint8_t op, uint32_t req, const tf_tuple *t,
     if (rc != 0)
         return fail(c, "lost the coordinator connection: %s", strerror(saved));
     return 0;
+}
+
+/* Send one frame (body: raw bytes or a tuple). */
+static int send_frame(ts_client *c, uint8_t op, uint32_t req, const tf_tuple *t,
+                      const void *raw, size_t rawlen)
+{
+    frame_spec f = {op, req, t, raw, rawlen};
+    return send_frames(c, 1, &f);
 }
 
 /* Read one frame into *f (body points into c->in, valid until the next read), waiting until
@@ -273,22 +291,10 @@ int ts_out_in(ts_client *c, const tf_tuple *t, const tf_tuple *tmpl, tf_tuple *o
         snprintf(c->err, sizeof c->err, "ts_out: a tuple may not contain formals");
         return -1;
     }
-    if (c->dead)
-        return -1;
     uint32_t put = next_request_id(c), take = next_request_id(c);
-    pthread_mutex_lock(&c->send_lock);
-    c->out.len = c->out.off = 0;
-    int rc = tf_frame_append_tuple(&c->out, TF_OP_OUT, put, t) ||
-             tf_frame_append_tuple(&c->out, TF_OP_IN, take, tmpl);
-    if (rc != 0) {
-        pthread_mutex_unlock(&c->send_lock);
-        return fail(c, "request too large for one frame (%u bytes at most)", TF_MAX_FRAME);
-    }
-    rc = send_plain(c, tf_buf_head(&c->out), c->out.len);
-    int saved = errno;
-    pthread_mutex_unlock(&c->send_lock);
-    if (rc != 0)
-        return fail(c, "lost the coordinator connection: %s", strerror(saved));
+    frame_spec f[2] = {{TF_OP_OUT, put, t, NULL, 0}, {TF_OP_IN, take, tmpl, NULL, 0}};
+    if (send_frames(c, 2, f) != 0)
+        return -1;
     int64_t deadline = deadline_from(c->timeout_ms);
     if (expect(c, await_reply(c, put, NULL, deadline), TF_OP_OK, TF_OP_OK) != 0)
         return -1;

@@ -163,6 +163,49 @@ static void test_socketpair_client(void **state)
     stop(fx);
 }
 
+/* ts_out_in: the out is stored before the in is served (the in can take the very tuple just
+ * put), both replies are read in order, and a blocking in is woken by a later out; the
+ * connection carries on normally afterwards. */
+static void test_out_in_one_round_trip(void **state)
+{
+    (void)state;
+    int sv[2];
+    assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+    fixture *fx = start(NULL, sv[0]);
+    ts_client *c = ts_client_from_fd(sv[1]);
+    tf_tuple t, m, got;
+    int64_t v;
+    tup(&t, "si", "result", 7);
+    tup(&m, "sI", "result", 0);
+    assert_int_equal(ts_out_in(c, &t, &m, &got), 0); /* takes back what it put */
+    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
+    assert_int_equal(v, 7);
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&t);
+    tf_tuple_clear(&m);
+    tup(&t, "si", "task", 1);
+    assert_int_equal(ts_out(c, &t), 0);
+    tf_tuple_clear(&t);
+    tup(&t, "si", "result", 8);
+    tup(&m, "sI", "task", 0);
+    assert_int_equal(ts_out_in(c, &t, &m, &got), 0); /* a result for a task */
+    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
+    assert_int_equal(v, 1);
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&t);
+    tf_tuple_clear(&m);
+    tup(&m, "sI", "result", 0);
+    assert_int_equal(ts_inp(c, &m, &got), 1); /* the out of the pair was stored */
+    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
+    assert_int_equal(v, 8);
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&m);
+    exercise(c); /* and the stream is still in step */
+    ts_client_close(c);
+    assert_true(wait_counter(fx, &fx->disconnects, 1));
+    stop(fx);
+}
+
 typedef struct blocked {
     const char *addr;
     int rc;
@@ -362,6 +405,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_socketpair_client),
+        cmocka_unit_test(test_out_in_one_round_trip),
         cmocka_unit_test(test_tcp_blocked_in_woken_by_other_client),
         cmocka_unit_test(test_bad_traffic_drops_only_that_connection),
         cmocka_unit_test(test_auth),

@@ -31,7 +31,7 @@ LDLIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXR_LIBS) $(CL_LIBS
 TEST_LIBS := $(shell pkg-config --libs cmocka 2>/dev/null)
 
 # 0. base: messages, clocks, vectors; the scene file (parsed, validated, hashed)
-BASE_SRC    := common/log.c common/clock.c common/scene.c common/animation.c
+BASE_SRC    := common/log.c common/clock.c common/datadir.c common/scene.c common/animation.c
 # 1. terrain: noise, fractal and grid generators, erosion, the height field and its max/min grids
 TERRAIN_SRC := $(wildcard common/terrain/*.c)
 # 2. image: the pixel, OpenEXR (OpenEXRCore) checkpoint files, PNG and the preview

@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include "clock.h"
+#include "datadir.h"
 #include "coordinator/api.h"
 #include "coordinator/httpauth.h"
 #include "coordinator/livepreview.h"
@@ -62,38 +63,13 @@ typedef struct request {
 
 /* ---- the page's files ---------------------------------------------------------------------- */
 
-static int has_index(const char *dir)
-{
-    char p[PATH_MAX];
-    return snprintf(p, sizeof p, "%s/index.html", dir) < (int)sizeof p && access(p, R_OK) == 0;
-}
-
 int tf_web_dir_find(char *dir, size_t len)
 {
-    const char *env = getenv("TERRAFARM_WEB");
-    if (env && *env) {
-        snprintf(dir, len, "%s", env);
-        return has_index(dir) ? 0 : -1;
-    }
-    char exe[PATH_MAX];
-    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
-    if (n > 0) {
-        exe[n] = 0;
-        char *slash = strrchr(exe, '/');
-        if (slash)
-            *slash = 0;
-        const char *rel[] = {"/../web", "/../../web", "/../share/terrafarm/web"};
-        for (size_t i = 0; i < sizeof rel / sizeof rel[0]; i++)
-            if (snprintf(dir, len, "%s%s", exe, rel[i]) < (int)len && has_index(dir))
-                return 0;
-    }
-    const char *fixed[] = {"/usr/local/share/terrafarm/web", "/usr/share/terrafarm/web"};
-    for (size_t i = 0; i < sizeof fixed / sizeof fixed[0]; i++) {
-        snprintf(dir, len, "%s", fixed[i]);
-        if (has_index(dir))
-            return 0;
-    }
-    return -1;
+    static const char *const beside[] = {"/../web", "/../../web", "/../share/terrafarm/web",
+                                         NULL};
+    static const char *const fixed[] = {"/usr/local/share/terrafarm/web",
+                                        "/usr/share/terrafarm/web", NULL};
+    return tf_datadir_find("TERRAFARM_WEB", beside, fixed, "index.html", dir, len) == 0 ? 0 : -1;
 }
 
 static int load_file(const char *dir, web_file *f, char *err, size_t errlen)

@@ -21,6 +21,7 @@
 #define CL_TARGET_OPENCL_VERSION 120
 #include "worker/backend_opencl.h"
 #include "clock.h"
+#include "datadir.h"
 
 #include <CL/cl.h>
 #include <ctype.h>
@@ -139,46 +140,20 @@ static char *read_text(const char *path, size_t *len)
     return buf;
 }
 
-static int has_kernel(const char *dir)
-{
-    char path[PATH_MAX];
-    return snprintf(path, sizeof path, "%s/" KERNEL_FILE, dir) < (int)sizeof path &&
-           access(path, R_OK) == 0;
-}
-
 /* The kernel directory, in order: $TERRAFARM_KERNELS (an explicit choice wins), next to the
  * executable (bin/../worker/kernels, and build/tests/../../worker/kernels for test programs),
  * the installed copies, then ./worker/kernels.  0, or -1 with a message listing the search. */
 static int find_kernel_dir(char *dir, size_t len, char *err, size_t errlen)
 {
-    const char *env = getenv("TERRAFARM_KERNELS");
-    if (env && *env) {
-        snprintf(dir, len, "%s", env);
-        if (has_kernel(dir))
-            return 0;
-        tf_seterr(err, errlen, "TERRAFARM_KERNELS=%s has no " KERNEL_FILE, env);
-        return -1;
-    }
-    char exe[PATH_MAX];
-    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
-    if (n > 0) {
-        exe[n] = 0;
-        char *slash = strrchr(exe, '/');
-        if (slash)
-            *slash = 0;
-        const char *rel[] = {"/../worker/kernels", "/../../worker/kernels",
-                             "/../share/terrafarm/kernels"};
-        for (size_t i = 0; i < sizeof rel / sizeof rel[0]; i++)
-            if (snprintf(dir, len, "%s%s", exe, rel[i]) < (int)len && has_kernel(dir))
-                return 0;
-    }
-    const char *fixed[] = {"/usr/local/share/terrafarm/kernels", "/usr/share/terrafarm/kernels",
-                           "worker/kernels"};
-    for (size_t i = 0; i < sizeof fixed / sizeof fixed[0]; i++) {
-        snprintf(dir, len, "%s", fixed[i]);
-        if (has_kernel(dir))
-            return 0;
-    }
+    static const char *const beside[] = {"/../worker/kernels", "/../../worker/kernels",
+                                         "/../share/terrafarm/kernels", NULL};
+    static const char *const fixed[] = {"/usr/local/share/terrafarm/kernels",
+                                        "/usr/share/terrafarm/kernels", "worker/kernels", NULL};
+    int rc = tf_datadir_find("TERRAFARM_KERNELS", beside, fixed, KERNEL_FILE, dir, len);
+    if (rc == 0)
+        return 0;
+    if (rc == -2)
+        return tf_seterr(err, errlen, "TERRAFARM_KERNELS=%s has no " KERNEL_FILE, dir);
     snprintf(err, errlen,
              "OpenCL kernels not found (looked in $TERRAFARM_KERNELS, <exe>/../worker/kernels, "
              "/usr/local/share/terrafarm/kernels, ./worker/kernels)");

@@ -1,5 +1,6 @@
 /* payloads.c: see payloads.h. */
 #include "worker/payloads.h"
+#include "growbuf.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -136,21 +137,6 @@ int tf_payloads_fit(const tf_payloads *p, const tf_exr_layout *l, char *err, siz
     return 0;
 }
 
-static int grow(uint8_t **buf, size_t *cap, size_t need)
-{
-    if (need <= *cap)
-        return 0;
-    size_t n = *cap ? *cap : 4096;
-    while (n < need)
-        n *= 2;
-    uint8_t *q = realloc(*buf, n);
-    if (!q)
-        return -1;
-    *buf = q;
-    *cap = n;
-    return 0;
-}
-
 int tf_payloads_for(const tf_payloads *p, const tf_exr_layout *l, tf_rect r, tf_payload_buf *b,
                     tf_chunk_payload *out, int64_t *spp_total, char *err, size_t errlen)
 {
@@ -163,7 +149,7 @@ int tf_payloads_for(const tf_payloads *p, const tf_exr_layout *l, tf_rect r, tf_
     int rx = tf_layout_chunks_x(&p->layout), ry = tf_layout_chunks_y(&p->layout);
     size_t len = 0;
     *spp_total = 0;
-    if (grow(&b->index, &b->index_cap, (size_t)count * TF_CHUNK_RECORD_BYTES))
+    if (tf_growbuf(&b->index, &b->index_cap, (size_t)count * TF_CHUNK_RECORD_BYTES))
         return tf_seterr(err, errlen, "out of memory");
     for (int i = 0; i < count; i++) {
         tf_chunk_ref c = tf_layout_chunk(l, first + i);
@@ -174,7 +160,7 @@ int tf_payloads_for(const tf_payloads *p, const tf_exr_layout *l, tf_rect r, tf_
             return tf_seterr(err, errlen, "no recorded chunk of %dx%d for chunk (%d, %d) (size "
                              "the render in whole tiles of the recording)", c.rect.w, c.rect.h,
                              c.cx, c.cy);
-        if (grow(&b->chunks, &b->chunks_cap, len + rc->len))
+        if (tf_growbuf(&b->chunks, &b->chunks_cap, len + rc->len))
             return tf_seterr(err, errlen, "out of memory");
         memcpy(b->chunks + len, rc->packed, rc->len);
         len += rc->len;
@@ -187,7 +173,7 @@ int tf_payloads_for(const tf_payloads *p, const tf_exr_layout *l, tf_rect r, tf_
     int i0, i1, j0, j1;
     tf_preview_span(&g, l->width, l->height, r, &i0, &i1, &j0, &j1);
     size_t plen = (size_t)(i1 - i0) * (size_t)(j1 - j0) * 3;
-    if (grow(&b->preview, &b->preview_cap, plen ? plen : 1))
+    if (tf_growbuf(&b->preview, &b->preview_cap, plen ? plen : 1))
         return tf_seterr(err, errlen, "out of memory");
     uint8_t *o = b->preview;
     for (int j = j0; j < j1; j++) {

@@ -1,5 +1,6 @@
 /* exrencode.c: see exrencode.h. */
 #include "image/exrencode.h"
+#include "growbuf.h"
 
 #include <openexr.h>
 #include <zlib.h>
@@ -41,29 +42,14 @@ static int64_t discard_write(exr_const_context_t ctxt, void *userdata, const voi
     return (int64_t)sz;
 }
 
-static int grow(uint8_t **buf, size_t *cap, size_t need)
-{
-    if (need <= *cap)
-        return 0;
-    size_t n = *cap ? *cap : 4096;
-    while (n < need)
-        n *= 2;
-    uint8_t *p = realloc(*buf, n);
-    if (!p)
-        return -1;
-    *buf = p;
-    *cap = n;
-    return 0;
-}
-
 /* The pipeline's last step: instead of writing the chunk to a file, append it to the payload. */
 static exr_result_t capture_chunk(exr_encode_pipeline_t *enc)
 {
     tf_exr_encoder *e = enc->encoding_user_data;
     const tf_exr_layout *l = &e->layout;
     size_t n = enc->compressed_bytes;
-    if (grow(&e->index, &e->index_cap, (e->nchunks + 1) * TF_CHUNK_RECORD_BYTES) ||
-        grow(&e->chunks, &e->chunks_cap, e->chunks_len + n)) {
+    if (tf_growbuf(&e->index, &e->index_cap, (e->nchunks + 1) * TF_CHUNK_RECORD_BYTES) ||
+        tf_growbuf(&e->chunks, &e->chunks_cap, e->chunks_len + n)) {
         e->failed = 1;
         return EXR_ERR_OUT_OF_MEMORY;
     }
@@ -168,7 +154,7 @@ int tf_preview_share(const tf_preview_grid *g, int width, int height, tf_rect r,
     int i0, i1, j0, j1;
     tf_preview_span(g, width, height, r, &i0, &i1, &j0, &j1);
     size_t n = (size_t)(i1 - i0) * (size_t)(j1 - j0) * 3;
-    if (grow(buf, cap, n ? n : 1))
+    if (tf_growbuf(buf, cap, n ? n : 1))
         return -1;
     uint8_t *o = *buf;
     for (int j = j0; j < j1; j++) {
@@ -222,7 +208,7 @@ int tf_exr_chunk_decodes(const uint8_t *packed, size_t packed_len, size_t unpack
         return -1;
     if (packed_len == unpacked)
         return 0; /* stored raw */
-    if (grow(scratch, cap, unpacked + 1))
+    if (tf_growbuf(scratch, cap, unpacked + 1))
         return -1;
     uLongf out = (uLongf)unpacked + 1; /* room for one byte more: a longer stream is caught */
     int rc = uncompress(*scratch, &out, packed, (uLong)packed_len);

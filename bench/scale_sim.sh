@@ -16,7 +16,7 @@
 # efficiency against workers for each task size (best watermark) to $OUT/scale_sim.svg.
 #
 # usage: bench/scale_sim.sh [MODEL]   (default: bench/default.cost)
-# env:   WORKERS="16 64 256 1024" TASK_MS="1 10 30 100" WM="1 2 4" TPW=16 OUT=bench/results
+# env:   WORKERS="16 64 256 1024" TASK_MS="1 10 30 100" WM="1 2 4" TPW=16 OUT=bench/results PIN=0
 set -eu
 cd "$(dirname "$0")/.."
 TF=${TF:-bin/terrafarm}
@@ -26,6 +26,9 @@ TASK_MS=${TASK_MS:-"1 10 30 100"}
 WM=${WM:-"1 2 4"}
 TPW=${TPW:-16}
 OUT=${OUT:-bench/results}
+# PIN=1: the coordinator on CPU 0 and the simulator on CPU 1 (taskset), so the simulator's
+# thousand threads cannot delay the coordinator on a 2-core machine
+if [ "${PIN:-0}" = 1 ]; then COORD_PIN="taskset -c 0"; SIM_PIN="taskset -c 1"; else COORD_PIN=""; SIM_PIN=""; fi
 SCENE=${SCENE:-scenes/default.scene}
 RECORD_SIZE=${RECORD_SIZE:-960x544}
 mkdir -p "$OUT"
@@ -56,7 +59,7 @@ for ms in $TASK_MS; do
     for f in $WM; do
       wm=$((f * w + cols))
       PORT=$((PORT + 1))
-      "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:$PORT --size ${width}x$height \
+      $COORD_PIN "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:$PORT --size ${width}x$height \
         --tasks stamps:8x8 --watermark $wm -o "$EXR" --overwrite --lease-timeout 600000 -q \
         --stats "$LOG.stats" &
       coord=$!
@@ -67,7 +70,7 @@ for ms in $TASK_MS; do
         sleep 0.05
       done
       /usr/bin/time -f '%U %S' -o "$LOG.time" \
-        "$TF" worker --connect 127.0.0.1:$PORT --simulate "$MODEL" -j $w --pixel-us "$pixel_us" \
+        $SIM_PIN "$TF" worker --connect 127.0.0.1:$PORT --simulate "$MODEL" -j $w --pixel-us "$pixel_us" \
         --payloads "$REC" -q --timeout 30000 >"$LOG"
       wait $coord
       sim_cpu=$(awk '{ printf "%.2f", $1 + $2 }' "$LOG.time")

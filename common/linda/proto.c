@@ -96,6 +96,15 @@ int tf_buf_reserve(tf_buf *b, size_t n)
     return 0;
 }
 
+void tf_buf_trim(tf_buf *b, size_t keep)
+{
+    if (b->len == 0 && b->cap > keep) {
+        free(b->data);
+        b->data = NULL;
+        b->cap = b->off = 0;
+    }
+}
+
 int tf_buf_append(tf_buf *b, const void *p, size_t n)
 {
     if (tf_buf_reserve(b, n) != 0)

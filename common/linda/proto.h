@@ -125,6 +125,10 @@ int tf_buf_reserve(tf_buf *b, size_t n);
 int tf_buf_append(tf_buf *b, const void *p, size_t n);
 /* Drop n bytes from the front (compacts lazily). */
 void tf_buf_consume(tf_buf *b, size_t n);
+/* An empty buffer that grew beyond `keep` bytes gives its memory back (a server holds one per
+ * connection: a thousand workers that each sent one large result must not keep a thousand
+ * result-sized buffers while they render). */
+void tf_buf_trim(tf_buf *b, size_t keep);
 /* First unconsumed byte. */
 static inline uint8_t *tf_buf_head(const tf_buf *b) { return b->data + b->off; }
 

@@ -49,6 +49,10 @@
 
 #define TS_READ_CHUNK 65536
 #define TS_MAX_PIPELINE 65536 /* input bytes buffered behind a blocked request */
+/* An idle connection's input buffer keeps at most this much memory: results of up to this size
+ * (most tasks' results) reuse it, larger ones (the default 128 K-pixel bands, ~1 MB) give it
+ * back once read, or 1024 workers would hold 1 GB between their results. */
+#define TS_BUF_KEEP (256 * 1024)
 #define TS_POLL_CAP_MS 250    /* longest poll when timeouts must be enforced */
 #define TS_STALL_MS 1000      /* a gap this long between iterations is a stall (see enforce_timeouts) */
 #define TS_PENALTY_SLOTS 64   /* addresses remembered for failed handshakes */
@@ -876,8 +880,12 @@ static void conn_readable(conn *c)
         }
         if (n < 0 && errno == EINTR)
             continue;
-        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+            /* drained: an idle connection keeps no large-result-sized buffer */
+            tf_buf_trim(&c->in, TS_BUF_KEEP);
+            tf_buf_trim(&c->raw, TS_BUF_KEEP);
             break;
+        }
         if (n == 0 && (c->in.len > 0 || c->raw.len > 0))
             conn_drop(c, "closed in the middle of a frame");
         else if (n == 0)

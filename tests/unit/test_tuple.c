@@ -178,6 +178,27 @@ static void test_frame_parse(void **state)
     assert_non_null(strstr(err, "unknown op"));
 }
 
+/* tf_buf_trim gives back an empty buffer's memory only past `keep`, never a buffer in use. */
+static void test_buf_trim(void **state)
+{
+    (void)state;
+    tf_buf b;
+    tf_buf_init(&b);
+    static uint8_t big[300 * 1024];
+    assert_int_equal(tf_buf_append(&b, big, sizeof big), 0);
+    tf_buf_trim(&b, 256 * 1024);
+    assert_non_null(b.data); /* holds bytes: kept */
+    tf_buf_consume(&b, sizeof big);
+    tf_buf_trim(&b, 256 * 1024);
+    assert_null(b.data);
+    assert_int_equal(b.cap, 0);
+    assert_int_equal(tf_buf_append(&b, big, 1000), 0); /* usable again */
+    tf_buf_consume(&b, 1000);
+    tf_buf_trim(&b, 256 * 1024);
+    assert_non_null(b.data); /* small: kept for reuse */
+    tf_buf_free(&b);
+}
+
 static void test_hostport_and_loopback(void **state)
 {
     (void)state;
@@ -227,6 +248,7 @@ int main(void)
         cmocka_unit_test(test_match_rules),
         cmocka_unit_test(test_decode_rejects_malformed),
         cmocka_unit_test(test_frame_parse),
+        cmocka_unit_test(test_buf_trim),
         cmocka_unit_test(test_hostport_and_loopback),
         cmocka_unit_test(test_auth_macs),
     };

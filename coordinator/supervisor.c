@@ -21,8 +21,8 @@
  *       the counter, then announced) whose connection is open.
  *   S7. pending_checks is the number of outstanding tasks in CHECK_PENDING, and each of those
  *       has its result (--verify: a check waiting for a second worker).
- *   S8. The indexes agree with what they index: lease_of_conn counts each connection's leases
- *       and names one of them; worker_of_conn names the entry of every open worker connection.
+ *   S8. The indexes agree with what they index: a connection holds at most one lease, and
+ *       lease_of_conn names it; worker_of_conn names the entry of every open worker connection.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -134,8 +134,8 @@ struct tf_supervisor {
     int64_t *written_by;     /* --verify: the worker whose result of each task was written */
     lease *leases;
     int nleases, cap_leases;
-    /* Indexes (idmap.h): connection -> its entry in stats.workers; connection -> (its number
-     * of leases << 32 | the index in leases of one of them). */
+    /* Indexes (idmap.h): connection -> its entry in stats.workers; connection -> its lease's
+     * index in leases. */
     tf_idmap worker_of_conn, lease_of_conn;
     tf_preview_grid grid;    /* of the output's progress preview */
     uint8_t *verify_buf;     /* --verify-chunks: inflated bytes */
@@ -207,15 +207,10 @@ static int supervisor_ok(const tf_supervisor *s)
         return 0; /* S6 */
     for (int i = 0; i < s->nleases; i++) {
         int64_t v;
-        int n = 0;
-        for (int j = 0; j < s->nleases; j++)
-            n += s->leases[j].conn == s->leases[i].conn;
-        if (!tf_idmap_get(&s->lease_of_conn, s->leases[i].conn, &v) || (v >> 32) != n ||
-            (v & 0xffffffff) >= (uint64_t)s->nleases ||
-            s->leases[v & 0xffffffff].conn != s->leases[i].conn)
-            return 0; /* S8 */
+        if (!tf_idmap_get(&s->lease_of_conn, s->leases[i].conn, &v) || v != i)
+            return 0; /* S8: each connection's one lease is where the index says */
     }
-    if (s->lease_of_conn.n > (size_t)s->nleases)
+    if (s->lease_of_conn.n != (size_t)s->nleases)
         return 0; /* S8 */
     for (int i = 0; i < s->stats.nworkers; i++) {
         int64_t v;
@@ -318,34 +313,37 @@ static void bind_conn(tf_supervisor *s, tf_worker_stats *w, uint64_t conn)
 
 /* ---- leases: who holds which task copy ---- */
 
+/* A connection holds at most one lease: the worker role refuses a second `in` of a task while
+ * it holds one (tf_supervisor_admit), and every connection has that role.  So the index maps a
+ * connection to the one entry of `leases` it holds (S8). */
+
+/* The index in leases of conn's lease, or -1. */
+static int lease_of(const tf_supervisor *s, uint64_t conn)
+{
+    int64_t v;
+    return tf_idmap_get(&s->lease_of_conn, conn, &v) ? (int)v : -1;
+}
+
 /* The index in leases of conn's lease of task, or -1. */
 static int find_lease(const tf_supervisor *s, uint64_t conn, int64_t task)
 {
-    int64_t v;
-    if (!tf_idmap_get(&s->lease_of_conn, conn, &v))
-        return -1;
-    int i = (int)(v & 0xffffffff);
-    if (i < s->nleases && s->leases[i].conn == conn && s->leases[i].task == task)
-        return i;
-    for (i = 0; i < s->nleases; i++) /* a connection with several leases (none does today) */
-        if (s->leases[i].conn == conn && s->leases[i].task == task)
-            return i;
-    return -1;
+    int i = lease_of(s, conn);
+    return i >= 0 && s->leases[i].task == task ? i : -1;
 }
 
-/* How many leases conn holds; one of their tasks in *first. */
-static int lease_count(const tf_supervisor *s, uint64_t conn, int64_t *first)
+/* 1 and the task in *task if conn holds a lease, else 0. */
+static int held_task(const tf_supervisor *s, uint64_t conn, int64_t *task)
 {
-    int64_t v;
-    if (!tf_idmap_get(&s->lease_of_conn, conn, &v))
+    int i = lease_of(s, conn);
+    if (i < 0)
         return 0;
-    if (first)
-        *first = s->leases[v & 0xffffffff].task;
-    return (int)(v >> 32);
+    *task = s->leases[i].task;
+    return 1;
 }
 
 static int add_lease(tf_supervisor *s, uint64_t conn, int64_t task)
 {
+    assert(lease_of(s, conn) < 0);
     if (s->nleases == s->cap_leases) {
         int cap = s->cap_leases ? 2 * s->cap_leases : 64;
         lease *nl = realloc(s->leases, (size_t)cap * sizeof *nl);
@@ -354,12 +352,7 @@ static int add_lease(tf_supervisor *s, uint64_t conn, int64_t task)
         s->leases = nl;
         s->cap_leases = cap;
     }
-    int64_t v, n = 0, at = s->nleases;
-    if (tf_idmap_get(&s->lease_of_conn, conn, &v)) {
-        n = v >> 32;
-        at = v & 0xffffffff;
-    }
-    if (tf_idmap_put(&s->lease_of_conn, conn, (n + 1) << 32 | at))
+    if (tf_idmap_put(&s->lease_of_conn, conn, s->nleases))
         return -1;
     s->leases[s->nleases++] = (lease){conn, task};
     return 0;
@@ -370,24 +363,10 @@ static int64_t remove_lease_at(tf_supervisor *s, int i)
 {
     lease gone = s->leases[i];
     int last = --s->nleases;
-    int64_t v;
+    tf_idmap_del(&s->lease_of_conn, gone.conn);
     if (i != last) {
-        lease moved = s->leases[last];
-        s->leases[i] = moved;
-        if (tf_idmap_get(&s->lease_of_conn, moved.conn, &v) && (v & 0xffffffff) == last)
-            tf_idmap_put(&s->lease_of_conn, moved.conn, (v >> 32) << 32 | i); /* no growth */
-    }
-    if (tf_idmap_get(&s->lease_of_conn, gone.conn, &v)) {
-        int64_t n = (v >> 32) - 1;
-        if (n <= 0) {
-            tf_idmap_del(&s->lease_of_conn, gone.conn);
-        } else {
-            int other = -1; /* the index may have named the removed one: find another */
-            for (int k = 0; k < s->nleases && other < 0; k++)
-                if (s->leases[k].conn == gone.conn)
-                    other = k;
-            tf_idmap_put(&s->lease_of_conn, gone.conn, n << 32 | (other < 0 ? 0 : other));
-        }
+        s->leases[i] = s->leases[last];
+        tf_idmap_put(&s->lease_of_conn, s->leases[i].conn, i); /* an update: cannot fail */
     }
     return gone.task;
 }
@@ -921,26 +900,23 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
         }
     if (w)
         tf_events_add(s->events, TF_EV_LEAVE, w->id, -1, "connection closed (%s)", peer ? peer : "?");
-    int64_t held;
-    while (lease_count(s, conn, &held) > 0) {
-        int i = find_lease(s, conn, held);
-        if (i < 0)
-            break; /* cannot be: the index names a lease of conn */
-        int64_t id = remove_lease_at(s, i);
-        task_slot *t = slot_of(s, id);
-        if (!t)
-            continue;
-        if (t->leased > 0)
-            t->leased--;
-        if (t->has_result) {
-            redeal_if_lost(s, t); /* a check copy, if one is out: dealt again */
-            continue;
-        }
-        tf_warn("worker %s left holding task %" PRId64, peer ? peer : "?", id);
-        tf_events_add(s->events, TF_EV_FAILURE, worker, id, "left holding the task");
-        if (!note_failure(s, t, worker))
-            redeal_if_lost(s, t);
+    int i = lease_of(s, conn);
+    if (i < 0)
+        return;
+    int64_t id = remove_lease_at(s, i);
+    task_slot *t = slot_of(s, id);
+    if (!t)
+        return;
+    if (t->leased > 0)
+        t->leased--;
+    if (t->has_result) {
+        redeal_if_lost(s, t); /* a check copy, if one is out: dealt again */
+        return;
     }
+    tf_warn("worker %s left holding task %" PRId64, peer ? peer : "?", id);
+    tf_events_add(s->events, TF_EV_FAILURE, worker, id, "left holding the task");
+    if (!note_failure(s, t, worker))
+        redeal_if_lost(s, t);
 }
 
 /* ---- spot checks (--verify, verify.h) -------------------------------------------------------
@@ -1382,7 +1358,7 @@ ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blockin
                 return refuse(why, len, "takes a task by a template with actual fields (only "
                               "(\"task\", ?id, ?x, ?y, ?w, ?h, ?excluded) is a worker's)");
         int64_t held = -1;
-        if (lease_count(s, conn, &held) > 0)
+        if (held_task(s, conn, &held))
             return refuse(why, len, "takes another task while holding task %" PRId64
                           " (one at a time)", held);
         return TS_CAP_ALLOW;

@@ -6,10 +6,12 @@ past the handshake when FLIP_AT is large enough).
 
 Usage: flip_proxy.py HOST PORT FLIP_AT CAPTURE
 Prints "listening on PORT" once ready; runs until killed."""
-import select
-import socket
+import os
 import sys
 import threading
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from tfwire import serve_proxy, shut_both  # noqa: E402
 
 
 def pump(src, dst, flip_at, capture, lock):
@@ -34,34 +36,15 @@ def pump(src, dst, flip_at, capture, lock):
             dst.sendall(data)
         except OSError:
             break
-    for s in (src, dst):
-        try:
-            s.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
+    shut_both(src, dst)
 
 
 def main():
     host, port, flip_at, capture_path = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
     capture = open(capture_path, "wb")
     lock = threading.Lock()
-    ls = socket.socket()
-    ls.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    ls.bind(("127.0.0.1", 0))
-    ls.listen(64)
-    print("listening on %d" % ls.getsockname()[1], flush=True)
-    first = True
-    while True:
-        c, _ = ls.accept()
-        try:
-            s = socket.create_connection((host, port))
-        except OSError:
-            c.close()  # the coordinator is gone: so is this connection
-            continue
-        threading.Thread(target=pump, args=(c, s, flip_at if first else None, None, lock),
-                         daemon=True).start()
-        threading.Thread(target=pump, args=(s, c, None, capture, lock), daemon=True).start()
-        first = False
+    serve_proxy(host, port, lambda c, s, n: [(pump, (c, s, flip_at if n == 0 else None, None, lock)),
+                                             (pump, (s, c, None, capture, lock))])
 
 
 if __name__ == "__main__":

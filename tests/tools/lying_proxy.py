@@ -10,10 +10,12 @@ It connects to the coordinator from SOURCE_ADDRESS (e.g. 127.0.0.2), as a machin
 With HONEST_FIRST = N it passes the first N results through untouched (a liar that earns trust
 by passing its first checks, then lies: "passed a result" lines for those).
 Prints "listening on PORT" once ready, then one line per altered result; runs until killed."""
-import socket
+import os
 import struct
 import sys
-import threading
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from tfwire import serve_proxy, shut_both  # noqa: E402
 
 OUT = 1
 honest_left = 0
@@ -78,11 +80,7 @@ def worker_to_coordinator(src, dst):
                 dst.sendall(lie(frame))
     except OSError:
         pass
-    for s in (src, dst):
-        try:
-            s.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
+    shut_both(src, dst)
 
 
 def coordinator_to_worker(src, dst):
@@ -94,11 +92,7 @@ def coordinator_to_worker(src, dst):
             dst.sendall(data)
     except OSError:
         pass
-    for s in (src, dst):
-        try:
-            s.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
+    shut_both(src, dst)
 
 
 def main():
@@ -106,19 +100,8 @@ def main():
     source = (sys.argv[3], 0) if len(sys.argv) > 3 and sys.argv[3] else None
     global honest_left
     honest_left = int(sys.argv[4]) if len(sys.argv) > 4 else 0
-    ls = socket.socket()
-    ls.bind(("127.0.0.1", 0))
-    ls.listen(64)
-    print("listening on %d" % ls.getsockname()[1], flush=True)
-    while True:
-        c, _ = ls.accept()
-        try:
-            s = socket.create_connection((host, port), source_address=source)
-        except OSError:
-            c.close()
-            continue
-        threading.Thread(target=worker_to_coordinator, args=(c, s), daemon=True).start()
-        threading.Thread(target=coordinator_to_worker, args=(s, c), daemon=True).start()
+    serve_proxy(host, port, lambda c, s, n: [(worker_to_coordinator, (c, s)),
+                                             (coordinator_to_worker, (s, c))], source)
 
 
 if __name__ == "__main__":

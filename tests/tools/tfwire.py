@@ -189,3 +189,37 @@ class Conn:
 
     def close(self):
         self.s.close()
+
+
+# ---- proxies (tests/tools/lying_proxy.py, flip_proxy.py): a machine on the path ----
+
+def shut_both(a, b):
+    """End a proxied connection in both directions (the other pump then sees EOF)."""
+    for s in (a, b):
+        try:
+            s.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+
+
+def serve_proxy(host, port, start, source=None):
+    """Listen on a free loopback port, print "listening on PORT", and for every connection
+    accepted open one to HOST:PORT (from SOURCE_ADDRESS if given) and call
+    start(client, server, n) with n the connection's number from 0.  Runs until killed."""
+    import threading
+    ls = socket.socket()
+    ls.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    ls.bind(("127.0.0.1", 0))
+    ls.listen(64)
+    print("listening on %d" % ls.getsockname()[1], flush=True)
+    n = 0
+    while True:
+        c, _ = ls.accept()
+        try:
+            s = socket.create_connection((host, port), source_address=source)
+        except OSError:
+            c.close()  # the coordinator is gone: so is this connection
+            continue
+        for target, args in start(c, s, n):
+            threading.Thread(target=target, args=args, daemon=True).start()
+        n += 1

@@ -2,9 +2,6 @@
 #include "coordinator/verify.h"
 
 #include <sodium.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
 
 uint64_t tf_verify_seed(void)
 {

@@ -252,7 +252,14 @@ def check(cond, what):
 H = stats["height"]
 check([f["frame"] for f in stats["frames"]] == [0, 1, 2], "--stats frames %s" % stats["frames"])
 check(fz["state"] == "rendering", "the frozen poll saw %s, not rendering" % fz["state"])
-for p in [fz] + [p for p in polls if p["state"] == "rendering"]:
+running = [p for p in polls if p["state"] == "rendering"]
+# Between the last row queued and the end of the run (the last frame finished, workers told to
+# stop) the state still reads "rendering" with every frame done: the view must then be whole.
+finishing = [p for p in running if p["frames_done"] == 3]
+for p in finishing:
+    check(p["frame"] == 2 and p["rows_written"] == p["rows_total"] == 3 * H,
+          "finishing with frame %s, rows %s of %s" % (p["frame"], p["rows_written"], p["rows_total"]))
+for p in [fz] + [p for p in running if p not in finishing]:
     check(p["frames_total"] == 3, "frames_total %s while rendering" % p["frames_total"])
     check(p["frames_done"] in (0, 1, 2), "frames_done %s while rendering" % p["frames_done"])
     # frames 0-2, none complete before: the frame being written is the first not done

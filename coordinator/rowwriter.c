@@ -70,8 +70,12 @@ static void write_preview(tf_rowwriter *rw, int last)
     double t0 = tf_now_msf();
     tf_png_writer *png = tf_png_create(rw->preview_path, rw->grid.pw, rw->grid.ph, 8, 3, err,
                                        sizeof err);
-    if (png) /* stored while rendering (a memcpy and a checksum); the final one compressed */
-        tf_png_fast(png, last ? 1 : 0);
+    /* Stored, the final one too: a memcpy and two checksums per preview pixel.  Deflating
+     * it, even at zlib level 1, cost 15-18 ms of a 1920x640 render's ~70 ms of coordinator CPU
+     * (a quarter: bench/README.md, session 5) for a file 2.3x smaller; any PNG tool
+     * recompresses it if its size matters. */
+    if (png)
+        tf_png_fast(png, 0);
     for (int j = 0; png && j < rw->grid.ph; j++)
         if (tf_png_write_row(png, rw->preview + (size_t)j * (size_t)rw->grid.pw * 3, err,
                              sizeof err)) {
@@ -172,8 +176,6 @@ static int write_result(tf_rowwriter *rw, const tf_tuple *t, char *err, size_t e
             return -1;
         off += (size_t)c.packed;
     }
-    if (tf_exr_flush(rw->w, err, errlen)) /* one write per result, and the file grows by results */
-        return -1;
     /* the task's rectangle: its chunks' union (one tile, or full rows) */
     tf_rect r = {first.x, first.y, last.x + last.w - first.x, last.y + last.h - first.y};
     if (m.nchunks > 0)
@@ -216,11 +218,24 @@ static void *writer_main(void *arg)
             if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
                 pthread_cond_signal(&rw->nonfull);
         }
+        int more = rw->count > 0; /* queued behind this one: their chunks join its write */
         pthread_mutex_unlock(&rw->mu);
 
         int rc = 0;
         if (have) {
             rc = write_result(rw, &item, err, sizeof err);
+            /* One write for as many results as came together (bounded by the sink's buffer),
+             * so that a farm of small tasks does not pay a system call per task; large chunks
+             * go out from the result itself (tf_exr_hold_chunks), so before it is freed, even
+             * after a failure.  The file grows by whole results either way. */
+            if (tf_exr_holds_references(rw->w) || (rc == 0 && !more)) {
+                char ferr[512];
+                int frc = tf_exr_flush(rw->w, ferr, sizeof ferr);
+                if (rc == 0 && frc != 0) {
+                    rc = frc;
+                    snprintf(err, sizeof err, "%s", ferr);
+                }
+            }
             tf_tuple_clear(&item);
             dirty = 1;
         }
@@ -280,6 +295,7 @@ tf_rowwriter *tf_rowwriter_start(tf_exr_writer *w, const tf_exr_layout *layout,
     rw->fsync_ms = cfg->fsync_interval_ms > 0 ? cfg->fsync_interval_ms : 1000;
     rw->preview_ms = cfg->preview_interval_ms > 0 ? cfg->preview_interval_ms : 5000;
     rw->rows_written = tf_exr_next_row(w);
+    tf_exr_hold_chunks(w, 1); /* write_result flushes before it frees a result */
     rw->slot = calloc((size_t)rw->depth, sizeof *rw->slot);
     if (!rw->slot)
         goto oom;

@@ -35,6 +35,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/uio.h>
 #include <unistd.h>
 #include "image/exrpart.h"
 #include "log.h"
@@ -87,17 +88,27 @@ typedef struct tf_exr_sink {
     int fd;
     int write_errno;  /* first failure, 0 if none */
     int abandoned;    /* once set, nothing more reaches the file */
-    /* Write-behind: OpenEXRCore writes each chunk as two small writes (its header, its bytes),
-     * in increasing offsets.  Contiguous writes gather here and reach the file in one pwrite
-     * when the buffer fills, before any other write, and on sink_flush (sync, finish, abandon):
-     * two syscalls per chunk become one per SINK_BUFFER bytes.  The file is still always a
-     * prefix of what was written, so a kill leaves whole chunks and at most one torn one. */
+    /* Write-behind: OpenEXRCore writes each chunk as two writes (its small header, its
+     * bytes), in increasing offsets.  Contiguous writes gather here as one run of pieces and
+     * reach the file in one pwritev when the run is full, before any other write, and on
+     * sink_flush (sync, finish, abandon, tf_exr_flush): two syscalls per chunk become one per
+     * run.  Small pieces are copied into buf; with `hold` set (tf_exr_hold_chunks), large ones
+     * are referenced where they lie, and the caller keeps them alive until the next flush.
+     * The file is still always a prefix of what was written, so a kill leaves whole chunks
+     * and at most one torn one. */
     uint8_t *buf;
-    size_t len;
-    uint64_t buf_off;  /* file offset of buf[0] */
+    size_t len;        /* bytes of buf in use */
+    uint64_t run_off;  /* file offset of the run's first byte */
+    uint64_t run_len;  /* bytes in the run */
+    struct iovec iov[64];
+    int niov;
+    int hold;
+    int held;          /* pieces of the run that are references */
 } tf_exr_sink;
 
 #define SINK_BUFFER (256 * 1024)
+#define SINK_REF_MIN 4096 /* with hold: pieces this large are referenced, not copied */
+#define SINK_IOV ((int)(sizeof ((tf_exr_sink *)0)->iov / sizeof(struct iovec)))
 
 static int sink_pwrite(tf_exr_sink *s, const uint8_t *p, uint64_t sz, uint64_t offset)
 {
@@ -116,16 +127,58 @@ static int sink_pwrite(tf_exr_sink *s, const uint8_t *p, uint64_t sz, uint64_t o
     return 0;
 }
 
-/* Write the buffered bytes out.  0, or -1 with write_errno set. */
+/* Write the run out (pwritev, resumed after a short write).  0, or -1 with write_errno set. */
 static int sink_flush(tf_exr_sink *s)
 {
-    if (s->write_errno)
+    if (s->write_errno) { /* nothing more reaches the file: drop the run and its references */
+        s->niov = s->held = 0;
+        s->len = 0;
+        s->run_len = 0;
         return -1;
-    if (s->len == 0)
-        return 0;
-    int rc = sink_pwrite(s, s->buf, s->len, s->buf_off);
+    }
+    struct iovec *v = s->iov;
+    int n = s->niov;
+    uint64_t off = s->run_off;
+    int rc = 0;
+    while (n > 0) {
+        ssize_t k = pwritev(s->fd, v, n, (off_t)off);
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k <= 0) {
+            if (!s->write_errno)
+                s->write_errno = k < 0 ? errno : EIO;
+            rc = -1;
+            break;
+        }
+        off += (uint64_t)k;
+        while (n > 0 && (size_t)k >= v->iov_len) {
+            k -= (ssize_t)v->iov_len;
+            v++;
+            n--;
+        }
+        if (n > 0) {
+            v->iov_base = (uint8_t *)v->iov_base + k;
+            v->iov_len -= (size_t)k;
+        }
+    }
+    s->niov = 0;
+    s->held = 0;
     s->len = 0;
+    s->run_len = 0;
     return rc;
+}
+
+/* Add a piece to the run (which has room for it: the caller checked). */
+static void sink_add(tf_exr_sink *s, const void *p, size_t sz, uint64_t offset)
+{
+    if (s->run_len == 0)
+        s->run_off = offset;
+    struct iovec *last = s->niov > 0 ? &s->iov[s->niov - 1] : NULL;
+    if (last && (const uint8_t *)last->iov_base + last->iov_len == (const uint8_t *)p)
+        last->iov_len += sz; /* the buffer's tail, grown by a copy just made */
+    else
+        s->iov[s->niov++] = (struct iovec){(void *)p, sz};
+    s->run_len += sz;
 }
 
 static int64_t sink_write(exr_const_context_t ctxt, void *userdata, const void *buffer,
@@ -140,22 +193,24 @@ static int64_t sink_write(exr_const_context_t ctxt, void *userdata, const void *
         s->write_errno = EFBIG;
         return -1;
     }
+    if (sz == 0)
+        return 0;
     if (!s->buf)
         s->buf = malloc(SINK_BUFFER); /* without it, every write goes straight through */
-    int contiguous = s->len > 0 && offset == s->buf_off + s->len;
-    if (s->buf && (contiguous || s->len == 0) && s->len + sz <= SINK_BUFFER) {
-        if (s->len == 0)
-            s->buf_off = offset;
-        memcpy(s->buf + s->len, buffer, (size_t)sz);
-        s->len += (size_t)sz;
+    int refer = s->hold && sz >= SINK_REF_MIN;
+    int fits = refer ? 1 : s->buf && s->len + sz <= SINK_BUFFER;
+    if (s->run_len > 0 && (offset != s->run_off + s->run_len || s->niov == SINK_IOV || !fits))
+        if (sink_flush(s))
+            return -1;
+    if (refer) {
+        sink_add(s, buffer, (size_t)sz, offset);
+        s->held++;
         return (int64_t)sz;
     }
-    if (sink_flush(s))
-        return -1;
-    if (s->buf && sz <= SINK_BUFFER) {
-        s->buf_off = offset;
-        memcpy(s->buf, buffer, (size_t)sz);
-        s->len = (size_t)sz;
+    if (s->buf && s->len + sz <= SINK_BUFFER) {
+        memcpy(s->buf + s->len, buffer, (size_t)sz);
+        sink_add(s, s->buf + s->len, (size_t)sz, offset);
+        s->len += (size_t)sz;
         return (int64_t)sz;
     }
     return sink_pwrite(s, buffer, sz, offset) ? -1 : (int64_t)sz;
@@ -465,14 +520,24 @@ int tf_exr_write_chunk(tf_exr_writer *w, int cx, int cy, const void *packed, siz
 
 int tf_exr_flush(tf_exr_writer *w, char *err, size_t errlen)
 {
-    if (writer_refuses(w, err, errlen))
-        return -1;
-    if (sink_flush(&w->sink)) {
+    /* Even when refusing new chunks (a failed chunk write), the whole chunks handed over
+     * before it go out, and no reference to the caller's memory outlives this call. */
+    int refused = writer_refuses(w, err, errlen);
+    if (sink_flush(&w->sink) && !refused) {
         tf_seterr(err, errlen, "%s: cannot write: %s", w->path, strerror(w->sink.write_errno));
         return -1;
     }
-    return 0;
+    return refused ? -1 : 0;
 }
+
+void tf_exr_hold_chunks(tf_exr_writer *w, int on)
+{
+    if (!on && w->sink.held)
+        sink_flush(&w->sink); /* a failure is remembered and reported by the next call */
+    w->sink.hold = on;
+}
+
+int tf_exr_holds_references(const tf_exr_writer *w) { return w->sink.held > 0; }
 
 int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen)
 {

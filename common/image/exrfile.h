@@ -57,9 +57,16 @@ int64_t tf_exr_next_chunk(const tf_exr_writer *w);
  * bytes, untouched (OpenEXRCore's raw chunk write).  0, or -1 with a message. */
 int tf_exr_write_chunk(tf_exr_writer *w, int cx, int cy, const void *packed, size_t len,
                        char *err, size_t errlen);
-/* Hand what the write-behind buffer holds to the file (one pwrite; no fsync).  tf_exr_write_chunk
- * buffers: the coordinator flushes after each result, so a result costs one write.  0 or -1. */
+/* Hand what the write-behind buffer holds to the file (one pwritev; no fsync).
+ * tf_exr_write_chunk buffers: the coordinator flushes when its queue of results runs dry, so
+ * results that come together cost one write.  0 or -1. */
 int tf_exr_flush(tf_exr_writer *w, char *err, size_t errlen);
+/* With hold on, tf_exr_write_chunk keeps a reference to large packed chunks instead of
+ * copying them into the buffer, and the caller keeps that memory alive and unchanged until
+ * the next tf_exr_flush, tf_exr_sync or tf_exr_finish -- which it must call before freeing it
+ * whenever tf_exr_holds_references says so.  Off by default. */
+void tf_exr_hold_chunks(tf_exr_writer *w, int on);
+int tf_exr_holds_references(const tf_exr_writer *w);
 /* Make everything written so far durable (flush and fsync). */
 int tf_exr_sync(tf_exr_writer *w, char *err, size_t errlen);
 /* All rows written: finish the file (offset table), fsync, close, free. */

@@ -25,6 +25,7 @@
 
 #include <openexr.h>
 
+#include "image/exrencode.h"
 #include "image/exrfile.h"
 
 #define W 37
@@ -482,6 +483,78 @@ static void test_resume_equals_uninterrupted_write(void **state)
 /* The rewind of --verify: a partial file cut back to its first K chunks through the resume
  * path (chunks after K dropped although they are whole), then rewritten with other pixels and
  * finished, reads back as those pixels, byte for byte the same file as one written straight. */
+/* The coordinator's path: chunks packed elsewhere (a worker's encoder), written raw with
+ * tf_exr_hold_chunks on, from a buffer that is scribbled over right after each flush.  The
+ * file must equal one written by tf_exr_write_rows byte for byte, large chunks must be held
+ * (referenced) until the flush and never after it, and a refused chunk must leave nothing
+ * held once flushed. */
+static void test_held_chunks_reach_the_file_before_their_memory_goes(void **state)
+{
+    (void)state;
+    const char *a = scratch_path("held_a.exr");
+    const char *b = scratch_path("held_b.exr");
+    tf_exr_meta m = test_meta(W * 8, H); /* random rows of 296 float pixels: chunks of ~7 KB */
+    tf_pixel *px = random_image(m.width, H, 9);
+    write_file(a, &m, px, H, 1);
+    char err[512] = "";
+    tf_exr_layout l = tf_exr_meta_layout(&m);
+    tf_exr_encoder *enc = tf_exr_encoder_new(&l, err, sizeof err);
+    assert_non_null(enc);
+    tf_exr_writer *w = tf_exr_create(b, &m, err, sizeof err);
+    assert_non_null(w);
+    tf_exr_hold_chunks(w, 1);
+    uint8_t *copy = NULL;
+    int held_any = 0;
+    for (int y = 0; y < H; y += tf_exr_chunk_rows()) {
+        int rows = H - y < tf_exr_chunk_rows() ? H - y : tf_exr_chunk_rows();
+        tf_rect r = {0, y, m.width, rows};
+        tf_chunk_payload p;
+        assert_int_equal(tf_exr_encode_rect(enc, r, px + (size_t)y * m.width, &p, err, sizeof err), 0);
+        copy = realloc(copy, p.chunks_len);
+        assert_non_null(copy);
+        memcpy(copy, p.chunks, p.chunks_len);
+        size_t off = 0;
+        for (size_t i = 0; i < p.nchunks; i++) {
+            tf_chunk_rec c;
+            tf_chunk_rec_get(p.index + i * TF_CHUNK_RECORD_BYTES, &c);
+            assert_int_equal(tf_exr_write_chunk(w, c.cx, c.cy, copy + off, (size_t)c.packed, err,
+                                                sizeof err), 0);
+            off += (size_t)c.packed;
+        }
+        held_any |= tf_exr_holds_references(w);
+        assert_int_equal(tf_exr_flush(w, err, sizeof err), 0);
+        assert_false(tf_exr_holds_references(w));
+        memset(copy, 0xa5, p.chunks_len); /* what a freed result would hold */
+    }
+    assert_true(held_any);
+    assert_int_equal(tf_exr_finish(w, err, sizeof err), 0);
+    long sa, sb;
+    assert_true(file_checksum(a, &sa) == file_checksum(b, &sb));
+    assert_int_equal(sa, sb);
+
+    /* A chunk out of order is refused; the held one before it still goes out at the flush. */
+    w = tf_exr_create(b, &m, err, sizeof err);
+    assert_non_null(w);
+    tf_exr_hold_chunks(w, 1);
+    tf_chunk_payload p;
+    tf_rect r0 = {0, 0, m.width, tf_exr_chunk_rows()};
+    assert_int_equal(tf_exr_encode_rect(enc, r0, px, &p, err, sizeof err), 0);
+    copy = realloc(copy, p.chunks_len);
+    memcpy(copy, p.chunks, p.chunks_len);
+    tf_chunk_rec c;
+    tf_chunk_rec_get(p.index, &c);
+    assert_int_equal(tf_exr_write_chunk(w, c.cx, c.cy, copy, (size_t)c.packed, err, sizeof err), 0);
+    assert_true(tf_exr_holds_references(w));
+    assert_int_equal(tf_exr_write_chunk(w, c.cx, c.cy + 32, copy, (size_t)c.packed, err,
+                                        sizeof err), -1);
+    assert_int_equal(tf_exr_flush(w, err, sizeof err), 0);
+    assert_false(tf_exr_holds_references(w));
+    tf_exr_abandon(w);
+    free(copy);
+    tf_exr_encoder_free(enc);
+    free(px);
+}
+
 static void test_resume_prefix_takes_back_whole_chunks(void **state)
 {
     (void)state;
@@ -709,6 +782,7 @@ int main(void)
         cmocka_unit_test(test_torn_last_chunk_dropped_at_every_offset),
         cmocka_unit_test(test_resume_equals_uninterrupted_write),
         cmocka_unit_test(test_resume_prefix_takes_back_whole_chunks),
+        cmocka_unit_test(test_held_chunks_reach_the_file_before_their_memory_goes),
         cmocka_unit_test(test_resume_refuses_changes_and_touches_nothing),
         cmocka_unit_test(test_probe_missing_and_foreign_files),
         cmocka_unit_test(test_write_rows_rejects_misaligned_rows),

@@ -836,6 +836,13 @@ static int unseal_and_serve(conn *c)
     }
 }
 
+/* Drained: an idle connection keeps no large-result-sized buffer. */
+static void trim_idle(conn *c)
+{
+    tf_buf_trim(&c->in, TS_BUF_KEEP);
+    tf_buf_trim(&c->raw, TS_BUF_KEEP);
+}
+
 /* Read what is available (bounded), then serve it. */
 static void conn_readable(conn *c)
 {
@@ -876,14 +883,18 @@ static void conn_readable(conn *c)
             }
             if (c->dead)
                 return;
+            if ((size_t)n < want) {
+                /* A short read took all the socket had: stop here rather than pay a recv that
+                 * says EAGAIN (epoll is level-triggered and reports anything that comes next). */
+                trim_idle(c);
+                break;
+            }
             continue;
         }
         if (n < 0 && errno == EINTR)
             continue;
         if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
-            /* drained: an idle connection keeps no large-result-sized buffer */
-            tf_buf_trim(&c->in, TS_BUF_KEEP);
-            tf_buf_trim(&c->raw, TS_BUF_KEEP);
+            trim_idle(c);
             break;
         }
         if (n == 0 && (c->in.len > 0 || c->raw.len > 0))

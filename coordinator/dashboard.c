@@ -20,6 +20,7 @@
 #include "log.h"
 
 #define DASH_PUBLISH_MS 200      /* a fresh snapshot at most this often */
+#define DASH_WATCHED_S 30.0      /* a reader within this long: snapshots are full */
 #define DASH_LINGER_MS 1000      /* at the end, for open event streams to send the final state */
 #define PREVIEW_MAX_SIDE 512     /* the live preview's longer side, in pixels */
 #define HISTORY_MAX 512          /* throughput samples kept (then halved, interval doubled) */
@@ -83,7 +84,7 @@ struct tf_dashboard {
 
 static double since_start(const tf_dashboard *d) { return tf_now_s() - d->t_start; }
 
-static void publish(tf_dashboard *d, int rows_written, int block);
+static void publish(tf_dashboard *d, int rows_written, int block, int full);
 
 /* ---- open ----------------------------------------------------------------------------------- */
 
@@ -347,7 +348,7 @@ int tf_dashboard_serve(tf_dashboard *d, char *err, size_t errlen)
     tf_info("dashboard at %s%s", d->url,
             d->have_token ? " (token required: Authorization: Bearer, or open /login?token=...)"
                           : "");
-    publish(d, d->rows_at_start, 1);
+    publish(d, d->rows_at_start, 1, 1);
     return 0;
 }
 
@@ -381,7 +382,7 @@ static void sample_history(tf_dashboard *d, double t, uint64_t rays, double busy
     d->hist_last_s = t;
 }
 
-static tf_snapshot *capture(tf_dashboard *d, int rows_written)
+static tf_snapshot *capture(tf_dashboard *d, int rows_written, int full)
 {
     tf_snapshot *s = calloc(1, sizeof *s);
     if (!s)
@@ -503,6 +504,9 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written)
         free(views);
         free(owners);
     }
+    s->partial = !full;
+    if (!full)
+        return s; /* nobody watches: the events and the preview, the costly copies, wait */
     s->events = malloc(TF_EVENTS_MAX * sizeof *s->events);
     if (s->events)
         s->nevents = tf_events_since(d->events, 0, s->events, TF_EVENTS_MAX);
@@ -523,9 +527,9 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written)
     return s;
 }
 
-static void publish(tf_dashboard *d, int rows_written, int block)
+static void publish(tf_dashboard *d, int rows_written, int block, int full)
 {
-    tf_snapshot *s = capture(d, rows_written);
+    tf_snapshot *s = capture(d, rows_written, full);
     if (!s)
         return;
     if (!tf_hub_publish(&d->hub, s, block)) {
@@ -597,8 +601,11 @@ int tf_dashboard_tick(tf_dashboard *d, int rows_written)
     int n = d->sup ? tf_hub_take_commands(&d->hub, cmds, TF_HUB_COMMANDS) : 0;
     for (int i = 0; i < n; i++)
         run_command(d, &cmds[i]);
-    if (n > 0 || (tf_now_s() - d->last_publish_s) * 1000.0 >= DASH_PUBLISH_MS)
-        publish(d, rows_written, 0);
+    /* A full snapshot only while someone reads them (or one waits for it now): a dashboard
+     * nobody watches costs no copies of the preview and the events. */
+    int watched = tf_hub_watched(&d->hub, DASH_WATCHED_S);
+    if (n > 0 || watched == 2 || (tf_now_s() - d->last_publish_s) * 1000.0 >= DASH_PUBLISH_MS)
+        publish(d, rows_written, 0, watched > 0);
     return d->stop_requested;
 }
 
@@ -610,7 +617,7 @@ void tf_dashboard_end(tf_dashboard *d, tf_run_state state, int exit_status, int 
     d->exit_status = exit_status;
     tf_events_add(d->events, TF_EV_END, -1, -1, "render %s (exit status %d)",
                   tf_run_state_name(state), exit_status);
-    publish(d, rows_written, 1);
+    publish(d, rows_written, 1, 1);
 }
 
 void tf_dashboard_close(tf_dashboard *d)

@@ -23,6 +23,8 @@ int tf_hub_init(tf_dash_hub *hub)
     hub->current = NULL;
     hub->stopping = 0;
     hub->ncmds = 0;
+    hub->last_read_s = -1e9;
+    atomic_init(&hub->want_full, 0);
     if (pthread_mutex_init(&hub->lock, NULL))
         return -1;
     pthread_condattr_t ca;
@@ -78,6 +80,14 @@ int tf_hub_take_commands(tf_dash_hub *hub, tf_command *out, int max)
 tf_snapshot *tf_hub_acquire(tf_dash_hub *hub)
 {
     pthread_mutex_lock(&hub->lock);
+    hub->last_read_s = tf_now_s();
+    if (hub->current && hub->current->partial && !hub->stopping) {
+        atomic_store(&hub->want_full, 1);
+        struct timespec deadline = tf_realtime_in(TF_HUB_FULL_WAIT_MS);
+        while (hub->current->partial && !hub->stopping &&
+               pthread_cond_timedwait(&hub->changed, &hub->lock, &deadline) != ETIMEDOUT)
+            ;
+    }
     tf_snapshot *s = hub->current;
     if (s)
         s->refs++;
@@ -96,10 +106,22 @@ void tf_hub_release(tf_dash_hub *hub, tf_snapshot *snap)
         tf_snapshot_free(snap);
 }
 
+int tf_hub_watched(tf_dash_hub *hub, double window_s)
+{
+    if (atomic_exchange(&hub->want_full, 0))
+        return 2;
+    if (pthread_mutex_trylock(&hub->lock))
+        return 1; /* a reader holds it right now */
+    int recent = tf_now_s() - hub->last_read_s < window_s;
+    pthread_mutex_unlock(&hub->lock);
+    return recent;
+}
+
 int tf_hub_wait(tf_dash_hub *hub, uint64_t version, int timeout_ms)
 {
     struct timespec deadline = tf_realtime_in(timeout_ms);
     pthread_mutex_lock(&hub->lock);
+    hub->last_read_s = tf_now_s();
     int rc = 0;
     for (;;) {
         if (hub->stopping) {

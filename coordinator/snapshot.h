@@ -14,6 +14,7 @@
 #define TF_SNAPSHOT_H
 
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdint.h>
 
 #include "coordinator/events.h"
@@ -89,6 +90,7 @@ typedef struct tf_snapshot {
     int64_t preview_stamps;
     uint64_t preview_version;
     uint8_t *preview_rgba;         /* preview_w * preview_h * 4 */
+    int partial;                   /* taken while nobody watched: no events, no preview */
 } tf_snapshot;
 
 typedef enum tf_command_kind { TF_CMD_STOP, TF_CMD_DROP_WORKER, TF_CMD_WATERMARK } tf_command_kind;
@@ -106,6 +108,8 @@ typedef struct tf_dash_hub {
     int stopping;
     tf_command cmds[TF_HUB_COMMANDS];
     int ncmds;
+    double last_read_s;            /* tf_now_s of the last acquire or wait (under lock) */
+    atomic_int want_full;          /* a reader waits for a snapshot that is not partial */
 } tf_dash_hub;
 
 void tf_snapshot_free(tf_snapshot *s);
@@ -117,8 +121,14 @@ void tf_hub_destroy(tf_dash_hub *hub);
 int tf_hub_publish(tf_dash_hub *hub, tf_snapshot *snap, int block);
 /* Event loop: take up to max queued commands, only if the lock is free at once. */
 int tf_hub_take_commands(tf_dash_hub *hub, tf_command *out, int max);
-/* HTTP side: a reference to the current snapshot (NULL before the first publish). */
+/* HTTP side: a reference to the current snapshot (NULL before the first publish).  If it is
+ * partial (nobody had been watching), asks the event loop for a full one and waits for it,
+ * at most TF_HUB_FULL_WAIT_MS. */
 tf_snapshot *tf_hub_acquire(tf_dash_hub *hub);
+#define TF_HUB_FULL_WAIT_MS 500
+/* Event loop: 2 if a reader waits for a full snapshot now (the request is cleared: the
+ * caller publishes one), 1 if a reader came by in the last `window_s` seconds, else 0. */
+int tf_hub_watched(tf_dash_hub *hub, double window_s);
 void tf_hub_release(tf_dash_hub *hub, tf_snapshot *snap);
 /* HTTP side: wait up to timeout_ms for a snapshot newer than `version` (or for stopping);
  * returns 1 if there is one, 0 on timeout, -1 when stopping. */

@@ -108,6 +108,52 @@ static void test_hub(void **state)
     tf_hub_destroy(&hub);
 }
 
+/* The event loop playing its part for test_hub_partial: wait for a reader's request, then
+ * publish a full snapshot. */
+static void *answer_request(void *arg)
+{
+    tf_dash_hub *hub = arg;
+    for (int i = 0; i < 1000 && tf_hub_watched(hub, 30.0) != 2; i++)
+        usleep(1000);
+    tf_snapshot *full = snap(11);
+    full->partial = 0;
+    tf_hub_publish(hub, full, 1);
+    return NULL;
+}
+
+/* Nobody watching: snapshots are partial and cost no copies.  A reader that finds a partial one
+ * asks for a full one and gets it; afterwards it counts as watching. */
+static void test_hub_partial(void **state)
+{
+    (void)state;
+    tf_dash_hub hub;
+    assert_int_equal(tf_hub_init(&hub), 0);
+    assert_int_equal(tf_hub_watched(&hub, 30.0), 0); /* no reader ever */
+    tf_snapshot *p = snap(10);
+    p->partial = 1;
+    assert_int_equal(tf_hub_publish(&hub, p, 0), 1);
+    pthread_t loop;
+    assert_int_equal(pthread_create(&loop, NULL, answer_request, &hub), 0);
+    tf_snapshot *got = tf_hub_acquire(&hub); /* blocks until the full one is out */
+    pthread_join(loop, NULL);
+    assert_non_null(got);
+    assert_int_equal(got->version, 11);
+    assert_int_equal(got->partial, 0);
+    tf_hub_release(&hub, got);
+    assert_int_equal(tf_hub_watched(&hub, 30.0), 1); /* a reader came by: full from now on */
+    assert_int_equal(tf_hub_watched(&hub, 0.0), 0);  /* ... but not within no time at all */
+    /* with no event loop answering, a reader waits TF_HUB_FULL_WAIT_MS, then takes what is there */
+    tf_snapshot *q = snap(12);
+    q->partial = 1;
+    assert_int_equal(tf_hub_publish(&hub, q, 0), 1);
+    got = tf_hub_acquire(&hub);
+    assert_int_equal(got->version, 12);
+    tf_hub_release(&hub, got);
+    assert_int_equal(tf_hub_watched(&hub, 30.0), 2); /* its request is still there, once */
+    assert_int_equal(tf_hub_watched(&hub, 30.0), 1);
+    tf_hub_destroy(&hub);
+}
+
 /* A rectangle's share of the preview grid (a result's `preview` blob), all one sRGB value. */
 static uint8_t *share_of(const tf_livepreview *lp, tf_rect r, uint8_t value, size_t *len)
 {
@@ -272,6 +318,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_event_ring),   cmocka_unit_test(test_hub),
+        cmocka_unit_test(test_hub_partial),
         cmocka_unit_test(test_live_preview), cmocka_unit_test(test_api_documents),
         cmocka_unit_test(test_tokens),
     };

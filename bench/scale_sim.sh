@@ -9,13 +9,16 @@
 # at the start (RECORD_SIZE of SCENE with 8x8 stamps, -j 2), so the coordinator receives, checks
 # and writes what a real farm sends.  The coordinator's CPU (render path) and the simulator's
 # CPU are reported apart.  Tasks are 8x8-pixel stamps; the image is sized so every worker gets
-# TPW tasks on average (near 16:9), and --pixel-us is chosen so the average task costs TASK_MS.
+# exactly TPW tasks (as near 16:9 as the divisors of W * TPW allow), and --pixel-us is chosen so
+# the average task costs TASK_MS.  MODEL "flat" gives every task the same cost (exactly
+# TASK_MS); a measured map (the default) gives the scene's spread: default.cost's sky rows cost
+# 0.04 of the average, so at "100 ms" a third of the tasks take 4 ms.
 # Watermark = F * W + one band of tasks, for each F.
 #
 # Prints one CSV line per run (and writes them to $OUT/scale_sim.csv), then plots modelled
 # efficiency against workers for each task size (best watermark) to $OUT/scale_sim.svg.
 #
-# usage: bench/scale_sim.sh [MODEL]   (default: bench/default.cost)
+# usage: bench/scale_sim.sh [MODEL|flat]   (default: bench/default.cost)
 # env:   WORKERS="16 64 256 1024" TASK_MS="1 10 30 100" WM="1 2 4" TPW=16 OUT=bench/results PIN=0
 set -eu
 cd "$(dirname "$0")/.."
@@ -37,9 +40,15 @@ PORT=$((20000 + $$ % 20000))
 EXR=/dev/shm/terrafarm-scale-sim-$$.exr
 LOG=$(mktemp)
 REC=/dev/shm/terrafarm-scale-payloads-$$.exr
-trap 'rm -f "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$REC" "${REC%.exr}.png"' EXIT
+FLAT_MODEL=
+trap 'rm -f ${FLAT_MODEL:+"$FLAT_MODEL"} "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$REC" "${REC%.exr}.png"' EXIT
 
 [ -x "$TF" ] || { echo "scale_sim.sh: build first (make)" >&2; exit 1; }
+if [ "$MODEL" = flat ]; then
+  MODEL=$(mktemp --suffix=.cost)
+  FLAT_MODEL=$MODEL
+  printf 'terrafarm-cost-map 1 1 1 1 1 1000.0\n1.0000\n' >"$MODEL"
+fi
 [ -r "$MODEL" ] || { echo "scale_sim.sh: no cost map $MODEL (terrafarm bench SCENE --cost-map $MODEL)" >&2; exit 1; }
 
 echo "recording the payloads: $SCENE at $RECORD_SIZE, stamps:8x8" >&2
@@ -48,12 +57,16 @@ echo "recorded $(wc -c <"$REC") bytes for $RECORD_SIZE pixels" >&2
 grep -m1 'model name' /proc/cpuinfo | sed 's/.*: /cpu: /' >&2
 echo "load before: $(cut -d' ' -f1-3 /proc/loadavg)" >&2
 
-echo "workers,task_ms,watermark,tasks,width,height,wall_s,modelled_s,efficiency,ops_per_s,take_mean_ms,take_p50_ms,take_p99_ms,redealt,duplicated,coord_wall_s,coord_render_cpu_s,sim_cpu_s,out_bytes,load1,bound_efficiency" >"$CSV"
+echo "workers,task_ms,watermark,tasks,width,height,wall_s,modelled_s,efficiency,ops_per_s,take_mean_ms,take_p50_ms,take_p99_ms,redealt,duplicated,coord_wall_s,coord_render_cpu_s,sim_cpu_s,out_bytes,load1,bound_efficiency,cost_map" >"$CSV"
 for ms in $TASK_MS; do
   for w in $WORKERS; do
     n=$((w * TPW))
-    cols=$(awk -v n="$n" 'BEGIN { c = int(sqrt(n * 16 / 9) + 0.5); print c < 1 ? 1 : c }')
-    bands=$(( (n + cols - 1) / cols ))
+    # columns: the divisor of n nearest a 16:9 image, so that there are exactly n tasks (a
+    # partial last band would add a wave of a few tasks that the workers finish alone)
+    cols=$(awk -v n="$n" 'BEGIN { t = sqrt(n * 16 / 9); b = 1
+                                   for (c = 1; c <= n; c++) if (n % c == 0 && (c - t) ^ 2 < (b - t) ^ 2) b = c
+                                   print b }')
+    bands=$((n / cols))
     width=$((cols * 8)); height=$((bands * 8))
     pixel_us=$(awk -v ms="$ms" 'BEGIN { printf "%.4f", ms * 1000 / 64 }')
     for f in $WM; do
@@ -77,7 +90,7 @@ for ms in $TASK_MS; do
       line=$(cat "$LOG")
       get() { echo "$line" | tr ' ' '\n' | sed -n "s/^$1=//p"; }
       js() { sed -n "s/^ *\"$1\": *\([0-9.]*\).*/\1/p" "$LOG.stats" | head -1; }
-      row="$w,$ms,$wm,$(get tasks),$width,$height,$(get wall_s),$(get modelled_s),$(get efficiency),$(get ops_per_s),$(get take_mean_ms),$(get take_p50_ms),$(get take_p99_ms),$(js tasks_redealt),$(js tasks_duplicated),$(js wall_s),$(js coordinator_render_cpu_s),$sim_cpu,$(wc -c <"$EXR"),$(cut -d' ' -f1 /proc/loadavg),$(get bound_efficiency)"
+      row="$w,$ms,$wm,$(get tasks),$width,$height,$(get wall_s),$(get modelled_s),$(get efficiency),$(get ops_per_s),$(get take_mean_ms),$(get take_p50_ms),$(get take_p99_ms),$(js tasks_redealt),$(js tasks_duplicated),$(js wall_s),$(js coordinator_render_cpu_s),$sim_cpu,$(wc -c <"$EXR"),$(cut -d' ' -f1 /proc/loadavg),$(get bound_efficiency),${FLAT_MODEL:+flat}${FLAT_MODEL:-$(basename "$MODEL")}"
       echo "$row" | tee -a "$CSV"
     done
   done

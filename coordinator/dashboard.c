@@ -13,6 +13,7 @@
 #include "clock.h"
 #include "coordinator/httpauth.h"
 #include "coordinator/httpd.h"
+#include "coordinator/idmap.h"
 #include "coordinator/livepreview.h"
 #include "farmproto.h"
 #include "image/exrfile.h"
@@ -63,6 +64,7 @@ struct tf_dashboard {
     int nconns, capconns;
     worker_seen *wseen;
     int nwseen, capwseen;
+    tf_idmap wseen_index;    /* worker id -> its entry of wseen (capture looks up every worker) */
     tf_snap_sample *hist;
     int nhist;
     double hist_interval_s, hist_last_s;
@@ -228,9 +230,16 @@ static void heard(tf_dashboard *d, uint64_t conn)
 
 static worker_seen *seen_worker(tf_dashboard *d, int64_t id)
 {
+    int64_t at;
+    if (id != 0 && tf_idmap_get(&d->wseen_index, (uint64_t)id, &at))
+        return &d->wseen[at];
+    /* not indexed (new, or the index ran out of memory): once per worker, not per snapshot */
     for (int i = 0; i < d->nwseen; i++)
-        if (d->wseen[i].id == id)
+        if (d->wseen[i].id == id) {
+            if (id != 0)
+                tf_idmap_put(&d->wseen_index, (uint64_t)id, i);
             return &d->wseen[i];
+        }
     if (d->nwseen == d->capwseen) {
         int cap = d->capwseen ? 2 * d->capwseen : 32;
         worker_seen *n = realloc(d->wseen, (size_t)cap * sizeof *n);
@@ -239,6 +248,8 @@ static worker_seen *seen_worker(tf_dashboard *d, int64_t id)
         d->wseen = n;
         d->capwseen = cap;
     }
+    if (id != 0)
+        tf_idmap_put(&d->wseen_index, (uint64_t)id, d->nwseen);
     worker_seen *w = &d->wseen[d->nwseen++];
     *w = (worker_seen){id, -1, -1, 0};
     return w;
@@ -456,9 +467,11 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written, int full)
         sample_history(d, t, s->rays_total, busy, rows_written, s->live_workers);
 
         int cap = s->outstanding > 0 ? s->outstanding : 1;
-        tf_task_view *views = malloc((size_t)cap * sizeof *views);
-        s->tasks = malloc((size_t)cap * sizeof *s->tasks);
-        s->workers = calloc((size_t)st->nworkers + 1, sizeof *s->workers);
+        tf_task_view *views = full ? malloc((size_t)cap * sizeof *views) : NULL;
+        s->tasks = full ? malloc((size_t)cap * sizeof *s->tasks) : NULL;
+        s->workers = full ? calloc((size_t)st->nworkers + 1, sizeof *s->workers) : NULL;
+        if (!full) /* the lists of tasks and workers wait for a reader too */
+            tf_supervisor_task_views(d->sup, &s->tasks_written, NULL, 0);
         if (views && s->tasks && s->workers && owners) {
             int64_t write_task = 0;
             int n = tf_supervisor_task_views(d->sup, &write_task, views, cap);
@@ -506,7 +519,7 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written, int full)
     }
     s->partial = !full;
     if (!full)
-        return s; /* nobody watches: the events and the preview, the costly copies, wait */
+        return s; /* nobody watches: the events and the preview, costly copies, wait too */
     s->events = malloc(TF_EVENTS_MAX * sizeof *s->events);
     if (s->events)
         s->nevents = tf_events_since(d->events, 0, s->events, TF_EVENTS_MAX);
@@ -637,6 +650,7 @@ void tf_dashboard_close(tf_dashboard *d)
     tf_livepreview_free(d->preview);
     free(d->conns);
     free(d->wseen);
+    tf_idmap_free(&d->wseen_index);
     free(d->hist);
     free(d);
 }

@@ -1,8 +1,9 @@
-/* idmap.h: a hash map from nonzero 64-bit ids (the server's connection ids) to 64-bit values,
- * for the supervisor's per-request lookups (which worker a connection is, which lease it holds)
- * that were linear scans: with a thousand workers they were a tenth of the coordinator's time.
+/* idmap.h: a hash map from nonzero 64-bit ids (the server's connection ids, worker ids) to
+ * 64-bit values, for the supervisor's per-request lookups (which worker a connection is, which
+ * lease it holds) and the dashboard's per-snapshot ones (a worker's record), that were linear
+ * scans: with a thousand workers they were a tenth of the coordinator's time.
  * Open addressing with linear probing and backward-shift deletion (no tombstones); it grows at
- * half full.  Not thread-safe: the supervisor's event loop is its only user. */
+ * half full.  Not thread-safe: the event loop is its only user. */
 #ifndef TF_IDMAP_H
 #define TF_IDMAP_H
 

@@ -5,7 +5,10 @@
  * threads of its own and must never touch the supervisor, the tuple space or the server.  So
  * the event loop copies the state it wants to show into a fresh tf_snapshot (dashboard.c, at
  * most every ~200 ms) and publishes it in the hub; HTTP threads take a reference to the current
- * snapshot, read it at leisure, and release it.  Snapshots are immutable once published.
+ * snapshot, read it at leisure, and release it.  Snapshots are immutable once published.  While
+ * no HTTP thread has come by for a while, snapshots are partial (counters only: no preview,
+ * events or lists, the copies that cost); a reader that finds a partial one asks for a full
+ * one and waits for the next publish (tf_hub_acquire). 
  * Controls flow the other way through the hub's small command queue, which the event loop
  * drains.  The event loop only ever *tries* the hub's lock (a busy lock means: publish next
  * time), so no HTTP request can stall the render; HTTP threads hold it only to move pointers

@@ -102,7 +102,8 @@ typedef struct tf_exr_sink {
     uint64_t run_len;  /* bytes in the run */
     struct iovec iov[64];
     int niov;
-    int hold;
+    int hold;          /* tf_exr_hold_chunks: the caller keeps its chunks alive to the flush */
+    int referring;     /* set only around tf_exr_write_chunk's raw write of the caller's bytes */
     int held;          /* pieces of the run that are references */
 } tf_exr_sink;
 
@@ -197,7 +198,9 @@ static int64_t sink_write(exr_const_context_t ctxt, void *userdata, const void *
         return 0;
     if (!s->buf)
         s->buf = malloc(SINK_BUFFER); /* without it, every write goes straight through */
-    int refer = s->hold && sz >= SINK_REF_MIN;
+    /* Only the caller's packed bytes, never OpenEXRCore's own buffers (the header, the offset
+     * table at finish, the encoder's output), which it may free before the flush. */
+    int refer = s->referring && sz >= SINK_REF_MIN;
     int fits = refer ? 1 : s->buf && s->len + sz <= SINK_BUFFER;
     if (s->run_len > 0 && (offset != s->run_off + s->run_len || s->niov == SINK_IOV || !fits))
         if (sink_flush(s))
@@ -507,9 +510,11 @@ int tf_exr_write_chunk(tf_exr_writer *w, int cx, int cy, const void *packed, siz
     }
     tf_chunk_ref c = tf_layout_chunk(&w->layout, index);
     last_exr_message[0] = '\0';
+    w->sink.referring = w->sink.hold;
     exr_result_t rv = w->layout.tiled
                           ? exr_write_tile_chunk(w->ctx, 0, cx, cy, 0, 0, packed, len)
                           : exr_write_scanline_chunk(w->ctx, 0, cy, packed, len);
+    w->sink.referring = 0;
     if (rv != EXR_ERR_SUCCESS || w->sink.write_errno) {
         chunk_failed(w, &c, rv, err, errlen);
         return -1;

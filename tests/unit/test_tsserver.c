@@ -163,6 +163,23 @@ static void test_socketpair_client(void **state)
     stop(fx);
 }
 
+/* ts_out_in of ("out_name", out_v) with the template (tmpl_name, ?int): the tuple it takes
+ * must carry `want`. */
+static void expect_out_in(ts_client *c, const char *out_name, int64_t out_v,
+                          const char *tmpl_name, int64_t want)
+{
+    tf_tuple t, m, got;
+    int64_t v;
+    tup(&t, "si", out_name, out_v);
+    tup(&m, "sI", tmpl_name, 0);
+    assert_int_equal(ts_out_in(c, &t, &m, &got), 0);
+    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
+    assert_int_equal(v, want);
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&t);
+    tf_tuple_clear(&m);
+}
+
 /* ts_out_in: the out is stored before the in is served (the in can take the very tuple just
  * put), both replies are read in order, and a blocking in is woken by a later out; the
  * connection carries on normally afterwards. */
@@ -175,25 +192,11 @@ static void test_out_in_one_round_trip(void **state)
     ts_client *c = ts_client_from_fd(sv[1]);
     tf_tuple t, m, got;
     int64_t v;
-    tup(&t, "si", "result", 7);
-    tup(&m, "sI", "result", 0);
-    assert_int_equal(ts_out_in(c, &t, &m, &got), 0); /* takes back what it put */
-    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
-    assert_int_equal(v, 7);
-    tf_tuple_clear(&got);
-    tf_tuple_clear(&t);
-    tf_tuple_clear(&m);
+    expect_out_in(c, "result", 7, "result", 7); /* takes back what it put */
     tup(&t, "si", "task", 1);
     assert_int_equal(ts_out(c, &t), 0);
     tf_tuple_clear(&t);
-    tup(&t, "si", "result", 8);
-    tup(&m, "sI", "task", 0);
-    assert_int_equal(ts_out_in(c, &t, &m, &got), 0); /* a result for a task */
-    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
-    assert_int_equal(v, 1);
-    tf_tuple_clear(&got);
-    tf_tuple_clear(&t);
-    tf_tuple_clear(&m);
+    expect_out_in(c, "result", 8, "task", 1); /* a result for a task */
     tup(&m, "sI", "result", 0);
     assert_int_equal(ts_inp(c, &m, &got), 1); /* the out of the pair was stored */
     assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);

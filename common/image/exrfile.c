@@ -84,6 +84,8 @@ static void set_error(char *err, size_t errlen, const char *path, const char *wh
 /* ---------------------------------------------------------------------------------------------
  * The output stream: our descriptor, the first errno that hit it, and the abandon switch. */
 
+#define SINK_IOV 64 /* pieces in one run (one pwritev) */
+
 typedef struct tf_exr_sink {
     int fd;
     int write_errno;  /* first failure, 0 if none */
@@ -100,7 +102,7 @@ typedef struct tf_exr_sink {
     size_t len;        /* bytes of buf in use */
     uint64_t run_off;  /* file offset of the run's first byte */
     uint64_t run_len;  /* bytes in the run */
-    struct iovec iov[64];
+    struct iovec iov[SINK_IOV];
     int niov;
     int hold;          /* tf_exr_hold_chunks: the caller keeps its chunks alive to the flush */
     int referring;     /* set only around tf_exr_write_chunk's raw write of the caller's bytes */
@@ -109,7 +111,6 @@ typedef struct tf_exr_sink {
 
 #define SINK_BUFFER (256 * 1024)
 #define SINK_REF_MIN 4096 /* with hold: pieces this large are referenced, not copied */
-#define SINK_IOV ((int)(sizeof ((tf_exr_sink *)0)->iov / sizeof(struct iovec)))
 
 static int sink_pwrite(tf_exr_sink *s, const uint8_t *p, uint64_t sz, uint64_t offset)
 {

@@ -615,9 +615,13 @@ int tf_dashboard_tick(tf_dashboard *d, int rows_written)
     for (int i = 0; i < n; i++)
         run_command(d, &cmds[i]);
     /* A full snapshot only while someone reads them (or one waits for it now): a dashboard
-     * nobody watches costs no copies of the preview and the events. */
+     * nobody watches costs no copies of the preview and the events.  Most turns of the event
+     * loop publish nothing: they only look at the request flag, without the hub's lock. */
+    int due = n > 0 || (tf_now_s() - d->last_publish_s) * 1000.0 >= DASH_PUBLISH_MS;
+    if (!due && !atomic_load(&d->hub.want_full))
+        return d->stop_requested;
     int watched = tf_hub_watched(&d->hub, DASH_WATCHED_S);
-    if (n > 0 || watched == 2 || (tf_now_s() - d->last_publish_s) * 1000.0 >= DASH_PUBLISH_MS)
+    if (due || watched == 2)
         publish(d, rows_written, 0, watched > 0);
     return d->stop_requested;
 }

@@ -10,6 +10,7 @@
 const $ = (id) => document.getElementById(id);
 const POLL_MS = 500;
 let status = null, tasks = null, history = [], preview = null, previewKey = -1, previewBusy = false;
+let previewWanted = null; // {key, stamps}: the newest asked for; a load in flight fetches it next
 let tick = 0, ended = false, events = 0;
 
 function cookieToken() {
@@ -210,17 +211,19 @@ function countDrawn(img) {
   document.body.dataset.previewTotal = o.width * o.height;
 }
 
-function loadPreview(key) {
-  if (previewBusy) return;
+function loadPreview(key, stamps) {
+  previewWanted = {key, stamps};
+  if (previewBusy) return; // onload asks for previewWanted: the final picture is never skipped
   previewBusy = true;
   const img = new Image();
   img.onload = () => {
     preview = img;
     previewKey = key;
     previewBusy = false;
-    document.body.dataset.stampsDrawn = status ? status.preview_stamps : 0;
+    document.body.dataset.stampsDrawn = stamps; // of this picture, not of the newest status
     countDrawn(img);
     drawImage();
+    if (previewWanted.key !== previewKey) loadPreview(previewWanted.key, previewWanted.stamps);
   };
   img.onerror = () => { previewBusy = false; showError("cannot load the preview image"); };
   img.src = "/api/preview.png?v=" + key;
@@ -292,9 +295,10 @@ function followEvents() {
     status = JSON.parse(m.data);
     renderStatus(status);
     if (status.state !== "rendering" && status.state !== "starting") {
-      ended = true; // the coordinator says how it ended, then the stream closes
+      // the coordinator says how it ended, then the stream closes; one last poll fetches the
+      // final picture, workers and tasks (the stream carries none of them) and ends polling
       es.close();
-      drawImage();
+      poll();
     }
   });
   es.onerror = () => { if (ended) es.close(); };
@@ -314,7 +318,7 @@ async function poll() {
       drawPlot();
     }
     const key = s.preview_stamps * 1000003 + s.rows_written;
-    if (key !== previewKey) loadPreview(key);
+    if (key !== previewKey) loadPreview(key, s.preview_stamps);
     drawImage();
     clearError();
     document.body.dataset.polls = tick;

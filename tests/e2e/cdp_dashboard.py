@@ -116,6 +116,19 @@ while time.time() - start < limit:
             break
     time.sleep(0.25)
 
+# Finished: the page must come to show the whole picture (the coordinator keeps serving the final
+# state while --on-done runs); a page that stopped at the picture of its last poll while
+# rendering shows the last stamps missing.
+final = samples[-1]["data"] if samples else {}
+if final.get("state") == "finished":
+    end = time.time() + 8
+    while not (int(final.get("previewTotal", 0)) > 0 and
+               final.get("previewPixels") == final.get("previewTotal")) and time.time() < end:
+        time.sleep(0.25)
+        r = call("Runtime.evaluate", {"expression": PROBE, "returnByValue": True}, session)
+        if r["result"].get("type") == "string":
+            final = json.loads(r["result"]["value"])["data"]
+
 rendering = [s for s in samples if s["data"].get("state") == "rendering"]
 problems = []
 errors = [s["error"] for s in samples if s["error"]]
@@ -137,6 +150,9 @@ else:
         problems.append("FAIL: the event log stayed empty (no join seen)")
     if max(int(s["data"].get("plotPoints", 0)) for s in samples) < 1:
         problems.append("FAIL: the throughput plot has no point")
+if final.get("state") == "finished" and final.get("previewPixels") != final.get("previewTotal"):
+    problems.append("FAIL: the finished page shows %s of the picture's %s pixels" %
+                    (final.get("previewPixels"), final.get("previewTotal")))
 if not shot_taken:
     try:
         open(shot, "wb").write(base64.b64decode(screenshot()))

@@ -2,7 +2,8 @@
 # dashboard_browser.sh: a real browser (headless Chromium, Debian's chromium package) opens the
 # dashboard of a running render and the page is checked over the DevTools protocol
 # (cdp_dashboard.py): no error shown, the workers table filled, progress rising, finished
-# stamps drawn on the image, events listed, the plot drawn; a screenshot is saved
+# stamps drawn on the image, events listed, the plot drawn, the whole picture once finished (the
+# dashboard serves the final state while --on-done runs); a screenshot is saved
 # ($TF_DASHBOARD_SHOT, default in the test's temp dir).  The render is made big enough to last
 # a few seconds; its image must still be byte-identical to one rendered without a dashboard.
 . "$(dirname "$0")/lib.sh"
@@ -14,7 +15,7 @@ render -q -j 2 --size $SIZE --tasks stamps:80x60 --http none -o "$T/ref.exr" || 
 
 say "render with the dashboard, watched by Chromium"
 "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 --http 127.0.0.1:0 -j 1 --size $SIZE \
-    --tasks stamps:80x60 -o "$T/out.exr" 2>"$T/coord.err" &
+    --tasks stamps:80x60 -o "$T/out.exr" --on-done "sleep 10" 2>"$T/coord.err" &
 pid=$!; e2e_track $pid
 i=0
 while ! grep -q 'dashboard at' "$T/coord.err" 2>/dev/null; do

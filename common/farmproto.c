@@ -161,6 +161,25 @@ int tf_result_check(tf_result_msg *m, const tf_exr_layout *l, const tf_preview_g
     return 0;
 }
 
+int tf_result_counts_check(const tf_result_msg *m, tf_rect r, int aa_depth, char *err,
+                           size_t errlen)
+{
+    uint64_t side = (1ull << (aa_depth < 0 ? 0 : aa_depth > 8 ? 8 : aa_depth)) + 1;
+    uint64_t pixels = (uint64_t)r.w * (uint64_t)r.h;
+    uint64_t max_spp = pixels * side * side;
+    uint64_t max_primary = max_spp + ((uint64_t)r.w + 1) * ((uint64_t)r.h + 1);
+    const tf_render_counts *c = &m->counts;
+    if (c->primary_rays > max_primary)
+        return tf_seterr(err, errlen, "claims %llu primary rays, the task has room for %llu",
+                         (unsigned long long)c->primary_rays, (unsigned long long)max_primary);
+    if (c->shadow_rays > c->primary_rays || c->external_rays > c->primary_rays)
+        return tf_seterr(err, errlen, "claims more shadow or external rays than primary ones");
+    if (m->spp_total < 0 || (uint64_t)m->spp_total > max_spp)
+        return tf_seterr(err, errlen, "claims %lld samples, the task has room for %llu",
+                         (long long)m->spp_total, (unsigned long long)max_spp);
+    return 0;
+}
+
 const char *tf_task_rect_problem(tf_rect r, int image_w, int image_h)
 {
     if (r.w < 1 || r.h < 1)

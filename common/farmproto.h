@@ -103,6 +103,13 @@ int tf_result_unpack(const tf_tuple *t, tf_result_msg *m);
 int tf_result_check(tf_result_msg *m, const tf_exr_layout *l, const tf_preview_grid *g,
                     tf_rect r, char *err, size_t errlen);
 
+/* Counts no render of task rectangle r could have reached with antialiasing depth aa_depth
+ * (render.c: at most (2^depth + 1)^2 samples per pixel, each with at most one shadow ray; the
+ * external samples are among the primary ones): 0, or -1 with a one-line reason.  A result's
+ * counts are summed into the statistics, so a lie here would make them overflow. */
+int tf_result_counts_check(const tf_result_msg *m, tf_rect r, int aa_depth, char *err,
+                           size_t errlen);
+
 /* Largest task a worker accepts, in pixels (a bound on its buffer, whatever a tuple says). */
 #define TF_TASK_MAX_PIXELS (64u * 1024u * 1024u)
 /* Why a task rectangle cannot be rendered in an image_w x image_h image (0: size unknown, only

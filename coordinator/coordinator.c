@@ -516,6 +516,7 @@ static int start_space(render *r)
     scfg.hooks = (tf_frame_hooks){r, open_frame_writer, finish_frame_writer, rewind_frame_writer};
     scfg.layout = r->layout;
     scfg.verify_chunks = o->verify_chunks;
+    scfg.aa_max_depth = r->scene->antialias.max_depth;
     scfg.verify_fraction = o->verify_fraction;
     scfg.verify_seed = tf_verify_seed();
     scfg.spec = r->spec;
@@ -669,7 +670,9 @@ static int supervise(render *r)
     double last_wait_note = tf_now_s(), last_reap = 0;
     while (!interrupted && !tf_supervisor_done(r->sup) && !tf_supervisor_error(r->sup) &&
            !r->finish_error[0]) {
-        if (ts_server_run_once(r->srv, 50) < 0) {
+        /* While results wait for the pixel checker's verdict, come back for it soon. */
+        int wait_ms = tf_supervisor_checks_pending(r->sup) ? 1 : 50;
+        if (ts_server_run_once(r->srv, wait_ms) < 0) {
             tf_error("event loop failed: %s", strerror(errno));
             break;
         }

@@ -5,8 +5,8 @@
  *     write_task <= next_deal <= total_tasks
  * Tasks below write_task are on disk; tasks in [write_task, next_deal) are "outstanding"
  * (dealt, in the space, leased to a worker, or done and waiting for their band); tasks from
- * next_deal on have not been dealt.  INVARIANTS (checked by supervisor_ok() in debug builds,
- * `make asan`):
+ * next_deal on have not been dealt.  INVARIANTS (asserted clause by clause by
+ * assert_supervisor_state() in debug builds, `make asan`):
  *   S1. 0 <= write_task <= next_deal <= total_tasks, and write_job is the job of write_task
  *       (njobs once everything is written); jobs before it are finished.
  *   S2. next_deal - write_task <= ring_size, and the slot of every outstanding task id is
@@ -23,6 +23,12 @@
  *       has its result (--verify: a check waiting for a second worker).
  *   S8. The indexes agree with what they index: a connection holds at most one lease, and
  *       lease_of_conn names it; worker_of_conn names the entry of every open worker connection.
+ *   S9. Liveness: every outstanding task is in the space (in_space > 0), held under a lease of
+ *       an open connection (leased > 0), with the pixel checker (checking), or has its result
+ *       and awaits nothing that must be dealt (no check, or a check pending a second worker);
+ *       a check copy that is out is in the space or held.  So the write front always moves
+ *       once workers work: no copy is ever dropped without being dealt again (a check copy
+ *       answered or failed by a worker it excludes, too).  Not while the render is failing.
  *
  * The watermark is the user's --watermark, or (auto) one band of tasks plus three per worker,
  * following the number of workers connected: workers may join at any time.
@@ -56,8 +62,8 @@
 #include "coordinator/events.h"
 #include "farmproto.h"
 #include "coordinator/idmap.h"
+#include "coordinator/resultcheck.h"
 #include "coordinator/verify.h"
-#include "image/exrencode.h"
 #include "log.h"
 
 #define MAX_FAILED_WORKERS 8  /* per task: distinct workers that failed it, remembered */
@@ -89,6 +95,9 @@ typedef struct task_slot {
     int64_t check_worker[2];
     uint8_t digest[2][TF_DIGEST_BYTES];
     int replacing;       /* the third render sided with the second: its result replaces the first */
+    int checking;        /* its result is with the pixel checker (resultcheck.h), out of the
+                          * space: 1, or 2 when that result replaces a lying first one */
+    int64_t checking_worker; /* whose result that is */
 } task_slot;
 
 /* CHECK_SECOND and CHECK_THIRD are also how many of check_worker a check copy excludes. */
@@ -97,6 +106,7 @@ enum { CHECK_NONE = 0, CHECK_SECOND = 1, CHECK_THIRD = 2, CHECK_PENDING = 3 };
 typedef struct lease {
     uint64_t conn;
     int64_t task;
+    double taken_ms;     /* when the copy was handed to the connection */
 } lease;
 
 /* One frame job: its tasks, where its ids start, its output. */
@@ -138,8 +148,7 @@ struct tf_supervisor {
      * index in leases. */
     tf_idmap worker_of_conn, lease_of_conn;
     tf_preview_grid grid;    /* of the output's progress preview */
-    uint8_t *verify_buf;     /* --verify-chunks: inflated bytes */
-    size_t verify_cap;
+    tf_resultcheck *checker; /* the pixels of results from workers it did not fork */
     int64_t pending_checks;  /* --verify: tasks in CHECK_PENDING */
     int told_pending;        /* the "only worker" line was logged since the last pending start */
     double last_straggler_scan_ms;
@@ -152,78 +161,99 @@ struct tf_supervisor {
     int64_t last_accepted;   /* tf_supervisor_last_accepted */
 };
 
-/* ---- invariants (S1-S5 above), for assert() in debug builds ------------------------------ */
+/* ---- invariants (S1-S9 above), asserted clause by clause in debug builds ------------------
+ * Each assert names the clause it checks, as SQLite's assert_pager_state does, so a failure
+ * says which promise broke.  Called at the start and end of every step (the supervisor's scan);
+ * inside a hook the counts may be mid-update (see on_take). */
 #ifndef NDEBUG
-static int supervisor_ok(const tf_supervisor *s)
+static void assert_job_cursors(const tf_supervisor *s)
 {
-    int64_t pending = 0;
-    if (!(0 <= s->write_task && s->write_task <= s->next_deal &&
-          s->next_deal <= s->total_tasks))
-        return 0; /* S1 */
+    assert(0 <= s->write_task && s->write_task <= s->next_deal &&
+           s->next_deal <= s->total_tasks && "S1: write_task <= next_deal <= total_tasks");
     if (s->write_job < s->njobs) {
         const job_state *j = &s->jobs[s->write_job];
-        if (j->tasks.count == 0 ? s->write_task != j->first_id
-                                : !(s->write_task >= j->first_id &&
-                                    s->write_task < j->first_id + j->tasks.count))
-            return 0; /* S1 */
-    } else if (s->write_task != s->total_tasks) {
-        return 0; /* S1 */
+        assert((j->tasks.count == 0 ? s->write_task == j->first_id
+                                    : s->write_task >= j->first_id &&
+                                          s->write_task < j->first_id + j->tasks.count) &&
+               "S1: write_job is the job of write_task");
+    } else {
+        assert(s->write_task == s->total_tasks && "S1: every task written once jobs are");
     }
     for (int j = 0; j < s->write_job && j < s->njobs; j++)
-        if (!s->jobs[j].finished)
-            return 0; /* S1 */
-    if (s->next_deal - s->write_task > s->ring_size)
-        return 0; /* S2 */
+        assert(s->jobs[j].finished && "S1: jobs before write_job are finished");
+    for (int j = 0; j < s->njobs; j++)
+        assert(s->jobs[j].rows_written <= s->cfg.height && "S5: rows_written <= height");
+}
+
+/* S9 for one outstanding task: on disk is excluded (it is outstanding), so it is in the space,
+ * held, with the checker, or has its result and waits for nothing dealt (no check, or a check
+ * pending a second worker); a check copy that is out is in the space or held. */
+static int task_alive(const task_slot *t)
+{
+    if (t->in_space > 0 || t->leased > 0 || t->checking)
+        return 1;
+    return t->has_result && (t->check == CHECK_NONE || t->check == CHECK_PENDING);
+}
+
+static void assert_ring(const tf_supervisor *s)
+{
+    int64_t pending = 0;
+    assert(s->next_deal - s->write_task <= s->ring_size && "S2: outstanding tasks fit the ring");
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
         const task_slot *t = &s->ring[id % s->ring_size];
-        if (t->id != id)
-            return 0; /* S2 */
-        if (t->in_space < 0 || t->leased < 0)
-            return 0; /* S3 */
-        if (t->check == CHECK_PENDING) {
-            if (!t->has_result)
-                return 0; /* S7 */
-            pending++;
-        }
+        assert(t->id == id && "S2: the ring holds every outstanding task in its slot");
+        assert(t->in_space >= 0 && t->leased >= 0 && "S3: copy counts are never negative");
+        assert((t->check != CHECK_PENDING || t->has_result) &&
+               "S7: a pending check has its result");
+        assert((s->error[0] || task_alive(t)) &&
+               "S9: an outstanding task is in the space, held, being checked, or waits only "
+               "for a second worker");
+        pending += t->check == CHECK_PENDING;
     }
-    if (pending != s->pending_checks)
-        return 0; /* S7 */
-    for (int i = 0; i < s->nleases; i++) {
-        int64_t task = s->leases[i].task;
-        if (task < 0 || task >= s->next_deal)
-            return 0; /* S4 */
-        if (task < s->write_task)
-            continue;
-        int n = 0;
-        for (int j = 0; j < s->nleases; j++)
-            n += s->leases[j].task == task;
-        if (n > s->ring[task % s->ring_size].leased)
-            return 0; /* S4 */
-    }
-    int live = 0;
-    for (int i = 0; i < s->stats.nworkers; i++)
-        live += s->stats.workers[i].conn != 0;
-    if (live != s->live_workers)
-        return 0; /* S6 */
-    for (int i = 0; i < s->nleases; i++) {
-        int64_t v;
-        if (!tf_idmap_get(&s->lease_of_conn, s->leases[i].conn, &v) || v != i)
-            return 0; /* S8: each connection's one lease is where the index says */
-    }
-    if (s->lease_of_conn.n != (size_t)s->nleases)
-        return 0; /* S8 */
-    for (int i = 0; i < s->stats.nworkers; i++) {
-        int64_t v;
-        if (s->stats.workers[i].conn &&
-            (!tf_idmap_get(&s->worker_of_conn, s->stats.workers[i].conn, &v) ||
-             s->stats.workers[i].conn != s->stats.workers[v].conn))
-            return 0; /* S8 */
-    }
-    for (int j = 0; j < s->njobs; j++)
-        if (s->jobs[j].rows_written > s->cfg.height)
-            return 0; /* S5 */
-    return 1;
+    assert(pending == s->pending_checks && "S7: pending_checks counts the pending checks");
 }
+
+static void assert_leases(const tf_supervisor *s)
+{
+    for (int i = 0; i < s->nleases; i++) {
+        int64_t task = s->leases[i].task, v;
+        assert(task >= 0 && task < s->next_deal && "S4: every lease names a dealt task");
+        if (task >= s->write_task) {
+            int n = 0;
+            for (int j = 0; j < s->nleases; j++)
+                n += s->leases[j].task == task;
+            assert(n <= s->ring[task % s->ring_size].leased &&
+                   "S4: leases naming a task <= its slot's leased");
+        }
+        assert(tf_idmap_get(&s->lease_of_conn, s->leases[i].conn, &v) && v == i &&
+               "S8: lease_of_conn names each connection's one lease");
+    }
+    assert(s->lease_of_conn.n == (size_t)s->nleases && "S8: one index entry per lease");
+}
+
+static void assert_workers(const tf_supervisor *s)
+{
+    int live = 0;
+    for (int i = 0; i < s->stats.nworkers; i++) {
+        const tf_worker_stats *w = &s->stats.workers[i];
+        int64_t v;
+        live += w->conn != 0;
+        assert((!w->conn || (tf_idmap_get(&s->worker_of_conn, w->conn, &v) &&
+                             s->stats.workers[v].conn == w->conn)) &&
+               "S8: worker_of_conn names every open worker connection's entry");
+    }
+    assert(live == s->live_workers && "S6: live_workers counts the open worker connections");
+}
+
+static void assert_supervisor_state(const tf_supervisor *s)
+{
+    assert_job_cursors(s);
+    assert_ring(s);
+    assert_leases(s);
+    assert_workers(s);
+}
+#else
+#define assert_supervisor_state(s) ((void)0)
 #endif
 
 /* ---- small helpers ---------------------------------------------------------------------- */
@@ -301,12 +331,22 @@ static tf_worker_stats *worker_by_conn(tf_supervisor *s, uint64_t conn)
     return NULL;
 }
 
+/* A connection's peer, for messages only (the lookup scans the connections). */
+static const char *peer_name(const tf_supervisor *s, uint64_t conn)
+{
+    const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
+    return peer ? peer : "?";
+}
+
 /* Worker w's connection is conn from now on (0: closed). */
 static void bind_conn(tf_supervisor *s, tf_worker_stats *w, uint64_t conn)
 {
     if (w->conn && w->conn != conn)
         tf_idmap_del(&s->worker_of_conn, w->conn);
     w->conn = conn;
+    w->forked_conn = conn && s->srv && ts_server_conn_trusted(s->srv, conn);
+    if (conn)
+        snprintf(w->peer, sizeof w->peer, "%s", peer_name(s, conn));
     if (conn && tf_idmap_put(&s->worker_of_conn, conn, w - s->stats.workers))
         fail(s, "out of memory indexing a worker");
 }
@@ -354,7 +394,7 @@ static int add_lease(tf_supervisor *s, uint64_t conn, int64_t task)
     }
     if (tf_idmap_put(&s->lease_of_conn, conn, s->nleases))
         return -1;
-    s->leases[s->nleases++] = (lease){conn, task};
+    s->leases[s->nleases++] = (lease){conn, task, tf_now_msf()};
     return 0;
 }
 
@@ -517,8 +557,8 @@ static int note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
 /* A copy of task t was lost (its worker died or gave up): deal it again if no copy is left. */
 static void redeal_if_lost(tf_supervisor *s, task_slot *t)
 {
-    if ((t->has_result && (!t->check || t->check == CHECK_PENDING)) || t->in_space > 0 ||
-        t->leased > 0 || s->error[0])
+    if ((t->has_result && (!t->check || t->check == CHECK_PENDING)) || t->checking ||
+        t->in_space > 0 || t->leased > 0 || s->error[0])
         return;
     t->in_space++;
     s->stats.tasks_redealt++;
@@ -720,13 +760,6 @@ static void on_task_returned(tf_supervisor *s, uint64_t conn, const tf_tuple *tu
 }
 
 
-/* A connection's peer, for messages only (the lookup scans the connections). */
-static const char *peer_name(const tf_supervisor *s, uint64_t conn)
-{
-    const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
-    return peer ? peer : "?";
-}
-
 /* Take this very tuple (all fields actual) out of the space. */
 static void remove_exact(tf_supervisor *s, const tf_tuple *tuple)
 {
@@ -738,24 +771,14 @@ static void remove_exact(tf_supervisor *s, const tf_tuple *tuple)
     tf_tuple_clear(&tmpl);
 }
 
-/* The checks of a result against its task (farmproto.h): structure always, and with
- * --verify-chunks that every chunk decodes.  0 if accepted, else -1 with the reason. */
+/* The checks of a result against its task that cost nothing per pixel (farmproto.h): its
+ * structure, and counts no render of the task could have reached.  0 if accepted, else -1 with
+ * the reason.  (Its pixels are checked off the event loop: needs_pixel_check.) */
 static int refuse_result(tf_supervisor *s, tf_result_msg *m, tf_rect r, char *why, size_t len)
 {
     if (tf_result_check(m, &s->cfg.layout, &s->grid, r, why, len))
         return -1;
-    if (!s->cfg.verify_chunks)
-        return 0;
-    size_t off = 0;
-    for (size_t i = 0; i < m->nchunks; i++) {
-        tf_chunk_rec c;
-        tf_chunk_rec_get(m->index + i * TF_CHUNK_RECORD_BYTES, &c);
-        if (tf_exr_chunk_decodes(m->chunks + off, (size_t)c.packed, (size_t)c.unpacked,
-                                 &s->verify_buf, &s->verify_cap))
-            return tf_seterr(why, len, "chunk (%d, %d) does not decode", c.cx, c.cy);
-        off += (size_t)c.packed;
-    }
-    return 0;
+    return tf_result_counts_check(m, r, s->cfg.aa_max_depth, why, len);
 }
 
 /* Take this very result out of the space (not "a result of task id from worker w": a second
@@ -765,6 +788,66 @@ static void drop_result(tf_supervisor *s, const tf_tuple *tuple)
     remove_exact(s, tuple);
 }
 static void start_check(tf_supervisor *s, task_slot *t, const tf_result_msg *m);
+
+/* A result that passed every check: it counts, the task's other copies leave, and its spot
+ * check (--verify) starts unless it is itself the third render that decided one. */
+static void accept_result(tf_supervisor *s, task_slot *t, const tf_result_msg *m, int replaced)
+{
+    t->has_result = 1;
+    t->result_worker = m->worker;
+    s->last_accepted = m->id;
+    if (t->duplicated)
+        s->dups_in_flight--;
+    t->duplicated = 0;
+    withdraw_copies(s, t);
+    if (!replaced)
+        start_check(s, t, m);
+    s->results_seen++;
+    s->mean_task_ms += ((double)m->busy_ns * 1e-6 - s->mean_task_ms) / (double)s->results_seen;
+    tf_worker_stats *w = worker_by_id(s, m->worker);
+    if (!w)
+        w = add_worker(s, m->worker);
+    if (w) {
+        w->tasks++;
+        w->rays += m->counts.primary_rays + m->counts.shadow_rays;
+        w->busy_s += (double)m->busy_ns * 1e-9;
+    }
+    s->stats.primary_rays += m->counts.primary_rays;
+    s->stats.shadow_rays += m->counts.shadow_rays;
+    s->stats.frames[job_of(s, m->id) - s->jobs].rays +=
+        m->counts.primary_rays + m->counts.shadow_rays;
+    s->stats.external_rays += m->counts.external_rays;
+    s->stats.spp_sum += (double)m->spp_total;
+    s->stats.pixels += m->counts.pixels;
+}
+
+/* Are this connection's pixels to be checked?  A worker this process did not fork sends bytes
+ * nobody has looked at; a forked child encodes what its own loop checked, so only
+ * --verify-chunks asks for its pixels too. */
+static int needs_pixel_check(tf_supervisor *s, uint64_t conn)
+{
+    const tf_worker_stats *w = worker_by_conn(s, conn);
+    return s->cfg.verify_chunks || !w || !w->forked_conn;
+}
+
+/* The result leaves the space for the checker until its verdict (collect_checked).  Nothing
+ * else of this worker for this task is in the space: a second result of one lease is refused
+ * at admission and dropped here, so the (task, worker) template takes this very tuple. */
+static void send_to_checker(tf_supervisor *s, task_slot *t, const tf_result_msg *m, int replaced)
+{
+    tf_tuple tmpl, got;
+    tf_tuple_init(&got);
+    int rc = tf_result_template(&tmpl, m->id, m->worker) ||
+             ts_space_inp(s->space, &tmpl, &got) != 1 || tf_resultcheck_submit(s->checker, &got);
+    tf_tuple_clear(&tmpl);
+    tf_tuple_clear(&got);
+    if (rc) {
+        fail(s, "out of memory checking the result of task %" PRId64, m->id);
+        return;
+    }
+    t->checking = replaced ? 2 : 1;
+    t->checking_worker = m->worker;
+}
 
 static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
@@ -781,7 +864,7 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         t->has_result = 0; /* the first result was a lie and left the space: this one counts */
         t->replacing = 0;
     }
-    if (!t || t->has_result) {
+    if (!t || t->has_result || t->checking) {
         drop_result(s, tuple);
         s->stats.results_dropped++;
         return;
@@ -800,34 +883,56 @@ static void on_result(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
             redeal_if_lost(s, t);
         return;
     }
-    t->has_result = 1;
-    t->result_worker = m.worker;
-    s->last_accepted = m.id;
-    if (t->duplicated)
-        s->dups_in_flight--;
-    t->duplicated = 0;
-    withdraw_copies(s, t);
-    if (!replaced) /* a third render that already decided needs no check */
-        start_check(s, t, &m);
-    s->results_seen++;
-    s->mean_task_ms += ((double)m.busy_ns * 1e-6 - s->mean_task_ms) / (double)s->results_seen;
-    tf_worker_stats *w = worker_by_id(s, m.worker);
-    if (!w)
-        w = add_worker(s, m.worker);
-    if (w) {
-        w->tasks++;
-        w->rays += m.counts.primary_rays + m.counts.shadow_rays;
-        w->busy_s += (double)m.busy_ns * 1e-9;
-    }
-    s->stats.primary_rays += m.counts.primary_rays;
-    s->stats.shadow_rays += m.counts.shadow_rays;
-    s->stats.frames[job_of(s, m.id) - s->jobs].rays +=
-        m.counts.primary_rays + m.counts.shadow_rays;
-    s->stats.external_rays += m.counts.external_rays;
-    s->stats.spp_sum += (double)m.spp_total;
-    s->stats.pixels += m.counts.pixels;
+    if (needs_pixel_check(s, conn))
+        send_to_checker(s, t, &m, replaced);
+    else
+        accept_result(s, t, &m, replaced);
     /* Results are handed to the writer by tf_supervisor_step, after the server has flushed its
      * replies: the worker does not wait for anything of the writing. */
+}
+
+/* A verdict of the pixel checker on task t's result m: refused like any lie (its task dealt
+ * again), or accepted and put back into the space, where the writer will find it. */
+static void checked_result(tf_supervisor *s, tf_tuple *tuple, int refused, const char *why)
+{
+    tf_result_msg m;
+    task_slot *t = tf_result_unpack(tuple, &m) ? NULL : slot_of(s, m.id);
+    if (!t || !t->checking || t->checking_worker != m.worker)
+        return; /* the task moved on meanwhile (a rewind): nothing waits for this verdict */
+    int replaced = t->checking == 2;
+    t->checking = 0;
+    tf_worker_stats *w = worker_by_id(s, m.worker);
+    if (refused) {
+        tf_rect r = rect_of(s, m.id);
+        tf_warn("result of task %" PRId64 " (%dx%d at %d,%d) from worker %" PRId64 " (%s) "
+                "refused: %s", m.id, r.w, r.h, r.x, r.y, m.worker, w ? w->peer : "?", why);
+        s->stats.results_refused++;
+        tf_events_add(s->events, TF_EV_FAILURE, m.worker, m.id, "result refused: %s", why);
+        if (!note_failure(s, t, m.worker))
+            redeal_if_lost(s, t);
+        return;
+    }
+    if (w && w->excluded) { /* caught lying (--verify) while this result was being checked */
+        redeal_if_lost(s, t);
+        return;
+    }
+    accept_result(s, t, &m, replaced); /* m borrows the tuple: before it moves into the space */
+    if (ts_space_out(s->space, tuple))
+        fail(s, "out of memory keeping the result of task %" PRId64, m.id);
+}
+
+/* Collect every verdict the checker has reached. */
+static void collect_checked(tf_supervisor *s)
+{
+    tf_tuple tuple;
+    char why[192];
+    int verdict;
+    tf_tuple_init(&tuple);
+    while (!s->error[0] &&
+           (verdict = tf_resultcheck_next(s->checker, &tuple, why, sizeof why)) >= 0) {
+        checked_result(s, &tuple, verdict, why);
+        tf_tuple_clear(&tuple);
+    }
 }
 
 static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
@@ -865,8 +970,8 @@ static void on_failed(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
         tf_events_add(s->events, TF_EV_FAILURE, worker, id, "%s", msg);
         remove_lease(s, conn, id);
         task_slot *t = slot_of(s, id);
-        if (t && !t->has_result && !note_failure(s, t, worker))
-            redeal_if_lost(s, t);
+        if (t && (t->has_result || !note_failure(s, t, worker)))
+            redeal_if_lost(s, t); /* a failed check copy is dealt again too (S9) */
     }
     remove_exact(s, tuple);
 }
@@ -1226,6 +1331,20 @@ static ts_cap_verdict refuse(char *why, size_t len, const char *fmt, ...)
     return TS_CAP_REFUSE;
 }
 
+/* A worker's busy time cannot exceed how long it held the task by the coordinator's clock
+ * (give or take 1% and 50 ms for a clock that runs at another rate): 0, or -1 with why. */
+static int busy_beyond_lease(const tf_supervisor *s, uint64_t conn, const tf_result_msg *m,
+                             char *why, size_t len)
+{
+    int i = find_lease(s, conn, m->id);
+    double held_ms = i < 0 ? 0 : tf_now_msf() - s->leases[i].taken_ms;
+    double busy_ms = (double)m->busy_ns * 1e-6;
+    if (i < 0 || busy_ms <= held_ms * 1.01 + 50.0)
+        return 0;
+    return tf_seterr(why, len, "claims %.0f ms of rendering for a task it held %.0f ms", busy_ms,
+                     held_ms);
+}
+
 static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_worker_stats *w,
                                    const tf_tuple *tuple, char *why, size_t len)
 {
@@ -1246,14 +1365,19 @@ static ts_cap_verdict admit_result(tf_supervisor *s, uint64_t conn, const tf_wor
     int checking = t && t->has_result && t->check && m.worker != t->check_worker[0] &&
                    (t->check == CHECK_SECOND || m.worker != t->check_worker[1]);
     if (!t || (t->has_result && !checking)) {
-        /* A straggler's second copy, or a task already written: the first result won. */
+        /* A straggler's second copy, or a task already written: the first result won.  Or a
+         * check copy answered by a worker it excludes (one that rendered the task already):
+         * that is no check, so the copy is dealt again (S9). */
         remove_lease(s, conn, m.id);
+        if (t)
+            redeal_if_lost(s, t);
         s->stats.results_dropped++;
         return TS_CAP_DISCARD;
     }
     tf_rect r = rect_of(s, m.id);
     char reason[192];
-    if (refuse_result(s, &m, r, reason, sizeof reason)) {
+    if (refuse_result(s, &m, r, reason, sizeof reason) ||
+        busy_beyond_lease(s, conn, &m, reason, sizeof reason)) {
         /* Dropped before it enters the space, counted against its worker, dealt again. */
         s->stats.results_refused++;
         remove_lease(s, conn, m.id);
@@ -1520,6 +1644,11 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         s->written_by = calloc((size_t)(s->total_tasks > 0 ? s->total_tasks : 1),
                                sizeof *s->written_by);
     s->grid = tf_preview_grid_for(cfg->width, cfg->height);
+    s->checker = tf_resultcheck_new(&cfg->layout, 1, err, errlen);
+    if (!s->checker) {
+        tf_supervisor_free(s);
+        return NULL;
+    }
     if (!s->ring || (cfg->verify_fraction > 0 && !s->written_by)) {
         tf_seterr(err, errlen, "out of memory");
         tf_supervisor_free(s);
@@ -1544,7 +1673,7 @@ void tf_supervisor_free(tf_supervisor *s)
     tf_idmap_free(&s->worker_of_conn);
     tf_idmap_free(&s->lease_of_conn);
     free(s->leases);
-    free(s->verify_buf);
+    tf_resultcheck_free(s->checker);
     free(s->stats.workers);
     free(s->stats.frames);
     free(s->jobs);
@@ -1594,13 +1723,26 @@ void tf_supervisor_step(tf_supervisor *s, double now_ms)
         return;
     if (writer_failed(s))
         return;
-    assert(supervisor_ok(s));
+    assert_supervisor_state(s);
+    collect_checked(s);
     start_pending_checks(s);
     write_ready_tasks(s);
     update_watermark(s);
     deal_new_tasks(s);
     deal_duplicate(s);
-    assert(supervisor_ok(s));
+    assert_supervisor_state(s);
+}
+
+int tf_supervisor_checks_pending(tf_supervisor *s)
+{
+    return tf_resultcheck_pending(s->checker) > 0;
+}
+
+double tf_supervisor_check_cpu_s(tf_supervisor *s) { return tf_resultcheck_cpu_s(s->checker); }
+
+uint64_t tf_supervisor_checked_pixels(tf_supervisor *s)
+{
+    return tf_resultcheck_pixels(s->checker);
 }
 
 int tf_supervisor_done(const tf_supervisor *s)

@@ -48,6 +48,8 @@ typedef struct tf_worker_stats {
     char host[64];
     char backend[16];
     uint64_t conn;     /* 0 once disconnected */
+    int forked_conn;   /* its connection is a socketpair to a child this process forked */
+    char peer[64];     /* the address its connection came from (for messages) */
     int64_t tasks;
     uint64_t rays;
     double busy_s;
@@ -114,7 +116,9 @@ typedef struct tf_supervisor_config {
     const tf_frame_job *jobs; /* copied */
     tf_frame_hooks hooks;
     tf_exr_layout layout;     /* of the output: what results must carry (farmproto.h) */
-    int verify_chunks;        /* --verify-chunks: also check that every chunk decodes */
+    int verify_chunks;        /* --verify-chunks: check the pixels of forked workers' results
+                               * too (networked workers' always are: resultcheck.h) */
+    int aa_max_depth;         /* the scene's antialiasing depth: bounds a task's rays */
     double verify_fraction;   /* --verify: fraction of tasks rendered twice (0: none) */
     uint64_t verify_seed;     /* which ones (verify.h) */
     tf_task_spec spec;
@@ -148,6 +152,11 @@ ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blockin
 void tf_supervisor_step(tf_supervisor *sup, double now_ms);
 /* All rows written (the writer is then finished by the caller). */
 int tf_supervisor_done(const tf_supervisor *sup);
+/* Results whose pixels are being checked (resultcheck.h): their verdicts come on a later step. */
+int tf_supervisor_checks_pending(tf_supervisor *sup);
+/* CPU seconds the pixel checker has spent, and the pixels it checked. */
+double tf_supervisor_check_cpu_s(tf_supervisor *sup);
+uint64_t tf_supervisor_checked_pixels(tf_supervisor *sup);
 /* A fatal farm error (a task failed everywhere, a write error): the message, else NULL. */
 const char *tf_supervisor_error(const tf_supervisor *sup);
 /* Put the stop tuple out so workers leave. */

@@ -3,7 +3,6 @@
 #include "growbuf.h"
 
 #include <openexr.h>
-#include <zlib.h>
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -199,18 +198,4 @@ int tf_exr_encode_rect(tf_exr_encoder *e, tf_rect r, const tf_pixel *px, tf_chun
     out->preview = e->preview;
     out->preview_len = plen;
     return 0;
-}
-
-int tf_exr_chunk_decodes(const uint8_t *packed, size_t packed_len, size_t unpacked,
-                         uint8_t **scratch, size_t *cap)
-{
-    if (packed_len == 0 || packed_len > unpacked)
-        return -1;
-    if (packed_len == unpacked)
-        return 0; /* stored raw */
-    if (tf_growbuf(scratch, cap, unpacked + 1))
-        return -1;
-    uLongf out = (uLongf)unpacked + 1; /* room for one byte more: a longer stream is caught */
-    int rc = uncompress(*scratch, &out, packed, (uLong)packed_len);
-    return rc == Z_OK && out == (uLongf)unpacked ? 0 : -1;
 }

@@ -28,12 +28,4 @@ int tf_exr_encode_rect(tf_exr_encoder *e, tf_rect r, const tf_pixel *px, tf_chun
 int tf_preview_share(const tf_preview_grid *g, int width, int height, tf_rect r,
                      const tf_pixel *px, uint8_t **buf, size_t *cap, size_t *len);
 
-/* Does this packed chunk decode to exactly `unpacked` bytes?  (ZIP/ZIPS: a chunk stored raw has
- * packed == unpacked; otherwise its zlib stream must inflate, checksum included, to exactly
- * unpacked bytes -- the rest of OpenEXR's ZIP decoding, the predictor and byte reordering,
- * cannot fail.)  For --verify-chunks: this is per-pixel work.  0 if it decodes, else -1.
- * *scratch (grown as needed, caller frees) holds the inflated bytes. */
-int tf_exr_chunk_decodes(const uint8_t *packed, size_t packed_len, size_t unpacked,
-                         uint8_t **scratch, size_t *cap);
-
 #endif

@@ -1078,6 +1078,12 @@ const char *ts_server_peer(const ts_server *srv, uint64_t conn_id)
     return c ? c->peer : NULL;
 }
 
+int ts_server_conn_trusted(const ts_server *srv, uint64_t conn_id)
+{
+    const conn *c = find_conn(srv, conn_id);
+    return c && c->trusted;
+}
+
 int ts_server_close_conn(ts_server *srv, uint64_t conn_id)
 {
     conn *c = find_conn(srv, conn_id);

@@ -117,5 +117,8 @@ size_t ts_server_conn_ids(const ts_server *srv, uint64_t *ids, size_t max);
 const char *ts_server_peer(const ts_server *srv, uint64_t conn_id);
 /* Close a connection now (on_disconnect runs).  1 if it existed, 0 if not. */
 int ts_server_close_conn(ts_server *srv, uint64_t conn_id);
+/* 1 if the connection was added by fd (ts_server_add_fd: a child this process forked), 0 if it
+ * was accepted from the network or does not exist. */
+int ts_server_conn_trusted(const ts_server *srv, uint64_t conn_id);
 
 #endif

@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
 """tests/tools/lying_proxy.py: makes a real worker a liar.  A TCP proxy for a coordinator
 without a secret (loopback: frames in clear, common/linda/proto.h) that passes everything
-through but changes one byte in the middle of the packed chunks of every result the worker
-puts (("result", ...) field 9, common/farmproto.h), keeping every size: the result stays
-structurally valid, only its pixels lie.  Only --verify (coordinator/verify.h) can tell.
+through but changes one pixel of every result the worker puts (("result", ...) field 9,
+common/farmproto.h): its first chunk is inflated, its ZIP filter undone (image/exrcheck.c),
+the lowest bit of its first value flipped, and it is sent back stored raw (packed = unpacked).
+The result stays structurally valid, decodes and holds finite values: only its pixels lie,
+and only --verify (coordinator/verify.h) can tell.
 
 Usage: lying_proxy.py HOST PORT [SOURCE_ADDRESS [HONEST_FIRST]]
 It connects to the coordinator from SOURCE_ADDRESS (e.g. 127.0.0.2), as a machine of its own.
@@ -13,9 +15,10 @@ Prints "listening on PORT" once ready, then one line per altered result; runs un
 import os
 import struct
 import sys
+import zlib
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from tfwire import serve_proxy, shut_both  # noqa: E402
+from tfwire import enc, frame as make_frame, serve_proxy, shut_both  # noqa: E402
 
 OUT = 1
 honest_left = 0
@@ -43,6 +46,49 @@ def field_span(body, index):
     return None
 
 
+def typed_fields(body):
+    """[(type, value)] of the tuple encoded in body (all actuals)."""
+    n, pos, out = body[0], 1, []
+    for _ in range(n):
+        tag = body[pos]
+        pos += 1
+        if tag in (1, 2):
+            out.append((tag, struct.unpack_from("<q" if tag == 1 else "<d", body, pos)[0]))
+            pos += 8
+        else:
+            (ln,) = struct.unpack_from("<I", body, pos)
+            out.append((tag, bytes(body[pos + 4:pos + 4 + ln])))
+            pos += 4 + ln
+    return out
+
+
+def raw_chunk(packed, unpacked):
+    """The bytes a reader decodes from an OpenEXR ZIP/ZIPS chunk (stored raw if same size)."""
+    if len(packed) == unpacked:
+        return bytearray(packed)
+    t = bytearray(zlib.decompress(packed))
+    for i in range(1, len(t)):
+        t[i] = (t[i - 1] + t[i] - 128) & 0xff
+    half = (len(t) + 1) // 2
+    out = bytearray(len(t))
+    out[0::2] = t[:half]
+    out[1::2] = t[half:]
+    return out
+
+
+def altered_body(body):
+    """The result tuple with its first chunk's first value changed in its lowest bit."""
+    f = typed_fields(body)
+    index, chunks = bytearray(f[8][1]), f[9][1]
+    cx, cy, packed, unpacked = struct.unpack_from("<iiqq", index, 0)
+    raw = raw_chunk(chunks[:packed], unpacked)
+    raw[0] ^= 0x01
+    struct.pack_into("<iiqq", index, 0, cx, cy, unpacked, unpacked)
+    f[8] = (f[8][0], bytes(index))
+    f[9] = (f[9][0], bytes(raw) + chunks[packed:])
+    return enc(f)
+
+
 def lie(frame):
     """frame: one whole frame (length field included).  Returns it, altered if a result."""
     if len(frame) < 11 or frame[5] != OUT:
@@ -59,9 +105,9 @@ def lie(frame):
         honest_left -= 1
         print("passed a result", flush=True)
         return frame
-    body[span[0] + span[1] // 2] ^= 0x01
+    op, req = struct.unpack_from("<BI", frame, 5)
     print("altered a result", flush=True)
-    return frame[:10] + bytes(body)
+    return make_frame(op, req, altered_body(body))
 
 
 def worker_to_coordinator(src, dst):

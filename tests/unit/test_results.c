@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "farmproto.h"
+#include "image/exrcheck.h"
 #include "image/exrencode.h"
 
 #define W 100

@@ -3,22 +3,24 @@
 # FORMAT").  tests/tools/lying_worker.py joins like any networked worker and answers tasks with
 # results that lie: another task's chunk coordinates, unpacked sizes that cannot belong to the
 # task, packed sizes that do not add up, a chunk too few, a preview share of the wrong size, and
-# a perfect structure over bytes that do not decode (caught by --verify-chunks).  Each is
-# refused with a line naming the peer and what is wrong, counted in results_refused, the task is
-# dealt again, and nothing of it reaches the file: a real worker then finishes the render and
-# the image is byte-identical to a clean one.  Scanline (rows:9) and tiled (stamps:40x27).
+# a perfect structure over bytes that do not decode, chunks stored raw full of NaN and infinity,
+# and a count of 2^62 rays.  No option is needed: a networked worker's pixels are always
+# checked (coordinator/resultcheck.h).  Each lie is refused with a line naming the peer and
+# what is wrong, counted in results_refused, the task is dealt again, and nothing of it reaches
+# the file: a real worker then finishes the render, the image is byte-identical to a clean one,
+# and the rays in the statistics are the real ones.  Scanline (rows:9) and tiled (stamps:40x27).
 . "$(dirname "$0")/lib.sh"
 e2e_init
 LIAR="$TF_ROOT/tests/tools/lying_worker.py"
 SIZE=240x135
-LIES=12
+LIES=16
 
 for tasks in rows:9 stamps:40x27; do
     t=$(echo $tasks | tr ':' '_')
     render -q -j 1 --size $SIZE --tasks $tasks -o "$T/ref_$t.exr" || fail "reference: $(cat "$T/last.err")"
-    say "$tasks: a lying worker first, then a real one (--verify-chunks)"
+    say "$tasks: a lying worker first, then a real one"
     "$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size $SIZE --tasks $tasks \
-        --verify-chunks -o "$T/$t.exr" --stats "$T/$t.json" 2>"$T/$t.err" &
+        -o "$T/$t.exr" --stats "$T/$t.json" 2>"$T/$t.err" &
     coord=$!; e2e_track $coord
     port=$(e2e_port "$T/$t.err") || fail "the coordinator printed no port: $(cat "$T/$t.err")"
     python3 "$LIAR" 127.0.0.1 "$port" $LIES >"$T/liar.out" 2>&1
@@ -31,10 +33,14 @@ for tasks in rows:9 stamps:40x27; do
     wait_exit $worker 20
     refused=$(jstat results_refused "$T/$t.json")
     [ "$refused" -eq $LIES ] || fail "$tasks: results_refused $refused, the liar told $LIES lies: $(grep refused "$T/$t.err")"
-    for why in "is at (" "unpacked bytes" "add up" "chunks, the task has" "preview of" "does not decode"; do
+    for why in "is at (" "unpacked bytes" "add up" "chunks, the task has" "preview of" "does not decode" \
+               "is not finite at pixel" "primary rays, the task has room for"; do
         grep "refused: " "$T/$t.err" | grep -q "$why" || fail "$tasks: no refusal saying '$why': $(grep refused "$T/$t.err")"
     done
     grep "refused: " "$T/$t.err" | grep -q "from 127.0.0.1:" || fail "$tasks: refusals do not name the peer"
+    grep "refused: " "$T/$t.err" | grep "not finite" | grep -q "(127.0.0.1:" || fail "$tasks: pixel refusals do not name the peer"
+    rays=$(jstat rays_total "$T/$t.json")
+    [ "$rays" -gt 0 ] && [ "$rays" -lt 1000000000 ] || fail "$tasks: rays_total $rays: a lie reached the statistics"
     say "$tasks: $refused results refused, e.g. $(grep -m1 'refused: ' "$T/$t.err")"
     same "$T/ref_$t.exr" "$T/$t.exr" "$tasks after $LIES lies"
 done

@@ -11,7 +11,11 @@ back a result that lies in one of these ways, in turn:
   sum       packed sizes that do not add up to the chunks blob
   count     one chunk too few
   preview   a preview share of the wrong size
-  garbage   a perfect structure whose packed bytes do not decode (only --verify-chunks sees it)
+  garbage   a perfect structure whose packed bytes do not decode
+  nonfinite chunks stored raw (packed = unpacked) whose values are NaN and infinity
+  rays      a perfect structure claiming 2^62 primary rays (more than the task can hold)
+The last three are refused only by what the coordinator checks of a result beyond its
+structure: its counts at once, its pixels in the checker thread (coordinator/resultcheck.h).
 After MAX_LIES results it stops lying and leaves (so a real worker finishes the render); it also
 leaves on the stop task.  Prints one line per lie: "lie MODE task ID"."""
 import os
@@ -25,7 +29,7 @@ from failing_worker import Conn, dec, IN, OUT, INT, STRING, BLOB  # noqa: E402
 
 RD = 3  # common/linda/proto.h: TF_OP_RD
 
-MODES = ["coords", "unpacked", "sum", "count", "preview", "garbage"]
+MODES = ["coords", "unpacked", "sum", "count", "preview", "garbage", "nonfinite", "rays"]
 
 
 def layout_of(text):
@@ -65,6 +69,10 @@ def lie(mode, rect, tiled, tw, th, pixel, width, height):
     chunks = chunks_of(rect, tiled, tw, th, pixel)
     recs, data = [], b""
     for cx, cy, unpacked in chunks:
+        if mode == "nonfinite":  # halves 0x7c00 (+inf) and 0xffff (NaN), floats 0xffffffff
+            recs.append([cx, cy, unpacked, unpacked])
+            data += (b"\x00\x7c\xff\xff" * unpacked)[:unpacked]
+            continue
         packed = max(1, min(unpacked, 64))
         recs.append([cx, cy, packed, unpacked])
         data += bytes(random.getrandbits(8) for _ in range(packed))
@@ -119,7 +127,8 @@ def main():
             continue
         mode = MODES[lies % len(MODES)]
         index, data, prev = lie(mode, rect, tiled, tw, th, pixel, width, height)
-        c.call(OUT, [(STRING, "result"), (INT, tid), (INT, me), (INT, 100), (INT, 10), (INT, 1),
+        primary = 2 ** 62 if mode == "rays" else 100
+        c.call(OUT, [(STRING, "result"), (INT, tid), (INT, me), (INT, primary), (INT, 10), (INT, 1),
                      (INT, 1000000), (INT, rect[2] * rect[3]), (BLOB, index), (BLOB, data),
                      (BLOB, prev)])
         print("lie %s task %d" % (mode, tid), flush=True)

@@ -56,6 +56,15 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
     double verify_busy_base = 0; /* every worker's busy time, for verify_cost */
     for (int i = 0; i < st->nworkers; i++)
         verify_busy_base += st->workers[i].busy_s;
+    /* the pixels of networked workers' results (and with --verify-chunks everyone's), decoded
+     * and scanned in the checker thread: part of coordinator_cpu_s, reported apart too */
+    json_object_set_new(o, "pixels_checked", json_integer((json_int_t)st->pixels_checked));
+    json_object_set_new(o, "pixel_check_cpu_s", seconds(st->pixel_check_cpu_s));
+    json_object_set_new(o, "pixel_check_ns_per_pixel",
+                        rounded(st->pixels_checked ? st->pixel_check_cpu_s * 1e9 /
+                                                         (double)st->pixels_checked
+                                                   : 0.0,
+                                100.0));
     json_object_set_new(o, "verify_fraction", rounded(st->verify_fraction, 1e4));
     json_object_set_new(o, "verify_checks", json_integer(st->verify_checks));
     json_object_set_new(o, "verify_mismatches", json_integer(st->verify_mismatches));

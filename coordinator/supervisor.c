@@ -916,6 +916,8 @@ static void checked_result(tf_supervisor *s, tf_tuple *tuple, int refused, const
         redeal_if_lost(s, t);
         return;
     }
+    tf_rect r = rect_of(s, m.id);
+    m.counts.pixels = (uint64_t)r.w * (uint64_t)r.h; /* as tf_result_check found at arrival */
     accept_result(s, t, &m, replaced); /* m borrows the tuple: before it moves into the space */
     if (ts_space_out(s->space, tuple))
         fail(s, "out of memory keeping the result of task %" PRId64, m.id);
@@ -1738,13 +1740,6 @@ int tf_supervisor_checks_pending(tf_supervisor *s)
     return tf_resultcheck_pending(s->checker) > 0;
 }
 
-double tf_supervisor_check_cpu_s(tf_supervisor *s) { return tf_resultcheck_cpu_s(s->checker); }
-
-uint64_t tf_supervisor_checked_pixels(tf_supervisor *s)
-{
-    return tf_resultcheck_pixels(s->checker);
-}
-
 int tf_supervisor_done(const tf_supervisor *s)
 {
     return s->write_job == s->njobs && !s->error[0];
@@ -1776,6 +1771,8 @@ const tf_farm_stats *tf_supervisor_stats(tf_supervisor *s)
     ts_space_stats st;
     ts_space_get_stats(s->space, &st);
     s->stats.max_tuple_bytes = st.max_bytes;
+    s->stats.pixel_check_cpu_s = tf_resultcheck_cpu_s(s->checker);
+    s->stats.pixels_checked = tf_resultcheck_pixels(s->checker);
     return &s->stats;
 }
 

@@ -68,7 +68,9 @@ typedef struct tf_frame_stats {
 
 typedef struct tf_farm_stats {
     int64_t tasks_total, tasks_redealt, tasks_duplicated, results_dropped, task_failures;
-    int64_t results_refused;  /* failed the result checks (structure, --verify-chunks) */
+    int64_t results_refused;  /* failed the result checks (structure, counts, pixels) */
+    double pixel_check_cpu_s; /* the pixel checker's CPU time (resultcheck.h) */
+    uint64_t pixels_checked;  /* and the pixels it decoded and scanned */
     /* --verify: checks dealt (a second render of a task), mismatches (a third render decided),
      * workers excluded for lying, and the worker time the checks cost */
     int64_t verify_checks, verify_mismatches, workers_excluded;
@@ -154,9 +156,6 @@ void tf_supervisor_step(tf_supervisor *sup, double now_ms);
 int tf_supervisor_done(const tf_supervisor *sup);
 /* Results whose pixels are being checked (resultcheck.h): their verdicts come on a later step. */
 int tf_supervisor_checks_pending(tf_supervisor *sup);
-/* CPU seconds the pixel checker has spent, and the pixels it checked. */
-double tf_supervisor_check_cpu_s(tf_supervisor *sup);
-uint64_t tf_supervisor_checked_pixels(tf_supervisor *sup);
 /* A fatal farm error (a task failed everywhere, a write error): the message, else NULL. */
 const char *tf_supervisor_error(const tf_supervisor *sup);
 /* Put the stop tuple out so workers leave. */

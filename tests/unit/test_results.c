@@ -3,7 +3,9 @@
  * it for its own task and refuses every structural lie (other chunk coordinates, another
  * task's rectangle, wrong unpacked or packed sizes, blob lengths that do not add up, a wrong
  * preview size); tf_exr_chunk_decodes refuses packed bytes that do not inflate to the chunk's
- * size.  Also the layout's geometry (partial edge tiles, the preview span partitioning the
+ * size; tf_exr_chunk_check finds a non-finite value at its exact channel and pixel, through
+ * the ZIP filter, in scanline and tiled, half and float chunks; tf_result_counts_check refuses
+ * counts beyond what a task can hold.  Also the layout's geometry (partial edge tiles, the preview span partitioning the
  * preview among tasks). */
 #include <stdarg.h>
 #include <stddef.h>
@@ -11,6 +13,8 @@
 #include <stdint.h>
 #include <cmocka.h>
 
+#include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -161,6 +165,97 @@ static void test_chunk_decodes(void **state)
     tf_exr_encoder_free(enc);
 }
 
+/* Encode r of layout l with one bad value at pixel (bx, by) of channel ch (0 A, 1 B, 2 G, 3 R,
+ * 4 Z, 5 spp) and check that the chunk holding it is refused naming them, the others pass. */
+static void expect_bad_value(const tf_exr_layout *l, tf_rect r, int bx, int by, int ch,
+                             float value, const char *name)
+{
+    char err[256], want[64];
+    tf_pixel *px = image(r.w, r.h);
+    float *v[6];
+    tf_pixel *p = &px[(by - r.y) * r.w + (bx - r.x)];
+    v[0] = &p->a, v[1] = &p->b, v[2] = &p->g, v[3] = &p->r, v[4] = &p->z, v[5] = &p->spp;
+    *v[ch] = value;
+    tf_exr_encoder *e = tf_exr_encoder_new(l, err, sizeof err);
+    assert_non_null(e);
+    tf_chunk_payload pay;
+    assert_int_equal(tf_exr_encode_rect(e, r, px, &pay, err, sizeof err), 0);
+    uint8_t *scratch = NULL;
+    size_t cap = 0, off = 0;
+    int refused = 0;
+    snprintf(want, sizeof want, "channel %s is not finite at pixel (%d, %d)", name, bx, by);
+    for (size_t i = 0; i < pay.nchunks; i++) {
+        tf_chunk_rec rec;
+        tf_chunk_rec_get(pay.index + i * TF_CHUNK_RECORD_BYTES, &rec);
+        tf_chunk_ref c = tf_layout_chunk(l, tf_layout_chunk_index(l, rec.cx, rec.cy));
+        int holds = by >= c.rect.y && by < c.rect.y + c.rect.h;
+        err[0] = '\0';
+        assert_int_equal(tf_exr_chunk_check(l, &c, pay.chunks + off, (size_t)rec.packed,
+                                            &scratch, &cap, err, sizeof err), holds ? -1 : 0);
+        if (holds) {
+            assert_string_equal(err, want);
+            refused++;
+        }
+        off += (size_t)rec.packed;
+    }
+    assert_int_equal(refused, 1);
+    free(scratch);
+    free(px);
+    tf_exr_encoder_free(e);
+}
+
+static void test_chunk_check(void **state)
+{
+    (void)state;
+    tf_exr_layout rows = {W, H, 0, 0, 0, TF_PIXEL_HALF};
+    tf_exr_layout tiled_half = {W, H, 1, 32, 16, TF_PIXEL_HALF};
+    tf_exr_layout tiled_float = {W, H, 1, 32, 16, TF_PIXEL_FLOAT};
+    expect_bad_value(&rows, (tf_rect){0, 3, W, 4}, 57, 5, 3, NAN, "R");
+    expect_bad_value(&rows, (tf_rect){0, 3, W, 4}, 99, 6, 0, INFINITY, "A");
+    expect_bad_value(&rows, (tf_rect){0, 3, W, 4}, 0, 3, 5, -INFINITY, "spp");
+    expect_bad_value(&tiled_half, (tf_rect){32, 16, 32, 16}, 40, 30, 2, 1e6f, "G"); /* > half */
+    expect_bad_value(&tiled_half, (tf_rect){96, 32, 4, 13}, 99, 44, 4, NAN, "Z");
+    expect_bad_value(&tiled_float, (tf_rect){32, 16, 32, 16}, 63, 16, 1, NAN, "B");
+    /* raw (packed = unpacked) chunks are scanned as they are */
+    tf_chunk_ref c = tf_layout_chunk(&rows, 0);
+    uint8_t *raw = calloc(1, (size_t)c.unpacked), *scratch = NULL;
+    size_t cap = 0;
+    char err[256];
+    assert_int_equal(tf_exr_chunk_check(&rows, &c, raw, (size_t)c.unpacked, &scratch, &cap, err,
+                                        sizeof err), 0);
+    raw[2 * W * 3 + 2 * 7 + 1] = 0x7e; /* R (the 4th channel) of pixel 7: a NaN half */
+    assert_int_equal(tf_exr_chunk_check(&rows, &c, raw, (size_t)c.unpacked, &scratch, &cap, err,
+                                        sizeof err), -1);
+    assert_string_equal(err, "channel R is not finite at pixel (7, 0)");
+    free(raw);
+    free(scratch);
+}
+
+static void test_counts_bounded(void **state)
+{
+    (void)state;
+    tf_rect r = {0, 0, 10, 4};
+    tf_result_msg m = {0};
+    char err[256];
+    uint64_t side = (1u << 3) + 1, spp = 40 * side * side;
+    m.counts = (tf_render_counts){spp + 11 * 5, spp, spp, 40};
+    m.spp_total = (int64_t)spp;
+    assert_int_equal(tf_result_counts_check(&m, r, 3, err, sizeof err), 0);
+    m.counts.primary_rays++;
+    assert_int_equal(tf_result_counts_check(&m, r, 3, err, sizeof err), -1);
+    m.counts.primary_rays = 1ull << 62;
+    assert_int_equal(tf_result_counts_check(&m, r, 3, err, sizeof err), -1);
+    m.counts.primary_rays = 100;
+    m.counts.shadow_rays = 101;
+    m.counts.external_rays = 0;
+    assert_int_equal(tf_result_counts_check(&m, r, 3, err, sizeof err), -1);
+    m.counts.shadow_rays = 100;
+    m.spp_total = (int64_t)spp + 1;
+    assert_int_equal(tf_result_counts_check(&m, r, 3, err, sizeof err), -1);
+    m.spp_total = -1;
+    assert_int_equal(tf_result_counts_check(&m, r, 3, err, sizeof err), -1);
+}
+
 static void test_geometry(void **state)
 {
     (void)state;
@@ -207,6 +302,8 @@ int main(void)
         cmocka_unit_test(test_round_trip_and_check),
         cmocka_unit_test(test_lies_refused),
         cmocka_unit_test(test_chunk_decodes),
+        cmocka_unit_test(test_chunk_check),
+        cmocka_unit_test(test_counts_bounded),
         cmocka_unit_test(test_geometry),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -26,6 +26,9 @@ TS=$("$BENCH" -n "$N" -t "$T")
 RS=$("$BENCH" -n "$N" -t "$T" --redis "$PORT")
 echo "$TS"
 echo "$RS"
-ts_ops=$(echo "$TS" | sed 's/.*ops_per_s=\([0-9.]*\).*/\1/')
-rs_ops=$(echo "$RS" | sed 's/.*ops_per_s=\([0-9.]*\).*/\1/')
+# ops_per_s of the run's "system=..." line (the program prints a "cpu=..." line before it)
+ops() { echo "$1" | sed -n 's/^system=.* ops_per_s=\([0-9.]*\) .*/\1/p'; }
+ts_ops=$(ops "$TS")
+rs_ops=$(ops "$RS")
+[ -n "$ts_ops" ] && [ -n "$rs_ops" ] || { echo "tuplespace_vs_redis: no ops_per_s in the output above" >&2; exit 1; }
 python3 -c "print('tuplespace/redis throughput ratio: %.2f' % ($ts_ops / $rs_ops))"

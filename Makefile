@@ -131,7 +131,9 @@ fuzz-runs: $(FUZZERS)
 
 REPLAYS := $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/replay/%)
 
-test: $(PROG) $(TESTS) $(REPLAYS) $(TOOLS)
+# The benchmarks are built too (not run: tests/e2e/bench_smoke.sh runs their --smoke modes),
+# so an API change that breaks one breaks the suite.
+test: $(PROG) $(TESTS) $(REPLAYS) $(TOOLS) $(BENCHES)
 	BUILD=$(BUILD) BIN=$(BIN) tests/run.sh
 
 ASAN_MAKE := $(MAKE) BUILD=build-asan BIN=build-asan/bin CFLAGS="-O1 -g" \

@@ -103,6 +103,8 @@ FUZZ_SAN     := address,undefined -fno-sanitize-recover=undefined
 FUZZ_CFLAGS  := -O1 -g -std=c11 -D_GNU_SOURCE -I. -Icommon -DTF_VERSION='"$(VERSION)"' \
                 $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS)
 FUZZ_LIB_OBJ := $(LIB_SRC:%.c=$(BUILD)/fuzzobj/%.o)
+# Named only by a pattern rule, they would be deleted as intermediates after every link.
+.SECONDARY: $(FUZZ_LIB_OBJ)
 # Helper programs of the e2e tests (tests/tools/*.c), e.g. exrcmp.
 TOOLS := $(patsubst tests/tools/%.c,$(BUILD)/tools/%,$(wildcard tests/tools/*.c))
 $(BUILD)/tools/%: tests/tools/%.c $(LIB_OBJ)

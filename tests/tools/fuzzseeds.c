@@ -7,13 +7,26 @@
  *                   (tf_exr_encode_rect of a small gradient, its preview share) for a few
  *                   layouts and tasks: scanline half and float, a whole tile, an edge tile.
  * Every seed is deterministic and small.  Usage: build/tools/fuzzseeds tests/corpus */
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "farmproto.h"
 #include "image/exrencode.h"
 #include "linda/seal.h"
+
+/* DIR/SUB made if it is not there; 0 or -1. */
+static int make_dir(const char *dir, const char *sub)
+{
+    char path[4096];
+    snprintf(path, sizeof path, "%s/%s", dir, sub);
+    if (mkdir(path, 0755) == 0 || errno == EEXIST)
+        return 0;
+    fprintf(stderr, "fuzzseeds: cannot create %s: %s\n", path, strerror(errno));
+    return -1;
+}
 
 static int write_file(const char *dir, const char *sub, const char *name, const uint8_t *p,
                       size_t n)
@@ -101,33 +114,41 @@ static tf_pixel *gradient(tf_rect r)
     return px;
 }
 
-/* The result tuple of task r, encoded; the bytes in *out (caller frees), 0 or -1. */
+/* The encoding of the result tuple of payload p for task r, in *out (caller frees); 0 or -1. */
+static int tuple_bytes(tf_rect r, const tf_chunk_payload *p, uint8_t **out, size_t *len)
+{
+    tf_render_counts c = {(uint64_t)r.w * (uint64_t)r.h, 0, 0, 0};
+    tf_tuple t;
+    tf_tuple_init(&t);
+    int rc = tf_result_pack(&t, 3, 1, &c, 1000, 4 * (int64_t)c.primary_rays, p);
+    *len = rc ? 0 : tf_tuple_encoded_size(&t);
+    *out = rc ? NULL : malloc(*len);
+    if (*out)
+        tf_tuple_encode(&t, *out);
+    tf_tuple_clear(&t);
+    return *out ? 0 : -1;
+}
+
+/* The result a worker sends for task r of layout l (a gradient, encoded), as tuple bytes. */
 static int result_bytes(const tf_exr_layout *l, tf_rect r, uint8_t **out, size_t *len)
 {
-    char err[256];
+    char err[256] = "out of memory";
     tf_exr_encoder *e = tf_exr_encoder_new(l, err, sizeof err);
     tf_pixel *px = gradient(r);
     tf_chunk_payload p;
     uint8_t *preview = NULL;
     size_t cap = 0;
     tf_preview_grid g = tf_preview_grid_for(l->width, l->height);
-    tf_render_counts c = {0};
-    tf_tuple t;
-    tf_tuple_init(&t);
     int rc = !e || !px || tf_exr_encode_rect(e, r, px, &p, err, sizeof err) ||
              tf_preview_share(&g, l->width, l->height, r, px, &preview, &cap, &p.preview_len);
     p.preview = preview;
-    c.primary_rays = (uint64_t)r.w * (uint64_t)r.h;
-    rc = rc || tf_result_pack(&t, 3, 1, &c, 1000, 4 * c.primary_rays, &p);
-    *len = rc ? 0 : tf_tuple_encoded_size(&t);
-    *out = rc ? NULL : malloc(*len);
-    if (*out)
-        tf_tuple_encode(&t, *out);
-    tf_tuple_clear(&t);
+    rc = rc || tuple_bytes(r, &p, out, len);
+    if (rc)
+        fprintf(stderr, "fuzzseeds: cannot encode a result: %s\n", err);
     free(preview);
     free(px);
     tf_exr_encoder_free(e);
-    return *out ? 0 : -1;
+    return rc ? -1 : 0;
 }
 
 static int result_seed(const char *dir, const char *name, tf_exr_layout l, tf_rect r)
@@ -168,5 +189,7 @@ int main(int argc, char **argv)
                 argv[0]);
         return 2;
     }
+    if (make_dir(argv[1], "seal") || make_dir(argv[1], "result"))
+        return 1;
     return seal_seeds(argv[1]) || result_seeds(argv[1]) ? 1 : 0;
 }

@@ -11,7 +11,8 @@
  * w * h pixels, its chunks' packed sizes add up to the chunks blob, and the chunk walk of
  * --verify-chunks stays inside it.  Seeds (tests/corpus/result/, made by
  * tests/tools/fuzzseeds.c) are real results encoded by tf_exr_encode_rect, so the replay
- * reaches the accept path. */
+ * reaches the accept path, and refused_* ones (another task, a short preview, a chunk that
+ * does not inflate) for the refusals. */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>

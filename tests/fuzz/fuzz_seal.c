@@ -9,7 +9,8 @@
  *     handed over in pieces, which must give back exactly the input; then one byte of that
  *     wire altered (where the input says) must never open to the whole input.
  * The committed seeds (tests/corpus/seal/, made by tests/tools/fuzzseeds.c) are records
- * sealed under this harness's key, so the replay opens records as well as refusing them. */
+ * sealed under this harness's key, so the replay opens records, and refused_* ones (cut
+ * short, altered, replayed, a length out of bounds) for the refusals. */
 #include <sodium.h>
 #include <stdint.h>
 #include <stdlib.h>

@@ -2,10 +2,14 @@
  * reaches the accept paths and not only the refusals:
  *   CORPUS/seal/    records sealed under tests/fuzz/fuzz_seal.c's fixed key and handshake
  *                   (client to server), holding ordinary frames: one record, several records,
- *                   one frame split over records;
+ *                   one frame split over records; and refused_*: a record cut short, one
+ *                   with a tag altered, one replayed, a length out of bounds;
  *   CORPUS/result/  fuzz_result.c's header and a result tuple encoded by a real encoder
  *                   (tf_exr_encode_rect of a small gradient, its preview share) for a few
- *                   layouts and tasks: scanline half and float, a whole tile, an edge tile.
+ *                   layouts and tasks: scanline half and float, a whole tile, an edge tile;
+ *                   and refused_*: a result for another task, a preview one byte short, a
+ *                   chunk whose zlib checksum is wrong (structurally fine: only the
+ *                   --verify-chunks walk refuses it).
  * Every seed is deterministic and small.  Usage: build/tools/fuzzseeds tests/corpus */
 #include <errno.h>
 #include <stdio.h>
@@ -71,6 +75,41 @@ static int seal_seed(const char *dir, const char *name, const tf_buf *plain, siz
     return rc;
 }
 
+/* plain sealed in one record, twice over (the second copy: a replay), in *out (caller frees);
+ * the record's length in *one.  0 or -1. */
+static int record_twice(const tf_buf *plain, uint8_t **out, size_t *one)
+{
+    tf_seal tx = client_tx();
+    tf_buf w;
+    tf_buf_init(&w);
+    *out = NULL;
+    if (tf_seal_append(&tx, &w, tf_buf_head(plain), plain->len) == 0 &&
+        (*out = malloc(2 * w.len)) != NULL) {
+        *one = w.len;
+        memcpy(*out, tf_buf_head(&w), w.len);
+        memcpy(*out + w.len, tf_buf_head(&w), w.len);
+    }
+    tf_buf_free(&w);
+    return *out ? 0 : -1;
+}
+
+/* The refused_* seal seeds: spoiled copies of plain's record. */
+static int seal_refusals(const char *dir, const tf_buf *plain)
+{
+    uint8_t *p;
+    size_t one;
+    if (record_twice(plain, &p, &one))
+        return -1;
+    int rc = write_file(dir, "seal", "refused_replayed", p, 2 * one) ||
+             write_file(dir, "seal", "refused_truncated", p, one - 1);
+    p[one - 1] ^= 0x80; /* the tag's last byte */
+    rc = rc || write_file(dir, "seal", "refused_tampered", p, one);
+    p[0] = 0x11, p[1] = 0x00, p[2] = 0x01, p[3] = 0x00; /* 65553 = max + 17 */
+    rc = rc || write_file(dir, "seal", "refused_length", p, one);
+    free(p);
+    return rc ? -1 : 0;
+}
+
 static int seal_seeds(const char *dir)
 {
     tf_buf plain;
@@ -83,7 +122,8 @@ static int seal_seeds(const char *dir)
     if (rc == 0)
         rc = seal_seed(dir, "one_record", &plain, plain.len) ||
              seal_seed(dir, "records_of_7", &plain, 7) ||
-             seal_seed(dir, "two_records", &plain, plain.len - 9);
+             seal_seed(dir, "two_records", &plain, plain.len - 9) ||
+             seal_refusals(dir, &plain);
     tf_tuple_clear(&t);
     tf_buf_free(&plain);
     return rc ? -1 : 0;
@@ -129,8 +169,28 @@ static int tuple_bytes(tf_rect r, const tf_chunk_payload *p, uint8_t **out, size
     return *out ? 0 : -1;
 }
 
-/* The result a worker sends for task r of layout l (a gradient, encoded), as tuple bytes. */
-static int result_bytes(const tf_exr_layout *l, tf_rect r, uint8_t **out, size_t *len)
+enum spoil { SPOIL_NONE, SPOIL_PREVIEW, SPOIL_CHUNK };
+
+/* Flip the last byte (zlib's checksum) of p's first compressed chunk; -1 if none is. */
+static int spoil_chunk(tf_chunk_payload *p)
+{
+    size_t off = 0;
+    for (size_t i = 0; i < p->nchunks; i++) {
+        tf_chunk_rec c;
+        tf_chunk_rec_get(p->index + i * TF_CHUNK_RECORD_BYTES, &c);
+        off += (size_t)c.packed;
+        if (c.packed < c.unpacked) {
+            ((uint8_t *)p->chunks)[off - 1] ^= 0x01; /* the encoder's own buffer */
+            return 0;
+        }
+    }
+    return -1;
+}
+
+/* The result a worker sends for task r of layout l (a gradient, encoded), as tuple bytes,
+ * spoiled as asked. */
+static int result_bytes(const tf_exr_layout *l, tf_rect r, enum spoil s, uint8_t **out,
+                        size_t *len)
 {
     char err[256] = "out of memory";
     tf_exr_encoder *e = tf_exr_encoder_new(l, err, sizeof err);
@@ -142,7 +202,9 @@ static int result_bytes(const tf_exr_layout *l, tf_rect r, uint8_t **out, size_t
     int rc = !e || !px || tf_exr_encode_rect(e, r, px, &p, err, sizeof err) ||
              tf_preview_share(&g, l->width, l->height, r, px, &preview, &cap, &p.preview_len);
     p.preview = preview;
-    rc = rc || tuple_bytes(r, &p, out, len);
+    if (s == SPOIL_PREVIEW)
+        p.preview_len--;
+    rc = rc || (s == SPOIL_CHUNK && spoil_chunk(&p)) || tuple_bytes(r, &p, out, len);
     if (rc)
         fprintf(stderr, "fuzzseeds: cannot encode a result: %s\n", err);
     free(preview);
@@ -151,35 +213,51 @@ static int result_bytes(const tf_exr_layout *l, tf_rect r, uint8_t **out, size_t
     return rc ? -1 : 0;
 }
 
-static int result_seed(const char *dir, const char *name, tf_exr_layout l, tf_rect r)
+/* A result seed: the result of rectangle r, spoiled as asked, checked against task `task`. */
+typedef struct result_spec {
+    const char *name;
+    tf_exr_layout l;
+    tf_rect r, task;
+    enum spoil spoil;
+} result_spec;
+
+static int result_seed(const char *dir, const result_spec *s)
 {
     uint8_t *body;
     size_t len;
-    if (result_bytes(&l, r, &body, &len))
+    if (result_bytes(&s->l, s->r, s->spoil, &body, &len))
         return -1;
     uint8_t *seed = malloc(15 + len);
     int rc = -1;
     if (seed) {
-        put_header(seed, &l, r);
+        put_header(seed, &s->l, s->task);
         memcpy(seed + 15, body, len);
-        rc = write_file(dir, "result", name, seed, 15 + len);
+        rc = write_file(dir, "result", s->name, seed, 15 + len);
     }
     free(seed);
     free(body);
     return rc;
 }
 
+#define SCAN_HALF {12, 6, 0, 0, 0, TF_PIXEL_HALF}
+#define SCAN_FLOAT {5, 4, 0, 0, 0, TF_PIXEL_FLOAT}
+#define TILED {10, 7, 1, 4, 4, TF_PIXEL_HALF}
+static const result_spec RESULTS[] = {
+    {"scanline_half_rows", SCAN_HALF, {0, 2, 12, 3}, {0, 2, 12, 3}, SPOIL_NONE},
+    {"scanline_float_all", SCAN_FLOAT, {0, 0, 5, 4}, {0, 0, 5, 4}, SPOIL_NONE},
+    {"tiled_whole_tile", TILED, {4, 0, 4, 4}, {4, 0, 4, 4}, SPOIL_NONE},
+    {"tiled_edge_tile", TILED, {8, 4, 2, 3}, {8, 4, 2, 3}, SPOIL_NONE},
+    {"refused_other_task", SCAN_HALF, {0, 2, 12, 3}, {0, 2, 12, 2}, SPOIL_NONE},
+    {"refused_short_preview", SCAN_FLOAT, {0, 0, 5, 4}, {0, 0, 5, 4}, SPOIL_PREVIEW},
+    {"refused_chunk_checksum", SCAN_FLOAT, {0, 0, 5, 4}, {0, 0, 5, 4}, SPOIL_CHUNK},
+};
+
 static int result_seeds(const char *dir)
 {
-    tf_exr_layout scan_half = {12, 6, 0, 0, 0, TF_PIXEL_HALF};
-    tf_exr_layout scan_float = {5, 4, 0, 0, 0, TF_PIXEL_FLOAT};
-    tf_exr_layout tiled = {10, 7, 1, 4, 4, TF_PIXEL_HALF};
-    return result_seed(dir, "scanline_half_rows", scan_half, (tf_rect){0, 2, 12, 3}) ||
-           result_seed(dir, "scanline_float_all", scan_float, (tf_rect){0, 0, 5, 4}) ||
-           result_seed(dir, "tiled_whole_tile", tiled, (tf_rect){4, 0, 4, 4}) ||
-           result_seed(dir, "tiled_edge_tile", tiled, (tf_rect){8, 4, 2, 3})
-               ? -1
-               : 0;
+    for (size_t i = 0; i < sizeof RESULTS / sizeof RESULTS[0]; i++)
+        if (result_seed(dir, &RESULTS[i]))
+            return -1;
+    return 0;
 }
 
 int main(int argc, char **argv)

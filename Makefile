@@ -1,7 +1,8 @@
 # terrafarm build.  `make` builds bin/terrafarm; `make test` builds and runs every test;
-# `make asan` builds an AddressSanitizer+UBSan tree under build-asan/ (assertions on) and runs
-# the tests with it; `make deps` installs the Debian packages the build and tests need;
-# `make bench` builds the benchmarks.
+# `make asan` builds an AddressSanitizer+UBSan tree under build-asan/ (assertions on), runs
+# the tests with it, then every fuzz target for a fixed number of runs (fuzz-runs);
+# `make deps` installs the Debian packages the build and tests need; `make bench` builds the
+# benchmarks.
 #
 # The objects are listed by layer, lowest first, as Lua's makefile lists its core and its
 # libraries: a layer uses only the layers above it in this list, never one below.  Headers are
@@ -62,7 +63,7 @@ BENCHES   := $(BENCH_SRC:bench/%.c=$(BUILD)/bench/%)
 LIB       := $(BUILD)/libterrafarm.a
 PROG      := $(BIN)/terrafarm
 
-.PHONY: all test asan bench bench-deps fuzz deps clean install FORCE
+.PHONY: all test asan bench bench-deps fuzz fuzz-runs deps clean install FORCE
 all: $(PROG)
 
 # Every object depends on the compiler flags it was built with (the version among them), so
@@ -96,32 +97,52 @@ $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 
 # libFuzzer targets (clang).  The harness sources are plain LLVMFuzzerTestOneInput files; the
 # test suite also links each one with tests/fuzz/replay_main.c (gcc) to replay the corpus.
-FUZZ_LIB_SRC := $(LIB_SRC)
+# The library is compiled once for all of them (instrumented, without libFuzzer's main:
+# fuzzer-no-link); UB stops a run as it stops `make asan`.
+FUZZ_SAN     := address,undefined -fno-sanitize-recover=undefined
+FUZZ_CFLAGS  := -O1 -g -std=c11 -D_GNU_SOURCE -I. -Icommon -DTF_VERSION='"$(VERSION)"' \
+                $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS)
+FUZZ_LIB_OBJ := $(LIB_SRC:%.c=$(BUILD)/fuzzobj/%.o)
+# Named only by a pattern rule, they would be deleted as intermediates after every link.
+.SECONDARY: $(FUZZ_LIB_OBJ)
 # Helper programs of the e2e tests (tests/tools/*.c), e.g. exrcmp.
 TOOLS := $(patsubst tests/tools/%.c,$(BUILD)/tools/%,$(wildcard tests/tools/*.c))
 $(BUILD)/tools/%: tests/tools/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
 
-$(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB_SRC)
+$(BUILD)/fuzzobj/%.o: %.c
 	@mkdir -p $(dir $@)
-	clang -O1 -g -fsanitize=fuzzer,address,undefined -std=c11 -D_GNU_SOURCE -I. -Icommon \
-	  -DTF_VERSION='"$(VERSION)"' $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS) \
-	  -o $@ $< $(FUZZ_LIB_SRC) $(LDLIBS)
+	clang $(FUZZ_CFLAGS) -fsanitize=fuzzer-no-link,$(FUZZ_SAN) -MMD -MP -c $< -o $@
+$(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB_OBJ)
+	@mkdir -p $(dir $@)
+	clang $(FUZZ_CFLAGS) -fsanitize=fuzzer,$(FUZZ_SAN) -MMD -MP -o $@ $< $(FUZZ_LIB_OBJ) $(LDLIBS)
 $(BUILD)/replay/%: tests/fuzz/%.c tests/fuzz/replay_main.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -o $@ $< tests/fuzz/replay_main.c $(LIB_OBJ) $(LDLIBS)
 
-fuzz: $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/fuzz/%)
+FUZZERS := $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/fuzz/%)
+fuzz: $(FUZZERS)
+
+# Every fuzz target for FUZZ_RUNS mutations after its committed corpus (tests/fuzz/bounded.sh:
+# a count, not a time, and a fixed seed).  Run by `make asan` after the suite; about 40 s of
+# running on two cores (fuzz_heightmap's decoders are most of it), plus the clang build.
+FUZZ_RUNS ?= 5000
+fuzz-runs: $(FUZZERS)
+	tests/fuzz/bounded.sh $(BUILD) $(FUZZ_RUNS)
 
 REPLAYS := $(FUZZ_SRC:tests/fuzz/%.c=$(BUILD)/replay/%)
 
-test: $(PROG) $(TESTS) $(REPLAYS) $(TOOLS)
+# The benchmarks are built too (not run: tests/e2e/bench_smoke.sh runs their --smoke modes),
+# so an API change that breaks one breaks the suite.
+test: $(PROG) $(TESTS) $(REPLAYS) $(TOOLS) $(BENCHES)
 	BUILD=$(BUILD) BIN=$(BIN) tests/run.sh
 
+ASAN_MAKE := $(MAKE) BUILD=build-asan BIN=build-asan/bin CFLAGS="-O1 -g" \
+  SAN="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined"
 asan:
-	$(MAKE) BUILD=build-asan BIN=build-asan/bin CFLAGS="-O1 -g" \
-	  SAN="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined" test
+	$(ASAN_MAKE) test
+	$(ASAN_MAKE) fuzz-runs
 
 bench: $(PROG) $(BENCHES)
 

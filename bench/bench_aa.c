@@ -10,7 +10,8 @@
  * and prints camera rays per pixel and PSNR against the reference (on the sRGB-encoded image,
  * what a viewer sees), then the ray ratio adaptive / uniform16.
  *
- *   build/bench/bench_aa SCENE [WxH]      (default 160x90: the reference is 256 rays/pixel) */
+ *   build/bench/bench_aa [--smoke] SCENE [WxH]   (default 160x90: the reference is 256
+ *   rays/pixel; --smoke: 16x9 and the scene's threshold only, for tests/e2e/bench_smoke.sh) */
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -114,11 +115,17 @@ static double psnr(const tf_pixel *img, const tf_pixel *ref, size_t n)
 
 int main(int argc, char **argv)
 {
+    int smoke = argc > 1 && !strcmp(argv[1], "--smoke");
+    if (smoke) {
+        argv[1] = argv[0];
+        argv++;
+        argc--;
+    }
     if (argc < 2) {
-        fprintf(stderr, "usage: %s SCENE [WxH]\n", argv[0]);
+        fprintf(stderr, "usage: %s [--smoke] SCENE [WxH]\n", argv[0]);
         return 2;
     }
-    int w = 160, h = 90;
+    int w = smoke ? 16 : 160, h = smoke ? 9 : 90;
     if (argc > 2 && (sscanf(argv[2], "%dx%d", &w, &h) != 2 || w <= 0 || h <= 0 || w > 4096 ||
                      h > 4096)) {
         fprintf(stderr, "bench_aa: bad size '%s'\n", argv[2]);
@@ -165,7 +172,8 @@ int main(int argc, char **argv)
     int scene_depth = s->antialias.max_depth;
     const double thresholds[] = {scene_threshold, 0.06, 0.04, 0.03, 0.025, 0.02, 0.015, 0.01};
     double head_rpp = 0, head_psnr = 0;
-    for (size_t i = 0; i < sizeof thresholds / sizeof thresholds[0]; i++) {
+    size_t sweep = smoke ? 1 : sizeof thresholds / sizeof thresholds[0];
+    for (size_t i = 0; i < sweep; i++) {
         s->antialias.max_depth = i == 0 ? scene_depth : 3;
         s->antialias.threshold = thresholds[i];
         r = tf_renderer_new(s, hf, err, sizeof err);

@@ -10,7 +10,9 @@
  * as a peer baseline.  Each generator runs in a forked child so one that fails (or is not yet
  * written) is reported and the others still run.
  *
- * usage: build/bench/bench_terrain [SIZE_EXP] [OCTAVES]     (defaults 10 and 8) */
+ * usage: build/bench/bench_terrain [SIZE_EXP] [OCTAVES]     (defaults 10 and 8)
+ *        build/bench/bench_terrain --smoke   (33x33 samples, 2 octaves, one build each, few
+ *                                             noise calls: for tests/e2e/bench_smoke.sh) */
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -25,6 +27,10 @@
 #include "terrain/terrain_build.h"
 
 #define TARGET_NS 5.0
+
+/* Builds per measurement (best of) and noise calls per timing; --smoke lowers both. */
+static int builds = 3;
+static int noise_calls = 4000000;
 
 static double now_s(void)
 {
@@ -80,7 +86,7 @@ static timing time_build(const tf_terrain *t, int threads, int reps)
     for (int r = 0; r < reps; r++) {
         char err[256];
         double w0 = now_s(), c0 = cpu_s();
-        float *h = tf_terrain_heights(t, threads, err, sizeof err);
+        float *h = tf_terrain_heights(t, threads, NULL, err, sizeof err);
         timing now = {now_s() - w0, cpu_s() - c0};
         if (!h) {
             fprintf(stderr, "  %s\n", err);
@@ -97,8 +103,8 @@ static timing time_build(const tf_terrain *t, int threads, int reps)
 static void measure_child(enum tf_generator g, int size_exp, double octaves, int cpus, int fd)
 {
     tf_terrain t = bench_terrain(g, size_exp, octaves);
-    timing one = time_build(&t, 1, 3);
-    timing all = one.wall < 0 ? one : time_build(&t, cpus, 3);
+    timing one = time_build(&t, 1, builds);
+    timing all = one.wall < 0 ? one : time_build(&t, cpus, builds);
     char line[128];
     int len = snprintf(line, sizeof line, "%.9f %.9f %.9f %.9f\n", one.wall, one.cpu, all.wall,
                        all.cpu);
@@ -174,10 +180,15 @@ static double time_noise(int plain, int count)
 
 int main(int argc, char **argv)
 {
-    int size_exp = argc > 1 ? atoi(argv[1]) : 10;
-    double octaves = argc > 2 ? atof(argv[2]) : 8.0;
+    int smoke = argc == 2 && !strcmp(argv[1], "--smoke");
+    int size_exp = smoke ? 5 : argc > 1 ? atoi(argv[1]) : 10;
+    double octaves = smoke ? 2.0 : argc > 2 ? atof(argv[2]) : 8.0;
+    if (smoke) {
+        builds = 1;
+        noise_calls = 20000;
+    }
     if (size_exp < 1 || size_exp > TF_TERRAIN_MAX_SIZE_EXP || !(octaves >= 1 && octaves <= 32)) {
-        fprintf(stderr, "usage: bench_terrain [SIZE_EXP 1..13] [OCTAVES 1..32]\n");
+        fprintf(stderr, "usage: bench_terrain [SIZE_EXP 1..13] [OCTAVES 1..32] | --smoke\n");
         return 2;
     }
     int cpus = (int)sysconf(_SC_NPROCESSORS_ONLN);
@@ -188,7 +199,7 @@ int main(int argc, char **argv)
 
     printf("terrain synthesis: %ldx%ld samples, %.1f octaves, %d CPUs; target %.1f ns per "
            "octave per sample per core\n", n, n, octaves, cpus, TARGET_NS);
-    double tf_ns = time_noise(0, 4000000), plain_ns = time_noise(1, 4000000);
+    double tf_ns = time_noise(0, noise_calls), plain_ns = time_noise(1, noise_calls);
     printf("single 2D noise call: terrafarm %.2f ns, plain Perlin %.2f ns (%.2fx faster)\n\n",
            tf_ns, plain_ns, plain_ns / tf_ns);
     printf("%-10s %12s %8s %14s %8s %9s\n", "generator", "1 core", "ratio", "all cores/core",

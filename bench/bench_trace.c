@@ -7,7 +7,8 @@
  * hit.  Every ray goes through tf_trace_flat and tf_trace (tf_occluded for shadows); results must
  * agree exactly (the run fails otherwise).  Single threaded, so the figures are per core.
  *
- * Usage: bench_trace [-s WxH] [k ...] */
+ * Usage: bench_trace [-s WxH] [k ...]
+ *        bench_trace --smoke    (16x9 rays over k = 5: for tests/e2e/bench_smoke.sh) */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -147,7 +148,11 @@ int main(int argc, char **argv)
 {
     int w = 320, h = 200, ks[16], nk = 0;
     for (int a = 1; a < argc; a++) {
-        if (strcmp(argv[a], "-s") == 0 && a + 1 < argc) {
+        if (strcmp(argv[a], "--smoke") == 0) {
+            w = 16;
+            h = 9;
+            ks[nk++] = 5;
+        } else if (strcmp(argv[a], "-s") == 0 && a + 1 < argc) {
             if (sscanf(argv[++a], "%dx%d", &w, &h) != 2 || w < 1 || h < 1 || w > 8192 || h > 8192) {
                 fprintf(stderr, "bench_trace: bad size '%s' (want WxH)\n", argv[a]);
                 return 2;
@@ -156,7 +161,7 @@ int main(int argc, char **argv)
             char *end;
             long k = strtol(argv[a], &end, 10);
             if (*end || k < 1 || k > 14 || nk == 16) {
-                fprintf(stderr, "usage: bench_trace [-s WxH] [k ...]   (1 <= k <= 14)\n");
+                fprintf(stderr, "usage: bench_trace [-s WxH] [k ...] | --smoke   (1 <= k <= 14)\n");
                 return 2;
             }
             ks[nk++] = (int)k;

@@ -9,7 +9,8 @@
  * With --sealed the same run is done twice, in clear and then with a secret (the HMAC handshake
  * and sealed records of linda/seal.h on every connection), and a third line gives the ratio:
  * the cost of encryption in tasks/s, measured against the clear baseline of the same run.
- * Usage: bench_tuplespace [-n CONSUMERS] [-t TASKS] [--redis PORT | --sealed]
+ * Usage: bench_tuplespace [-n CONSUMERS] [-t TASKS] [--redis PORT | --sealed] [--smoke]
+ * (--smoke: 2 consumers, 200 tasks, for tests/e2e/bench_smoke.sh; -n and -t after it win.)
  * Output: one line "system=... consumers=N tasks=T ops_per_s=X median_us=Y p99_us=Z" per run. */
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -281,10 +282,13 @@ int main(int argc, char **argv)
             tasks = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--redis") && i + 1 < argc)
             redis_port = atoi(argv[++i]);
-        else if (!strcmp(argv[i], "--sealed"))
+        else if (!strcmp(argv[i], "--smoke")) {
+            consumers = 2;
+            tasks = 200;
+        } else if (!strcmp(argv[i], "--sealed"))
             sealed_compare = 1;
         else
-            tf_die(2, "usage: bench_tuplespace [-n CONSUMERS] [-t TASKS] [--redis PORT | --sealed]");
+            tf_die(2, "usage: bench_tuplespace [-n CONSUMERS] [-t TASKS] [--redis PORT | --sealed] [--smoke]");
     }
     if (consumers < 1 || consumers > 256 || tasks < 1 || tasks > 10000000)
         tf_die(2, "bad -n or -t");

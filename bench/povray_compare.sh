@@ -36,6 +36,10 @@
 #   --plain   terrafarm without bump noise, snow-line noise and mist (tracing + plain shading
 #             only, the closest to POV-Ray's plain pigment); default: the scene as written.
 #   --keep    copy the .pov files, derived scenes and both pictures of each case to DIR.
+#   --smoke   --sizes 6 --image 16x9 --runs 1 --modes noaa (a later option still wins): for
+#             tests/e2e/bench_smoke.sh.
+# env: TF (default bin/terrafarm) and TF_BUILD (default build/): the binaries to time; the
+# defaults are built here first.
 # Exit status: 0 done, 77 povray not installed (skip), 1 error.  Run from anywhere.
 set -u
 
@@ -61,6 +65,7 @@ while [ $# -gt 0 ]; do
     --pov-eq) POV_EQ_THRESH=$2; shift 2 ;;
     --plain) PLAIN=1; shift ;;
     --keep) KEEP=$2; shift 2 ;;
+    --smoke) SIZES=6; IMAGE=16x9; RUNS=1; MODES=noaa; shift ;;
     -h|--help) sed -n '2,/^set -u/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown argument '$1' (try --help)" ;;
     esac
@@ -74,10 +79,12 @@ if [ -n "$IMAGE" ]; then
 fi
 SCENE=$(cd "$(dirname "$SCENE")" && pwd)/$(basename "$SCENE")
 
-# Build what we run (quietly; a failure shows make's own message).
-make -s -C "$ROOT" bin/terrafarm build/bench/povray_tf_render >/dev/null || die "build failed"
-TF_RENDER="$ROOT/build/bench/povray_tf_render"
-TF="$ROOT/bin/terrafarm"
+# Build what we run (quietly; a failure shows make's own message), unless given.
+if [ -z "${TF:-}" ] || [ -z "${TF_BUILD:-}" ]; then
+    make -s -C "$ROOT" bin/terrafarm build/bench/povray_tf_render >/dev/null || die "build failed"
+fi
+TF_RENDER="${TF_BUILD:-$ROOT/build}/bench/povray_tf_render"
+TF="${TF:-$ROOT/bin/terrafarm}"
 
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/povcmp.XXXXXX") || die "mktemp failed"
 trap 'rm -rf "$WORK"' EXIT

@@ -8,7 +8,7 @@
  * POV-Ray's "Trace Time ... CPU-seconds" likewise excludes its parsing and PNG loading.
  * Writes the 8-bit sRGB PNG so the picture can be compared with POV-Ray's.
  *
- *   build/bench/povray_tf_render SCENE OUT.png [WxH]
+ *   build/bench/povray_tf_render [--smoke] SCENE OUT.png [WxH]   (--smoke: 16x9 unless WxH)
  *   prints: render_cpu_s=0.123 camera_rays_per_pixel=4.52 shadow_rays_per_pixel=3.9 */
 #include <stdio.h>
 #include <stdlib.h>
@@ -66,11 +66,17 @@ static int write_png(const char *path, const tf_pixel *img, int w, int h)
 
 int main(int argc, char **argv)
 {
+    int smoke = argc > 1 && !strcmp(argv[1], "--smoke");
+    if (smoke) {
+        argv[1] = argv[0];
+        argv++;
+        argc--;
+    }
     if (argc < 3 || argc > 4) {
-        fprintf(stderr, "usage: %s SCENE OUT.png [WxH]\n", argv[0]);
+        fprintf(stderr, "usage: %s [--smoke] SCENE OUT.png [WxH]\n", argv[0]);
         return 2;
     }
-    int w = 0, h = 0;
+    int w = smoke ? 16 : 0, h = smoke ? 9 : 0;
     if (argc == 4 && (sscanf(argv[3], "%dx%d", &w, &h) != 2 || w <= 0 || h <= 0 ||
                       w > 16384 || h > 16384)) {
         fprintf(stderr, "povray_tf_render: bad size '%s' (WxH, each 1..16384)\n", argv[3]);

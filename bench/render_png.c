@@ -3,7 +3,8 @@
  * image is the same bits whatever the thread count) and writes an 8-bit sRGB PNG (clamp + sRGB
  * curve, tf_srgb8).  Prints rays per pixel and the time.
  *
- *   build/bench/render_png SCENE OUT.png [WxH] [-d MAX_DEPTH] [-t THRESHOLD] [-j THREADS] */
+ *   build/bench/render_png SCENE OUT.png [WxH] [-d MAX_DEPTH] [-t THRESHOLD] [-j THREADS]
+ *                          [--smoke]   (--smoke: 16x9, for tests/e2e/bench_smoke.sh) */
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -82,7 +83,8 @@ static int write_png(const char *path, const tf_pixel *img, int w, int h)
 int main(int argc, char **argv)
 {
     if (argc < 3) {
-        fprintf(stderr, "usage: %s SCENE OUT.png [WxH] [-d MAX_DEPTH] [-t THRESHOLD] [-j THREADS]\n",
+        fprintf(stderr, "usage: %s SCENE OUT.png [WxH] [-d MAX_DEPTH] [-t THRESHOLD] [-j THREADS] "
+                "[--smoke]\n",
                 argv[0]);
         return 2;
     }
@@ -95,6 +97,8 @@ int main(int argc, char **argv)
             threshold = atof(argv[++i]);
         else if (!strcmp(argv[i], "-j") && i + 1 < argc)
             threads = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--smoke"))
+            w = 16, h = 9;
         else if (sscanf(argv[i], "%dx%d", &w, &h) != 2 || w <= 0 || h <= 0 || w > 65536 ||
                  h > 65536) {
             fprintf(stderr, "render_png: bad argument '%s'\n", argv[i]);

@@ -10,12 +10,20 @@
 # Prints one line per run: kind, size, coordinator_max_rss_kb, output bytes, wall and
 # render-path CPU of the coordinator.
 #
-# usage: bench/rss_flat.sh   (env: SIZES="1024 2048 4096 8192" DIR=/tmp)
+# usage: bench/rss_flat.sh [--smoke]
+#   (env: SIZES="1024 2048 4096 8192" KINDS="tiled tiled-capped scanline scanline-capped"
+#    RECORD=1024x256 DIR=/tmp TF=bin/terrafarm)
+#   --smoke: one 64^2 run of each fixed-shape kind, payloads from a 128x64 render, 2 simulated
+#   workers: for tests/e2e/bench_smoke.sh.
 set -eu
 cd "$(dirname "$0")/.."
 TF=${TF:-bin/terrafarm}
 SCENE=scenes/default.scene
+SIM_WORKERS=16
+if [ "${1:-}" = --smoke ]; then SIZES=64; KINDS="tiled scanline"; RECORD=128x64; SIM_WORKERS=2; fi
 SIZES=${SIZES:-"1024 2048 4096 8192"}
+KINDS=${KINDS:-"tiled tiled-capped scanline scanline-capped"}
+RECORD=${RECORD:-1024x256}
 DIR=$(mktemp -d "${DIR:-/tmp}/tf-rss.XXXXXX")
 trap 'rm -rf "$DIR"' EXIT
 MODEL=bench/default.cost
@@ -25,13 +33,13 @@ echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 # record TASKS WIDTH: a real render of the layout a run needs (scanline: of its width)
 record() {
     case $1 in
-    stamps:*) "$TF" render "$SCENE" -j 2 --size 1024x256 --tasks $1 -o "$DIR/rec.exr" -q --overwrite ;;
+    stamps:*) "$TF" render "$SCENE" -j 2 --size "$RECORD" --tasks $1 -o "$DIR/rec.exr" -q --overwrite ;;
     rows:*) "$TF" render "$SCENE" -j 2 --size "$2"x32 --tasks $1 -o "$DIR/rec.exr" -q --overwrite ;;
     esac
 }
 
 echo "kind,tasks,size,coordinator_max_rss_kb,out_bytes,wall_s,coordinator_render_cpu_s,cpu_ns_per_pixel"
-for kind in tiled tiled-capped scanline scanline-capped; do
+for kind in $KINDS; do
   for n in $SIZES; do
     cap=$((131072 / n)); [ $cap -gt 128 ] && cap=128
     case $kind in
@@ -50,7 +58,7 @@ for kind in tiled tiled-capped scanline scanline-capped; do
       port=$(sed -n 's/.*workers may join at [^ ]*:\([0-9][0-9]*\).*/\1/p' "$DIR/coord.err")
       [ -n "$port" ] && break; sleep 0.05
     done
-    "$TF" worker --connect 127.0.0.1:$port --simulate "$MODEL" -j 16 --pixel-us 0.001 \
+    "$TF" worker --connect 127.0.0.1:$port --simulate "$MODEL" -j "$SIM_WORKERS" --pixel-us 0.001 \
       --payloads "$rec" -q >/dev/null
     wait $coord
     js() { sed -n "s/^ *\"$1\": *\([0-9.]*\).*/\1/p" "$DIR/s.json" | head -1; }

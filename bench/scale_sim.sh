@@ -19,10 +19,18 @@
 # efficiency against workers for each task size (best watermark) to $OUT/scale_sim.svg.
 #
 # usage: bench/scale_sim.sh [MODEL|flat]   (default: bench/default.cost)
+#        bench/scale_sim.sh --smoke [MODEL|flat]   (2 workers, 2 tasks each of 1 ms, payloads of
+#        a 64x32 render, CSV and plot in a temp directory: for tests/e2e/bench_smoke.sh)
 # env:   WORKERS="16 64 256 1024" TASK_MS="1 10 30 100" WM="1 2 4" TPW=16 OUT=bench/results PIN=0
 set -eu
 cd "$(dirname "$0")/.."
 TF=${TF:-bin/terrafarm}
+SMOKE_OUT=
+if [ "${1:-}" = --smoke ]; then
+  shift
+  SMOKE_OUT=$(mktemp -d "${TMPDIR:-/tmp}/tf-scale-smoke.XXXXXX")
+  WORKERS=2 TASK_MS=1 WM=1 TPW=2 RECORD_SIZE=64x32 OUT=$SMOKE_OUT
+fi
 MODEL=${1:-bench/default.cost}
 WORKERS=${WORKERS:-"16 64 256 1024"}
 TASK_MS=${TASK_MS:-"1 10 30 100"}
@@ -41,7 +49,7 @@ EXR=/dev/shm/terrafarm-scale-sim-$$.exr
 LOG=$(mktemp)
 REC=/dev/shm/terrafarm-scale-payloads-$$.exr
 FLAT_MODEL=
-trap 'rm -f ${FLAT_MODEL:+"$FLAT_MODEL"} "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$REC" "${REC%.exr}.png"' EXIT
+trap 'rm -f ${FLAT_MODEL:+"$FLAT_MODEL"} "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$REC" "${REC%.exr}.png"; rm -rf ${SMOKE_OUT:+"$SMOKE_OUT"}' EXIT
 
 [ -x "$TF" ] || { echo "scale_sim.sh: build first (make)" >&2; exit 1; }
 if [ "$MODEL" = flat ]; then

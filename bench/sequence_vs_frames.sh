@@ -13,18 +13,26 @@
 # clock.  Every frame of (a) is checked byte-identical to its (b) counterpart.
 #
 # usage: bench/sequence_vs_frames.sh [SCENE]     (default scenes/flyby.scene)
-# env:   SIZE=320x180 FRAMES=24 WORKERS=2 REPEAT=1
+#        bench/sequence_vs_frames.sh --smoke     (2 frames at 32x18 of flyby.scene with a 129^2,
+#                                                3-octave terrain: for tests/e2e/bench_smoke.sh)
+# env:   SIZE=320x180 FRAMES=24 WORKERS=2 REPEAT=1 TF=bin/terrafarm
 set -eu
 cd "$(dirname "$0")/.."
 TF=${TF:-bin/terrafarm}
+SMOKE=0
+[ "${1:-}" = --smoke ] && { SMOKE=1; shift; SIZE=32x18; FRAMES=2; REPEAT=1; }
 SCENE=${1:-scenes/flyby.scene}
 SIZE=${SIZE:-320x180}
 FRAMES=${FRAMES:-24}
 WORKERS=${WORKERS:-2}
 REPEAT=${REPEAT:-1}
 [ -x "$TF" ] || { echo "sequence_vs_frames.sh: build first (make)" >&2; exit 1; }
-W=$(mktemp -d /tmp/tf-seqbench.XXXXXX)
+W=$(mktemp -d "${TMPDIR:-/tmp}/tf-seqbench.XXXXXX")
 trap 'rm -rf "$W"' EXIT
+if [ "$SMOKE" = 1 ]; then
+    sed 's/^size_exp *=.*/size_exp = 7/; s/^octaves *=.*/octaves = 3/' "$SCENE" >"$W/smoke.scene"
+    SCENE=$W/smoke.scene
+fi
 last=$((FRAMES - 1))
 now() { date +%s.%N; }
 # cpu_of CMD...: run CMD; its children's user + sys seconds in $cpu

@@ -341,10 +341,14 @@ static void sim_serve(sim_worker *w)
 }
 
 /* Append k items of `size` bytes to the growing array *dst (*n used of *cap); if memory runs
- * out they are dropped (a sample lost from a percentile or the bound, nothing else). */
+ * out they are dropped (a sample lost from a percentile or the bound, nothing else).  k = 0
+ * (a worker that took no task: both arrays still NULL) appends nothing, without a memcpy
+ * from or to NULL. */
 static void append_all(void **dst, size_t *n, size_t *cap, const void *src, size_t k,
                        size_t size)
 {
+    if (k == 0)
+        return;
     if (*n + k > *cap) {
         size_t c = 2 * (*n + k);
         void *p = realloc(*dst, c * size);

@@ -1,15 +1,17 @@
 /* fuzz_result.c: libFuzzer harness for the checks a worker's result passes before the
  * coordinator writes its chunks (coordinator/supervisor.c refuse_result): tf_result_unpack
- * (common/farmproto.c), the structural tf_result_check against the task, and with
- * --verify-chunks tf_exr_chunk_decodes on every chunk (common/image/exrencode.c).
+ * (common/farmproto.c), the structural tf_result_check against the task, the counts bound
+ * (tf_result_counts_check), and the pixel check of coordinator/resultcheck.c:
+ * tf_exr_chunk_check on every chunk (common/image/exrcheck.c: inflate, undo the ZIP filter,
+ * scan every value).
  *
  * Input: a 15-byte header, then a result tuple's encoding (tuple.h) as a worker sends it:
  *   u16 width-1, u16 height-1 (little-endian, 1..65536), u8 flags (bit 0 tiled, bit 1 half),
  *   u8 tile_w-1, u8 tile_h-1, u16 x, u16 y, u16 w, u16 h (the task's rectangle)
  * Besides "no crash, leak or hang" it checks: every refusal is one non-empty line; a tuple that
  * unpacks re-packs (tf_result_pack) to the very bytes it came from; an accepted result counts
- * w * h pixels, its chunks' packed sizes add up to the chunks blob, and the chunk walk of
- * --verify-chunks stays inside it.  Seeds (tests/corpus/result/, made by
+ * w * h pixels, its chunks' packed sizes add up to the chunks blob, and the pixel check's
+ * chunk walk stays inside it, each refusal one line.  Seeds (tests/corpus/result/, made by
  * tests/tools/fuzzseeds.c) are real results encoded by tf_exr_encode_rect, so the replay
  * reaches the accept path, and refused_* ones (another task, a short preview, a chunk that
  * does not inflate) for the refusals. */
@@ -18,7 +20,7 @@
 #include <string.h>
 
 #include "farmproto.h"
-#include "image/exrencode.h"
+#include "image/exrcheck.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
@@ -61,18 +63,25 @@ static void check_repack(const tf_result_msg *m, const uint8_t *enc, size_t len)
     tf_tuple_clear(&t);
 }
 
-/* The --verify-chunks walk over an accepted result, as refuse_result does it. */
-static void walk_chunks(const tf_result_msg *m)
+/* The pixel check's walk over an accepted result, as coordinator/resultcheck.c does it. */
+static void walk_chunks(const tf_result_msg *m, const tf_exr_layout *l)
 {
     uint8_t *scratch = NULL;
     size_t cap = 0, off = 0;
+    char err[256];
     for (size_t i = 0; i < m->nchunks; i++) {
         tf_chunk_rec c;
         tf_chunk_rec_get(m->index + i * TF_CHUNK_RECORD_BYTES, &c);
         if ((uint64_t)c.packed > m->chunks_len - off)
             abort(); /* accepted, yet the chunk runs past the blob */
-        tf_exr_chunk_decodes(m->chunks + off, (size_t)c.packed, (size_t)c.unpacked, &scratch,
-                             &cap);
+        int64_t index = tf_layout_chunk_index(l, c.cx, c.cy);
+        if (index < 0)
+            abort(); /* accepted, yet not one of the output's chunks */
+        tf_chunk_ref ref = tf_layout_chunk(l, index);
+        err[0] = '\0';
+        if (tf_exr_chunk_check(l, &ref, m->chunks + off, (size_t)c.packed, &scratch, &cap, err,
+                               sizeof err))
+            check_reason(err);
         off += (size_t)c.packed;
     }
     if (off != m->chunks_len)
@@ -95,7 +104,9 @@ static void check_against_task(tf_result_msg *m, const tf_exr_layout *l, tf_rect
     }
     if (m->counts.pixels != (uint64_t)r.w * (uint64_t)r.h)
         abort();
-    walk_chunks(m);
+    if (tf_result_counts_check(m, r, 3, err, sizeof err))
+        check_reason(err);
+    walk_chunks(m, l);
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)

@@ -38,41 +38,6 @@
 
 #define SQUARE_TOLERANCE 0.01 /* relative difference of the window's sides in metres */
 
-void tf_raster_free(tf_raster *r)
-{
-    free(r->v);
-    r->v = NULL;
-}
-
-int tf_raster_check_size(long long width, long long height, const char *name, char *err,
-                         size_t errlen)
-{
-    if (width < 1 || height < 1)
-        return tf_seterr(err, errlen, "%s: empty raster (%lldx%lld pixels)", name, width,
-                         height);
-    if (width > TF_RASTER_MAX_SIDE || height > TF_RASTER_MAX_SIDE ||
-        (unsigned long long)width * (unsigned long long)height > TF_RASTER_MAX_PIXELS)
-        return tf_seterr(err, errlen, "%s: too large: %lldx%lld pixels (at most %d on a side and "
-                         "%zu in all; crop or shrink it with gdal_translate first)", name, width,
-                         height, TF_RASTER_MAX_SIDE, TF_RASTER_MAX_PIXELS);
-    return 0;
-}
-
-static int decode(const tf_terrain *t, const char *name, tf_raster *r, char *err, size_t errlen)
-{
-    static const uint8_t png_sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-    static const uint8_t exr_magic[4] = {0x76, 0x2f, 0x31, 0x01};
-    const uint8_t *d = t->file_bytes;
-    size_t len = t->file_len;
-    if (len == 0)
-        return tf_seterr(err, errlen, "%s: empty file", name);
-    if (len >= 8 && memcmp(d, png_sig, 8) == 0)
-        return tf_raster_read_png(d, len, name, r, err, errlen);
-    if (len >= 4 && memcmp(d, exr_magic, 4) == 0)
-        return tf_raster_read_exr(d, len, name, r, err, errlen);
-    return tf_raster_read_gdal(d, len, name, r, err, errlen);
-}
-
 /* The crop window, checked against the raster. */
 static int crop_window(const tf_terrain *t, const tf_raster *r, const char *name, int *x,
                        int *y, int *w, int *h, char *err, size_t errlen)
@@ -220,7 +185,7 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
     if (!t->file_bytes)
         return tf_seterr(err, errlen, "%s: height map not loaded", name), NULL;
     tf_raster r;
-    if (decode(t, name, &r, err, errlen) != 0)
+    if (tf_raster_decode(t->file_bytes, t->file_len, name, &r, err, errlen) != 0)
         return NULL;
     float *out = NULL;
     double *z = NULL, *tmp = NULL;

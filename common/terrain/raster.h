@@ -1,9 +1,11 @@
-/* raster.h: a height map raster as decoded from a file's bytes, before it becomes a terrain
- * grid (heightmap_file.c does that: crop, nodata, vertical scale, orientation, resampling).
+/* raster.h: a height map raster as decoded from a file's bytes: a plain struct of values and
+ * what the file says about them, before anything makes it a terrain grid (that is the
+ * caller's business; the decoders know nothing of scenes or terrains).
  *
- * Three decoders, chosen by heightmap_file.c from the first bytes: 16-bit (or 8-bit) grayscale
- * PNG with libpng (raster_png.c), OpenEXR with OpenEXRCore (raster_exr.c), and everything else
- * -- GeoTIFF above all -- through GDAL (raster_gdal.c), which also reads the georeferencing.
+ * Three decoders, chosen by tf_raster_decode (raster.c) from the first bytes: 16-bit (or
+ * 8-bit) grayscale PNG with libpng (raster_png.c), OpenEXR with OpenEXRCore (raster_exr.c),
+ * and everything else -- GeoTIFF above all -- through GDAL (raster_gdal.c), which also reads
+ * the georeferencing.
  * Every decoder works on bytes in memory, never on a path, so a networked worker that received
  * the bytes from the coordinator decodes exactly what the coordinator decoded.
  *
@@ -30,6 +32,9 @@ typedef struct tf_raster {
     double unit_m;     /* projected: metres per coordinate unit (1 for metres, 0.3048 feet) */
 } tf_raster;
 
+/* The decoder the first bytes call for (PNG signature, OpenEXR magic number, else GDAL). */
+int tf_raster_decode(const uint8_t *data, size_t len, const char *name, tf_raster *r,
+                     char *err, size_t errlen);
 /* Each returns 0 and fills r (r->v malloc'd), or -1 with one line in err naming `name`. */
 int tf_raster_read_png(const uint8_t *data, size_t len, const char *name, tf_raster *r,
                        char *err, size_t errlen);

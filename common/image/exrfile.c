@@ -599,11 +599,19 @@ void tf_exr_abandon(tf_exr_writer *w)
 int tf_exr_write_gray(const char *path, int width, int height, const float *data, char *err,
                       size_t errlen)
 {
+    return tf_exr_write_gray_attrs(path, width, height, data, NULL, err, errlen);
+}
+
+int tf_exr_write_gray_attrs(const char *path, int width, int height, const float *data,
+                            const char *const *attrs, char *err, size_t errlen)
+{
     tf_exr_layout layout = {width, height, 0, 0, 0, TF_PIXEL_FLOAT};
     tf_exr_writer *w = writer_open(path, &layout, GRAY_CHANNELS, 1, sizeof(float), err, errlen);
     if (!w)
         return -1;
     exr_result_t rv = exr_attr_set_string(w->ctx, 0, ATTR_VERSION, TF_VERSION);
+    for (int i = 0; attrs && attrs[i] && rv == EXR_ERR_SUCCESS; i += 2)
+        rv = exr_attr_set_string(w->ctx, 0, attrs[i], attrs[i + 1]);
     if (rv != EXR_ERR_SUCCESS)
         writer_error(w, err, errlen, "cannot set a header attribute", rv);
     if (rv != EXR_ERR_SUCCESS || write_header(w, err, errlen) != 0 ||

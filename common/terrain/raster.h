@@ -20,6 +20,24 @@
 #define TF_RASTER_MAX_SIDE 65536
 #define TF_RASTER_MAX_PIXELS ((size_t)1 << 27) /* 512 MiB of floats */
 
+/* What a file may say about its own samples (terrafarm heightfield records it: EXR string
+ * attributes, PNG text chunks, GDAL metadata items), under these names: */
+#define TF_RASTER_KEY_FIRST_ROW "terrafarm.first_row"             /* "north" or "south" */
+#define TF_RASTER_KEY_EXTENT "terrafarm.extent"                   /* first to last column */
+#define TF_RASTER_KEY_VERTICAL_SCALE "terrafarm.vertical_scale"   /* height = value * scale */
+#define TF_RASTER_KEY_VERTICAL_OFFSET "terrafarm.vertical_offset" /*          + offset */
+#define TF_RASTER_MAX_EXTENT 1e9 /* the scene's own limits on extent and the vertical keys */
+#define TF_RASTER_MAX_VERTICAL 1e9
+
+enum tf_raster_rows { TF_RASTER_ROWS_UNSAID, TF_RASTER_ROWS_NORTH_FIRST, TF_RASTER_ROWS_SOUTH_FIRST };
+
+typedef struct tf_raster_meta {
+    int first_row;         /* enum tf_raster_rows */
+    double extent;         /* world distance from the first column to the last; 0: unsaid */
+    int has_scale, has_offset;
+    double vertical_scale, vertical_offset;
+} tf_raster_meta;
+
 typedef struct tf_raster {
     int width, height;
     float *v;          /* width * height values, row-major, first row first; NaN = nodata */
@@ -30,6 +48,7 @@ typedef struct tf_raster {
     int geographic;    /* coordinates are degrees of longitude and latitude */
     double semi_major; /* geographic: the ellipsoid's semi-major axis in metres */
     double unit_m;     /* projected: metres per coordinate unit (1 for metres, 0.3048 feet) */
+    tf_raster_meta meta; /* what the file says of itself (all decoders) */
 } tf_raster;
 
 /* The decoder the first bytes call for (PNG signature, OpenEXR magic number, else GDAL). */
@@ -43,6 +62,14 @@ int tf_raster_read_exr(const uint8_t *data, size_t len, const char *name, tf_ras
 int tf_raster_read_gdal(const uint8_t *data, size_t len, const char *name, tf_raster *r,
                         char *err, size_t errlen);
 void tf_raster_free(tf_raster *r);
+
+/* 1 if key is one of the TF_RASTER_KEY_* names, else 0. */
+int tf_raster_meta_key(const char *key);
+/* A decoder's text item key = value: a TF_RASTER_KEY_* one is parsed into r->meta, any other
+ * ignored.  0, or -1 with "NAME: KEY: what is wrong" in err (a malformed or out-of-range
+ * value). */
+int tf_raster_meta_item(tf_raster *r, const char *key, const char *value, const char *name,
+                        char *err, size_t errlen);
 
 /* 0 if width x height is within the limits, else -1 with "NAME: ... too large" in err. */
 int tf_raster_check_size(long long width, long long height, const char *name, char *err,

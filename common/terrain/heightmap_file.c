@@ -4,20 +4,24 @@
  *   1. decode: PNG by its signature, OpenEXR by its magic number, anything else through GDAL;
  *   2. crop to crop_x, crop_y, crop_width, crop_height (width/height 0: to the raster's edge);
  *   3. world heights z = value * vertical_scale + vertical_offset (in double, stored as float,
- *      so a float raster with scale 1 and offset 0 keeps its bits);
+ *      so a float raster with scale 1 and offset 0 keeps its bits).  Here and in 5 and 6, a
+ *      key the scene leaves at its default (scale 1, offset 0, first_row auto, extent 0) takes
+ *      what the file says of itself (raster.h's tf_raster_meta, which terrafarm heightfield
+ *      writes), so its exports re-import with only `path`;
  *   4. nodata: `fill` gives each nodata sample the mean of its already-known 4-neighbours, in
  *      breadth-first layers growing from the data (deterministic, linear time); `sea` puts it
  *      one world unit below materials.sea_level, under the water.  A window with no data at
  *      all is an error;
  *   5. orientation: terrain row 0 is the south edge (world y = 0).  first_row = north (the
- *      map convention, and `auto` without georeferencing) flips the rows; so does `auto` with
- *      a north-up geotransform (negative pixel height); first_row = south (what terrafarm
- *      heightfield writes in PNG and EXR) keeps them.  An east-to-west geotransform flips the
+ *      map convention, and `auto` without the file's word or georeferencing) flips the rows;
+ *      so does `auto` with a north-up geotransform (negative pixel height); first_row = south
+ *      (what terrafarm heightfield writes in PNG and EXR, and records there) keeps them.  An east-to-west geotransform flips the
  *      columns;
  *   6. horizontal scale: a georeferenced raster's pixel size in metres: projected CRSs times
  *      their linear unit, geographic (degree) CRSs by the sphere of the ellipsoid's semi-major
  *      axis a: east = |dlon| * pi/180 * a * cos(latitude of the window's centre), north =
- *      |dlat| * pi/180 * a.  Without georeferencing a pixel is one world unit.  The terrain is
+ *      |dlat| * pi/180 * a.  Without georeferencing a pixel is the file's recorded extent over
+ *      its width - 1, else one world unit.  The terrain is
  *      square, so the window must cover a square (within 1%) in metres; `extent`, if set,
  *      overrides the side's size;
  *   7. resample onto n x n samples with a separable tent (triangle) filter of radius
@@ -129,11 +133,34 @@ out:
     return rc;
 }
 
+/* Step 3's scale and offset: each the scene's key where it is given (differs from its default,
+ * 1 and 0), else what the file says, else the default. */
+static void vertical(const tf_terrain *t, const tf_raster_meta *m, double *scale,
+                     double *offset)
+{
+    *scale = t->vertical_scale != 1.0 || !m->has_scale ? t->vertical_scale : m->vertical_scale;
+    *offset = t->vertical_offset != 0.0 || !m->has_offset ? t->vertical_offset
+                                                          : m->vertical_offset;
+}
+
+/* Step 5: 1 if the raster's first row is the south edge: the scene's first_row, else the
+ * file's own word, else a south-up geotransform. */
+static int south_first(const tf_terrain *t, const tf_raster *r)
+{
+    if (t->first_row != TF_FIRST_ROW_AUTO)
+        return t->first_row == TF_FIRST_ROW_SOUTH;
+    if (r->meta.first_row != TF_RASTER_ROWS_UNSAID)
+        return r->meta.first_row == TF_RASTER_ROWS_SOUTH_FIRST;
+    return r->has_georef && r->gt[5] > 0;
+}
+
 /* Step 6: metres per pixel east and north. */
 static int pixel_size(const tf_raster *r, int wy, int wh, const char *name, double *dx,
                       double *dy, char *err, size_t errlen)
 {
     *dx = *dy = 1.0;
+    if (!r->has_georef && r->meta.extent > 0)
+        *dx = *dy = r->meta.extent / (r->width - 1);
     if (!r->has_georef)
         return 0;
     if (r->gt[2] != 0 || r->gt[4] != 0)
@@ -200,12 +227,14 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
         tf_seterr(err, errlen, "%s: out of memory", name);
         goto out;
     }
+    double vscale, voffset;
+    vertical(t, &r.meta, &vscale, &voffset);
     size_t valid = 0;
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             float v = r.v[(size_t)(wy + y) * (size_t)r.width + (size_t)(wx + x)];
             float zz = isnan(v) ? NAN
-                                : (float)((double)v * t->vertical_scale + t->vertical_offset);
+                                : (float)((double)v * vscale + voffset);
             if (!isnan(zz) && !isfinite(zz)) {
                 free(win);
                 tf_seterr(err, errlen, "%s: value %g at pixel (%d, %d) times vertical_scale is "
@@ -251,8 +280,7 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
         goto out;
     }
     *extent = t->extent > 0 ? t->extent : side_x;
-    int south_first = t->first_row == TF_FIRST_ROW_SOUTH ||
-                      (t->first_row == TF_FIRST_ROW_AUTO && r.has_georef && r.gt[5] > 0);
+    int south = south_first(t, &r);
     int flip_x = r.has_georef && r.gt[1] < 0;
 
     /* 7: rows to n columns (tmp, h x n), then columns to n rows (out, n x n) */
@@ -270,7 +298,7 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
         goto out;
     }
     for (int y = 0; y < h; y++) {
-        int sy = south_first ? y : h - 1 - y; /* z row y is world row y (south first) */
+        int sy = south ? y : h - 1 - y; /* z row y is world row y (south first) */
         for (int x = 0; x < w; x++)
             z[(size_t)y * (size_t)w + (size_t)x] =
                 win[(size_t)sy * (size_t)w + (size_t)(flip_x ? w - 1 - x : x)];

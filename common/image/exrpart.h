@@ -1,6 +1,6 @@
 /* exrpart.h: the one definition of the render output's OpenEXR part (channels and their types,
  * compression and its zlib level, line order, tiles) for a tf_exr_layout.  The coordinator's
- * file writer (exrfile.c) and every worker's chunk encoder (exrencode.c) build their contexts
+ * file writer (exrwrite.c) and every worker's chunk encoder (exrencode.c) build their contexts
  * with it, so a chunk a worker packs is exactly the chunk the file's header describes. */
 #ifndef TF_EXRPART_H
 #define TF_EXRPART_H

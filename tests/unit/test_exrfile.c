@@ -1,4 +1,5 @@
-/* test_exrfile.c: the OpenEXR output and checkpoint (common/image/exrfile.c).
+/* test_exrfile.c: the OpenEXR output and checkpoint (common/image/exrfile.h: exrwrite.c,
+ * exrsink.c, exrread.c, exrstream.c, exrresume.c).
  *
  * Covers the bit-exact round trip, header attributes, that exrheader accepts the file, that
  * OpenEXRCore 3.1.5 really rebuilds the zero offset table of a killed render, torn final chunks

@@ -2,6 +2,7 @@
  * goes through tf_exr_sink_write, a write-behind buffer and pwrite loop on our own descriptor. */
 #include "image/exrsink.h"
 
+#include <assert.h>
 #include <errno.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -11,6 +12,28 @@
 
 #define SINK_BUFFER (256 * 1024)
 #define SINK_REF_MIN 4096 /* with hold: pieces this large are referenced, not copied */
+
+void tf_exr_sink_check(const tf_exr_sink *s)
+{
+#ifndef NDEBUG
+    uint64_t sum = 0;
+    for (int i = 0; i < s->niov && i < SINK_IOV; i++)
+        sum += s->iov[i].iov_len;
+    assert((s->niov == 0 || s->fd >= 0) && "E1: a run waits only on an open descriptor");
+    assert(s->write_errno >= 0 && "E2: write_errno is 0 or an errno");
+    assert((!s->abandoned || s->niov == 0) && "E3: an abandoned sink holds no run");
+    assert(s->niov >= 0 && s->niov <= SINK_IOV && "E4: at most SINK_IOV pieces in the run");
+    assert(s->run_len == sum && "E4: run_len is the sum of the pieces' lengths");
+    assert(s->len <= SINK_BUFFER && "E5: the copies fit the buffer");
+    assert((s->len == 0 || s->buf) && "E5: copies only with a buffer");
+    assert(s->len <= s->run_len && "E5: every copied byte is in the run");
+    assert(s->held >= 0 && s->held <= s->niov && "E6: 0 <= held <= niov");
+    assert((s->held == 0 || s->hold) && "E6: references only with hold");
+    assert((!s->referring || s->hold) && "E6: referring only with hold");
+#else
+    (void)s;
+#endif
+}
 
 static int sink_pwrite(tf_exr_sink *s, const uint8_t *p, uint64_t sz, uint64_t offset)
 {
@@ -67,12 +90,15 @@ int tf_exr_sink_flush(tf_exr_sink *s)
     s->held = 0;
     s->len = 0;
     s->run_len = 0;
+    tf_exr_sink_check(s);
     return rc;
 }
 
 /* Add a piece to the run (which has room for it: the caller checked). */
 static void sink_add(tf_exr_sink *s, const void *p, size_t sz, uint64_t offset)
 {
+    assert(!s->write_errno && "E2: nothing joins the run after a failure");
+    assert(!s->abandoned && "E3: nothing joins the run of an abandoned sink");
     if (s->run_len == 0)
         s->run_off = offset;
     struct iovec *last = s->niov > 0 ? &s->iov[s->niov - 1] : NULL;
@@ -83,12 +109,9 @@ static void sink_add(tf_exr_sink *s, const void *p, size_t sz, uint64_t offset)
     s->run_len += sz;
 }
 
-int64_t tf_exr_sink_write(exr_const_context_t ctxt, void *userdata, const void *buffer,
-                          uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb)
+/* tf_exr_sink_write's work: the bytes into the run, or straight to the file. */
+static int64_t sink_take(tf_exr_sink *s, const void *buffer, uint64_t sz, uint64_t offset)
 {
-    (void)ctxt;
-    (void)error_cb;
-    tf_exr_sink *s = userdata;
     if (s->abandoned || s->write_errno)
         return -1;
     if (sz > (uint64_t)INT64_MAX || offset > (uint64_t)INT64_MAX - sz) {
@@ -118,4 +141,15 @@ int64_t tf_exr_sink_write(exr_const_context_t ctxt, void *userdata, const void *
         return (int64_t)sz;
     }
     return sink_pwrite(s, buffer, sz, offset) ? -1 : (int64_t)sz;
+}
+
+int64_t tf_exr_sink_write(exr_const_context_t ctxt, void *userdata, const void *buffer,
+                          uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb)
+{
+    (void)ctxt;
+    (void)error_cb;
+    tf_exr_sink *s = userdata;
+    int64_t n = sink_take(s, buffer, sz, offset);
+    tf_exr_sink_check(s);
+    return n;
 }

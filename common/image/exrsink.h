@@ -4,7 +4,20 @@
  * with its errno and reported as one line naming the file, and (3) tf_exr_abandon can close the
  * file without OpenEXRCore writing another byte: it sets `abandoned`, after which
  * tf_exr_sink_write refuses everything, exactly as if the process had been killed at that
- * instant.  Internal to the files behind exrfile.h. */
+ * instant.  Internal to the files behind exrfile.h.
+ *
+ * Invariants, after every call that changes a sink (tf_exr_sink_check asserts them clause by
+ * clause in the `make asan` build, each failure naming its clause):
+ *   E1  (1) a run waits only on an open descriptor: pieces in the run imply fd >= 0;
+ *   E2  (2) write_errno is 0 or the first errno, and after it nothing joins the run (the next
+ *       flush drops what is there);
+ *   E3  (3) an abandoned sink holds no run: what was handed over before went out first;
+ *   E4  the run is its pieces: 0 <= niov <= SINK_IOV and run_len is the sum of their lengths
+ *       (so an empty run has no pieces, and no bytes);
+ *   E5  the copies fit the buffer: len <= SINK_BUFFER, len > 0 only with buf, and len <=
+ *       run_len (every copied byte is in the run);
+ *   E6  references only while the caller keeps them alive: 0 <= held <= niov, held > 0 only
+ *       with hold, and referring only with hold. */
 #ifndef TF_EXRSINK_H
 #define TF_EXRSINK_H
 
@@ -38,6 +51,8 @@ typedef struct tf_exr_sink {
     int held;          /* pieces of the run that are references */
 } tf_exr_sink;
 
+/* Assert E1-E6 (above) on s, one assert per clause; nothing with NDEBUG. */
+void tf_exr_sink_check(const tf_exr_sink *s);
 /* Write the run out (pwritev, resumed after a short write).  0, or -1 with write_errno set. */
 int tf_exr_sink_flush(tf_exr_sink *s);
 /* OpenEXRCore's write function (its user data is the sink). */

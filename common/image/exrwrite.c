@@ -8,9 +8,16 @@
  * bytes" (tiles: "int32 tx, ty, level x, level y, packed size, packed bytes").  OpenEXRCore
  * 3.1.5 sees the zero offset table as invalid and rebuilds it by walking
  * those chunk headers (tests/unit/test_exrfile.c checks that it does), so a killed render is
- * readable up to its last whole chunk. */
+ * readable up to its last whole chunk.
+ *
+ * Invariants of a writer, after every call that changes it (assert_writer_state asserts them
+ * clause by clause in the `make asan` build), beside its sink's E1-E6 (exrsink.h):
+ *   E7  chunks go out in file order, each once: 0 <= next_chunk <= nchunks;
+ *   E8  OpenEXRCore writes only to our open descriptor: a live context implies sink.fd >= 0
+ *       (the descriptor is opened before the context and closed after it ends). */
 #include "image/exrinternal.h"
 
+#include <assert.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <stdio.h>
@@ -55,6 +62,16 @@ struct tf_exr_writer {
     int broken;                  /* a chunk write failed: every later write/sync/finish fails */
 };
 
+/* E7 and the sink's E1-E6, one assert per clause; nothing with NDEBUG. */
+static void assert_writer_state(const tf_exr_writer *w)
+{
+    assert(w->next_chunk >= 0 && "E7: next_chunk >= 0");
+    assert(w->next_chunk <= w->nchunks && "E7: next_chunk <= nchunks");
+    assert((!w->ctx || w->sink.fd >= 0) && "E8: a live context writes to an open descriptor");
+    tf_exr_sink_check(&w->sink);
+    (void)w;
+}
+
 int tf_exr_chunk_rows(void) { return TF_EXR_CHUNK_ROWS; }
 
 int tf_exr_next_row(const tf_exr_writer *w)
@@ -88,6 +105,7 @@ static void writer_free(tf_exr_writer *w, int abandon)
         if (w->sink.fd >= 0)
             tf_exr_sink_flush(&w->sink);
         w->sink.abandoned = 1;
+        assert_writer_state(w);
     }
     if (w->ctx)
         exr_finish(&w->ctx);
@@ -257,6 +275,7 @@ static int encode_chunk(tf_exr_writer *w, const tf_chunk_ref *c, const uint8_t *
         return -1;
     }
     w->next_chunk++;
+    assert_writer_state(w);
     return 0;
 }
 
@@ -289,6 +308,7 @@ static int write_rows_raw(tf_exr_writer *w, int nrows, const void *px, char *err
                   strerror(w->sink.write_errno));
         w->broken = 1;
         w->next_chunk = first_chunk; /* none of this call's rows counts as written */
+        assert_writer_state(w);
         return -1;
     }
     return 0;
@@ -317,11 +337,13 @@ int tf_exr_write_chunk(tf_exr_writer *w, int cx, int cy, const void *packed, siz
                           ? exr_write_tile_chunk(w->ctx, 0, cx, cy, 0, 0, packed, len)
                           : exr_write_scanline_chunk(w->ctx, 0, cy, packed, len);
     w->sink.referring = 0;
+    assert_writer_state(w);
     if (rv != EXR_ERR_SUCCESS || w->sink.write_errno) {
         chunk_failed(w, &c, rv, err, errlen);
         return -1;
     }
     w->next_chunk++;
+    assert_writer_state(w);
     return 0;
 }
 
@@ -342,6 +364,7 @@ void tf_exr_hold_chunks(tf_exr_writer *w, int on)
     if (!on && w->sink.held)
         tf_exr_sink_flush(&w->sink); /* a failure is remembered and reported by the next call */
     w->sink.hold = on;
+    assert_writer_state(w);
 }
 
 int tf_exr_holds_references(const tf_exr_writer *w) { return w->sink.held > 0; }

@@ -56,6 +56,9 @@ typedef int (*tf_exr_visit_fn)(void *user, tf_exr_reader *r, const exr_chunk_inf
  * decodable chunks, or -1 if fn failed or memory ran out (message in err). */
 int64_t tf_exr_walk_chunks_upto(tf_exr_reader *r, int64_t limit, tf_exr_visit_fn fn,
                                 void *user, char *err, size_t errlen);
+/* The same walk handing fn each chunk's packed bytes as they are in the file too. */
+int64_t tf_exr_walk_packed(tf_exr_reader *r, int64_t limit, tf_exr_packed_fn fn, void *user,
+                           char *err, size_t errlen);
 int64_t tf_exr_walk_chunks(tf_exr_reader *r, tf_exr_visit_fn fn, void *user, char *err,
                            size_t errlen);
 

@@ -228,6 +228,44 @@ int64_t tf_exr_walk_chunks(tf_exr_reader *r, tf_exr_visit_fn fn, void *user, cha
     return tf_exr_walk_chunks_upto(r, INT64_MAX, fn, user, err, errlen);
 }
 
+typedef struct packed_walk {
+    tf_exr_packed_fn fn;
+    void *user;
+    uint8_t *buf;
+    size_t cap;
+    char *err;
+    size_t errlen;
+} packed_walk;
+
+/* Read a verified chunk's packed bytes and hand them on with its pixels. */
+static int visit_packed(void *user, tf_exr_reader *r, const exr_chunk_info_t *cinfo,
+                        const tf_chunk_ref *c, const tf_pixel *px)
+{
+    packed_walk *s = user;
+    if (cinfo->packed_size > s->cap) {
+        uint8_t *p = realloc(s->buf, (size_t)cinfo->packed_size);
+        if (!p)
+            return tf_seterr(s->err, s->errlen, "%s: out of memory", r->path);
+        s->buf = p;
+        s->cap = (size_t)cinfo->packed_size;
+    }
+    exr_result_t rv = exr_read_chunk(r->ctx, 0, cinfo, s->buf);
+    if (rv != EXR_ERR_SUCCESS) {
+        tf_exr_set_error(s->err, s->errlen, r->path, "cannot read a verified chunk", rv);
+        return -1;
+    }
+    return s->fn(s->user, c, s->buf, (size_t)cinfo->packed_size, px);
+}
+
+int64_t tf_exr_walk_packed(tf_exr_reader *r, int64_t limit, tf_exr_packed_fn fn, void *user,
+                           char *err, size_t errlen)
+{
+    packed_walk s = {fn, user, NULL, 0, err, errlen};
+    int64_t good = tf_exr_walk_chunks_upto(r, limit, visit_packed, &s, err, errlen);
+    free(s.buf);
+    return good;
+}
+
 /* Was the file finished (offset table written by exr_finish)?  Asked of a second context
  * with chunk reconstruction disabled, so only a real offset table can answer yes.  With
  * whole_file set, the last chunk must also end exactly at the end of the file. */

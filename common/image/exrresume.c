@@ -48,34 +48,17 @@ static int describe_meta_change(const char *path, const tf_exr_meta *have,
 
 typedef struct raw_copy {
     tf_exr_writer *w;
-    void *buf;
-    size_t cap;
     char *err;
     size_t errlen;
 } raw_copy;
 
 /* Copy one verified chunk's packed bytes into the new file, untouched. */
-static int copy_chunk_raw(void *user, tf_exr_reader *r, const exr_chunk_info_t *cinfo,
-                          const tf_chunk_ref *c, const tf_pixel *px)
+static int copy_chunk_raw(void *user, const tf_chunk_ref *c, const uint8_t *packed, size_t len,
+                          const tf_pixel *px)
 {
     (void)px;
     raw_copy *rc = user;
-    if (cinfo->packed_size > rc->cap) {
-        void *p = realloc(rc->buf, (size_t)cinfo->packed_size);
-        if (!p) {
-            snprintf(rc->err, rc->errlen, "%s: out of memory", r->path);
-            return -1;
-        }
-        rc->buf = p;
-        rc->cap = (size_t)cinfo->packed_size;
-    }
-    exr_result_t rv = exr_read_chunk(r->ctx, 0, cinfo, rc->buf);
-    if (rv != EXR_ERR_SUCCESS) {
-        tf_exr_set_error(rc->err, rc->errlen, r->path, "cannot read a verified chunk", rv);
-        return -1;
-    }
-    return tf_exr_write_chunk(rc->w, c->cx, c->cy, rc->buf, (size_t)cinfo->packed_size, rc->err,
-                              rc->errlen);
+    return tf_exr_write_chunk(rc->w, c->cx, c->cy, packed, len, rc->err, rc->errlen);
 }
 
 static int fsync_parent_dir(const char *path, char *err, size_t errlen)
@@ -129,9 +112,9 @@ tf_exr_writer *tf_exr_resume_prefix(const char *path, const tf_exr_meta *expect,
     memcpy(tmp + plen, ".resume.tmp", sizeof ".resume.tmp");
 
     tf_exr_writer *w = tf_exr_create(tmp, &r.meta, err, errlen);
-    raw_copy copy = {w, NULL, 0, err, errlen};
-    int64_t good = w ? tf_exr_walk_chunks_upto(&r, keep_chunks, copy_chunk_raw, &copy, err, errlen) : -1;
-    free(copy.buf);
+    raw_copy copy = {w, err, errlen};
+    int64_t good = w ? tf_exr_walk_packed(&r, keep_chunks, copy_chunk_raw, &copy, err, errlen)
+                     : -1;
     tf_exr_reader_close(&r);
     if (good < 0 || tf_exr_sync(w, err, errlen) != 0) {
         tf_exr_abandon(w);

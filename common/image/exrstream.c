@@ -43,34 +43,6 @@ int tf_exr_read_chunks(const char *path, tf_exr_meta *meta, int64_t *chunks_vali
     return good < 0 ? -1 : 0;
 }
 
-typedef struct packed_stream {
-    tf_exr_packed_fn fn;
-    void *user;
-    uint8_t *buf;
-    size_t cap;
-    char *err;
-    size_t errlen;
-} packed_stream;
-
-static int stream_packed(void *user, tf_exr_reader *r, const exr_chunk_info_t *cinfo,
-                         const tf_chunk_ref *c, const tf_pixel *px)
-{
-    packed_stream *s = user;
-    if (cinfo->packed_size > s->cap) {
-        uint8_t *p = realloc(s->buf, (size_t)cinfo->packed_size);
-        if (!p)
-            return tf_seterr(s->err, s->errlen, "%s: out of memory", r->path);
-        s->buf = p;
-        s->cap = (size_t)cinfo->packed_size;
-    }
-    exr_result_t rv = exr_read_chunk(r->ctx, 0, cinfo, s->buf);
-    if (rv != EXR_ERR_SUCCESS) {
-        tf_exr_set_error(s->err, s->errlen, r->path, "cannot read a verified chunk", rv);
-        return -1;
-    }
-    return s->fn(s->user, c, s->buf, (size_t)cinfo->packed_size, px);
-}
-
 int tf_exr_read_packed_chunks(const char *path, tf_exr_meta *meta, int64_t *chunks_valid,
                               tf_exr_packed_fn fn, void *user, char *err, size_t errlen)
 {
@@ -83,13 +55,11 @@ int tf_exr_read_packed_chunks(const char *path, tf_exr_meta *meta, int64_t *chun
     if (rc != 0)
         return -1;
     *meta = r.meta;
-    packed_stream s = {fn, user, NULL, 0, err, errlen};
-    int64_t good = tf_exr_walk_chunks(&r, stream_packed, &s, err, errlen);
+    int64_t good = tf_exr_walk_packed(&r, INT64_MAX, fn, user, err, errlen);
     if (good < 0 && errlen > 0 && !err[0])
         tf_seterr(err, errlen, "%s: reading stopped by the chunk consumer", path);
     if (good >= 0)
         *chunks_valid = good;
-    free(s.buf);
     tf_exr_reader_close(&r);
     return good < 0 ? -1 : 0;
 }

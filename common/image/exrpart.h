@@ -35,4 +35,13 @@ exr_compression_t tf_exr_layout_compression(const tf_exr_layout *l);
 exr_result_t tf_exr_define_part(exr_context_t ctx, const tf_exr_layout *l,
                                 const tf_exr_channel *channels, int nchannels);
 
+/* Start encoding chunk c of part 0: its chunk info, the encode pipeline initialised, each
+ * channel pointed at its float in the caller's pixels (origin: the chunk's top-left pixel;
+ * pixels pixel_bytes and rows line_bytes apart), the default routines chosen.  Returns
+ * OpenEXRCore's result; enc is to be destroyed (exr_encoding_destroy) either way. */
+exr_result_t tf_exr_begin_chunk(exr_context_t ctx, const tf_exr_layout *l,
+                                const tf_chunk_ref *c, const tf_exr_channel *channels,
+                                int nchannels, const uint8_t *origin, size_t pixel_bytes,
+                                size_t line_bytes, exr_encode_pipeline_t *enc);
+
 #endif

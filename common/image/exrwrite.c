@@ -239,34 +239,12 @@ static void chunk_failed(tf_exr_writer *w, const tf_chunk_ref *c, exr_result_t r
 static int encode_chunk(tf_exr_writer *w, const tf_chunk_ref *c, const uint8_t *rows, int y0,
                         char *err, size_t errlen)
 {
-    exr_chunk_info_t cinfo;
     exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
-    exr_result_t rv = w->layout.tiled
-                          ? exr_write_tile_chunk_info(w->ctx, 0, c->cx, c->cy, 0, 0, &cinfo)
-                          : exr_write_scanline_chunk_info(w->ctx, 0, c->cy, &cinfo);
-    if (rv == EXR_ERR_SUCCESS)
-        rv = exr_encoding_initialize(w->ctx, 0, &cinfo, &enc);
-    if (rv == EXR_ERR_SUCCESS) {
-        size_t line = (size_t)w->width * w->pixel_bytes;
-        const uint8_t *origin = rows + (size_t)(c->rect.y - y0) * line +
-                                (size_t)c->rect.x * w->pixel_bytes;
-        for (int i = 0; i < enc.channel_count; i++) {
-            exr_coding_channel_info_t *ch = &enc.channels[i];
-            const tf_exr_channel *m = tf_exr_find_channel(w->channels, w->nchannels,
-                                                          ch->channel_name);
-            if (!m) { /* cannot happen: we declared exactly these channels */
-                rv = EXR_ERR_INVALID_ARGUMENT;
-                break;
-            }
-            ch->encode_from_ptr = origin + m->offset;
-            ch->user_pixel_stride = (int32_t)w->pixel_bytes;
-            ch->user_line_stride = (int32_t)line;
-            ch->user_bytes_per_element = 4;
-            ch->user_data_type = EXR_PIXEL_FLOAT;
-        }
-    }
-    if (rv == EXR_ERR_SUCCESS)
-        rv = exr_encoding_choose_default_routines(w->ctx, 0, &enc);
+    size_t line = (size_t)w->width * w->pixel_bytes;
+    const uint8_t *origin = rows + (size_t)(c->rect.y - y0) * line +
+                            (size_t)c->rect.x * w->pixel_bytes;
+    exr_result_t rv = tf_exr_begin_chunk(w->ctx, &w->layout, c, w->channels, w->nchannels,
+                                         origin, w->pixel_bytes, line, &enc);
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_encoding_run(w->ctx, 0, &enc);
     exr_encoding_destroy(w->ctx, &enc);

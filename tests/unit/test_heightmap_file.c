@@ -342,6 +342,13 @@ static void test_file_says_orientation_extent_vertical(void **state)
     assert_true(extent == 500);
     assert_true(h[0] == 4 * v[(MN - 1) * MN] - 3 && h[MN * MN - 1] == 4 * v[MN - 1] - 3);
     free(h);
+    /* the recorded extent spans the whole raster: a 5x5 crop of the 9x9 covers half of it */
+    t = file_terrain(bytes, len, 2);
+    t.crop_width = t.crop_height = 5;
+    h = tf_heightmap_heights(&t, &extent, err, sizeof err);
+    assert_non_null(h);
+    assert_true(extent == 40);
+    free(h);
     free(bytes);
     const char *const png_meta[] = {TF_RASTER_KEY_FIRST_ROW, "north", TF_RASTER_KEY_EXTENT, "40",
                                     TF_RASTER_KEY_VERTICAL_SCALE, "0.5",

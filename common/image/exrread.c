@@ -199,8 +199,8 @@ static int decode_chunk(tf_exr_reader *r, const exr_chunk_info_t *cinfo, const t
 
 /* Verify chunks from the first, at most `limit` of them; returns the number of leading whole,
  * decodable chunks, or -1 if fn failed or memory ran out (message in err). */
-int64_t tf_exr_walk_chunks_upto(tf_exr_reader *r, int64_t limit, tf_exr_visit_fn fn, void *user, char *err,
-                                size_t errlen)
+int64_t tf_exr_walk_chunks_upto(tf_exr_reader *r, int64_t limit, tf_exr_visit_fn fn,
+                                void *user, char *err, size_t errlen)
 {
     tf_chunk_ref c0 = tf_layout_chunk(&r->layout, 0); /* the largest chunk */
     tf_pixel *px = malloc((size_t)c0.rect.w * (size_t)c0.rect.h * sizeof *px);
@@ -223,7 +223,8 @@ int64_t tf_exr_walk_chunks_upto(tf_exr_reader *r, int64_t limit, tf_exr_visit_fn
     return good;
 }
 
-int64_t tf_exr_walk_chunks(tf_exr_reader *r, tf_exr_visit_fn fn, void *user, char *err, size_t errlen)
+int64_t tf_exr_walk_chunks(tf_exr_reader *r, tf_exr_visit_fn fn, void *user, char *err,
+                           size_t errlen)
 {
     return tf_exr_walk_chunks_upto(r, INT64_MAX, fn, user, err, errlen);
 }

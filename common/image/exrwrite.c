@@ -165,7 +165,8 @@ static tf_exr_writer *writer_open(const char *path, const tf_exr_layout *layout,
 
 static int set_string_attrs(tf_exr_writer *w, const tf_exr_meta *meta, char *err, size_t errlen)
 {
-    const char *names[] = {TF_EXR_ATTR_HASH, TF_EXR_ATTR_SCENE, TF_EXR_ATTR_SETTINGS, TF_EXR_ATTR_VERSION};
+    const char *names[] = {TF_EXR_ATTR_HASH, TF_EXR_ATTR_SCENE, TF_EXR_ATTR_SETTINGS,
+                           TF_EXR_ATTR_VERSION};
     const char *values[] = {meta->scene_hash, meta->scene_name, meta->settings, TF_VERSION};
     for (int i = 0; i < 4; i++) {
         exr_result_t rv = exr_attr_set_string(w->ctx, 0, names[i], values[i]);

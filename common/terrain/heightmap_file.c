@@ -15,8 +15,8 @@
  *   5. orientation: terrain row 0 is the south edge (world y = 0).  first_row = north (the
  *      map convention, and `auto` without the file's word or georeferencing) flips the rows;
  *      so does `auto` with a north-up geotransform (negative pixel height); first_row = south
- *      (what terrafarm heightfield writes in PNG and EXR, and records there) keeps them.  An east-to-west geotransform flips the
- *      columns;
+ *      (what terrafarm heightfield writes in PNG and EXR, and records there) keeps them.  An
+ *      east-to-west geotransform flips the columns;
  *   6. horizontal scale: a georeferenced raster's pixel size in metres: projected CRSs times
  *      their linear unit, geographic (degree) CRSs by the sphere of the ellipsoid's semi-major
  *      axis a: east = |dlon| * pi/180 * a * cos(latitude of the window's centre), north =

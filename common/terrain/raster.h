@@ -29,7 +29,11 @@
 #define TF_RASTER_MAX_EXTENT 1e9 /* the scene's own limits on extent and the vertical keys */
 #define TF_RASTER_MAX_VERTICAL 1e9
 
-enum tf_raster_rows { TF_RASTER_ROWS_UNSAID, TF_RASTER_ROWS_NORTH_FIRST, TF_RASTER_ROWS_SOUTH_FIRST };
+enum tf_raster_rows {
+    TF_RASTER_ROWS_UNSAID,
+    TF_RASTER_ROWS_NORTH_FIRST,
+    TF_RASTER_ROWS_SOUTH_FIRST,
+};
 
 typedef struct tf_raster_meta {
     int first_row;         /* enum tf_raster_rows */

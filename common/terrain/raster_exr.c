@@ -142,8 +142,7 @@ static int read_attributes(exr_context_t ctx, const char *name, tf_raster *r, ch
                 EXR_ERR_SUCCESS || !a || !tf_raster_meta_key(a->name))
             continue;
         if (a->type != EXR_ATTR_STRING || !a->string)
-            return tf_seterr(err, errlen, "%s: %s: not a string attribute (%s)", name, a->name,
-                             a->type_name ? a->type_name : "unknown type");
+            return tf_seterr(err, errlen, "%s: %s: not a string attribute", name, a->name);
         if (tf_raster_meta_item(r, a->name, a->string->str ? a->string->str : "", name, err,
                                 errlen) != 0)
             return -1;

@@ -3,8 +3,9 @@
  *
  * The PNG's codes are the raster's values (0..65535 for 16 bits); the scene's vertical_scale
  * and vertical_offset turn them into heights.  A grayscale+alpha PNG's transparent samples
- * (alpha 0) are nodata.  Text chunks may say what the samples are (raster.h's TF_RASTER_KEY_*:
- * terrafarm heightfield records them).  Colour and palette images are refused: a height map is one channel.
+ * (alpha 0) are nodata.  Text chunks may say what the samples are (raster.h's
+ * TF_RASTER_KEY_*: terrafarm heightfield records them).  Colour and palette images are
+ * refused: a height map is one channel.
  * libpng reports errors by longjmp: every allocation that can outlive it is made before
  * setjmp or freed after it. */
 #include "terrain/raster.h"

@@ -10,7 +10,12 @@
  * column c is world x = c * cell.  That order is chosen for POV-Ray: its height_field puts the
  * image's last row at local z = 0 and splits each cell along the (x+1, z)-(x, z+1) diagonal;
  * mirrored in z by the printed transform, that split becomes terrafarm's own (ci, cj)-(ci+1,
- * cj+1) diagonal, so POV-Ray traces exactly the triangles the terrafarm tracer does. */
+ * cj+1) diagonal, so POV-Ray traces exactly the triangles the terrafarm tracer does.
+ *
+ * Every format also records what generator = file needs to read it back as this terrain
+ * (terrain/raster.h's TF_RASTER_KEY_*: which edge the first row is, the extent, how values
+ * become heights) in the file itself: EXR string attributes, PNG text chunks, GeoTIFF
+ * metadata.  A scene with only `generator = file` and `path` re-imports the same heights. */
 #include <getopt.h>
 #include <math.h>
 #include <stdint.h>
@@ -25,6 +30,7 @@
 #include "log.h"
 #include "image/png_write.h"
 #include "scene.h"
+#include "terrain/raster.h"
 #include "terrain/terrain_build.h"
 
 static const char usage[] =
@@ -50,7 +56,11 @@ static const char usage[] =
     "y = extent (north is at the bottom).  Printed after writing: the world extent, the height\n"
     "range, and the POV-Ray transform that places the PNG exactly on the terrain (POV-Ray's y\n"
     "is up and its z is terrafarm's y; the negative z scale undoes POV-Ray's bottom-row-first\n"
-    "reading and makes its triangle split equal terrafarm's).\n";
+    "reading and makes its triangle split equal terrafarm's).\n"
+    "\n"
+    "The file records its first row's edge, its extent and how its values become heights\n"
+    "(terrafarm.* attributes, text chunks or metadata), so a scene's [terrain] with only\n"
+    "generator = file and path = FILE reads these heights back.\n";
 
 struct hf_options {
     const char *scene_path;
@@ -155,6 +165,25 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
     return -1;
 }
 
+/* What a file says of itself, as name, value pairs for the writers. */
+typedef struct hf_meta {
+    char extent[32], scale[32], offset[32];
+    const char *items[9];
+} hf_meta;
+
+static const char *const *describe(hf_meta *m, const char *first_row, double extent,
+                                   double scale, double offset)
+{
+    snprintf(m->extent, sizeof m->extent, "%.17g", extent);
+    snprintf(m->scale, sizeof m->scale, "%.17g", scale);
+    snprintf(m->offset, sizeof m->offset, "%.17g", offset);
+    const char *items[9] = {TF_RASTER_KEY_FIRST_ROW, first_row, TF_RASTER_KEY_EXTENT,
+                            m->extent, TF_RASTER_KEY_VERTICAL_SCALE, m->scale,
+                            TF_RASTER_KEY_VERTICAL_OFFSET, m->offset, NULL};
+    memcpy(m->items, items, sizeof items);
+    return m->items;
+}
+
 static void height_range(const float *h, size_t count, float *lo, float *hi)
 {
     *lo = *hi = h[0];
@@ -164,9 +193,18 @@ static void height_range(const float *h, size_t count, float *lo, float *hi)
     }
 }
 
-/* 16-bit PNG, row r = terrain row r.  0 on success. */
-static int write_png(const char *path, const float *h, int n, float lo, float hi, char *err,
-                     size_t errlen)
+/* Its text chunks meta (name, value, ..., NULL) to w; 0 or -1. */
+static int png_texts(tf_png_writer *w, const char *const *meta, char *err, size_t errlen)
+{
+    for (int i = 0; meta[i]; i += 2)
+        if (tf_png_text(w, meta[i], meta[i + 1], err, errlen) != 0)
+            return -1;
+    return 0;
+}
+
+/* 16-bit PNG, row r = terrain row r, with its text chunks meta.  0 on success. */
+static int write_png(const char *path, const float *h, int n, float lo, float hi,
+                     const char *const *meta, char *err, size_t errlen)
 {
     uint16_t *row = malloc((size_t)n * sizeof *row);
     if (!row) {
@@ -174,6 +212,10 @@ static int write_png(const char *path, const float *h, int n, float lo, float hi
         return -1;
     }
     tf_png_writer *w = tf_png_create(path, n, n, 16, 1, err, errlen);
+    if (w && png_texts(w, meta, err, errlen) != 0) {
+        tf_png_abort(w);
+        w = NULL;
+    }
     if (!w) {
         free(row);
         return -1;
@@ -252,10 +294,14 @@ int cmd_heightfield(int argc, char **argv)
     height_range(h, (size_t)n * (size_t)n, &lo, &hi);
     int png = ends_with(o.output, ".png");
     int tif = ends_with(o.output, ".tif") || ends_with(o.output, ".tiff");
-    int rc = png ? write_png(o.output, h, n, lo, hi, err, sizeof err)
+    hf_meta m;
+    double range = (double)hi - (double)lo;
+    const char *const *meta = png ? describe(&m, "south", extent, range / 65535.0, lo)
+                                  : describe(&m, tif ? "north" : "south", extent, 1, 0);
+    int rc = png ? write_png(o.output, h, n, lo, hi, meta, err, sizeof err)
              : tif ? tf_geotiff_write_heights(o.output, n, h, extent / (n - 1), o.east0, o.north0,
-                                              o.srs, err, sizeof err)
-                   : tf_exr_write_gray(o.output, n, n, h, err, sizeof err);
+                                              o.srs, meta, err, sizeof err)
+                   : tf_exr_write_gray_attrs(o.output, n, n, h, meta, err, sizeof err);
     free(h);
     if (rc != 0) {
         tf_error("%s", err);

@@ -111,32 +111,11 @@ void tf_exr_encoder_free(tf_exr_encoder *e)
 static exr_result_t encode_chunk(tf_exr_encoder *e, tf_rect r, const tf_pixel *px,
                                  const tf_chunk_ref *c)
 {
-    exr_chunk_info_t cinfo;
     exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
-    exr_result_t rv = e->layout.tiled
-                          ? exr_write_tile_chunk_info(e->ctx, 0, c->cx, c->cy, 0, 0, &cinfo)
-                          : exr_write_scanline_chunk_info(e->ctx, 0, c->cy, &cinfo);
-    if (rv == EXR_ERR_SUCCESS)
-        rv = exr_encoding_initialize(e->ctx, 0, &cinfo, &enc);
-    if (rv == EXR_ERR_SUCCESS) {
-        const tf_pixel *origin = px + (size_t)(c->rect.y - r.y) * (size_t)r.w + (c->rect.x - r.x);
-        for (int i = 0; i < enc.channel_count; i++) {
-            exr_coding_channel_info_t *ch = &enc.channels[i];
-            const tf_exr_channel *m = tf_exr_find_channel(e->channels, e->nchannels,
-                                                          ch->channel_name);
-            if (!m) {
-                rv = EXR_ERR_INVALID_ARGUMENT;
-                break;
-            }
-            ch->encode_from_ptr = (const uint8_t *)origin + m->offset;
-            ch->user_pixel_stride = (int32_t)sizeof(tf_pixel);
-            ch->user_line_stride = (int32_t)(sizeof(tf_pixel) * (size_t)r.w);
-            ch->user_bytes_per_element = 4;
-            ch->user_data_type = EXR_PIXEL_FLOAT;
-        }
-    }
-    if (rv == EXR_ERR_SUCCESS)
-        rv = exr_encoding_choose_default_routines(e->ctx, 0, &enc);
+    const tf_pixel *origin = px + (size_t)(c->rect.y - r.y) * (size_t)r.w + (c->rect.x - r.x);
+    exr_result_t rv = tf_exr_begin_chunk(e->ctx, &e->layout, c, e->channels, e->nchannels,
+                                         (const uint8_t *)origin, sizeof(tf_pixel),
+                                         sizeof(tf_pixel) * (size_t)r.w, &enc);
     if (rv == EXR_ERR_SUCCESS) {
         enc.encoding_user_data = e;
         enc.yield_until_ready_fn = NULL; /* no file order to wait for: nothing is written here */

@@ -123,5 +123,8 @@ int tf_exr_read_packed_chunks(const char *path, tf_exr_meta *meta, int64_t *chun
 /* Write a single-channel FLOAT image (channel "Y"), e.g. height field export. */
 int tf_exr_write_gray(const char *path, int width, int height, const float *data, char *err,
                       size_t errlen);
+/* The same with string attributes in its header: attrs is NULL or name, value, ..., NULL. */
+int tf_exr_write_gray_attrs(const char *path, int width, int height, const float *data,
+                            const char *const *attrs, char *err, size_t errlen);
 
 #endif

@@ -57,3 +57,39 @@ exr_result_t tf_exr_define_part(exr_context_t ctx, const tf_exr_layout *l,
                              EXR_PERCEPTUALLY_LINEAR, 1, 1);
     return rv;
 }
+
+/* Point each channel of enc at its float in the caller's pixels. */
+static exr_result_t point_channels(exr_encode_pipeline_t *enc, const tf_exr_channel *channels,
+                                   int nchannels, const uint8_t *origin, size_t pixel_bytes,
+                                   size_t line_bytes)
+{
+    for (int i = 0; i < enc->channel_count; i++) {
+        exr_coding_channel_info_t *ch = &enc->channels[i];
+        const tf_exr_channel *m = tf_exr_find_channel(channels, nchannels, ch->channel_name);
+        if (!m) /* cannot happen: the part declares exactly these channels */
+            return EXR_ERR_INVALID_ARGUMENT;
+        ch->encode_from_ptr = origin + m->offset;
+        ch->user_pixel_stride = (int32_t)pixel_bytes;
+        ch->user_line_stride = (int32_t)line_bytes;
+        ch->user_bytes_per_element = 4;
+        ch->user_data_type = EXR_PIXEL_FLOAT;
+    }
+    return EXR_ERR_SUCCESS;
+}
+
+exr_result_t tf_exr_begin_chunk(exr_context_t ctx, const tf_exr_layout *l,
+                                const tf_chunk_ref *c, const tf_exr_channel *channels,
+                                int nchannels, const uint8_t *origin, size_t pixel_bytes,
+                                size_t line_bytes, exr_encode_pipeline_t *enc)
+{
+    exr_chunk_info_t cinfo;
+    exr_result_t rv = l->tiled ? exr_write_tile_chunk_info(ctx, 0, c->cx, c->cy, 0, 0, &cinfo)
+                               : exr_write_scanline_chunk_info(ctx, 0, c->cy, &cinfo);
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_encoding_initialize(ctx, 0, &cinfo, enc);
+    if (rv == EXR_ERR_SUCCESS)
+        rv = point_channels(enc, channels, nchannels, origin, pixel_bytes, line_bytes);
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_encoding_choose_default_routines(ctx, 0, enc);
+    return rv;
+}

@@ -1,6 +1,6 @@
 /* exrpart.h: the one definition of the render output's OpenEXR part (channels and their types,
  * compression and its zlib level, line order, tiles) for a tf_exr_layout.  The coordinator's
- * file writer (exrfile.c) and every worker's chunk encoder (exrencode.c) build their contexts
+ * file writer (exrwrite.c) and every worker's chunk encoder (exrencode.c) build their contexts
  * with it, so a chunk a worker packs is exactly the chunk the file's header describes. */
 #ifndef TF_EXRPART_H
 #define TF_EXRPART_H
@@ -34,5 +34,14 @@ exr_compression_t tf_exr_layout_compression(const tf_exr_layout *l);
  * order, tile description and the channels.  Returns OpenEXRCore's result. */
 exr_result_t tf_exr_define_part(exr_context_t ctx, const tf_exr_layout *l,
                                 const tf_exr_channel *channels, int nchannels);
+
+/* Start encoding chunk c of part 0: its chunk info, the encode pipeline initialised, each
+ * channel pointed at its float in the caller's pixels (origin: the chunk's top-left pixel;
+ * pixels pixel_bytes and rows line_bytes apart), the default routines chosen.  Returns
+ * OpenEXRCore's result; enc is to be destroyed (exr_encoding_destroy) either way. */
+exr_result_t tf_exr_begin_chunk(exr_context_t ctx, const tf_exr_layout *l,
+                                const tf_chunk_ref *c, const tf_exr_channel *channels,
+                                int nchannels, const uint8_t *origin, size_t pixel_bytes,
+                                size_t line_bytes, exr_encode_pipeline_t *enc);
 
 #endif

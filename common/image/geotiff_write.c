@@ -15,8 +15,8 @@
 #include "log.h"
 
 int tf_geotiff_write_heights(const char *path, int n, const float *h, double cell,
-                             double east0, double north0, const char *srs, char *err,
-                             size_t errlen)
+                             double east0, double north0, const char *srs,
+                             const char *const *meta, char *err, size_t errlen)
 {
     GDALAllRegister();
     GDALDriverH drv = GDALGetDriverByName("GTiff");
@@ -53,6 +53,12 @@ int tf_geotiff_write_heights(const char *path, int n, const float *h, double cel
             goto out;
         }
     }
+    for (int i = 0; meta && meta[i]; i += 2)
+        if (GDALSetMetadataItem(ds, meta[i], meta[i + 1], NULL) != CE_None) {
+            tf_seterr(err, errlen, "%s: cannot set metadata %s: %s", path, meta[i],
+                      CPLGetLastErrorMsg());
+            goto out;
+        }
     GDALRasterBandH band = GDALGetRasterBand(ds, 1);
     for (int r = 0; r < n; r++) {
         const float *row = h + (size_t)(n - 1 - r) * (size_t)n; /* north first */

@@ -123,6 +123,17 @@ void tf_png_fast(tf_png_writer *w, int level)
     png_set_filter(w->png, PNG_FILTER_TYPE_BASE, PNG_FILTER_NONE);
 }
 
+int tf_png_text(tf_png_writer *w, const char *key, const char *value, char *err,
+                size_t errlen)
+{
+    png_text t = {.compression = PNG_TEXT_COMPRESSION_NONE, .key = (char *)key,
+                  .text = (char *)value, .text_length = strlen(value)};
+    if (setjmp(png_jmpbuf(w->png)))
+        return tf_seterr(err, errlen, "%s: libpng refuses the text chunk %s", w->path, key);
+    png_set_text(w->png, w->info, &t, 1);
+    return 0;
+}
+
 /* The setjmp lives here, apart from the caller's locals, so nothing live across it changes. */
 static int write_raw_row(tf_png_writer *w, png_const_bytep src)
 {

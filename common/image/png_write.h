@@ -16,6 +16,10 @@ tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_de
  * preview the coordinator rewrites every few seconds while a render runs.  Call before the
  * first row. */
 void tf_png_fast(tf_png_writer *w, int level);
+/* A tEXt chunk key = value (Latin-1, key 1..79 bytes), written after the pixels by
+ * tf_png_finish.  0, or -1 with one line in err. */
+int tf_png_text(tf_png_writer *w, const char *key, const char *value, char *err,
+                size_t errlen);
 /* One row of width * channels samples: uint8_t for depth 8, uint16_t (host order) for depth 16. */
 int tf_png_write_row(tf_png_writer *w, const void *row, char *err, size_t errlen);
 /* Finish, close, rename into place.  Frees w whatever happens. */

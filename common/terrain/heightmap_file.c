@@ -4,20 +4,24 @@
  *   1. decode: PNG by its signature, OpenEXR by its magic number, anything else through GDAL;
  *   2. crop to crop_x, crop_y, crop_width, crop_height (width/height 0: to the raster's edge);
  *   3. world heights z = value * vertical_scale + vertical_offset (in double, stored as float,
- *      so a float raster with scale 1 and offset 0 keeps its bits);
+ *      so a float raster with scale 1 and offset 0 keeps its bits).  Here and in 5 and 6, a
+ *      key the scene leaves at its default (scale 1, offset 0, first_row auto, extent 0) takes
+ *      what the file says of itself (raster.h's tf_raster_meta, which terrafarm heightfield
+ *      writes), so its exports re-import with only `path`;
  *   4. nodata: `fill` gives each nodata sample the mean of its already-known 4-neighbours, in
  *      breadth-first layers growing from the data (deterministic, linear time); `sea` puts it
  *      one world unit below materials.sea_level, under the water.  A window with no data at
  *      all is an error;
  *   5. orientation: terrain row 0 is the south edge (world y = 0).  first_row = north (the
- *      map convention, and `auto` without georeferencing) flips the rows; so does `auto` with
- *      a north-up geotransform (negative pixel height); first_row = south (what terrafarm
- *      heightfield writes in PNG and EXR) keeps them.  An east-to-west geotransform flips the
- *      columns;
+ *      map convention, and `auto` without the file's word or georeferencing) flips the rows;
+ *      so does `auto` with a north-up geotransform (negative pixel height); first_row = south
+ *      (what terrafarm heightfield writes in PNG and EXR, and records there) keeps them.  An
+ *      east-to-west geotransform flips the columns;
  *   6. horizontal scale: a georeferenced raster's pixel size in metres: projected CRSs times
  *      their linear unit, geographic (degree) CRSs by the sphere of the ellipsoid's semi-major
  *      axis a: east = |dlon| * pi/180 * a * cos(latitude of the window's centre), north =
- *      |dlat| * pi/180 * a.  Without georeferencing a pixel is one world unit.  The terrain is
+ *      |dlat| * pi/180 * a.  Without georeferencing a pixel is the file's recorded extent over
+ *      its width - 1, else one world unit.  The terrain is
  *      square, so the window must cover a square (within 1%) in metres; `extent`, if set,
  *      overrides the side's size;
  *   7. resample onto n x n samples with a separable tent (triangle) filter of radius
@@ -37,41 +41,6 @@
 #include "log.h"
 
 #define SQUARE_TOLERANCE 0.01 /* relative difference of the window's sides in metres */
-
-void tf_raster_free(tf_raster *r)
-{
-    free(r->v);
-    r->v = NULL;
-}
-
-int tf_raster_check_size(long long width, long long height, const char *name, char *err,
-                         size_t errlen)
-{
-    if (width < 1 || height < 1)
-        return tf_seterr(err, errlen, "%s: empty raster (%lldx%lld pixels)", name, width,
-                         height);
-    if (width > TF_RASTER_MAX_SIDE || height > TF_RASTER_MAX_SIDE ||
-        (unsigned long long)width * (unsigned long long)height > TF_RASTER_MAX_PIXELS)
-        return tf_seterr(err, errlen, "%s: too large: %lldx%lld pixels (at most %d on a side and "
-                         "%zu in all; crop or shrink it with gdal_translate first)", name, width,
-                         height, TF_RASTER_MAX_SIDE, TF_RASTER_MAX_PIXELS);
-    return 0;
-}
-
-static int decode(const tf_terrain *t, const char *name, tf_raster *r, char *err, size_t errlen)
-{
-    static const uint8_t png_sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-    static const uint8_t exr_magic[4] = {0x76, 0x2f, 0x31, 0x01};
-    const uint8_t *d = t->file_bytes;
-    size_t len = t->file_len;
-    if (len == 0)
-        return tf_seterr(err, errlen, "%s: empty file", name);
-    if (len >= 8 && memcmp(d, png_sig, 8) == 0)
-        return tf_raster_read_png(d, len, name, r, err, errlen);
-    if (len >= 4 && memcmp(d, exr_magic, 4) == 0)
-        return tf_raster_read_exr(d, len, name, r, err, errlen);
-    return tf_raster_read_gdal(d, len, name, r, err, errlen);
-}
 
 /* The crop window, checked against the raster. */
 static int crop_window(const tf_terrain *t, const tf_raster *r, const char *name, int *x,
@@ -164,11 +133,34 @@ out:
     return rc;
 }
 
+/* Step 3's scale and offset: each the scene's key where it is given (differs from its default,
+ * 1 and 0), else what the file says, else the default. */
+static void vertical(const tf_terrain *t, const tf_raster_meta *m, double *scale,
+                     double *offset)
+{
+    *scale = t->vertical_scale != 1.0 || !m->has_scale ? t->vertical_scale : m->vertical_scale;
+    *offset = t->vertical_offset != 0.0 || !m->has_offset ? t->vertical_offset
+                                                          : m->vertical_offset;
+}
+
+/* Step 5: 1 if the raster's first row is the south edge: the scene's first_row, else the
+ * file's own word, else a south-up geotransform. */
+static int south_first(const tf_terrain *t, const tf_raster *r)
+{
+    if (t->first_row != TF_FIRST_ROW_AUTO)
+        return t->first_row == TF_FIRST_ROW_SOUTH;
+    if (r->meta.first_row != TF_RASTER_ROWS_UNSAID)
+        return r->meta.first_row == TF_RASTER_ROWS_SOUTH_FIRST;
+    return r->has_georef && r->gt[5] > 0;
+}
+
 /* Step 6: metres per pixel east and north. */
 static int pixel_size(const tf_raster *r, int wy, int wh, const char *name, double *dx,
                       double *dy, char *err, size_t errlen)
 {
     *dx = *dy = 1.0;
+    if (!r->has_georef && r->meta.extent > 0)
+        *dx = *dy = r->meta.extent / (r->width - 1);
     if (!r->has_georef)
         return 0;
     if (r->gt[2] != 0 || r->gt[4] != 0)
@@ -220,7 +212,7 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
     if (!t->file_bytes)
         return tf_seterr(err, errlen, "%s: height map not loaded", name), NULL;
     tf_raster r;
-    if (decode(t, name, &r, err, errlen) != 0)
+    if (tf_raster_decode(t->file_bytes, t->file_len, name, &r, err, errlen) != 0)
         return NULL;
     float *out = NULL;
     double *z = NULL, *tmp = NULL;
@@ -235,12 +227,14 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
         tf_seterr(err, errlen, "%s: out of memory", name);
         goto out;
     }
+    double vscale, voffset;
+    vertical(t, &r.meta, &vscale, &voffset);
     size_t valid = 0;
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             float v = r.v[(size_t)(wy + y) * (size_t)r.width + (size_t)(wx + x)];
             float zz = isnan(v) ? NAN
-                                : (float)((double)v * t->vertical_scale + t->vertical_offset);
+                                : (float)((double)v * vscale + voffset);
             if (!isnan(zz) && !isfinite(zz)) {
                 free(win);
                 tf_seterr(err, errlen, "%s: value %g at pixel (%d, %d) times vertical_scale is "
@@ -286,8 +280,7 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
         goto out;
     }
     *extent = t->extent > 0 ? t->extent : side_x;
-    int south_first = t->first_row == TF_FIRST_ROW_SOUTH ||
-                      (t->first_row == TF_FIRST_ROW_AUTO && r.has_georef && r.gt[5] > 0);
+    int south = south_first(t, &r);
     int flip_x = r.has_georef && r.gt[1] < 0;
 
     /* 7: rows to n columns (tmp, h x n), then columns to n rows (out, n x n) */
@@ -305,7 +298,7 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
         goto out;
     }
     for (int y = 0; y < h; y++) {
-        int sy = south_first ? y : h - 1 - y; /* z row y is world row y (south first) */
+        int sy = south ? y : h - 1 - y; /* z row y is world row y (south first) */
         for (int x = 0; x < w; x++)
             z[(size_t)y * (size_t)w + (size_t)x] =
                 win[(size_t)sy * (size_t)w + (size_t)(flip_x ? w - 1 - x : x)];

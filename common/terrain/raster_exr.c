@@ -3,7 +3,9 @@
  * The channel read is "Y" (what terrafarm heightfield writes), else "Z", else "R", else the
  * only channel; FLOAT and HALF samples are read as float (FLOAT bit for bit), UINT ones
  * converted.  NaN and infinite samples are nodata.  Scanline and tiled files both decode,
- * chunk by chunk; the data window's size is checked before anything is allocated. */
+ * chunk by chunk; the data window's size is checked before anything is allocated.  String
+ * attributes may say what the samples are (raster.h's TF_RASTER_KEY_*: terrafarm heightfield
+ * records them). */
 #include "terrain/raster.h"
 
 #include <openexr.h>
@@ -127,6 +129,27 @@ static exr_result_t decode_all(exr_context_t ctx, exr_storage_t storage, const c
     return EXR_ERR_SUCCESS;
 }
 
+/* The header's terrafarm.* attributes into r->meta: each must be a string. */
+static int read_attributes(exr_context_t ctx, const char *name, tf_raster *r, char *err,
+                           size_t errlen)
+{
+    int32_t n = 0;
+    if (exr_get_attribute_count(ctx, 0, &n) != EXR_ERR_SUCCESS)
+        return 0;
+    for (int32_t i = 0; i < n; i++) {
+        const exr_attribute_t *a = NULL;
+        if (exr_get_attribute_by_index(ctx, 0, EXR_ATTR_LIST_FILE_ORDER, i, &a) !=
+                EXR_ERR_SUCCESS || !a || !tf_raster_meta_key(a->name))
+            continue;
+        if (a->type != EXR_ATTR_STRING || !a->string)
+            return tf_seterr(err, errlen, "%s: %s: not a string attribute", name, a->name);
+        if (tf_raster_meta_item(r, a->name, a->string->str ? a->string->str : "", name, err,
+                                errlen) != 0)
+            return -1;
+    }
+    return 0;
+}
+
 int tf_raster_read_exr(const uint8_t *data, size_t len, const char *name, tf_raster *r,
                        char *err, size_t errlen)
 {
@@ -156,6 +179,8 @@ int tf_raster_read_exr(const uint8_t *data, size_t len, const char *name, tf_ras
         tf_seterr(err, errlen, "%s: OpenEXR header lacks a data window or channels", name);
         goto out;
     }
+    if (read_attributes(ctx, name, r, err, errlen) != 0)
+        goto out;
     int c = pick_channel(chlist);
     if (c < 0) {
         tf_seterr(err, errlen, "%s: OpenEXR file has %d channels and none is named Y, Z or R",

@@ -4,7 +4,8 @@
  *
  * Band 1 is read as Float32 (Float32 rasters bit for bit); the band's nodata value, and NaN,
  * become nodata.  The georeferencing comes along: the geotransform, whether the CRS is
- * geographic (degrees) and the ellipsoid, or the projected CRS's linear unit.
+ * geographic (degrees) and the ellipsoid, or the projected CRS's linear unit; so do the
+ * metadata items raster.h's TF_RASTER_KEY_* (terrafarm heightfield records them).
  *
  * Only drivers that read a single file are allowed (ALLOWED_DRIVERS): a VRT could make GDAL
  * open other files on this machine, and formats that need sidecar files would decode
@@ -68,6 +69,20 @@ static void read_georef(GDALDatasetH ds, tf_raster *r)
         if (u > 0)
             r->unit_m = u;
     }
+}
+
+/* The dataset's metadata items TF_RASTER_KEY_* (the GeoTIFF's GDAL_METADATA tag) into r->meta. */
+static int read_meta(GDALDatasetH ds, const char *name, tf_raster *r, char *err, size_t errlen)
+{
+    static const char *const keys[] = {TF_RASTER_KEY_FIRST_ROW, TF_RASTER_KEY_EXTENT,
+                                       TF_RASTER_KEY_VERTICAL_SCALE,
+                                       TF_RASTER_KEY_VERTICAL_OFFSET};
+    for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
+        const char *v = GDALGetMetadataItem(ds, keys[i], NULL);
+        if (v && tf_raster_meta_item(r, keys[i], v, name, err, errlen) != 0)
+            return -1;
+    }
+    return 0;
 }
 
 /* GDAL's last message, on one line and without our /vsimem/ prefix: ": what", or "". */
@@ -148,6 +163,8 @@ int tf_raster_read_gdal(const uint8_t *data, size_t len, const char *name, tf_ra
     r->width = w;
     r->height = h;
     read_georef(ds, r);
+    if (read_meta(ds, name, r, err, errlen) != 0)
+        goto out;
     rc = 0;
 out:
     if (rc != 0) {

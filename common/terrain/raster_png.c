@@ -3,7 +3,9 @@
  *
  * The PNG's codes are the raster's values (0..65535 for 16 bits); the scene's vertical_scale
  * and vertical_offset turn them into heights.  A grayscale+alpha PNG's transparent samples
- * (alpha 0) are nodata.  Colour and palette images are refused: a height map is one channel.
+ * (alpha 0) are nodata.  Text chunks may say what the samples are (raster.h's
+ * TF_RASTER_KEY_*: terrafarm heightfield records them).  Colour and palette images are
+ * refused: a height map is one channel.
  * libpng reports errors by longjmp: every allocation that can outlive it is made before
  * setjmp or freed after it. */
 #include "terrain/raster.h"
@@ -46,6 +48,20 @@ static void on_warning(png_structp png, png_const_charp msg)
 {
     (void)png;
     (void)msg; /* benign (unknown chunks, ...): the pixels are what matter */
+}
+
+/* The file's text chunks (tEXt, zTXt, iTXt, before or after the pixels) into r->meta. */
+static int read_text(png_structp png, png_infop info, const char *name, tf_raster *r,
+                     char *err, size_t errlen)
+{
+    png_textp text = NULL;
+    int n = 0;
+    png_get_text(png, info, &text, &n);
+    for (int i = 0; i < n; i++)
+        if (tf_raster_meta_item(r, text[i].key, text[i].text ? text[i].text : "", name, err,
+                                errlen) != 0)
+            return -1;
+    return 0;
 }
 
 int tf_raster_read_png(const uint8_t *data, size_t len, const char *name, tf_raster *r,
@@ -126,7 +142,9 @@ int tf_raster_read_png(const uint8_t *data, size_t len, const char *name, tf_ras
             out[x] = a == 0 ? NAN : (float)v;
         }
     }
-    png_read_end(png, NULL);
+    png_read_end(png, info);
+    if (read_text(png, info, name, r, err, errlen) != 0)
+        goto out;
     r->width = (int)w;
     r->height = (int)h;
     r->v = values;

@@ -8,7 +8,7 @@ e2e_init
 SIZE=480x270
 ARGS="-j 2 --size $SIZE --tasks rows:2"
 PROBE_ARGS="--size $SIZE"
-CHUNK=1   # scanlines per OpenEXR chunk (ZIPS compression, common/image/exrfile.c)
+CHUNK=1   # scanlines per OpenEXR chunk (ZIPS compression, common/image/exrwrite.c)
 
 render -q $ARGS -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
 full=$(wc -c <"$T/ref.exr")

@@ -1,4 +1,5 @@
-/* test_exrfile.c: the OpenEXR output and checkpoint (common/image/exrfile.c).
+/* test_exrfile.c: the OpenEXR output and checkpoint (common/image/exrfile.h: exrwrite.c,
+ * exrsink.c, exrread.c, exrstream.c, exrresume.c).
  *
  * Covers the bit-exact round trip, header attributes, that exrheader accepts the file, that
  * OpenEXRCore 3.1.5 really rebuilds the zero offset table of a killed render, torn final chunks
@@ -21,12 +22,14 @@
 #include <string.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <openexr.h>
 
 #include "image/exrencode.h"
 #include "image/exrfile.h"
+#include "image/exrsink.h"
 
 #define W 37
 #define H 53 /* an odd height: with chunks of 16 rows, a last partial chunk of 5 */
@@ -769,6 +772,66 @@ static void test_write_gray_round_trip(void **state)
     assert_memory_equal(back, data, sizeof data);
 }
 
+#ifndef NDEBUG
+/* tf_exr_sink_check on s in a child: 1 if it aborted with `clause` on stderr, 0 if it
+ * returned. */
+static int sink_check_aborts_naming(const tf_exr_sink *s, const char *clause)
+{
+    int fds[2];
+    assert_int_equal(pipe(fds), 0);
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        dup2(fds[1], 2);
+        tf_exr_sink_check(s);
+        _exit(0);
+    }
+    close(fds[1]);
+    char text[1024] = "";
+    size_t n = 0;
+    ssize_t k;
+    while (n + 1 < sizeof text && (k = read(fds[0], text + n, sizeof text - 1 - n)) > 0)
+        n += (size_t)k;
+    text[n] = '\0';
+    close(fds[0]);
+    int status;
+    assert_int_equal(waitpid(pid, &status, 0), pid);
+    if (!WIFSIGNALED(status))
+        return 0;
+    assert_int_equal(WTERMSIG(status), SIGABRT);
+    if (!strstr(text, clause))
+        fail_msg("the assertion does not name '%s': %s", clause, text);
+    return 1;
+}
+#endif
+
+/* The sink's invariants (exrsink.h E1-E6) are asserted clause by clause, each failure naming
+ * its clause: a run on a closed descriptor fails E1, a run_len that is not its pieces' sum E4,
+ * a reference without hold E6; a consistent sink passes.  Asserts are on in `make asan`. */
+static void test_sink_invariants_name_their_clause(void **state)
+{
+    (void)state;
+#ifdef NDEBUG
+    skip(); /* release builds define NDEBUG: nothing to check */
+#else
+    static tf_exr_sink s; /* large (its iovec array): static, not on the stack */
+    memset(&s, 0, sizeof s);
+    s.fd = 2;
+    s.niov = 1;
+    s.iov[0].iov_len = 10;
+    s.run_len = 10;
+    assert_int_equal(sink_check_aborts_naming(&s, ""), 0);
+    s.fd = -1;
+    assert_true(sink_check_aborts_naming(&s, "E1: a run waits only on an open descriptor"));
+    s.fd = 2;
+    s.run_len = 11;
+    assert_true(sink_check_aborts_naming(&s, "E4: run_len is the sum of the pieces' lengths"));
+    s.run_len = 10;
+    s.held = 1;
+    assert_true(sink_check_aborts_naming(&s, "E6: references only with hold"));
+#endif
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -789,6 +852,7 @@ int main(void)
         cmocka_unit_test(test_full_device_gives_clear_error),
         cmocka_unit_test(test_mid_render_write_error_is_reported),
         cmocka_unit_test(test_write_gray_round_trip),
+        cmocka_unit_test(test_sink_invariants_name_their_clause),
     };
     return cmocka_run_group_tests(tests, scratch_dir_make, scratch_dir_remove);
 }

@@ -2,8 +2,11 @@
  * heightmap_file.c) on small GeoTIFFs made in memory with GDAL: metres per pixel from a
  * geographic (degree) raster, the square check, north-up rows flipped to terrafarm's south-first
  * order, nodata filled or made sea, all-nodata refused, vertical scale and offset, the crop
- * window, and resampling (exact on a 2^k+1 grid, area-weighted when shrinking).  The PNG and
- * EXR decoders and the render comparisons are in tests/e2e/heightmap_file.sh. */
+ * window, and resampling (exact on a 2^k+1 grid, area-weighted when shrinking); what a file
+ * says of itself (terrafarm.* in EXR attributes, PNG text chunks, GeoTIFF metadata) honoured
+ * where the scene leaves a key at its default, and refused with one line naming file and key
+ * when malformed.  The render comparisons are in tests/e2e/heightmap_file.sh, the round trip
+ * through terrafarm heightfield in tests/e2e/heightmap_reimport.sh. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <setjmp.h>
@@ -17,8 +20,13 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
+#include "image/exrfile.h"
+#include "image/geotiff_write.h"
+#include "image/png_write.h"
 #include "terrain/heightmap_file.h"
+#include "terrain/raster.h"
 
 /* A w x h Float32 GeoTIFF, first row first, as file bytes (malloc'd, *len). epsg 0: no CRS;
  * gt NULL: no geotransform; has_nodata: that value is the band's nodata. */
@@ -259,6 +267,137 @@ static void test_resample_shrink(void **state)
     free(bytes);
 }
 
+/* An n x n file of values v (first row first) as FORMAT ('e' OpenEXR, 'p' 16-bit PNG of the
+ * values as codes, 't' GeoTIFF: v south first, written north-up) with the metadata items meta
+ * (name, value, ..., NULL), as bytes (malloc'd, *len). */
+static uint8_t *make_file(char format, int n, const float *v, const char *const *meta,
+                          size_t *len)
+{
+    char path[] = "/tmp/test_heightmap_file.XXXXXX", err[512];
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    close(fd);
+    int rc = -1;
+    if (format == 'e')
+        rc = tf_exr_write_gray_attrs(path, n, n, v, meta, err, sizeof err);
+    if (format == 't')
+        rc = tf_geotiff_write_heights(path, n, v, 1.0, 0, 0, NULL, meta, err, sizeof err);
+    if (format == 'p') {
+        tf_png_writer *w = tf_png_create(path, n, n, 16, 1, err, sizeof err);
+        assert_non_null(w);
+        for (int i = 0; meta[i]; i += 2)
+            assert_int_equal(tf_png_text(w, meta[i], meta[i + 1], err, sizeof err), 0);
+        uint16_t row[64];
+        for (int r = 0; r < n; r++) {
+            for (int c = 0; c < n; c++)
+                row[c] = (uint16_t)v[r * n + c];
+            assert_int_equal(tf_png_write_row(w, row, err, sizeof err), 0);
+        }
+        rc = tf_png_finish(w, err, sizeof err);
+    }
+    assert_int_equal(rc, 0);
+    FILE *f = fopen(path, "rb");
+    assert_non_null(f);
+    uint8_t *bytes = malloc(1 << 20);
+    *len = fread(bytes, 1, 1 << 20, f);
+    fclose(f);
+    unlink(path);
+    return bytes;
+}
+
+enum { MN = 9 };
+
+static void ramp(float *v)
+{
+    for (int r = 0; r < MN; r++)
+        for (int c = 0; c < MN; c++)
+            v[r * MN + c] = (float)(r * 10 + c);
+}
+
+static void test_file_says_orientation_extent_vertical(void **state)
+{
+    (void)state;
+    float v[MN * MN];
+    ramp(v);
+    const char *const exr_meta[] = {TF_RASTER_KEY_FIRST_ROW, "south", TF_RASTER_KEY_EXTENT, "80",
+                                    TF_RASTER_KEY_VERTICAL_SCALE, "2",
+                                    TF_RASTER_KEY_VERTICAL_OFFSET, "-3", NULL};
+    size_t len;
+    uint8_t *bytes = make_file('e', MN, v, exr_meta, &len);
+    tf_terrain t = file_terrain(bytes, len, 3);
+    double extent;
+    char err[512];
+    float *h = tf_heightmap_heights(&t, &extent, err, sizeof err);
+    assert_non_null(h);
+    assert_true(extent == 80);
+    for (int i = 0; i < MN * MN; i++)
+        assert_true(h[i] == 2 * v[i] - 3); /* south first: file row j is terrain row j */
+    free(h);
+    /* the scene's keys, where given, win: each on its own */
+    t.first_row = TF_FIRST_ROW_NORTH;
+    t.extent = 500;
+    t.vertical_scale = 4;
+    h = tf_heightmap_heights(&t, &extent, err, sizeof err);
+    assert_non_null(h);
+    assert_true(extent == 500);
+    assert_true(h[0] == 4 * v[(MN - 1) * MN] - 3 && h[MN * MN - 1] == 4 * v[MN - 1] - 3);
+    free(h);
+    /* the recorded extent spans the whole raster: a 5x5 crop of the 9x9 covers half of it */
+    t = file_terrain(bytes, len, 2);
+    t.crop_width = t.crop_height = 5;
+    h = tf_heightmap_heights(&t, &extent, err, sizeof err);
+    assert_non_null(h);
+    assert_true(extent == 40);
+    free(h);
+    free(bytes);
+    const char *const png_meta[] = {TF_RASTER_KEY_FIRST_ROW, "north", TF_RASTER_KEY_EXTENT, "40",
+                                    TF_RASTER_KEY_VERTICAL_SCALE, "0.5",
+                                    TF_RASTER_KEY_VERTICAL_OFFSET, "1", NULL};
+    bytes = make_file('p', MN, v, png_meta, &len);
+    t = file_terrain(bytes, len, 3);
+    h = tf_heightmap_heights(&t, &extent, err, sizeof err);
+    assert_non_null(h);
+    assert_true(extent == 40);
+    for (int j = 0; j < MN; j++)
+        for (int i = 0; i < MN; i++)
+            assert_true(h[j * MN + i] == 0.5f * v[(MN - 1 - j) * MN + i] + 1);
+    free(h);
+    free(bytes);
+}
+
+/* The file made with the one item key = value fails with one line naming it and the key. */
+static void expect_refused(char format, const char *key, const char *value, const char *what)
+{
+    float v[MN * MN];
+    ramp(v);
+    const char *const meta[] = {key, value, NULL};
+    size_t len;
+    uint8_t *bytes = make_file(format, MN, v, meta, &len);
+    tf_terrain t = file_terrain(bytes, len, 3);
+    t.file_name = "hostile.map";
+    double extent;
+    char err[512], want[256];
+    assert_null(tf_heightmap_heights(&t, &extent, err, sizeof err));
+    snprintf(want, sizeof want, "hostile.map: %s: %s", key, what);
+    if (!strstr(err, want))
+        fail_msg("%c %s = '%s': got \"%s\", want \"%s\"", format, key, value, err, want);
+    assert_null(strchr(err, '\n'));
+    free(bytes);
+}
+
+static void test_file_says_nonsense(void **state)
+{
+    (void)state;
+    expect_refused('e', TF_RASTER_KEY_EXTENT, "abc", "'abc' is not a number in (0, 1e+09]");
+    expect_refused('e', TF_RASTER_KEY_EXTENT, "0", "'0' is not a number in (0, 1e+09]");
+    expect_refused('e', TF_RASTER_KEY_EXTENT, "1e10", "'1e10' is not a number");
+    expect_refused('e', TF_RASTER_KEY_VERTICAL_OFFSET, "", "'' is not a number");
+    expect_refused('p', TF_RASTER_KEY_FIRST_ROW, "sideways", "'sideways' is neither north");
+    expect_refused('p', TF_RASTER_KEY_VERTICAL_SCALE, "2\x01x", "'2?x' is not a number");
+    expect_refused('t', TF_RASTER_KEY_VERTICAL_SCALE, "nan", "'nan' is not a number");
+    expect_refused('t', TF_RASTER_KEY_FIRST_ROW, "North", "'North' is neither north");
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -267,6 +406,8 @@ int main(void)
         cmocka_unit_test(test_nodata),
         cmocka_unit_test(test_fill_single_sample),
         cmocka_unit_test(test_resample_shrink),
+        cmocka_unit_test(test_file_says_orientation_extent_vertical),
+        cmocka_unit_test(test_file_says_nonsense),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

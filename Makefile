@@ -150,9 +150,10 @@ bench: $(PROG) $(BENCHES)
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
             iproute2 python3 gnuplot-nox ffmpeg libgdal-dev gdal-bin openssh-server openssh-client \
-            slurm-wlm munge libmicrohttpd-dev libjansson-dev chromium
-# Only the benchmarks' peers need these (make bench-deps).
-BENCH_PKGS := povray redis-server hyperfine linux-perf valgrind
+            slurm-wlm munge libmicrohttpd-dev libjansson-dev chromium povray redis-server
+# The benchmarks' measuring tools (make bench-deps); their peers POV-Ray and Redis are in
+# DEB_PKGS, since the tests run every benchmark's smoke mode (tests/e2e/bench_smoke.sh).
+BENCH_PKGS := hyperfine linux-perf valgrind
 deps:
 	@missing=""; for p in $(DEB_PKGS); do dpkg-query -W -f='$${Status}' $$p 2>/dev/null | \
 	  grep -q 'ok installed' || missing="$$missing $$p"; done; \

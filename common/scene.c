@@ -1447,7 +1447,9 @@ static void sb_printf(struct strbuf *b, const char *fmt, ...)
     for (;;) {
         va_list ap;
         va_start(ap, fmt);
-        int n = vsnprintf(b->data + b->len, b->cap - b->len, fmt, ap);
+        /* an empty buffer is NULL: no offset may be added to it (UB even when zero) */
+        char *end = b->data ? b->data + b->len : NULL;
+        int n = vsnprintf(end, b->cap - b->len, fmt, ap);
         va_end(ap);
         if (n < 0) {
             b->oom = 1;

@@ -302,7 +302,7 @@ static void tap_out(void *ctx, uint64_t conn, const tf_tuple *tuple)
         d->inner.on_out(d->inner.ctx, conn, tuple);
     heard(d, conn);
     const char *name = tf_tuple_name(tuple);
-    if (name && !strcmp(name, "result"))
+    if (name && !strcmp(name, TF_TAG_RESULT))
         draw_result(d, tuple);
 }
 

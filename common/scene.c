@@ -6,6 +6,7 @@
  *   scene_ini.c        the callbacks inih calls, a line at a time
  *   scene_check.c      the checks once the whole text is read
  *   scene_canonical.c  the canonical form and its hash
+ *   scene_frame.c      the scene of one frame of an [animation]
  *
  * How it works.  The whole text is held in memory (tf_scene_load reads the file, bounded, and
  * calls tf_scene_parse_text, so a networked worker that receives the text gets the very same

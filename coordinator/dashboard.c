@@ -340,8 +340,6 @@ void tf_dashboard_attach(tf_dashboard *d, tf_supervisor *sup, ts_server *srv, co
     d->tasks = tasks;
 }
 
-int tf_dashboard_port(const tf_dashboard *d) { return d ? d->port : 0; }
-
 const char *tf_dashboard_url(const tf_dashboard *d) { return d ? d->url : ""; }
 
 int tf_dashboard_serve(tf_dashboard *d, char *err, size_t errlen)

@@ -336,13 +336,6 @@ int tf_rowwriter_put(tf_rowwriter *rw, tf_tuple *result)
     return 0;
 }
 
-int tf_rowwriter_rows_written(tf_rowwriter *rw)
-{
-    pthread_mutex_lock(&rw->mu);
-    int n = rw->rows_written;
-    pthread_mutex_unlock(&rw->mu);
-    return n;
-}
 
 int tf_rowwriter_error(tf_rowwriter *rw, char *buf, size_t len)
 {

@@ -185,8 +185,6 @@ ts_server *ts_server_new(ts_space *space, const ts_server_config *cfg,
 }
 
 int ts_server_port(const ts_server *srv) { return srv->port; }
-ts_space *ts_server_space(const ts_server *srv) { return srv->space; }
-
 /* ---- connections ---- */
 static void conn_touch(conn *c);
 static void addr_of(const char *peer, char *addr, size_t len);
@@ -1046,23 +1044,6 @@ int ts_server_run_once(ts_server *srv, int timeout_ms)
 }
 
 size_t ts_server_conn_count(const ts_server *srv) { return srv->nconns; }
-
-size_t ts_server_unauthenticated_count(const ts_server *srv)
-{
-    size_t n = 0;
-    for (const conn *c = srv->conns; c; c = c->next)
-        n += c->state == NEED_AUTH;
-    return n;
-}
-
-size_t ts_server_conn_ids(const ts_server *srv, uint64_t *ids, size_t max)
-{
-    size_t i = 0;
-    for (const conn *c = srv->conns; c; c = c->next, i++)
-        if (i < max)
-            ids[i] = c->id;
-    return i;
-}
 
 static conn *find_conn(const ts_server *srv, uint64_t id)
 {

@@ -23,16 +23,26 @@
  * checks and the canonical form are all driven by that table, so a field cannot be parsed but
  * forgotten in the hash.
  *
- * Invariants:
- *   - The first error wins and stops parsing: once `failed` is set the reader returns EOF.
- *     inih reports its own syntax errors only through its return value (the first bad line),
- *     and keeps parsing after one, so at the end the earlier of inih's and ours is reported.
- *   - Every message is one line "NAME:LINE: key: what is wrong"; bytes quoted from the input
- *     are cut short and non-printable ones replaced, so a message never spans lines.
- *   - The canonical form is itself a valid scene: parse(canonical(s)) has the same canonical
- *     form (the unit tests and the fuzz harness check this). */
+ * INVARIANTS (checked clause by clause in debug builds, `make asan`: P1-P3 on the parser's
+ * state by scene_assert_parser (scene_check.c) at every line and every error, P4 by
+ * scene_assert_values on every scene accepted, P5 by assert_round_trip below):
+ *   P1. The first error wins and stops parsing: once `failed` is set the reader returns EOF,
+ *       and the error names a line already read (0: a section that is not there).  inih
+ *       reports its own syntax errors only through its return value (the first bad line),
+ *       and keeps parsing after one, so at the end the earlier of inih's and ours is reported.
+ *   P2. Every message is one line "NAME:LINE: key: what is wrong"; bytes quoted from the input
+ *       are cut short and non-printable ones replaced, so a message never spans lines.
+ *   P3. The parser's state stays within its tables: the section is -1 (before the first
+ *       header) or a section; the last key is -1 or a key of that section; a key is set on a
+ *       line at or after its section's header; the envelope and the [animation] keys fit
+ *       their arrays.
+ *   P4. A scene accepted holds, for every number and vector its text set, a value in the
+ *       key's range.
+ *   P5. The canonical form is itself a valid scene: parse(canonical(s)) has the same canonical
+ *       form (the unit tests and the fuzz harness check this too). */
 #include "scene.h"
 
+#include <assert.h>
 #include <errno.h>
 #include <ini.h>
 #include <sodium.h>
@@ -74,6 +84,28 @@ static tf_scene *scene_new(const char *name, const char *text, size_t len)
     return s;
 }
 
+#ifndef NDEBUG
+/* P5: the canonical form parses, to the same canonical form.  Returns 1, so that a call sits
+ * inside assert() and vanishes with NDEBUG (as SQLite's assert_pager_state). */
+static int assert_round_trip(const tf_scene *s)
+{
+    static _Thread_local int nested; /* the parse below does not check itself again */
+    char *canon = nested ? NULL : tf_scene_canonical(s);
+    if (!canon)
+        return 1; /* nested, or out of memory: nothing to compare */
+    nested = 1;
+    tf_scene *again = tf_scene_parse_text("<canonical>", canon, strlen(canon), NULL, 0);
+    nested = 0;
+    char *canon2 = again ? tf_scene_canonical(again) : NULL;
+    assert(again && "P5: the canonical form is a valid scene");
+    assert((!canon2 || !strcmp(canon, canon2)) && "P5: it has the same canonical form");
+    free(canon2);
+    free(canon);
+    tf_scene_free(again);
+    return 1;
+}
+#endif
+
 tf_scene *tf_scene_parse_text(const char *name, const char *text, size_t len, char *err,
                               size_t errlen)
 {
@@ -101,11 +133,14 @@ tf_scene *tf_scene_parse_text(const char *name, const char *text, size_t len, ch
         scene_fail_at(&p, p.line, "line: cannot parse (out of memory)");
     if (!p.failed)
         scene_check_semantics(&p);
+    assert(scene_assert_parser(&p));
     if (p.failed) {
         tf_scene_free(s);
         return NULL;
     }
+    assert(scene_assert_values(&p));
     tf_scene_rehash(s);
+    assert(assert_round_trip(s));
     return s;
 }
 

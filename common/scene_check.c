@@ -3,6 +3,7 @@
  * camera that can see. */
 #include "scene_impl.h"
 
+#include <assert.h>
 #include <math.h>
 #include <string.h>
 
@@ -168,3 +169,68 @@ void scene_check_semantics(struct parser *p)
     if (!p->failed)
         check_camera(p);
 }
+
+/* ---------------------------------------------------------------------------------------- */
+/* The invariants of scene.c, asserted clause by clause (debug builds)                      */
+
+#ifndef NDEBUG
+/* P3 for the keys set so far: each on a line at or after its section's header. */
+static int keys_after_headers(const struct parser *p)
+{
+    for (int key = 0; key < SCENE_KEY_COUNT; key++) {
+        int sec_line = p->section_line[SCENE_KEYS[key].section];
+        if (p->key_line[key] && (!sec_line || p->key_line[key] < sec_line))
+            return 0;
+    }
+    return 1;
+}
+
+int scene_assert_parser(const struct parser *p)
+{
+    const tf_animation *a = &p->s->animation;
+    assert((!p->failed || (p->err_line >= 0 && p->err_line <= p->line)) &&
+           "P1: the error names a line already read");
+    assert((!p->failed || !p->err || p->errlen < 2 || (p->err[0] && !strchr(p->err, '\n'))) &&
+           "P2: an error message is one non-empty line");
+    assert(p->section >= -1 && p->section < SEC_COUNT && "P3: the section is -1 or a section");
+    assert((p->last_key < 0 || (p->last_key < SCENE_KEY_COUNT &&
+                                (int)SCENE_KEYS[p->last_key].section == p->section)) &&
+           "P3: the last key is -1 or a key of the current section");
+    assert(keys_after_headers(p) && "P3: a key is set at or after its section's header");
+    assert(p->envelope_count >= 0 && p->envelope_count <= TF_ENVELOPE_MAX * TF_ENVELOPE_MAX &&
+           "P3: the envelope fits its array");
+    assert(a->ncamera >= 0 && a->ncamera <= TF_ANIM_MAX_KEYS && a->nsun >= 0 &&
+           a->nsun <= TF_ANIM_MAX_KEYS && "P3: the [animation] keys fit their arrays");
+    return 1;
+}
+
+/* 1 if v is within key's range. */
+static int in_range(const struct key_def *k, double v)
+{
+    return (k->min_exclusive ? v > k->min : v >= k->min) && v <= k->max;
+}
+
+/* P4 for one key its text set (numbers and vectors; other types have no range). */
+static int value_in_range(const tf_scene *s, int key)
+{
+    const struct key_def *k = &SCENE_KEYS[key];
+    const void *src = scene_cfield(s, key);
+    if (k->type == KT_INT)
+        return in_range(k, *(const int *)src);
+    if (k->type == KT_DOUBLE)
+        return in_range(k, *(const double *)src);
+    if (k->type == KT_VEC3) {
+        const tf_vec3 *v = src;
+        return in_range(k, v->x) && in_range(k, v->y) && in_range(k, v->z);
+    }
+    return 1;
+}
+
+int scene_assert_values(const struct parser *p)
+{
+    for (int key = 0; key < SCENE_KEY_COUNT; key++)
+        assert((!p->key_line[key] || value_in_range(p->s, key)) &&
+               "P4: every number the text set is in its key's range");
+    return 1;
+}
+#endif

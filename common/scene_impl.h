@@ -129,4 +129,12 @@ int scene_on_key(void *user, const char *section, const char *name, const char *
 
 void scene_check_semantics(struct parser *p);
 
+#ifndef NDEBUG
+/* The invariants of scene.c, one assert a clause; each returns 1, so that a call sits inside
+ * assert() and vanishes with NDEBUG.  P1-P3: the parser's state. */
+int scene_assert_parser(const struct parser *p);
+/* P4: the values of a scene the parser accepted. */
+int scene_assert_values(const struct parser *p);
+#endif
+
 #endif

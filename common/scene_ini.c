@@ -3,6 +3,7 @@
  * handler of each "key = value" line and of indented continuation lines. */
 #include "scene_impl.h"
 
+#include <assert.h>
 #include <ctype.h>
 #include <string.h>
 
@@ -74,6 +75,7 @@ static void check_section_header(struct parser *p)
 char *scene_read_line(char *buf, int num, void *stream)
 {
     struct parser *p = stream;
+    assert(scene_assert_parser(p));
     if (p->failed || p->pos >= p->len || num < 3)
         return NULL;
     const char *start = p->text + p->pos;

@@ -3,6 +3,7 @@
  * with its non-printable bytes replaced. */
 #include "scene_impl.h"
 
+#include <assert.h>
 #include <ctype.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -42,6 +43,7 @@ void scene_fail_at(struct parser *p, int line, const char *fmt, ...)
     vsnprintf(what, sizeof what, fmt, ap);
     va_end(ap);
     snprintf(p->err, p->errlen, "%s:%d: %s", p->name, line, what);
+    assert(scene_assert_parser(p));
 }
 
 /* inih found a syntax error on line `line`: say what is wrong with it. */

@@ -14,6 +14,21 @@ static int is_kind(const tf_tuple *t, const char *tag, int nfields)
     return name && !strcmp(name, tag) && t->nfields == nfields;
 }
 
+/* (tag, id, worker, rest...): id and worker each an actual, or a formal when < 0; rest the
+ * formals of tf_tuple_pack's format. */
+static int id_worker_template(tf_tuple *t, const char *tag, int64_t id, int64_t worker,
+                              const char *rest)
+{
+    tf_tuple_init(t);
+    if (tf_tuple_add_string(t, tag))
+        return -1;
+    if (id >= 0 ? tf_tuple_add_int(t, id) : tf_tuple_add_formal(t, TF_FIELD_INT))
+        return -1;
+    if (worker >= 0 ? tf_tuple_add_int(t, worker) : tf_tuple_add_formal(t, TF_FIELD_INT))
+        return -1;
+    return tf_tuple_pack(t, rest);
+}
+
 #define IMAGE_SIDE_MAX 65536 /* the scene tuple's largest width or height */
 
 int tf_scene_tuple_pack(tf_tuple *t, const tf_scene_msg *m)
@@ -81,14 +96,7 @@ int tf_failed_pack(tf_tuple *t, int64_t id, int64_t worker, const char *message)
 
 int tf_failed_template(tf_tuple *t, int64_t id, int64_t worker)
 {
-    tf_tuple_init(t);
-    if (tf_tuple_add_string(t, TF_TAG_FAILED))
-        return -1;
-    if (id >= 0 ? tf_tuple_add_int(t, id) : tf_tuple_add_formal(t, TF_FIELD_INT))
-        return -1;
-    if (worker >= 0 ? tf_tuple_add_int(t, worker) : tf_tuple_add_formal(t, TF_FIELD_INT))
-        return -1;
-    return tf_tuple_pack(t, "S");
+    return id_worker_template(t, TF_TAG_FAILED, id, worker, "S");
 }
 
 int tf_failed_unpack(const tf_tuple *t, tf_failed_msg *m)
@@ -173,14 +181,7 @@ int tf_result_pack(tf_tuple *t, int64_t id, int64_t worker, const tf_render_coun
 
 int tf_result_template(tf_tuple *t, int64_t id, int64_t worker)
 {
-    tf_tuple_init(t);
-    if (tf_tuple_add_string(t, TF_TAG_RESULT))
-        return -1;
-    if (id >= 0 ? tf_tuple_add_int(t, id) : tf_tuple_add_formal(t, TF_FIELD_INT))
-        return -1;
-    if (worker >= 0 ? tf_tuple_add_int(t, worker) : tf_tuple_add_formal(t, TF_FIELD_INT))
-        return -1;
-    return tf_tuple_pack(t, "IIIIIBBB");
+    return id_worker_template(t, TF_TAG_RESULT, id, worker, "IIIIIBBB");
 }
 
 int tf_result_unpack(const tf_tuple *t, tf_result_msg *m)

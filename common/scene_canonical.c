@@ -65,6 +65,15 @@ static void canonical_envelope(struct strbuf *b, const tf_terrain *t)
     sb_printf(b, "\n");
 }
 
+/* A key whose value is one of count names (an enum stored as int). */
+static void canonical_name(struct strbuf *b, const struct key_def *k, const void *src,
+                           const char *const *names, int count)
+{
+    int i;
+    memcpy(&i, src, sizeof i);
+    sb_printf(b, "%s = %s\n", k->name, (i >= 0 && i < count) ? names[i] : "?");
+}
+
 static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
 {
     const struct key_def *k = &SCENE_KEYS[key];
@@ -93,9 +102,7 @@ static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
         sb_printf(b, "%s = %s\n", k->name, tf_generator_name((enum tf_generator)i));
         break;
     case KT_CAMERA:
-        memcpy(&i, src, sizeof i);
-        sb_printf(b, "%s = %s\n", k->name,
-                  (i >= 0 && i < SCENE_CAMERA_COUNT) ? SCENE_CAMERA_NAMES[i] : "?");
+        canonical_name(b, k, src, SCENE_CAMERA_NAMES, SCENE_CAMERA_COUNT);
         break;
     case KT_ENVELOPE:
         if (s->terrain.envelope_n > 0)
@@ -123,14 +130,10 @@ static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
             sb_printf(b, "%s = %s\n", k->name, (const char *)src);
         break;
     case KT_NODATA:
-        memcpy(&i, src, sizeof i);
-        sb_printf(b, "%s = %s\n", k->name,
-                  (i >= 0 && i < SCENE_NODATA_COUNT) ? SCENE_NODATA_NAMES[i] : "?");
+        canonical_name(b, k, src, SCENE_NODATA_NAMES, SCENE_NODATA_COUNT);
         break;
     case KT_FIRST_ROW:
-        memcpy(&i, src, sizeof i);
-        sb_printf(b, "%s = %s\n", k->name,
-                  (i >= 0 && i < SCENE_FIRST_ROW_COUNT) ? SCENE_FIRST_ROW_NAMES[i] : "?");
+        canonical_name(b, k, src, SCENE_FIRST_ROW_NAMES, SCENE_FIRST_ROW_COUNT);
         break;
     }
 }

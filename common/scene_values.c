@@ -374,6 +374,20 @@ static int read_key_frame(struct parser *p, const char *key, const char **sp, in
     return 0;
 }
 
+/* Start a new [animation] key `name` (one more of *count, at most TF_ANIM_MAX_KEYS): read its
+ * frame number at *sp.  The new key's index, or -1 after scene_fail_at. */
+static int start_key(struct parser *p, const char *name, int *count, const char **sp,
+                     int *frame)
+{
+    if (*count == TF_ANIM_MAX_KEYS) {
+        scene_fail_at(p, p->line, "%s: more than %d keys", name, TF_ANIM_MAX_KEYS);
+        return -1;
+    }
+    if (read_key_frame(p, name, sp, frame) < 0)
+        return -1;
+    return (*count)++;
+}
+
 /* camera = FRAME position X Y Z look_at X Y Z [fov F] [up X Y Z]; an indented continuation
  * line adds fields to the last key. */
 int scene_parse_camera_key(struct parser *p, const char *value, int continuation)
@@ -381,14 +395,9 @@ int scene_parse_camera_key(struct parser *p, const char *value, int continuation
     tf_animation *a = &p->s->animation;
     const char *s = value;
     if (!continuation) {
-        int frame;
-        if (a->ncamera == TF_ANIM_MAX_KEYS) {
-            scene_fail_at(p, p->line, "camera: more than %d keys", TF_ANIM_MAX_KEYS);
+        int frame, k = start_key(p, "camera", &a->ncamera, &s, &frame);
+        if (k < 0)
             return -1;
-        }
-        if (read_key_frame(p, "camera", &s, &frame) < 0)
-            return -1;
-        int k = a->ncamera++;
         memset(&a->camera[k], 0, sizeof a->camera[k]);
         a->camera[k].frame = frame;
         a->camera[k].line = p->line;
@@ -413,14 +422,9 @@ int scene_parse_sun_key(struct parser *p, const char *value, int continuation)
     tf_animation *a = &p->s->animation;
     const char *s = value;
     if (!continuation) {
-        int frame;
-        if (a->nsun == TF_ANIM_MAX_KEYS) {
-            scene_fail_at(p, p->line, "sun: more than %d keys", TF_ANIM_MAX_KEYS);
+        int frame, k = start_key(p, "sun", &a->nsun, &s, &frame);
+        if (k < 0)
             return -1;
-        }
-        if (read_key_frame(p, "sun", &s, &frame) < 0)
-            return -1;
-        int k = a->nsun++;
         memset(&a->sun[k], 0, sizeof a->sun[k]);
         a->sun[k].frame = frame;
         a->sun[k].line = p->line;

@@ -1,5 +1,5 @@
 #!/bin/bash
-# scale_sim.sh: the coordinator with 16..1024 simulated workers (issue 7, "beyond one machine").
+# scale_sim.sh: the coordinator with 16..1024 simulated workers (docs/contract.md section 6).
 #
 # For each worker count W, modelled task cost and watermark it starts a real coordinator
 # (`terrafarm render -j 0`, networked workers only, output in /dev/shm) and one process of W

@@ -1,6 +1,6 @@
 #!/bin/bash
-# sequence_vs_frames.sh: issue 14's measure.  A 24-frame sequence at a modest size with 2
-# workers, rendered side by side in one run
+# sequence_vs_frames.sh: what a sequence run saves over a per-frame farm.  A 24-frame sequence at a
+# modest size with 2 workers, rendered side by side in one run
 #   (a) as one `terrafarm render SCENE --frames 0-23` run: the terrain built once, one pool of
 #       workers, the next frame's tasks dealt while the previous frame's last ones are in flight;
 #   (b) as 24 separate `terrafarm render SCENE --frame N` runs, the way a per-frame farm

@@ -1,4 +1,5 @@
-/* cmd_bench.c: `terrafarm bench SCENE --workers 1,2,4`: speedup against worker count (issue 7).
+/* cmd_bench.c: `terrafarm bench SCENE --workers 1,2,4`: speedup against worker count
+ * (docs/contract.md section 6, "Targets").
  *
  * Each measurement is a real `terrafarm render` run as a child process (fork + exec of
  * /proc/self/exe) with --stats to a temporary directory, so the bench measures exactly what

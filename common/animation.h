@@ -1,10 +1,11 @@
 /* animation.h: a scene's [animation] section (scenes/README.md): a frame count, a frame rate,
  * camera keys and sun keys, and the splines that give the camera and the sun of any frame.
  *
- * The parser (scene.c) fills a tf_animation from the file and calls tf_animation_check; the
- * coordinator and every worker then ask for the camera of frame f with tf_scene_apply_frame, a
- * pure function of the parsed keys and f (plain double arithmetic, no FMA contraction), so a
- * frame's pixels are the same whichever process, machine or run computes them.
+ * The parser (scene_values.c, scene_check.c) fills a tf_animation from the file and calls
+ * tf_animation_check; the coordinator and every worker then ask for the camera of frame f
+ * with tf_scene_apply_frame (scene.h, scene_frame.c), a pure function of the parsed keys and f
+ * (plain double arithmetic, no FMA contraction), so a frame's pixels are the same whichever
+ * process, machine or run computes them.
  *
  * The splines.
  *   Camera position and look_at: each a centripetal Catmull-Rom curve (alpha = 1/2, Yuksel,
@@ -68,14 +69,5 @@ int tf_animation_check(const tf_animation *a, int pinhole, int *line, char *what
 
 /* The scene line of the camera key that starts frame f's segment (for messages). */
 int tf_animation_camera_line(const tf_animation *a, int f);
-
-struct tf_scene;
-/* Set s's camera and sun to those of frame f (whatever is animated; the rest unchanged).  The
- * scene hash is not changed: a frame belongs to its sequence's scene. */
-void tf_scene_apply_frame(struct tf_scene *s, int f);
-/* A copy of s (own path and text; a generator = file height map stays s's, borrowed, so s must
- * outlive the copy) with frame f's camera and sun, for a renderer of that frame.  NULL on out
- * of memory.  Free with tf_scene_free. */
-struct tf_scene *tf_scene_at_frame(const struct tf_scene *s, int f);
 
 #endif

@@ -7,6 +7,106 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* 1 if t is a tuple of the kind named tag with nfields fields. */
+static int is_kind(const tf_tuple *t, const char *tag, int nfields)
+{
+    const char *name = tf_tuple_name(t);
+    return name && !strcmp(name, tag) && t->nfields == nfields;
+}
+
+/* (tag, id, worker, rest...): id and worker each an actual, or a formal when < 0; rest the
+ * formals of tf_tuple_pack's format. */
+static int id_worker_template(tf_tuple *t, const char *tag, int64_t id, int64_t worker,
+                              const char *rest)
+{
+    tf_tuple_init(t);
+    if (tf_tuple_add_string(t, tag))
+        return -1;
+    if (id >= 0 ? tf_tuple_add_int(t, id) : tf_tuple_add_formal(t, TF_FIELD_INT))
+        return -1;
+    if (worker >= 0 ? tf_tuple_add_int(t, worker) : tf_tuple_add_formal(t, TF_FIELD_INT))
+        return -1;
+    return tf_tuple_pack(t, rest);
+}
+
+#define IMAGE_SIDE_MAX 65536 /* the scene tuple's largest width or height */
+
+int tf_scene_tuple_pack(tf_tuple *t, const tf_scene_msg *m)
+{
+    tf_tuple_init(t);
+    return tf_tuple_pack(t, "ssiiss", TF_TAG_SCENE, m->text, m->width, m->height, m->hash,
+                         m->layout);
+}
+
+int tf_scene_tuple_template(tf_tuple *t)
+{
+    tf_tuple_init(t);
+    return tf_tuple_pack(t, "sSIISS", TF_TAG_SCENE);
+}
+
+int tf_scene_tuple_unpack(const tf_tuple *t, tf_scene_msg *m)
+{
+    if (!is_kind(t, TF_TAG_SCENE, TF_SCENE_FIELDS) || tf_tuple_get_string(t, 1, &m->text) ||
+        tf_tuple_get_int(t, 2, &m->width) || tf_tuple_get_int(t, 3, &m->height) ||
+        tf_tuple_get_string(t, 4, &m->hash) || tf_tuple_get_string(t, 5, &m->layout))
+        return -1;
+    if (m->width < 1 || m->height < 1 || m->width > IMAGE_SIDE_MAX || m->height > IMAGE_SIDE_MAX)
+        return -1;
+    return 0;
+}
+
+int tf_next_worker_pack(tf_tuple *t, int64_t n)
+{
+    tf_tuple_init(t);
+    return tf_tuple_pack(t, "si", TF_TAG_NEXT_WORKER, n);
+}
+
+int tf_next_worker_template(tf_tuple *t)
+{
+    tf_tuple_init(t);
+    return tf_tuple_pack(t, "sI", TF_TAG_NEXT_WORKER);
+}
+
+int tf_next_worker_unpack(const tf_tuple *t, int64_t *n)
+{
+    return is_kind(t, TF_TAG_NEXT_WORKER, TF_NEXT_WORKER_FIELDS) ? tf_tuple_get_int(t, 1, n) : -1;
+}
+
+int tf_hello_pack(tf_tuple *t, const tf_hello_msg *m)
+{
+    tf_tuple_init(t);
+    return tf_tuple_pack(t, "sissis", TF_TAG_HELLO, m->worker, m->kind, m->host, m->pid,
+                         m->backend);
+}
+
+int tf_hello_unpack(const tf_tuple *t, tf_hello_msg *m)
+{
+    if (!is_kind(t, TF_TAG_HELLO, TF_HELLO_FIELDS) || tf_tuple_get_int(t, 1, &m->worker) ||
+        tf_tuple_get_string(t, 2, &m->kind) || tf_tuple_get_string(t, 3, &m->host) ||
+        tf_tuple_get_int(t, 4, &m->pid) || tf_tuple_get_string(t, 5, &m->backend))
+        return -1;
+    return 0;
+}
+
+int tf_failed_pack(tf_tuple *t, int64_t id, int64_t worker, const char *message)
+{
+    tf_tuple_init(t);
+    return tf_tuple_pack(t, "siis", TF_TAG_FAILED, id, worker, message);
+}
+
+int tf_failed_template(tf_tuple *t, int64_t id, int64_t worker)
+{
+    return id_worker_template(t, TF_TAG_FAILED, id, worker, "S");
+}
+
+int tf_failed_unpack(const tf_tuple *t, tf_failed_msg *m)
+{
+    if (!is_kind(t, TF_TAG_FAILED, TF_FAILED_FIELDS) || tf_tuple_get_int(t, 1, &m->id) ||
+        tf_tuple_get_int(t, 2, &m->worker) || tf_tuple_get_string(t, 3, &m->message))
+        return -1;
+    return 0;
+}
+
 int tf_task_pack(tf_tuple *t, const tf_task_msg *m)
 {
     uint8_t ex[TF_EXCLUDED_MAX * 8];
@@ -16,7 +116,7 @@ int tf_task_pack(tf_tuple *t, const tf_task_msg *m)
         memcpy(ex + 8 * i, &le, 8);
     }
     tf_tuple_init(t);
-    return tf_tuple_pack(t, "siiiiiib", "task", m->id, (int64_t)m->frame, (int64_t)m->rect.x,
+    return tf_tuple_pack(t, "siiiiiib", TF_TAG_TASK, m->id, (int64_t)m->frame, (int64_t)m->rect.x,
                          (int64_t)m->rect.y,
                          (int64_t)m->rect.w, (int64_t)m->rect.h, (const void *)ex, (size_t)(8 * n));
 }
@@ -24,7 +124,7 @@ int tf_task_pack(tf_tuple *t, const tf_task_msg *m)
 int tf_task_template(tf_tuple *t, int64_t id)
 {
     tf_tuple_init(t);
-    if (tf_tuple_add_string(t, "task"))
+    if (tf_tuple_add_string(t, TF_TAG_TASK))
         return -1;
     if (id == TF_TASK_ANY ? tf_tuple_add_formal(t, TF_FIELD_INT) : tf_tuple_add_int(t, id))
         return -1;
@@ -33,11 +133,10 @@ int tf_task_template(tf_tuple *t, int64_t id)
 
 int tf_task_unpack(const tf_tuple *t, tf_task_msg *m)
 {
-    const char *name = tf_tuple_name(t);
     int64_t v[6];
     const uint8_t *ex;
     size_t exlen;
-    if (!name || strcmp(name, "task") || t->nfields != TF_TASK_FIELDS)
+    if (!is_kind(t, TF_TAG_TASK, TF_TASK_FIELDS))
         return -1;
     for (int i = 0; i < 6; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))
@@ -73,7 +172,7 @@ int tf_result_pack(tf_tuple *t, int64_t id, int64_t worker, const tf_render_coun
                    int64_t busy_ns, int64_t spp_total, const tf_chunk_payload *p)
 {
     tf_tuple_init(t);
-    return tf_tuple_pack(t, "siiiiiiibbb", "result", id, worker, (int64_t)c->primary_rays,
+    return tf_tuple_pack(t, "siiiiiiibbb", TF_TAG_RESULT, id, worker, (int64_t)c->primary_rays,
                          (int64_t)c->shadow_rays, (int64_t)c->external_rays, busy_ns, spp_total,
                          (const void *)p->index, p->nchunks * TF_CHUNK_RECORD_BYTES,
                          (const void *)p->chunks, p->chunks_len, (const void *)p->preview,
@@ -82,22 +181,14 @@ int tf_result_pack(tf_tuple *t, int64_t id, int64_t worker, const tf_render_coun
 
 int tf_result_template(tf_tuple *t, int64_t id, int64_t worker)
 {
-    tf_tuple_init(t);
-    if (tf_tuple_add_string(t, "result"))
-        return -1;
-    if (id >= 0 ? tf_tuple_add_int(t, id) : tf_tuple_add_formal(t, TF_FIELD_INT))
-        return -1;
-    if (worker >= 0 ? tf_tuple_add_int(t, worker) : tf_tuple_add_formal(t, TF_FIELD_INT))
-        return -1;
-    return tf_tuple_pack(t, "IIIIIBBB");
+    return id_worker_template(t, TF_TAG_RESULT, id, worker, "IIIIIBBB");
 }
 
 int tf_result_unpack(const tf_tuple *t, tf_result_msg *m)
 {
-    const char *name = tf_tuple_name(t);
     int64_t v[7];
     size_t index_len;
-    if (!name || strcmp(name, "result") || t->nfields != TF_RESULT_FIELDS)
+    if (!is_kind(t, TF_TAG_RESULT, TF_RESULT_FIELDS))
         return -1;
     for (int i = 0; i < 7; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))

@@ -56,8 +56,41 @@
 #include "render/counts.h"
 #include "linda/tuple.h"
 
+/* The tags (first fields) of the six kinds of tuple, and how many fields each has. */
+#define TF_TAG_SCENE "scene"
+#define TF_TAG_NEXT_WORKER "next_worker"
+#define TF_TAG_HELLO "hello"
+#define TF_TAG_TASK "task"
+#define TF_TAG_RESULT "result"
+#define TF_TAG_FAILED "failed"
+#define TF_SCENE_FIELDS 6
+#define TF_NEXT_WORKER_FIELDS 2
+#define TF_HELLO_FIELDS 6
+#define TF_FAILED_FIELDS 4
+
 #define TF_TASK_STOP (-1)
 #define TF_EXCLUDED_MAX 64
+
+/* The scene tuple: strings borrowed from the tuple it was unpacked from. */
+typedef struct tf_scene_msg {
+    const char *text;
+    int64_t width, height;
+    const char *hash, *layout;
+} tf_scene_msg;
+
+/* A worker's hello: strings borrowed from the tuple. */
+typedef struct tf_hello_msg {
+    int64_t worker;
+    const char *kind, *host;
+    int64_t pid;
+    const char *backend;
+} tf_hello_msg;
+
+/* A worker's report that it could not render a task: message borrowed from the tuple. */
+typedef struct tf_failed_msg {
+    int64_t id, worker;
+    const char *message;
+} tf_failed_msg;
 
 typedef struct tf_task_msg {
     int64_t id;
@@ -79,6 +112,24 @@ typedef struct tf_result_msg {
     const uint8_t *preview;
     size_t preview_len;
 } tf_result_msg;
+
+int tf_scene_tuple_pack(tf_tuple *t, const tf_scene_msg *m);
+int tf_scene_tuple_template(tf_tuple *t);
+/* Fields and types, and an image size of 1..65536 each way: 0, or -1. */
+int tf_scene_tuple_unpack(const tf_tuple *t, tf_scene_msg *m);
+
+/* The worker counter, holding the next free worker id n. */
+int tf_next_worker_pack(tf_tuple *t, int64_t n);
+int tf_next_worker_template(tf_tuple *t);
+int tf_next_worker_unpack(const tf_tuple *t, int64_t *n);
+
+int tf_hello_pack(tf_tuple *t, const tf_hello_msg *m);
+int tf_hello_unpack(const tf_tuple *t, tf_hello_msg *m);
+
+int tf_failed_pack(tf_tuple *t, int64_t id, int64_t worker, const char *message);
+/* Template for the failure of task id by worker (either < 0: any). */
+int tf_failed_template(tf_tuple *t, int64_t id, int64_t worker);
+int tf_failed_unpack(const tf_tuple *t, tf_failed_msg *m);
 
 int tf_task_pack(tf_tuple *t, const tf_task_msg *m);
 /* Template for any task (id = TF_TASK_ANY) or for one task id. */

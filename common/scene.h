@@ -186,4 +186,12 @@ void tf_scene_rehash(tf_scene *s);
 
 const char *tf_generator_name(enum tf_generator g);
 
+/* Set s's camera and sun to those of frame f (whatever is animated; the rest unchanged).  The
+ * scene hash is not changed: a frame belongs to its sequence's scene. */
+void tf_scene_apply_frame(tf_scene *s, int f);
+/* A copy of s (own path and text; a generator = file height map stays s's, borrowed, so s must
+ * outlive the copy) with frame f's camera and sun, for a renderer of that frame.  NULL on out
+ * of memory.  Free with tf_scene_free. */
+tf_scene *tf_scene_at_frame(const tf_scene *s, int f);
+
 #endif

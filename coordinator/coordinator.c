@@ -482,14 +482,12 @@ static int finish_frame_writer(void *ctx, int job, tf_rowwriter *w, char *err, s
 
 static int put_scene_tuples(ts_space *space, const tf_scene *s, const char *layout)
 {
+    tf_scene_msg m = {s->text, s->width, s->height, s->hash_hex, layout};
     tf_tuple t;
-    tf_tuple_init(&t);
-    if (tf_tuple_pack(&t, "ssiiss", "scene", s->text, (int64_t)s->width, (int64_t)s->height,
-                      s->hash_hex, layout) ||
-        ts_space_out(space, &t) || tf_heightmap_tuples_put(space, s))
+    if (tf_scene_tuple_pack(&t, &m) || ts_space_out(space, &t) ||
+        tf_heightmap_tuples_put(space, s))
         return -1;
-    tf_tuple_init(&t);
-    if (tf_tuple_pack(&t, "si", "next_worker", (int64_t)1) || ts_space_out(space, &t))
+    if (tf_next_worker_pack(&t, 1) || ts_space_out(space, &t))
         return -1;
     return 0;
 }

@@ -302,7 +302,7 @@ static void tap_out(void *ctx, uint64_t conn, const tf_tuple *tuple)
         d->inner.on_out(d->inner.ctx, conn, tuple);
     heard(d, conn);
     const char *name = tf_tuple_name(tuple);
-    if (name && !strcmp(name, "result"))
+    if (name && !strcmp(name, TF_TAG_RESULT))
         draw_result(d, tuple);
 }
 
@@ -339,8 +339,6 @@ void tf_dashboard_attach(tf_dashboard *d, tf_supervisor *sup, ts_server *srv, co
     d->srv = srv;
     d->tasks = tasks;
 }
-
-int tf_dashboard_port(const tf_dashboard *d) { return d ? d->port : 0; }
 
 const char *tf_dashboard_url(const tf_dashboard *d) { return d ? d->url : ""; }
 

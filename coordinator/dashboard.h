@@ -56,8 +56,7 @@ int tf_dashboard_tick(tf_dashboard *d, int rows_written);
 void tf_dashboard_end(tf_dashboard *d, tf_run_state state, int exit_status, int rows_written);
 /* Stop serving and free (NULL is fine). */
 void tf_dashboard_close(tf_dashboard *d);
-/* The port it listens on, and its URL once serving ("" if not, or d is NULL). */
-int tf_dashboard_port(const tf_dashboard *d);
+/* Its URL once serving ("" if not, or d is NULL). */
 const char *tf_dashboard_url(const tf_dashboard *d);
 
 #endif

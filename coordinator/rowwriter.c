@@ -1,10 +1,12 @@
 /* rowwriter.c: see rowwriter.h.  A ring of `depth` result tuples between one producer (the
  * supervisor) and one consumer (the writer thread), under one mutex with two condition
- * variables.  INVARIANTS (checked by queue_ok() under the mutex in debug builds, `make asan`):
+ * variables.  INVARIANTS (checked clause by clause by assert_queue() under the mutex, after
+ * every put and before every take, in debug builds, `make asan`):
  *   R1. 0 <= head < depth and 0 <= count <= depth;
- *   R2. slots [head, head + count) modulo depth hold the queued results in file order, each a
- *       result tuple (11 fields), and only the producer touches the slot at head + count (the
- *       thread takes a result out of the ring, under the mutex, before writing it);
+ *   R2. slots [head, head + count) modulo depth hold the queued results in file order (their
+ *       task ids increase), each a result tuple (11 fields), and every other slot is empty:
+ *       only the producer touches the slot at head + count, and the thread takes a result out
+ *       of the ring, under the mutex, before writing it;
  *   R3. rows_written only grows. */
 #include "coordinator/rowwriter.h"
 #include "clock.h"
@@ -31,6 +33,9 @@ struct tf_rowwriter {
     int failed;
     char error[512];
     int rows_written;
+#ifndef NDEBUG
+    int rows_checked;  /* rows_written when the invariants were last checked (R3) */
+#endif
     /* the progress preview (writer thread only) */
     char *preview_path;
     tf_preview_grid grid;
@@ -143,14 +148,32 @@ static void start_preview(tf_rowwriter *rw, const char *png_path, const char *ex
 /* ---- the thread ----------------------------------------------------------------------------- */
 
 #ifndef NDEBUG
-/* R1 and R2 (call with rw->mu held). */
-static int queue_ok(const tf_rowwriter *rw)
+/* The task id of a queued result (R2 checks their order). */
+static int64_t queued_id(const tf_rowwriter *rw, int i)
 {
-    if (rw->head < 0 || rw->head >= rw->depth || rw->count < 0 || rw->count > rw->depth)
-        return 0;
-    for (int i = 0; i < rw->count; i++)
-        if (rw->slot[(rw->head + i) % rw->depth].nfields != 11)
-            return 0;
+    int64_t id = INT64_MIN;
+    tf_tuple_get_int(&rw->slot[(rw->head + i) % rw->depth], 1, &id);
+    return id;
+}
+
+/* R1-R3, one assert a clause (as SQLite's assert_pager_state; call with rw->mu held).
+ * Returns 1, so that a call sits inside assert() and vanishes with NDEBUG. */
+static int assert_queue(tf_rowwriter *rw)
+{
+    assert(rw->head >= 0 && rw->head < rw->depth && "R1: 0 <= head < depth");
+    assert(rw->count >= 0 && rw->count <= rw->depth && "R1: 0 <= count <= depth");
+    for (int i = 0; i < rw->depth; i++) {
+        int queued = (i - rw->head + rw->depth) % rw->depth < rw->count;
+        const tf_tuple *t = &rw->slot[i];
+        assert((!queued || t->nfields == TF_RESULT_FIELDS) &&
+               "R2: every queued slot holds a result tuple");
+        assert((queued || t->nfields == 0) && "R2: every slot outside the queue is empty");
+    }
+    for (int i = 1; i < rw->count; i++)
+        assert(queued_id(rw, i - 1) < queued_id(rw, i) &&
+               "R2: the queued results are in file order (increasing task ids)");
+    assert(rw->rows_written >= rw->rows_checked && "R3: rows_written only grows");
+    rw->rows_checked = rw->rows_written;
     return 1;
 }
 #endif
@@ -206,7 +229,7 @@ static void *writer_main(void *arg)
             struct timespec ts = tf_realtime_in(due - now);
             pthread_cond_timedwait(&rw->nonempty, &rw->mu, &ts);
         }
-        assert(queue_ok(rw));
+        assert(assert_queue(rw));
         if (rw->count == 0 && rw->stop)
             break;
         int have = rw->count > 0 && !rw->failed;
@@ -331,17 +354,9 @@ int tf_rowwriter_put(tf_rowwriter *rw, tf_tuple *result)
     tf_tuple_move(&rw->slot[idx], result);
     if (rw->count++ == 0) /* the thread sleeps only on an empty queue */
         pthread_cond_signal(&rw->nonempty);
-    assert(queue_ok(rw));
+    assert(assert_queue(rw));
     pthread_mutex_unlock(&rw->mu);
     return 0;
-}
-
-int tf_rowwriter_rows_written(tf_rowwriter *rw)
-{
-    pthread_mutex_lock(&rw->mu);
-    int n = rw->rows_written;
-    pthread_mutex_unlock(&rw->mu);
-    return n;
 }
 
 int tf_rowwriter_error(tf_rowwriter *rw, char *buf, size_t len)

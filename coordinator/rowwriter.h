@@ -35,8 +35,6 @@ tf_rowwriter *tf_rowwriter_start(tf_exr_writer *w, const tf_exr_layout *layout,
 /* Queue a checked result tuple (farmproto.h) whose chunks are the next in file order; its
  * contents are moved out of *result.  0, or -1 once the writer has failed. */
 int tf_rowwriter_put(tf_rowwriter *rw, tf_tuple *result);
-/* Rows entirely on disk (written, not necessarily synced), including those before it started. */
-int tf_rowwriter_rows_written(tf_rowwriter *rw);
 /* The first write/sync error, copied into buf; returns 1 if there was one. */
 int tf_rowwriter_error(tf_rowwriter *rw, char *buf, size_t len);
 /* Write what is queued, finish the file (offset table, fsync) and the preview, stop, free.

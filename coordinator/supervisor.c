@@ -699,14 +699,12 @@ static void remove_lease(tf_supervisor *s, uint64_t conn, int64_t task)
 static void on_join(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
     int64_t id;
-    if (tuple->nfields != 2 || tf_tuple_get_int(tuple, 1, &id))
+    if (tf_next_worker_unpack(tuple, &id))
         return;
     if (id >= s->next_worker_id)
         s->next_worker_id = id + 1;
     tf_tuple next;
-    tf_tuple_init(&next);
-    if (tf_tuple_pack(&next, "si", "next_worker", s->next_worker_id) ||
-        ts_space_out(s->space, &next)) {
+    if (tf_next_worker_pack(&next, s->next_worker_id) || ts_space_out(s->space, &next)) {
         fail(s, "out of memory putting the worker counter back");
         return;
     }
@@ -722,11 +720,11 @@ static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)
 {
     tf_supervisor *s = ctx;
     const char *name = tf_tuple_name(tuple);
-    if (name && !strcmp(name, "next_worker")) {
+    if (name && !strcmp(name, TF_TAG_NEXT_WORKER)) {
         on_join(s, conn, tuple);
         return;
     }
-    if (!name || strcmp(name, "task"))
+    if (!name || strcmp(name, TF_TAG_TASK))
         return;
     tf_task_msg m;
     if (tf_task_unpack(tuple, &m) || m.id < 0)
@@ -939,23 +937,20 @@ static void collect_checked(tf_supervisor *s)
 
 static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
-    int64_t id, pid;
-    const char *kind, *host, *backend;
-    if (tuple->nfields == 6 && !tf_tuple_get_int(tuple, 1, &id) &&
-        !tf_tuple_get_string(tuple, 2, &kind) && !tf_tuple_get_string(tuple, 3, &host) &&
-        !tf_tuple_get_int(tuple, 4, &pid) && !tf_tuple_get_string(tuple, 5, &backend)) {
-        tf_worker_stats *w = add_worker(s, id);
+    tf_hello_msg m;
+    if (!tf_hello_unpack(tuple, &m)) {
+        tf_worker_stats *w = add_worker(s, m.worker);
         if (w) {
-            snprintf(w->kind, sizeof w->kind, "%s", kind);
-            snprintf(w->host, sizeof w->host, "%s", host);
-            snprintf(w->backend, sizeof w->backend, "%s", backend);
+            snprintf(w->kind, sizeof w->kind, "%s", m.kind);
+            snprintf(w->host, sizeof w->host, "%s", m.host);
+            snprintf(w->backend, sizeof w->backend, "%s", m.backend);
             if (!w->conn)
                 s->live_workers++;
             bind_conn(s, w, conn);
             const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
-            tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)", id,
-                     kind, host, pid, backend, peer ? peer : "?");
-            tf_events_add(s->events, TF_EV_JOIN, id, -1, "%s worker on %s (%s backend, %s)",
+            tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)",
+                     m.worker, m.kind, m.host, m.pid, m.backend, peer ? peer : "?");
+            tf_events_add(s->events, TF_EV_JOIN, m.worker, -1, "%s worker on %s (%s backend, %s)",
                           w->kind, w->host, w->backend, peer ? peer : "?");
         }
     }
@@ -964,15 +959,13 @@ static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 
 static void on_failed(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
 {
-    int64_t id, worker;
-    const char *msg;
-    if (tuple->nfields == 4 && !tf_tuple_get_int(tuple, 1, &id) &&
-        !tf_tuple_get_int(tuple, 2, &worker) && !tf_tuple_get_string(tuple, 3, &msg)) {
-        tf_warn("worker %" PRId64 " failed task %" PRId64 ": %s", worker, id, msg);
-        tf_events_add(s->events, TF_EV_FAILURE, worker, id, "%s", msg);
-        remove_lease(s, conn, id);
-        task_slot *t = slot_of(s, id);
-        if (t && (t->has_result || !note_failure(s, t, worker)))
+    tf_failed_msg m;
+    if (!tf_failed_unpack(tuple, &m)) {
+        tf_warn("worker %" PRId64 " failed task %" PRId64 ": %s", m.worker, m.id, m.message);
+        tf_events_add(s->events, TF_EV_FAILURE, m.worker, m.id, "%s", m.message);
+        remove_lease(s, conn, m.id);
+        task_slot *t = slot_of(s, m.id);
+        if (t && (t->has_result || !note_failure(s, t, m.worker)))
             redeal_if_lost(s, t); /* a failed check copy is dealt again too (S9) */
     }
     remove_exact(s, tuple);
@@ -985,13 +978,13 @@ static void on_out(void *ctx, uint64_t conn, const tf_tuple *tuple)
     const char *name = tf_tuple_name(tuple);
     if (!name)
         return;
-    if (!strcmp(name, "result"))
+    if (!strcmp(name, TF_TAG_RESULT))
         on_result(s, conn, tuple);
-    else if (!strcmp(name, "task"))
+    else if (!strcmp(name, TF_TAG_TASK))
         on_task_returned(s, conn, tuple);
-    else if (!strcmp(name, "hello"))
+    else if (!strcmp(name, TF_TAG_HELLO))
         on_hello(s, conn, tuple);
-    else if (!strcmp(name, "failed"))
+    else if (!strcmp(name, TF_TAG_FAILED))
         on_failed(s, conn, tuple);
 }
 
@@ -1452,7 +1445,7 @@ ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blockin
     tf_supervisor *s = ctx;
     const char *name = tf_tuple_name(tuple);
     tf_worker_stats *w = worker_by_conn(s, conn);
-    if (!strcmp(name, "next_worker")) {
+    if (!strcmp(name, TF_TAG_NEXT_WORKER)) {
         if (w)
             return refuse(why, len, "joins twice (already worker %" PRId64 ")", w->id);
         if (s->nexcluded_addr > 0 && address_excluded(s, peer_name(s, conn)))
@@ -1464,19 +1457,16 @@ ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blockin
                       "first)", ts_cap_op_name(op), name);
     if (w->excluded)
         return refuse(why, len, "worker %" PRId64 " is excluded (it failed a spot check)", w->id);
-    if (!strcmp(name, "hello")) {
-        int64_t id, pid;
-        const char *str;
-        if (tf_tuple_get_int(tuple, 1, &id) || tf_tuple_get_string(tuple, 2, &str) ||
-            tf_tuple_get_string(tuple, 3, &str) || tf_tuple_get_int(tuple, 4, &pid) ||
-            tf_tuple_get_string(tuple, 5, &str))
+    if (!strcmp(name, TF_TAG_HELLO)) {
+        tf_hello_msg m;
+        if (tf_hello_unpack(tuple, &m))
             return refuse(why, len, "malformed hello tuple");
-        if (id != w->id)
-            return refuse(why, len, "hello as worker %" PRId64 " from worker %" PRId64, id,
+        if (m.worker != w->id)
+            return refuse(why, len, "hello as worker %" PRId64 " from worker %" PRId64, m.worker,
                           w->id);
         return TS_CAP_ALLOW;
     }
-    if (!strcmp(name, "task") && op == TS_CAP_IN) {
+    if (!strcmp(name, TF_TAG_TASK) && op == TS_CAP_IN) {
         /* Any task, never one chosen by id or place: a client may not pick the task it wants
          * to fail or to sit on. */
         for (int i = 1; i < tuple->nfields; i++)
@@ -1489,22 +1479,20 @@ ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blockin
                           " (one at a time)", held);
         return TS_CAP_ALLOW;
     }
-    if (!strcmp(name, "task"))
+    if (!strcmp(name, TF_TAG_TASK))
         return admit_task_return(s, conn, tuple, why, len);
-    if (!strcmp(name, "result"))
+    if (!strcmp(name, TF_TAG_RESULT))
         return admit_result(s, conn, w, tuple, why, len);
-    if (!strcmp(name, "failed")) {
-        int64_t id, worker;
-        const char *msg;
-        if (tf_tuple_get_int(tuple, 1, &id) || tf_tuple_get_int(tuple, 2, &worker) ||
-            tf_tuple_get_string(tuple, 3, &msg))
+    if (!strcmp(name, TF_TAG_FAILED)) {
+        tf_failed_msg m;
+        if (tf_failed_unpack(tuple, &m))
             return refuse(why, len, "malformed failed tuple");
-        if (worker != w->id)
+        if (m.worker != w->id)
             return refuse(why, len, "failure reported as worker %" PRId64 " by worker %" PRId64,
-                          worker, w->id);
-        if (!holds_lease(s, conn, id))
+                          m.worker, w->id);
+        if (!holds_lease(s, conn, m.id))
             return refuse(why, len, "failure of task %" PRId64 ", which this connection does not "
-                          "hold", id);
+                          "hold", m.id);
         return TS_CAP_ALLOW;
     }
     return refuse(why, len, "%s (\"%s\", ...) is not a worker's", ts_cap_op_name(op), name);

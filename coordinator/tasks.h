@@ -39,9 +39,7 @@ void tf_tasks_init(tf_tasks *t, int width, int height, int first_row, tf_task_sp
 void tf_tasks_skip(tf_tasks *t, int n);
 /* Rectangle of task id (0 <= id < count). */
 tf_rect tf_task_rect(const tf_tasks *t, int id);
-/* Band of task id, first task id of a band, and a band's rows [y0, y0 + rows). */
-static inline int tf_task_band(const tf_tasks *t, int id) { return id / t->cols; }
-static inline int tf_band_first_task(const tf_tasks *t, int band) { return band * t->cols; }
+/* A band's rows [y0, y0 + rows). */
 void tf_band_rows(const tf_tasks *t, int band, int *y0, int *rows);
 
 #endif

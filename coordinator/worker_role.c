@@ -5,15 +5,15 @@
 #include "farmproto.h"
 
 static const ts_cap_rule worker_rules[] = {
-    {TS_CAP_RD, "scene", 6, 0, NULL},
+    {TS_CAP_RD, TF_TAG_SCENE, TF_SCENE_FIELDS, 0, NULL},
     {TS_CAP_RD, "heightmap", 4, 0, NULL},       /* generator = file: heightmap_tuples.h */
     {TS_CAP_RD, "heightmap_chunk", 3, 0, NULL},
-    {TS_CAP_IN, "next_worker", 2, 1, tf_supervisor_admit},
-    {TS_CAP_OUT, "hello", 6, 1, tf_supervisor_admit},
-    {TS_CAP_IN, "task", TF_TASK_FIELDS, 0, tf_supervisor_admit},
-    {TS_CAP_OUT, "task", TF_TASK_FIELDS, 0, tf_supervisor_admit},
-    {TS_CAP_OUT, "result", TF_RESULT_FIELDS, 0, tf_supervisor_admit},
-    {TS_CAP_OUT, "failed", 4, 0, tf_supervisor_admit},
+    {TS_CAP_IN, TF_TAG_NEXT_WORKER, TF_NEXT_WORKER_FIELDS, 1, tf_supervisor_admit},
+    {TS_CAP_OUT, TF_TAG_HELLO, TF_HELLO_FIELDS, 1, tf_supervisor_admit},
+    {TS_CAP_IN, TF_TAG_TASK, TF_TASK_FIELDS, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, TF_TAG_TASK, TF_TASK_FIELDS, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, TF_TAG_RESULT, TF_RESULT_FIELDS, 0, tf_supervisor_admit},
+    {TS_CAP_OUT, TF_TAG_FAILED, TF_FAILED_FIELDS, 0, tf_supervisor_admit},
 };
 
 /* A result's chunks never exceed their unpacked size (farmproto.h: 1 <= packed <= unpacked),

@@ -115,11 +115,6 @@ void tf_payloads_free(tf_payloads *p)
     free(p);
 }
 
-void tf_payloads_size(const tf_payloads *p, uint64_t *packed, uint64_t *pixels)
-{
-    *packed = p->packed_total;
-    *pixels = (uint64_t)p->layout.width * (uint64_t)p->layout.height;
-}
 
 int tf_payloads_fit(const tf_payloads *p, const tf_exr_layout *l, char *err, size_t errlen)
 {

@@ -27,8 +27,6 @@ tf_payloads *tf_payloads_load(const char *path, char *err, size_t errlen);
 void tf_payloads_free(tf_payloads *p);
 /* Does the recording fit renders of layout l?  0, or -1 with a message. */
 int tf_payloads_fit(const tf_payloads *p, const tf_exr_layout *l, char *err, size_t errlen);
-/* Total packed bytes and pixels of the recording (its compression ratio, for reports). */
-void tf_payloads_size(const tf_payloads *p, uint64_t *packed, uint64_t *pixels);
 
 /* A per-thread builder of payloads (buffers reused from task to task). */
 typedef struct tf_payload_buf {

@@ -1,5 +1,5 @@
-/* simulate.h: synthetic workers, to measure the coordinator beyond the cores at hand (issue 7,
- * "beyond one machine, by simulation").
+/* simulate.h: synthetic workers, to measure the coordinator beyond the cores at hand
+ * (docs/contract.md section 6, "Targets": parallel efficiency modelled at 1024 workers).
  *
  * A simulated worker speaks the real farm protocol (farmproto.h) over its own tuple-space
  * connection, exactly like `terrafarm worker`, but instead of tracing rays it sleeps the

@@ -21,10 +21,9 @@
 static int take_worker_id(ts_client *c, int64_t *id)
 {
     tf_tuple tmpl, got;
-    tf_tuple_init(&tmpl);
     tf_tuple_init(&got);
-    int rc = tf_tuple_pack(&tmpl, "sI", "next_worker") || ts_in(c, &tmpl, &got) ||
-                     tf_tuple_get_int(&got, 1, id)
+    int rc = tf_next_worker_template(&tmpl) || ts_in(c, &tmpl, &got) ||
+                     tf_next_worker_unpack(&got, id)
                  ? -1
                  : 0;
     tf_tuple_clear(&tmpl);
@@ -38,12 +37,9 @@ int tf_worker_join(ts_client *c, const char *kind, const char *backend, int64_t 
         return -1;
     char host[64] = "";
     gethostname(host, sizeof host - 1);
+    tf_hello_msg m = {*id, kind, host, (int64_t)getpid(), backend};
     tf_tuple t;
-    tf_tuple_init(&t);
-    int rc = tf_tuple_pack(&t, "sissis", "hello", *id, kind, host, (int64_t)getpid(), backend) ||
-                     ts_out(c, &t)
-                 ? -1
-                 : 0;
+    int rc = tf_hello_pack(&t, &m) || ts_out(c, &t) ? -1 : 0;
     tf_tuple_clear(&t);
     return rc;
 }
@@ -66,8 +62,7 @@ static int report_failure(ts_client *c, int64_t task, int64_t worker, const char
                           const tf_worker_step *step)
 {
     tf_tuple t;
-    tf_tuple_init(&t);
-    int rc = tf_tuple_pack(&t, "siis", "failed", task, worker, msg) || ts_out(c, &t) ? -1 : 0;
+    int rc = tf_failed_pack(&t, task, worker, msg) || ts_out(c, &t) ? -1 : 0;
     tf_tuple_clear(&t);
     note_op(step);
     return rc;
@@ -362,16 +357,13 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
 int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t errlen)
 {
     tf_tuple tmpl, got;
-    tf_tuple_init(&tmpl);
     tf_tuple_init(&got);
-    const char *text;
-    int64_t w, h;
+    tf_scene_msg m;
     int rc = -1;
-    if (tf_tuple_pack(&tmpl, "sSIISS", "scene") || ts_rd(c, &tmpl, &got))
+    if (tf_scene_tuple_template(&tmpl) || ts_rd(c, &tmpl, &got))
         tf_seterr(err, errlen, "cannot read the scene tuple: %s", ts_client_error(c));
-    else if (tf_tuple_get_int(&got, 2, &w) || tf_tuple_get_int(&got, 3, &h) ||
-             tf_tuple_get_string(&got, 5, &text) || w < 1 || h < 1 || w > 65536 || h > 65536 ||
-             tf_exr_layout_parse(text, (int)w, (int)h, l))
+    else if (tf_scene_tuple_unpack(&got, &m) ||
+             tf_exr_layout_parse(m.layout, (int)m.width, (int)m.height, l))
         tf_seterr(err, errlen, "malformed output layout in the scene tuple");
     else
         rc = 0;
@@ -383,36 +375,33 @@ int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t err
 tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen)
 {
     tf_tuple tmpl, got;
-    tf_tuple_init(&tmpl);
     tf_tuple_init(&got);
-    const char *text, *hash;
-    int64_t w, h;
-    if (tf_tuple_pack(&tmpl, "sSIISS", "scene") || ts_rd(c, &tmpl, &got)) {
+    tf_scene_msg m;
+    if (tf_scene_tuple_template(&tmpl) || ts_rd(c, &tmpl, &got)) {
         tf_seterr(err, errlen, "%s: cannot read the scene: %s", coordinator, ts_client_error(c));
         goto fail;
     }
-    if (tf_tuple_get_string(&got, 1, &text) || tf_tuple_get_int(&got, 2, &w) ||
-        tf_tuple_get_int(&got, 3, &h) || tf_tuple_get_string(&got, 4, &hash) || w < 1 ||
-        h < 1 || w > 65536 || h > 65536) {
+    if (tf_scene_tuple_unpack(&got, &m)) {
         tf_seterr(err, errlen, "%s: malformed scene tuple", coordinator);
         goto fail;
     }
     char perr[1024];
-    tf_scene *s = tf_scene_parse_text("<coordinator scene>", text, strlen(text), perr, sizeof perr);
+    tf_scene *s = tf_scene_parse_text("<coordinator scene>", m.text, strlen(m.text), perr,
+                                      sizeof perr);
     if (!s) {
         tf_seterr(err, errlen, "%s: scene does not parse here: %s", coordinator, perr);
         goto fail;
     }
-    tf_scene_set_size(s, (int)w, (int)h);
+    tf_scene_set_size(s, (int)m.width, (int)m.height);
     if (tf_heightmap_fetch(c, s, coordinator, err, errlen)) { /* generator = file only */
         tf_scene_free(s);
         goto fail;
     }
-    if (strcmp(s->hash_hex, hash)) {
+    if (strcmp(s->hash_hex, m.hash)) {
         snprintf(err, errlen,
                  "%s: the scene hashes differently here (%.12s vs %.12s): mismatched terrafarm "
                  "versions?",
-                 coordinator, s->hash_hex, hash);
+                 coordinator, s->hash_hex, m.hash);
         tf_scene_free(s);
         goto fail;
     }

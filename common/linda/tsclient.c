@@ -34,7 +34,6 @@
 struct ts_client {
     int fd;
     int dead;
-    int timeout_ms;
     uint32_t next_req;
     tf_buf in, out;
     int sealed;            /* records on the wire after AUTH_OK (seal.h) */
@@ -207,17 +206,16 @@ static long read_frame(ts_client *c, tf_frame *f, int64_t deadline)
     }
 }
 
-static int64_t deadline_from(int timeout_ms)
-{
-    return timeout_ms > 0 ? tf_now_ms() + timeout_ms : -1;
-}
-
 /* Turn an ERROR frame into the client's error. */
 static int fail_with_server_error(ts_client *c, const tf_frame *f)
 {
     size_t n = f->body_len < TF_PROTO_ERROR_MAX ? f->body_len : TF_PROTO_ERROR_MAX;
     return fail(c, "coordinator refused: %.*s", (int)n, (const char *)f->body);
 }
+
+/* A request's reply is awaited for as long as it takes (a blocking in may wait for hours); only
+ * the connection and its handshake have a deadline. */
+#define NO_DEADLINE (-1)
 
 /* read_frame, with a server's ERROR frame turned into the client's error. */
 static long read_reply(ts_client *c, tf_frame *f, int64_t deadline)
@@ -247,7 +245,7 @@ static int request(ts_client *c, uint8_t op, const tf_tuple *t, tf_tuple *out)
     uint32_t req = next_request_id(c);
     if (send_frame(c, op, req, t, NULL, 0) != 0)
         return -1;
-    return await_reply(c, req, out, deadline_from(c->timeout_ms));
+    return await_reply(c, req, out, NO_DEADLINE);
 }
 
 /* Read the reply to request req (replies come in request order). */
@@ -295,10 +293,9 @@ int ts_out_in(ts_client *c, const tf_tuple *t, const tf_tuple *tmpl, tf_tuple *o
     frame_spec f[2] = {{TF_OP_OUT, put, t, NULL, 0}, {TF_OP_IN, take, tmpl, NULL, 0}};
     if (send_frames(c, 2, f) != 0)
         return -1;
-    int64_t deadline = deadline_from(c->timeout_ms);
-    if (expect(c, await_reply(c, put, NULL, deadline), TF_OP_OK, TF_OP_OK) != 0)
+    if (expect(c, await_reply(c, put, NULL, NO_DEADLINE), TF_OP_OK, TF_OP_OK) != 0)
         return -1;
-    return expect(c, await_reply(c, take, out, deadline), TF_OP_TUPLE, TF_OP_TUPLE);
+    return expect(c, await_reply(c, take, out, NO_DEADLINE), TF_OP_TUPLE, TF_OP_TUPLE);
 }
 
 int ts_out(ts_client *c, const tf_tuple *t)
@@ -334,9 +331,7 @@ int ts_rdp(ts_client *c, const tf_tuple *tmpl, tf_tuple *out) { return probing(c
 
 int ts_ping(ts_client *c) { return expect(c, request(c, TF_OP_PING, NULL, NULL), TF_OP_PONG, TF_OP_PONG); }
 
-void ts_client_set_timeout(ts_client *c, int timeout_ms) { c->timeout_ms = timeout_ms; }
 const char *ts_client_error(const ts_client *c) { return c->err; }
-int ts_client_fd(const ts_client *c) { return c->fd; }
 
 /* ---- heartbeat ---- */
 static void *heartbeat_main(void *arg)

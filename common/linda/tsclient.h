@@ -55,16 +55,10 @@ int ts_out_in(ts_client *c, const tf_tuple *t, const tf_tuple *tmpl, tf_tuple *o
 /* Round trip a PING/PONG.  0 or -1. */
 int ts_ping(ts_client *c);
 
-/* Reply timeout for every later call, in ms (<= 0: wait forever, the default).  A blocking
- * in/rd that times out fails with "timed out" and kills the client (the request may still be
- * served later, so the stream can no longer be trusted). */
-void ts_client_set_timeout(ts_client *c, int timeout_ms);
 /* Start (interval_ms > 0) or stop (0) the heartbeat thread.  0 or -1. */
 int ts_client_heartbeat(ts_client *c, int interval_ms);
 
 /* The last error, "" if none. */
 const char *ts_client_error(const ts_client *c);
-/* The socket, e.g. for poll(); do not read or write it directly. */
-int ts_client_fd(const ts_client *c);
 
 #endif

@@ -16,8 +16,8 @@
  * dead (fd closed, waiter cancelled, on_disconnect run) and freed by the sweep at the end of
  * ts_server_run_once, or at once when the close comes from outside the loop.
  *
- * The dirty list (see conn_touch).  INVARIANTS (checked by dirty_list_ok() in debug builds,
- * `make asan`):
+ * The dirty list (see conn_touch).  INVARIANTS (checked clause by clause by
+ * assert_dirty_list() before every flush, in debug builds, `make asan`):
  *   T1. A connection is on srv->dirty at most once, and exactly when c->dirty is set (a live
  *       connection with c->dirty set is on the list; every entry of the list has it set).
  *   T2. srv->nconns is the length of the live list srv->conns. */
@@ -185,8 +185,6 @@ ts_server *ts_server_new(ts_space *space, const ts_server_config *cfg,
 }
 
 int ts_server_port(const ts_server *srv) { return srv->port; }
-ts_space *ts_server_space(const ts_server *srv) { return srv->space; }
-
 /* ---- connections ---- */
 static void conn_touch(conn *c);
 static void addr_of(const char *peer, char *addr, size_t len);
@@ -231,19 +229,37 @@ static void conn_touch(conn *c)
 }
 
 #ifndef NDEBUG
-static int dirty_list_ok(const ts_server *srv)
+/* 1 if the dirty list ends: a connection on it twice would close it into a cycle (Floyd). */
+static int dirty_list_ends(const ts_server *srv)
 {
-    size_t listed = 0, live_listed = 0, live_dirty = 0, live = 0;
+    const conn *slow = srv->dirty, *fast = srv->dirty;
+    while (fast && fast->dirty_next) {
+        slow = slow->dirty_next;
+        fast = fast->dirty_next->dirty_next;
+        if (slow == fast)
+            return 0;
+    }
+    return 1;
+}
+
+/* T1 and T2, one assert a clause (as SQLite's assert_pager_state).  Returns 1, so that a call
+ * sits inside assert() and vanishes with NDEBUG. */
+static int assert_dirty_list(const ts_server *srv)
+{
+    size_t live_listed = 0, live_dirty = 0, live = 0;
+    assert(dirty_list_ends(srv) && "T1: no connection is on the dirty list twice");
     for (const conn *c = srv->dirty; c; c = c->dirty_next) {
-        if (!c->dirty || ++listed > srv->nconns + 65536)
-            return 0; /* T1: an entry without the flag, or a cycle */
+        assert(c->dirty && "T1: every connection on the dirty list has its dirty flag set");
         live_listed += !c->dead;
     }
     for (const conn *c = srv->conns; c; c = c->next) {
         live++;
         live_dirty += c->dirty && !c->dead;
     }
-    return live_listed == live_dirty && live == srv->nconns; /* T1, T2 */
+    assert(live_listed == live_dirty &&
+           "T1: every live connection with its dirty flag set is on the dirty list");
+    assert(live == srv->nconns && "T2: srv->nconns is the length of the live list");
+    return 1;
 }
 #endif
 
@@ -931,7 +947,7 @@ static void sync_conn_interest(conn *c)
  * a connection may run hooks that touch others: they join the list and are served here too. */
 static void flush_dirty(ts_server *srv)
 {
-    assert(dirty_list_ok(srv));
+    assert(assert_dirty_list(srv));
     while (srv->dirty) {
         conn *c = srv->dirty;
         srv->dirty = c->dirty_next;
@@ -1046,23 +1062,6 @@ int ts_server_run_once(ts_server *srv, int timeout_ms)
 }
 
 size_t ts_server_conn_count(const ts_server *srv) { return srv->nconns; }
-
-size_t ts_server_unauthenticated_count(const ts_server *srv)
-{
-    size_t n = 0;
-    for (const conn *c = srv->conns; c; c = c->next)
-        n += c->state == NEED_AUTH;
-    return n;
-}
-
-size_t ts_server_conn_ids(const ts_server *srv, uint64_t *ids, size_t max)
-{
-    size_t i = 0;
-    for (const conn *c = srv->conns; c; c = c->next, i++)
-        if (i < max)
-            ids[i] = c->id;
-    return i;
-}
 
 static conn *find_conn(const ts_server *srv, uint64_t id)
 {

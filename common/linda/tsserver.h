@@ -92,7 +92,6 @@ void ts_server_free(ts_server *srv);
 
 /* The TCP port actually bound (useful with port 0), or 0 when not listening on TCP. */
 int ts_server_port(const ts_server *srv);
-ts_space *ts_server_space(const ts_server *srv);
 
 /* Serve an already-connected fd (e.g. the coordinator's end of a socketpair to a forked
  * worker): trusted, no HELLO, no authentication.  Takes ownership of fd (made non-blocking).
@@ -105,13 +104,9 @@ uint64_t ts_server_add_fd(ts_server *srv, int fd, const char *peer);
  * of sockets that had events, or -1 on a fatal poll error (EINTR counts as 0 events). */
 int ts_server_run_once(ts_server *srv, int timeout_ms);
 
-/* Accepted connections that have not finished the handshake. */
-size_t ts_server_unauthenticated_count(const ts_server *srv);
 
-/* Open connections (authenticated or not) and their ids. */
+/* Open connections (authenticated or not). */
 size_t ts_server_conn_count(const ts_server *srv);
-/* Fill ids with up to max connection ids; returns the total number of connections. */
-size_t ts_server_conn_ids(const ts_server *srv, uint64_t *ids, size_t max);
 /* A connection's peer ("127.0.0.1:53122", "[::1]:5000", "unix", or the add_fd label); NULL if
  * no such connection.  Valid until the connection closes. */
 const char *ts_server_peer(const ts_server *srv, uint64_t conn_id);

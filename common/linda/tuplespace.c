@@ -15,11 +15,21 @@
  *     others on the "wild" list.  Every waiter is also in an id hash for ts_cancel.  A global
  *     sequence number orders waiters across the two lists (arrival order).
  *
- * Invariant: no stored tuple matches a queued in-waiter or rd-waiter; i.e. a tuple is stored only
- * after every waiter that matches it has been served (rd) or it has been taken (in), and a
- * waiter is queued only after no stored tuple matched it. */
+ * INVARIANTS (checked clause by clause in debug builds, `make asan`: L1 by assert_no_match_waits
+ * after every out and wait, L2-L3 by assert_space_counts whenever the statistics are read and
+ * when the space is freed):
+ *   L1. No stored tuple matches a queued in-waiter or rd-waiter: a tuple is stored only after
+ *       every waiter that matches it has been served (rd) or it has been taken (in), and a
+ *       waiter is queued only after no stored tuple matched it.  (A wake-up that runs out of
+ *       memory leaves the waiters it could not serve queued, to be served by a later out; from
+ *       then on, short_of_memory set, L1 is not checked.)
+ *   L2. The statistics count what is there: st.tuples the stored tuples, st.bytes the sum of
+ *       their sizes, st.waiters (and nwaiters) the queued waiters.
+ *   L3. Every bucket holds a stored tuple or a queued waiter (an emptied one is freed at once),
+ *       and nbuckets counts the buckets. */
 #include "linda/tuplespace.h"
 
+#include <assert.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -82,7 +92,12 @@ struct ts_space {
     elist by_arity[TF_TUPLE_MAX_FIELDS + 1];
     uint64_t next_waiter_id, next_seq;
     ts_space_stats st;
+    int short_of_memory; /* a wake-up left matching waiters queued (L1) */
 };
+
+#ifndef NDEBUG
+static int assert_space_counts(const ts_space *s); /* L2, L3 */
+#endif
 
 /* ---- lists ---- */
 static void elist_push(elist *l, entry *e, int k)
@@ -313,6 +328,7 @@ void ts_space_free(ts_space *s)
 {
     if (!s)
         return;
+    assert(assert_space_counts(s));
     for (int a = 0; a <= TF_TUPLE_MAX_FIELDS; a++) {
         entry *e = s->by_arity[a].head, *next;
         for (; e; e = next) {
@@ -388,8 +404,9 @@ static void entry_take(ts_space *s, entry *e, tf_tuple *out)
     free(e);
 }
 
-/* The oldest stored tuple matching tmpl, or NULL.  Looks in one bucket when tmpl is named. */
-static entry *lookup(ts_space *s, const tf_tuple *tmpl)
+/* The oldest stored tuple matching tmpl, or NULL.  Looks in one bucket when tmpl is named.
+ * Each comparison is counted in *comparisons (NULL: not counted). */
+static entry *find(ts_space *s, const tf_tuple *tmpl, uint64_t *comparisons)
 {
     if (tmpl->nfields < 0 || tmpl->nfields > TF_TUPLE_MAX_FIELDS)
         return NULL;
@@ -407,12 +424,66 @@ static entry *lookup(ts_space *s, const tf_tuple *tmpl)
         link = LINK_ARITY;
     }
     for (entry *e = l->head; e; e = e->next[link]) {
-        s->st.comparisons++;
+        if (comparisons)
+            (*comparisons)++;
         if (tf_tuple_match(tmpl, &e->t))
             return e;
     }
     return NULL;
 }
+
+static entry *lookup(ts_space *s, const tf_tuple *tmpl)
+{
+    return find(s, tmpl, &s->st.comparisons);
+}
+
+#ifndef NDEBUG
+/* L1, one assert (SQLite's assert_pager_state): no queued waiter's lookup finds a tuple.
+ * Returns 1, so that a call sits inside assert() and vanishes with NDEBUG. */
+static int assert_no_match_waits(ts_space *s)
+{
+    for (size_t i = 0; i < s->nwslots; i++)
+        for (const waiter *w = s->wslots[i]; w; w = w->id_next)
+            assert((s->short_of_memory || !find(s, &w->tmpl, NULL)) &&
+                   "L1: no stored tuple matches a queued waiter");
+    return 1;
+}
+
+/* The queued waiters, counted on their lists (the buckets' and the wild one). */
+static size_t count_waiters(const ts_space *s, size_t *buckets)
+{
+    size_t n = 0;
+    *buckets = 0;
+    for (const waiter *w = s->wild.head; w; w = w->next)
+        n++;
+    for (size_t i = 0; i < s->nslots; i++)
+        for (const bucket *b = s->slots[i]; b; b = b->chain, (*buckets)++) {
+            assert((b->tuples.head || b->waiters.head) &&
+                   "L3: every bucket holds a stored tuple or a queued waiter");
+            for (const waiter *w = b->waiters.head; w; w = w->next)
+                n++;
+        }
+    return n;
+}
+
+/* L2 and L3, one assert a clause.  Returns 1, as assert_no_match_waits. */
+static int assert_space_counts(const ts_space *s)
+{
+    size_t tuples = 0, bytes = 0, buckets;
+    for (int a = 0; a <= TF_TUPLE_MAX_FIELDS; a++)
+        for (const entry *e = s->by_arity[a].head; e; e = e->next[LINK_ARITY]) {
+            tuples++;
+            bytes += e->bytes;
+        }
+    size_t waiters = count_waiters(s, &buckets);
+    assert(tuples == s->st.tuples && "L2: st.tuples counts the stored tuples");
+    assert(bytes == s->st.bytes && "L2: st.bytes is the sum of their sizes");
+    assert(waiters == s->st.waiters && waiters == s->nwaiters &&
+           "L2: st.waiters and nwaiters count the queued waiters");
+    assert(buckets == s->nbuckets && "L3: nbuckets counts the buckets");
+    return 1;
+}
+#endif
 
 /* ---- waiters ---- */
 typedef struct delivery {
@@ -467,14 +538,17 @@ static long collect_waiters(ts_space *s, tf_tuple *t, delivery **out)
         if (n == cap) {
             size_t ncap = cap ? cap * 2 : 4;
             delivery *nd = realloc(d, ncap * sizeof *nd);
-            if (!nd)
-                break; /* the waiters not collected stay queued: still correct, just later */
+            if (!nd) {
+                s->short_of_memory = 1; /* L1: those not collected stay queued, served later */
+                break;
+            }
             d = nd;
             cap = ncap;
         }
         if (w->take) {
             tf_tuple_move(&d[n].t, t);
         } else if (tf_tuple_copy(&d[n].t, t) != 0) {
+            s->short_of_memory = 1; /* L1: this rd waiter stays queued */
             continue;
         }
         d[n++].w = w;
@@ -522,6 +596,7 @@ int ts_space_out(ts_space *s, tf_tuple *t)
         tf_tuple_clear(t);
         rc = -1;
     }
+    assert(assert_no_match_waits(s));
     deliver(s, d, n);
     return rc;
 }
@@ -599,7 +674,9 @@ int ts_wait(ts_space *s, const tf_tuple *tmpl, int take, ts_wait_fn fn, void *ct
         tf_tuple_clear(&got);
         return 1;
     }
-    return enqueue_waiter(s, tmpl, take, fn, ctx, waiter_id);
+    int rc = enqueue_waiter(s, tmpl, take, fn, ctx, waiter_id);
+    assert(assert_no_match_waits(s));
+    return rc;
 }
 
 int ts_cancel(ts_space *s, uint64_t waiter_id)
@@ -616,7 +693,11 @@ int ts_cancel(ts_space *s, uint64_t waiter_id)
     return 1;
 }
 
-void ts_space_get_stats(const ts_space *s, ts_space_stats *out) { *out = s->st; }
+void ts_space_get_stats(const ts_space *s, ts_space_stats *out)
+{
+    assert(assert_space_counts(s));
+    *out = s->st;
+}
 
 size_t ts_space_count(ts_space *s, const tf_tuple *tmpl)
 {

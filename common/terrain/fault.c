@@ -1,8 +1,8 @@
 /* fault.c: Krten's fault-line terrain with his wind and rain erosion filters -- tf_gen_fault,
  * the TF_GEN_FAULT generator.
  *
- * Source: R. Krten, "Generating Realistic Terrain", Dr. Dobb's Journal, July 1994
- * (seeds/002_...), Listings Two (filter) and Four (fault, generate_line).
+ * Source: R. Krten, "Generating Realistic Terrain", Dr. Dobb's Journal, July 1994, Listings
+ * Two (filter) and Four (fault, generate_line).
  *
  *  - generate_line: a line through two random points (x1, y1), (x2, y2) with |x2-x1| > 2 and
  *    |y2-y1| > 2 (rejection sampling, as in the listing); on each row y the intercept is

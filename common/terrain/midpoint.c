@@ -1,8 +1,9 @@
 /* midpoint.c: random midpoint displacement (diamond-square) under Koh & Hearn's control
  * envelope -- tf_gen_midpoint, the TF_GEN_MIDPOINT generator.
  *
- * Source: Koh & Hearn, "Fast Generation and Surface Structuring Methods for Terrain and Other
- * Natural Phenomena" (seeds/000_...).
+ * Source: E.-K. Koh, D. D. Hearn, "Fast Generation and Surface Structuring Methods for
+ * Terrain and Other Natural Phenomena", Computer Graphics Forum (Eurographics '92), 1992; the
+ * sections below are that paper's.
  *
  *  - Section 2, random midpoint displacement, eqs. (9) and (10): a new point is the average of
  *    its already-known neighbours plus a random displacement whose amplitude shrinks with the

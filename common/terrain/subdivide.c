@@ -1,8 +1,8 @@
 /* subdivide.c: Ammeter & Mikhailyuk's recursive subdivision -- tf_gen_subdivide, the
  * TF_GEN_SUBDIVIDE generator.
  *
- * Source: H. Ammeter, M. V. Mikhailyuk, "Generation and Rendering of Virtual Terrain"
- * (seeds/004_...), section 3.  The corners are level 0; at each following level the midpoints
+ * Source: H. Ammeter, M. V. Mikhailyuk, "Generation and Rendering of Virtual Terrain",
+ * section 3.  The corners are level 0; at each following level the midpoints
  * between already-determined points get
  *
  *     H = A + (R - W) * (1 + A)^2 * M / L^E

@@ -1,7 +1,8 @@
 /* weathering.c: thermal weathering (talus relaxation) of a height field -- tf_weather_thermal,
  * the optional post-process applied by terrain_build.c to world heights.
  *
- * Source: Musgrave, "Methods for Realistic Landscape Imaging" (seeds/003_...), section 2.4.2.
+ * Source: F. K. Musgrave, "Methods for Realistic Landscape Imaging", PhD dissertation, Yale
+ * University, 1993, section 2.4.2.
  * At each time step every vertex v is compared with its neighbours u; where the drop
  * a_v - a_u exceeds the talus slope T, a fixed fraction c_t of the excess moves onto u:
  *

@@ -1,9 +1,10 @@
 #!/bin/sh
-# farm_failures.sh: issue 4, "a task that fails repeatedly on one worker is not dealt to it
-# again; a task that fails everywhere stops the render with a clear error, and the rows written
-# so far remain valid for --resume"; and many failing connections of one client beside a real
-# worker cannot stop a render (issue 13).  The failing workers are tests/tools/failing_worker.py,
-# which joins like any networked worker and answers every task with ("failed", ...).
+# farm_failures.sh: docs/contract.md section 3, "The tuple space and the farm": a task that fails
+# repeatedly on one worker is not dealt to it again; a task that fails everywhere stops the render
+# with a clear error, and the rows written so far remain valid for --resume; and many failing
+# connections of one client beside a real worker cannot stop a render.  The failing workers are
+# tests/tools/failing_worker.py, which joins like any networked worker and answers every task with
+# ("failed", ...).
 . "$(dirname "$0")/lib.sh"
 e2e_init
 FAILER="$TF_ROOT/tests/tools/failing_worker.py"

@@ -1,12 +1,11 @@
 #!/bin/sh
-# farm_flood.sh: bounded resources before authentication (issue 13).  While one real worker
-# renders against a coordinator that requires a secret, tests/tools/flood.py keeps 100
-# connections streaming a 64 MiB frame and thousands of idle connections open, and the test
-# sends wrong-MAC handshakes from the same address.  The render must complete, identical to a
-# clean one; the coordinator's peak RSS (--stats coordinator_max_rss_kb) must stay under 64 MB
-# (1 GB under ASan)
-# (on main it buffered every 64 MiB frame: 100 connections took it to gigabytes); the log stays
-# short (rate-limited warnings); and repeated failed handshakes from one address are slowed
+# farm_flood.sh: bounded resources before authentication (docs/contract.md section 3).  While one
+# real worker renders against a coordinator that requires a secret, tests/tools/flood.py keeps 100
+# connections streaming a 64 MiB frame and thousands of idle connections open, and the test sends
+# wrong-MAC handshakes from the same address.  The render must complete, identical to a clean one;
+# the coordinator's peak RSS (--stats coordinator_max_rss_kb) must stay under 64 MB (1 GB under
+# ASan) (on main it buffered every 64 MiB frame: 100 connections took it to gigabytes); the log
+# stays short (rate-limited warnings); and repeated failed handshakes from one address are slowed
 # down (fewer than 20 wrong tries get an answer in 4 s).
 . "$(dirname "$0")/lib.sh"
 e2e_init

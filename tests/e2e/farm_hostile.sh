@@ -1,11 +1,11 @@
 #!/bin/sh
-# farm_hostile.sh: a client holding the secret can only render (issue 13).
-# tests/tools/hostile_worker.py joins a render in progress and tries each class of attack:
-# forged, duplicate, empty and short results (non-finite values are refused by the worker
-# itself, tests/unit/test_worker.c; in encoded chunks only --verify can catch them); forged tasks and stops; scene replacement;
-# stealing results; hoarding; exclusions; joining twice.  Each must be refused (an ERROR reply
-# for that request), then it hoards tasks on five connections until the end.  A real worker
-# renders meanwhile.  The render must exit 0 with an image identical to a clean render, and
+# farm_hostile.sh: a client holding the secret can only render (coordinator/worker_role.h).
+# tests/tools/hostile_worker.py joins a render in progress and tries each class of attack: forged,
+# duplicate, empty and short results (non-finite values are refused by the worker itself,
+# tests/unit/test_worker.c; in encoded chunks only --verify can catch them); forged tasks and stops;
+# scene replacement; stealing results; hoarding; exclusions; joining twice.  Each must be refused
+# (an ERROR reply for that request), then it hoards tasks on five connections until the end.  A real
+# worker renders meanwhile.  The render must exit 0 with an image identical to a clean render, and
 # the coordinator's log must name the refused attempts and the peer.
 . "$(dirname "$0")/lib.sh"
 e2e_init

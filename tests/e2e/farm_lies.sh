@@ -1,5 +1,5 @@
 #!/bin/sh
-# farm_lies.sh: results whose chunks lie are refused (issue 12; farmproto.h "THE RESULT
+# farm_lies.sh: results whose chunks lie are refused (farmproto.h "THE RESULT
 # FORMAT").  tests/tools/lying_worker.py joins like any networked worker and answers tasks with
 # results that lie: another task's chunk coordinates, unpacked sizes that cannot belong to the
 # task, packed sizes that do not add up, a chunk too few, a preview share of the wrong size, and

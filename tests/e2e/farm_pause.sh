@@ -1,5 +1,6 @@
 #!/bin/sh
-# farm_pause.sh: a coordinator paused for longer than the lease heals by itself (issue 13).
+# farm_pause.sh: a coordinator paused for longer than the lease heals by itself (leases,
+# docs/contract.md section 3).
 # A render with one forked and one networked worker, --lease-timeout 1500; once both render,
 # the coordinator is SIGSTOPped for three lease periods (as a VM migration or a closed laptop
 # lid would), then continued.  On waking it must read what arrived before it judges anyone

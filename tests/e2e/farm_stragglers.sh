@@ -1,9 +1,9 @@
 #!/bin/sh
-# farm_stragglers.sh: issue 4, "stragglers: when nothing else is left to deal, idle workers may
-# get a duplicate of the oldest outstanding task; the first result wins, later ones are
-# dropped".  A worker is frozen (SIGSTOP) while it holds a task, with a lease far longer than
-# the render, so only straggler duplication can finish the image; the other worker must get a
-# copy of the frozen task, and the image must be identical.
+# farm_stragglers.sh: stragglers (docs/contract.md section 3): when nothing else is left to deal,
+# idle workers may get a duplicate of the oldest outstanding task; the first result wins, later ones
+# are dropped.  A worker is frozen (SIGSTOP) while it holds a task, with a lease far longer than the
+# render, so only straggler duplication can finish the image; the other worker must get a copy of
+# the frozen task, and the image must be identical.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=320x180

@@ -1,12 +1,12 @@
 #!/bin/sh
-# farm_tamper.sh: frames are sealed after the handshake (common/linda/seal.h; issue 13).  A
-# networked worker reaches the coordinator through tests/tools/flip_proxy.py, a machine on the
-# path that records what the coordinator sends and flips one bit of the worker's stream well
-# after the handshake, once.  The coordinator must close that connection only (one line naming
-# it: the record failed authentication); a second networked worker, connected directly, goes
-# on; the tampered-with worker reconnects and finishes; the image is identical to a clean render.  And the recorded stream
-# must not contain the scene's text, which the worker did receive (a machine on the path
-# cannot read the scene).
+# farm_tamper.sh: frames are sealed after the handshake (common/linda/seal.h).  A networked worker
+# reaches the coordinator through tests/tools/flip_proxy.py, a machine on the path that records what
+# the coordinator sends and flips one bit of the worker's stream well after the handshake, once.
+# The coordinator must close that connection only (one line naming it: the record failed
+# authentication); a second networked worker, connected directly, goes on; the tampered-with worker
+# reconnects and finishes; the image is identical to a clean render.  And the recorded stream must
+# not contain the scene's text, which the worker did receive (a machine on the path cannot read the
+# scene).
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=640x360

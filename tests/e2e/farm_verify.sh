@@ -1,12 +1,13 @@
 #!/bin/sh
-# farm_verify.sh: spot checks catch a lying worker (--verify, coordinator/verify.h; issue 13).
-# Three networked workers; one of them is a real `terrafarm worker` whose results pass through
-# tests/tools/lying_proxy.py (connecting from 127.0.0.2, a machine of its own), which changes one byte of every result's packed chunks (sizes
-# kept: the structural checks cannot see it).  With --verify 0.2 the coordinator must catch it
-# (a mismatch decided by a third render), exclude it, deal its tasks again, and finish with an
-# image identical to a clean render; the statistics report the checks and their cost.  The liar
-# joins first and renders alone for a moment: its results must wait for a check all the same.  Without
-# --verify the same liar gets its lies into the file (checked too, so the test can fail).
+# farm_verify.sh: spot checks catch a lying worker (--verify, coordinator/verify.h; docs/contract.md
+# section 3). Three networked workers; one of them is a real `terrafarm worker` whose results pass
+# through tests/tools/lying_proxy.py (connecting from 127.0.0.2, a machine of its own), which
+# changes one byte of every result's packed chunks (sizes kept: the structural checks cannot see
+# it).  With --verify 0.2 the coordinator must catch it (a mismatch decided by a third render),
+# exclude it, deal its tasks again, and finish with an image identical to a clean render; the
+# statistics report the checks and their cost.  The liar joins first and renders alone for a moment:
+# its results must wait for a check all the same.  Without --verify the same liar gets its lies into
+# the file (checked too, so the test can fail).
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=480x270

@@ -1,5 +1,6 @@
 #!/bin/sh
-# output_kept.sh: a finished output is never lost (issue 13; coordinator/output.h).
+# output_kept.sh: a finished output is never lost (coordinator/output.h; docs/contract.md
+# section 2: no error path leaves a corrupted output).
 #  1. A new render over a finished one (another size: nothing to resume) renders beside it
 #     and replaces it only when complete: on a full disk (a small tmpfs) it fails with a clear
 #     error, and the finished render is still there byte for byte, with nothing left beside it.

@@ -1,14 +1,14 @@
 #!/bin/sh
-# resume_kill.sh: docs/contract.md sections 2-3, issue 5: the coordinator can be SIGKILLed at any
-# instant, with workers holding tasks, and `render --resume` continues the same render: rows on
-# disk are kept (rows_resumed), never rendered again, and the final image is byte-identical to
-# an uninterrupted render.  Kills land while the new file's header is written, the instant the
-# file appears, as a resumed run starts, at ~30% of the output file's final size, inside the
-# resume's copy of the verified chunks, and at ~60% and ~90% (plus a random few milliseconds,
-# so they fall anywhere, mid-write included).  Forked workers die with their coordinator (PR_SET_PDEATHSIG).
-# Prints, per interruption, rows on disk after the kill and rows the next run resumed.
-# RESUME_TASKS (default rows:1, a scanline file) picks the task shape: resume_kill_tiled.sh
-# runs the same interruptions on a tiled file (stamps).
+# resume_kill.sh: docs/contract.md sections 2, 3 and 5: the coordinator can be SIGKILLed at any
+# instant, with workers holding tasks, and `render --resume` continues the same render: rows on disk
+# are kept (rows_resumed), never rendered again, and the final image is byte-identical to an
+# uninterrupted render.  Kills land while the new file's header is written, the instant the file
+# appears, as a resumed run starts, at ~30% of the output file's final size, inside the resume's
+# copy of the verified chunks, and at ~60% and ~90% (plus a random few milliseconds, so they fall
+# anywhere, mid-write included).  Forked workers die with their coordinator (PR_SET_PDEATHSIG).
+# Prints, per interruption, rows on disk after the kill and rows the next run resumed. RESUME_TASKS
+# (default rows:1, a scanline file) picks the task shape: resume_kill_tiled.sh runs the same
+# interruptions on a tiled file (stamps).
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=800x450

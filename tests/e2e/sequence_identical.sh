@@ -1,11 +1,11 @@
 #!/bin/sh
-# sequence_identical.sh: issue 14, determinism of sequences.  Frame k of one `render --frames`
-# run is byte-identical to `render --frame k` alone (the same task shape, so the same file
-# layout) for several k, worker counts and frame steps, with forked and with networked workers
-# (a networked worker builds the terrain once for the whole sequence), and holds bit-identical
-# decoded pixels with other task shapes (rows:K write scanline files, stamps tiled ones).  The frames overlap: frame k+1's first task is dealt before
-# frame k's last row is on disk (stats: frames[].start_s / done_s), and each frame's preview is
-# written beside it.
+# sequence_identical.sh: determinism of sequences (docs/contract.md section 2, --frames).  Frame k
+# of one `render --frames` run is byte-identical to `render --frame k` alone (the same task shape,
+# so the same file layout) for several k, worker counts and frame steps, with forked and with
+# networked workers (a networked worker builds the terrain once for the whole sequence), and holds
+# bit-identical decoded pixels with other task shapes (rows:K write scanline files, stamps tiled
+# ones).  The frames overlap: frame k+1's first task is dealt before frame k's last row is on disk
+# (stats: frames[].start_s / done_s), and each frame's preview is written beside it.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 # the showpiece's path and sun over a smaller terrain (2049^2 takes a while under ASan)

@@ -1,8 +1,9 @@
 #!/bin/sh
-# sequence_movie.sh: issue 14, "output a person can watch": `render --frames ... --movie
-# FILE.mp4|webm` writes a PNG preview per frame and assembles them with ffmpeg into a video at
-# the scene's frame rate (ffprobe reads its frame count, rate and size back); a second run with
-# every frame complete renders nothing and still makes the movie; a bad movie name is refused.
+# sequence_movie.sh: output a person can watch (docs/contract.md section 2, --movie): `render
+# --frames ... --movie FILE.mp4|webm` writes a PNG preview per frame and assembles them with ffmpeg
+# into a video at the scene's frame rate (ffprobe reads its frame count, rate and size back); a
+# second run with every frame complete renders nothing and still makes the movie; a bad movie name
+# is refused.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 command -v ffmpeg >/dev/null 2>&1 || skip "ffmpeg is not installed (make deps installs it)"

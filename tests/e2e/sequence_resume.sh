@@ -1,10 +1,10 @@
 #!/bin/sh
-# sequence_resume.sh: issue 14, resuming a sequence.  The coordinator of a `render --frames`
-# run is SIGKILLed in the middle of the sequence, twice; each `--resume` skips the frames that
-# are complete and verified (they are not rendered again: the statistics list them in
-# frames_skipped and not in frames), continues the frame in progress row by row, and renders
-# the rest; every frame is byte-identical to the uninterrupted sequence.  A changed animation
-# key is refused with one line.
+# sequence_resume.sh: resuming a sequence (docs/contract.md section 5, frames_skipped).  The
+# coordinator of a `render --frames` run is SIGKILLed in the middle of the sequence, twice; each
+# `--resume` skips the frames that are complete and verified (they are not rendered again: the
+# statistics list them in frames_skipped and not in frames), continues the frame in progress row by
+# row, and renders the rest; every frame is byte-identical to the uninterrupted sequence.  A changed
+# animation key is refused with one line.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 # the showpiece's path and sun over a smaller terrain (2049^2 takes a while under ASan)

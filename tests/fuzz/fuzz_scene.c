@@ -1,4 +1,4 @@
-/* fuzz_scene.c: libFuzzer harness for the scene parser (common/scene.c).  The input bytes are
+/* fuzz_scene.c: libFuzzer harness for the scene parser (common/scene*.c).  The input bytes are
  * scene text, as a networked worker would receive it.  Besides "no crash, leak or hang" it
  * checks two promises of scene.h on every input that parses:
  *   - the error contract: a rejected input yields one non-empty line with no newline;

@@ -1,5 +1,5 @@
 /* test_animation.c: unit tests for the [animation] section (common/animation.c and its keys in
- * common/scene.c): the camera and the sun pass through every key at its frame; the camera's
+ * common/scene_*.c): the camera and the sun pass through every key at its frame; the camera's
  * velocity is continuous across keys (one-sided difference quotients agree) and it never runs
  * backwards along its path; repeated key points are well defined; every bad key gives its
  * one-line "FILE:LINE: key: what is wrong"; the keys enter the canonical form and the hash

@@ -128,7 +128,8 @@ static size_t count_equal_spp(const tf_pixel *a, const tf_pixel *b, size_t n)
     return same;
 }
 
-/* The tolerance of the issue: PSNR >= 45 dB, sample counts and alpha equal for >= 99%. */
+/* The tolerance of docs/contract.md section 4: PSNR >= 45 dB, sample counts and alpha equal for
+ * >= 99%. */
 static void assert_close_to_c(const tf_pixel *img, const char *what)
 {
     size_t n = (size_t)W * H, alpha_same = 0;

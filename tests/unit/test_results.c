@@ -5,8 +5,9 @@
  * preview size); tf_exr_chunk_decodes refuses packed bytes that do not inflate to the chunk's
  * size; tf_exr_chunk_check finds a non-finite value at its exact channel and pixel, through
  * the ZIP filter, in scanline and tiled, half and float chunks; tf_result_counts_check refuses
- * counts beyond what a task can hold.  Also the layout's geometry (partial edge tiles, the preview span partitioning the
- * preview among tasks). */
+ * counts beyond what a task can hold.  Also the layout's geometry (partial edge tiles, the
+ * preview span partitioning the preview among tasks), and the other kinds of farm tuple
+ * (scene, counter, hello, failed). */
 #include <stdarg.h>
 #include <stddef.h>
 #include <setjmp.h>
@@ -296,6 +297,65 @@ static void test_geometry(void **state)
     }
 }
 
+/* The scene, counter, hello and failed tuples round-trip through their packers, match their
+ * templates, and are refused by the other kinds' parsers. */
+static void test_other_kinds_round_trip(void **state)
+{
+    (void)state;
+    tf_tuple t, tmpl;
+    tf_scene_msg sc = {"[image]\n", 64, 48, "abc", "scanline half"}, sc2;
+    assert_int_equal(tf_scene_tuple_pack(&t, &sc), 0);
+    assert_int_equal(tf_scene_tuple_template(&tmpl), 0);
+    assert_true(tf_tuple_match(&tmpl, &t));
+    assert_int_equal(tf_scene_tuple_unpack(&t, &sc2), 0);
+    assert_string_equal(sc2.text, sc.text);
+    assert_int_equal(sc2.width, 64);
+    assert_int_equal(sc2.height, 48);
+    assert_string_equal(sc2.hash, "abc");
+    assert_string_equal(sc2.layout, "scanline half");
+    int64_t n;
+    assert_int_equal(tf_next_worker_unpack(&t, &n), -1);
+    tf_tuple_clear(&t);
+    tf_tuple_clear(&tmpl);
+    sc.width = 65537; /* larger than any image */
+    assert_int_equal(tf_scene_tuple_pack(&t, &sc), 0);
+    assert_int_equal(tf_scene_tuple_unpack(&t, &sc2), -1);
+    tf_tuple_clear(&t);
+
+    assert_int_equal(tf_next_worker_pack(&t, 5), 0);
+    assert_int_equal(tf_next_worker_template(&tmpl), 0);
+    assert_true(tf_tuple_match(&tmpl, &t));
+    assert_int_equal(tf_next_worker_unpack(&t, &n), 0);
+    assert_int_equal(n, 5);
+    tf_tuple_clear(&t);
+    tf_tuple_clear(&tmpl);
+
+    tf_hello_msg h = {3, "forked", "host", 99, "c"}, h2;
+    assert_int_equal(tf_hello_pack(&t, &h), 0);
+    assert_int_equal(tf_hello_unpack(&t, &h2), 0);
+    assert_int_equal(h2.worker, 3);
+    assert_int_equal(h2.pid, 99);
+    assert_string_equal(h2.kind, "forked");
+    assert_string_equal(h2.host, "host");
+    assert_string_equal(h2.backend, "c");
+    tf_failed_msg f;
+    assert_int_equal(tf_failed_unpack(&t, &f), -1);
+    tf_tuple_clear(&t);
+
+    assert_int_equal(tf_failed_pack(&t, 12, 3, "no memory"), 0);
+    assert_int_equal(tf_failed_template(&tmpl, 12, -1), 0);
+    assert_true(tf_tuple_match(&tmpl, &t));
+    tf_tuple_clear(&tmpl);
+    assert_int_equal(tf_failed_template(&tmpl, 13, 3), 0);
+    assert_false(tf_tuple_match(&tmpl, &t));
+    assert_int_equal(tf_failed_unpack(&t, &f), 0);
+    assert_int_equal(f.id, 12);
+    assert_int_equal(f.worker, 3);
+    assert_string_equal(f.message, "no memory");
+    tf_tuple_clear(&t);
+    tf_tuple_clear(&tmpl);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -305,6 +365,7 @@ int main(void)
         cmocka_unit_test(test_chunk_check),
         cmocka_unit_test(test_counts_bounded),
         cmocka_unit_test(test_geometry),
+        cmocka_unit_test(test_other_kinds_round_trip),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,4 +1,4 @@
-/* test_scene.c: unit tests for the scene parser (common/scene.c): the exact one-line error for
+/* test_scene.c: unit tests for the scene parser (common/scene*.c): the exact one-line error for
  * every kind of bad input, defaults, vector syntax, the canonical form and hash (unchanged by
  * comments, spacing, key order and spelled-out defaults; changed by any field and by
  * tf_scene_set_size), tf_scene_parse_text == tf_scene_load, and every scenes/NAME.scene parsing. */

@@ -100,8 +100,7 @@ static void test_malformed_tasks_become_failures(void **state)
 
     for (int64_t id = 1; id <= NAN_TASK; id++) {
         tf_tuple tmpl, got;
-        tf_tuple_init(&tmpl);
-        assert_int_equal(tf_tuple_pack(&tmpl, "siiS", "failed", id, (int64_t)7), 0);
+        assert_int_equal(tf_failed_template(&tmpl, id, 7), 0);
         assert_int_equal(ts_space_inp(space, &tmpl, &got), 1);
         tf_tuple_clear(&got);
         tf_tuple_clear(&tmpl);

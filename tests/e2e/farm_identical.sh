@@ -5,7 +5,8 @@
 # edge tiles, the default stamps -> a tiled EXR) and the mix of forked and networked workers.
 # Files of the same layout are byte-identical (cmp: the workers' chunks do not depend on who
 # encoded them); files of different layouts are compared decoded (tests/tools/exrcmp.c).
-# Also: both kinds are ordinary OpenEXR files (exrheader and exrinfo read them).
+# Also: both kinds are ordinary OpenEXR files (exrheader and exrinfo read them); a bad
+# --wait-workers is one line and exit 2.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=240x135
@@ -58,6 +59,12 @@ mixed() {
 }
 mixed rows:1 "$T/ref.exr"
 mixed stamps:37x23 "$T/stamps_37x23_j1.exr"
+for bad in -1 x2 ''; do
+    "$TF_BIN" render "$SCENE" --wait-workers "$bad" -o "$T/bad.exr" 2>"$T/bad.err"; rc=$?
+    [ $rc -eq 2 ] && [ "$(wc -l <"$T/bad.err")" -eq 1 ] ||
+        fail "--wait-workers '$bad': exit $rc, $(cat "$T/bad.err")"
+done
+say "a bad --wait-workers: $(cat "$T/bad.err")"
 
 command -v exrheader >/dev/null 2>&1 || skip "exrheader not installed (package openexr)"
 for f in ref stamps_37x23_j1; do

@@ -64,7 +64,7 @@ NAMESPACES=""
 TMP=""
 STOPPED=""             # workers paused by cut_while_holding, continued before anything else
 cleanup() {
-    [ -n "$STOPPED" ] && kill -CONT $STOPPED 2>/dev/null
+    for pid in $STOPPED; do kill -CONT "$pid" 2>/dev/null; done
     for pid in $PIDS; do
         kill "$pid" 2>/dev/null
     done
@@ -225,12 +225,17 @@ except Exception:
 # however slow the look (a loaded machine) or fast the workers.
 cut_while_holding() {
     wpid=$(child_of "$1") opid=$(child_of "$3")
-    [ -n "$wpid" ] && [ -n "$opid" ] || fail "cannot find the worker processes under pids $1 $3"
+    if [ -z "$wpid" ] || [ -z "$opid" ]; then
+        fail "cannot find the worker processes under pids $1 $3"
+    fi
     tries=0
     while :; do
-        # a zombie takes the signal too: ask ps whether it still runs
-        kill -STOP "$wpid" "$opid" 2>/dev/null && [ "$(ps -o stat= -p "$wpid" | cut -c1)" = T ] ||
+        # a zombie takes the signal too: ask ps whether it is still there and not one
+        kill -STOP "$wpid" "$opid" 2>/dev/null
+        st=$(ps -o stat= -p "$wpid" | cut -c1)
+        if [ -z "$st" ] || [ "$st" = Z ]; then
             fail "worker 2 exited before the cut"
+        fi
         STOPPED="$wpid $opid"
         sleep 0.5
         held=$(worker_task 2)

@@ -234,6 +234,7 @@ cut_while_holding() {
         kill -STOP "$wpid" "$opid" 2>/dev/null
         st=$(ps -o stat= -p "$wpid" | cut -c1)
         if [ -z "$st" ] || [ "$st" = Z ]; then
+            tail -3 "$TMP/cut.coord.log" "$TMP/cut.w1.log" "$TMP/cut.w2.log"
             fail "worker 2 exited before the cut"
         fi
         STOPPED="$wpid $opid"

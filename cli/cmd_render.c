@@ -28,6 +28,8 @@ static const char usage[] =
     "      --movie FILE.mp4|webm after the frames, assemble their PNG previews into a video at\n"
     "                            the scene's frame rate (needs ffmpeg)\n"
     "  -j, --workers N           local workers to fork (default: online CPUs); 0 = networked only\n"
+    "      --wait-workers N      deal no task until N workers (forked ones included) have joined:\n"
+    "                            a farm across N hosts starts when all are in (default 0: at once)\n"
     "      --tasks rows:K        scanline-block tasks of K rows\n"
     "      --tasks stamps:WxH    postage-stamp tasks of WxH pixels (default: stamps sized from the\n"
     "                            image and the worker count)\n"
@@ -93,10 +95,11 @@ int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
            O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE, O_PIXEL,
-           O_VERIFY_CHUNKS, O_VERIFY, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE };
+           O_VERIFY_CHUNKS, O_VERIFY, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE, O_WAIT_WORKERS };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
+        {"wait-workers", required_argument, NULL, O_WAIT_WORKERS},
         {"tasks", required_argument, NULL, O_TASKS},
         {"watermark", required_argument, NULL, O_WATERMARK},
         {"size", required_argument, NULL, O_SIZE},
@@ -134,6 +137,10 @@ int cmd_render(int argc, char **argv)
         case 'o': o.output = optarg; break;
         case 'j':
             if (parse_int("--workers", optarg, 0, 4096, &o.workers))
+                return TF_EXIT_USAGE;
+            break;
+        case O_WAIT_WORKERS:
+            if (parse_int("--wait-workers", optarg, 0, 1 << 20, &o.wait_workers))
                 return TF_EXIT_USAGE;
             break;
         case O_TASKS:

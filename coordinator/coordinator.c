@@ -520,6 +520,10 @@ static int start_space(render *r)
     scfg.spec = r->spec;
     scfg.watermark = o->watermark; /* 0: auto, following the connected workers */
     scfg.expected_workers = expected_workers;
+    scfg.wait_workers = o->wait_workers;
+    if (o->wait_workers > 0)
+        tf_info("dealing no task until %d worker%s joined (--wait-workers)", o->wait_workers,
+                o->wait_workers == 1 ? " has" : "s have");
     scfg.max_task_failures = o->max_task_failures;
     r->sup = tf_supervisor_new(r->space, &scfg, err, sizeof err);
     if (!r->sup)

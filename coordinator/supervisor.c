@@ -157,6 +157,8 @@ struct tf_supervisor {
     tf_farm_stats stats;
     int cap_workers;
     int live_workers;        /* workers connected and announced: kept, not counted per step */
+    int joined_workers;      /* workers that said hello, ever (--wait-workers) */
+    int wait_workers;        /* --wait-workers: deal nothing before joined_workers reaches it */
     tf_events *events;       /* the dashboard's event log, or NULL */
     int64_t last_accepted;   /* tf_supervisor_last_accepted */
 };
@@ -482,8 +484,24 @@ static int open_job(tf_supervisor *s, job_state *j)
     return 0;
 }
 
+/* --wait-workers: 1 while too few workers have said hello for the first task to be dealt.
+ * Once open, the gate stays open (a worker leaving later does not stop the render). */
+static int waiting_for_workers(tf_supervisor *s)
+{
+    if (s->wait_workers <= 0)
+        return 0;
+    if (s->joined_workers < s->wait_workers)
+        return 1;
+    tf_info("%d worker%s joined: dealing tasks", s->joined_workers,
+            s->joined_workers == 1 ? "" : "s");
+    s->wait_workers = 0;
+    return 0;
+}
+
 static void deal_new_tasks(tf_supervisor *s)
 {
+    if (waiting_for_workers(s))
+        return;
     while (!s->error[0] && s->next_deal < s->total_tasks &&
            s->next_deal - s->write_task < s->watermark) {
         job_state *j = job_of(s, s->next_deal);
@@ -941,6 +959,8 @@ static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
     if (!tf_hello_unpack(tuple, &m)) {
         tf_worker_stats *w = add_worker(s, m.worker);
         if (w) {
+            s->joined_workers += !w->hello; /* its first hello */
+            w->hello = 1;
             snprintf(w->kind, sizeof w->kind, "%s", m.kind);
             snprintf(w->host, sizeof w->host, "%s", m.host);
             snprintf(w->backend, sizeof w->backend, "%s", m.backend);
@@ -1580,6 +1600,7 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     s->space = space;
     s->last_accepted = -1;
     s->cfg = *cfg;
+    s->wait_workers = cfg->wait_workers;
     if (s->cfg.max_task_failures < 1)
         s->cfg.max_task_failures = 3;
     s->cfg.jobs = NULL; /* copied below */
@@ -1763,6 +1784,8 @@ const tf_farm_stats *tf_supervisor_stats(tf_supervisor *s)
     s->stats.pixels_checked = tf_resultcheck_pixels(s->checker);
     return &s->stats;
 }
+
+int tf_supervisor_joined_workers(const tf_supervisor *s) { return s->joined_workers; }
 
 int tf_supervisor_live_workers(const tf_supervisor *s)
 {

@@ -56,6 +56,7 @@ typedef struct tf_worker_stats {
     int checked;       /* --verify: passed a spot check (its results may be written) */
     int excluded;      /* --verify: caught lying; every request refused */
     int64_t written;   /* its results handed to the writer */
+    int hello;         /* it said hello (counted once by --wait-workers) */
 } tf_worker_stats;
 
 /* One frame of a sequence (docs/contract.md: "frames"). */
@@ -126,6 +127,8 @@ typedef struct tf_supervisor_config {
     tf_task_spec spec;
     int watermark;            /* >= tasks per band (checked); 0 = auto (follows the workers) */
     int expected_workers;     /* auto watermark: workers to plan for before they connect */
+    int wait_workers;         /* --wait-workers: deal no task before this many workers said
+                               * hello (forked ones count; 0: deal at once) */
     int max_task_failures;
 } tf_supervisor_config;
 
@@ -166,6 +169,8 @@ int tf_supervisor_rows_written(const tf_supervisor *sup, int job);
 int tf_supervisor_write_job(const tf_supervisor *sup);
 /* Live statistics (pointers valid until the next call into the supervisor). */
 const tf_farm_stats *tf_supervisor_stats(tf_supervisor *sup);
+/* Workers that said hello since the start (left or not): --wait-workers counts these. */
+int tf_supervisor_joined_workers(const tf_supervisor *sup);
 /* Connected workers that said hello and have not left. */
 int tf_supervisor_live_workers(const tf_supervisor *sup);
 

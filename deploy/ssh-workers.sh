@@ -2,8 +2,12 @@
 # deploy/ssh-workers.sh: start terrafarm workers on a list of machines over ssh.
 #
 # Start the coordinator first, listening on an address the worker machines can reach, with a
-# secret file (required on any non-loopback address):
-#     terrafarm render scenes/alps.scene -o alps.exr --listen 0.0.0.0:7878 --secret-file secret
+# secret file (required on any non-loopback address), and --wait-workers with the number of
+# worker processes the hosts file starts (plus -j, the coordinator's own), so that no task is
+# dealt before every machine has joined (a small render is otherwise over before the last
+# machine connects, and that machine's workers fail to find the coordinator):
+#     terrafarm render scenes/alps.scene -o alps.exr --listen 0.0.0.0:7878 --secret-file secret \
+#         -j 0 --wait-workers 16
 # then, from any machine that can ssh to the workers:
 #     deploy/ssh-workers.sh --connect coord.example.org:7878 --push-secret secret hosts.txt
 #

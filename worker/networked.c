@@ -36,10 +36,11 @@ static int failure_is_final(const char *err)
 }
 
 /* Connect, retrying with backoff (250 ms doubling to 4 s) for at most timeout_ms while the
- * coordinator cannot be reached: a worker started before its coordinator (a boot script, a
- * batch job) waits for it, and one that lost it (a pause, a partition, a restart, an address
- * made to wait after failed handshakes) comes back.  A final failure (wrong secret, not a
- * coordinator) ends at once. */
+ * coordinator cannot be reached or turns the connection away unheard: a worker started before
+ * its coordinator (a boot script, a batch job, "Connection refused") waits for it, one that
+ * lost it (a pause, a partition, a restart) comes back, and one whose address is crowded by
+ * failed handshakes (a guesser beside it) tries again.  A final failure (its own wrong secret,
+ * answered as such; not a coordinator) ends at once. */
 static ts_client *connect_patiently(const char *hostport, const uint8_t *key, int timeout_ms,
                                     char *err, size_t errlen)
 {

@@ -33,15 +33,25 @@ static int take_worker_id(ts_client *c, int64_t *id)
 
 int tf_worker_join(ts_client *c, const char *kind, const char *backend, int64_t *id)
 {
+    return tf_worker_join_take(c, kind, backend, id, NULL);
+}
+
+int tf_worker_join_take(ts_client *c, const char *kind, const char *backend, int64_t *id,
+                        tf_tuple *first)
+{
     if (take_worker_id(c, id))
         return -1;
     char host[64] = "";
     gethostname(host, sizeof host - 1);
     tf_hello_msg m = {*id, kind, host, (int64_t)getpid(), backend};
-    tf_tuple t;
-    int rc = tf_hello_pack(&t, &m) || ts_out(c, &t) ? -1 : 0;
+    tf_tuple t, tmpl;
+    tf_task_template(&tmpl, TF_TASK_ANY);
+    int rc = tf_hello_pack(&t, &m);
+    if (rc == 0)
+        rc = first ? ts_out_in(c, &t, &tmpl, first) : ts_out(c, &t);
     tf_tuple_clear(&t);
-    return rc;
+    tf_tuple_clear(&tmpl);
+    return rc ? -1 : 0;
 }
 
 static void note_op(const tf_worker_step *step)
@@ -71,6 +81,12 @@ static int report_failure(ts_client *c, int64_t task, int64_t worker, const char
 int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
                     const tf_worker_step *step)
 {
+    return tf_worker_serve_from(c, id, layout, step, NULL);
+}
+
+int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
+                         const tf_worker_step *step, tf_tuple *first)
+{
     char err[1024];
     tf_exr_encoder *enc = NULL;
     if (!step->payload && !(enc = tf_exr_encoder_new(layout, err, sizeof err))) {
@@ -89,6 +105,11 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
     tf_tuple_init(&next);
     int have_next = 0;
     int64_t next_wait = 0;
+    if (first) { /* taken when joining (tf_worker_join_take) */
+        next = *first;
+        tf_tuple_init(first);
+        have_next = 1;
+    }
     for (;;) {
         tf_tuple task;
         tf_task_msg m;
@@ -320,29 +341,34 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
         tf_error("%s", err);
         return TF_WORKER_EXIT_NOSTART;
     }
-    int64_t id;
-    if (tf_worker_join(c, kind, tf_backend_name(b), &id)) {
-        /* A refusal (this address is excluded) is final; a lost connection is not. */
-        int refused = strstr(ts_client_error(c), "refused:") != NULL;
-        if (refused)
-            tf_error("cannot join the render: %s", ts_client_error(c));
-        else
-            tf_warn("cannot join the render: %s", ts_client_error(c));
-        tf_backend_free(b);
-        return refused ? 1 : TF_WORKER_EXIT_LOST;
-    }
-    char tag[32];
-    snprintf(tag, sizeof tag, "worker %" PRId64, id);
-    tf_log_set_tag(tag);
     tf_exr_layout layout;
     if (tf_worker_fetch_layout(c, &layout, err, sizeof err)) {
         tf_error("%s", err);
         tf_backend_free(b);
         return 1;
     }
+    /* The hello and the first take leave together: when the coordinator counts this worker
+     * as joined (--wait-workers), it is already waiting for a task. */
+    int64_t id;
+    tf_tuple first;
+    tf_tuple_init(&first);
+    if (tf_worker_join_take(c, kind, tf_backend_name(b), &id, &first)) {
+        /* A refusal (this address is excluded) is final; a lost connection is not. */
+        int refused = strstr(ts_client_error(c), "refused:") != NULL;
+        if (refused)
+            tf_error("cannot join the render: %s", ts_client_error(c));
+        else
+            tf_warn("cannot join the render: %s", ts_client_error(c));
+        tf_tuple_clear(&first);
+        tf_backend_free(b);
+        return refused ? 1 : TF_WORKER_EXIT_LOST;
+    }
+    char tag[32];
+    snprintf(tag, sizeof tag, "worker %" PRId64, id);
+    tf_log_set_tag(tag);
     backend_ctx bc = {b, s, -1, {{0}}, 0};
     tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, NULL, s->width, s->height};
-    int rc = tf_worker_serve(c, id, &layout, &step);
+    int rc = tf_worker_serve_from(c, id, &layout, &step, &first);
     backend_ctx_free(&bc);
     if (rc == TF_SERVE_LOST)
         tf_warn("lost the coordinator: %s", ts_client_error(c));

@@ -49,6 +49,11 @@ typedef struct tf_worker_step {
 /* Join the render: take a worker id (Linda's counter idiom) and announce ("hello", id, kind,
  * host, pid, backend).  0, or -1 (the client's error says why). */
 int tf_worker_join(ts_client *c, const char *kind, const char *backend, int64_t *id);
+/* The same, and the hello leaves with the first take of a task in one round trip (ts_out_in):
+ * when the coordinator sees the hello, this worker is already waiting for a task.  Returns once
+ * the first task tuple is in *first (to hand to tf_worker_serve_from). */
+int tf_worker_join_take(ts_client *c, const char *kind, const char *backend, int64_t *id,
+                        tf_tuple *first);
 
 /* How tf_worker_serve ended. */
 enum { TF_SERVE_STOPPED = 0, TF_SERVE_LOST = 1, TF_SERVE_UNDELIVERED = 2 };
@@ -59,6 +64,10 @@ enum { TF_SERVE_STOPPED = 0, TF_SERVE_LOST = 1, TF_SERVE_UNDELIVERED = 2 };
  * was ending anyway. */
 int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
                     const tf_worker_step *step);
+/* The same, starting with the task in *first (taken when joining; moved out, *first left
+ * empty), or with a take when first is NULL. */
+int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
+                         const tf_worker_step *step, tf_tuple *first);
 
 /* The real worker: join, build the backend, serve until told to stop.  kind is "forked" or
  * "networked".  Returns an exit status (0 when the render finished; TF_WORKER_EXIT_NOSTART

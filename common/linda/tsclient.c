@@ -430,10 +430,13 @@ static int handshake(ts_client *c, const uint8_t *key, int64_t deadline)
     tf_auth_client_mac(key, ns, nc, body + TF_NONCE_BYTES);
     if (send_frame(c, TF_OP_AUTH, 0, NULL, body, sizeof body) != 0)
         return -1;
+    /* A wrong secret gets an explicit ERROR ("authentication failed"); a close without one
+     * (a handshake evicted to make room, a coordinator going away) may be retried. */
     n = read_frame(c, &f, deadline);
     if (n < 0) {
         if (strstr(c->err, "closed"))
-            snprintf(c->err, sizeof c->err, "authentication failed (wrong secret?)");
+            snprintf(c->err, sizeof c->err, "the coordinator closed the connection during the "
+                     "handshake");
         return -1;
     }
     if (f.op == TF_OP_ERROR)

@@ -2,8 +2,9 @@
  * the wire format).  One thread, epoll, non-blocking sockets, per-connection buffers.
  *
  * Life of a connection: accepted (HELLO queued; if a key is set, state NEED_AUTH until a valid
- * AUTH) or added by fd (trusted, READY at once) -> frames are parsed from its input buffer in
- * order -> replies are queued on its output buffer and written before the next poll, like
+ * AUTH; a wrong AUTH from an address that failed before is HELD: its answer waits, see
+ * note_auth_failure) or added by fd (trusted, READY at once) -> frames are parsed from its
+ * input buffer in order -> replies are queued on its output buffer and written before the next poll, like
  * Redis's beforeSleep -> closed on EOF, error, protocol violation or timeout.
  *
  * Ordering invariant: a connection has at most one request in progress.  While its blocked
@@ -56,12 +57,14 @@
 #define TS_POLL_CAP_MS 250    /* longest poll when timeouts must be enforced */
 #define TS_STALL_MS 1000      /* a gap this long between iterations is a stall (see enforce_timeouts) */
 #define TS_PENALTY_SLOTS 64   /* addresses remembered for failed handshakes */
-#define TS_PENALTY_FREE_FAILS 3 /* failures from one address before it must wait */
+#define TS_PENALTY_FREE_FAILS 3 /* failures from one address answered at once */
 #define TS_PENALTY_BASE_MS 250
 #define TS_PENALTY_MAX_MS 30000
+#define TS_PENALTY_FORGET_MS 600000 /* an address quiet this long starts afresh */
 #define TS_ACCEPT_PAUSE_MS 100 /* out of file descriptors: stop accepting this long */
 
-enum conn_state { NEED_AUTH, READY };
+/* HELD: a failed handshake whose answer waits out its address's penalty (note_auth_failure). */
+enum conn_state { NEED_AUTH, HELD, READY };
 
 typedef struct conn {
     uint64_t id;
@@ -79,6 +82,7 @@ typedef struct conn {
     tf_seal tx, rx;
     tf_buf raw, wire;      /* sealed: records read but not opened yet, records not yet sent */
     int64_t created_ms, last_rx_ms;
+    int64_t verdict_ms;    /* HELD: when "authentication failed" is sent and c closed */
     int waiting;           /* a blocked IN/RD is queued in the space */
     int pending_take;      /* ... and whether it is an IN */
     uint32_t pending_req;  /* ... and its request id */
@@ -95,7 +99,7 @@ typedef struct conn {
 typedef struct auth_penalty {
     char addr[96];
     int failures;
-    int64_t until_ms, last_ms;
+    int64_t last_ms;
 } auth_penalty;
 
 struct ts_server {
@@ -435,35 +439,35 @@ static auth_penalty *penalty_for(ts_server *srv, const char *addr, int create)
     return oldest;
 }
 
-/* After TS_PENALTY_FREE_FAILS failures an address waits 250 ms, then 500, 1 s, ... up to 30 s
- * before its next connection is even accepted: guessing a secret online becomes hopeless. */
-static void note_auth_failure(ts_server *srv, const char *addr)
+/* Count a failed handshake from addr; returns how long its answer must wait.  The first
+ * TS_PENALTY_FREE_FAILS failures are answered at once, then 250 ms, 500 ms, 1 s ... up to 30 s:
+ * guessing a secret online becomes hopeless.  Only wrong guesses wait: a right one from the same
+ * address is admitted at once, so a guesser cannot lock out the workers sharing its address. */
+static int64_t note_auth_failure(ts_server *srv, const char *addr)
 {
     auth_penalty *p = penalty_for(srv, addr, 1);
     int64_t now = tf_now_ms();
+    if (p->failures > 0 && now - p->last_ms > TS_PENALTY_FORGET_MS)
+        p->failures = 0;
     p->failures++;
     p->last_ms = now;
-    if (p->failures >= TS_PENALTY_FREE_FAILS) {
-        int shift = p->failures - TS_PENALTY_FREE_FAILS;
-        int64_t wait = shift > 16 ? TS_PENALTY_MAX_MS : (int64_t)TS_PENALTY_BASE_MS << shift;
-        p->until_ms = now + (wait > TS_PENALTY_MAX_MS ? TS_PENALTY_MAX_MS : wait);
-    }
+    if (p->failures <= TS_PENALTY_FREE_FAILS)
+        return 0;
+    int shift = p->failures - TS_PENALTY_FREE_FAILS - 1;
+    int64_t wait = shift > 16 ? TS_PENALTY_MAX_MS : (int64_t)TS_PENALTY_BASE_MS << shift;
+    return wait > TS_PENALTY_MAX_MS ? TS_PENALTY_MAX_MS : wait;
 }
 
-static void note_auth_success(ts_server *srv, const char *addr)
-{
-    auth_penalty *p = penalty_for(srv, addr, 0);
-    if (p)
-        memset(p, 0, sizeof *p);
-}
-
-/* The oldest connection still in the handshake (from addr, or from anywhere if NULL). */
-static conn *oldest_unauthenticated(ts_server *srv, const char *addr, size_t *count)
+/* The oldest connection still in the handshake (from addr, or from anywhere if NULL), among
+ * those waiting for their AUTH (held = 0) or those holding a failed one's answer (held = 1);
+ * *count (if given): how many of that kind there are. */
+static conn *oldest_unauthenticated(ts_server *srv, const char *addr, int held, size_t *count)
 {
     conn *oldest = NULL;
     size_t n = 0;
+    enum conn_state want = held ? HELD : NEED_AUTH;
     for (conn *c = srv->conns; c; c = c->next) {
-        if (c->state != NEED_AUTH || (addr && strcmp(c->addr, addr)))
+        if (c->state != want || (addr && strcmp(c->addr, addr)))
             continue;
         n++;
         if (!oldest || c->created_ms <= oldest->created_ms)
@@ -489,30 +493,42 @@ static void pause_accepting(ts_server *srv)
         srv->listen_added = 0;
 }
 
+/* Make room for one more unfinished handshake from addr: at a cap, close the oldest one still
+ * waiting for its AUTH (it learns nothing).  Failed handshakes whose answer is held count too,
+ * but are not closed early for a newcomer from their own address (that would answer a guess
+ * sooner): then the newcomer is refused, -1 (logged).  So one address has at most
+ * max_unauth_per_addr guesses in flight. */
+static int room_for_handshake(ts_server *srv, const char *peer, const char *addr)
+{
+    static tf_ratelimit rl;
+    size_t waiting, held, all_waiting, all_held;
+    conn *old_here = oldest_unauthenticated(srv, addr, 0, &waiting);
+    oldest_unauthenticated(srv, addr, 1, &held);
+    conn *old_all = oldest_unauthenticated(srv, NULL, 0, &all_waiting);
+    conn *old_held = oldest_unauthenticated(srv, NULL, 1, &all_held);
+    if (waiting + held >= (size_t)srv->max_unauth_per_addr) {
+        if (!old_here) {
+            tf_warn_limited(&rl, "refusing tuple-space connection from %s: %zu failed "
+                            "handshakes from %s await their answer", peer, held, addr);
+            return -1;
+        }
+        evict(old_here, "too many unfinished handshakes from this address");
+    } else if (all_waiting + all_held >= (size_t)srv->max_unauth) {
+        evict(old_all ? old_all : old_held, "too many unfinished handshakes");
+    }
+    return 0;
+}
+
 /* Decide whether a new connection from peer may stay; may close older strangers to make room.
- * 0: keep it; -1: refuse it (logged). */
+ * 0: keep it; -1: refuse it (logged).  Failed handshakes do not bar an address: they only slow
+ * its wrong guesses (note_auth_failure). */
 static int admit(ts_server *srv, const char *peer)
 {
-    static tf_ratelimit rl_penalty, rl_cap;
+    static tf_ratelimit rl_cap;
     char addr[96];
     addr_of(peer, addr, sizeof addr);
-    int64_t now = tf_now_ms();
-    auth_penalty *p = penalty_for(srv, addr, 0);
-    if (p && p->until_ms > now) {
-        tf_warn_limited(&rl_penalty, "refusing tuple-space connection from %s: %d failed "
-                        "handshakes from %s, next try allowed in %lld ms",
-                        peer, p->failures, addr, (long long)(p->until_ms - now));
+    if (srv->has_key && room_for_handshake(srv, peer, addr) != 0)
         return -1;
-    }
-    if (srv->has_key) {
-        size_t here, all;
-        conn *old_here = oldest_unauthenticated(srv, addr, &here);
-        conn *old_all = oldest_unauthenticated(srv, NULL, &all);
-        if (here >= (size_t)srv->max_unauth_per_addr && old_here)
-            evict(old_here, "too many unfinished handshakes from this address");
-        else if (all >= (size_t)srv->max_unauth && old_all)
-            evict(old_all, "too many unfinished handshakes");
-    }
     size_t same = 0;
     for (conn *c = srv->conns; c; c = c->next)
         same += c->state == READY && !strcmp(c->addr, addr);
@@ -522,7 +538,7 @@ static int admit(ts_server *srv, const char *peer)
         return -1;
     }
     if (srv->nconns >= (size_t)srv->max_conns) {
-        conn *old = oldest_unauthenticated(srv, NULL, NULL);
+        conn *old = oldest_unauthenticated(srv, NULL, 0, NULL);
         if (!old) {
             tf_warn_limited(&rl_cap, "refusing tuple-space connection from %s: %d connections "
                             "open", peer, srv->max_conns);
@@ -543,7 +559,7 @@ static void accept_all(ts_server *srv)
             if (errno == EMFILE || errno == ENFILE || errno == ENOBUFS || errno == ENOMEM) {
                 /* Out of descriptors: free one held by a stranger, else stop accepting for a
                  * moment (the listener would otherwise stay readable and spin the loop). */
-                conn *old = oldest_unauthenticated(srv, NULL, NULL);
+                conn *old = oldest_unauthenticated(srv, NULL, 0, NULL);
                 if (old) {
                     evict(old, "out of file descriptors");
                     continue;
@@ -706,6 +722,24 @@ static int handle_take_or_read(conn *c, const tf_frame *f, char *err, size_t err
     return rc;
 }
 
+/* A wrong MAC: answered at once, or held (state HELD, input ignored) until the address's
+ * penalty is served, then answered and closed by enforce_timeouts. */
+static void auth_failed(conn *c)
+{
+    static tf_ratelimit rl;
+    int64_t wait = note_auth_failure(c->srv, c->addr);
+    auth_penalty *p = penalty_for(c->srv, c->addr, 0);
+    tf_warn_limited(&rl, "authentication failed from %s (%d failed handshakes from %s; "
+                    "answered in %lld ms)", c->peer, p ? p->failures : 0, c->addr,
+                    (long long)wait);
+    if (wait == 0) {
+        conn_refuse(c, "authentication failed");
+        return;
+    }
+    c->state = HELD;
+    c->verdict_ms = tf_now_ms() + wait;
+}
+
 static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
 {
     if (c->state != NEED_AUTH) {
@@ -718,13 +752,9 @@ static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
     }
     const uint8_t *nc = f->body, *mac = f->body + TF_NONCE_BYTES;
     if (!tf_auth_client_mac_ok(c->srv->key, c->ns, nc, mac)) {
-        static tf_ratelimit rl;
-        tf_warn_limited(&rl, "authentication failed from %s", c->peer);
-        note_auth_failure(c->srv, c->addr);
-        conn_refuse(c, "authentication failed");
+        auth_failed(c);
         return 0;
     }
-    note_auth_success(c->srv, c->addr);
     uint8_t proof[TF_MAC_BYTES];
     tf_auth_server_mac(c->srv->key, c->ns, nc, proof);
     c->state = READY;
@@ -786,7 +816,7 @@ static int handle_frame(conn *c, const tf_frame *f, char *err, size_t errlen)
  * largest tuple its role allows (plus the frame header), then TF_MAX_FRAME. */
 static uint32_t conn_max_frame(const conn *c)
 {
-    if (c->state == NEED_AUTH)
+    if (c->state != READY)
         return TF_HANDSHAKE_FRAME_MAX;
     const ts_role *role = c->srv->role;
     if (role && role->max_tuple_bytes && role->max_tuple_bytes < TF_MAX_FRAME - 64)
@@ -798,6 +828,10 @@ static uint32_t conn_max_frame(const conn *c)
 static void conn_process_input(conn *c)
 {
     char err[160];
+    if (c->state == HELD) { /* nothing it says counts until its answer is sent */
+        tf_buf_consume(&c->in, c->in.len);
+        return;
+    }
     while (!c->dead && c->in.len > 0) {
         tf_frame f;
         long n = tf_frame_parse_max(tf_buf_head(&c->in), c->in.len, conn_max_frame(c), &f, err,
@@ -982,7 +1016,11 @@ static void enforce_timeouts(ts_server *srv)
     srv->last_timeout_check_ms = now;
     for (conn *c = srv->conns, *next; c; c = next) {
         next = c->next;
-        if (c->state == NEED_AUTH && now - c->created_ms > srv->handshake_ms)
+        if (c->state == HELD && now >= c->verdict_ms)
+            conn_refuse(c, "authentication failed");
+        else if (c->state == HELD)
+            continue;
+        else if (c->state == NEED_AUTH && now - c->created_ms > srv->handshake_ms)
             conn_drop(c, "authentication handshake timed out");
         else if (srv->silence_ms > 0 && now - c->last_rx_ms > srv->silence_ms)
             conn_drop(c, "silent for too long (no frame or heartbeat)");

@@ -73,8 +73,11 @@ typedef struct ts_server_config {
      * (tf_tuple_bytes); 0: no limit. */
     size_t max_space_bytes;
     /* Connections that have not finished the handshake: at most this many in all and from
-     * one address; a new one beyond either cap closes the oldest such connection (so idle
-     * strangers cannot lock real workers out: a worker needs one round trip).  <= 0: 64, 8. */
+     * one address; a new one beyond either cap closes the oldest such connection still waiting
+     * for its AUTH (so idle strangers cannot lock real workers out: a worker needs one round
+     * trip).  Failed handshakes whose answer is held (a wrong secret from an address that
+     * failed before) count too; from one address they are never closed early: a newcomer is
+     * refused instead, so the guesses in flight stay bounded.  <= 0: 64, 8. */
     int max_unauthenticated, max_unauthenticated_per_address;
     /* Authenticated (or loopback) connections from one address beyond this are refused.
      * <= 0: 1024. */

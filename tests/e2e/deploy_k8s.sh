@@ -68,6 +68,9 @@ check(arg_after(wargs, "--connect") == "%s:%d" % (svc["metadata"]["name"], port[
       "workers do not connect to the Service")
 check(workers_job["parallelism"] > 1, "worker Job parallelism must be > 1 (N workers)")
 check(workers_job["completions"] == workers_job["parallelism"], "completions != parallelism")
+check(int(arg_after(cargs, "--wait-workers")) ==
+      int(arg_after(cargs, "-j")) + workers_job["parallelism"] * int(arg_after(wargs, "-j")),
+      "coordinator --wait-workers is not its own -j plus parallelism x the workers' -j")
 check(coord["spec"]["restartPolicy"] in ("OnFailure", "Never"), "Job restartPolicy")
 
 for pod, ctr, args in ((coord, c, cargs), (workers, w, wargs)):

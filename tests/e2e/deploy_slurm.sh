@@ -56,7 +56,7 @@ chmod +x "$T/bin/scontrol" "$T/bin/srun"
 J=$(printf '%s' "$T/job dir" | sed 's/ /\\ /g')
 cat >"$T/dry.expected" <<EXPECTED
 (umask 077; head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \\n' >$J/.terrafarm-4321.secret)
-/opt/tf/terrafarm render scenes/alps.scene -o alps.exr --resume --listen 10.1.2.3:14321 --secret-file $J/.terrafarm-4321.secret -j 16 --stats alps.json &
+/opt/tf/terrafarm render scenes/alps.scene -o alps.exr --resume --listen 10.1.2.3:14321 --secret-file $J/.terrafarm-4321.secret -j 16 --wait-workers 48 --stats alps.json &
 srun --nodes=2 --ntasks=2 --ntasks-per-node=1 --relative=1 --cpus-per-task=16 --kill-on-bad-exit=0 /opt/tf/terrafarm worker --connect 10.1.2.3:14321 --secret-file $J/.terrafarm-4321.secret -j 16 &
 EXPECTED
 diff "$T/dry.expected" "$T/dry.out" || fail "dry-run commands differ from the expected ones"

@@ -10,7 +10,8 @@
 #   1. sbatch -N 2 terrafarm.sbatch SCENE OUT.exr: the coordinator runs on node1, `srun`
 #      starts a networked worker on node2; the job completes, node2's worker rendered tasks,
 #      and the image is byte-identical to a local render.
-#   2. A bigger job is requeued by Slurm mid-render (scontrol requeue): the script's --resume
+#   2. A bigger job is requeued by Slurm mid-render (scontrol requeue, its workers frozen first
+#      so that it cannot finish before): the script's --resume
 #      makes the second run continue the partial image instead of refusing it ("resuming ..."
 #      in the job's output), and the final image is byte-identical to a local render.
 # Skips (77) with the reason where the daemons are not installed or cannot start, or network
@@ -97,7 +98,10 @@ SlurmdPort=6818
 SlurmUser=root
 SlurmdUser=root
 AuthType=auth/munge
-AuthInfo=socket=$T/munge/sock
+# cred_expire: how long a requeued job is held back (and its old credential stays revoked on
+# the nodes); the default is 120 s.  Forcing an earlier start made slurmd refuse the launch
+# ("Job credential revoked") whenever it came too soon after the kill.
+AuthInfo=socket=$T/munge/sock,cred_expire=10
 CredType=cred/munge
 StateSaveLocation=$T/state
 SlurmdSpoolDir=$T/spool/%n
@@ -187,6 +191,18 @@ srun_tasks=$(sed -n 's/.*"kind": "networked".*"tasks": \([0-9]*\),.*/\1/p' "$T/j
 cmp "$T/local-small.exr" "$T/job/small.exr" || fail "the Slurm job's image differs from a local render"
 note "job $JOB (sbatch -N 2) COMPLETED: node2's srun worker rendered $srun_tasks tasks; image identical to a local render"
 
+# freeze_job_workers: SIGSTOP every worker process of this test's terrafarm: `terrafarm worker`
+# processes, and the forked workers of a coordinator (a terrafarm whose parent is one).
+freeze_job_workers() {
+    for p in $(pgrep -f "^$TF "); do
+        parent=$(ps -o ppid= -p "$p" | tr -d ' ')
+        case "$(ps -o args= -p "$p")" in
+        "$TF worker "*) kill -STOP "$p" ;;
+        "$TF render "*) [ "$(ps -o comm= -p "$parent")" = terrafarm ] && kill -STOP "$p" ;;
+        esac
+    done
+}
+
 # ---- 2. requeued mid-render: the second run resumes ----
 BIG=1280x720
 submit "$T/job/big.exr" $BIG
@@ -201,15 +217,19 @@ until grep -q "rendering .* workers may join" "$T/job/slurm-$JOB.out" 2>/dev/nul
     i=$((i + 1)); [ $i -le 600 ] || fail "job $JOB wrote no rows in 60 s"
     sleep 0.1
 done
-[ "$(job_state "$JOB")" = RUNNING ] || fail "job $JOB finished before the requeue (raise BIG)"
+# Freeze the job's workers (the coordinator's forked one, node2's srun worker): the render can
+# no longer end before the requeue however fast the machine.  Every worker has joined by now
+# (the script runs the coordinator with --wait-workers), and Slurm's kill of the requeued job
+# sends SIGCONT before SIGTERM, so nothing stays stopped.
+freeze_job_workers
+[ "$(job_state "$JOB")" = RUNNING ] || fail "job $JOB is $(job_state "$JOB"), not running, with its workers frozen"
 on_ctl scontrol requeue "$JOB" || fail "scontrol requeue $JOB"
-# Slurm holds a requeued job back for a while (its begin time moves ~2 min ahead): start it now
 i=0
 until [ "$(job_state "$JOB")" = PENDING ]; do
-    i=$((i + 1)); [ $i -le 300 ] || fail "job $JOB is $(job_state "$JOB"), not pending, after the requeue"
+    i=$((i + 1)); [ $i -le 600 ] || fail "job $JOB is $(job_state "$JOB"), not pending, after the requeue"
     sleep 0.1
 done
-on_ctl scontrol update JobId="$JOB" StartTime=now || fail "cannot release the requeued job $JOB"
+# Slurm holds a requeued job back for cred_expire (10 s here), then starts it by itself.
 note "job $JOB requeued mid-render ($(stat -c %s "$T/job/big.exr") bytes on disk)"
 wait_done "$JOB" 120
 grep -q "resuming" "$T/job/slurm-$JOB.out" ||

@@ -5,7 +5,8 @@
 # authorized_keys and pid file in the test's temp dir (the system's sshd and its config are
 # never touched); a key pair generated for the run.  A coordinator listens on loopback with a
 # secret; ssh-workers.sh pushes the secret over ssh (--push-secret) and starts two worker
-# "hosts" (both 127.0.0.1 through sshd) in the foreground.  The image must be byte-identical
+# "hosts" (both 127.0.0.1 through sshd) in the foreground; the render waits for both
+# (--wait-workers 2).  The image must be byte-identical
 # to a local render, both workers must have rendered, and the pushed secret must be mode 600.
 # Skips (77) with the reason when sshd or ssh-keygen is missing or sshd cannot start here.
 # shellcheck disable=SC1091 # lib.sh: the shared e2e helpers (say, fail, skip, e2e_*, same)
@@ -58,8 +59,12 @@ say "sshd on 127.0.0.1:$PORT accepts the generated key"
 umask 077
 head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/secret"
 umask 022
-"$TF_BIN" render "$SCENE" --size $SIZE -j 0 --listen 127.0.0.1:0 --secret-file "$T/secret" \
-    -o "$T/ssh.exr" --stats "$T/ssh.json" 2>"$T/coord.log" &
+# --wait-workers 2: no task before both hosts' workers have joined.  Without it the first to
+# join could finish the small render before the second connected, which then found no
+# coordinator ("Connection refused") and made ssh-workers.sh fail; with it, as a worker joins
+# already asking for a task, the first two tasks go one to each, so each renders something.
+"$TF_BIN" render "$SCENE" --size $SIZE -j 0 --wait-workers 2 --listen 127.0.0.1:0 \
+    --secret-file "$T/secret" -o "$T/ssh.exr" --stats "$T/ssh.json" 2>"$T/coord.log" &
 COORD=$!
 e2e_track $COORD
 P=$(e2e_port "$T/coord.log") || fail "the coordinator did not listen: $(cat "$T/coord.log")"

@@ -55,7 +55,10 @@ say "$(grep 'failed on 3 different workers' "$T/b.err")"
 say "one real worker and four failing connections of one client: the render still completes"
 # Each connection joins as a worker of its own and fails every task it takes; a task has not
 # failed everywhere while a connected worker that has not failed it (the real one) is left.
-"$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 $ARGS -o "$T/c.exr" 2>"$T/c.err" &
+# --wait-workers 5: nothing is dealt before all five have joined, so the real worker is there
+# before the first failure (else three failing connections that joined first could fail a task
+# before it arrived, and the render would rightly stop).
+"$TF_BIN" render "$SCENE" -j 0 --wait-workers 5 --listen 127.0.0.1:0 $ARGS -o "$T/c.exr" 2>"$T/c.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/c.err") || fail "the coordinator printed no port: $(cat "$T/c.err")"
 "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -q 2>"$T/cw.err" &

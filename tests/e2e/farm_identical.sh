@@ -5,7 +5,8 @@
 # edge tiles, the default stamps -> a tiled EXR) and the mix of forked and networked workers.
 # Files of the same layout are byte-identical (cmp: the workers' chunks do not depend on who
 # encoded them); files of different layouts are compared decoded (tests/tools/exrcmp.c).
-# Also: both kinds are ordinary OpenEXR files (exrheader and exrinfo read them).
+# Also: both kinds are ordinary OpenEXR files (exrheader and exrinfo read them); a bad
+# --wait-workers is one line and exit 2.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=240x135
@@ -31,11 +32,14 @@ done
 render -q -j 2 --size $SIZE -o "$T/default.exr" || fail "default tasks: $(cat "$T/last.err")"
 same_pixels "$T/ref.exr" "$T/default.exr" "default stamps, -j 2"
 
-# mixed TASKS REF: -j 1 forked plus a terrafarm worker --connect -j 1, compared with REF (cmp)
+# mixed TASKS REF: -j 1 forked plus a terrafarm worker --connect -j 1, compared with REF (cmp).
+# --wait-workers 2: no task is dealt before both have joined (else the forked worker may render
+# everything before the networked one connects, and that one finds no coordinator); a worker
+# joins already asking for a task, so the first two tasks go one to each: both render.
 mixed() {
     say "forked plus networked, --tasks $1: -j 1 and a terrafarm worker --connect -j 1"
     : >"$T/coord.err"   # empty now: e2e_port must not read the previous call's port
-    "$TF_BIN" render "$SCENE" -j 1 --size $SIZE --tasks $1 --listen 127.0.0.1:0 \
+    "$TF_BIN" render "$SCENE" -j 1 --wait-workers 2 --size $SIZE --tasks $1 --listen 127.0.0.1:0 \
         -o "$T/mixed.exr" --overwrite --stats "$T/mixed.json" 2>"$T/coord.err" &
     coord=$!; e2e_track $coord
     port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/coord.err")"
@@ -51,9 +55,16 @@ mixed() {
     case "$kinds" in *forked*networked*) ;; *) fail "expected both forked and networked workers, got '$kinds'" ;; esac
     nettasks=$(python3 -c 'import json,sys; print(sum(w["tasks"] for w in json.load(open(sys.argv[1]))["workers"] if w["kind"]=="networked"))' "$T/mixed.json")
     say "tasks rendered by the networked worker: $nettasks"
+    [ "$nettasks" -ge 1 ] || fail "the networked worker rendered no task: not a mixed render"
 }
 mixed rows:1 "$T/ref.exr"
 mixed stamps:37x23 "$T/stamps_37x23_j1.exr"
+for bad in -1 x2 ''; do
+    "$TF_BIN" render "$SCENE" --wait-workers "$bad" -o "$T/bad.exr" 2>"$T/bad.err"; rc=$?
+    [ $rc -eq 2 ] && [ "$(wc -l <"$T/bad.err")" -eq 1 ] ||
+        fail "--wait-workers '$bad': exit $rc, $(cat "$T/bad.err")"
+done
+say "a bad --wait-workers: $(cat "$T/bad.err")"
 
 command -v exrheader >/dev/null 2>&1 || skip "exrheader not installed (package openexr)"
 for f in ref stamps_37x23_j1; do

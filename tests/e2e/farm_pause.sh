@@ -13,7 +13,9 @@ SIZE=960x540
 LEASE=1500
 
 render -q -j 2 --size $SIZE --tasks rows:2 -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
-"$TF_BIN" render "$SCENE" -j 1 --size $SIZE --tasks rows:2 --listen 127.0.0.1:0 \
+# --wait-workers 2: the forked worker cannot render anything before the networked one has
+# joined (it could otherwise be done before that one connected).
+"$TF_BIN" render "$SCENE" -j 1 --wait-workers 2 --size $SIZE --tasks rows:2 --listen 127.0.0.1:0 \
     --lease-timeout $LEASE -o "$T/pause.exr" -v 2>"$T/coord.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/coord.err")"
@@ -24,7 +26,6 @@ while [ "$(grep -c 'joined: ' "$T/coord.err")" -lt 2 ]; do
     i=$((i + 1)); [ $i -gt 200 ] && fail "the two workers did not join: $(cat "$T/coord.err")"
     sleep 0.1
 done
-sleep 0.5
 kill -0 $coord 2>/dev/null || fail "the render ended before the pause (make SIZE bigger)"
 say "SIGSTOP the coordinator for $((3 * LEASE)) ms"
 kill -STOP $coord

@@ -15,7 +15,9 @@ PROXY="$TF_ROOT/tests/tools/flip_proxy.py"
 render -q -j 1 --size $SIZE --tasks rows:2 -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
 head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/farm.key"
 chmod 600 "$T/farm.key"
-"$TF_BIN" render "$SCENE" -j 0 --size $SIZE --tasks rows:2 --secret-file "$T/farm.key" \
+# --wait-workers 2: the direct worker cannot finish the render before the proxied one is back
+# (the flipped byte falls in its first connection, before it joins; it reconnects and joins).
+"$TF_BIN" render "$SCENE" -j 0 --wait-workers 2 --size $SIZE --tasks rows:2 --secret-file "$T/farm.key" \
     --listen 127.0.0.1:0 -o "$T/tamper.exr" -v 2>"$T/coord.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/coord.err")"

@@ -62,9 +62,9 @@ if ldd "$TF" 2>/dev/null | grep -q libasan; then LIMIT=150; fi
 PIDS=""
 NAMESPACES=""
 TMP=""
-STOPPED=""             # a worker paused by cut_while_rendering, continued before anything else
+STOPPED=""             # workers paused by cut_while_holding, continued before anything else
 cleanup() {
-    [ -n "$STOPPED" ] && kill -CONT "$STOPPED" 2>/dev/null
+    for pid in $STOPPED; do kill -CONT "$pid" 2>/dev/null; done
     for pid in $PIDS; do
         kill "$pid" 2>/dev/null
     done
@@ -211,7 +211,7 @@ except Exception:
     print("none")' "$1"
 }
 
-# cut_while_holding PID PORT: pull the cable at switch port PORT while the worker under PID
+# cut_while_holding PID PORT OTHER: pull the cable at switch port PORT while the worker under PID
 # (a `timeout` started by start; worker id 2 at the coordinator) holds a task it has not
 # returned, so there is a lease to expire.  A worker between tasks holds none: the coordinator
 # may already have its result and the `in` for the next task be lost with the cable, and then
@@ -220,18 +220,28 @@ except Exception:
 # nothing more), give the coordinator 0.5 s to take in whatever was already on the wire, and
 # read worker 2's task from the dashboard.  If it holds one, cut the cable before it runs again;
 # if not, let it run a moment and look again.  The freeze is well inside the 2 s lease, so the
-# cut, not the pause, is what silences it.
+# cut, not the pause, is what silences it.  The other worker (under OTHER) is frozen while we
+# look too: the render advances only between looks, so it cannot end during a run of misses
+# however slow the look (a loaded machine) or fast the workers.
 cut_while_holding() {
-    wpid=$(child_of "$1")
-    [ -n "$wpid" ] || fail "cannot find the worker process under pid $1"
+    wpid=$(child_of "$1") opid=$(child_of "$3")
+    if [ -z "$wpid" ] || [ -z "$opid" ]; then
+        fail "cannot find the worker processes under pids $1 $3"
+    fi
     tries=0
     while :; do
-        kill -STOP "$wpid" 2>/dev/null || fail "worker 2 exited before the cut"
-        STOPPED=$wpid
+        # a zombie takes the signal too: ask ps whether it is still there and not one
+        kill -STOP "$wpid" "$opid" 2>/dev/null
+        st=$(ps -o stat= -p "$wpid" | cut -c1)
+        if [ -z "$st" ] || [ "$st" = Z ]; then
+            tail -3 "$TMP/cut.coord.log" "$TMP/cut.w1.log" "$TMP/cut.w2.log"
+            fail "worker 2 exited before the cut"
+        fi
+        STOPPED="$wpid $opid"
         sleep 0.5
         held=$(worker_task 2)
         [ "$held" != none ] && break
-        kill -CONT "$wpid"
+        kill -CONT "$wpid" "$opid"
         STOPPED=""
         tries=$((tries + 1))
         [ "$tries" -le 20 ] || fail "worker 2 was never seen holding a task"
@@ -239,14 +249,14 @@ cut_while_holding() {
     done
     ip -n "$NS_LAN" link set "$2" down
     rc=$?
-    kill -CONT "$wpid"
+    kill -CONT "$wpid" "$opid"
     STOPPED=""
     [ "$rc" -eq 0 ] || fail "cannot cut the cable at $2"
     note "worker 2 frozen holding task $held (after $tries miss(es)); cable cut"
 }
 
 # ---- 1. the secret is checked across the network ----
-start_coordinator small "$SMALL"
+start_coordinator small "$SMALL" --wait-workers 2
 if ip netns exec "$NS_W1" timeout 20 "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/wrong-secret" -j 1 --timeout 5000 >"$TMP/wrong.log" 2>&1; then
     fail "a worker with the wrong secret was accepted"
@@ -255,6 +265,9 @@ fi
 note "wrong secret refused: $(cat "$TMP/wrong.log")"
 
 # ---- 2. a render across the two worker hosts equals a local render ----
+# (the coordinator runs with --wait-workers 2 in every part: nothing is dealt before both hosts
+# have joined, so neither can finish a render alone before the other is in, and the first two
+# tasks go one to each: both render, whichever is faster)
 start "$NS_W1" "$TMP/small.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1
 W1=$LAST
@@ -281,7 +294,7 @@ note "$SMALL across 2 hosts: identical to the local render; tasks per worker:" \
 # of that task well before the lease expires (the render recovers, tasks_duplicated counts it,
 # but nothing is re-dealt).  Here worker 1 keeps rendering fresh tasks, so it is the lease that
 # notices the silent worker and deals its task again.
-start_coordinator cut "$LARGE" --tasks rows:4 --lease-timeout 2000 --watermark 1000 \
+start_coordinator cut "$LARGE" --wait-workers 2 --tasks rows:4 --lease-timeout 2000 --watermark 1000 \
     --http "$COORD_IP:$HTTP_PORT"
 # One after the other, so that worker 2 is the second to join: id 2 at the coordinator (the
 # coordinator logs each join at -v).
@@ -303,7 +316,7 @@ start "$NS_W2" "$TMP/cut.w2.log" "$TF" worker --connect "$COORD_IP:$PORT" \
 W2=$LAST
 wait_joined 2
 kill -0 "$COORD" 2>/dev/null || fail "the render finished before the cut (make LARGE bigger)"
-cut_while_holding "$W2" p-w2
+cut_while_holding "$W2" p-w2 "$W1"
 cut_at=$(date +%s)
 note "cut worker 2's cable (p-w2 down) mid-render"
 finish "$COORD" "coordinator (render with a cut cable)"
@@ -331,7 +344,7 @@ wait "$W2" 2>/dev/null
 forget "$W2"
 ip -n "$NS_LAN" link set p-w2 up || fail "cannot plug worker 2 back in"
 LIMIT=$((LIMIT + 55)) # the partition and the reconnections come on top of the render
-start_coordinator part "$LARGE" --tasks rows:4 --lease-timeout 2000
+start_coordinator part "$LARGE" --wait-workers 2 --tasks rows:4 --lease-timeout 2000
 start "$NS_W1" "$TMP/part.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1 --timeout 30000
 W1=$LAST
@@ -345,7 +358,6 @@ while [ "$(count_lines "$TMP/part.coord.log" 'joined: networked')" -lt 2 ]; do
     [ "$i" -le 200 ] || { cat "$TMP/part.coord.log"; fail "the two workers did not join"; }
     sleep 0.1
 done
-sleep 0.5
 kill -0 "$COORD" 2>/dev/null || fail "the render finished before the partition (make LARGE bigger)"
 if ! { ip -n "$NS_LAN" link set p-w1 down && ip -n "$NS_LAN" link set p-w2 down; }; then
     fail "cannot pull the cables"

@@ -63,7 +63,9 @@ cp "$CDIR/secret" "$WDIR/secret"
 { sed -n '1,/^\[terrain\]/p' "$SCENE"; printf 'generator = file\nseed = 1\npath = dem.tif\n\n'
   sed -n '/^\[materials\]/,$p' "$SCENE"; } >"$CDIR/dem.scene"
 
-ip netns exec "$NS_C" timeout $LIMIT "$TF" render "$CDIR/dem.scene" --size $SIZE -j 0 \
+# --wait-workers 2: the worker's two processes both join before any task is dealt (the first
+# could otherwise finish alone, and the second, finding no coordinator, fail the worker)
+ip netns exec "$NS_C" timeout $LIMIT "$TF" render "$CDIR/dem.scene" --size $SIZE -j 0 --wait-workers 2 \
     --listen 10.78.0.1:$PORT --secret-file "$CDIR/secret" -o "$CDIR/net.exr" >"$WDIR/coord.log" 2>&1 &
 COORD=$!
 PIDS="$PIDS $COORD"

@@ -55,7 +55,9 @@ seq_render --frames 1-5:2 -j 2 --tasks rows:7 -o "$T/c/f.##.exr" || fail "steppe
 for k in 1 3 5; do same_pixels "$T/a/f.000$k.exr" "$T/c/f.0$k.exr" "frame $k of --frames 1-5:2, rows:7"; done
 
 say "networked workers only: -j 0 and a terrafarm worker --connect -j 2"
-"$TF_BIN" render "$FLY" --listen 127.0.0.1:0 --size $SIZE --frames 0-5 -j 0 --tasks stamps:16x16 \
+# --wait-workers 2: the worker's second process may connect a moment after the first, which
+# could otherwise render the whole sequence alone (the second then finds no coordinator).
+"$TF_BIN" render "$FLY" --listen 127.0.0.1:0 --size $SIZE --frames 0-5 -j 0 --wait-workers 2 --tasks stamps:16x16 \
     -o "$T/n/f.####.exr" --stats "$T/n.json" 2>"$T/coord.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/coord.err")"

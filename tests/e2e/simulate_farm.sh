@@ -23,7 +23,9 @@ assert abs(tot / (w * h) - 1) < 1e-3, tot / (w * h)
 PY
 
 say "a 64x48 render (48 stamps of 8x8) served by 8 simulated workers"
-"$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size 64x48 --tasks stamps:8x8 \
+# --wait-workers 8: all eight join before any task is dealt (the first could otherwise serve
+# the tiny render alone before the last connected)
+"$TF_BIN" render "$SCENE" -j 0 --wait-workers 8 --listen 127.0.0.1:0 --size 64x48 --tasks stamps:8x8 \
     -o "$T/sim.exr" --stats "$T/sim.json" 2>"$T/coord.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/coord.err")"
@@ -49,7 +51,7 @@ grep -q 'without --payloads' "$T/sim.err" || fail "no warning about black payloa
 
 say "--payloads: the packed chunks of a real 32x24 render stand in for the simulated results"
 render -q -j 1 --size 32x24 --tasks stamps:8x8 -o "$T/rec.exr" || fail "recording: $(cat "$T/last.err")"
-"$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size 64x48 --tasks stamps:8x8 --verify-chunks \
+"$TF_BIN" render "$SCENE" -j 0 --wait-workers 8 --listen 127.0.0.1:0 --size 64x48 --tasks stamps:8x8 --verify-chunks \
     -o "$T/sim2.exr" --stats "$T/sim2.json" 2>"$T/coord3.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/coord3.err") || fail "coordinator printed no port: $(cat "$T/coord3.err")"

@@ -2,7 +2,8 @@
  * common/linda/tsclient.c): over a socketpair and loopback TCP; a blocked in woken by another
  * client's out; hooks (on_take, on_out, on_disconnect); garbage, oversized, unknown-op and
  * half frames each dropping only their own connection; authentication with the right and the
- * wrong secret and an op before the handshake.  The server loop runs in a background thread;
+ * wrong secret and an op before the handshake; wrong secrets slowed per address without
+ * barring the right one from that address.  The server loop runs in a background thread;
  * the hooks record what they saw under a mutex. */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -21,6 +22,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include "clock.h"
 #include "linda/tsserver.h"
 #include "linda/proto.h"
 #include "linda/tsclient.h"
@@ -372,6 +374,45 @@ static void test_auth(void **state)
     stop(fx);
 }
 
+/* A wrong-secret handshake: how long its answer took (ms); it must be "authentication failed". */
+static int64_t wrong_guess_ms(fixture *fx, const uint8_t *wrong)
+{
+    char err[256];
+    int64_t t0 = tf_now_ms();
+    ts_client *bad = ts_client_connect(fx->addr, wrong, 5000, err, sizeof err);
+    assert_null(bad);
+    assert_non_null(strstr(err, "authentication failed"));
+    return tf_now_ms() - t0;
+}
+
+/* Failed handshakes from 127.0.0.1: the first three answered at once, the next ones held
+ * (250 ms, 500 ms ...); meanwhile the right secret from the same address is admitted at once. */
+static void test_guesses_slowed_right_secret_admitted(void **state)
+{
+    (void)state;
+    uint8_t key[TF_KEY_BYTES], wrong[TF_KEY_BYTES];
+    tf_secret_from_bytes("correct horse", 13, key);
+    tf_secret_from_bytes("battery staple", 14, wrong);
+    fixture *fx = start(key, -1);
+    int saved = dup(2), devnull = open("/dev/null", O_WRONLY);
+    dup2(devnull, 2); /* the warnings */
+    for (int i = 0; i < 3; i++)
+        wrong_guess_ms(fx, wrong);
+    int64_t held = wrong_guess_ms(fx, wrong);
+    char err[256];
+    ts_client *good = ts_client_connect(fx->addr, key, 2000, err, sizeof err);
+    int64_t held2 = wrong_guess_ms(fx, wrong);
+    dup2(saved, 2);
+    close(saved);
+    close(devnull);
+    assert_true(held >= 200);
+    assert_true(held2 >= 400);
+    assert_non_null(good);
+    exercise(good);
+    ts_client_close(good);
+    stop(fx);
+}
+
 static void test_silence_timeout_and_heartbeat(void **state)
 {
     (void)state;
@@ -412,6 +453,7 @@ int main(void)
         cmocka_unit_test(test_tcp_blocked_in_woken_by_other_client),
         cmocka_unit_test(test_bad_traffic_drops_only_that_connection),
         cmocka_unit_test(test_auth),
+        cmocka_unit_test(test_guesses_slowed_right_secret_admitted),
         cmocka_unit_test(test_silence_timeout_and_heartbeat),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -13,6 +13,14 @@ static int blame_line(const struct parser *p, int key)
     return p->key_line[key] ? p->key_line[key] : p->section_line[SCENE_KEYS[key].section];
 }
 
+/* generator = file makes no terrain from the seed: there it only seeds the jitter and the
+ * textures, and may be left out (0), so a height map re-imports with `path =` alone. */
+static int seed_of_a_file(const struct parser *p, int key)
+{
+    return key == scene_key_index(SEC_TERRAIN, "seed") &&
+           p->s->terrain.generator == TF_GEN_FILE;
+}
+
 static void check_required(struct parser *p)
 {
     for (int key = 0; key < SCENE_KEY_COUNT && !p->failed; key++) {
@@ -25,7 +33,7 @@ static void check_required(struct parser *p)
                               k->name);
             continue;
         }
-        if (!k->required || p->key_line[key])
+        if (!k->required || p->key_line[key] || seed_of_a_file(p, key))
             continue;
         if (p->section_line[k->section])
             scene_fail_at(p, p->section_line[k->section], "%s: missing required key in [%s]",

@@ -1,7 +1,7 @@
 #!/bin/sh
 # heightmap_reimport.sh: what terrafarm heightfield writes comes back with only
-# `generator = file` and `path =` in a scene's [terrain] (and the `seed` every [terrain] must
-# have, unused by the file generator): each export (float EXR, 16-bit PNG,
+# `generator = file` and `path =` in a scene's [terrain] (no `seed`: the file generator does
+# not need one): each export (float EXR, 16-bit PNG,
 # Float32 GeoTIFF) records its first row's edge, its extent and its vertical scale and offset,
 # and the re-imported terrain has the original's heights (bit for bit from EXR and GeoTIFF,
 # within half a 16-bit step from PNG) and extent.  Scene keys, when given, win over the file's.
@@ -30,7 +30,7 @@ hi=$(sed -n 's/^height range: \[\([^,]*\), \([^]]*\)\].*/\2/p' "$T/maps/hf.png.t
 half_step=$(python3 -c "print(($hi - ($lo)) / 65535 / 2 * 1.001)")
 
 for f in exr tif png; do
-    scene re_$f "generator = file" "seed = 1" "path = maps/hf.$f"
+    scene re_$f "generator = file" "path = maps/hf.$f"
     export_hf "$T/re_$f.scene" "$T/re_$f.exr"
     [ "$(extent_of "$T/re_$f.exr")" = "$(extent_of "$T/maps/hf.exr")" ] ||
         fail "$f: re-imported extent $(extent_of "$T/re_$f.exr"), not $(extent_of "$T/maps/hf.exr")"

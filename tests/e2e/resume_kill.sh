@@ -80,13 +80,24 @@ for pct in create early 0 30 copy 60 90; do
         while [ "$(wc -c 2>/dev/null <"$OUT" || echo 0)" -lt $want ] && kill -0 $coord 2>/dev/null; do
             sleep 0.01; i=$((i + 1)); [ $i -lt 12000 ] || fail "run $run: the output never reached $want bytes"
         done
+        # Freeze the workers (forked and networked) at the mark: the coordinator can then only
+        # write the results it already holds, so however fast or loaded the machine, the render
+        # cannot run on to its end during the jitter (only at 90% can what it holds be the
+        # rest of the image: then the file is complete, which the check below accepts).
+        frozen="$(pgrep -P $coord) $netw"
+        kill -STOP $frozen 2>/dev/null
         jitter=$(rand_ms 40)
     fi
     [ $jitter -gt 0 ] && sleep "0.$(printf %03d $jitter)"
     kids=$(pgrep -P $coord)
-    kill -0 $coord 2>/dev/null || fail "run $run ended before the kill at ${pct}: $(cat "$T/run$run.err")"
-    kill -KILL $coord
+    if ! kill -0 $coord 2>/dev/null; then
+        [ $pct = 90 ] && [ "$(rows_on_disk "$OUT")" = complete ] ||
+            fail "run $run ended before the kill at ${pct}: $(cat "$T/run$run.err")"
+    fi
+    kill -KILL $coord 2>/dev/null
     wait $coord 2>/dev/null
+    [ -n "${frozen:-}" ] && kill -CONT $frozen 2>/dev/null
+    frozen=""
     # the forked workers must follow their coordinator
     i=0; while [ $i -lt 30 ]; do
         alive=""; for k in $kids; do [ "$(ps -o stat= -p $k 2>/dev/null | cut -c1)" ] && alive="$alive $k"; done

@@ -206,18 +206,10 @@ size_t tf_resultcheck_pending(tf_resultcheck *rc)
     return n;
 }
 
-double tf_resultcheck_cpu_s(tf_resultcheck *rc)
+void tf_resultcheck_totals(tf_resultcheck *rc, double *cpu_s, uint64_t *pixels)
 {
     pthread_mutex_lock(&rc->mu);
-    double s = rc->cpu_s;
+    *cpu_s = rc->cpu_s;
+    *pixels = rc->pixels;
     pthread_mutex_unlock(&rc->mu);
-    return s;
-}
-
-uint64_t tf_resultcheck_pixels(tf_resultcheck *rc)
-{
-    pthread_mutex_lock(&rc->mu);
-    uint64_t n = rc->pixels;
-    pthread_mutex_unlock(&rc->mu);
-    return n;
 }

@@ -36,7 +36,6 @@ int tf_resultcheck_next(tf_resultcheck *rc, tf_tuple *result, char *why, size_t 
 /* Results queued or being checked, not yet collected. */
 size_t tf_resultcheck_pending(tf_resultcheck *rc);
 /* CPU seconds the checker threads have spent, and the pixels they checked. */
-double tf_resultcheck_cpu_s(tf_resultcheck *rc);
-uint64_t tf_resultcheck_pixels(tf_resultcheck *rc);
+void tf_resultcheck_totals(tf_resultcheck *rc, double *cpu_s, uint64_t *pixels);
 
 #endif

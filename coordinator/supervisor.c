@@ -1780,8 +1780,7 @@ const tf_farm_stats *tf_supervisor_stats(tf_supervisor *s)
     ts_space_stats st;
     ts_space_get_stats(s->space, &st);
     s->stats.max_tuple_bytes = st.max_bytes;
-    s->stats.pixel_check_cpu_s = tf_resultcheck_cpu_s(s->checker);
-    s->stats.pixels_checked = tf_resultcheck_pixels(s->checker);
+    tf_resultcheck_totals(s->checker, &s->stats.pixel_check_cpu_s, &s->stats.pixels_checked);
     return &s->stats;
 }
 

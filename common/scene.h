@@ -73,6 +73,10 @@ typedef struct tf_terrain {
     int thermal_iterations; /* thermal weathering; 0 = off */
     double talus_deg;       /* talus angle for thermal weathering */
 
+    /* procedural = yes: a point generator evaluated where rays need it, at the level of detail
+     * of the pixel footprint, with no grid and no size cap (terrain/procedural.h) */
+    int procedural;
+
     /* generator = file (terrain/heightmap_file.c; scenes/README.md) */
     char file_path[TF_SCENE_PATH_MAX]; /* as written; relative to the scene file's folder */
     char file_sha256[65];   /* hex SHA-256 of the file: pinned by the scene, or set on load */

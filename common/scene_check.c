@@ -165,6 +165,19 @@ static void check_terrain_file(struct parser *p)
                       "(0, from the raster, is only for generator = file)", t->extent, BIG);
 }
 
+/* procedural = yes evaluates a point generator on demand: the grid generators and height maps
+ * have no function to evaluate between their samples. */
+static void check_procedural(struct parser *p)
+{
+    const tf_terrain *t = &p->s->terrain;
+    if (!t->procedural || t->generator == TF_GEN_FBM || t->generator == TF_GEN_HETERO ||
+        t->generator == TF_GEN_HYBRID || t->generator == TF_GEN_RIDGED)
+        return;
+    scene_fail_at(p, blame_line(p, scene_key_index(SEC_TERRAIN, "procedural")),
+                  "procedural: needs a noise generator (fbm, hetero, hybrid or ridged), not "
+                  "this grid or file generator");
+}
+
 void scene_check_semantics(struct parser *p)
 {
     check_required(p);
@@ -172,6 +185,8 @@ void scene_check_semantics(struct parser *p)
         check_envelope(p);
     if (!p->failed)
         check_terrain_file(p);
+    if (!p->failed)
+        check_procedural(p);
     if (!p->failed)
         check_animation(p);
     if (!p->failed)

@@ -52,7 +52,7 @@ struct key_def {
     double def[3];      /* default (def[0] for scalars) */
 };
 
-#define SCENE_KEY_COUNT 68 /* entries of SCENE_KEYS */
+#define SCENE_KEY_COUNT 69 /* entries of SCENE_KEYS */
 extern const struct key_def SCENE_KEYS[SCENE_KEY_COUNT];
 
 #define SCENE_GENERATOR_COUNT 8

@@ -66,6 +66,7 @@ const struct key_def SCENE_KEYS[SCENE_KEY_COUNT] = {
     {SEC_TERRAIN, "thermal_iterations", KT_INT, F(terrain.thermal_iterations), 0, 10000, 0, 0,
      {0}},
     {SEC_TERRAIN, "talus", KT_DOUBLE, F(terrain.talus_deg), 0, 90, 0, 0, {35}},
+    {SEC_TERRAIN, "procedural", KT_BOOL, F(terrain.procedural), 0, 1, 0, 0, {0}},
     {SEC_TERRAIN, "path", KT_PATH, F(terrain.file_path), 0, TF_SCENE_PATH_MAX, 0, 0, {0}},
     {SEC_TERRAIN, "sha256", KT_SHA256, F(terrain.file_sha256), 0, 0, 0, 0, {0}},
     {SEC_TERRAIN, "vertical_scale", KT_DOUBLE, F(terrain.vertical_scale), -BIG, BIG, 0, 0, {1}},

@@ -4,6 +4,7 @@
  * Constants below set the default look (greens, greys, white snow, blue water); the scene
  * chooses lines, slopes, sun, sky and mist. */
 #include "render/shade.h"
+#include "render/trace_procedural.h"
 
 #include <math.h>
 #include <pthread.h>
@@ -43,6 +44,30 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
         sh->pixel_angle = s->camera.fov_deg * TF_DEG2RAD / columns;
     else
         sh->pixel_angle = 2.0 * tan(0.5 * s->camera.fov_deg * TF_DEG2RAD) / columns;
+    if (hf->proc)
+        sh->view = tf_proc_view_of(hf->proc, s->camera.position, sh->pixel_angle);
+}
+
+/* ---------------------------------------------------------------- the terrain, either kind */
+
+static int trace_terrain(const tf_shader *sh, tf_vec3 o, tf_vec3 d, double tmax, tf_hit *hit)
+{
+    if (sh->hf->proc)
+        return tf_proc_trace(sh->hf->proc, &sh->view, o, d, 0.0, tmax, hit);
+    return tf_trace(sh->hf, o, d, 0.0, tmax, hit);
+}
+
+static int terrain_occludes(const tf_shader *sh, tf_vec3 o, tf_vec3 d)
+{
+    if (sh->hf->proc)
+        return tf_proc_occluded(sh->hf->proc, &sh->view, o, d, 0.0, TF_FAR_AWAY);
+    return tf_occluded(sh->hf, o, d, 0.0, TF_FAR_AWAY);
+}
+
+/* Shadow rays start this far along the normal from a terrain hit. */
+static double shadow_lift_at(const tf_shader *sh, tf_vec3 p)
+{
+    return sh->hf->proc ? tf_proc_shadow_lift(sh->hf->proc, &sh->view, p) : sh->shadow_lift;
 }
 
 /* How many octaves of a texture of first wavelength `scale` a pixel shows at distance dist
@@ -273,9 +298,9 @@ static int sunlit(const tf_shader *sh, tf_vec3 p, tf_vec3 ng, uint64_t *shadow_r
 {
     if (v3_dot(ng, sh->sun_dir) <= 0 || sh->sun_dir.z <= -1.0)
         return 0;
-    tf_vec3 start = v3_add(p, v3_scale(ng, sh->shadow_lift));
+    tf_vec3 start = v3_add(p, v3_scale(ng, shadow_lift_at(sh, p)));
     (*shadow_rays)++;
-    return !tf_occluded(sh->hf, start, sh->sun_dir, 0.0, TF_FAR_AWAY);
+    return !terrain_occludes(sh, start, sh->sun_dir);
 }
 
 /* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */
@@ -304,7 +329,8 @@ static tf_vec3 terrain_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double 
 
 tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays)
 {
-    tf_vec3 n = smooth_normal(sh->hf, hit->ci, hit->cj, hit->p);
+    /* a procedural hit's normal is the surface's own gradient: smooth already */
+    tf_vec3 n = sh->hf->proc ? hit->n : smooth_normal(sh->hf, hit->ci, hit->cj, hit->p);
     tf_vec3 nb = n;
     double variation = 0;
     double octaves = visible_octaves(sh, sh->bump_scale, hit->t, TF_BUMP_OCTAVES);
@@ -354,7 +380,7 @@ void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *o
     tf_hit hit;
     tf_vec3 c;
     double dist;
-    if (tf_trace(sh->hf, origin, dir, 0.0, t_water, &hit)) {
+    if (trace_terrain(sh, origin, dir, t_water, &hit)) {
         dist = hit.t;
         c = tf_shade_terrain(sh, &hit, shadow_rays);
     } else if (t_water < TF_FAR_AWAY) {

@@ -30,6 +30,7 @@
 #include "scene.h"
 #include "render/constants.h"
 #include "render/trace.h"
+#include "terrain/procedural.h"
 #include "vec.h"
 
 typedef struct tf_shader {
@@ -46,6 +47,7 @@ typedef struct tf_shader {
     double ripple_scale;     /* world wavelength of the first water ripple octave */
     double shadow_lift;      /* shadow ray start offset along the normal */
     double pixel_angle;      /* angle one pixel subtends at the image centre, radians */
+    tf_proc_view view;       /* a procedural terrain's levels of detail for this camera */
 } tf_shader;
 
 /* One camera sample: linear RGB, alpha (1 = terrain or water), distance to the hit (or

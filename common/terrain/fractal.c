@@ -113,6 +113,7 @@ int tf_fractal_prepare(tf_fractal *f, const tf_terrain *t)
     }
     f->generator = t->generator;
     tf_octaves_plan(&f->octaves, t->H, t->lacunarity, t->octaves);
+    f->H = t->H;
     f->offset = t->offset;
     f->gain = t->gain;
     f->feature_size = t->feature_size;

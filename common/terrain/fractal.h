@@ -40,6 +40,7 @@ double tf_ridged2(const tf_noise *nz, double x, double y, double H, double lacun
 typedef struct tf_fractal {
     enum tf_generator generator;
     tf_octaves octaves;
+    double H;      /* fractal increment (the plan's weights are lacunarity^(-H i)) */
     double offset, gain;
     double feature_size;
     double ox, oy; /* seed-derived noise-space offset */

@@ -18,6 +18,7 @@
 #include <string.h>
 #include <unistd.h>
 #include "terrain/heightfield.h"
+#include "terrain/procedural.h"
 
 /* Largest supported k: (2^16 + 1)^2 floats is already 16 GiB of heights. */
 #define TF_HF_MAX_K 16
@@ -155,7 +156,14 @@ void tf_heightfield_free(tf_heightfield *hf)
         return;
     free_grids(hf);
     free(hf->h);
+    tf_procedural_free(hf->proc);
     free(hf);
+}
+
+void tf_heightfield_set_cache(tf_heightfield *hf, size_t bytes)
+{
+    if (hf && hf->proc)
+        tf_tilecache_set_budget(hf->proc->cache, bytes);
 }
 
 /* A max/min level: large ones on 2 MB boundaries and marked for transparent huge pages, so the

@@ -28,9 +28,16 @@ typedef struct tf_heightfield {
     int levels;        /* number of max-grid levels: k + 1 (cells, cells/2, ..., 1) */
     float **maxgrid;   /* maxgrid[L]: (cells >> L)^2 entries */
     float **mingrid;   /* mingrid[L]: same shape, minima */
+    /* [terrain] procedural = yes: no samples, no grids (h, maxgrid, mingrid NULL, n = k = 0);
+     * the terrain is this function, evaluated where rays need it.  extent, hmin and hmax are
+     * its square and its bound; cell is nominal (extent / 8192, the finest grid's) for the
+     * shading scales that derive from it. */
+    struct tf_procedural *proc;
 } tf_heightfield;
 
-/* Build the scene's height field with `threads` threads (0 = all online CPUs).
+/* Build the scene's height field with `threads` threads (0 = all online CPUs); for a
+ * procedural scene, the procedural terrain with a cache of `tf_procedural_default_cache_bytes`
+ * (tf_heightfield_set_cache changes it).
  * Returns NULL with a one-line message in err on failure (e.g. out of memory). */
 tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, size_t errlen);
 /* Wrap existing heights (copied) and build the max/min grids; for tests and tools. */
@@ -39,6 +46,8 @@ tf_heightfield *tf_heightfield_from_heights(const float *h, int k, double extent
  * tf_heightfield_build calls once the heights are generated.  NULL on out of memory (h freed). */
 tf_heightfield *tf_heightfield_wrap(float *h, int k, double extent, int threads);
 void tf_heightfield_free(tf_heightfield *hf);
+/* A procedural terrain's per-process cache budget in bytes (no effect on a grid). */
+void tf_heightfield_set_cache(tf_heightfield *hf, size_t bytes);
 
 /* Height at world (x, y) by the same two-triangle interpolation the tracer
  * uses (clamped to the terrain's edge). */

@@ -7,6 +7,7 @@
  * rows also balance the load for generators whose cost varies across the terrain.  Grid
  * generators (midpoint.c, fault.c, subdivide.c) own their parallelism; weathering.c likewise. */
 #include "terrain/terrain_build.h"
+#include "terrain/procedural.h"
 
 #include <math.h>
 #include <pthread.h>
@@ -198,8 +199,30 @@ float *tf_terrain_heights(const tf_terrain *t, int threads, double *extent, char
     return h;
 }
 
+/* The procedural terrain as a height field without samples (heightfield.h). */
+static tf_heightfield *procedural_build(const tf_scene *s, char *err, size_t errlen)
+{
+    tf_heightfield *hf = calloc(1, sizeof *hf);
+    if (!hf) {
+        tf_seterr(err, errlen, "out of memory");
+        return NULL;
+    }
+    hf->proc = tf_procedural_new(&s->terrain, tf_procedural_default_cache_bytes(), err, errlen);
+    if (!hf->proc) {
+        free(hf);
+        return NULL;
+    }
+    hf->extent = s->terrain.extent;
+    hf->cell = hf->extent / (double)(1 << s->terrain.size_exp); /* the grid's look */
+    hf->hmin = (float)hf->proc->lo;
+    hf->hmax = (float)hf->proc->hi;
+    return hf;
+}
+
 tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, size_t errlen)
 {
+    if (s->terrain.procedural)
+        return procedural_build(s, err, errlen);
     double extent;
     float *h = tf_terrain_heights(&s->terrain, threads, &extent, err, errlen);
     if (!h)

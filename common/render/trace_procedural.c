@@ -1,0 +1,338 @@
+/* trace_procedural.c: the quad-tree tracer of the procedural terrain (trace_procedural.h).
+ *
+ * Node (q, i, j) is the square [i, i + 1] x [j, j + 1] times extent / 2^q.  A node is a leaf
+ * when it is at most two cells of the finest level used over it wide (q >= hi + 4, the cells
+ * of level L being extent / 2^(L + 5)) and spans few levels; then each level used there covers
+ * it with one cell, or two a side for the finest: LEAF_SAMPLES samples, all in one tile. */
+#include "render/trace_procedural.h"
+
+#include <math.h>
+#include <stdlib.h>
+
+#define MAX_LEAF_LEVELS 6
+#define LEAF_SAMPLES 9
+#define MARCH_STEPS 256
+#define HIT_TOLERANCE 1e-3 /* of the leaf's finest spacing */
+#define SHADOW_LIFT 2e-2   /* of the finest spacing at the hit */
+
+typedef struct pray {
+    const tf_procedural *p;
+    const tf_proc_view *v;
+    tf_vec3 o, d;
+    double dxy;     /* |d| across the ground */
+    int max_q;
+    double t;       /* the hit */
+    tf_vec3 n;      /* its normal */
+    int want_normal;
+} pray;
+
+/* One level's samples over a leaf: n x n cells from cell (ci, cj), spacing s. */
+typedef struct leaf_level {
+    double s;
+    int64_t ci, cj;
+    int n;
+    float v[LEAF_SAMPLES];
+} leaf_level;
+
+typedef struct leaf {
+    int lo, hi;
+    leaf_level lev[MAX_LEAF_LEVELS];
+    double zlo, zhi; /* the range of every sample: the surface lies within */
+    double slope;    /* Lipschitz bound of the surface over the leaf */
+    double eps;
+} leaf;
+
+static double z_at(const pray *r, double t) { return r->o.z + t * r->d.z; }
+
+/* ------------------------------------------------------------------------------ leaves */
+
+static void read_level(const pray *r, int q, int64_t i, int64_t j, int level, leaf_level *l)
+{
+    l->s = tf_proc_spacing(r->p, level);
+    int shift = q - level - 5; /* >= -1 in a leaf */
+    l->n = shift >= 0 ? 1 : 2;
+    l->ci = shift >= 0 ? i >> shift : i << 1;
+    l->cj = shift >= 0 ? j >> shift : j << 1;
+    tf_proc_samples(r->p, level, l->ci, l->cj, l->n + 1, l->n + 1, l->v);
+}
+
+/* Steepest slope of level l's bilinear patches, and the range of its samples. */
+static double level_slope(const leaf_level *l, double *lo, double *hi)
+{
+    int m = l->n + 1;
+    double gx = 0, gy = 0;
+    for (int b = 0; b < m; b++)
+        for (int a = 0; a < m; a++) {
+            double v = l->v[b * m + a];
+            *lo = fmin(*lo, v);
+            *hi = fmax(*hi, v);
+            if (a + 1 < m)
+                gx = fmax(gx, fabs(l->v[b * m + a + 1] - v));
+            if (b + 1 < m)
+                gy = fmax(gy, fabs(l->v[(b + 1) * m + a] - v));
+        }
+    return hypot(gx, gy) / l->s;
+}
+
+/* |grad lambda| <= 1 / (ln 2 * d) where d >= the leaf's nearest distance (and min_dist). */
+static double lambda_slope(const pray *r, double x0, double x1, double y0, double y1)
+{
+    const tf_proc_view *v = r->v;
+    double nx = v->eye.x < x0 ? x0 - v->eye.x : v->eye.x > x1 ? v->eye.x - x1 : 0.0;
+    double ny = v->eye.y < y0 ? y0 - v->eye.y : v->eye.y > y1 ? v->eye.y - y1 : 0.0;
+    double d = sqrt(nx * nx + ny * ny + v->dz * v->dz);
+    return 1.0 / (M_LN2 * fmax(d, v->min_dist));
+}
+
+static void load_leaf(const pray *r, int q, int64_t i, int64_t j, int lo, int hi, double *box,
+                      leaf *f)
+{
+    f->lo = lo;
+    f->hi = hi;
+    f->zlo = INFINITY;
+    f->zhi = -INFINITY;
+    double steepest = 0;
+    for (int level = lo; level <= hi; level++) {
+        read_level(r, q, i, j, level, &f->lev[level - lo]);
+        steepest = fmax(steepest, level_slope(&f->lev[level - lo], &f->zlo, &f->zhi));
+    }
+    f->slope = steepest + (f->zhi - f->zlo) * lambda_slope(r, box[0], box[1], box[2], box[3]);
+    f->eps = HIT_TOLERANCE * tf_proc_spacing(r->p, hi);
+}
+
+/* Level l's bilinear height at (x, y), and its gradient if g is not NULL. */
+static double level_height(const leaf_level *l, double x, double y, double *g)
+{
+    double gx = x / l->s - (double)l->ci, gy = y / l->s - (double)l->cj;
+    int a = gx < 1 || l->n == 1 ? 0 : 1, b = gy < 1 || l->n == 1 ? 0 : 1;
+    double fx = fmin(fmax(gx - a, 0.0), 1.0), fy = fmin(fmax(gy - b, 0.0), 1.0);
+    int m = l->n + 1;
+    const float *c = l->v + b * m + a;
+    double c00 = c[0], c10 = c[1], c01 = c[m], c11 = c[m + 1];
+    if (g) {
+        g[0] = ((1 - fy) * (c10 - c00) + fy * (c11 - c01)) / l->s;
+        g[1] = ((1 - fx) * (c01 - c00) + fx * (c11 - c10)) / l->s;
+    }
+    return (1 - fy) * ((1 - fx) * c00 + fx * c10) + fy * ((1 - fx) * c01 + fx * c11);
+}
+
+/* The surface h (procedural.h) at (x, y) from the leaf's samples; its gradient into g if
+ * g is not NULL. */
+static double leaf_height(const pray *r, const leaf *f, double x, double y, double *g)
+{
+    double dx = x - r->v->eye.x, dy = y - r->v->eye.y, d2 = dx * dx + dy * dy;
+    double lambda = tf_proc_lambda(r->p, r->v, d2);
+    int level = (int)lambda;
+    level = level < f->lo ? f->lo : level > f->hi ? f->hi : level;
+    double w = fmin(fmax(lambda - level, 0.0), 1.0);
+    double g0[2], g1[2];
+    double h = level_height(&f->lev[level - f->lo], x, y, g ? g0 : NULL);
+    if (!(w > 0) || level >= f->hi) {
+        if (g)
+            g[0] = g0[0], g[1] = g0[1];
+        return h;
+    }
+    double h1 = level_height(&f->lev[level + 1 - f->lo], x, y, g ? g1 : NULL);
+    if (g) { /* d lambda / dx = -(x - ex) / (ln 2 (d2 + dz^2)) while lambda is not clamped */
+        double d2z = d2 + r->v->dz * r->v->dz;
+        double k = lambda > 0 && lambda < r->p->max_level && d2z > 0 ? -1.0 / (M_LN2 * d2z) : 0;
+        for (int a = 0; a < 2; a++)
+            g[a] = g0[a] + w * (g1[a] - g0[a]) + (h1 - h) * k * (a == 0 ? dx : dy);
+    }
+    return h + w * (h1 - h);
+}
+
+static void hit_normal(pray *r, const leaf *f, double x, double y)
+{
+    double g[2];
+    leaf_height(r, f, x, y, g);
+    r->n = v3_norm(v3(-g[0], -g[1], 1.0));
+}
+
+/* March the leaf's surface from t0 to t1 with steps the slope bound makes safe. */
+static int march(pray *r, const leaf *f, double t0, double t1)
+{
+    if (fmin(z_at(r, t0), z_at(r, t1)) > f->zhi)
+        return 0;
+    double climb = f->slope * r->dxy - r->d.z; /* how fast the gap can close, at most */
+    double t = t0;
+    for (int step = 0; step < MARCH_STEPS; step++) {
+        double x = r->o.x + t * r->d.x, y = r->o.y + t * r->d.y;
+        double gap = z_at(r, t) - leaf_height(r, f, x, y, NULL);
+        if (gap <= f->eps)
+            break;
+        if (!(climb > 0))
+            return 0;
+        t += gap / climb;
+        if (t > t1)
+            return 0;
+    }
+    r->t = t;
+    if (r->want_normal)
+        hit_normal(r, f, r->o.x + t * r->d.x, r->o.y + t * r->d.y);
+    return 1;
+}
+
+/* ------------------------------------------------------------------------------ the tree */
+
+static void node_box(const pray *r, int q, int64_t i, int64_t j, double *box)
+{
+    double size = ldexp(r->p->extent, -q);
+    box[0] = (double)i * size, box[1] = (double)(i + 1) * size;
+    box[2] = (double)j * size, box[3] = (double)(j + 1) * size;
+}
+
+/* t where the ray crosses coordinate c along axis a (x: 0, y: 1), or INFINITY. */
+static double cross_at(const pray *r, int a, double c)
+{
+    double o = a == 0 ? r->o.x : r->o.y, d = a == 0 ? r->d.x : r->d.y;
+    return d != 0 ? (c - o) / d : INFINITY;
+}
+
+static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1);
+
+/* Node bounds are costly (an interval sum over the octaves) and each serves many rays: a
+ * direct-mapped table per thread remembers them.  A bound is a function of the terrain, the
+ * node and its levels only, so a hit returns exactly what the computation would. */
+#define BOUND_TABLE_BITS 16
+typedef struct bound_entry {
+    uint64_t proc;
+    int64_t i, j;
+    int q, lo, hi;
+    tf_interval b;
+} bound_entry;
+static __thread bound_entry *bound_table;
+
+static tf_interval node_bound(const pray *r, int q, int64_t i, int64_t j, const double *box,
+                              int lo, int hi)
+{
+    if (!bound_table)
+        bound_table = calloc((size_t)1 << BOUND_TABLE_BITS, sizeof *bound_table);
+    if (!bound_table) /* no memory: compute every time */
+        return tf_proc_bound_levels(r->p, box[0], box[1], box[2], box[3], lo, hi);
+    uint64_t h = tf_hash64((uint64_t)i * 0x9e3779b97f4a7c15ULL ^ (uint64_t)j ^
+                           ((uint64_t)q << 56) ^ ((uint64_t)lo << 48) ^ ((uint64_t)hi << 40));
+    bound_entry *e = &bound_table[h >> (64 - BOUND_TABLE_BITS)];
+    if (e->proc == r->p->id && e->i == i && e->j == j && e->q == q && e->lo == lo &&
+        e->hi == hi)
+        return e->b;
+    tf_interval b = tf_proc_bound_levels(r->p, box[0], box[1], box[2], box[3], lo, hi);
+    *e = (bound_entry){r->p->id, i, j, q, lo, hi, b};
+    return b;
+}
+
+/* The four children in the order the ray meets them over [t0, t1]. */
+static int visit_children(pray *r, int q, int64_t i, int64_t j, const double *box, double t0,
+                          double t1)
+{
+    double xm = 0.5 * (box[0] + box[1]), ym = 0.5 * (box[2] + box[3]);
+    double cut[4] = {t0, cross_at(r, 0, xm), cross_at(r, 1, ym), t1};
+    for (int a = 1; a < 3; a++)
+        cut[a] = cut[a] > t0 && cut[a] < t1 ? cut[a] : t1;
+    if (cut[1] > cut[2]) {
+        double s = cut[1];
+        cut[1] = cut[2], cut[2] = s;
+    }
+    for (int k = 0; k < 3; k++) {
+        if (!(cut[k + 1] > cut[k]))
+            continue;
+        double tm = 0.5 * (cut[k] + cut[k + 1]);
+        int cx = r->o.x + tm * r->d.x >= xm, cy = r->o.y + tm * r->d.y >= ym;
+        if (visit(r, q + 1, 2 * i + cx, 2 * j + cy, cut[k], cut[k + 1]))
+            return 1;
+    }
+    return 0;
+}
+
+/* Once a node lies within one tile of every level used over it (q >= hi), its bound is exact:
+ * the range of the samples each level has over it (a block of the tile's pyramid; a node
+ * smaller than two cells takes the two-cell block around it).  h mixes those samples only. */
+static tf_interval sample_bound(const pray *r, int q, int64_t i, int64_t j, int lo, int hi)
+{
+    tf_interval b = {INFINITY, -INFINITY};
+    for (int level = lo; level <= hi; level++) {
+        int cells_log2 = level + 5 - q; /* the node's side in cells of this level, log 2 */
+        int k = cells_log2 < 1 ? 1 : cells_log2;
+        int64_t ci = cells_log2 >= 0 ? i << cells_log2 : i >> -cells_log2;
+        int64_t cj = cells_log2 >= 0 ? j << cells_log2 : j >> -cells_log2;
+        float a, c;
+        tf_proc_range(r->p, level, k, ci, cj, &a, &c);
+        b.lo = a < b.lo ? a : b.lo;
+        b.hi = c > b.hi ? c : b.hi;
+    }
+    return b;
+}
+
+static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1)
+{
+    double box[4];
+    int lo, hi;
+    node_box(r, q, i, j, box);
+    tf_proc_box_levels(r->p, r->v, box[0], box[1], box[2], box[3], &lo, &hi);
+    tf_interval b = q >= hi ? sample_bound(r, q, i, j, lo, hi) : node_bound(r, q, i, j, box, lo, hi);
+    if (fmin(z_at(r, t0), z_at(r, t1)) > b.hi)
+        return 0;
+    if ((q >= hi + 4 && hi - lo < MAX_LEAF_LEVELS) || q >= r->max_q) {
+        leaf f;
+        if (hi - lo >= MAX_LEAF_LEVELS)
+            lo = hi - MAX_LEAF_LEVELS + 1; /* q >= max_q: unreachable for any real view */
+        load_leaf(r, q, i, j, lo, hi, box, &f);
+        return march(r, &f, t0, t1);
+    }
+    return visit_children(r, q, i, j, box, t0, t1);
+}
+
+/* Clip [*t0, *t1] to the ray's stretch over the square [0, extent]^2; 0 if none. */
+static int clip_to_square(const pray *r, double *t0, double *t1)
+{
+    for (int a = 0; a < 2; a++) {
+        double o = a == 0 ? r->o.x : r->o.y, d = a == 0 ? r->d.x : r->d.y;
+        if (d == 0) {
+            if (!(o >= 0 && o <= r->p->extent))
+                return 0;
+            continue;
+        }
+        double ta = (0 - o) / d, tb = (r->p->extent - o) / d;
+        *t0 = fmax(*t0, fmin(ta, tb));
+        *t1 = fmin(*t1, fmax(ta, tb));
+    }
+    return *t1 > *t0;
+}
+
+static int trace(pray *r, double tmin, double tmax)
+{
+    r->dxy = hypot(r->d.x, r->d.y);
+    r->max_q = r->p->max_level + 4 + 2 * MAX_LEAF_LEVELS;
+    double t0 = tmin, t1 = tmax;
+    if (!clip_to_square(r, &t0, &t1))
+        return 0;
+    return visit(r, 0, 0, 0, t0, t1);
+}
+
+int tf_proc_trace(const tf_procedural *p, const tf_proc_view *v, tf_vec3 origin, tf_vec3 dir,
+                  double tmin, double tmax, tf_hit *hit)
+{
+    pray r = {.p = p, .v = v, .o = origin, .d = dir, .want_normal = 1};
+    if (!trace(&r, tmin, tmax))
+        return 0;
+    hit->t = r.t;
+    hit->p = v3_add(origin, v3_scale(dir, r.t));
+    hit->n = r.n;
+    hit->ci = hit->cj = 0;
+    return 1;
+}
+
+int tf_proc_occluded(const tf_procedural *p, const tf_proc_view *v, tf_vec3 origin, tf_vec3 dir,
+                     double tmin, double tmax)
+{
+    pray r = {.p = p, .v = v, .o = origin, .d = dir, .want_normal = 0};
+    return trace(&r, tmin, tmax);
+}
+
+double tf_proc_shadow_lift(const tf_procedural *p, const tf_proc_view *v, tf_vec3 p_hit)
+{
+    double dx = p_hit.x - v->eye.x, dy = p_hit.y - v->eye.y;
+    int level = (int)tf_proc_lambda(p, v, dx * dx + dy * dy) + 1;
+    return SHADOW_LIFT * tf_proc_spacing(p, level > p->max_level ? p->max_level : level);
+}
+

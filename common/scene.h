@@ -73,6 +73,12 @@ typedef struct tf_terrain {
     int thermal_iterations; /* thermal weathering; 0 = off */
     double talus_deg;       /* talus angle for thermal weathering */
 
+    /* shading of the grid's triangles (render/shade.h): 0 = flat-lit triangles near the
+     * terminator (the sun test and the shadow ray's start by the triangle's own normal, the
+     * look of every scene before the key), 1 = smooth: both by the interpolated normal, as
+     * POV-Ray's height_field { smooth } */
+    int smooth;
+
     /* generator = file (terrain/heightmap_file.c; scenes/README.md) */
     char file_path[TF_SCENE_PATH_MAX]; /* as written; relative to the scene file's folder */
     char file_sha256[65];   /* hex SHA-256 of the file: pinned by the scene, or set on load */

@@ -77,6 +77,12 @@ typedef struct tf_terrain {
      * of the pixel footprint, with no grid and no size cap (terrain/procedural.h) */
     int procedural;
 
+    /* shading of the grid's triangles (render/shade.h): 0 = flat-lit triangles near the
+     * terminator (the sun test and the shadow ray's start by the triangle's own normal, the
+     * look of every scene before the key), 1 = smooth: both by the interpolated normal, as
+     * POV-Ray's height_field { smooth } */
+    int smooth;
+
     /* generator = file (terrain/heightmap_file.c; scenes/README.md) */
     char file_path[TF_SCENE_PATH_MAX]; /* as written; relative to the scene file's folder */
     char file_sha256[65];   /* hex SHA-256 of the file: pinned by the scene, or set on load */

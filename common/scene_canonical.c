@@ -95,6 +95,8 @@ static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
         break;
     }
     case KT_BOOL:
+        if (scene_key_silent(s, key))
+            break; /* not written: the key is absent */
         sb_printf(b, "%s = %s\n", k->name, *(const int *)src ? "true" : "false");
         break;
     case KT_GENERATOR:

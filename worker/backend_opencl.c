@@ -414,6 +414,7 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     I[TFI_HEIGHT] = cam->height;
     I[TFI_CAM_KIND] = cam->kind == TF_CAMERA_PANORAMA;
     I[TFI_TEXTURED] = sh->textured;
+    I[TFI_SMOOTH] = sh->smooth;
     I[TFI_MIST_ENABLED] = s->mist.enabled;
     I[TFI_MIST_HOMOG] = s->mist.homogeneous;
     I[TFI_LATTICE] = r->lattice;

@@ -149,6 +149,44 @@ TF_SHARED tf_lane3 tf_smooth_normal_blend(tf_lane3 n00, tf_lane3 nside, tf_lane3
     return tf_l3_norm(n);
 }
 
+/* ---- the shadow ray of smooth shading (terrain smooth = yes)
+ *
+ * Shaded with the interpolated normal, a point near the terminator may face the sun while its
+ * flat triangle faces away; a shadow ray from the triangle then enters the triangle's own mesh
+ * at once, and every such triangle is dark on its own: the mosaic of the "shadow terminator"
+ * problem.  The ray starts instead on the smooth surface the vertex normals describe (Hanika,
+ * "Hacking the shadow terminator", Ray Tracing Gems II, 2021): p is lifted onto the tangent
+ * plane of each vertex of its triangle (only upwards: a point already above a vertex's plane,
+ * as in a concave cell, stays), and the three lifts are blended with p's barycentric weights,
+ * those of tf_smooth_normal_blend.  On a convex slope the triangles lie below that surface, so
+ * a ray leaving it towards a sun above its tangent plane misses them; in a concave cell the
+ * point stays on its triangle, where the curved surface does shade itself.  The lift is zero
+ * at the vertices and, along an edge, depends on the edge's two vertices alone, so the start
+ * is continuous from triangle to triangle and light ends on the smooth normal's terminator,
+ * not on triangle edges.  It is a few hundredths of a cell on real terrain: no light leaks
+ * under a ridge taller than that. */
+
+/* How far p lies below the plane through v normal to unit n (0 on or above it). */
+TF_SHARED tf_lane tf_depth_below_plane(tf_lane3 p, tf_lane3 v, tf_lane3 n)
+{
+    tf_lane d = tf_l3_dot(tf_l3(p.x - v.x, p.y - v.y, p.z - v.z), n);
+    return TF_SEL(-d, 0.0, d >= 0.0);
+}
+
+/* p lifted onto the smooth surface: the hit triangle's vertices v00, vside, v11 with their
+ * normals n00, nside, n11 and p's cell fractions fx, fy, as tf_smooth_normal_blend takes them. */
+TF_SHARED tf_lane3 tf_smooth_shadow_origin(tf_lane3 p, tf_lane3 v00, tf_lane3 n00, tf_lane3 vside,
+                                           tf_lane3 nside, tf_lane3 v11, tf_lane3 n11,
+                                           tf_lane fx, tf_lane fy)
+{
+    tf_mask lower = fx >= fy;
+    tf_lane big = TF_SEL(fy, fx, lower), small = TF_SEL(fx, fy, lower);
+    tf_lane3 up = tf_l3_scale(n00, (1 - big) * tf_depth_below_plane(p, v00, n00));
+    up = tf_l3_add(up, tf_l3_scale(nside, (big - small) * tf_depth_below_plane(p, vside, nside)));
+    up = tf_l3_add(up, tf_l3_scale(n11, small * tf_depth_below_plane(p, v11, n11)));
+    return tf_l3_add(p, up);
+}
+
 /* The bumped normal: n tilted by the bump texture's gradient (gx, gy) times amp -- but never
  * tipped over the horizon (then n itself). */
 TF_SHARED tf_lane3 tf_bump_normal(tf_lane3 n, double amp, tf_lane gx, tf_lane gy)

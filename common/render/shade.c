@@ -27,6 +27,7 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
     sh->scene = s;
     sh->hf = hf;
     sh->textured = s->materials.bump > 0 || s->materials.snow_jitter > 0;
+    sh->smooth = s->terrain.smooth;
     if (sh->textured)
         tf_noise_init(&sh->noise, s->terrain.seed ^ 0x7465787475726573ULL); /* "textures" */
     double az = s->sun.azimuth_deg * TF_DEG2RAD, el = s->sun.elevation_deg * TF_DEG2RAD;
@@ -96,18 +97,50 @@ static tf_vec3 vertex_normal(const tf_heightfield *hf, int i, int j)
                                span_y);
 }
 
-/* Normal interpolated across the hit triangle with barycentric weights.  The cell's diagonal
- * runs from (ci, cj) to (ci+1, cj+1) (heightfield.h), so fx >= fy is the lower-right triangle. */
-static tf_vec3 smooth_normal(const tf_heightfield *hf, int ci, int cj, tf_vec3 p)
+/* The triangle hit in cell (ci, cj) at p: its corner (ci, cj), its side vertex (si, sj) and
+ * their normals, p's fractions of the cell.  The cell's diagonal runs from (ci, cj) to
+ * (ci+1, cj+1) (heightfield.h), so fx >= fy is the lower-right triangle, whose side vertex is
+ * (ci+1, cj); the upper-left one's is (ci, cj+1). */
+typedef struct hit_triangle {
+    int ci, cj, si, sj;
+    tf_vec3 n00, nside, n11;
+    double fx, fy;
+} hit_triangle;
+
+static void hit_triangle_at(const tf_heightfield *hf, int ci, int cj, tf_vec3 p, hit_triangle *t)
 {
     ci = ci < 0 ? 0 : ci >= hf->cells ? hf->cells - 1 : ci;
     cj = cj < 0 ? 0 : cj >= hf->cells ? hf->cells - 1 : cj;
     double fx = p.x / hf->cell - ci, fy = p.y / hf->cell - cj;
-    fx = tf_clamp01(fx);
-    fy = tf_clamp01(fy);
-    tf_vec3 n00 = vertex_normal(hf, ci, cj), n11 = vertex_normal(hf, ci + 1, cj + 1);
-    tf_vec3 nside = fx >= fy ? vertex_normal(hf, ci + 1, cj) : vertex_normal(hf, ci, cj + 1);
-    return tf_smooth_normal_blend(n00, nside, n11, fx, fy);
+    t->fx = tf_clamp01(fx);
+    t->fy = tf_clamp01(fy);
+    t->ci = ci;
+    t->cj = cj;
+    t->si = t->fx >= t->fy ? ci + 1 : ci;
+    t->sj = t->fx >= t->fy ? cj : cj + 1;
+    t->n00 = vertex_normal(hf, ci, cj);
+    t->n11 = vertex_normal(hf, ci + 1, cj + 1);
+    t->nside = vertex_normal(hf, t->si, t->sj);
+}
+
+/* Normal interpolated across the hit triangle with barycentric weights. */
+static tf_vec3 smooth_normal(const hit_triangle *t)
+{
+    return tf_smooth_normal_blend(t->n00, t->nside, t->n11, t->fx, t->fy);
+}
+
+/* Sample (i, j) in the world (heightfield.h). */
+static tf_vec3 vertex_at(const tf_heightfield *hf, int i, int j)
+{
+    return v3((double)i * hf->cell, (double)j * hf->cell, height_sample(hf, i, j));
+}
+
+/* p lifted onto the smooth surface of its triangle (tf_smooth_shadow_origin, sample_math.h). */
+static tf_vec3 smooth_shadow_origin(const tf_heightfield *hf, const hit_triangle *t, tf_vec3 p)
+{
+    tf_vec3 v00 = vertex_at(hf, t->ci, t->cj), v11 = vertex_at(hf, t->ci + 1, t->cj + 1);
+    return tf_smooth_shadow_origin(p, v00, t->n00, vertex_at(hf, t->si, t->sj), t->nside, v11,
+                                   t->n11, t->fx, t->fy);
 }
 
 /* Noise at x and at x_dx (the same lattice row `ay`), as tf_noise2_axis(nz, x, ay) and
@@ -293,7 +326,8 @@ tf_vec3 tf_mist_apply(const tf_shader *sh, tf_vec3 c, tf_vec3 origin, tf_vec3 di
 
 /* ---------------------------------------------------------------- surfaces */
 
-/* 1 if the sun is visible from p (surface with geometric normal ng). */
+/* 1 if the sun is visible from p on a surface of normal ng: the sun in front of it, and a
+ * shadow ray from p lifted along ng reaches the sky. */
 static int sunlit(const tf_shader *sh, tf_vec3 p, tf_vec3 ng, uint64_t *shadow_rays)
 {
     if (v3_dot(ng, sh->sun_dir) <= 0 || sh->sun_dir.z <= -1.0)
@@ -301,6 +335,18 @@ static int sunlit(const tf_shader *sh, tf_vec3 p, tf_vec3 ng, uint64_t *shadow_r
     tf_vec3 start = v3_add(p, v3_scale(ng, shadow_lift_at(sh, p)));
     (*shadow_rays)++;
     return !terrain_occludes(sh, start, sh->sun_dir);
+}
+
+/* sunlit for a terrain hit with smooth normal n.  Flat (every scene before terrain smooth):
+ * the sun must face the hit triangle itself, and the ray starts on it, lifted along its normal
+ * -- so near the terminator each triangle is lit or dark on its own.  Smooth: the sun must
+ * face n, and the ray starts on the smooth surface (tf_smooth_shadow_origin), lifted along n. */
+static int terrain_sunlit(const tf_shader *sh, const tf_hit *hit, const hit_triangle *t,
+                          tf_vec3 n, uint64_t *shadow_rays)
+{
+    if (!sh->smooth || sh->hf->proc) /* procedural: hit->n is n, the surface has no facets */
+        return sunlit(sh, hit->p, hit->n, shadow_rays);
+    return sunlit(sh, smooth_shadow_origin(sh->hf, t, hit->p), n, shadow_rays);
 }
 
 /* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */
@@ -329,8 +375,12 @@ static tf_vec3 terrain_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double 
 
 tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays)
 {
-    /* a procedural hit's normal is the surface's own gradient: smooth already */
-    tf_vec3 n = sh->hf->proc ? hit->n : smooth_normal(sh->hf, hit->ci, hit->cj, hit->p);
+    hit_triangle tri = {0};
+    tf_vec3 n = hit->n; /* a procedural hit's normal is the surface's own gradient: smooth */
+    if (!sh->hf->proc) {
+        hit_triangle_at(sh->hf, hit->ci, hit->cj, hit->p, &tri);
+        n = smooth_normal(&tri);
+    }
     tf_vec3 nb = n;
     double variation = 0;
     double octaves = visible_octaves(sh, sh->bump_scale, hit->t, TF_BUMP_OCTAVES);
@@ -343,7 +393,7 @@ tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shado
     tf_vec3 albedo = terrain_albedo(sh, hit->p, n, variation);
     double cos_sun = v3_dot(nb, sh->sun_dir);
     tf_vec3 light = tf_sky_light_on(sh->sky_light, nb.z);
-    if (cos_sun > 0 && sunlit(sh, hit->p, hit->n, shadow_rays))
+    if (cos_sun > 0 && terrain_sunlit(sh, hit, &tri, n, shadow_rays))
         light = v3_add(light, v3_scale(sh->sun_light, cos_sun));
     return v3_mul(albedo, light);
 }

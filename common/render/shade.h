@@ -11,8 +11,14 @@
  *               texture", Musgrave 5).  Texture octaves finer than the pixel's footprint
  *               at the hit are faded out (band-limited textures: less aliasing, and the
  *               adaptive antialiasing is not sent chasing sub-pixel noise).
- *   light       sun (direct, shadowed through tf_occluded from a point lifted along the
- *               geometric normal) plus sky light weighted by how much sky the normal sees.
+ *   light       sun (direct, shadowed through tf_occluded) plus sky light weighted by how
+ *               much sky the normal sees.  Whether the sun shines on a terrain point is
+ *               decided, by default, by its flat triangle: the sun must face the triangle, and
+ *               the shadow ray starts on it, lifted along its normal, so near the terminator
+ *               each triangle is lit or dark on its own.  terrain.smooth decides it by the
+ *               interpolated normal instead, the shadow ray starting on the smooth surface the
+ *               vertex normals describe (tf_smooth_shadow_origin, sample_math.h): light then
+ *               ends on a smooth terminator.
  *   water       an infinite plane at sea_level, flat with fBm ripples in its normal; reflects
  *               the sky with Schlick's Fresnel term over a dark, lit water body.
  *   sky         zenith/horizon gradient plus a soft glow around the sun.
@@ -38,6 +44,8 @@ typedef struct tf_shader {
     const tf_heightfield *hf;
     tf_noise noise;          /* texture noise (initialised only when textures need it) */
     int textured;            /* bump > 0 or snow_jitter > 0 */
+    int smooth;              /* terrain.smooth: the sun test and the shadow ray by the
+                              * interpolated normal (tf_shade_terrain) */
     tf_vec3 sun_dir;         /* unit vector towards the sun */
     tf_vec3 sun_light;       /* sun colour * intensity */
     tf_vec3 sky_light;       /* ambient sky radiance on an upward-facing surface */

@@ -4,7 +4,10 @@
 # (both must take tasks), against the C backend's image.  The contract is a tolerance (PSNR
 # >= 45 dB, sample counts equal for nearly all pixels: tests/unit/test_opencl.c measures it per
 # pixel); here the images are compared byte for byte when they can be (PoCL gives identical
-# bits), else by the statistics' ray and sample counts within 1%.  A bad --cl-device gives a
+# bits), else by the statistics' ray and sample counts within 1%.  A scene with [terrain]
+# smooth = yes, rendered by a networked OpenCL worker (which parses the scene's text and checks
+# its hash, that of the canonical form, which names the key when on), against the C
+# backend's smooth image, which must differ from the flat one.  A bad --cl-device gives a
 # one-line error from the worker.  Skipped (77) without an OpenCL platform.
 . "$(dirname "$0")/lib.sh"
 e2e_init
@@ -22,13 +25,15 @@ say "reference: C backend, -j 1, $SIZE"
 render -q -j 1 --size $SIZE -o "$T/ref.exr" --stats "$T/ref.json" ||
     fail "C render: $(cat "$T/last.err")"
 
-# close A.json B.json WHAT: images identical, or rays and samples within 1%.
+# close A.json B.exr WHAT B.json [A.exr]: B.exr identical to A.exr (default ref.exr), or rays
+# and samples within 1%.
 close() {
-    if cmp -s "$T/ref.exr" "$2"; then
+    ref=${5:-$T/ref.exr}
+    if cmp -s "$ref" "$2"; then
         say "$3: byte-identical to the C backend's image"
         return 0
     fi
-    if "$EXRCMP" "$T/ref.exr" "$2" >/dev/null 2>&1; then   # another layout (rows:1: scanline)
+    if "$EXRCMP" "$ref" "$2" >/dev/null 2>&1; then   # another layout (rows:1: scanline)
         say "$3: pixels identical to the C backend's image"
         return 0
     fi
@@ -68,6 +73,24 @@ close "$T/ref.json" "$T/mixed.exr" "C + OpenCL workers" "$T/mixed.json"
 by=$(python3 -c 'import json,sys; w=json.load(open(sys.argv[1]))["workers"]; print(" ".join("%s:%d" % (b, sum(x["tasks"] for x in w if x["backend"]==b)) for b in ("c","opencl")))' "$T/mixed.json")
 say "tasks by backend: $by"
 case "$by" in *"c:0"*|*"opencl:0"*) fail "one backend rendered no task ($by): not a mixed render" ;; esac
+
+say "[terrain] smooth = yes: a networked OpenCL worker, which parses the scene's text and checks its hash"
+sed 's/^\[terrain\]/[terrain]\nsmooth = yes/' "$SCENE" >"$T/smooth.scene"
+"$TF_BIN" render "$T/smooth.scene" -q -j 1 --size $SIZE --listen 127.0.0.1:0 -o "$T/smooth_c.exr" \
+    --stats "$T/smooth_c.json" 2>"$T/smooth_c.err" || fail "smooth C render: $(cat "$T/smooth_c.err")"
+"$EXRCMP" "$T/ref.exr" "$T/smooth_c.exr" >/dev/null 2>&1 && fail "smooth = yes rendered the flat image"
+"$TF_BIN" render "$T/smooth.scene" -j 0 --wait-workers 1 --size $SIZE --listen 127.0.0.1:0 -v \
+    -o "$T/smooth_cl.exr" --stats "$T/smooth_cl.json" 2>"$T/coord3.err" &
+coord=$!; e2e_track $coord
+port=$(e2e_port "$T/coord3.err") || fail "coordinator printed no port: $(cat "$T/coord3.err")"
+"$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --backend opencl -q 2>"$T/worker3.err" &
+wk=$!; e2e_track $wk
+wait_exit $coord 120
+[ $rc -eq 0 ] || fail "smooth OpenCL render exited $rc: $(cat "$T/coord3.err")"
+wait_exit $wk 30
+[ $rc -eq 0 ] || fail "OpenCL worker exited $rc: $(cat "$T/worker3.err")"
+close "$T/smooth_c.json" "$T/smooth_cl.exr" "smooth, networked OpenCL worker" "$T/smooth_cl.json" \
+    "$T/smooth_c.exr"
 
 say "a bad --cl-device: the worker refuses with one line"
 "$TF_BIN" render "$SCENE" -j 0 --size $SIZE --listen 127.0.0.1:0 -o "$T/bad.exr" 2>"$T/coord2.err" &

@@ -11,6 +11,8 @@
  *                       with mixed workers assembles) meets the same tolerance.
  *   other_scenes        mesa (water, eroded terrain) and alps (panorama camera, ridged) at
  *                       small sizes: the same tolerance.
+ *   smooth_scenes       alps and default with terrain smooth = yes: the same tolerance (and
+ *                       the bits on PoCL), each image differing from its flat one.
  *   aa_depths_and_tiny_images   AA depth 0 and 6, a 1x1 image, a 7x3 one: the same.
  *   On PoCL's CPU device the packet kernels compute every sample with the C operations in the
  *   C order, so match_c_backend and other_scenes also demand memcmp-identical pixels there (a
@@ -25,6 +27,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -226,8 +229,9 @@ static void mixed_backends(void **state)
 }
 
 /* Render scenes/NAME.scene at w x h with both backends (AA depth `depth`, or the scene's if
- * negative); compare. */
-static void check_scene(const char *name, int w, int h, int depth)
+ * negative; terrain smooth as `smooth`, or the scene's if negative); compare.  Returns a
+ * checksum of the C image (for telling the modes apart). */
+static uint64_t check_scene_mode(const char *name, int w, int h, int depth, int smooth)
 {
     char err[1024], path[4096];
     const char *root = getenv("TF_ROOT");
@@ -237,6 +241,9 @@ static void check_scene(const char *name, int w, int h, int depth)
     tf_scene_set_size(s, w, h);
     if (depth >= 0)
         s->antialias.max_depth = depth;
+    if (smooth >= 0)
+        s->terrain.smooth = smooth;
+    tf_scene_rehash(s);
     tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
     assert_non_null(hf);
     tf_renderer *r = tf_renderer_new(s, hf, err, sizeof err);
@@ -251,18 +258,27 @@ static void check_scene(const char *name, int w, int h, int depth)
     assert_int_equal(tf_cl_backend_render(b, (tf_rect){0, 0, w, h}, g, NULL, err, sizeof err), 0);
     double p = psnr(c, g, n);
     size_t spp_same = count_equal_spp(c, g, n);
-    print_message("%s %dx%d depth %d: PSNR %.1f dB, spp equal %zu/%zu\n", name, w, h,
-                  s->antialias.max_depth, p, spp_same, n);
+    print_message("%s %dx%d depth %d%s: PSNR %.1f dB, spp equal %zu/%zu\n", name, w, h,
+                  s->antialias.max_depth, s->terrain.smooth ? " smooth" : "", p, spp_same, n);
     assert_true(p >= 45.0);
     assert_true(spp_same * 100 >= n * 99);
     if (on_pocl_cpu(b))
         assert_memory_equal(g, c, n * sizeof *c);
+    uint64_t sum = 0xcbf29ce484222325ULL; /* FNV-1a */
+    for (size_t i = 0; i < n * sizeof *c; i++)
+        sum = (sum ^ ((const unsigned char *)c)[i]) * 0x100000001b3ULL;
     free(c);
     free(g);
     tf_cl_backend_free(b);
     tf_renderer_free(r);
     tf_heightfield_free(hf);
     tf_scene_free(s);
+    return sum;
+}
+
+static void check_scene(const char *name, int w, int h, int depth)
+{
+    check_scene_mode(name, w, h, depth, -1);
 }
 
 static void other_scenes(void **state)
@@ -271,6 +287,18 @@ static void other_scenes(void **state)
     skip_without_opencl();
     check_scene("mesa", 96, 54, -1);
     check_scene("alps", 120, 40, -1);
+}
+
+/* terrain smooth = yes (the sun test and the shadow ray's start by the interpolated normal):
+ * the same bits on PoCL.  Each image must differ from its flat one, or the smooth path was
+ * not exercised. */
+static void smooth_scenes(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    assert_true(check_scene_mode("alps", 120, 40, -1, 1) != check_scene_mode("alps", 120, 40, -1, 0));
+    assert_true(check_scene_mode("default", 96, 54, -1, 1) !=
+                check_scene_mode("default", 96, 54, -1, 0));
 }
 
 /* The edges of the packet kernels: no subdivision at all, the deepest one (a 65 x 65 lattice
@@ -420,6 +448,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(match_c_backend), cmocka_unit_test(rect_invariance),
         cmocka_unit_test(mixed_backends),  cmocka_unit_test(other_scenes),
+        cmocka_unit_test(smooth_scenes),
         cmocka_unit_test(aa_depths_and_tiny_images),
         cmocka_unit_test(bad_device),
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),

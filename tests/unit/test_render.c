@@ -9,6 +9,7 @@
 #include <cmocka.h>
 #include <math.h>
 #include <pthread.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -264,10 +265,53 @@ static void test_contrast_is_perceptual(void **state)
                 tf_display_level(0.82) - tf_display_level(0.80));
 }
 
+/* FNV-1a over the bytes of an image: a fingerprint of every bit of every pixel. */
+static uint64_t image_digest(const tf_pixel *img, size_t n)
+{
+    const unsigned char *b = (const unsigned char *)img;
+    uint64_t h = 0xcbf29ce484222325ULL;
+    for (size_t i = 0; i < n * sizeof *img; i++)
+        h = (h ^ b[i]) * 0x100000001b3ULL;
+    return h;
+}
+
+/* The fixture rendered with the sun at `elevation` and `azimuth`, its digest. */
+static uint64_t digest_with_sun(fixture *f, double azimuth, double elevation)
+{
+    tf_scene s = f->scene;
+    s.sun.azimuth_deg = azimuth;
+    s.sun.elevation_deg = elevation;
+    char err[256];
+    tf_renderer *r = tf_renderer_new(&s, f->hf, err, sizeof err);
+    assert_non_null(r);
+    tf_pixel *img = calloc(W * H, sizeof *img);
+    tf_render_rect(r, (tf_rect){0, 0, W, H}, img, NULL);
+    uint64_t d = image_digest(img, (size_t)W * H);
+    free(img);
+    tf_renderer_free(r);
+    return d;
+}
+
+/* terrain.smooth = 0 (the default) is the shading of every scene before the key existed, to
+ * the bit: the digests were taken from the renderer of the commit before smooth shading, on
+ * the fixture with its own sun and with a low one (many triangles near the terminator, where
+ * the two modes differ).  A change of the compiler or libm may move them; then check that
+ * smooth = 0 still renders what that commit renders, and take them again. */
+static void test_flat_shading_unchanged(void **state)
+{
+    fixture *f = *state;
+    uint64_t own = image_digest(f->whole, (size_t)W * H);
+    uint64_t low = digest_with_sun(f, 250, 7);
+    print_message("digests %016llx %016llx\n", (unsigned long long)own, (unsigned long long)low);
+    assert_true(own == 0xf29dcf73affe00baULL);
+    assert_true(low == 0x7b2063a3e6c2356dULL);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_contrast_is_perceptual),
+        cmocka_unit_test(test_flat_shading_unchanged),
         cmocka_unit_test(test_rows_identical_to_whole),
         cmocka_unit_test(test_columns_identical_to_whole),
         cmocka_unit_test(test_stamps_7x5_identical_to_whole),

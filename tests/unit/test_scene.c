@@ -373,6 +373,7 @@ static void test_hash_changes_with_each_field(void **state)
         {"terrain", "rain_passes", "0"}, {"terrain", "erosion_k", "0.25"},
         {"terrain", "sub_M", "2"}, {"terrain", "sub_E", "3"}, {"terrain", "sub_W", "0"},
         {"terrain", "thermal_iterations", "1"}, {"terrain", "talus", "30"},
+        {"terrain", "smooth", "yes"},
         {"materials", "sea_level", "1"}, {"materials", "tree_line", "1"},
         {"materials", "snow_line", "1"}, {"materials", "snow_jitter", "1"},
         {"materials", "rock_slope", "1"}, {"materials", "bump", "1"},
@@ -522,6 +523,41 @@ static void test_generator_names(void **state)
     assert_string_equal(tf_generator_name((enum tf_generator)99), "unknown");
 }
 
+/* terrain smooth: a bool, off by default; the canonical form names it only when on, so a scene
+ * that leaves it out (or says no) keeps the hash it had before the key existed, and networked
+ * workers, which parse the canonical text, get it when on. */
+static void test_smooth_key(void **state)
+{
+    (void)state;
+    char err[512];
+    tf_scene *plain = parse(MINIMAL, err, sizeof err), *no = parse(MINIMAL "smooth = no\n", err,
+                                                                   sizeof err);
+    tf_scene *yes = parse(MINIMAL "smooth = yes\n", err, sizeof err);
+    assert_non_null(plain);
+    assert_non_null(no);
+    assert_non_null(yes);
+    assert_int_equal(plain->terrain.smooth, 0);
+    assert_int_equal(yes->terrain.smooth, 1);
+    char *c_plain = tf_scene_canonical(plain), *c_yes = tf_scene_canonical(yes);
+    assert_null(strstr(c_plain, "smooth"));
+    assert_non_null(strstr(c_yes, "\nsmooth = true\n"));
+    assert_string_equal(no->hash_hex, plain->hash_hex);
+    assert_string_not_equal(yes->hash_hex, plain->hash_hex);
+    tf_scene *again = parse(c_yes, err, sizeof err);
+    assert_non_null(again);
+    assert_int_equal(again->terrain.smooth, 1);
+    assert_string_equal(again->hash_hex, yes->hash_hex);
+    free(c_plain);
+    free(c_yes);
+    tf_scene_free(again);
+    tf_scene_free(plain);
+    tf_scene_free(no);
+    tf_scene_free(yes);
+    expect_error_text(MINIMAL "smooth = maybe\n", "t.scene:10: smooth: unknown value \"maybe\"");
+    expect_error_text(MINIMAL "[materials]\nsmooth = yes\n",
+                      "t.scene:11: smooth: unknown key in [materials]");
+}
+
 /* generator = file: path required, extent 0 (from the raster) unless set, the canonical form
  * keeps the file keys and is itself a valid scene; a procedural scene may not take extent 0. */
 #define FILE_SCENE                                                                                 \
@@ -625,6 +661,7 @@ int main(void)
         cmocka_unit_test(test_every_example_scene_parses),
         cmocka_unit_test(test_generator_names),
         cmocka_unit_test(test_file_generator_keys),
+        cmocka_unit_test(test_smooth_key),
         cmocka_unit_test(test_file_hash_follows_bytes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

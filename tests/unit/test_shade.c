@@ -259,6 +259,73 @@ static void test_sun_shadow_through_tracer(void **state)
     free(f);
 }
 
+/* A convex ridge sloping away from a low western sun, faceted by its 10 m cells: z = 300 -
+ * 0.02 (x - 40)^2, level along y; 17 x 17 samples (k = 4).  The slope steepens by 0.4 per
+ * cell: cell x in [40, 50] (chord slope 0.2) faces the sun (tan 27 deg = 0.51), cell [50, 60]
+ * (chord 0.6) faces away, though its interpolated normal faces the sun up to x = 52.7. */
+static tf_heightfield *convex_ridge(void)
+{
+    float h[17 * 17];
+    for (int j = 0; j < 17; j++)
+        for (int i = 0; i < 17; i++)
+            h[j * 17 + i] = (float)(300.0 - 0.02 * (10.0 * i - 40.0) * (10.0 * i - 40.0));
+    return tf_heightfield_from_heights(h, 4, 160, 1);
+}
+
+/* The colour of the terrain straight below (x, y), through the real tracer's hit. */
+static tf_vec3 shade_below(const tf_shader *sh, double x, double y)
+{
+    tf_hit hit;
+    assert_true(tf_trace(sh->hf, v3(x, y, 1000), v3(0, 0, -1), 0, 1e9, &hit));
+    uint64_t shadow = 0;
+    return tf_shade_terrain(sh, &hit, &shadow);
+}
+
+/* Along the ridge's slope from x = 40 to 70 (0.25 apart, off the vertices): the largest step of
+ * the green channel between neighbours, and the step across the edge x = 50 (1e-4 either side). */
+static void slope_steps(const tf_shader *sh, double *largest, double *at_edge)
+{
+    *largest = 0;
+    for (double x = 40.125; x < 70; x += 0.25) {
+        double step = fabs(shade_below(sh, x + 0.25, 80.3).y - shade_below(sh, x, 80.3).y);
+        *largest = fmax(*largest, step);
+    }
+    *at_edge = fabs(shade_below(sh, 50.0001, 80.3).y - shade_below(sh, 49.9999, 80.3).y);
+}
+
+/* terrain.smooth: near the terminator the flat look jumps at the triangle's edge (the cell that
+ * faces away is dark whole, its smooth normal notwithstanding); the smooth look varies
+ * continuously, lit where the interpolated normal faces the sun, its shadow ray not caught by
+ * its own triangles. */
+static void test_smooth_terminator_is_continuous(void **state)
+{
+    (void)state;
+    fixture *f = calloc(1, sizeof *f);
+    fill_scene(&f->scene);
+    f->scene.sun.azimuth_deg = 270;
+    f->scene.sun.elevation_deg = 27;
+    tf_heightfield *hf = convex_ridge();
+    assert_non_null(hf);
+    double flat_largest, flat_edge, smooth_largest, smooth_edge;
+    tf_shader_init(&f->sh, &f->scene, hf);
+    tf_vec3 flat_inside = shade_below(&f->sh, 51, 80.3);
+    slope_steps(&f->sh, &flat_largest, &flat_edge);
+    f->scene.terrain.smooth = 1;
+    tf_shader_init(&f->sh, &f->scene, hf);
+    tf_vec3 smooth_inside = shade_below(&f->sh, 51, 80.3);
+    slope_steps(&f->sh, &smooth_largest, &smooth_edge);
+    print_message("flat: edge step %.4f, largest %.4f; smooth: edge step %.6f, largest %.4f; "
+                  "x = 51: %.4f flat, %.4f smooth\n", flat_edge, flat_largest, smooth_edge,
+                  smooth_largest, flat_inside.y, smooth_inside.y);
+    double lit = shade_below(&f->sh, 49.9999, 80.3).y; /* the uphill side of the edge */
+    assert_true(flat_edge > 0.3 * lit);             /* the facet's edge shows */
+    assert_true(smooth_edge < 1e-3 * lit);          /* no edge: the step of a 2e-4 move */
+    assert_true(smooth_largest < 0.25 * flat_edge); /* and nowhere a jump like it */
+    assert_true(smooth_inside.y > flat_inside.y + 0.5 * flat_edge); /* lit past the edge */
+    tf_heightfield_free(hf);
+    free(f);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -270,6 +337,7 @@ int main(void)
         cmocka_unit_test(test_materials_by_altitude_and_slope),
         cmocka_unit_test(test_water_reflects_sky_with_fresnel),
         cmocka_unit_test(test_sun_shadow_through_tracer),
+        cmocka_unit_test(test_smooth_terminator_is_continuous),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -286,19 +286,53 @@ v3p vertex_normal8(const world *w, iv i, iv j)
                                span_y);
 }
 
-/* smooth_normal: the triangle of the cell that holds p picks n10 or n01; both cases are the
- * same sum with the weights and the third vertex chosen per lane. */
-v3p smooth_normal8(const world *w, iv ci, iv cj, v3p p)
+/* hit_triangle_at: the triangle of the cell that holds p picks its side vertex (ci+1, cj) or
+ * (ci, cj+1) per lane; both cases are the same sums with the weights and the side vertex
+ * chosen per lane. */
+typedef struct hit_triangle8 {
+    iv ci, cj, si, sj;
+    v3p n00, nside, n11;
+    dv fx, fy;
+} hit_triangle8;
+
+hit_triangle8 hit_triangle8_at(const world *w, iv ci, iv cj, v3p p)
 {
+    hit_triangle8 t;
     ci = select(select(ci, (iv)(w->cells - 1), ci >= w->cells), (iv)(0), ci < 0);
     cj = select(select(cj, (iv)(w->cells - 1), cj >= w->cells), (iv)(0), cj < 0);
     dv fx = p.x / w->cell - convert_double8(ci), fy = p.y / w->cell - convert_double8(cj);
-    fx = tf_clamp01(fx);
-    fy = tf_clamp01(fy);
-    v3p n00 = vertex_normal8(w, ci, cj), n11 = vertex_normal8(w, ci + 1, cj + 1);
-    iv lower_i = mask_i(fx >= fy); /* n10 side */
-    v3p nside = vertex_normal8(w, select(ci, ci + 1, lower_i), select(cj + 1, cj, lower_i));
-    return tf_smooth_normal_blend(n00, nside, n11, fx, fy);
+    t.fx = tf_clamp01(fx);
+    t.fy = tf_clamp01(fy);
+    iv lower_i = mask_i(t.fx >= t.fy); /* side vertex (ci+1, cj) */
+    t.ci = ci;
+    t.cj = cj;
+    t.si = select(ci, ci + 1, lower_i);
+    t.sj = select(cj + 1, cj, lower_i);
+    t.n00 = vertex_normal8(w, ci, cj);
+    t.n11 = vertex_normal8(w, ci + 1, cj + 1);
+    t.nside = vertex_normal8(w, t.si, t.sj);
+    return t;
+}
+
+/* smooth_normal */
+v3p smooth_normal8(const hit_triangle8 *t)
+{
+    return tf_smooth_normal_blend(t->n00, t->nside, t->n11, t->fx, t->fy);
+}
+
+/* vertex_at: sample (i, j) in the world */
+v3p vertex_at8(const world *w, iv i, iv j)
+{
+    return v3p_make(convert_double8(i) * w->cell, convert_double8(j) * w->cell,
+                    height_sample8(w, i, j));
+}
+
+/* smooth_shadow_origin */
+v3p smooth_shadow_origin8(const world *w, const hit_triangle8 *t, v3p p)
+{
+    v3p v00 = vertex_at8(w, t->ci, t->cj), v11 = vertex_at8(w, t->ci + 1, t->cj + 1);
+    return tf_smooth_shadow_origin(p, v00, t->n00, vertex_at8(w, t->si, t->sj), t->nside, v11,
+                                   t->n11, t->fx, t->fy);
 }
 
 /* shade.c's tf_sky_color and tf_mist_apply per lane. */
@@ -372,7 +406,8 @@ typedef struct shading8 {
 /* shade_terrain up to its sunlit call, for the lanes of `mask` (their ray hit the terrain). */
 void terrain_before8(const world *w, const hitp *hit, lv mask, shading8 *sh)
 {
-    v3p n = smooth_normal8(w, hit->ci, hit->cj, hit->p);
+    hit_triangle8 tri = hit_triangle8_at(w, hit->ci, hit->cj, hit->p);
+    v3p n = smooth_normal8(&tri);
     v3p nb = n;
     dv variation = 0.0;
     dv octaves = tf_visible_octaves(w->P[TFP_PIXEL_ANGLE], w->P[TFP_BUMP_SCALE], hit->t,
@@ -394,7 +429,13 @@ void terrain_before8(const world *w, const hitp *hit, lv mask, shading8 *sh)
     sh->albedo = v3p_select(sh->albedo, albedo, mask);
     sh->light = v3p_select(sh->light, light, mask);
     sh->sun_gain = select(sh->sun_gain, cos_sun, mask);
-    sh->cast |= sunlit_cast8(w, hit->p, hit->n, mask & (cos_sun > 0.0), &sh->start);
+    /* terrain_sunlit: flat, from the hit triangle itself; smooth, from the smooth surface */
+    v3p from = hit->p, facing = hit->n;
+    if (w->I[TFI_SMOOTH]) {
+        from = smooth_shadow_origin8(w, &tri, hit->p);
+        facing = n;
+    }
+    sh->cast |= sunlit_cast8(w, from, facing, mask & (cos_sun > 0.0), &sh->start);
 }
 
 /* shade_water up to its sunlit call, for the lanes of `mask` (their ray reached the sea). */

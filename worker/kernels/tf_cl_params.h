@@ -68,7 +68,8 @@
 #define TFI_MIST_HOMOG    8
 #define TFI_LATTICE       9   /* N = 2^depth */
 #define TFI_DEPTH        10
-#define TFI_LEVEL_OFFSET 11   /* up to TF_CL_MAX_LEVELS entries */
+#define TFI_SMOOTH       11   /* terrain.smooth (shade.h) */
+#define TFI_LEVEL_OFFSET 12   /* up to TF_CL_MAX_LEVELS entries */
 #define TF_CL_MAX_LEVELS 18
 #define TFI_COUNT        (TFI_LEVEL_OFFSET + TF_CL_MAX_LEVELS)
 

@@ -55,6 +55,8 @@ static const char usage[] =
     "      --resume              continue an interrupted render of the same scene into the same output\n"
     "      --overwrite           discard a partial render (or a foreign file) at the output\n"
     "      --stats FILE.json     write the run statistics\n"
+    "      --terrain-cache SIZE  each local worker's budget for evaluated procedural terrain\n"
+    "                            (e.g. 4M, 512M; default an eighth of memory, at most 512M)\n"
     "      --lease-timeout T     drop a worker silent this long and re-deal its task (default 15s;\n"
     "                            T is a number with ms, s, m or h; a bare number is milliseconds)\n"
     "  -q, --quiet               errors only\n"
@@ -95,7 +97,8 @@ int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
            O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE, O_PIXEL,
-           O_VERIFY_CHUNKS, O_VERIFY, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE, O_WAIT_WORKERS };
+           O_VERIFY_CHUNKS, O_VERIFY, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE, O_WAIT_WORKERS,
+           O_TERRAIN_CACHE };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
@@ -110,6 +113,7 @@ int cmd_render(int argc, char **argv)
         {"overwrite", no_argument, NULL, O_OVERWRITE},
         {"stats", required_argument, NULL, O_STATS},
         {"lease-timeout", required_argument, NULL, O_LEASE},
+        {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
         {"cl-device", required_argument, NULL, O_CL_DEVICE},
         {"frames", required_argument, NULL, O_FRAMES},
         {"frame", required_argument, NULL, O_FRAME},
@@ -230,6 +234,10 @@ int cmd_render(int argc, char **argv)
             o.lease_timeout_ms = (int)ms;
             break;
         }
+        case O_TERRAIN_CACHE:
+            if (tf_parse_byte_size("--terrain-cache", optarg, &o.terrain_cache))
+                return TF_EXIT_USAGE;
+            break;
         case 'q': o.quiet = 1; break;
         case 'v': o.verbose = 1; break;
         case 'h': fputs(usage, stdout); return TF_EXIT_OK;

@@ -26,6 +26,8 @@ static const char usage[] =
     "      --cl-device DEV       OpenCL device: P:D indices or a name substring\n"
     "                            (same as TERRAFARM_CL_DEVICE)\n"
     "  -j, --workers N           worker processes on this machine (default: online CPUs)\n"
+    "      --terrain-cache SIZE  each process's budget for evaluated procedural terrain\n"
+    "                            (e.g. 64M, 2G; default an eighth of memory, at most 512M)\n"
     "      --timeout T           keep trying to reach the coordinator for T (default 10s; T is\n"
     "                            a number with ms, s, m or h; a bare number is milliseconds)\n"
     "      --simulate MODEL      synthetic workers: sleep each task's modelled cost from the cost\n"
@@ -40,7 +42,8 @@ static const char usage[] =
 
 int cmd_worker(int argc, char **argv)
 {
-    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE, O_PAYLOADS };
+    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE, O_PAYLOADS,
+           O_TERRAIN_CACHE };
     static const struct option longopts[] = {
         {"connect", required_argument, NULL, 'c'},
         {"secret-file", required_argument, NULL, O_SECRET},
@@ -51,6 +54,7 @@ int cmd_worker(int argc, char **argv)
         {"pixel-us", required_argument, NULL, O_PIXEL_US},
         {"payloads", required_argument, NULL, O_PAYLOADS},
         {"cl-device", required_argument, NULL, O_CL_DEVICE},
+        {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -58,6 +62,7 @@ int cmd_worker(int argc, char **argv)
     };
     const char *connect = NULL, *secret = NULL, *backend = "c", *model = NULL, *payloads = NULL;
     double pixel_us = 50.0;
+    size_t terrain_cache = 0;
     int nproc = 0, timeout_ms = 10000, ch;
     char *end;
     optind = 1;
@@ -93,6 +98,10 @@ int cmd_worker(int argc, char **argv)
         }
         case O_SIMULATE: model = optarg; break;
         case O_PAYLOADS: payloads = optarg; break;
+        case O_TERRAIN_CACHE:
+            if (tf_parse_byte_size("--terrain-cache", optarg, &terrain_cache))
+                return TF_EXIT_USAGE;
+            break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
         case O_PIXEL_US:
             pixel_us = strtod(optarg, &end);
@@ -119,6 +128,7 @@ int cmd_worker(int argc, char **argv)
         return TF_EXIT_USAGE;
     }
     signal(SIGPIPE, SIG_IGN);
-    tf_networked_opts o = {connect, secret, timeout_ms, nproc, backend, model, pixel_us, payloads};
+    tf_networked_opts o = {connect, secret,   timeout_ms, nproc,   backend,
+                           model,   pixel_us, payloads,   terrain_cache};
     return tf_networked_worker_run(&o) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
 }

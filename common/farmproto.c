@@ -172,33 +172,35 @@ int tf_result_pack(tf_tuple *t, int64_t id, int64_t worker, const tf_render_coun
                    int64_t busy_ns, int64_t spp_total, const tf_chunk_payload *p)
 {
     tf_tuple_init(t);
-    return tf_tuple_pack(t, "siiiiiiibbb", TF_TAG_RESULT, id, worker, (int64_t)c->primary_rays,
-                         (int64_t)c->shadow_rays, (int64_t)c->external_rays, busy_ns, spp_total,
-                         (const void *)p->index, p->nchunks * TF_CHUNK_RECORD_BYTES,
+    return tf_tuple_pack(t, "siiiiiiiiiibbb", TF_TAG_RESULT, id, worker,
+                         (int64_t)c->primary_rays, (int64_t)c->shadow_rays,
+                         (int64_t)c->external_rays, busy_ns, spp_total,
+                         (int64_t)c->terrain_samples, (int64_t)c->terrain_hits,
+                         (int64_t)c->terrain_evictions, (const void *)p->index, p->nchunks * TF_CHUNK_RECORD_BYTES,
                          (const void *)p->chunks, p->chunks_len, (const void *)p->preview,
                          p->preview_len);
 }
 
 int tf_result_template(tf_tuple *t, int64_t id, int64_t worker)
 {
-    return id_worker_template(t, TF_TAG_RESULT, id, worker, "IIIIIBBB");
+    return id_worker_template(t, TF_TAG_RESULT, id, worker, "IIIIIIIIBBB");
 }
 
 int tf_result_unpack(const tf_tuple *t, tf_result_msg *m)
 {
-    int64_t v[7];
+    int64_t v[10];
     size_t index_len;
     if (!is_kind(t, TF_TAG_RESULT, TF_RESULT_FIELDS))
         return -1;
-    for (int i = 0; i < 7; i++)
+    for (int i = 0; i < 10; i++)
         if (tf_tuple_get_int(t, 1 + i, &v[i]))
             return -1;
-    if (tf_tuple_get_blob(t, 8, &m->index, &index_len) ||
-        tf_tuple_get_blob(t, 9, &m->chunks, &m->chunks_len) ||
-        tf_tuple_get_blob(t, 10, &m->preview, &m->preview_len) ||
+    if (tf_tuple_get_blob(t, TF_RESULT_INDEX_FIELD, &m->index, &index_len) ||
+        tf_tuple_get_blob(t, TF_RESULT_INDEX_FIELD + 1, &m->chunks, &m->chunks_len) ||
+        tf_tuple_get_blob(t, TF_RESULT_INDEX_FIELD + 2, &m->preview, &m->preview_len) ||
         index_len % TF_CHUNK_RECORD_BYTES)
         return -1;
-    for (int i = 2; i < 7; i++)
+    for (int i = 2; i < 10; i++)
         if (v[i] < 0)
             return -1;
     m->id = v[0];
@@ -209,6 +211,9 @@ int tf_result_unpack(const tf_tuple *t, tf_result_msg *m)
     m->counts.pixels = 0;
     m->busy_ns = v[5];
     m->spp_total = v[6];
+    m->counts.terrain_samples = (uint64_t)v[7];
+    m->counts.terrain_hits = (uint64_t)v[8];
+    m->counts.terrain_evictions = (uint64_t)v[9];
     m->nchunks = index_len / TF_CHUNK_RECORD_BYTES;
     return 0;
 }
@@ -252,6 +257,8 @@ int tf_result_check(tf_result_msg *m, const tf_exr_layout *l, const tf_preview_g
     return 0;
 }
 
+#define TF_TERRAIN_COUNT_MAX (1ull << 40)
+
 int tf_result_counts_check(const tf_result_msg *m, tf_rect r, int aa_depth, char *err,
                            size_t errlen)
 {
@@ -265,6 +272,11 @@ int tf_result_counts_check(const tf_result_msg *m, tf_rect r, int aa_depth, char
                          (unsigned long long)c->primary_rays, (unsigned long long)max_primary);
     if (c->shadow_rays > c->primary_rays || c->external_rays > c->primary_rays)
         return tf_seterr(err, errlen, "claims more shadow or external rays than primary ones");
+    /* the terrain counts are the worker's word, summed into the stats: bounded so no liar can
+     * overflow a sum (2^40 samples is days of one worker's evaluation) */
+    if (c->terrain_samples > TF_TERRAIN_COUNT_MAX || c->terrain_hits > TF_TERRAIN_COUNT_MAX ||
+        c->terrain_evictions > TF_TERRAIN_COUNT_MAX)
+        return tf_seterr(err, errlen, "claims a terrain count above 2^40");
     if (m->spp_total < 0 || (uint64_t)m->spp_total > max_spp)
         return tf_seterr(err, errlen, "claims %lld samples, the task has room for %llu",
                          (long long)m->spp_total, (unsigned long long)max_spp);

@@ -10,6 +10,7 @@
  *   ("task", id:I, frame:I, x:I, y:I, w:I, h:I, excluded:B)  a rectangle of a frame to render;
  *                                                       id < 0 = stop
  *   ("result", id:I, worker:I, primary:I, shadow:I, external:I, busy_ns:I, spp_total:I,
+ *              samples:I, hits:I, evictions:I,
  *              index:B, chunks:B, preview:B)                    the task's finished EXR chunks
  *   ("failed", id:I, worker:I, message:S)              a worker could not render a task
  *
@@ -25,7 +26,8 @@
  * OpenEXRCore's encode pipeline for the output's layout, ready for exr_write_scanline_chunk /
  * exr_write_tile_chunk.  primary, shadow, external are the rays the task cost; busy_ns its
  * render time; spp_total the sum of its pixels' spp channel (for samples_per_pixel_avg: the
- * coordinator never sees a pixel).  All integers in the blobs little-endian.
+ * coordinator never sees a pixel); samples, hits, evictions what it cost the worker's procedural
+ * terrain cache (tilecache.h; 0 on a grid), the worker's word only, reported, never trusted.  All integers in the blobs little-endian.
  *   index    n records of TF_CHUNK_RECORD_BYTES (24) bytes, one per chunk, in file order
  *            (increasing y; tiles left to right within a tile row):
  *                int32 cx, int32 cy      scanline: 0 and the chunk's row y;
@@ -136,7 +138,8 @@ int tf_task_pack(tf_tuple *t, const tf_task_msg *m);
 #define TF_TASK_ANY INT64_MIN
 /* Fields of a task tuple and of a result tuple (the layouts above). */
 #define TF_TASK_FIELDS 8
-#define TF_RESULT_FIELDS 11
+#define TF_RESULT_FIELDS 14
+#define TF_RESULT_INDEX_FIELD 11 /* index, chunks, preview: the last three */
 
 int tf_task_template(tf_tuple *t, int64_t id);
 /* 0, or -1 if t is not a well-formed task tuple. */

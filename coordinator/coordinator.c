@@ -403,6 +403,10 @@ static int open_dashboard(render *r)
 static int build_terrain(render *r)
 {
     char err[1024];
+    if (r->nworkers > 0 && r->scene->terrain.procedural && r->o->backend &&
+        !strcmp(r->o->backend, "opencl"))
+        return step_failed(r, 2, "--backend opencl: the OpenCL backend cannot trace procedural "
+                                 "terrain ([terrain] procedural = yes); use --backend c or auto");
     if (r->nworkers <= 0 && r->scene->terrain.generator == TF_GEN_FILE) {
         /* networked workers build their own, but a height map is decoded here once, so a bad
          * file is one line now rather than a failure on every worker that joins */
@@ -418,6 +422,8 @@ static int build_terrain(render *r)
     if (!r->hf)
         return step_failed(r, 1, err);
     r->hf_s = tf_now_s() - t0;
+    if (r->o->terrain_cache) /* the forked workers inherit the budget */
+        tf_heightfield_set_cache(r->hf, r->o->terrain_cache);
     tf_debug("height field %dx%d built in %.2f s", r->hf->n, r->hf->n, r->hf_s);
     warn_camera_underground(r);
     return 0;

@@ -40,6 +40,7 @@ typedef struct tf_render_opts {
     const char *stats_path;
     int wait_workers;          /* --wait-workers N: deal no task before N workers joined */
     int lease_timeout_ms;      /* a silent worker is dropped after this (default 15000) */
+    size_t terrain_cache;      /* --terrain-cache: procedural terrain per local worker; 0 = default */
     int max_task_failures;     /* distinct workers a task may fail on before the render stops */
     int fsync_interval_ms;     /* at most this long between durable checkpoints */
     int pixel;                 /* --pixel: TF_PIXEL_HALF | TF_PIXEL_FLOAT (image/exrlayout.h) */

@@ -43,6 +43,8 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
     json_object_set_new(o, "primary_rays", json_integer((json_int_t)st->primary_rays));
     json_object_set_new(o, "shadow_rays", json_integer((json_int_t)st->shadow_rays));
     json_object_set_new(o, "external_rays", json_integer((json_int_t)st->external_rays));
+    json_object_set_new(o, "terrain_samples_evaluated",
+                        json_integer((json_int_t)st->terrain_samples));
     json_object_set_new(o, "samples_per_pixel_avg",
                         json_real(st->pixels ? st->spp_sum / (double)st->pixels : 0.0));
     json_object_set_new(o, "rays_per_pixel_avg",
@@ -130,6 +132,10 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
         json_object_set_new(wo, "tasks", json_integer(w->tasks));
         json_object_set_new(wo, "rays", json_integer((json_int_t)w->rays));
         json_object_set_new(wo, "busy_s", seconds(w->busy_s));
+        json_object_set_new(wo, "samples_evaluated", json_integer((json_int_t)w->terrain_samples));
+        json_object_set_new(wo, "cache_hits", json_integer((json_int_t)w->terrain_hits));
+        json_object_set_new(wo, "cache_evictions",
+                            json_integer((json_int_t)w->terrain_evictions));
         json_array_append_new(workers, wo);
     }
     json_object_set_new(o, "workers", workers);

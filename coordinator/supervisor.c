@@ -827,7 +827,11 @@ static void accept_result(tf_supervisor *s, task_slot *t, const tf_result_msg *m
         w->tasks++;
         w->rays += m->counts.primary_rays + m->counts.shadow_rays;
         w->busy_s += (double)m->busy_ns * 1e-9;
+        w->terrain_samples += m->counts.terrain_samples;
+        w->terrain_hits += m->counts.terrain_hits;
+        w->terrain_evictions += m->counts.terrain_evictions;
     }
+    s->stats.terrain_samples += m->counts.terrain_samples;
     s->stats.primary_rays += m->counts.primary_rays;
     s->stats.shadow_rays += m->counts.shadow_rays;
     s->stats.frames[job_of(s, m->id) - s->jobs].rays +=

@@ -57,6 +57,8 @@ typedef struct tf_worker_stats {
     int excluded;      /* --verify: caught lying; every request refused */
     int64_t written;   /* its results handed to the writer */
     int hello;         /* it said hello (counted once by --wait-workers) */
+    /* its procedural terrain cache, as its accepted results say (render/counts.h) */
+    uint64_t terrain_samples, terrain_hits, terrain_evictions;
 } tf_worker_stats;
 
 /* One frame of a sequence (docs/contract.md: "frames"). */
@@ -79,6 +81,7 @@ typedef struct tf_farm_stats {
     double verify_fraction;
     int rows_resumed, rows_rendered;
     uint64_t primary_rays, shadow_rays, external_rays;
+    uint64_t terrain_samples; /* procedural terrain samples evaluated, all workers */
     double spp_sum;           /* sum of the spp channel over rendered pixels */
     uint64_t pixels;
     int max_outstanding_tasks;

@@ -493,6 +493,11 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
 tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, char *err,
                                  size_t errlen)
 {
+    if (hf->proc) { /* the kernels walk a grid's max/min mipmap; a procedural terrain has none */
+        tf_seterr(err, errlen, "the OpenCL backend cannot trace procedural terrain "
+                  "([terrain] procedural = yes); use --backend c");
+        return NULL;
+    }
     tf_cl_backend *b = calloc(1, sizeof *b);
     if (!b) {
         tf_seterr(err, errlen, "out of memory");

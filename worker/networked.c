@@ -241,6 +241,8 @@ int tf_networked_worker_run(const tf_networked_opts *o)
         ts_client_close(c);
         return 1;
     }
+    if (o->terrain_cache)
+        tf_heightfield_set_cache(hf, o->terrain_cache);
     int status;
     if (nproc == 1) {
         status = run_one(connect, k, timeout_ms, s, hf, backend, c);

@@ -9,6 +9,7 @@
 #define TF_NETWORKED_H
 
 #include <stdint.h>
+#include <stddef.h>
 
 typedef struct tf_networked_opts {
     const char *connect;        /* HOST:PORT of the coordinator */
@@ -19,6 +20,7 @@ typedef struct tf_networked_opts {
     const char *simulate_model; /* cost map path: simulated workers; NULL: real ones */
     double pixel_us;            /* simulated cost of an average pixel */
     const char *payloads;       /* simulated workers send this recording's chunks (payloads.h) */
+    size_t terrain_cache;       /* procedural terrain cache per process, bytes; 0 = default */
 } tf_networked_opts;
 
 /* Run until the render is finished.  Returns the process exit status (0, or 1 after one

@@ -278,7 +278,7 @@ static int sim_render(void *ctx, int frame, tf_rect rect, tf_pixel *px,
     }
     if (w->ndone < w->cap_done) /* a lost record only weakens the bound */
         w->done[w->ndone++] = (sim_task){rect.y, rect.x, cost_ns};
-    *counts = (tf_render_counts){0, 0, 0, (uint64_t)n};
+    *counts = (tf_render_counts){.pixels = (uint64_t)n};
     *busy_ns = cost_ns;
     return 0;
 }

@@ -10,6 +10,10 @@ typedef struct tf_render_counts {
     uint64_t shadow_rays;    /* rays towards the sun */
     uint64_t external_rays;  /* camera rays for samples outside the rectangle's own pixels */
     uint64_t pixels;
+    /* a procedural terrain's tile cache (terrain/tilecache.h), what this render cost it */
+    uint64_t terrain_samples;   /* height samples evaluated */
+    uint64_t terrain_hits;      /* tile reads that found their tile */
+    uint64_t terrain_evictions; /* tiles dropped for the budget */
 } tf_render_counts;
 
 #endif

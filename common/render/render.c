@@ -29,6 +29,7 @@
 #include "log.h"
 #include "render/render_internal.h"
 #include "render/sample_math.h"
+#include "terrain/tilecache.h"
 
 tf_renderer *tf_renderer_new(const tf_scene *s, const tf_heightfield *hf, char *err, size_t errlen)
 {
@@ -226,6 +227,7 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
         tf_die(71, "tf_render_rect: out of memory for a %d-pixel row", rect.w);
 
     tf_render_counts tally = {0};
+    tf_tile_counts cache_before = tf_tilecache_thread_counts();
     corner_row(r, rect, rect.y, 0, above, &tally);
     for (int row = 0; row < rect.h; row++) {
         corner_row(r, rect, rect.y + row + 1, row + 1 == rect.h, below, &tally);
@@ -237,6 +239,10 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
         below = t;
     }
     tally.pixels = (uint64_t)rect.w * (uint64_t)rect.h;
+    tf_tile_counts cache_after = tf_tilecache_thread_counts(); /* this thread's: exact */
+    tally.terrain_samples = cache_after.samples_evaluated - cache_before.samples_evaluated;
+    tally.terrain_hits = cache_after.hits - cache_before.hits;
+    tally.terrain_evictions = cache_after.evictions - cache_before.evictions;
     free(above);
     free(below);
     free(pc.sample);
@@ -246,6 +252,9 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
         counts->shadow_rays += tally.shadow_rays;
         counts->external_rays += tally.external_rays;
         counts->pixels += tally.pixels;
+        counts->terrain_samples += tally.terrain_samples;
+        counts->terrain_hits += tally.terrain_hits;
+        counts->terrain_evictions += tally.terrain_evictions;
     }
 }
 

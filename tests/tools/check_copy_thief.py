@@ -42,7 +42,7 @@ def zero_result(tid, me, rect, scene):
         data += bytes(unpacked)
     prev = bytes(preview_len(rect, width, height))
     return [(STRING, "result"), (INT, tid), (INT, me), (INT, 1), (INT, 0), (INT, 0), (INT, 1000),
-            (INT, 0), (BLOB, recs), (BLOB, data), (BLOB, prev)]
+            (INT, 0), (INT, 0), (INT, 0), (INT, 0), (BLOB, recs), (BLOB, data), (BLOB, prev)]
 
 
 def main():

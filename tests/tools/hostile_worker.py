@@ -67,7 +67,8 @@ def task_fields(tid, rect, excluded=b"", frame=-1):
 def result_fields(tid, worker, index=b"", chunks=b"", preview=b""):
     """A result tuple (common/farmproto.h, THE RESULT FORMAT) with the given blobs."""
     return [(STRING, "result"), (INT, tid), (INT, worker), (INT, 1), (INT, 0), (INT, 0),
-            (INT, 1000), (INT, 4), (BLOB, index), (BLOB, chunks), (BLOB, preview)]
+            (INT, 1000), (INT, 4), (INT, 0), (INT, 0), (INT, 0), (BLOB, index), (BLOB, chunks),
+            (BLOB, preview)]
 
 
 def chunk_rec(cx, cy, packed, unpacked):
@@ -92,8 +93,8 @@ def main():
     expect(c, "replacing the scene", OUT,
            [(STRING, "scene"), (STRING, "[image]\nwidth = 16\n"), (INT, width), (INT, height),
             (STRING, "0" * 64), (STRING, "scanline half")])
-    expect(c, "stealing a result", INP, [(STRING, "result")] + [(INT, None)] * 6 + [(BLOB, None)])
-    expect(c, "reading a result", RDP, [(STRING, "result")] + [(INT, None)] * 6 + [(BLOB, None)])
+    expect(c, "stealing a result", INP, [(STRING, "result")] + [(INT, None)] * 9 + [(BLOB, None)])
+    expect(c, "reading a result", RDP, [(STRING, "result")] + [(INT, None)] * 9 + [(BLOB, None)])
     expect(c, "reading a task without taking it", RD, TASK_TMPL)
     expect(c, "a forged stop task", OUT, task_fields(-1, [0, 0, 0, 0]))
     expect(c, "a forged task with a zero-size rectangle", OUT, task_fields(3, [0, 0, 0, 0]))

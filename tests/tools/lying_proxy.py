@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """tests/tools/lying_proxy.py: makes a real worker a liar.  A TCP proxy for a coordinator
 without a secret (loopback: frames in clear, common/linda/proto.h) that passes everything
-through but changes one pixel of every result the worker puts (("result", ...) field 9,
+through but changes one pixel of every result the worker puts (("result", ...) field 12,
 common/farmproto.h): its first chunk is inflated, its ZIP filter undone (image/exrcheck.c),
 the lowest bit of its first value flipped, and it is sent back stored raw (packed = unpacked).
 The result stays structurally valid, decodes and holds finite values: only its pixels lie,
@@ -76,16 +76,19 @@ def raw_chunk(packed, unpacked):
     return out
 
 
+INDEX, CHUNKS = 11, 12  # the result's index and chunks blobs (common/farmproto.h)
+
+
 def altered_body(body):
     """The result tuple with its first chunk's first value changed in its lowest bit."""
     f = typed_fields(body)
-    index, chunks = bytearray(f[8][1]), f[9][1]
+    index, chunks = bytearray(f[INDEX][1]), f[CHUNKS][1]
     cx, cy, packed, unpacked = struct.unpack_from("<iiqq", index, 0)
     raw = raw_chunk(chunks[:packed], unpacked)
     raw[0] ^= 0x01
     struct.pack_into("<iiqq", index, 0, cx, cy, unpacked, unpacked)
-    f[8] = (f[8][0], bytes(index))
-    f[9] = (f[9][0], bytes(raw) + chunks[packed:])
+    f[INDEX] = (f[INDEX][0], bytes(index))
+    f[CHUNKS] = (f[CHUNKS][0], bytes(raw) + chunks[packed:])
     return enc(f)
 
 
@@ -97,7 +100,7 @@ def lie(frame):
     first = field_span(body, 0)
     if not first or bytes(body[first[0]:first[0] + first[1]]) != b"result":
         return frame
-    span = field_span(body, 9)
+    span = field_span(body, CHUNKS)
     if not span or span[1] == 0:
         return frame
     global honest_left

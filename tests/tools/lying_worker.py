@@ -129,8 +129,8 @@ def main():
         index, data, prev = lie(mode, rect, tiled, tw, th, pixel, width, height)
         primary = 2 ** 62 if mode == "rays" else 100
         c.call(OUT, [(STRING, "result"), (INT, tid), (INT, me), (INT, primary), (INT, 10), (INT, 1),
-                     (INT, 1000000), (INT, rect[2] * rect[3]), (BLOB, index), (BLOB, data),
-                     (BLOB, prev)])
+                     (INT, 1000000), (INT, rect[2] * rect[3]), (INT, 0), (INT, 0), (INT, 0),
+                     (BLOB, index), (BLOB, data), (BLOB, prev)])
         print("lie %s task %d" % (mode, tid), flush=True)
         lies += 1
     return 0

@@ -46,7 +46,7 @@ static void pack_rect(const tf_exr_layout *l, tf_rect r, tf_tuple *t)
     assert_non_null(enc);
     tf_chunk_payload p;
     assert_int_equal(tf_exr_encode_rect(enc, r, px, &p, err, sizeof err), 0);
-    tf_render_counts c = {10, 5, 2, 0};
+    tf_render_counts c = {.primary_rays = 10, .shadow_rays = 5, .external_rays = 2};
     assert_int_equal(tf_result_pack(t, 7, 3, &c, 1234, 99, &p), 0);
     free(px);
 }
@@ -111,15 +111,15 @@ static void test_lies_refused(void **state)
     tf_exr_layout rows = {W, H, 0, 0, 0, TF_PIXEL_HALF};
     tf_rect r = {0, 7, W, 3}; /* rows 7..9: three chunks */
     int32_t y = 8;
-    expect_refused(&rows, r, 8, 4, &y, 4, (size_t)-1, "chunk 0 is at (0, 8)");
+    expect_refused(&rows, r, TF_RESULT_INDEX_FIELD, 4, &y, 4, (size_t)-1, "chunk 0 is at (0, 8)");
     int64_t big = 1 << 20, zero = 0;
-    expect_refused(&rows, r, 8, 16, &big, 8, (size_t)-1, "unpacked bytes");
-    expect_refused(&rows, r, 8, 8, &big, 8, (size_t)-1, "packed bytes");
-    expect_refused(&rows, r, 8, 8, &zero, 8, (size_t)-1, "packed bytes");
-    expect_refused(&rows, r, 8, 0, NULL, 0, 2 * TF_CHUNK_RECORD_BYTES, "2 chunks, the task has 3");
-    expect_refused(&rows, r, 8, 0, NULL, 0, 2 * TF_CHUNK_RECORD_BYTES + 5, NULL); /* not records */
-    expect_refused(&rows, r, 9, 0, NULL, 0, 10, "add up");
-    expect_refused(&rows, r, 10, 0, NULL, 0, 3, "preview");
+    expect_refused(&rows, r, TF_RESULT_INDEX_FIELD, 16, &big, 8, (size_t)-1, "unpacked bytes");
+    expect_refused(&rows, r, TF_RESULT_INDEX_FIELD, 8, &big, 8, (size_t)-1, "packed bytes");
+    expect_refused(&rows, r, TF_RESULT_INDEX_FIELD, 8, &zero, 8, (size_t)-1, "packed bytes");
+    expect_refused(&rows, r, TF_RESULT_INDEX_FIELD, 0, NULL, 0, 2 * TF_CHUNK_RECORD_BYTES, "2 chunks, the task has 3");
+    expect_refused(&rows, r, TF_RESULT_INDEX_FIELD, 0, NULL, 0, 2 * TF_CHUNK_RECORD_BYTES + 5, NULL); /* not records */
+    expect_refused(&rows, r, TF_RESULT_INDEX_FIELD + 1, 0, NULL, 0, 10, "add up");
+    expect_refused(&rows, r, TF_RESULT_INDEX_FIELD + 2, 0, NULL, 0, 3, "preview");
     /* a task that is not whole chunks of the file */
     tf_rect half = {0, 7, W / 2, 3};
     tf_tuple t;
@@ -239,7 +239,8 @@ static void test_counts_bounded(void **state)
     tf_result_msg m = {0};
     char err[256];
     uint64_t side = (1u << 3) + 1, spp = 40 * side * side;
-    m.counts = (tf_render_counts){spp + 11 * 5, spp, spp, 40};
+    m.counts = (tf_render_counts){.primary_rays = spp + 11 * 5, .shadow_rays = spp,
+                                  .external_rays = spp, .pixels = 40};
     m.spp_total = (int64_t)spp;
     assert_int_equal(tf_result_counts_check(&m, r, 3, err, sizeof err), 0);
     m.counts.primary_rays++;

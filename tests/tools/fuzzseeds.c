@@ -157,7 +157,7 @@ static tf_pixel *gradient(tf_rect r)
 /* The encoding of the result tuple of payload p for task r, in *out (caller frees); 0 or -1. */
 static int tuple_bytes(tf_rect r, const tf_chunk_payload *p, uint8_t **out, size_t *len)
 {
-    tf_render_counts c = {(uint64_t)r.w * (uint64_t)r.h, 0, 0, 0};
+    tf_render_counts c = {.primary_rays = (uint64_t)r.w * (uint64_t)r.h};
     tf_tuple t;
     tf_tuple_init(&t);
     int rc = tf_result_pack(&t, 3, 1, &c, 1000, 4 * (int64_t)c.primary_rays, p);

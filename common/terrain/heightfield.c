@@ -268,6 +268,8 @@ static int split_coord(const tf_heightfield *hf, double v, double *frac)
 
 double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y)
 {
+    if (hf->proc) /* its finest level: what a view sees up close */
+        return tf_proc_level_height(hf->proc, hf->proc->max_level, x, y);
     double u, v;
     int ci = split_coord(hf, x, &u), cj = split_coord(hf, y, &v);
     const float *row = hf->h + (size_t)cj * hf->n + ci;

@@ -50,7 +50,7 @@ void tf_heightfield_free(tf_heightfield *hf);
 void tf_heightfield_set_cache(tf_heightfield *hf, size_t bytes);
 
 /* Height at world (x, y) by the same two-triangle interpolation the tracer
- * uses (clamped to the terrain's edge). */
+ * uses (clamped to the terrain's edge); a procedural terrain's at its finest level. */
 double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y);
 
 /* Number of worker threads to use for `threads` (0 -> online CPUs). */

@@ -27,6 +27,11 @@
  * before (tf_supervisor_set_writer), and finished (hooks.finish) as soon as its last task is
  * written.
  *
+ * Affinity (--affinity, affinity.h): with more than one task per band, the space's chooser
+ * (tuplespace.h) gives each worker, among the tasks dealt and waiting, one in its own column
+ * range first, then one in a neighbouring range, then the lowest id.  It chooses only among
+ * what the watermark let in, so the dealing, the watermark and the writes are as without it.
+ *
  * Memory is O(watermark): per-task state lives in a ring indexed by task id modulo its size
  * (sized for the largest auto watermark, 4096 workers: a few MB, whatever the image size). */
 #ifndef TF_SUPERVISOR_H
@@ -57,6 +62,11 @@ typedef struct tf_worker_stats {
     int excluded;      /* --verify: caught lying; every request refused */
     int64_t written;   /* its results handed to the writer */
     int hello;         /* it said hello (counted once by --wait-workers) */
+    /* affinity.h: its column range [aff_x0, aff_x1) at its latest take of a task (both -1:
+     * none, as with one task per band), and its takes by where the task lay for it then
+     * (counted with --affinity off too: what FIFO dealing gives) */
+    int aff_x0, aff_x1;
+    int64_t aff_first, aff_second, aff_elsewhere;
 } tf_worker_stats;
 
 /* One frame of a sequence (docs/contract.md: "frames"). */
@@ -84,6 +94,8 @@ typedef struct tf_farm_stats {
     int max_outstanding_tasks;
     int watermark;
     size_t max_tuple_bytes;
+    int affinity;             /* horizontal-extent affinity ranked the takes (--affinity on and
+                               * more than one task per band) */
     int nworkers;
     tf_worker_stats *workers;
     int nframes;              /* = the number of jobs */
@@ -130,6 +142,8 @@ typedef struct tf_supervisor_config {
     int wait_workers;         /* --wait-workers: deal no task before this many workers said
                                * hello (forked ones count; 0: deal at once) */
     int max_task_failures;
+    int affinity;             /* --affinity: rank each worker's takes by its column range
+                               * (affinity.h); only where a band has more than one task */
 } tf_supervisor_config;
 
 /* NULL with a message on error (e.g. watermark smaller than a band). */

@@ -103,12 +103,17 @@ static int range_of_column(const tf_affinity *a, int x)
     return k;
 }
 
+int tf_affinity_range_of(const tf_affinity *a, tf_rect r)
+{
+    return a->n > 0 ? range_of_column(a, r.x + r.w / 2) : -1;
+}
+
 tf_affinity_choice tf_affinity_choice_of(const tf_affinity *a, int64_t worker, tf_rect r)
 {
     int found, k = position(a, worker, &found);
     if (!found)
         return TF_AFFINITY_NONE;
-    int j = range_of_column(a, r.x + r.w / 2);
+    int j = tf_affinity_range_of(a, r);
     if (j == k)
         return TF_AFFINITY_FIRST;
     return j == k - 1 || j == k + 1 ? TF_AFFINITY_SECOND : TF_AFFINITY_ELSEWHERE;

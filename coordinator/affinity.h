@@ -35,6 +35,8 @@ void tf_affinity_leave(tf_affinity *a, int64_t worker);
 int tf_affinity_workers(const tf_affinity *a);
 /* Worker's columns [*x0, *x1): 0, or -1 when it has no range. */
 int tf_affinity_range(const tf_affinity *a, int64_t worker, int *x0, int *x1);
+/* The range (0 .. workers-1, in id order) holding r's centre column; -1 with no workers. */
+int tf_affinity_range_of(const tf_affinity *a, tf_rect r);
 /* Where a task of rectangle r lies for worker. */
 tf_affinity_choice tf_affinity_choice_of(const tf_affinity *a, int64_t worker, tf_rect r);
 /* The rank of task `id` (rectangle r) for worker, lower first: 0 for its own range (the

@@ -33,6 +33,7 @@ static void affinity_keys(json_t *wo, const tf_worker_stats *w)
     json_object_set_new(wo, "first_choice", json_integer(w->aff_first));
     json_object_set_new(wo, "second_choice", json_integer(w->aff_second));
     json_object_set_new(wo, "elsewhere", json_integer(w->aff_elsewhere));
+    json_object_set_new(wo, "range_switches", json_integer(w->aff_switches));
 }
 
 static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)

@@ -431,7 +431,7 @@ static tf_worker_stats *add_worker(tf_supervisor *s, int64_t id)
     w = &s->stats.workers[s->stats.nworkers++];
     memset(w, 0, sizeof *w);
     w->id = id;
-    w->aff_x0 = w->aff_x1 = -1;
+    w->aff_x0 = w->aff_x1 = w->aff_last = -1;
     snprintf(w->kind, sizeof w->kind, "networked");
     return w;
 }
@@ -608,7 +608,19 @@ static void withdraw_copies(tf_supervisor *s, task_slot *t)
 
 /* ---- affinity (affinity.h): which of the waiting tasks a worker gets ----------------------- */
 
-/* The space's chooser: task tuple t's rank for the worker on connection taker (0: any). */
+/* 1 if task id's copies are dealt excluding worker (task_msg_of): it would only put it back. */
+static int excludes(tf_supervisor *s, int64_t id, int64_t worker)
+{
+    const task_slot *t = slot_of(s, id);
+    if (!t || (t->nfailed == 0 && (t->check == CHECK_NONE || t->check == CHECK_PENDING)))
+        return 0;
+    tf_task_msg m;
+    task_msg_of(s, t, &m);
+    return tf_task_excludes(&m, worker);
+}
+
+/* The space's chooser: task tuple t's rank for the worker on connection taker (0: any).  A
+ * task that excludes the worker comes last, so it does not bounce on one of its own range. */
 static uint64_t rank_task(void *ctx, uint64_t taker, const tf_tuple *t)
 {
     tf_supervisor *s = ctx;
@@ -618,7 +630,11 @@ static uint64_t rank_task(void *ctx, uint64_t taker, const tf_tuple *t)
         id >= s->total_tasks)
         return 0;
     tf_worker_stats *w = worker_by_conn(s, taker);
-    return w ? tf_affinity_rank(s->affinity, w->id, rect_of(s, id), id) : 0;
+    if (!w)
+        return 0;
+    if (excludes(s, id, w->id))
+        return UINT64_MAX;
+    return tf_affinity_rank(s->affinity, w->id, rect_of(s, id), id);
 }
 
 /* Worker w said hello (joined, 1) or its connection closed (0): the ranges follow. */
@@ -639,7 +655,11 @@ static void count_choice(tf_supervisor *s, uint64_t conn, int64_t id)
     if (!w)
         return;
     tf_affinity_range(s->affinity, w->id, &w->aff_x0, &w->aff_x1);
-    tf_affinity_choice c = tf_affinity_choice_of(s->affinity, w->id, rect_of(s, id));
+    tf_rect r = rect_of(s, id);
+    int range = tf_affinity_range_of(s->affinity, r);
+    w->aff_switches += w->aff_last >= 0 && range != w->aff_last;
+    w->aff_last = range;
+    tf_affinity_choice c = tf_affinity_choice_of(s->affinity, w->id, r);
     if (c == TF_AFFINITY_FIRST)
         w->aff_first++;
     else if (c == TF_AFFINITY_SECOND)

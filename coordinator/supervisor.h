@@ -67,6 +67,8 @@ typedef struct tf_worker_stats {
      * (counted with --affinity off too: what FIFO dealing gives) */
     int aff_x0, aff_x1;
     int64_t aff_first, aff_second, aff_elsewhere;
+    int64_t aff_switches; /* takes in another range than its take before (locality) */
+    int aff_last;         /* the range of its latest take (-1: none) */
 } tf_worker_stats;
 
 /* One frame of a sequence (docs/contract.md: "frames"). */

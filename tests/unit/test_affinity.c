@@ -59,6 +59,8 @@ static void test_first_second_elsewhere(void **state)
     assert_int_equal(tf_affinity_choice_of(a, 1, stamp(128, 64)), TF_AFFINITY_SECOND);
     assert_int_equal(tf_affinity_choice_of(a, 2, stamp(128, 64)), TF_AFFINITY_FIRST);
     assert_int_equal(tf_affinity_choice_of(a, 9, stamp(0, 64)), TF_AFFINITY_NONE);
+    assert_int_equal(tf_affinity_range_of(a, stamp(128, 64)), 1);
+    assert_int_equal(tf_affinity_range_of(a, stamp(576, 64)), 3);
     tf_affinity_free(a);
 }
 

@@ -620,13 +620,15 @@ static int excludes(tf_supervisor *s, int64_t id, int64_t worker)
 }
 
 /* The space's chooser: task tuple t's rank for the worker on connection taker (0: any).  A
- * task that excludes the worker comes last, so it does not bounce on one of its own range. */
+ * task that excludes the worker comes last, so it does not bounce on one of its own range.
+ * With more workers than tasks in a band, ranges are narrower than a task and most workers
+ * would own none (and scan every waiting task on each take): plain FIFO then. */
 static uint64_t rank_task(void *ctx, uint64_t taker, const tf_tuple *t)
 {
     tf_supervisor *s = ctx;
     const char *name = tf_tuple_name(t);
     int64_t id;
-    if (!name || strcmp(name, TF_TAG_TASK) || tf_tuple_get_int(t, 1, &id) || id < 0 ||
+    if (tf_affinity_workers(s->affinity) > s->band_tasks || !name || strcmp(name, TF_TAG_TASK) || tf_tuple_get_int(t, 1, &id) || id < 0 ||
         id >= s->total_tasks)
         return 0;
     tf_worker_stats *w = worker_by_conn(s, taker);

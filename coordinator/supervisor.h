@@ -31,6 +31,7 @@
  * (tuplespace.h) gives each worker, among the tasks dealt and waiting, one in its own column
  * range first, then one in a neighbouring range, then the lowest id.  It chooses only among
  * what the watermark let in, so the dealing, the watermark and the writes are as without it.
+ * With more workers than tasks in a band (ranges narrower than a task) it ranks nothing.
  *
  * Memory is O(watermark): per-task state lives in a ring indexed by task id modulo its size
  * (sized for the largest auto watermark, 4096 workers: a few MB, whatever the image size). */

@@ -319,7 +319,9 @@ static void test_chooser_ranks_stored_tuples(void **state)
     calls = 0;
     assert_int_equal(take_as(s, 0), 3); /* no taker named: FIFO, the chooser not asked */
     assert_int_equal(calls, 0);
-    assert_int_equal(take_as(s, 3), 14); /* none of its own: the lowest id */
+    out_task(s, "task", 8, 0);
+    assert_int_equal(take_as(s, 3), 8); /* none of its own: the lowest id, not the oldest */
+    assert_int_equal(take_as(s, 3), 14);
     assert_int_equal(take_as(s, 3), -1);
     ts_space_free(s);
 }

@@ -628,7 +628,8 @@ static uint64_t rank_task(void *ctx, uint64_t taker, const tf_tuple *t)
     tf_supervisor *s = ctx;
     const char *name = tf_tuple_name(t);
     int64_t id;
-    if (tf_affinity_workers(s->affinity) > s->band_tasks || !name || strcmp(name, TF_TAG_TASK) || tf_tuple_get_int(t, 1, &id) || id < 0 ||
+    if (tf_affinity_workers(s->affinity) > s->band_tasks || !name ||
+        strcmp(name, TF_TAG_TASK) || tf_tuple_get_int(t, 1, &id) || id < 0 ||
         id >= s->total_tasks)
         return 0;
     tf_worker_stats *w = worker_by_conn(s, taker);

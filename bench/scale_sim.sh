@@ -22,6 +22,7 @@
 #        bench/scale_sim.sh --smoke [MODEL|flat]   (2 workers, 2 tasks each of 1 ms, payloads of
 #        a 64x32 render, CSV and plot in a temp directory: for tests/e2e/bench_smoke.sh)
 # env:   WORKERS="16 64 256 1024" TASK_MS="1 10 30 100" WM="1 2 4" TPW=16 OUT=bench/results PIN=0
+#        RENDER_ARGS="--affinity off" (more options for the coordinator)
 set -eu
 cd "$(dirname "$0")/.."
 TF=${TF:-bin/terrafarm}
@@ -82,7 +83,7 @@ for ms in $TASK_MS; do
       PORT=$((PORT + 1))
       $COORD_PIN "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:$PORT --size ${width}x$height \
         --tasks stamps:8x8 --watermark $wm -o "$EXR" --overwrite --lease-timeout 600000 -q \
-        --stats "$LOG.stats" &
+        --stats "$LOG.stats" ${RENDER_ARGS:-} &
       coord=$!
       # wait until the coordinator listens (a refused connect is not retried by the client)
       i=0

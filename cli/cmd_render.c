@@ -35,6 +35,9 @@ static const char usage[] =
     "                            image and the worker count)\n"
     "      --watermark N         at most N tasks dealt beyond the write front (default: one band\n"
     "                            of tasks plus three per worker)\n"
+    "      --affinity on|off     give each worker stamps in its own column range of the image\n"
+    "                            first, then its neighbours', then the lowest left, so it re-uses\n"
+    "                            what it evaluated there (default on; rows:K spans the width)\n"
     "      --size WxH            override the scene's image size\n"
     "      --pixel half|float    channel type of R, G, B, A (Z and samples stay float; default\n"
     "                            half). rows:K writes a scanline EXR, stamps:WxH a tiled one\n"
@@ -98,13 +101,14 @@ int cmd_render(int argc, char **argv)
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
            O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE, O_PIXEL,
            O_VERIFY_CHUNKS, O_VERIFY, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE, O_WAIT_WORKERS,
-           O_TERRAIN_CACHE };
+           O_TERRAIN_CACHE, O_AFFINITY };
     static const struct option longopts[] = {
         {"output", required_argument, NULL, 'o'},
         {"workers", required_argument, NULL, 'j'},
         {"wait-workers", required_argument, NULL, O_WAIT_WORKERS},
         {"tasks", required_argument, NULL, O_TASKS},
         {"watermark", required_argument, NULL, O_WATERMARK},
+        {"affinity", required_argument, NULL, O_AFFINITY},
         {"size", required_argument, NULL, O_SIZE},
         {"backend", required_argument, NULL, O_BACKEND},
         {"listen", required_argument, NULL, O_LISTEN},
@@ -157,6 +161,13 @@ int cmd_render(int argc, char **argv)
         case O_WATERMARK:
             if (parse_int("--watermark", optarg, 1, 1 << 20, &o.watermark))
                 return TF_EXIT_USAGE;
+            break;
+        case O_AFFINITY:
+            if (strcmp(optarg, "on") && strcmp(optarg, "off")) {
+                tf_error("--affinity '%s': expected on or off", optarg);
+                return TF_EXIT_USAGE;
+            }
+            o.affinity = !strcmp(optarg, "on");
             break;
         case O_SIZE:
             if (parse_size(optarg, &o.width, &o.height))

@@ -63,6 +63,7 @@ void tf_render_opts_init(tf_render_opts *o)
     o->fsync_interval_ms = 1000;
     o->pixel = TF_PIXEL_HALF; /* see README: Performance, why half */
     o->preview_interval_ms = 5000;
+    o->affinity = 1;
 }
 
 /* One output file: a still's, or one frame's of a sequence. */
@@ -531,6 +532,7 @@ static int start_space(render *r)
         tf_info("dealing no task until %d worker%s joined (--wait-workers)", o->wait_workers,
                 o->wait_workers == 1 ? " has" : "s have");
     scfg.max_task_failures = o->max_task_failures;
+    scfg.affinity = o->affinity;
     r->sup = tf_supervisor_new(r->space, &scfg, err, sizeof err);
     if (!r->sup)
         return step_failed(r, 2, err);

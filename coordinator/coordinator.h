@@ -39,6 +39,7 @@ typedef struct tf_render_opts {
     int overwrite;             /* --overwrite: discard a partial render at the output */
     const char *stats_path;
     int wait_workers;          /* --wait-workers N: deal no task before N workers joined */
+    int affinity;              /* --affinity on|off: column-range affinity (default on) */
     int lease_timeout_ms;      /* a silent worker is dropped after this (default 15000) */
     size_t terrain_cache;      /* --terrain-cache: procedural terrain per local worker; 0 = default */
     int max_task_failures;     /* distinct workers a task may fail on before the render stops */

@@ -22,6 +22,20 @@ static double cpu_seconds(const struct rusage *ru)
            (double)ru->ru_stime.tv_sec + ru->ru_stime.tv_usec * 1e-6;
 }
 
+/* A worker's column range at its latest take (affinity.h; null without one, as with rows:K)
+ * and its takes by where they lay for it: what --affinity on does, or FIFO dealing gives. */
+static void affinity_keys(json_t *wo, const tf_worker_stats *w)
+{
+    json_t *range = json_null();
+    if (w->aff_x0 >= 0)
+        range = json_pack("[ii]", w->aff_x0, w->aff_x1);
+    json_object_set_new(wo, "affinity_range", range ? range : json_null());
+    json_object_set_new(wo, "first_choice", json_integer(w->aff_first));
+    json_object_set_new(wo, "second_choice", json_integer(w->aff_second));
+    json_object_set_new(wo, "elsewhere", json_integer(w->aff_elsewhere));
+    json_object_set_new(wo, "range_switches", json_integer(w->aff_switches));
+}
+
 static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
 {
     json_t *o = json_object();
@@ -51,6 +65,7 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
                         json_real(st->pixels ? (double)st->primary_rays / (double)st->pixels : 0.0));
     json_object_set_new(o, "max_outstanding_tasks", json_integer(st->max_outstanding_tasks));
     json_object_set_new(o, "watermark", json_integer(st->watermark));
+    json_object_set_new(o, "affinity", json_boolean(st->affinity));
     json_object_set_new(o, "max_tuple_bytes", json_integer((json_int_t)st->max_tuple_bytes));
     json_object_set_new(o, "local_workers", json_integer(run->local_workers));
     json_object_set_new(o, "heightfield_s", seconds(run->heightfield_s));
@@ -136,6 +151,7 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
         json_object_set_new(wo, "cache_hits", json_integer((json_int_t)w->terrain_hits));
         json_object_set_new(wo, "cache_evictions",
                             json_integer((json_int_t)w->terrain_evictions));
+        affinity_keys(wo, w);
         json_array_append_new(workers, wo);
     }
     json_object_set_new(o, "workers", workers);

@@ -59,6 +59,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "coordinator/affinity.h"
 #include "coordinator/events.h"
 #include "farmproto.h"
 #include "coordinator/idmap.h"
@@ -161,6 +162,7 @@ struct tf_supervisor {
     int wait_workers;        /* --wait-workers: deal nothing before joined_workers reaches it */
     tf_events *events;       /* the dashboard's event log, or NULL */
     int64_t last_accepted;   /* tf_supervisor_last_accepted */
+    tf_affinity *affinity;   /* --affinity, when a band has more than one task; else NULL */
 };
 
 /* ---- invariants (S1-S9 above), asserted clause by clause in debug builds ------------------
@@ -429,6 +431,7 @@ static tf_worker_stats *add_worker(tf_supervisor *s, int64_t id)
     w = &s->stats.workers[s->stats.nworkers++];
     memset(w, 0, sizeof *w);
     w->id = id;
+    w->aff_x0 = w->aff_x1 = w->aff_last = -1;
     snprintf(w->kind, sizeof w->kind, "networked");
     return w;
 }
@@ -603,6 +606,87 @@ static void withdraw_copies(tf_supervisor *s, task_slot *t)
     tf_tuple_clear(&tmpl);
 }
 
+/* ---- affinity (affinity.h): which of the waiting tasks a worker gets ----------------------- */
+
+/* 1 if task id's copies are dealt excluding worker (task_msg_of): it would only put it back. */
+static int excludes(tf_supervisor *s, int64_t id, int64_t worker)
+{
+    const task_slot *t = slot_of(s, id);
+    if (!t || (t->nfailed == 0 && (t->check == CHECK_NONE || t->check == CHECK_PENDING)))
+        return 0;
+    tf_task_msg m;
+    task_msg_of(s, t, &m);
+    return tf_task_excludes(&m, worker);
+}
+
+/* The space's chooser: task tuple t's rank for the worker on connection taker (0: any).  A
+ * task that excludes the worker comes last, so it does not bounce on one of its own range.
+ * With more workers than tasks in a band, ranges are narrower than a task and most workers
+ * would own none (and scan every waiting task on each take): plain FIFO then. */
+static uint64_t rank_task(void *ctx, uint64_t taker, const tf_tuple *t)
+{
+    tf_supervisor *s = ctx;
+    const char *name = tf_tuple_name(t);
+    int64_t id;
+    if (tf_affinity_workers(s->affinity) > s->band_tasks || !name ||
+        strcmp(name, TF_TAG_TASK) || tf_tuple_get_int(t, 1, &id) || id < 0 ||
+        id >= s->total_tasks)
+        return 0;
+    tf_worker_stats *w = worker_by_conn(s, taker);
+    if (!w)
+        return 0;
+    if (excludes(s, id, w->id))
+        return UINT64_MAX;
+    return tf_affinity_rank(s->affinity, w->id, rect_of(s, id), id);
+}
+
+/* Worker w said hello (joined, 1) or its connection closed (0): the ranges follow. */
+static void affinity_member(tf_supervisor *s, const tf_worker_stats *w, int joined)
+{
+    if (!s->affinity)
+        return;
+    if (!joined)
+        tf_affinity_leave(s->affinity, w->id);
+    else if (tf_affinity_join(s->affinity, w->id))
+        fail(s, "out of memory giving worker %" PRId64 " its column range", w->id);
+}
+
+/* The worker on conn took task id: count where it lay for it, and keep the range it had. */
+static void count_choice(tf_supervisor *s, uint64_t conn, int64_t id)
+{
+    tf_worker_stats *w = s->affinity ? worker_by_conn(s, conn) : NULL;
+    if (!w)
+        return;
+    tf_affinity_range(s->affinity, w->id, &w->aff_x0, &w->aff_x1);
+    tf_rect r = rect_of(s, id);
+    int range = tf_affinity_range_of(s->affinity, r);
+    w->aff_switches += w->aff_last >= 0 && range != w->aff_last;
+    w->aff_last = range;
+    tf_affinity_choice c = tf_affinity_choice_of(s->affinity, w->id, r);
+    if (c == TF_AFFINITY_FIRST)
+        w->aff_first++;
+    else if (c == TF_AFFINITY_SECOND)
+        w->aff_second++;
+    else if (c == TF_AFFINITY_ELSEWHERE)
+        w->aff_elsewhere++;
+}
+
+/* When a band has more than one task (rows:K spans the width), the ranges are kept and the
+ * takes counted by where they lay; --affinity on also ranks the takes by them.  Off, the counts
+ * show what plain FIFO dealing gives. */
+static int start_affinity(tf_supervisor *s, char *err, size_t errlen)
+{
+    if (s->band_tasks < 2)
+        return 0;
+    s->affinity = tf_affinity_new(s->cfg.width);
+    if (!s->affinity)
+        return tf_seterr(err, errlen, "out of memory");
+    if (s->cfg.affinity)
+        ts_space_set_chooser(s->space, rank_task, s);
+    s->stats.affinity = s->cfg.affinity;
+    return 0;
+}
+
 /* ---- writing ------------------------------------------------------------------------------ */
 
 /* Task id is written next and has its result: take the accepted tuple out of the space and hand
@@ -761,6 +845,7 @@ static void on_take(void *ctx, uint64_t conn, const tf_tuple *tuple)
     t->leased++;
     if (t->taken_ms == 0)
         t->taken_ms = tf_now_msf();
+    count_choice(s, conn, m.id);
 }
 
 /* A worker put a task back (it is excluded from it): the copy is in the space again. */
@@ -971,6 +1056,7 @@ static void on_hello(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple)
             if (!w->conn)
                 s->live_workers++;
             bind_conn(s, w, conn);
+            affinity_member(s, w, 1);
             const char *peer = s->srv ? ts_server_peer(s->srv, conn) : NULL;
             tf_debug("worker %" PRId64 " joined: %s on %s (pid %" PRId64 ", %s backend, %s)",
                      m.worker, m.kind, m.host, m.pid, m.backend, peer ? peer : "?");
@@ -1022,8 +1108,11 @@ static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
             bind_conn(s, &s->stats.workers[i], 0);
             s->live_workers--;
         }
-    if (w)
-        tf_events_add(s->events, TF_EV_LEAVE, w->id, -1, "connection closed (%s)", peer ? peer : "?");
+    if (w) {
+        affinity_member(s, w, 0);
+        tf_events_add(s->events, TF_EV_LEAVE, w->id, -1, "connection closed (%s)",
+                      peer ? peer : "?");
+    }
     int i = lease_of(s, conn);
     if (i < 0)
         return;
@@ -1655,6 +1744,10 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
                        : cfg->watermark;
     s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
+    if (start_affinity(s, err, errlen)) {
+        tf_supervisor_free(s);
+        return NULL;
+    }
     if (cfg->verify_fraction > 0)
         s->written_by = calloc((size_t)(s->total_tasks > 0 ? s->total_tasks : 1),
                                sizeof *s->written_by);
@@ -1683,6 +1776,9 @@ void tf_supervisor_free(tf_supervisor *s)
 {
     if (!s)
         return;
+    if (s->stats.affinity)
+        ts_space_set_chooser(s->space, NULL, NULL);
+    tf_affinity_free(s->affinity);
     free(s->ring);
     free(s->written_by);
     tf_idmap_free(&s->worker_of_conn);

@@ -27,6 +27,12 @@
  * before (tf_supervisor_set_writer), and finished (hooks.finish) as soon as its last task is
  * written.
  *
+ * Affinity (--affinity, affinity.h): with more than one task per band, the space's chooser
+ * (tuplespace.h) gives each worker, among the tasks dealt and waiting, one in its own column
+ * range first, then one in a neighbouring range, then the lowest id.  It chooses only among
+ * what the watermark let in, so the dealing, the watermark and the writes are as without it.
+ * With more workers than tasks in a band (ranges narrower than a task) it ranks nothing.
+ *
  * Memory is O(watermark): per-task state lives in a ring indexed by task id modulo its size
  * (sized for the largest auto watermark, 4096 workers: a few MB, whatever the image size). */
 #ifndef TF_SUPERVISOR_H
@@ -59,6 +65,13 @@ typedef struct tf_worker_stats {
     int hello;         /* it said hello (counted once by --wait-workers) */
     /* its procedural terrain cache, as its accepted results say (render/counts.h) */
     uint64_t terrain_samples, terrain_hits, terrain_evictions;
+    /* affinity.h: its column range [aff_x0, aff_x1) at its latest take of a task (both -1:
+     * none, as with one task per band), and its takes by where the task lay for it then
+     * (counted with --affinity off too: what FIFO dealing gives) */
+    int aff_x0, aff_x1;
+    int64_t aff_first, aff_second, aff_elsewhere;
+    int64_t aff_switches; /* takes in another range than its take before (locality) */
+    int aff_last;         /* the range of its latest take (-1: none) */
 } tf_worker_stats;
 
 /* One frame of a sequence (docs/contract.md: "frames"). */
@@ -87,6 +100,8 @@ typedef struct tf_farm_stats {
     int max_outstanding_tasks;
     int watermark;
     size_t max_tuple_bytes;
+    int affinity;             /* horizontal-extent affinity ranked the takes (--affinity on and
+                               * more than one task per band) */
     int nworkers;
     tf_worker_stats *workers;
     int nframes;              /* = the number of jobs */
@@ -133,6 +148,8 @@ typedef struct tf_supervisor_config {
     int wait_workers;         /* --wait-workers: deal no task before this many workers said
                                * hello (forked ones count; 0: deal at once) */
     int max_task_failures;
+    int affinity;             /* --affinity: rank each worker's takes by its column range
+                               * (affinity.h); only where a band has more than one task */
 } tf_supervisor_config;
 
 /* NULL with a message on error (e.g. watermark smaller than a band). */

@@ -696,14 +696,15 @@ static int handle_take_or_read(conn *c, const tf_frame *f, char *err, size_t err
         c->waiting = 1;
         c->pending_take = take;
         c->pending_req = f->request_id;
-        if (ts_wait(srv->space, &tmpl, take, on_waiter_served, c, &c->waiter_id) < 0) {
+        if (ts_wait_as(srv->space, &tmpl, take, c->id, on_waiter_served, c, &c->waiter_id) <
+            0) {
             c->waiting = 0;
             tf_seterr(err, errlen, "out of memory queuing a request");
             rc = -1;
         }
     } else {
         tf_tuple got;
-        int found = take ? ts_space_inp(srv->space, &tmpl, &got)
+        int found = take ? ts_space_inp_as(srv->space, &tmpl, c->id, &got)
                          : ts_space_rdp(srv->space, &tmpl, &got);
         if (found > 0) {
             if (take && srv->hooks.on_take)

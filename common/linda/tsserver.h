@@ -32,7 +32,10 @@
  * queued; on_out after a connection's tuple has been put in the space (it may already have been
  * handed to a waiter: the hook sees the tuple's value, not a live reference into the store);
  * on_disconnect when a connection is closed for any reason (including ts_server_close_conn and
- * ts_server_free).  Hooks may call the ts_space and ts_server_close_conn. */
+ * ts_server_free).  Hooks may call the ts_space and ts_server_close_conn.
+ *
+ * Every in and inp names its connection id as the taker (ts_wait_as, ts_space_inp_as), so a
+ * chooser set on the space (tuplespace.h) can rank the matching tuples per connection. */
 #ifndef TF_TSSERVER_H
 #define TF_TSSERVER_H
 

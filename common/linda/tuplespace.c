@@ -53,6 +53,7 @@ typedef struct elist {
 typedef struct waiter {
     tf_tuple tmpl;
     int take;
+    uint64_t taker;             /* ts_wait_as: who takes, for the chooser (0: nobody named) */
     ts_wait_fn fn;
     void *ctx;
     uint64_t id, seq;
@@ -93,6 +94,8 @@ struct ts_space {
     uint64_t next_waiter_id, next_seq;
     ts_space_stats st;
     int short_of_memory; /* a wake-up left matching waiters queued (L1) */
+    ts_rank_fn rank;     /* the chooser (ts_space_set_chooser), or NULL */
+    void *rank_ctx;
 };
 
 #ifndef NDEBUG
@@ -404,25 +407,54 @@ static void entry_take(ts_space *s, entry *e, tf_tuple *out)
     free(e);
 }
 
-/* The oldest stored tuple matching tmpl, or NULL.  Looks in one bucket when tmpl is named.
- * Each comparison is counted in *comparisons (NULL: not counted). */
-static entry *find(ts_space *s, const tf_tuple *tmpl, uint64_t *comparisons)
+/* The list a lookup of tmpl scans (one bucket when tmpl is named) and its link; NULL if none. */
+static const elist *candidates(ts_space *s, const tf_tuple *tmpl, int *link)
 {
     if (tmpl->nfields < 0 || tmpl->nfields > TF_TUPLE_MAX_FIELDS)
         return NULL;
     key k;
-    int link;
-    const elist *l;
     if (secondary_key(tmpl, &k) || primary_key(tmpl, &k)) {
         bucket *b = bucket_find(s, &k, key_hash(&k));
-        if (!b)
-            return NULL;
-        l = &b->tuples;
-        link = b->link;
-    } else {
-        l = &s->by_arity[tmpl->nfields];
-        link = LINK_ARITY;
+        *link = b ? b->link : LINK_PRIMARY;
+        return b ? &b->tuples : NULL;
     }
+    *link = LINK_ARITY;
+    return &s->by_arity[tmpl->nfields];
+}
+
+/* The chooser's pick for taker among l's tuples matching tmpl: the lowest rank, the oldest
+ * among equals; a rank of 0 ends the scan. */
+static entry *find_ranked(ts_space *s, const elist *l, int link, const tf_tuple *tmpl,
+                          uint64_t taker, uint64_t *comparisons)
+{
+    entry *best = NULL;
+    uint64_t best_rank = UINT64_MAX;
+    for (entry *e = l->head; e; e = e->next[link]) {
+        if (comparisons)
+            (*comparisons)++;
+        if (!tf_tuple_match(tmpl, &e->t))
+            continue;
+        uint64_t r = s->rank(s->rank_ctx, taker, &e->t);
+        if (!best || r < best_rank) {
+            best = e;
+            best_rank = r;
+        }
+        if (r == 0)
+            break;
+    }
+    return best;
+}
+
+/* The stored tuple matching tmpl that taker gets (the oldest, unless a chooser ranks them), or
+ * NULL.  Each comparison is counted in *comparisons (NULL: not counted). */
+static entry *find(ts_space *s, const tf_tuple *tmpl, uint64_t taker, uint64_t *comparisons)
+{
+    int link;
+    const elist *l = candidates(s, tmpl, &link);
+    if (!l)
+        return NULL;
+    if (s->rank && taker)
+        return find_ranked(s, l, link, tmpl, taker, comparisons);
     for (entry *e = l->head; e; e = e->next[link]) {
         if (comparisons)
             (*comparisons)++;
@@ -432,9 +464,9 @@ static entry *find(ts_space *s, const tf_tuple *tmpl, uint64_t *comparisons)
     return NULL;
 }
 
-static entry *lookup(ts_space *s, const tf_tuple *tmpl)
+static entry *lookup(ts_space *s, const tf_tuple *tmpl, uint64_t taker)
 {
-    return find(s, tmpl, &s->st.comparisons);
+    return find(s, tmpl, taker, &s->st.comparisons);
 }
 
 #ifndef NDEBUG
@@ -444,7 +476,7 @@ static int assert_no_match_waits(ts_space *s)
 {
     for (size_t i = 0; i < s->nwslots; i++)
         for (const waiter *w = s->wslots[i]; w; w = w->id_next)
-            assert((s->short_of_memory || !find(s, &w->tmpl, NULL)) &&
+            assert((s->short_of_memory || !find(s, &w->tmpl, 0, NULL)) &&
                    "L1: no stored tuple matches a queued waiter");
     return 1;
 }
@@ -520,20 +552,45 @@ static void waiter_unlink(ts_space *s, waiter *w)
     s->st.waiters--;
 }
 
+/* The in waiter the chooser gives t to: the lowest rank, the oldest among equals (a waiter
+ * naming no taker ranks 0).  NULL without a chooser: the first matching in waiter takes t. */
+static waiter *chosen_taker(ts_space *s, bucket *b, const tf_tuple *t)
+{
+    if (!s->rank)
+        return NULL;
+    waiter *ca = b ? b->waiters.head : NULL, *cb = s->wild.head, *w, *best = NULL;
+    uint64_t best_rank = UINT64_MAX;
+    while ((w = next_candidate(&ca, &cb)) != NULL) {
+        s->st.comparisons++;
+        if (!w->take || !tf_tuple_match(&w->tmpl, t))
+            continue;
+        uint64_t r = w->taker ? s->rank(s->rank_ctx, w->taker, t) : 0;
+        if (!best || r < best_rank) {
+            best = w;
+            best_rank = r;
+        }
+        if (r == 0)
+            break;
+    }
+    return best;
+}
+
 /* Collect the waiters t serves, oldest first: every matching rd waiter up to and including the
- * first matching in waiter.  Each is unlinked and given its tuple (a copy for rd; t itself for
- * the in waiter, leaving t empty).  Returns the number collected into *out (malloc'd), or -1. */
+ * in waiter that takes it (the first matching one, or the chooser's).  Each is unlinked and
+ * given its tuple (a copy for rd; t itself for the in waiter, leaving t empty).  Returns the
+ * number collected into *out (malloc'd), or -1. */
 static long collect_waiters(ts_space *s, tf_tuple *t, delivery **out)
 {
     *out = NULL;
     key k;
     bucket *b = primary_key(t, &k) ? bucket_find(s, &k, key_hash(&k)) : NULL;
+    waiter *chosen = chosen_taker(s, b, t);
     waiter *ca = b ? b->waiters.head : NULL, *cb = s->wild.head, *w;
     size_t n = 0, cap = 0;
     delivery *d = NULL;
     while ((w = next_candidate(&ca, &cb)) != NULL) {
         s->st.comparisons++;
-        if (!tf_tuple_match(&w->tmpl, t))
+        if ((chosen && w->take && w != chosen) || !tf_tuple_match(&w->tmpl, t))
             continue;
         if (n == cap) {
             size_t ncap = cap ? cap * 2 : 4;
@@ -603,7 +660,12 @@ int ts_space_out(ts_space *s, tf_tuple *t)
 
 int ts_space_inp(ts_space *s, const tf_tuple *tmpl, tf_tuple *out)
 {
-    entry *e = lookup(s, tmpl);
+    return ts_space_inp_as(s, tmpl, 0, out);
+}
+
+int ts_space_inp_as(ts_space *s, const tf_tuple *tmpl, uint64_t taker, tf_tuple *out)
+{
+    entry *e = lookup(s, tmpl, taker);
     if (!e)
         return 0;
     entry_take(s, e, out);
@@ -613,7 +675,7 @@ int ts_space_inp(ts_space *s, const tf_tuple *tmpl, tf_tuple *out)
 
 int ts_space_rdp(ts_space *s, const tf_tuple *tmpl, tf_tuple *out)
 {
-    entry *e = lookup(s, tmpl);
+    entry *e = lookup(s, tmpl, 0);
     if (!e)
         return 0;
     if (tf_tuple_copy(out, &e->t) != 0)
@@ -623,8 +685,8 @@ int ts_space_rdp(ts_space *s, const tf_tuple *tmpl, tf_tuple *out)
 }
 
 /* Queue a copy of tmpl as a new waiter; 0 or -1. */
-static int enqueue_waiter(ts_space *s, const tf_tuple *tmpl, int take, ts_wait_fn fn,
-                          void *ctx, uint64_t *waiter_id)
+static int enqueue_waiter(ts_space *s, const tf_tuple *tmpl, int take, uint64_t taker,
+                          ts_wait_fn fn, void *ctx, uint64_t *waiter_id)
 {
     if (s->nwaiters >= s->nwslots && wtable_grow(s) != 0)
         return -1;
@@ -647,6 +709,7 @@ static int enqueue_waiter(ts_space *s, const tf_tuple *tmpl, int take, ts_wait_f
         wlist_push(&s->wild, w);
     }
     w->take = take;
+    w->taker = taker;
     w->fn = fn;
     w->ctx = ctx;
     w->id = s->next_waiter_id++;
@@ -663,10 +726,16 @@ static int enqueue_waiter(ts_space *s, const tf_tuple *tmpl, int take, ts_wait_f
 int ts_wait(ts_space *s, const tf_tuple *tmpl, int take, ts_wait_fn fn, void *ctx,
             uint64_t *waiter_id)
 {
+    return ts_wait_as(s, tmpl, take, 0, fn, ctx, waiter_id);
+}
+
+int ts_wait_as(ts_space *s, const tf_tuple *tmpl, int take, uint64_t taker, ts_wait_fn fn,
+               void *ctx, uint64_t *waiter_id)
+{
     if (waiter_id)
         *waiter_id = 0;
     tf_tuple got;
-    int found = take ? ts_space_inp(s, tmpl, &got) : ts_space_rdp(s, tmpl, &got);
+    int found = take ? ts_space_inp_as(s, tmpl, taker, &got) : ts_space_rdp(s, tmpl, &got);
     if (found < 0)
         return -1;
     if (found) {
@@ -674,7 +743,7 @@ int ts_wait(ts_space *s, const tf_tuple *tmpl, int take, ts_wait_fn fn, void *ct
         tf_tuple_clear(&got);
         return 1;
     }
-    int rc = enqueue_waiter(s, tmpl, take, fn, ctx, waiter_id);
+    int rc = enqueue_waiter(s, tmpl, take, taker, fn, ctx, waiter_id);
     assert(assert_no_match_waits(s));
     return rc;
 }
@@ -691,6 +760,12 @@ int ts_cancel(ts_space *s, uint64_t waiter_id)
     waiter_unlink(s, w);
     waiter_free(w);
     return 1;
+}
+
+void ts_space_set_chooser(ts_space *s, ts_rank_fn fn, void *ctx)
+{
+    s->rank = fn;
+    s->rank_ctx = ctx;
 }
 
 void ts_space_get_stats(const ts_space *s, ts_space_stats *out)

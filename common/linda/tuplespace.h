@@ -15,6 +15,14 @@
  * and the first in waiter takes the tuple (later waiters do not see it); if no in waiter matched,
  * the tuple is stored.  Waiters are indexed by (name, arity) the same way.
  *
+ * A chooser (ts_space_set_chooser) may rank the tuples that match a take by the taker named in
+ * ts_space_inp_as / ts_wait_as: such a take gets the lowest-ranked match (the oldest among
+ * equals; a rank of 0 ends the scan at once), and a tuple put in goes to the matching in waiter
+ * with the lowest rank for it (the oldest among equals; rd waiters queued before that one get
+ * their copies as above).  Takes naming taker 0, and every take while no chooser is set, are
+ * the plain FIFO ones.  The space knows nothing of what the ranks mean (the farm's supervisor
+ * uses them for horizontal-extent affinity, coordinator/affinity.h).
+ *
  * Callbacks run after the store is consistent, so a callback may call any function here
  * (ts_space_out, ts_wait, ts_cancel, ...) on the same space.
  *
@@ -67,6 +75,16 @@ int ts_wait(ts_space *s, const tf_tuple *tmpl, int take, ts_wait_fn fn, void *ct
             uint64_t *waiter_id);
 /* Drop a queued request; 1 if it was queued, 0 if unknown or already served. */
 int ts_cancel(ts_space *s, uint64_t waiter_id);
+
+/* A take's preference among the tuples matching it: lower is better, 0 is the best there is.
+ * Called with the taker named by the take; must not call into the space. */
+typedef uint64_t (*ts_rank_fn)(void *ctx, uint64_t taker, const tf_tuple *t);
+/* Rank the matches of takes that name a taker with fn from now on (NULL: plain FIFO again). */
+void ts_space_set_chooser(ts_space *s, ts_rank_fn fn, void *ctx);
+/* ts_space_inp and ts_wait for a named taker (> 0; 0 is the plain forms): see the top. */
+int ts_space_inp_as(ts_space *s, const tf_tuple *tmpl, uint64_t taker, tf_tuple *out);
+int ts_wait_as(ts_space *s, const tf_tuple *tmpl, int take, uint64_t taker, ts_wait_fn fn,
+               void *ctx, uint64_t *waiter_id);
 
 void ts_space_get_stats(const ts_space *s, ts_space_stats *out);
 /* Number of tuples held that match tmpl (a scan of tmpl's bucket; for tests and statistics). */

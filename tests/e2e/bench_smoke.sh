@@ -30,6 +30,7 @@ program_case() {
 # The line a script's smoke run must print.
 script_want() {
     case $1 in
+    affinity_ab) WANT='^affinity on/off wall ratio: [0-9]' ;;
     povray_compare) WANT='^65 *noaa *| *[0-9]' ;;
     rss_flat) WANT='^scanline,rows:8,64x64,[0-9]' ;;
     scale_sim) WANT='^2,1,4,4,' ;;

@@ -1,7 +1,8 @@
 /* test_tuplespace.c: the in-process tuple store (common/linda/tuplespace.c): out/inp/rdp, FIFO
  * order, blocked requests served in arrival order (rd sees, in takes), cancel, re-entrant
  * callbacks, byte accounting, and that the (name, arity[, int]) index keeps lookups independent
- * of unrelated tuples (asserted on the comparison counter, not on time). */
+ * of unrelated tuples (asserted on the comparison counter, not on time); a chooser ranks the
+ * matches of a named taker's take, stored or waited for. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -279,6 +280,90 @@ static void test_index_ignores_other_names(void **state)
     ts_space_free(s);
 }
 
+/* The chooser of these tests: taker t wants ids 10t .. 10t+9 (rank 0), then the lowest id. */
+static uint64_t rank_by_tens(void *ctx, uint64_t taker, const tf_tuple *t)
+{
+    int64_t id = 0;
+    (*(int *)ctx)++;
+    tf_tuple_get_int(t, 1, &id);
+    return (uint64_t)id / 10 == taker ? 0 : 1 + (uint64_t)id;
+}
+
+static int64_t take_as(ts_space *s, uint64_t taker)
+{
+    tf_tuple m, got;
+    int64_t id = -1;
+    make_tmpl(&m, "task");
+    if (ts_space_inp_as(s, &m, taker, &got) == 1) {
+        tf_tuple_get_int(&got, 1, &id);
+        tf_tuple_clear(&got);
+    }
+    tf_tuple_clear(&m);
+    return id;
+}
+
+static void test_chooser_ranks_stored_tuples(void **state)
+{
+    (void)state;
+    ts_space *s = ts_space_new();
+    int calls = 0;
+    int64_t ids[] = {1, 12, 25, 13, 3, 14};
+    for (int i = 0; i < 6; i++)
+        out_task(s, "task", ids[i], 0);
+    out_task(s, "other", 20, 0);
+    assert_int_equal(take_as(s, 2), 1); /* no chooser yet: FIFO, whoever takes */
+    ts_space_set_chooser(s, rank_by_tens, &calls);
+    assert_int_equal(take_as(s, 2), 25); /* its own, past older ones; "other" never matches */
+    assert_int_equal(take_as(s, 1), 12); /* its own, the oldest of them */
+    assert_int_equal(take_as(s, 1), 13);
+    calls = 0;
+    assert_int_equal(take_as(s, 0), 3); /* no taker named: FIFO, the chooser not asked */
+    assert_int_equal(calls, 0);
+    out_task(s, "task", 8, 0);
+    assert_int_equal(take_as(s, 3), 8); /* none of its own: the lowest id, not the oldest */
+    assert_int_equal(take_as(s, 3), 14);
+    assert_int_equal(take_as(s, 3), -1);
+    ts_space_free(s);
+}
+
+static void test_chooser_picks_the_waiter(void **state)
+{
+    (void)state;
+    ts_space *s = ts_space_new();
+    int calls = 0;
+    ts_space_set_chooser(s, rank_by_tens, &calls);
+    record rec = {0};
+    probe in1 = {&rec, 1}, rd3 = {&rec, 3}, in2 = {&rec, 2}, in0 = {&rec, 0};
+    tf_tuple m;
+    make_tmpl(&m, "task");
+    assert_int_equal(ts_wait_as(s, &m, 1, 1, on_tuple, &in1, NULL), 0);
+    assert_int_equal(ts_wait_as(s, &m, 0, 3, on_tuple, &rd3, NULL), 0);
+    assert_int_equal(ts_wait_as(s, &m, 1, 2, on_tuple, &in2, NULL), 0);
+    /* 25 is taker 2's own: it goes there, past the older taker 1; the rd before it sees it */
+    out_task(s, "task", 25, 0);
+    assert_int_equal(rec.n, 2);
+    assert_int_equal(rec.calls[0], 3);
+    assert_int_equal(rec.calls[1], 2);
+    assert_int_equal(rec.ids[1], 25);
+    /* nobody better waits: taker 1 gets 7 */
+    out_task(s, "task", 7, 0);
+    assert_int_equal(rec.n, 3);
+    assert_int_equal(rec.calls[2], 1);
+    /* a waiter naming no taker ranks 0: it keeps its place in line */
+    assert_int_equal(ts_wait_as(s, &m, 1, 0, on_tuple, &in0, NULL), 0);
+    assert_int_equal(ts_wait_as(s, &m, 1, 2, on_tuple, &in2, NULL), 0);
+    out_task(s, "task", 26, 0);
+    assert_int_equal(rec.calls[3], 0);
+    out_task(s, "task", 5, 0);
+    assert_int_equal(rec.calls[4], 2);
+    ts_space_stats st;
+    ts_space_get_stats(s, &st);
+    assert_int_equal(st.waiters, 0);
+    assert_int_equal(st.tuples, 0);
+    tf_tuple_clear(&m);
+    ts_space_free(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -288,6 +373,8 @@ int main(void)
         cmocka_unit_test(test_reentrant_callback),
         cmocka_unit_test(test_accounting),
         cmocka_unit_test(test_index_ignores_other_names),
+        cmocka_unit_test(test_chooser_ranks_stored_tuples),
+        cmocka_unit_test(test_chooser_picks_the_waiter),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -189,7 +189,7 @@ static double cross_at(const pray *r, int a, double c)
     return d != 0 ? (c - o) / d : INFINITY;
 }
 
-static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1);
+static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1, int plo, int phi);
 
 /* Node bounds are costly (an interval sum over the octaves) and each serves many rays: a
  * direct-mapped table per thread remembers them.  A bound is a function of the terrain, the
@@ -223,7 +223,7 @@ static tf_interval node_bound(const pray *r, int q, int64_t i, int64_t j, const 
 
 /* The four children in the order the ray meets them over [t0, t1]. */
 static int visit_children(pray *r, int q, int64_t i, int64_t j, const double *box, double t0,
-                          double t1)
+                          double t1, int lo, int hi)
 {
     double xm = 0.5 * (box[0] + box[1]), ym = 0.5 * (box[2] + box[3]);
     double cut[4] = {t0, cross_at(r, 0, xm), cross_at(r, 1, ym), t1};
@@ -238,7 +238,7 @@ static int visit_children(pray *r, int q, int64_t i, int64_t j, const double *bo
             continue;
         double tm = 0.5 * (cut[k] + cut[k + 1]);
         int cx = r->o.x + tm * r->d.x >= xm, cy = r->o.y + tm * r->d.y >= ym;
-        if (visit(r, q + 1, 2 * i + cx, 2 * j + cy, cut[k], cut[k + 1]))
+        if (visit(r, q + 1, 2 * i + cx, 2 * j + cy, cut[k], cut[k + 1], lo, hi))
             return 1;
     }
     return 0;
@@ -263,12 +263,15 @@ static tf_interval sample_bound(const pray *r, int q, int64_t i, int64_t j, int 
     return b;
 }
 
-static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1)
+/* Node (q, i, j) over [t0, t1] of the ray; plo, phi: its parent's levels (a child's lie
+ * within them, so a parent with one level pair passes it down without computing). */
+static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1, int plo, int phi)
 {
     double box[4];
-    int lo, hi;
+    int lo = plo, hi = phi;
     node_box(r, q, i, j, box);
-    tf_proc_box_levels(r->p, r->v, box[0], box[1], box[2], box[3], &lo, &hi);
+    if (phi - plo > 1 || (phi == r->p->max_level && plo == phi)) /* may narrow */
+        tf_proc_box_levels(r->p, r->v, box[0], box[1], box[2], box[3], &lo, &hi);
     tf_interval b = q >= hi ? sample_bound(r, q, i, j, lo, hi) : node_bound(r, q, i, j, box, lo, hi);
     if (fmin(z_at(r, t0), z_at(r, t1)) > b.hi)
         return 0;
@@ -279,7 +282,7 @@ static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1)
         load_leaf(r, q, i, j, lo, hi, box, &f);
         return march(r, &f, t0, t1);
     }
-    return visit_children(r, q, i, j, box, t0, t1);
+    return visit_children(r, q, i, j, box, t0, t1, lo, hi);
 }
 
 /* Clip [*t0, *t1] to the ray's stretch over the square [0, extent]^2; 0 if none. */
@@ -306,7 +309,7 @@ static int trace(pray *r, double tmin, double tmax)
     double t0 = tmin, t1 = tmax;
     if (!clip_to_square(r, &t0, &t1))
         return 0;
-    return visit(r, 0, 0, 0, t0, t1);
+    return visit(r, 0, 0, 0, t0, t1, 0, r->p->max_level);
 }
 
 int tf_proc_trace(const tf_procedural *p, const tf_proc_view *v, tf_vec3 origin, tf_vec3 dir,

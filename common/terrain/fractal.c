@@ -257,19 +257,26 @@ static void row_octaves(const tf_fractal *f, const tf_noise *nz, const tf_noise_
 void tf_fractal_row(const tf_fractal *f, const tf_noise *nz, double y, double cell, int count,
                     double scale, float *out, tf_fractal_rowbuf *buf)
 {
+    tf_fractal_row_at(f, nz, y, cell, 0, count, scale, out, buf);
+}
+
+void tf_fractal_row_at(const tf_fractal *f, const tf_noise *nz, double y, double cell,
+                       int64_t first, int count, double scale, float *out,
+                       tf_fractal_rowbuf *buf)
+{
     if (count <= 0)
         return;
     tf_noise_axis axes[TF_MAX_OCTAVES + 1];
     tf_octave_axes(&f->octaves, y / f->feature_size + f->oy, axes);
     if (!buf || buf->capacity < count) {
         for (int k = 0; k < count; k++) {
-            double x = (double)k * cell / f->feature_size + f->ox;
+            double x = (double)(first + k) * cell / f->feature_size + f->ox;
             out[k] = (float)(scale * eval_axes(f, nz, x, axes));
         }
         return;
     }
     for (int k = 0; k < count; k++)
-        buf->x[k] = (double)k * cell / f->feature_size + f->ox;
+        buf->x[k] = (double)(first + k) * cell / f->feature_size + f->ox;
     row_octaves(f, nz, axes, count, buf);
     for (int k = 0; k < count; k++)
         out[k] = (float)(scale * buf->value[k]);

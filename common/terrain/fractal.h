@@ -74,6 +74,12 @@ void tf_fractal_rowbuf_free(tf_fractal_rowbuf *buf);
 void tf_fractal_row(const tf_fractal *f, const tf_noise *nz, double y, double cell, int count,
                     double scale, float *out, tf_fractal_rowbuf *buf);
 
+/* The same for samples first .. first + count - 1: out[k] = (float)(scale *
+ * tf_fractal_eval(f, nz, (double)(first + k) * cell, y)), bit for bit. */
+void tf_fractal_row_at(const tf_fractal *f, const tf_noise *nz, double y, double cell,
+                       int64_t first, int count, double scale, float *out,
+                       tf_fractal_rowbuf *buf);
+
 /* The seed-derived noise-space offset of the terrain functions (exposed for tests). */
 void tf_fractal_seed_offset(uint64_t seed, double *ox, double *oy);
 

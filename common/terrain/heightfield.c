@@ -163,7 +163,7 @@ void tf_heightfield_free(tf_heightfield *hf)
 void tf_heightfield_set_cache(tf_heightfield *hf, size_t bytes)
 {
     if (hf && hf->proc)
-        tf_tilecache_set_budget(hf->proc->cache, bytes);
+        tf_procedural_set_cache(hf->proc, bytes);
 }
 
 /* A max/min level: large ones on 2 MB boundaries and marked for transparent huge pages, so the

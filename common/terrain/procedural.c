@@ -2,6 +2,7 @@
 #include "terrain/procedural.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -27,20 +28,23 @@ static double grid_coord(const tf_procedural *p, int level, int64_t i)
     return (double)i * tf_proc_spacing(p, level);
 }
 
+/* A row buffer per thread for the fills (tf_fractal_row_at: octave by octave over a row, the
+ * lattice columns hashed once for the samples that share them; the same bits as a point). */
+static __thread tf_fractal_rowbuf fill_row;
+static __thread int fill_row_ready;
+
 static uint64_t fill_tile(void *ctx, uint64_t key, float *samples)
 {
     const tf_procedural *p = ctx;
     int level = (int)(key >> 58);
     int64_t tx = (int64_t)((key >> 29) & ((1u << 29) - 1)), ty = (int64_t)(key & ((1u << 29) - 1));
-    const tf_fractal *f = &p->level[level];
-    for (int b = 0; b < TF_TILE_SAMPLES; b++) {
-        double y = grid_coord(p, level, ty * TILE + b);
-        for (int a = 0; a < TF_TILE_SAMPLES; a++) {
-            double x = grid_coord(p, level, tx * TILE + a);
-            samples[b * TF_TILE_SAMPLES + a] =
-                (float)(p->height_scale * tf_fractal_eval(f, &p->noise, x, y));
-        }
-    }
+    if (!fill_row_ready)
+        fill_row_ready = tf_fractal_rowbuf_init(&fill_row, TF_TILE_SAMPLES) == 0 ? 1 : -1;
+    for (int b = 0; b < TF_TILE_SAMPLES; b++)
+        tf_fractal_row_at(&p->level[level], &p->noise, grid_coord(p, level, ty * TILE + b),
+                          tf_proc_spacing(p, level), tx * TILE, TF_TILE_SAMPLES,
+                          p->height_scale, samples + b * TF_TILE_SAMPLES,
+                          fill_row_ready > 0 ? &fill_row : NULL);
     return (uint64_t)TF_TILE_SAMPLES * TF_TILE_SAMPLES;
 }
 
@@ -108,21 +112,43 @@ tf_procedural *tf_procedural_new(const tf_terrain *t, size_t cache_bytes, char *
     double slack = 1e-6 * fmax(fabs(a), fabs(b)) + 1e-30; /* float rounding of the samples */
     p->lo = fmin(a, b) - slack;
     p->hi = fmax(a, b) + slack;
-    p->cache = tf_tilecache_new(cache_bytes, fill_tile, p);
-    if (!p->cache) {
-        free(p);
-        tf_seterr(err, errlen, "procedural terrain: out of memory for its cache");
-        return NULL;
-    }
+    p->cache_bytes = cache_bytes;
     return p;
 }
 
-void tf_procedural_free(tf_procedural *p)
+void tf_procedural_free(tf_procedural *p) { free(p); }
+
+void tf_procedural_set_cache(tf_procedural *p, size_t bytes) { p->cache_bytes = bytes; }
+
+/* ------------------------------------------------------------------------------ caches */
+
+/* This thread's cache, of the terrain whose id it holds. */
+static __thread tf_tilecache *thread_cache;
+static __thread uint64_t thread_cache_owner;
+static pthread_key_t cache_key;
+static pthread_once_t cache_key_once = PTHREAD_ONCE_INIT;
+
+static void free_thread_cache(void *c) { tf_tilecache_free(c); }
+static void make_cache_key(void) { pthread_key_create(&cache_key, free_thread_cache); }
+
+static tf_tilecache *cache_of(const tf_procedural *p)
 {
-    if (!p)
-        return;
-    tf_tilecache_free(p->cache);
-    free(p);
+    if (thread_cache && thread_cache_owner == p->id) {
+        if (tf_tilecache_budget(thread_cache) != p->cache_bytes)
+            tf_tilecache_set_budget(thread_cache, p->cache_bytes);
+        return thread_cache;
+    }
+    pthread_once(&cache_key_once, make_cache_key);
+    tf_tilecache_free(thread_cache);
+    /* the fill reads p: the cache is dropped (above) before another terrain uses this thread */
+    thread_cache = tf_tilecache_new(p->cache_bytes, fill_tile, (void *)p);
+    if (!thread_cache) {
+        fprintf(stderr, "terrafarm: out of memory for a terrain cache\n");
+        abort();
+    }
+    thread_cache_owner = p->id;
+    pthread_setspecific(cache_key, thread_cache);
+    return thread_cache;
 }
 
 /* ------------------------------------------------------------------------------ levels */
@@ -171,7 +197,14 @@ static void box_distances(const tf_proc_view *v, double x0, double x1, double y0
 static int level_at(const tf_procedural *p, const tf_proc_view *v, double d2)
 {
     double dd2 = d2 + v->dz * v->dz;
-    int level = 0;
+    if (!(dd2 < v->reach2[1]))
+        return 0;
+    /* reach2[L] = reach2[0] / 4^L: start from the binary exponent of the ratio, then settle
+     * on the table itself so rounding cannot disagree with it */
+    int level = ilogb(v->reach2[0] / fmax(dd2, 1e-300)) / 2;
+    level = level < 0 ? 0 : level > p->max_level ? p->max_level : level;
+    while (level > 0 && !(dd2 <= v->reach2[level]))
+        level--;
     while (level < p->max_level && dd2 <= v->reach2[level + 1])
         level++;
     return level;
@@ -196,7 +229,7 @@ void tf_proc_samples(const tf_procedural *p, int level, int64_t i0, int64_t j0, 
 {
     int64_t last = ((int64_t)1 << level) - 1;
     int64_t tx = i0 / TILE < last ? i0 / TILE : last, ty = j0 / TILE < last ? j0 / TILE : last;
-    tf_tilecache_read(p->cache, tile_key(level, tx, ty), (int)(i0 - tx * TILE),
+    tf_tilecache_read(cache_of(p), tile_key(level, tx, ty), (int)(i0 - tx * TILE),
                       (int)(j0 - ty * TILE), w, h, out);
 }
 
@@ -204,7 +237,7 @@ void tf_proc_range(const tf_procedural *p, int level, int k, int64_t ci, int64_t
                    float *hi)
 {
     int64_t tx = ci / TILE, ty = cj / TILE;
-    tf_tilecache_range(p->cache, tile_key(level, tx, ty), k, (int)(ci - tx * TILE) >> k,
+    tf_tilecache_range(cache_of(p), tile_key(level, tx, ty), k, (int)(ci - tx * TILE) >> k,
                        (int)(cj - ty * TILE) >> k, lo, hi);
 }
 

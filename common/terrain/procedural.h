@@ -49,7 +49,7 @@ typedef struct tf_procedural {
     double extent, height_scale;
     double spacing0;                            /* s_0 = extent / 32 */
     double lo, hi;                              /* bound of every height, world units */
-    tf_tilecache *cache;
+    size_t cache_bytes;                         /* each rendering thread's tile cache budget */
 } tf_procedural;
 
 /* What a view needs to pick levels: see above. */
@@ -62,10 +62,14 @@ typedef struct tf_proc_view {
     double reach2[TF_PROC_MAX_LEVELS + 1];
 } tf_proc_view;
 
+/* Evaluated samples live in a tile cache (tilecache.h) of each thread that renders, created
+ * on its first read with cache_bytes, emptied when the thread renders another terrain. */
 /* NULL with one line in err: not a noise generator, or out of memory. */
 tf_procedural *tf_procedural_new(const tf_terrain *t, size_t cache_bytes, char *err,
                                  size_t errlen);
 void tf_procedural_free(tf_procedural *p);
+/* Change the budget of every thread's cache (from their next read on). */
+void tf_procedural_set_cache(tf_procedural *p, size_t bytes);
 /* Default per-worker cache budget: an eighth of the machine's memory, at most 512 MiB. */
 size_t tf_procedural_default_cache_bytes(void);
 

@@ -9,7 +9,6 @@
 
 #include <assert.h>
 #include <math.h>
-#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -18,6 +17,7 @@
 #define MAX_BUCKETS (1u << 22)
 /* The range pyramid: blocks of 2^k x 2^k cells for k = 1..5 (16^2 + 8^2 + 4^2 + 2^2 + 1). */
 #define PYRAMID_ENTRIES 341
+#define RECENT_SLOTS 64
 
 typedef struct tile {
     uint64_t key;
@@ -64,7 +64,6 @@ static void build_pyramid(tile *t)
 }
 
 struct tf_tilecache {
-    pthread_mutex_t lock;
     tf_tile_fill_fn fill;
     void *ctx;
     size_t budget, max_tiles, ntiles;
@@ -72,6 +71,7 @@ struct tf_tilecache {
     size_t nbuckets; /* a power of two */
     tile *newest, *oldest;
     tf_tile_counts totals;
+    tile *recent[RECENT_SLOTS]; /* by key hash: tiles read lately, skipping the chains */
 };
 
 static __thread tf_tile_counts thread_counts;
@@ -136,7 +136,6 @@ tf_tilecache *tf_tilecache_new(size_t budget_bytes, tf_tile_fill_fn fill, void *
         free(c);
         return NULL;
     }
-    pthread_mutex_init(&c->lock, NULL);
     return c;
 }
 
@@ -149,7 +148,6 @@ void tf_tilecache_free(tf_tilecache *c)
         free(t);
     }
     free(c->buckets);
-    pthread_mutex_destroy(&c->lock);
     free(c);
 }
 
@@ -187,10 +185,17 @@ static void unchain(tf_tilecache *c, tile *t)
     *p = t->chain;
 }
 
+static size_t recent_slot(uint64_t key)
+{
+    return (size_t)((key * 0x9e3779b97f4a7c15ULL) >> 58) & (RECENT_SLOTS - 1);
+}
+
 static void evict_down_to(tf_tilecache *c, size_t keep)
 {
     while (c->ntiles > keep) {
         tile *t = c->oldest;
+        if (c->recent[recent_slot(t->key)] == t)
+            c->recent[recent_slot(t->key)] = NULL;
         unlink_lru(c, t);
         unchain(c, t);
         free(t);
@@ -202,12 +207,10 @@ static void evict_down_to(tf_tilecache *c, size_t keep)
 
 void tf_tilecache_set_budget(tf_tilecache *c, size_t budget_bytes)
 {
-    pthread_mutex_lock(&c->lock);
     c->budget = budget_bytes;
     c->max_tiles = tiles_for(budget_bytes);
     evict_down_to(c, c->max_tiles);
     check_cache(c);
-    pthread_mutex_unlock(&c->lock);
 }
 
 static tile *find(tf_tilecache *c, uint64_t key)
@@ -225,29 +228,29 @@ static void copy_out(const float *s, int i0, int j0, int w, int h, float *out)
                (size_t)w * sizeof *out);
 }
 
-/* Under the lock: the tile, most recently used now, or NULL. */
+/* The tile, most recently used now, or NULL. */
 static tile *touch(tf_tilecache *c, uint64_t key)
 {
-    tile *t = find(c, key);
-    if (t) {
+    tile **slot = &c->recent[recent_slot(key)];
+    tile *t = *slot && (*slot)->key == key ? *slot : find(c, key);
+    if (t && c->newest != t) {
         unlink_lru(c, t);
         push_newest(c, t);
     }
+    if (t)
+        *slot = t;
     return t;
 }
 
-/* Under the lock: keep freshly filled t (unless another thread kept the key first). */
+/* Keep freshly filled t. */
 static void keep(tf_tilecache *c, tile *t)
 {
-    if (find(c, t->key)) {
-        free(t);
-        return;
-    }
     evict_down_to(c, c->max_tiles - 1);
     size_t b = bucket_of(c, t->key);
     t->chain = c->buckets[b];
     c->buckets[b] = t;
     push_newest(c, t);
+    c->recent[recent_slot(t->key)] = t;
     c->ntiles++;
 }
 
@@ -264,80 +267,43 @@ static void fill(tf_tilecache *c, tile *t)
 {
     uint64_t n = c->fill(c->ctx, t->key, t->s);
     build_pyramid(t);
-    pthread_mutex_lock(&c->lock);
     count_fill(c, n);
-    pthread_mutex_unlock(&c->lock);
 }
 
-/* Run `use` on tile `key` with the lock held: found, or filled (and kept when memory allows;
- * else filled in `spare` and dropped). */
-static void with_tile(tf_tilecache *c, uint64_t key, tile *spare,
-                      void (*use)(const tile *, void *), void *arg)
+static __thread tile *spare_tile; /* per thread, for the out-of-memory path */
+
+/* Tile `key`: found, or filled and kept; or, when no memory is left for one more, filled in
+ * a spare that the next call reuses. */
+static const tile *get_tile(tf_tilecache *c, uint64_t key)
 {
-    pthread_mutex_lock(&c->lock);
     tile *t = touch(c, key);
     if (t) {
         c->totals.hits++;
         thread_counts.hits++;
-        use(t, arg);
-        pthread_mutex_unlock(&c->lock);
-        return;
+        return t;
     }
-    pthread_mutex_unlock(&c->lock);
     tile *fresh = malloc(sizeof *fresh);
-    t = fresh ? fresh : spare;
+    if (!fresh && !spare_tile)
+        spare_tile = malloc(sizeof *spare_tile);
+    t = fresh ? fresh : spare_tile;
     if (!t) {
         fprintf(stderr, "terrafarm: out of memory for one terrain tile\n");
         abort();
     }
     t->key = key;
     fill(c, t);
-    pthread_mutex_lock(&c->lock);
-    use(t, arg);
     if (fresh)
         keep(c, fresh);
     check_cache(c);
-    pthread_mutex_unlock(&c->lock);
+    return t;
 }
 
-typedef struct read_args {
-    int i0, j0, w, h;
-    float *out;
-} read_args;
-
-static void use_read(const tile *t, void *arg)
-{
-    const read_args *a = arg;
-    copy_out(t->s, a->i0, a->j0, a->w, a->h, a->out);
-}
-
-static __thread tile *spare_tile; /* per thread, for the out-of-memory path */
-
-static tile *spare(void)
-{
-    if (!spare_tile)
-        spare_tile = malloc(sizeof *spare_tile);
-    return spare_tile;
-}
 
 void tf_tilecache_read(tf_tilecache *c, uint64_t key, int i0, int j0, int w, int h, float *out)
 {
     assert(i0 >= 0 && j0 >= 0 && w >= 0 && h >= 0 && i0 + w <= TF_TILE_SAMPLES &&
            j0 + h <= TF_TILE_SAMPLES);
-    read_args a = {i0, j0, w, h, out};
-    with_tile(c, key, spare(), use_read, &a);
-}
-
-typedef struct range_args {
-    int at;
-    float *lo, *hi;
-} range_args;
-
-static void use_range(const tile *t, void *arg)
-{
-    const range_args *a = arg;
-    *a->lo = t->lo[a->at];
-    *a->hi = t->hi[a->at];
+    copy_out(get_tile(c, key)->s, i0, j0, w, h, out);
 }
 
 void tf_tilecache_range(tf_tilecache *c, uint64_t key, int k, int bi, int bj, float *lo,
@@ -345,16 +311,12 @@ void tf_tilecache_range(tf_tilecache *c, uint64_t key, int k, int bi, int bj, fl
 {
     assert(k >= 1 && k <= 5 && bi >= 0 && bj >= 0 && bi < (TF_TILE_CELLS >> k) &&
            bj < (TF_TILE_CELLS >> k));
-    range_args a = {pyramid_at(k, bi, bj), lo, hi};
-    with_tile(c, key, spare(), use_range, &a);
+    const tile *t = get_tile(c, key);
+    int at = pyramid_at(k, bi, bj);
+    *lo = t->lo[at];
+    *hi = t->hi[at];
 }
 
-tf_tile_counts tf_tilecache_totals(tf_tilecache *c)
-{
-    pthread_mutex_lock(&c->lock);
-    tf_tile_counts t = c->totals;
-    pthread_mutex_unlock(&c->lock);
-    return t;
-}
+tf_tile_counts tf_tilecache_totals(tf_tilecache *c) { return c->totals; }
 
 tf_tile_counts tf_tilecache_thread_counts(void) { return thread_counts; }

@@ -8,9 +8,9 @@
  * kept least recently used first out within a byte budget (never fewer than
  * TF_TILE_CACHE_MIN_TILES).
  *
- * Thread-safe: a mutex guards the table; a fill runs outside it (two threads may fill the same
- * tile at once: the same values, one copy kept).  Callers copy what they need out under the
- * lock (tf_tilecache_read), so an eviction never pulls memory from under a reader.
+ * One thread's: no locks (a farm worker is one process rendering on one thread; a program
+ * rendering on several threads gives each its own cache, as procedural.c does).  Reads copy
+ * what they need out, so a tile may be evicted by the very next read.
  *
  * Counters: per cache (tf_tilecache_totals) and per calling thread (tf_tilecache_thread_counts,
  * what one worker's task cost when one thread renders it). */
@@ -48,8 +48,8 @@ void tf_tilecache_set_budget(tf_tilecache *c, size_t budget_bytes);
 
 /* Copy samples (i, j) for i in [i0, i0 + w), j in [j0, j0 + h) of tile `key` into out (row
  * major, w per row); 0 <= i0, i0 + w <= TF_TILE_SAMPLES, likewise j.  A missing tile that
- * cannot be allocated is filled in a spare one per thread and not kept: slower, never wrong
- * (and if even the spare cannot be had, the process is out of memory: it aborts). */
+ * cannot be allocated is filled in a spare and not kept: slower, never wrong (and if even the
+ * spare cannot be had, the process is out of memory: it aborts). */
 void tf_tilecache_read(tf_tilecache *c, uint64_t key, int i0, int j0, int w, int h, float *out);
 
 /* The range of tile `key`'s samples over its block (bi, bj) of 2^k x 2^k cells (k in 1..5;

@@ -112,6 +112,14 @@ tf_procedural *tf_procedural_new(const tf_terrain *t, size_t cache_bytes, char *
     double slack = 1e-6 * fmax(fabs(a), fabs(b)) + 1e-30; /* float rounding of the samples */
     p->lo = fmin(a, b) - slack;
     p->hi = fmax(a, b) + slack;
+    /* the bound holds every sample: finite and well inside a float, or refuse the scene now
+     * (hetero's products can overflow: offset 10 over 30 octaves) */
+    if (!(fabs(p->lo) < 1e30 && fabs(p->hi) < 1e30)) {
+        free(p);
+        tf_seterr(err, errlen, "procedural terrain: heights may reach %g, beyond what a sample "
+                  "holds (lower height_scale, offset or octaves)", fmax(fabs(a), fabs(b)));
+        return NULL;
+    }
     p->cache_bytes = cache_bytes;
     return p;
 }
@@ -161,7 +169,7 @@ tf_proc_view tf_proc_view_of(const tf_procedural *p, tf_vec3 eye, double pixel_a
     v.dz = eye.z > p->hi ? eye.z - p->hi : 0.0;
     v.min_dist = tf_proc_spacing(p, p->max_level) / v.pixel_angle;
     for (int level = 0; level <= p->max_level; level++) {
-        double reach = p->spacing0 / (v.pixel_angle * ldexp(1.0, level - 1));
+        double reach = p->spacing0 / (v.pixel_angle * ldexp(1.0, level));
         v.reach2[level] = reach * reach;
     }
     return v;
@@ -171,7 +179,7 @@ double tf_proc_lambda(const tf_procedural *p, const tf_proc_view *v, double d2)
 {
     double d = sqrt(d2 + v->dz * v->dz);
     double footprint = v->pixel_angle * (d > v->min_dist ? d : v->min_dist);
-    double lambda = log2(p->spacing0 / footprint) + 1.0;
+    double lambda = log2(p->spacing0 / footprint);
     return lambda < 0 ? 0 : lambda > p->max_level ? p->max_level : lambda;
 }
 

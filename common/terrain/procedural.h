@@ -10,10 +10,11 @@
  * samples.  A sample is a pure function of (L, i, j): what a worker has cached never matters.
  *
  * Level of detail.  A view (eye position and the angle of a pixel) gives every horizontal
- * position a continuous level lambda(x, y) = log2(s_0 / footprint) + 1, where footprint is the
+ * position a continuous level lambda(x, y) = log2(s_0 / footprint), where footprint is the
  * pixel's size at distance d = |(x, y) - eye_xy, dz| (dz: the eye's height above the highest
- * the terrain can reach, or 0), clamped to [0, max_level].  So the finer level used at a place
- * has spacing at most one pixel there.  The surface the view sees is
+ * the terrain can reach, or 0), clamped to [0, max_level]: level lambda's spacing is one
+ * pixel.  So of the two levels used at a place the finer one has spacing at most a pixel (a
+ * pixel exactly where it alone is used), the coarser at most two.  The surface the view sees is
  *     h(x, y) = (1 - w) H_L(x, y) + w H_{L+1}(x, y),   L = floor(lambda), w = lambda - L:
  * continuous everywhere (no cracks between levels), detail fading in as the eye approaches
  * (no popping), and a function of the position and the view only, never of the ray, so camera

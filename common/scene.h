@@ -76,6 +76,8 @@ typedef struct tf_terrain {
     /* procedural = yes: a point generator evaluated where rays need it, at the level of detail
      * of the pixel footprint, with no grid and no size cap (terrain/procedural.h) */
     int procedural;
+    double detail;          /* procedural over a grid or height map: metres of the first
+                             * detail octave (wavelength two cells; terrain/procedural.h) */
 
     /* shading of the grid's triangles (render/shade.h): 0 = flat-lit triangles near the
      * terminator (the sun test and the shadow ray's start by the triangle's own normal, the

@@ -87,6 +87,8 @@ static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
         sb_printf(b, "%s = %" PRIu64 "\n", k->name, *(const uint64_t *)src);
         break;
     case KT_DOUBLE:
+        if (scene_key_silent(s, key))
+            break; /* not written: the key is absent */
         sb_printf(b, "%s = %.17g\n", k->name, *(const double *)src);
         break;
     case KT_VEC3: {

@@ -165,17 +165,17 @@ static void check_terrain_file(struct parser *p)
                       "(0, from the raster, is only for generator = file)", t->extent, BIG);
 }
 
-/* procedural = yes evaluates a point generator on demand: the grid generators and height maps
- * have no function to evaluate between their samples. */
+/* detail adds to a grid or a height map under procedural = yes; a noise generator has its
+ * own octaves for that. */
 static void check_procedural(struct parser *p)
 {
     const tf_terrain *t = &p->s->terrain;
-    if (!t->procedural || t->generator == TF_GEN_FBM || t->generator == TF_GEN_HETERO ||
-        t->generator == TF_GEN_HYBRID || t->generator == TF_GEN_RIDGED)
-        return;
-    scene_fail_at(p, blame_line(p, scene_key_index(SEC_TERRAIN, "procedural")),
-                  "procedural: needs a noise generator (fbm, hetero, hybrid or ridged), not "
-                  "this grid or file generator");
+    int noise = t->generator == TF_GEN_FBM || t->generator == TF_GEN_HETERO ||
+                t->generator == TF_GEN_HYBRID || t->generator == TF_GEN_RIDGED;
+    if (t->detail > 0 && (noise || !t->procedural))
+        scene_fail_at(p, blame_line(p, scene_key_index(SEC_TERRAIN, "detail")),
+                      "detail: only for a grid generator or generator = file with procedural "
+                      "= yes (a noise generator's detail is its octaves)");
 }
 
 void scene_check_semantics(struct parser *p)

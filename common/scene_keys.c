@@ -66,9 +66,11 @@ const struct key_def SCENE_KEYS[SCENE_KEY_COUNT] = {
     {SEC_TERRAIN, "thermal_iterations", KT_INT, F(terrain.thermal_iterations), 0, 10000, 0, 0,
      {0}},
     {SEC_TERRAIN, "talus", KT_DOUBLE, F(terrain.talus_deg), 0, 90, 0, 0, {35}},
-    /* smooth and procedural: added after format 1, written only when set (scene_key_silent) */
+    /* smooth, procedural, detail: added after format 1, written only when set
+     * (scene_key_silent) */
     {SEC_TERRAIN, "smooth", KT_BOOL, F(terrain.smooth), 0, 1, 0, 0, {0}},
     {SEC_TERRAIN, "procedural", KT_BOOL, F(terrain.procedural), 0, 1, 0, 0, {0}},
+    {SEC_TERRAIN, "detail", KT_DOUBLE, F(terrain.detail), 0, BIG, 0, 0, {0}},
     {SEC_TERRAIN, "path", KT_PATH, F(terrain.file_path), 0, TF_SCENE_PATH_MAX, 0, 0, {0}},
     {SEC_TERRAIN, "sha256", KT_SHA256, F(terrain.file_sha256), 0, 0, 0, 0, {0}},
     {SEC_TERRAIN, "vertical_scale", KT_DOUBLE, F(terrain.vertical_scale), -BIG, BIG, 0, 0, {1}},
@@ -150,9 +152,12 @@ const void *scene_cfield(const tf_scene *s, int key)
 int scene_key_silent(const tf_scene *s, int key)
 {
     const struct key_def *k = &SCENE_KEYS[key];
-    if (k->section != SEC_TERRAIN ||
-        (strcmp(k->name, "smooth") != 0 && strcmp(k->name, "procedural") != 0))
+    if (k->section != SEC_TERRAIN || (strcmp(k->name, "smooth") != 0 &&
+                                       strcmp(k->name, "procedural") != 0 &&
+                                       strcmp(k->name, "detail") != 0))
         return 0;
+    if (k->type == KT_DOUBLE)
+        return *(const double *)scene_cfield(s, key) == k->def[0];
     return *(const int *)scene_cfield(s, key) == (int)k->def[0];
 }
 

@@ -11,6 +11,7 @@
  * Grids are filled by `threads` pthreads splitting rows.  Max and min are exact, so the result
  * is bit-identical whatever the thread count. */
 #include <errno.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -270,6 +271,31 @@ double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y)
 {
     if (hf->proc) /* its finest level: what a view sees up close */
         return tf_proc_level_height(hf->proc, hf->proc->max_level, x, y);
+    return tf_heightfield_grid_height_at(hf, x, y);
+}
+
+void tf_heightfield_range(const tf_heightfield *hf, double x0, double x1, double y0, double y1,
+                          float *lo, float *hi)
+{
+    double u;
+    int i0 = split_coord(hf, x0, &u), i1 = split_coord(hf, x1, &u);
+    int j0 = split_coord(hf, y0, &u), j1 = split_coord(hf, y1, &u);
+    int L = 0;
+    while (L + 1 < hf->levels && ((i1 >> L) - (i0 >> L) > 2 || (j1 >> L) - (j0 >> L) > 2))
+        L++;
+    int side = hf->cells >> L;
+    *lo = INFINITY;
+    *hi = -INFINITY;
+    for (int bj = j0 >> L; bj <= j1 >> L; bj++)
+        for (int bi = i0 >> L; bi <= i1 >> L; bi++) {
+            size_t at = (size_t)bj * (size_t)side + (size_t)bi;
+            *lo = hf->mingrid[L][at] < *lo ? hf->mingrid[L][at] : *lo;
+            *hi = hf->maxgrid[L][at] > *hi ? hf->maxgrid[L][at] : *hi;
+        }
+}
+
+double tf_heightfield_grid_height_at(const tf_heightfield *hf, double x, double y)
+{
     double u, v;
     int ci = split_coord(hf, x, &u), cj = split_coord(hf, y, &v);
     const float *row = hf->h + (size_t)cj * hf->n + ci;

@@ -28,10 +28,12 @@ typedef struct tf_heightfield {
     int levels;        /* number of max-grid levels: k + 1 (cells, cells/2, ..., 1) */
     float **maxgrid;   /* maxgrid[L]: (cells >> L)^2 entries */
     float **mingrid;   /* mingrid[L]: same shape, minima */
-    /* [terrain] procedural = yes: no samples, no grids (h, maxgrid, mingrid NULL, n = k = 0);
-     * the terrain is this function, evaluated where rays need it.  extent, hmin and hmax are
-     * its square and its bound; cell is nominal (extent / 8192, the finest grid's) for the
-     * shading scales that derive from it. */
+    /* [terrain] procedural = yes: the terrain is this function, evaluated where rays need it.
+     * With a noise generator there are no samples and no grids (h, maxgrid, mingrid NULL, n =
+     * k = 0); extent, hmin and hmax are its square and its bound, cell nominal (the grid of
+     * size_exp's) for the shading scales that derive from it.  With a grid generator or a
+     * height map the grid stays (the base the detail is added to) and hmin, hmax widen to the
+     * procedural bound. */
     struct tf_procedural *proc;
 } tf_heightfield;
 
@@ -52,6 +54,13 @@ void tf_heightfield_set_cache(tf_heightfield *hf, size_t bytes);
 /* Height at world (x, y) by the same two-triangle interpolation the tracer
  * uses (clamped to the terrain's edge); a procedural terrain's at its finest level. */
 double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y);
+
+/* The grid's own height there, whether or not a procedural terrain is over it. */
+double tf_heightfield_grid_height_at(const tf_heightfield *hf, double x, double y);
+/* The range of the grid's heights over the cells that meet [x0, x1] x [y0, y1] (clamped to
+ * the square), from the max/min grids: a bound of the surface there. */
+void tf_heightfield_range(const tf_heightfield *hf, double x0, double x1, double y0, double y1,
+                          float *lo, float *hi);
 
 /* Number of worker threads to use for `threads` (0 -> online CPUs). */
 int tf_thread_count(int threads);

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "log.h"
+#include "terrain/heightfield.h"
 
 #define TILE TF_TILE_CELLS
 #define MiB (1024.0 * 1024.0)
@@ -28,6 +29,19 @@ static double grid_coord(const tf_procedural *p, int level, int64_t i)
     return (double)i * tf_proc_spacing(p, level);
 }
 
+/* Detail over a grid: the grid's height under each sample of tile (tx, ty) of a level. */
+static void add_base(const tf_procedural *p, int level, int64_t tx, int64_t ty, float *samples)
+{
+    for (int b = 0; b < TF_TILE_SAMPLES; b++) {
+        double y = grid_coord(p, level, ty * TILE + b);
+        for (int a = 0; a < TF_TILE_SAMPLES; a++) {
+            double x = grid_coord(p, level, tx * TILE + a);
+            float *v = &samples[b * TF_TILE_SAMPLES + a];
+            *v = (float)((double)*v + tf_heightfield_grid_height_at(p->base, x, y));
+        }
+    }
+}
+
 /* A row buffer per thread for the fills (tf_fractal_row_at: octave by octave over a row, the
  * lattice columns hashed once for the samples that share them; the same bits as a point). */
 static __thread tf_fractal_rowbuf fill_row;
@@ -43,8 +57,10 @@ static uint64_t fill_tile(void *ctx, uint64_t key, float *samples)
     for (int b = 0; b < TF_TILE_SAMPLES; b++)
         tf_fractal_row_at(&p->level[level], &p->noise, grid_coord(p, level, ty * TILE + b),
                           tf_proc_spacing(p, level), tx * TILE, TF_TILE_SAMPLES,
-                          p->height_scale, samples + b * TF_TILE_SAMPLES,
+                          p->height_scale * p->fade[level], samples + b * TF_TILE_SAMPLES,
                           fill_row_ready > 0 ? &fill_row : NULL);
+    if (p->base)
+        add_base(p, level, tx, ty, samples);
     return (uint64_t)TF_TILE_SAMPLES * TF_TILE_SAMPLES;
 }
 
@@ -82,9 +98,13 @@ static int prepare_levels(tf_procedural *p, const tf_terrain *t)
         tf_terrain at_level = *t;
         at_level.octaves = p->octaves[level] = level_octaves(t, tf_proc_spacing(p, level));
         tf_fractal_prepare(&p->level[level], &at_level);
+        p->fade[level] = 1.0;
     }
     return 0;
 }
+
+static tf_procedural *finish(tf_procedural *p, const tf_terrain *t, size_t cache_bytes,
+                             char *err, size_t errlen);
 
 tf_procedural *tf_procedural_new(const tf_terrain *t, size_t cache_bytes, char *err,
                                  size_t errlen)
@@ -106,9 +126,23 @@ tf_procedural *tf_procedural_new(const tf_terrain *t, size_t cache_bytes, char *
                   "hybrid or ridged)");
         return NULL;
     }
-    tf_interval all = tf_fractal_bound(&p->fractal, &p->full, &p->noise, 0, t->extent, 0, t->extent, 1.0,
-                                       t->octaves);
+    return finish(p, t, cache_bytes, err, errlen);
+}
+
+/* The bound of every height, and the cache budget; frees p and returns NULL if the bound
+ * leaves a float. */
+static tf_procedural *finish(tf_procedural *p, const tf_terrain *t, size_t cache_bytes,
+                             char *err, size_t errlen)
+{
+    tf_interval all = tf_fractal_bound(&p->fractal, &p->full, &p->noise, 0, t->extent, 0,
+                                       t->extent, 1.0, t->octaves);
+    if (p->base) /* the grid, plus detail that may also be absent (fade 0) */
+        all = (tf_interval){fmin(all.lo, 0.0), fmax(all.hi, 0.0)};
     double a = all.lo * p->height_scale, b = all.hi * p->height_scale;
+    if (p->base) {
+        a += p->base->hmin;
+        b += p->base->hmax;
+    }
     double slack = 1e-6 * fmax(fabs(a), fabs(b)) + 1e-30; /* float rounding of the samples */
     p->lo = fmin(a, b) - slack;
     p->hi = fmax(a, b) + slack;
@@ -122,6 +156,42 @@ tf_procedural *tf_procedural_new(const tf_terrain *t, size_t cache_bytes, char *
     }
     p->cache_bytes = cache_bytes;
     return p;
+}
+
+/* The detail fBm over a grid of cell `cell`: first wavelength two cells, amplitude `detail`. */
+static tf_terrain detail_terrain(const tf_terrain *t, double cell)
+{
+    tf_terrain d = *t;
+    d.generator = TF_GEN_FBM;
+    d.feature_size = 2 * cell;
+    d.height_scale = t->detail;
+    return d;
+}
+
+tf_procedural *tf_procedural_over(const tf_terrain *t, const struct tf_heightfield *grid,
+                                  size_t cache_bytes, char *err, size_t errlen)
+{
+    tf_procedural *p = calloc(1, sizeof *p);
+    if (!p) {
+        tf_seterr(err, errlen, "procedural detail: out of memory");
+        return NULL;
+    }
+    static uint64_t next_id = 1ull << 62; /* apart from tf_procedural_new's */
+    p->id = __atomic_add_fetch(&next_id, 1, __ATOMIC_RELAXED);
+    tf_terrain d = detail_terrain(t, grid->cell);
+    d.extent = grid->extent;
+    p->base = grid;
+    p->extent = grid->extent;
+    p->height_scale = d.height_scale;
+    p->spacing0 = grid->extent / TILE;
+    tf_noise_init(&p->noise, t->seed ^ 0x64657461696cULL); /* "detail" */
+    prepare_levels(p, &d);
+    for (int level = 0; level <= p->max_level; level++) {
+        /* 1 + log2(2 cells / 2 spacings) octaves: below 1, that share of the first */
+        double n = 1.0 + log(grid->cell / tf_proc_spacing(p, level)) / log(d.lacunarity);
+        p->fade[level] = n <= 0 ? 0.0 : n >= 1 ? 1.0 : n;
+    }
+    return finish(p, &d, cache_bytes, err, errlen);
 }
 
 void tf_procedural_free(tf_procedural *p) { free(p); }
@@ -296,7 +366,16 @@ tf_interval tf_proc_bound_levels(const tf_procedural *p, double x0, double x1, d
     double pad = tf_proc_spacing(p, lo);
     tf_interval b = tf_fractal_bound(&p->fractal, &p->full, &p->noise, x0 - pad, x1 + pad, y0 - pad,
                                      y1 + pad, p->octaves[lo], p->octaves[hi]);
+    double f_lo = fmin(p->fade[lo], p->fade[hi]), f_hi = fmax(p->fade[lo], p->fade[hi]);
+    if (f_lo < 1) /* a fading first octave: anything between none and all of it */
+        b = (tf_interval){fmin(b.lo * f_lo, b.lo * f_hi), fmax(b.hi * f_lo, b.hi * f_hi)};
     double a = b.lo * p->height_scale, c = b.hi * p->height_scale;
+    if (p->base) {
+        float glo, ghi;
+        tf_heightfield_range(p->base, x0 - pad, x1 + pad, y0 - pad, y1 + pad, &glo, &ghi);
+        a += glo;
+        c += ghi;
+    }
     /* samples are rounded to float: widen by more than half an ulp of the largest */
     double slack = 1e-6 * fmax(fabs(a), fabs(c)) + 1e-30;
     return (tf_interval){fmax(fmin(a, c) - slack, p->lo), fmin(fmax(a, c) + slack, p->hi)};

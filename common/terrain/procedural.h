@@ -37,6 +37,8 @@
 #include "terrain/tilecache.h"
 #include "vec.h"
 
+struct tf_heightfield;
+
 #define TF_PROC_MAX_LEVELS 28
 
 typedef struct tf_procedural {
@@ -51,6 +53,10 @@ typedef struct tf_procedural {
     double spacing0;                            /* s_0 = extent / 32 */
     double lo, hi;                              /* bound of every height, world units */
     size_t cache_bytes;                         /* each rendering thread's tile cache budget */
+    /* Detail over a grid (tf_procedural_over): the grid, and each level's share of the first
+     * detail octave (0 where the level is no finer than the grid, 1 from twice as fine) */
+    const struct tf_heightfield *base;
+    double fade[TF_PROC_MAX_LEVELS + 1];
 } tf_procedural;
 
 /* What a view needs to pick levels: see above. */
@@ -68,6 +74,14 @@ typedef struct tf_proc_view {
 /* NULL with one line in err: not a noise generator, or out of memory. */
 tf_procedural *tf_procedural_new(const tf_terrain *t, size_t cache_bytes, char *err,
                                  size_t errlen);
+/* Procedural detail over a grid or a height map (Ammeter & Mikhailyuk's real data with generated
+ * detail): level L's samples are the grid's height there (its two triangles) plus `detail`
+ * metres times an fBm whose first octave has a wavelength of two grid cells, with the octaves
+ * level L's spacing can show (t's H, lacunarity and octaves); a level no finer than the grid
+ * adds nothing, and the first octave fades in from 0 to 1 as the spacing halves below it.
+ * The grid must outlive the terrain (it is its height field). */
+tf_procedural *tf_procedural_over(const tf_terrain *t, const struct tf_heightfield *grid,
+                                  size_t cache_bytes, char *err, size_t errlen);
 void tf_procedural_free(tf_procedural *p);
 /* Change the budget of every thread's cache (from their next read on). */
 void tf_procedural_set_cache(tf_procedural *p, size_t bytes);

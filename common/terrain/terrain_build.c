@@ -219,9 +219,29 @@ static tf_heightfield *procedural_build(const tf_scene *s, char *err, size_t err
     return hf;
 }
 
+/* Procedural detail over the grid hf (procedural.h, tf_procedural_over). */
+static tf_heightfield *detail_over(tf_heightfield *hf, const tf_scene *s, char *err,
+                                   size_t errlen)
+{
+    hf->proc = tf_procedural_over(&s->terrain, hf, tf_procedural_default_cache_bytes(), err,
+                                  errlen);
+    if (!hf->proc) {
+        tf_heightfield_free(hf);
+        return NULL;
+    }
+    hf->hmin = (float)hf->proc->lo;
+    hf->hmax = (float)hf->proc->hi;
+    return hf;
+}
+
+static int noise_generator(enum tf_generator g)
+{
+    return g == TF_GEN_FBM || g == TF_GEN_HETERO || g == TF_GEN_HYBRID || g == TF_GEN_RIDGED;
+}
+
 tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, size_t errlen)
 {
-    if (s->terrain.procedural)
+    if (s->terrain.procedural && noise_generator(s->terrain.generator))
         return procedural_build(s, err, errlen);
     double extent;
     float *h = tf_terrain_heights(&s->terrain, threads, &extent, err, errlen);
@@ -234,5 +254,5 @@ tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, 
         tf_seterr(err, errlen, "out of memory: max/min grids of a %dx%d height field", n, n);
         return NULL;
     }
-    return hf;
+    return s->terrain.procedural ? detail_over(hf, s, err, errlen) : hf;
 }

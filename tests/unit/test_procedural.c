@@ -4,8 +4,8 @@
  * recently used tile, keeps its budget and its counts, and its range pyramid is exact; the surface
  * is continuous where the level of detail changes and fades the finer level in from nothing; the
  * quad-tree's bound is never below the surface on random boxes; random rays find every hit a
- * brute-force dense march of the same surface finds, and only true ones; and no hit depends on
- * the cache's budget. */
+ * brute-force dense march of the same surface finds, and only true ones, over a noise generator
+ * and over a grid with detail added; and no hit depends on the cache's budget. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -16,6 +16,7 @@
 #include <math.h>
 #include <cmocka.h>
 #include "terrain/fractal_bound.h"
+#include "terrain/heightfield.h"
 #include "terrain/procedural.h"
 #include "terrain/tilecache.h"
 #include "render/trace_procedural.h"
@@ -197,6 +198,32 @@ static tf_procedural *make(enum tf_generator g)
     return p;
 }
 
+/* Detail over a 65^2 grid of rolling hills (15.6 m cells) on the same square. */
+static tf_heightfield *hills;
+static tf_procedural *make_over(void)
+{
+    enum { K = 6, N = (1 << K) + 1 };
+    static float h[N * N];
+    for (int j = 0; j < N; j++)
+        for (int i = 0; i < N; i++)
+            h[j * N + i] = (float)(40 * sin(i * 0.31) * cos(j * 0.23) + 0.5 * ((i * 7 + j * 3) % 5));
+    hills = tf_heightfield_from_heights(h, K, 1000, 1);
+    char err[256];
+    tf_terrain t = terrain_of(TF_GEN_MIDPOINT);
+    t.detail = 3;
+    tf_procedural *p = tf_procedural_over(&t, hills, 64 << 20, err, sizeof err);
+    if (!p)
+        fail_msg("%s", err);
+    return p;
+}
+
+static void free_over(tf_procedural *p)
+{
+    tf_procedural_free(p);
+    tf_heightfield_free(hills);
+    hills = NULL;
+}
+
 /* Eye over the middle; a coarse pixel so that every level appears within the square. */
 static tf_proc_view view_of(const tf_procedural *p)
 {
@@ -249,9 +276,9 @@ static void test_continuous_across_levels(void **state)
 static void test_bound_never_below(void **state)
 {
     (void)state;
-    enum tf_generator gens[] = {TF_GEN_FBM, TF_GEN_HETERO, TF_GEN_HYBRID, TF_GEN_RIDGED};
-    for (int g = 0; g < 4; g++) {
-        tf_procedural *p = make(gens[g]);
+    enum tf_generator gens[] = {TF_GEN_FBM, TF_GEN_HETERO, TF_GEN_HYBRID, TF_GEN_RIDGED, 0};
+    for (int g = 0; g < 5; g++) {
+        tf_procedural *p = g < 4 ? make(gens[g]) : make_over(); /* 4: detail over a grid */
         tf_proc_view v = view_of(p);
         for (int box = 0; box < 300; box++) {
             double size = exp(uniform(log(0.2), log(600.0)));
@@ -265,7 +292,10 @@ static void test_bound_never_below(void **state)
                              b.hi);
             }
         }
-        tf_procedural_free(p);
+        if (g < 4)
+            tf_procedural_free(p);
+        else
+            free_over(p);
     }
 }
 
@@ -296,10 +326,8 @@ static double brute_force(const tf_procedural *p, const tf_proc_view *v, tf_vec3
     return -1;
 }
 
-static void test_no_missed_hits(void **state)
+static void no_missed_hits(tf_procedural *p)
 {
-    (void)state;
-    tf_procedural *p = make(TF_GEN_HYBRID);
     tf_proc_view v = view_of(p);
     const double tmax = 40, dt = 0.05;
     int hits = 0;
@@ -325,7 +353,30 @@ static void test_no_missed_hits(void **state)
         }
     }
     assert_true(hits > 1000 * PROC_SOAK); /* the rays do meet the ground */
+}
+
+static void test_no_missed_hits(void **state)
+{
+    (void)state;
+    tf_procedural *p = make(TF_GEN_HYBRID);
+    no_missed_hits(p);
     tf_procedural_free(p);
+}
+
+static void test_no_missed_hits_detail_over_grid(void **state)
+{
+    (void)state;
+    tf_procedural *p = make_over();
+    no_missed_hits(p);
+    /* the detail is there: level 6 (1 m spacing) differs from the grid by metres somewhere */
+    double most = 0;
+    for (int k = 0; k < 200; k++) {
+        double x = uniform(0, 1000), y = uniform(0, 1000);
+        most = fmax(most, fabs(tf_proc_level_height(p, 6, x, y) -
+                               tf_heightfield_grid_height_at(hills, x, y)));
+    }
+    assert_true(most > 1.0);
+    free_over(p);
 }
 
 /* The same rays give the same bits with a cache of 16 tiles as with 64 MiB. */
@@ -371,6 +422,7 @@ int main(void)
         cmocka_unit_test(test_continuous_across_levels),
         cmocka_unit_test(test_bound_never_below),
         cmocka_unit_test(test_no_missed_hits),
+        cmocka_unit_test(test_no_missed_hits_detail_over_grid),
         cmocka_unit_test(test_hits_independent_of_cache),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -103,17 +103,19 @@ for c in ("on", "off", "big"):
                     [[x[0] for x in rs]]
 nothrash1 = med["big", 1][0]
 print()
-print("%-4s %7s %8s %13s %11s %9s %8s %9s %8s %8s %11s  %s"
+print("%-4s %7s %8s %13s %11s %9s %8s %8s %9s %8s %8s %11s  %s"
       % ("cfg", "workers", "wall_s", "samples_total", "per_worker", "evictions", "speedup",
-         "vs_big_1w", "cpu_s", "cpu_1/n", "first/takes", "walls"))
+         "spd_min", "vs_big_1w", "cpu_s", "cpu_1/n", "first/takes", "walls"))
 for c in ("on", "off", "big"):
-    base, cbase = med[c, 1][0], med[c, 1][5]
+    base, cbase, mbase = med[c, 1][0], med[c, 1][5], min(med[c, 1][6])
     for n in counts:
         m = med[c, n]
-        print("%-4s %7d %8.3f %13.0f %11.0f %9.0f %8.3f %9.3f %8.3f %8.3f %5.0f/%-5.0f  %s"
-              % (c, n, m[0], m[1], m[1] / n, m[2], base / m[0], nothrash1 / m[0], m[5],
-                 cbase / m[5] if m[5] > 0 else 0, m[3], m[4], " ".join("%.2f" % t for t in m[6])))
+        print("%-4s %7d %8.3f %13.0f %11.0f %9.0f %8.3f %8.3f %9.3f %8.3f %8.3f %5.0f/%-5.0f  %s"
+              % (c, n, m[0], m[1], m[1] / n, m[2], base / m[0], mbase / min(m[6]),
+                 nothrash1 / m[0], m[5], cbase / m[5] if m[5] > 0 else 0, m[3], m[4],
+                 " ".join("%.2f" % t for t in m[6])))
 print("(medians over %d round(s); speedup: wall time of 1 worker of the same cfg / this one;"
+      " spd_min: the same with the fastest run of each (the least disturbed by other load);"
       " vs_big_1w: of 1 worker with the big cache / this one; cpu_s: all workers' CPU seconds;"
       " cpu_1/n: 1 worker's CPU / this one's, > 1 when n workers do less work in all)" % rounds)
 on = [med["on", n][1] for n in counts]
@@ -121,8 +123,10 @@ falls = all(b < a for a, b in zip(on, on[1:]))
 print("samples with affinity on: %s (%s)" % (" -> ".join("%.0f" % s for s in on),
       "fall at every step" if falls else "do NOT fall at every step"))
 if 2 in counts:
-    print("superlinear: 2-worker speedup %.3f (affinity on), %.3f (off); against the no-thrash "
-          "1-worker run %.3f (on)" % (med["on", 1][0] / med["on", 2][0],
-                                       med["off", 1][0] / med["off", 2][0],
-                                       nothrash1 / med["on", 2][0]))
+    print("superlinear: 2-worker speedup %.3f (affinity on), %.3f (off); fastest runs %.3f (on);"
+          " CPU work 1 worker / 2 workers %.3f (on); against the no-thrash 1-worker run %.3f (on)"
+          % (med["on", 1][0] / med["on", 2][0], med["off", 1][0] / med["off", 2][0],
+             min(med["on", 1][6]) / min(med["on", 2][6]),
+             med["on", 1][5] / med["on", 2][5] if med["on", 2][5] > 0 else 0,
+             nothrash1 / med["on", 2][0]))
 PY

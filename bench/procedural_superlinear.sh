@@ -7,6 +7,9 @@
 # cache: the TOTAL terrain samples evaluated over all workers should then fall as workers are
 # added, and the speedup over one (thrashing) worker exceed the worker count.
 #
+# CACHE=32M: one 160x100 worker of closeup.scene thrashes (view ~45 MB), a 2-worker share almost
+# fits (bench/README.md section 5 for the budget sweep).
+#
 # Three configurations per worker count, alternated in each round (A/B/C, A/B/C, ...) so that a
 # change of the machine's load falls on all alike:
 #   on    the small budget, --affinity on
@@ -19,7 +22,7 @@
 #
 # usage: bench/procedural_superlinear.sh [SCENE]   (default scenes/closeup.scene)
 #        bench/procedural_superlinear.sh --smoke   (48x30, workers 1 2, 1 round: bench_smoke.sh)
-# env:   SIZE=160x100 STAMPS=16x16 CACHE=16M BIG=512M WORKERS="1 2 4 8" ROUNDS=3 TF=bin/terrafarm
+# env:   SIZE=160x100 STAMPS=16x16 CACHE=32M BIG=512M WORKERS="1 2 4 8" ROUNDS=3 TF=bin/terrafarm
 set -eu
 cd "$(dirname "$0")/.."
 TF=${TF:-bin/terrafarm}
@@ -31,7 +34,7 @@ fi
 SCENE=${1:-scenes/closeup.scene}
 SIZE=${SIZE:-160x100}
 STAMPS=${STAMPS:-16x16}
-CACHE=${CACHE:-16M}
+CACHE=${CACHE:-32M}
 BIG=${BIG:-512M}
 WORKERS=${WORKERS:-1 2 4 8}
 ROUNDS=${ROUNDS:-3}

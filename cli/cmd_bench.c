@@ -11,6 +11,12 @@
  * mean busy fraction, tasks re-dealt, and the external-sample overhead (camera rays traced
  * outside the tasks' own pixels / rays inside, Musgrave's "a few percent").
  *
+ * On a procedural scene ([terrain] procedural = yes) the table has three more columns, from the
+ * same median run's statistics: the terrain samples evaluated by all workers together, their
+ * mean per worker, and the tile-cache evictions of all workers.  --terrain-cache and --affinity
+ * are passed to every render, so a budget that one worker's view does not fit shows whether
+ * adding workers makes the total fall (Musgrave A.7.2.3: a superlinear speedup).
+ *
  * `terrafarm bench SCENE --cost-map OUT` instead measures the per-region cost of the scene
  * in-process and writes the cost map that simulated workers read (worker/simulate.h). */
 #include <errno.h>
@@ -40,13 +46,17 @@ static const char usage[] =
     "\n"
     "Render SCENE with each worker count (terrafarm render as a child process), check that\n"
     "every image is bit-identical, and print speedup, parallel efficiency, rays/s, the\n"
-    "workers' mean busy fraction, tasks re-dealt and the external-sample overhead.\n"
+    "workers' mean busy fraction, tasks re-dealt and the external-sample overhead; on a\n"
+    "procedural scene also the terrain samples evaluated (all workers, mean per worker) and\n"
+    "the tile-cache evictions.\n"
     "\n"
     "  -j, -w, --workers LIST    comma-separated worker counts (default 1,2)\n"
     "  -r, --repeat R            runs per worker count; the median wall time counts (default 3)\n"
     "      --tasks SPEC          rows:K or stamps:WxH, passed to render\n"
     "      --watermark N         passed to render\n"
     "      --size WxH            override the scene's image size\n"
+    "      --terrain-cache SIZE  passed to render: each worker's budget for procedural terrain\n"
+    "      --affinity on|off     passed to render (default: render's, on)\n"
     "      --csv FILE            write the table as CSV\n"
     "      --plot FILE.svg|png   plot speedup and efficiency against workers (needs gnuplot)\n"
     "      --keep DIR            keep the images and statistics in DIR (default: a temporary\n"
@@ -59,13 +69,16 @@ static const char usage[] =
 
 typedef struct bench_opts {
     const char *scene, *tasks, *watermark, *size, *csv, *plot, *keep, *cost_map;
+    const char *terrain_cache, *affinity;
     int counts[MAX_COUNTS], ncounts;
     int repeat, grid_w, grid_h, quiet;
+    int procedural; /* the scene's [terrain] procedural: the terrain columns are shown */
 } bench_opts;
 
 /* One render's figures, from its --stats JSON. */
 typedef struct run_stats {
     double wall_s, rays, primary, external, redealt, busy_sum;
+    double samples, evictions; /* procedural terrain, all workers */
     int nworkers;
 } run_stats;
 
@@ -118,7 +131,10 @@ static int parse_wxh(const char *flag, const char *text, int lo, int hi, int *w,
 /* 0 to run, 1 to exit successfully (--help), -1 on a usage error (already reported). */
 static int parse_args(int argc, char **argv, bench_opts *o)
 {
-    enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_CSV, O_PLOT, O_KEEP, O_COST, O_GRID };
+    enum {
+        O_TASKS = 256, O_WATERMARK, O_SIZE, O_CSV, O_PLOT, O_KEEP, O_COST, O_GRID,
+        O_TERRAIN_CACHE, O_AFFINITY
+    };
     static const struct option longopts[] = {
         {"workers", required_argument, NULL, 'w'}, {"repeat", required_argument, NULL, 'r'},
         {"tasks", required_argument, NULL, O_TASKS},
@@ -126,6 +142,8 @@ static int parse_args(int argc, char **argv, bench_opts *o)
         {"size", required_argument, NULL, O_SIZE}, {"csv", required_argument, NULL, O_CSV},
         {"plot", required_argument, NULL, O_PLOT}, {"keep", required_argument, NULL, O_KEEP},
         {"cost-map", required_argument, NULL, O_COST}, {"grid", required_argument, NULL, O_GRID},
+        {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
+        {"affinity", required_argument, NULL, O_AFFINITY},
         {"quiet", no_argument, NULL, 'q'}, {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -139,6 +157,7 @@ static int parse_args(int argc, char **argv, bench_opts *o)
     int c, w, h;
     char *end, err[256];
     tf_task_spec spec;
+    size_t bytes;
     optind = 1;
     opterr = 0;
     while ((c = getopt_long(argc, argv, ":w:j:r:qh", longopts, NULL)) != -1) {
@@ -167,6 +186,18 @@ static int parse_args(int argc, char **argv, bench_opts *o)
             if (parse_wxh("--size", optarg, 1, 65536, &w, &h))
                 return -1;
             o->size = optarg;
+            break;
+        case O_TERRAIN_CACHE:
+            if (tf_parse_byte_size("--terrain-cache", optarg, &bytes))
+                return -1;
+            o->terrain_cache = optarg;
+            break;
+        case O_AFFINITY:
+            if (strcmp(optarg, "on") && strcmp(optarg, "off")) {
+                tf_error("--affinity '%s': expected on or off", optarg);
+                return -1;
+            }
+            o->affinity = optarg;
             break;
         case O_CSV: o->csv = optarg; break;
         case O_PLOT: o->plot = optarg; break;
@@ -246,7 +277,7 @@ static int run_render(const bench_opts *o, const char *dir, int n, int r, char *
     snprintf(jobs, sizeof jobs, "%d", n);
     snprintf(exr, exrlen, "%s/out-%d-%d.exr", dir, n, r);
     snprintf(json, jsonlen, "%s/out-%d-%d.json", dir, n, r);
-    const char *args[24];
+    const char *args[28];
     int k = 0;
     args[k++] = "terrafarm";
     args[k++] = "render";
@@ -272,6 +303,14 @@ static int run_render(const bench_opts *o, const char *dir, int n, int r, char *
     if (o->size) {
         args[k++] = "--size";
         args[k++] = o->size;
+    }
+    if (o->terrain_cache) {
+        args[k++] = "--terrain-cache";
+        args[k++] = o->terrain_cache;
+    }
+    if (o->affinity) {
+        args[k++] = "--affinity";
+        args[k++] = o->affinity;
     }
     args[k] = NULL;
     fflush(NULL);
@@ -309,7 +348,7 @@ static int stat_number(json_t *doc, const char *key, double *out)
     return 0;
 }
 
-static int read_stats(const char *path, run_stats *st)
+static int read_stats(const char *path, int procedural, run_stats *st)
 {
     memset(st, 0, sizeof *st);
     json_error_t jerr;
@@ -322,7 +361,8 @@ static int read_stats(const char *path, run_stats *st)
               stat_number(doc, "rays_total", &st->rays) ||
               stat_number(doc, "primary_rays", &st->primary) ||
               stat_number(doc, "external_rays", &st->external) ||
-              stat_number(doc, "tasks_redealt", &st->redealt);
+              stat_number(doc, "tasks_redealt", &st->redealt) ||
+              (procedural && stat_number(doc, "terrain_samples_evaluated", &st->samples));
     json_t *workers = json_object_get(doc, "workers");
     size_t i;
     json_t *w;
@@ -335,6 +375,14 @@ static int read_stats(const char *path, run_stats *st)
         }
         st->busy_sum += busy;
         st->nworkers++;
+        double evictions;
+        if (procedural) {
+            if (stat_number(w, "cache_evictions", &evictions)) {
+                bad = 1;
+                break;
+            }
+            st->evictions += evictions;
+        }
     }
     json_decref(doc);
     if (bad || st->wall_s <= 0) {
@@ -461,7 +509,7 @@ static int measure(const bench_opts *o, const char *dir, row *rows)
                 fprintf(stderr, "bench: %d worker%s, run %d of %d\n", n, n == 1 ? "" : "s",
                         r + 1, o->repeat);
             if (run_render(o, dir, n, r, exr, sizeof exr, json, sizeof json) ||
-                read_stats(json, &runs[r]))
+                read_stats(json, o->procedural, &runs[r]))
                 goto fail;
             if (!ref[0]) {
                 snprintf(ref, sizeof ref, "%s", exr);
@@ -510,17 +558,29 @@ static void derive(const bench_opts *o, row *rows)
 
 static void print_table(const bench_opts *o, const row *rows)
 {
-    printf("%-8s %9s %8s %10s %10s %6s %8s %9s\n", "workers", "wall_s", "speedup", "efficiency",
+    printf("%-8s %9s %8s %10s %10s %6s %8s %9s", "workers", "wall_s", "speedup", "efficiency",
            "Mrays/s", "busy", "redealt", "external");
+    if (o->procedural)
+        printf(" %12s %12s %10s", "samples", "per_worker", "evictions");
+    printf("\n");
     for (int i = 0; i < o->ncounts; i++) {
         const row *r = &rows[i];
-        printf("%-8d %9.3f %8.3f %10.3f %10.3f %6.3f %8.0f %8.2f%%\n", r->workers, r->st.wall_s,
+        printf("%-8d %9.3f %8.3f %10.3f %10.3f %6.3f %8.0f %8.2f%%", r->workers, r->st.wall_s,
                r->speedup, r->efficiency, r->rays_per_s / 1e6, r->busy_fraction, r->st.redealt,
                100.0 * r->external_overhead);
+        if (o->procedural)
+            printf(" %12.0f %12.0f %10.0f", r->st.samples,
+                   r->st.nworkers ? r->st.samples / r->st.nworkers : 0.0, r->st.evictions);
+        printf("\n");
     }
     printf("images: %d render%s bit-identical (decoded); median of %d run%s; tasks %s\n",
            o->ncounts * o->repeat, o->ncounts * o->repeat == 1 ? "" : "s", o->repeat,
            o->repeat == 1 ? "" : "s", o->tasks ? o->tasks : "default");
+    if (o->procedural)
+        printf("procedural terrain: samples evaluated by all workers (of the median run); "
+               "terrain cache %s per worker; affinity %s\n",
+               o->terrain_cache ? o->terrain_cache : "default",
+               o->affinity ? o->affinity : "on (default)");
 }
 
 static int write_csv(const char *path, const bench_opts *o, const row *rows)
@@ -531,12 +591,17 @@ static int write_csv(const char *path, const bench_opts *o, const row *rows)
         return -1;
     }
     fprintf(f, "workers,wall_s,speedup,efficiency,rays_per_s,busy_fraction,tasks_redealt,"
-               "external_overhead\n");
+               "external_overhead%s\n",
+            o->procedural ? ",samples_evaluated,samples_per_worker,cache_evictions" : "");
     for (int i = 0; i < o->ncounts; i++) {
         const row *r = &rows[i];
-        fprintf(f, "%d,%.4f,%.4f,%.4f,%.0f,%.4f,%.0f,%.5f\n", r->workers, r->st.wall_s,
+        fprintf(f, "%d,%.4f,%.4f,%.4f,%.0f,%.4f,%.0f,%.5f", r->workers, r->st.wall_s,
                 r->speedup, r->efficiency, r->rays_per_s, r->busy_fraction, r->st.redealt,
                 r->external_overhead);
+        if (o->procedural)
+            fprintf(f, ",%.0f,%.1f,%.0f", r->st.samples,
+                    r->st.nworkers ? r->st.samples / r->st.nworkers : 0.0, r->st.evictions);
+        fprintf(f, "\n");
     }
     if (fclose(f) != 0) {
         tf_error("%s: cannot write the CSV: %s", path, strerror(errno));
@@ -641,6 +706,15 @@ int cmd_bench(int argc, char **argv)
         tf_error("--plot needs gnuplot, which is not installed (Debian: apt-get install "
                  "gnuplot-nox)");
         return TF_EXIT_FAIL;
+    }
+    /* A scene that does not load is left to the first render to report (as before). */
+    {
+        char err[1024];
+        tf_scene *s = tf_scene_load(o.scene, err, sizeof err);
+        if (s) {
+            o.procedural = s->terrain.procedural;
+            tf_scene_free(s);
+        }
     }
     char tmpl[] = "/tmp/terrafarm-bench-XXXXXX";
     const char *dir = o.keep;

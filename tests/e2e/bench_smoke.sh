@@ -32,6 +32,7 @@ script_want() {
     case $1 in
     affinity_ab) WANT='^affinity on/off wall ratio: [0-9]' ;;
     povray_compare) WANT='^65 *noaa *| *[0-9]' ;;
+    procedural_superlinear) WANT='^superlinear: 2-worker speedup [0-9]' ;;
     rss_flat) WANT='^scanline,rows:8,64x64,[0-9]' ;;
     scale_sim) WANT='^2,1,4,4,' ;;
     sequence_vs_frames) WANT='^all 2 frames of (a) are byte-identical' ;;

@@ -1,7 +1,8 @@
 #!/bin/sh
 # bench_speedup.sh: `terrafarm bench` works end to end on a tiny render: it runs the renders
 # (1 and 2 workers), finds the images identical, prints the table (speedup 1 at the smallest
-# count, efficiency = speedup / workers) and writes the CSV; bad flags fail with one line.
+# count, efficiency = speedup / workers) and writes the CSV, with terrain columns (samples
+# evaluated, per worker, evictions) on a procedural scene only; bad flags fail with one line.
 # Timings are not checked (they belong to bench/README.md, not to `make test`).
 . "$(dirname "$0")/lib.sh"
 e2e_init
@@ -23,6 +24,28 @@ for r in rows:
     assert 0 < float(r["busy_fraction"]) <= 1.05, r
     assert 0 < float(r["external_overhead"]) < 1, r
 PY
+head -1 "$T/s.csv" | grep -q 'external_overhead$' || fail "a grid scene's CSV gained columns: $(head -1 "$T/s.csv")"
+grep -q 'samples' "$T/out" && fail "a grid scene's table gained terrain columns: $(cat "$T/out")"
+
+say "a procedural scene: --terrain-cache and --affinity reach the renders, terrain columns"
+"$TF_BIN" bench "$TF_ROOT/scenes/closeup.scene" --workers 1,2 --repeat 1 --size 32x20 \
+    --tasks stamps:16x16 --terrain-cache 1M --affinity off --csv "$T/p.csv" --keep "$T/pk" -q \
+    >"$T/pout" 2>"$T/perr" || fail "procedural bench failed: $(cat "$T/perr")"
+grep -q '^workers .*samples .*per_worker .*evictions' "$T/pout" || fail "no terrain columns: $(cat "$T/pout")"
+grep -q 'terrain cache 1M per worker; affinity off' "$T/pout" || fail "no terrain line: $(cat "$T/pout")"
+python3 - "$T/p.csv" "$T/pk" <<'PY' || fail "procedural CSV content"
+import csv, json, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+assert [int(r["workers"]) for r in rows] == [1, 2], rows
+for r in rows:
+    n = int(r["workers"])
+    st = json.load(open("%s/out-%d-0.json" % (sys.argv[2], n)))
+    assert st["affinity"] is False, st["affinity"]
+    assert int(r["samples_evaluated"]) == st["terrain_samples_evaluated"] > 0, (r, st)
+    assert abs(float(r["samples_per_worker"]) - int(r["samples_evaluated"]) / n) < 1, r
+    assert int(r["cache_evictions"]) == sum(w["cache_evictions"] for w in st["workers"]), r
+PY
+
 say "the kept images are the renders the bench compared"
 n=$(ls "$T/keep"/out-*.exr | wc -l)
 [ "$n" -eq 4 ] || fail "expected 4 kept images, found $n"
@@ -33,6 +56,10 @@ say "usage errors: one line, exit 2"
 [ $rc -eq 2 ] && [ "$(wc -l <"$T/e1")" -eq 1 ] || fail "--workers 0,2: rc $rc: $(cat "$T/e1")"
 "$TF_BIN" bench "$SCENE" --tasks bogus 2>"$T/e2"; rc=$?
 [ $rc -eq 2 ] && [ "$(wc -l <"$T/e2")" -eq 1 ] || fail "--tasks bogus: rc $rc: $(cat "$T/e2")"
+"$TF_BIN" bench "$SCENE" --affinity maybe 2>"$T/e4"; rc=$?
+[ $rc -eq 2 ] && [ "$(wc -l <"$T/e4")" -eq 1 ] || fail "--affinity maybe: rc $rc: $(cat "$T/e4")"
+"$TF_BIN" bench "$SCENE" --terrain-cache lots 2>"$T/e5"; rc=$?
+[ $rc -eq 2 ] && [ "$(wc -l <"$T/e5")" -eq 1 ] || fail "--terrain-cache lots: rc $rc: $(cat "$T/e5")"
 say "a render that fails makes the bench fail with a message"
 "$TF_BIN" bench "$T/missing.scene" --workers 1 --repeat 1 -q 2>"$T/e3"; rc=$?
 [ $rc -ne 0 ] && grep -q 'render with 1 worker failed' "$T/e3" || fail "missing scene: rc $rc: $(cat "$T/e3")"

@@ -22,7 +22,7 @@
 
 #define TF_TILE_CELLS 32
 #define TF_TILE_SAMPLES (TF_TILE_CELLS + 1)
-#define TF_TILE_CACHE_MIN_TILES 16
+#define TF_TILE_CACHE_MIN_TILES 128 /* about 0.9 MiB: what one ray may need across its levels, and more */
 /* Bytes a tile costs in the budget (its samples and its bookkeeping). */
 size_t tf_tilecache_tile_bytes(void);
 

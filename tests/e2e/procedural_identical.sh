@@ -6,19 +6,18 @@
 # thrashes, to 512M), and a coordinator SIGKILLed mid-render then resumed (with another budget).
 # The statistics: per worker samples_evaluated / cache_hits / cache_evictions, their sum is
 # terrain_samples_evaluated; a tiny cache evicts and evaluates more.  Refusals, each exit 2 and
-# one line: --backend opencl, --terrain-cache 12Q, procedural = yes with a grid generator.
-# (--terrain-cache 64K, the 16-tile floor, thrashes much harder: 1.2e9 samples and 70 s for 96x64.)
+# one line: --backend opencl, --terrain-cache 12Q, detail = METRES on a noise generator.
 . "$(dirname "$0")/lib.sh"
 e2e_init
-SIZE=96x64
-H=64
+SIZE=160x100   # the view needs more tiles than the 1M budget holds
+H=100
 SCENE=$T/proc.scene   # render() and make_partial() use $SCENE
 # the default scene, evaluated procedurally, the camera tilted down so that terrain fills the
 # frame (rows that show terrain reach the disk early: a partial file holds some)
 sed -e 's/^size_exp .*/procedural   = yes/' -e 's/^look_at .*/look_at  = 500, 400, -150/' \
     "$TF_ROOT/scenes/default.scene" >"$SCENE"
 grep -q '^procedural *= *yes' "$SCENE" || fail "could not make a procedural scene"
-TINY=1M BIG=512M
+TINY=1M BIG=512M   # 1M: 145 tiles (the floor is 128, tilecache.h)
 
 # stats FILE.json [big|tiny|any]: the procedural statistics are sane; sets st_samples (the total)
 # and st_evictions (summed over the workers).
@@ -112,13 +111,16 @@ if f["samples_evaluated"] + n["samples_evaluated"] != d["terrain_samples_evaluat
 PY
 say "both workers rendered tasks and evaluated samples; none evicted with $BIG"
 
-# SIGKILL mid-render, then --resume.  The interrupted render thrashes (256K: 40 s for the image
-# here, a row every half second); once a few rows are on disk its worker is frozen, so the render
-# cannot end before the kill however loaded the machine.  The resume uses another budget.
-say "SIGKILL the coordinator mid-render (--terrain-cache 256K), --resume with $BIG"
+# SIGKILL mid-render, then --resume.  At 320x200 one worker takes seconds, a row at a time;
+# once a few rows are on disk its worker is frozen, so the render cannot end before the kill
+# however loaded the machine.  The resume uses another budget.
+KSIZE=320x200 H=200
+say "SIGKILL the coordinator mid-render ($KSIZE, --terrain-cache $TINY), --resume with $BIG"
+render -q -j 2 --size $KSIZE --tasks rows:1 --terrain-cache $BIG -o "$T/kref.exr" ||
+    fail "reference at $KSIZE: $(cat "$T/last.err")"
 mkdir "$T/out"; OUT=$T/out/img.exr
-full=$(wc -c <"$T/ref.exr")
-"$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 -j 1 --size $SIZE --tasks rows:1 --terrain-cache 256K -o "$OUT" 2>"$T/partial.err" &
+full=$(wc -c <"$T/kref.exr")
+"$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 -j 1 --size $KSIZE --tasks rows:1 --terrain-cache $TINY -o "$OUT" 2>"$T/partial.err" &
 pk=$!; e2e_track $pk
 i=0
 while [ "$(wc -c 2>/dev/null <"$OUT" || echo 0)" -lt $((full / 30)) ]; do
@@ -127,16 +129,16 @@ while [ "$(wc -c 2>/dev/null <"$OUT" || echo 0)" -lt $((full / 30)) ]; do
 done
 freeze_workers $pk
 kill -KILL $pk; wait $pk 2>/dev/null
-PROBE_ARGS="--size $SIZE --tasks rows:1"
+PROBE_ARGS="--size $KSIZE --tasks rows:1"
 on_disk=$(rows_on_disk "$OUT")
 case "$on_disk" in ''|complete|0) fail "after the kill: '$on_disk' rows on disk, want a partial file" ;; esac
 [ "$on_disk" -lt $H ] || fail "after the kill: $on_disk rows on disk"
-"$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 -j 2 --size $SIZE --tasks rows:1 --terrain-cache $BIG --resume \
+"$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 -j 2 --size $KSIZE --tasks rows:1 --terrain-cache $BIG --resume \
     -o "$OUT" --stats "$T/resume.json" 2>"$T/resume.err" || fail "--resume: $(cat "$T/resume.err")"
 resumed=$(jstat rows_resumed "$T/resume.json")
 [ "$resumed" -eq "$on_disk" ] || fail "rows_resumed $resumed, but $on_disk rows were on disk"
 stats "$T/resume.json"
-same "$T/ref.exr" "$OUT" "killed with $on_disk of $H rows on disk, resumed"
+same "$T/kref.exr" "$OUT" "killed with $on_disk of $H rows on disk, resumed"
 
 say "refusals"
 "$TF_BIN" render "$SCENE" --backend opencl --size 8x8 --http none --listen 127.0.0.1:0 -o "$T/cl.exr" 2>"$T/cl.err"; rc=$?
@@ -151,10 +153,10 @@ say "$(cat "$T/cl.err")"
 [ $rc -eq 2 ] && [ "$(wc -l <"$T/q.err")" -eq 1 ] && grep -q "terrain-cache '12Q'" "$T/q.err" ||
     fail "worker --terrain-cache 12Q: exit $rc, $(cat "$T/q.err")"
 say "$(cat "$T/q.err")"
-sed 's/^generator .*/generator    = midpoint/' "$SCENE" >"$T/mid.scene"
-line=$(grep -n '^procedural' "$T/mid.scene" | cut -d: -f1)
-"$TF_BIN" render "$T/mid.scene" --size 8x8 --http none --listen 127.0.0.1:0 -o "$T/mid.exr" 2>"$T/mid.err"; rc=$?
-[ $rc -eq 2 ] && [ "$(wc -l <"$T/mid.err")" -eq 1 ] && grep -q "mid.scene:$line: procedural" "$T/mid.err" ||
-    fail "generator = midpoint, procedural = yes: exit $rc, $(cat "$T/mid.err") (want mid.scene:$line)"
-say "$(cat "$T/mid.err")"
+sed 's/^procedural .*/&\ndetail = 3/' "$SCENE" >"$T/det.scene"
+line=$(grep -n '^detail' "$T/det.scene" | cut -d: -f1)
+"$TF_BIN" render "$T/det.scene" --size 8x8 --http none --listen 127.0.0.1:0 -o "$T/det.exr" 2>"$T/det.err"; rc=$?
+[ $rc -eq 2 ] && [ "$(wc -l <"$T/det.err")" -eq 1 ] && grep -q "det.scene:$line: detail" "$T/det.err" ||
+    fail "detail = 3 on fbm: exit $rc, $(cat "$T/det.err") (want det.scene:$line)"
+say "$(cat "$T/det.err")"
 echo "procedural_identical: all images identical; cache statistics sane; refusals one line"

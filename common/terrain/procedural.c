@@ -106,16 +106,24 @@ static int prepare_levels(tf_procedural *p, const tf_terrain *t)
 static tf_procedural *finish(tf_procedural *p, const tf_terrain *t, size_t cache_bytes,
                              char *err, size_t errlen);
 
+/* A zeroed terrain with an id no other in this process has; NULL with a message. */
+static tf_procedural *alloc_terrain(char *err, size_t errlen)
+{
+    static uint64_t next_id;
+    tf_procedural *p = calloc(1, sizeof *p);
+    if (!p)
+        tf_seterr(err, errlen, "procedural terrain: out of memory");
+    else
+        p->id = __atomic_add_fetch(&next_id, 1, __ATOMIC_RELAXED);
+    return p;
+}
+
 tf_procedural *tf_procedural_new(const tf_terrain *t, size_t cache_bytes, char *err,
                                  size_t errlen)
 {
-    tf_procedural *p = calloc(1, sizeof *p);
-    if (!p) {
-        tf_seterr(err, errlen, "procedural terrain: out of memory");
+    tf_procedural *p = alloc_terrain(err, errlen);
+    if (!p)
         return NULL;
-    }
-    static uint64_t next_id;
-    p->id = __atomic_add_fetch(&next_id, 1, __ATOMIC_RELAXED);
     p->extent = t->extent;
     p->height_scale = t->height_scale;
     p->spacing0 = t->extent / TILE;
@@ -171,13 +179,9 @@ static tf_terrain detail_terrain(const tf_terrain *t, double cell)
 tf_procedural *tf_procedural_over(const tf_terrain *t, const struct tf_heightfield *grid,
                                   size_t cache_bytes, char *err, size_t errlen)
 {
-    tf_procedural *p = calloc(1, sizeof *p);
-    if (!p) {
-        tf_seterr(err, errlen, "procedural detail: out of memory");
+    tf_procedural *p = alloc_terrain(err, errlen);
+    if (!p)
         return NULL;
-    }
-    static uint64_t next_id = 1ull << 62; /* apart from tf_procedural_new's */
-    p->id = __atomic_add_fetch(&next_id, 1, __ATOMIC_RELAXED);
     tf_terrain d = detail_terrain(t, grid->cell);
     d.extent = grid->extent;
     p->base = grid;

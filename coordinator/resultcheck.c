@@ -33,7 +33,8 @@ struct tf_resultcheck {
     list todo, done;
     size_t pending;       /* in todo, in a thread's hands, or in done */
     int stop;
-    int nthreads;
+    int nthreads;          /* started: none until the first result (see tf_resultcheck_new) */
+    int wanted;            /* how many to start then */
     pthread_t threads[MAX_THREADS];
     double cpu_s;
     uint64_t pixels;
@@ -132,14 +133,20 @@ tf_resultcheck *tf_resultcheck_new(const tf_exr_layout *l, int threads, char *er
     rc->layout = *l;
     pthread_mutex_init(&rc->mu, NULL);
     pthread_cond_init(&rc->work, NULL);
-    threads = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
-    for (; rc->nthreads < threads; rc->nthreads++)
-        if (pthread_create(&rc->threads[rc->nthreads], NULL, checker, rc)) {
-            tf_seterr(err, errlen, "cannot start the result checker's threads");
-            tf_resultcheck_free(rc);
-            return NULL;
-        }
+    rc->wanted = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
     return rc;
+}
+
+/* The threads start with the first result, not with the checker: the coordinator forks its
+ * local workers after making the supervisor, and a child forked while another thread is
+ * inside the allocator may inherit its lock held for good (AddressSanitizer's was seen to hang
+ * a worker at its first allocation of that size).  0, or -1 if none could start. */
+static int start_threads(tf_resultcheck *rc)
+{
+    for (; rc->nthreads < rc->wanted; rc->nthreads++)
+        if (pthread_create(&rc->threads[rc->nthreads], NULL, checker, rc))
+            break;
+    return rc->nthreads > 0 ? 0 : -1;
 }
 
 static void drop_all(list *l)
@@ -170,6 +177,8 @@ void tf_resultcheck_free(tf_resultcheck *rc)
 
 int tf_resultcheck_submit(tf_resultcheck *rc, tf_tuple *result)
 {
+    if (start_threads(rc))
+        return -1;
     item *it = calloc(1, sizeof *it);
     if (!it)
         return -1;

@@ -21,14 +21,16 @@
 
 typedef struct tf_resultcheck tf_resultcheck;
 
-/* Start `threads` (>= 1) checker threads for results of an output of layout l (each result
- * is a task's rectangle, already structurally checked). */
+/* A checker with `threads` (>= 1) threads for results of an output of layout l (each result
+ * is a task's rectangle, already structurally checked); they start with the first result, so
+ * the process stays one thread until then (the coordinator forks its workers meanwhile). */
 tf_resultcheck *tf_resultcheck_new(const tf_exr_layout *l, int threads, char *err,
                                    size_t errlen);
 /* Stop the threads and drop whatever is queued or decided.  NULL is fine. */
 void tf_resultcheck_free(tf_resultcheck *rc);
 /* Queue a result tuple for checking; its contents move into the queue (the caller's tuple is
- * left empty).  0, or -1 when out of memory (the tuple is then left to the caller). */
+ * left empty).  0, or -1 when out of memory or no thread could start (the tuple is then left
+ * to the caller). */
 int tf_resultcheck_submit(tf_resultcheck *rc, tf_tuple *result);
 /* A decided result: 0 (it passed) or 1 (refused, *why says why), its tuple moved into
  * *result; -1 when nothing is decided yet. */

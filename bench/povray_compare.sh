@@ -79,8 +79,11 @@ if [ -n "$IMAGE" ]; then
 fi
 SCENE=$(cd "$(dirname "$SCENE")" && pwd)/$(basename "$SCENE")
 
-# Build what we run (quietly; a failure shows make's own message), unless given.
-if [ -z "${TF:-}" ] || [ -z "${TF_BUILD:-}" ]; then
+# Build what we run (quietly; a failure shows make's own message), unless given (tests/run.sh
+# gives TF_BIN and TF_BUILD: under `make asan` those are build-asan's, which plain make knows
+# nothing of).
+TF=${TF:-${TF_BIN:-}}
+if [ -z "$TF" ] || [ -z "${TF_BUILD:-}" ]; then
     make -s -C "$ROOT" bin/terrafarm build/bench/povray_tf_render >/dev/null || die "build failed"
 fi
 TF_RENDER="${TF_BUILD:-$ROOT/build}/bench/povray_tf_render"

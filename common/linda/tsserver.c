@@ -62,6 +62,7 @@
 #define TS_PENALTY_MAX_MS 30000
 #define TS_PENALTY_FORGET_MS 600000 /* an address quiet this long starts afresh */
 #define TS_ACCEPT_PAUSE_MS 100 /* out of file descriptors: stop accepting this long */
+#define TS_ACCEPT_BATCH 64     /* connections accepted a turn of the event loop */
 
 /* HELD: a failed handshake whose answer waits out its address's penalty (note_auth_failure). */
 enum conn_state { NEED_AUTH, HELD, READY };
@@ -549,10 +550,14 @@ static int admit(ts_server *srv, const char *peer)
     return 0;
 }
 
+/* At most TS_ACCEPT_BATCH connections a turn of the loop: a connection evicted to make room
+ * is freed by the sweep at the end of the turn, so an accept loop that ran as long as a flood
+ * kept the backlog full held every evicted stranger until it stopped (300 MB, seen in
+ * farm_flood); the listener stays readable and is served again next turn. */
 static void accept_all(ts_server *srv)
 {
     static tf_ratelimit rl;
-    for (;;) {
+    for (int accepted = 0; accepted < TS_ACCEPT_BATCH; accepted++) {
         char peer[96];
         int fd = tf_sock_accept(srv->listen_fd, peer, sizeof peer);
         if (fd < 0) {

@@ -74,16 +74,6 @@ static double level_slope(const leaf_level *l, double *lo, double *hi)
     return hypot(gx, gy) / l->s;
 }
 
-/* |grad lambda| <= 1 / (ln 2 * d) where d >= the leaf's nearest distance (and min_dist). */
-static double lambda_slope(const pray *r, double x0, double x1, double y0, double y1)
-{
-    const tf_proc_view *v = r->v;
-    double nx = v->eye.x < x0 ? x0 - v->eye.x : v->eye.x > x1 ? v->eye.x - x1 : 0.0;
-    double ny = v->eye.y < y0 ? y0 - v->eye.y : v->eye.y > y1 ? v->eye.y - y1 : 0.0;
-    double d = sqrt(nx * nx + ny * ny + v->dz * v->dz);
-    return 1.0 / (M_LN2 * fmax(d, v->min_dist));
-}
-
 static void load_leaf(const pray *r, int q, int64_t i, int64_t j, int lo, int hi, double *box,
                       leaf *f)
 {
@@ -96,7 +86,8 @@ static void load_leaf(const pray *r, int q, int64_t i, int64_t j, int lo, int hi
         read_level(r, q, i, j, level, &f->lev[level - lo]);
         steepest = fmax(steepest, level_slope(&f->lev[level - lo], &f->zlo, &f->zhi));
     }
-    f->slope = steepest + (f->zhi - f->zlo) * lambda_slope(r, box[0], box[1], box[2], box[3]);
+    f->slope = steepest + (f->zhi - f->zlo) * tf_proc_lambda_slope(r->p, r->v, box[0], box[1],
+                                                                   box[2], box[3]);
     f->eps = HIT_TOLERANCE * tf_proc_spacing(r->p, hi);
 }
 

@@ -292,6 +292,16 @@ static int level_at(const tf_procedural *p, const tf_proc_view *v, double d2)
     return level;
 }
 
+double tf_proc_lambda_slope(const tf_procedural *p, const tf_proc_view *v, double x0,
+                            double x1, double y0, double y1)
+{
+    (void)p;
+    double near2, far2;
+    box_distances(v, x0, x1, y0, y1, &near2, &far2);
+    double d = sqrt(near2 + v->dz * v->dz);
+    return 1.0 / (M_LN2 * fmax(d, v->min_dist));
+}
+
 void tf_proc_box_levels(const tf_procedural *p, const tf_proc_view *v, double x0, double x1,
                         double y0, double y1, int *level_lo, int *level_hi)
 {

@@ -92,6 +92,9 @@ tf_proc_view tf_proc_view_of(const tf_procedural *p, tf_vec3 eye, double pixel_a
 double tf_proc_spacing(const tf_procedural *p, int level);
 /* lambda at horizontal distance-squared d2 from the eye (see above). */
 double tf_proc_lambda(const tf_procedural *p, const tf_proc_view *v, double d2);
+/* A bound of |grad lambda| over the box: 1 / (ln 2 * its nearest distance, or min_dist). */
+double tf_proc_lambda_slope(const tf_procedural *p, const tf_proc_view *v, double x0,
+                            double x1, double y0, double y1);
 /* The range of lambda over the box, as levels: floor(min) and the finest used, floor(max)+1
  * (capped at max_level). */
 void tf_proc_box_levels(const tf_procedural *p, const tf_proc_view *v, double x0, double x1,

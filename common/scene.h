@@ -38,6 +38,26 @@ enum tf_first_row { TF_FIRST_ROW_AUTO, TF_FIRST_ROW_NORTH, TF_FIRST_ROW_SOUTH };
 
 #define TF_ENVELOPE_MAX 9 /* control grid up to 9x9 points (2^3+1) */
 
+/* [erosion]: Musgrave's fluvial erosion (2.4.1), dry creep (2.4.3) and layers (2.4.4), run on
+ * the grid after the generator and thermal weathering (terrain/erosion.h; scenes/README.md). */
+typedef struct tf_erosion_keys {
+    int fluvial_steps;      /* time steps; 0 = no erosion */
+    double capacity;        /* K_c: sediment a unit of moving water can carry */
+    double deposition;      /* K_d: fraction of the suspended sediment settling each step */
+    double softness;        /* K_s: fraction of a capacity deficit taken from the bedrock */
+    double silt_softness;   /* softness of deposited silt, relative to the bedrock's */
+    double talus_softness;  /* softness of talus (crept material), relative to the bedrock's */
+    double rain;            /* metres of rain per vertex per rain event */
+    int rain_interval;      /* steps between rain events */
+    double rain_altitude;   /* rain multiplier grows linearly: 1 + rain_altitude at the top */
+    double rain_noise;      /* 0: steady; > 0: 1/f-distributed storm sizes of this spread */
+    double evaporation;     /* fraction of each vertex's water evaporating per step */
+    double creep;           /* c_d: diffusive creep coefficient per step (0..0.125) */
+    double strata;          /* bedrock strata thickness in metres; 0 = uniform */
+    double strata_contrast; /* 0..1: softness of the hardest stratum is 1 - contrast */
+    double hardness_noise;  /* 0..1: a fractal field of bedrock hardness of this amplitude */
+} tf_erosion_keys;
+
 typedef struct tf_terrain {
     enum tf_generator generator;
     uint64_t seed;
@@ -84,6 +104,8 @@ typedef struct tf_terrain {
      * look of every scene before the key), 1 = smooth: both by the interpolated normal, as
      * POV-Ray's height_field { smooth } */
     int smooth;
+
+    tf_erosion_keys erosion;
 
     /* generator = file (terrain/heightmap_file.c; scenes/README.md) */
     char file_path[TF_SCENE_PATH_MAX]; /* as written; relative to the scene file's folder */

@@ -149,6 +149,8 @@ char *tf_scene_canonical(const tf_scene *s)
     for (int sec = 0; sec < SEC_COUNT; sec++) {
         if (sec == SEC_ANIMATION && s->animation.frames == 0)
             continue; /* a still: no section, and the hash of every still scene is unchanged */
+        if (sec == SEC_EROSION && s->terrain.erosion.fluvial_steps == 0)
+            continue; /* no erosion: every other scene's hash is unchanged */
         sb_printf(&b, "[%s]\n", SCENE_SECTION_NAMES[sec]);
         for (int key = 0; key < SCENE_KEY_COUNT; key++)
             if (SCENE_KEYS[key].section == (enum section)sec &&

@@ -18,7 +18,7 @@ _Static_assert(sizeof(enum tf_camera_kind) == sizeof(int), "enums are stored as 
 /* ---- the format: sections and keys (scene_keys.c) ------------------------------------- */
 
 enum section { SEC_IMAGE, SEC_CAMERA, SEC_SUN, SEC_SKY, SEC_TERRAIN, SEC_MATERIALS, SEC_MIST,
-               SEC_ANTIALIAS, SEC_ANIMATION, SEC_COUNT };
+               SEC_ANTIALIAS, SEC_ANIMATION, SEC_EROSION, SEC_COUNT };
 extern const char *const SCENE_SECTION_NAMES[SEC_COUNT];
 
 enum key_type {
@@ -52,7 +52,7 @@ struct key_def {
     double def[3];      /* default (def[0] for scalars) */
 };
 
-#define SCENE_KEY_COUNT 71 /* entries of SCENE_KEYS */
+#define SCENE_KEY_COUNT 86 /* entries of SCENE_KEYS */
 extern const struct key_def SCENE_KEYS[SCENE_KEY_COUNT];
 /* 1 if the canonical form leaves key out: a key added to the format after its first version
  * (terrain smooth) while it is at its default, so every scene that does not set it keeps its

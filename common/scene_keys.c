@@ -10,7 +10,8 @@
 #define F(field) offsetof(tf_scene, field)
 
 const char *const SCENE_SECTION_NAMES[SEC_COUNT] = {
-    "image", "camera", "sun", "sky", "terrain", "materials", "mist", "antialias", "animation"};
+    "image", "camera", "sun", "sky", "terrain", "materials", "mist", "antialias", "animation",
+    "erosion"};
 
 /* Keys that may be given more than once (each adds to a list) and continue on indented lines. */
 int scene_is_list_type(int type)
@@ -106,6 +107,24 @@ const struct key_def SCENE_KEYS[SCENE_KEY_COUNT] = {
     {SEC_ANIMATION, "fps", KT_DOUBLE, F(animation.fps), 0, 1000, 1, 0, {24}},
     {SEC_ANIMATION, "camera", KT_CAMERA_KEY, F(animation), -BIG, BIG, 0, 0, {0}},
     {SEC_ANIMATION, "sun", KT_SUN_KEY, F(animation), -360, 360, 0, 0, {0}},
+
+#define E(field) F(terrain.erosion.field)
+    {SEC_EROSION, "fluvial_steps", KT_INT, E(fluvial_steps), 0, 10000000, 0, 0, {0}},
+    {SEC_EROSION, "capacity", KT_DOUBLE, E(capacity), 0, 1000, 0, 0, {5.0}},
+    {SEC_EROSION, "deposition", KT_DOUBLE, E(deposition), 0, 1, 0, 0, {0.1}},
+    {SEC_EROSION, "softness", KT_DOUBLE, E(softness), 0, 1, 0, 0, {0.3}},
+    {SEC_EROSION, "silt_softness", KT_DOUBLE, E(silt_softness), 0, 3.3, 0, 0, {3.0}},
+    {SEC_EROSION, "talus_softness", KT_DOUBLE, E(talus_softness), 0, 3.3, 0, 0, {2.0}},
+    {SEC_EROSION, "rain", KT_DOUBLE, E(rain), 0, 1000, 0, 0, {0.5}},
+    {SEC_EROSION, "rain_interval", KT_INT, E(rain_interval), 1, 1000000, 0, 0, {80}},
+    {SEC_EROSION, "rain_altitude", KT_DOUBLE, E(rain_altitude), 0, 100, 0, 0, {1.0}},
+    {SEC_EROSION, "rain_noise", KT_DOUBLE, E(rain_noise), 0, 1, 0, 0, {0}},
+    {SEC_EROSION, "evaporation", KT_DOUBLE, E(evaporation), 0, 1, 0, 0, {0}},
+    {SEC_EROSION, "creep", KT_DOUBLE, E(creep), 0, 0.125, 0, 0, {0}},
+    {SEC_EROSION, "strata", KT_DOUBLE, E(strata), 0, BIG, 0, 0, {0}},
+    {SEC_EROSION, "strata_contrast", KT_DOUBLE, E(strata_contrast), 0, 1, 0, 0, {0.5}},
+    {SEC_EROSION, "hardness_noise", KT_DOUBLE, E(hardness_noise), 0, 1, 0, 0, {0}},
+#undef E
 };
 _Static_assert(sizeof SCENE_KEYS / sizeof SCENE_KEYS[0] == SCENE_KEY_COUNT,
                "SCENE_KEY_COUNT counts the table");

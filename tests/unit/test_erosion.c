@@ -1,0 +1,257 @@
+/* test_erosion.c: the fluvial erosion model (terrain/erosion.h, erosion_state.h, erosion_run.h).
+ * Bedrock + talus + silt + load plus what left at the outlet is conserved to the last quantum,
+ * and water changes only by rain, evaporation and outflow; the result is bit-identical for every
+ * tile shape, halo and thread count and on the AVX2 and portable kernels; a lone wet vertex
+ * sends the same water to its four neighbours, a flat dry plane only collects rain, and a
+ * slope erodes at the top and deposits below. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+#include <cmocka.h>
+#include "terrain/erosion.h"
+#include "terrain/erosion_run.h"
+#include "terrain/erosion_state.h"
+#include "terrain/terrain_build.h"
+
+static tf_erosion_keys keys(int steps)
+{
+    tf_erosion_keys k = {0};
+    k.fluvial_steps = steps;
+    k.capacity = 5.0;
+    k.deposition = 0.1;
+    k.softness = 0.3;
+    k.silt_softness = 3.0;
+    k.talus_softness = 2.0;
+    k.rain = 0.5;
+    k.rain_interval = 10;
+    k.rain_altitude = 1.0;
+    k.creep = 0.02;
+    k.evaporation = 0.001;
+    k.strata = 7.0;
+    k.strata_contrast = 0.6;
+    k.hardness_noise = 0.5;
+    k.rain_noise = 0.5;
+    return k;
+}
+
+/* An fBm grid of (2^e + 1)^2 heights. */
+static float *fbm_heights(int e)
+{
+    tf_terrain t = {0};
+    t.generator = TF_GEN_FBM;
+    t.seed = 5;
+    t.size_exp = e;
+    t.extent = 1000;
+    t.height_scale = 200;
+    t.feature_size = 400;
+    t.octaves = 6;
+    t.H = 0.8;
+    t.lacunarity = 2.0;
+    char err[256];
+    float *h = tf_terrain_heights(&t, 1, NULL, err, sizeof err);
+    assert_non_null(h);
+    return h;
+}
+
+typedef struct {
+    tf_erosion_model m;
+    tf_erosion_state st;
+    tf_erosion_tally tally;
+} run;
+
+static void start(run *r, const float *h, int n, const tf_erosion_keys *k)
+{
+    float lo = h[0], hi = h[0];
+    for (size_t i = 0; i < (size_t)n * (size_t)n; i++) {
+        lo = h[i] < lo ? h[i] : lo;
+        hi = h[i] > hi ? h[i] : hi;
+    }
+    char err[256];
+    memset(r, 0, sizeof *r);
+    assert_int_equal(tf_erosion_model_init(&r->m, k, 9, n, lo, hi, err, sizeof err), 0);
+    assert_int_equal(tf_erosion_state_from_heights(&r->st, &r->m, k, h), 0);
+}
+
+static void go(run *r, int first, int steps, int threads, int halo, int tw, int th)
+{
+    char err[256];
+    tf_erosion_run_opts o = {first, steps, threads, halo, tw, th};
+    assert_int_equal(tf_erosion_run(&r->st, &r->m, &o, &r->tally, err, sizeof err), 0);
+}
+
+static void assert_same_state(const tf_erosion_state *a, const tf_erosion_state *b)
+{
+    size_t bytes = (size_t)a->n * (size_t)a->n * 4;
+    assert_memory_equal(a->b, b->b, bytes);
+    assert_memory_equal(a->t, b->t, bytes);
+    assert_memory_equal(a->d, b->d, bytes);
+    assert_memory_equal(a->w, b->w, bytes);
+    assert_memory_equal(a->s, b->s, bytes);
+    assert_memory_equal(a->flow, b->flow, bytes);
+}
+
+static void test_mass_conserved(void **state)
+{
+    (void)state;
+    int e = 6, n = 65;
+    float *h = fbm_heights(e);
+    tf_erosion_keys k = keys(300);
+    run r;
+    start(&r, h, n, &k);
+    int64_t solid0 = tf_erosion_solid(&r.st, n), water0 = tf_erosion_water(&r.st, n);
+    go(&r, 0, 300, 2, 8, 0, 0);
+    int64_t solid1 = tf_erosion_solid(&r.st, n), water1 = tf_erosion_water(&r.st, n);
+    assert_true(r.tally.rain > 0);
+    assert_true(r.tally.out_water > 0);
+    assert_true(r.tally.evaporated > 0);
+    assert_int_equal(solid1 + r.tally.out_load, solid0);
+    assert_int_equal(water1 + r.tally.out_water + r.tally.evaporated, water0 + r.tally.rain);
+    /* something happened: the ground moved */
+    float *after = malloc((size_t)n * n * sizeof *after);
+    tf_erosion_heights(&r.st, &r.m, after);
+    double moved = 0;
+    for (int i = 0; i < n * n; i++)
+        moved += fabs((double)after[i] - h[i]);
+    assert_true(moved > 1.0);
+    free(after);
+    tf_erosion_state_free(&r.st);
+    free(h);
+}
+
+/* Every tiling, halo and thread count, and the portable kernel, give the same bits. */
+static void test_identical_any_tiling(void **state)
+{
+    (void)state;
+    int e = 6, n = 65;
+    float *h = fbm_heights(e);
+    tf_erosion_keys k = keys(97);
+    run ref;
+    start(&ref, h, n, &k);
+    go(&ref, 0, 97, 1, 97, n, n); /* one tile, one round */
+    struct { int threads, halo, tw, th, portable; } cut[] = {
+        {2, 8, 0, 0, 0}, {1, 1, 7, 13, 0}, {2, 3, 64, 5, 0}, {2, 8, 0, 0, 1}, {1, 5, 9, 9, 1},
+    };
+    for (size_t c = 0; c < sizeof cut / sizeof cut[0]; c++) {
+        tf_erosion_force_portable(cut[c].portable);
+        run r;
+        start(&r, h, n, &k);
+        go(&r, 0, 40, cut[c].threads, cut[c].halo, cut[c].tw, cut[c].th);
+        go(&r, 40, 57, cut[c].threads, cut[c].halo, cut[c].tw, cut[c].th); /* resumed */
+        assert_same_state(&r.st, &ref.st);
+        assert_memory_equal(&r.tally, &ref.tally, sizeof r.tally);
+        tf_erosion_state_free(&r.st);
+    }
+    tf_erosion_force_portable(-1);
+    tf_erosion_state_free(&ref.st);
+    free(h);
+}
+
+/* A flat dry plane: the ground never moves; far from the outlet rain stays where it falls. */
+static void test_flat_plane(void **state)
+{
+    (void)state;
+    int n = 65;
+    float *h = calloc((size_t)n * n, sizeof *h);
+    for (int i = 0; i < n * n; i++)
+        h[i] = 100.0f;
+    tf_erosion_keys k = keys(25);
+    k.creep = 0.1;
+    k.evaporation = 0;
+    k.rain_noise = 0;
+    k.rain_altitude = 0;
+    run r;
+    start(&r, h, n, &k);
+    go(&r, 0, 25, 1, 8, 0, 0);
+    int32_t rain = (int32_t)r.m.rain_units;
+    for (int j = 1; j < n - 1; j++)
+        for (int i = 1; i < n - 1; i++) {
+            size_t v = (size_t)j * n + i;
+            assert_int_equal(r.st.b[v], r.st.b[0]);
+            assert_int_equal(r.st.t[v] + r.st.d[v] + r.st.s[v], 0);
+            /* the outlet's pull spreads one vertex a step: 25 steps from it, none */
+            if (i > 25 && i < n - 26 && j > 25 && j < n - 26)
+                assert_int_equal(r.st.w[v], 3 * rain);  /* rain on steps 0, 10, 20 */
+        }
+    tf_erosion_state_free(&r.st);
+    free(h);
+}
+
+/* A lone wet vertex on a plane sends equal water to its four neighbours: E1 with H drop w. */
+static void test_single_vertex(void **state)
+{
+    (void)state;
+    int n = 9;
+    float *h = calloc((size_t)n * n, sizeof *h);
+    h[0] = 0; /* range 0..1 */
+    h[1] = 1;
+    tf_erosion_keys k = keys(1);
+    k.rain = 0;
+    k.creep = 0;
+    k.evaporation = 0;
+    run r;
+    start(&r, h, n, &k);
+    size_t c = 4 * n + 4;
+    r.st.w[c] = 1000;
+    go(&r, 0, 1, 1, 8, 0, 0);
+    /* DW = trunc(min(1000, 1000 / 2) / 4) = 125 to each neighbour */
+    assert_int_equal(r.st.w[c], 1000 - 4 * 125);
+    assert_int_equal(r.st.w[c - 1], 125);
+    assert_int_equal(r.st.w[c + 1], 125);
+    assert_int_equal(r.st.w[c - n], 125);
+    assert_int_equal(r.st.w[c + n], 125);
+    /* capacity 5 * 125 with no load: the flat ground has no drop, so nothing is eroded */
+    assert_int_equal(r.st.b[c], r.st.b[c + 2]);
+    tf_erosion_state_free(&r.st);
+    free(h);
+}
+
+/* Water running down a ramp cuts into its upper part and deposits silt at the foot. */
+static void test_ramp_erodes_and_deposits(void **state)
+{
+    (void)state;
+    int n = 33;
+    float *h = malloc((size_t)n * n * sizeof *h);
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++)
+            h[(size_t)j * n + i] = j < 20 ? (float)(20 - j) : 0.0f; /* falls north to south */
+    tf_erosion_keys k = keys(400);
+    k.strata = 0;
+    k.hardness_noise = 0;
+    k.evaporation = 0;
+    run r;
+    start(&r, h, n, &k);
+    int64_t solid0 = tf_erosion_solid(&r.st, n);
+    go(&r, 0, 400, 2, 8, 0, 0);
+    assert_int_equal(tf_erosion_solid(&r.st, n) + r.tally.out_load, solid0);
+    int64_t cut = 0, silt = 0;
+    for (int j = 1; j < n - 1; j++)
+        for (int i = 1; i < n - 1; i++) {
+            size_t v = (size_t)j * n + i;
+            int32_t b0 = (int32_t)nearbyint((h[v] - r.m.base) / r.m.q);
+            if (j < 18)
+                cut += b0 - r.st.b[v];
+            else
+                silt += r.st.d[v];
+        }
+    assert_true(cut > 0);
+    assert_true(silt > 0);
+    tf_erosion_state_free(&r.st);
+    free(h);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_mass_conserved),
+        cmocka_unit_test(test_identical_any_tiling),
+        cmocka_unit_test(test_flat_plane),
+        cmocka_unit_test(test_single_vertex),
+        cmocka_unit_test(test_ramp_erodes_and_deposits),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

@@ -44,7 +44,7 @@ RENDER_SRC  := $(wildcard common/render/*.c)
 # 4. linda: tuples, the wire protocol, sockets, authentication, the store, client and server
 LINDA_SRC   := $(wildcard common/linda/*.c)
 # 5. the farm's tuples (task, result, failure, scene, height map), spoken by both sides
-FARM_SRC    := common/farmproto.c common/heightmap_tuples.c
+FARM_SRC    := common/farmproto.c common/heightmap_tuples.c common/erosion_tuples.c
 # 6. worker: the worker loop, its C and OpenCL backends, the simulated worker
 WORKER_SRC  := $(wildcard worker/*.c)
 # 7. coordinator: the farm's policy (dealer and watermark, leases, in-order writer, progress)

@@ -24,7 +24,12 @@
 #include <string.h>
 #include <strings.h>
 
+#include <jansson.h>
+
 #include "cli/commands.h"
+#include "coordinator/erosion_farm.h"
+#include "terrain/drainage.h"
+#include "terrain/eroded.h"
 #include "image/exrfile.h"
 #include "image/geotiff_write.h"
 #include "log.h"
@@ -35,7 +40,8 @@
 
 static const char usage[] =
     "usage: terrafarm heightfield SCENE -o FILE.png|FILE.exr|FILE.tif [-j N] [--size-exp K]\n"
-    "                             [--srs SRS] [--origin EAST,NORTH]\n"
+    "                             [--srs SRS] [--origin EAST,NORTH] [--stats FILE.json]\n"
+    "                             [--maps PREFIX] [--halo K]\n"
     "\n"
     "Export the terrain of SCENE as a height field image.\n"
     "\n"
@@ -47,7 +53,15 @@ static const char usage[] =
     "      --srs SRS         GeoTIFF: its CRS, e.g. EPSG:32632 (default: none, only the\n"
     "                        geotransform); world units are then the CRS's metres\n"
     "      --origin E,N      GeoTIFF: easting and northing of sample (0, 0) (default 0,0)\n"
-    "  -j, --threads N       threads for the terrain synthesis (default: online CPUs)\n"
+    "  -j, --workers N       threads for the terrain synthesis; with [erosion], the erosion\n"
+    "                        runs on N forked workers, one patch each, exchanging their\n"
+    "                        edges through the tuple space (default: in this process, on\n"
+    "                        every core)\n"
+    "      --halo K          erosion: steps between edge exchanges, K rows each (default 8)\n"
+    "      --stats FILE      write JSON: erosion_vertex_steps_per_s, seconds, the mass\n"
+    "                        balance, pits and the largest basin before and after\n"
+    "      --maps PREFIX     erosion: also write PREFIX-water.exr, PREFIX-silt.exr and\n"
+    "                        PREFIX-flow.exr (world metres, rows as the heights)\n"
     "  -k, --size-exp K      override the scene's size_exp: (2^K + 1)^2 samples, K in 1..13\n"
     "  -h, --help            this text\n"
     "\n"
@@ -57,6 +71,10 @@ static const char usage[] =
     "range, and the POV-Ray transform that places the PNG exactly on the terrain (POV-Ray's y\n"
     "is up and its z is terrafarm's y; the negative z scale undoes POV-Ray's bottom-row-first\n"
     "reading and makes its triangle split equal terrafarm's).\n"
+    "\n"
+    "An eroded terrain is cached under .terrafarm-cache/ beside FILE, by the hash of the\n"
+    "scene's [terrain] and [erosion] (TF_EROSION_CACHE=DIR or off overrides): a second run,\n"
+    "or a render of the same terrain, does no erosion.\n"
     "\n"
     "The file records its first row's edge, its extent and how its values become heights\n"
     "(terrafarm.* attributes, text chunks or metadata), so a scene's [terrain] with only\n"
@@ -69,6 +87,9 @@ struct hf_options {
     int size_exp; /* 0 = the scene's */
     const char *srs;
     double east0, north0;
+    int workers; /* -j given: erosion on this many forked workers */
+    int halo;
+    const char *stats, *maps;
 };
 
 static int ends_with(const char *s, const char *suffix)
@@ -95,6 +116,8 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
         {"output", required_argument, NULL, 'o'},   {"threads", required_argument, NULL, 't'},
         {"size-exp", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
         {"srs", required_argument, NULL, 's'},      {"origin", required_argument, NULL, 'O'},
+        {"workers", required_argument, NULL, 'j'},  {"halo", required_argument, NULL, 'H'},
+        {"stats", required_argument, NULL, 'S'},    {"maps", required_argument, NULL, 'M'},
         {NULL, 0, NULL, 0},
     };
     memset(o, 0, sizeof *o);
@@ -124,9 +147,22 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
         case 't':
         case 'j':
             if (parse_int(optarg, 0, 1024, &o->threads) != 0) {
-                tf_error("heightfield: --threads wants an integer 0..1024, not '%s'", optarg);
+                tf_error("heightfield: -j wants an integer 0..1024, not '%s'", optarg);
                 return TF_EXIT_USAGE;
             }
+            o->workers = c == 'j' ? o->threads : 0;
+            break;
+        case 'H':
+            if (parse_int(optarg, 1, 1024, &o->halo) != 0) {
+                tf_error("heightfield: --halo wants an integer 1..1024, not '%s'", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        case 'S':
+            o->stats = optarg;
+            break;
+        case 'M':
+            o->maps = optarg;
             break;
         case 'k':
             if (parse_int(optarg, 1, TF_TERRAIN_MAX_SIZE_EXP, &o->size_exp) != 0) {
@@ -265,6 +301,116 @@ static void print_placement(const char *path, int n, double extent, float lo, fl
     printf("    translate <0, %.9g, %.9g> }\n", (double)lo, extent);
 }
 
+/* ---- erosion: where it runs, its cache, its maps and its figures ---------------------- */
+
+typedef struct erosion_run {
+    tf_eroded_maps maps;
+    tf_erosion_report rep;
+    tf_erosion_farm_report farm;
+} erosion_run;
+
+/* The erosion cache: .terrafarm-cache beside the output file. */
+static void set_cache_beside(const char *output)
+{
+    char dir[400];
+    const char *slash = strrchr(output, '/');
+    if (slash)
+        snprintf(dir, sizeof dir, "%.*s/.terrafarm-cache", (int)(slash - output), output);
+    else
+        snprintf(dir, sizeof dir, ".terrafarm-cache");
+    tf_eroded_set_cache_dir(dir);
+}
+
+/* The heights: with -j and [erosion], eroded on forked workers; else in this process. */
+static float *heights(const struct hf_options *o, const tf_terrain *t, double *extent,
+                      erosion_run *er, char *err, size_t errlen)
+{
+    if (t->erosion.fluvial_steps <= 0 || o->workers <= 0)
+        return tf_terrain_heights_maps(t, o->threads, extent, &er->maps, &er->rep, err, errlen);
+    uint8_t *blob;
+    size_t len;
+    if (tf_erosion_farm(t, o->workers, o->halo, &blob, &len, &er->rep, &er->farm, err,
+                        errlen) != 0)
+        return NULL;
+    tf_terrain with = *t;
+    with.eroded_bytes = blob;
+    with.eroded_len = len;
+    with.eroded_from = "the erosion farm";
+    float *h = tf_terrain_heights_maps(&with, o->threads, extent, &er->maps, NULL, err, errlen);
+    free(blob);
+    return h;
+}
+
+static int write_maps(const char *prefix, int n, const tf_eroded_maps *m, char *err,
+                      size_t errlen)
+{
+    const char *names[3] = {"water", "silt", "flow"};
+    const float *maps[3] = {m->water, m->silt, m->flow};
+    for (int k = 0; k < 3; k++) {
+        char path[600];
+        snprintf(path, sizeof path, "%s-%s.exr", prefix, names[k]);
+        if (!maps[k] || tf_exr_write_gray_attrs(path, n, n, maps[k], NULL, err, errlen) != 0)
+            return maps[k] ? -1 : tf_seterr(err, errlen, "no %s map", names[k]);
+        printf("wrote %s\n", path);
+    }
+    return 0;
+}
+
+/* Pits and the largest basin of t's heights before erosion and of h after. */
+static int drainage(const tf_terrain *t, int n, const float *after, tf_drainage *before,
+                    tf_drainage *now, char *err, size_t errlen)
+{
+    tf_terrain raw = *t;
+    raw.erosion.fluvial_steps = 0;
+    float *h = tf_terrain_heights(&raw, 0, NULL, err, errlen);
+    if (!h)
+        return -1;
+    int rc = tf_drainage_measure(h, n, before) | tf_drainage_measure(after, n, now);
+    free(h);
+    return rc ? tf_seterr(err, errlen, "out of memory measuring drainage") : 0;
+}
+
+static int write_stats(const char *path, const tf_terrain *t, int n, const erosion_run *er,
+                       const tf_drainage *before, const tf_drainage *after, char *err,
+                       size_t errlen)
+{
+    const tf_erosion_report *r = &er->rep;
+    double rate = r->seconds > 0 ? r->vertex_steps / r->seconds : 0;
+    int64_t balance = r->solid_after + r->tally.out_load - r->solid_before;
+    json_t *doc = json_pack(
+        "{s:i, s:i, s:b, s:s, s:f, s:f, s:f, s:i, s:i, s:i, s:i, s:f, s:I, s:I, s:I, s:I, s:I,"
+        " s:I, s:f, s:I, s:I, s:f, s:f}",
+        "n", n, "fluvial_steps", t->erosion.fluvial_steps, "from_cache", r->from_cache,
+        "isa", r->isa ? r->isa : "", "erosion_seconds", r->seconds,
+        "erosion_vertex_steps_per_s", rate, "erosion_vertex_steps", r->vertex_steps,
+        "workers", er->farm.workers, "patches_x", er->farm.px, "patches_y", er->farm.py,
+        "halo", er->farm.halo, "edge_bytes_per_step", er->farm.edge_bytes_per_step,
+        "rain_quanta", (json_int_t)r->tally.rain, "evaporated_quanta",
+        (json_int_t)r->tally.evaporated, "outflow_water_quanta", (json_int_t)r->tally.out_water,
+        "outflow_load_quanta", (json_int_t)r->tally.out_load, "solid_before_quanta",
+        (json_int_t)r->solid_before, "mass_balance_quanta", (json_int_t)balance,
+        "quantum_m", r->quantum, "pits_before", (json_int_t)before->pits, "pits_after",
+        (json_int_t)after->pits, "largest_basin_share_before", before->largest_basin_share,
+        "largest_basin_share_after", after->largest_basin_share);
+    int rc = doc && json_dump_file(doc, path, JSON_INDENT(2)) == 0 ? 0 : -1;
+    json_decref(doc);
+    return rc ? tf_seterr(err, errlen, "%s: cannot write the statistics", path) : 0;
+}
+
+/* The maps and the statistics of the eroded heights h. */
+static int erosion_outputs(const struct hf_options *o, const tf_terrain *t, int n,
+                           const float *h, const erosion_run *er, char *err, size_t errlen)
+{
+    if (o->maps && write_maps(o->maps, n, &er->maps, err, errlen) != 0)
+        return -1;
+    if (!o->stats)
+        return 0;
+    tf_drainage before, after;
+    if (drainage(t, n, h, &before, &after, err, errlen) != 0)
+        return -1;
+    return write_stats(o->stats, t, n, er, &before, &after, err, errlen);
+}
+
 int cmd_heightfield(int argc, char **argv)
 {
     struct hf_options o;
@@ -284,7 +430,9 @@ int cmd_heightfield(int argc, char **argv)
     int n = (1 << terrain.size_exp) + 1;
 
     double extent;
-    float *h = tf_terrain_heights(&terrain, o.threads, &extent, err, sizeof err);
+    set_cache_beside(o.output);
+    erosion_run er = {0};
+    float *h = heights(&o, &terrain, &extent, &er, err, sizeof err);
     if (!h) {
         tf_error("%s", err);
         tf_scene_free(scene);
@@ -302,13 +450,16 @@ int cmd_heightfield(int argc, char **argv)
              : tif ? tf_geotiff_write_heights(o.output, n, h, extent / (n - 1), o.east0, o.north0,
                                               o.srs, meta, err, sizeof err)
                    : tf_exr_write_gray_attrs(o.output, n, n, h, meta, err, sizeof err);
+    if (rc == 0)
+        print_placement(o.output, n, extent, lo, hi, png, tif);
+    if (rc == 0 && terrain.erosion.fluvial_steps > 0)
+        rc = erosion_outputs(&o, &terrain, n, h, &er, err, sizeof err);
     free(h);
+    tf_eroded_maps_free(&er.maps);
+    tf_scene_free(scene);
     if (rc != 0) {
         tf_error("%s", err);
-        tf_scene_free(scene);
         return TF_EXIT_FAIL;
     }
-    print_placement(o.output, n, extent, lo, hi, png, tif);
-    tf_scene_free(scene);
     return TF_EXIT_OK;
 }

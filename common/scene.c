@@ -63,7 +63,27 @@ void tf_scene_free(tf_scene *s)
     free(s->text);
     free(s->heightmap);
     free(s->heightmap_name);
+    free(s->eroded);
+    free(s->eroded_from);
     free(s);
+}
+
+int tf_scene_attach_eroded(tf_scene *s, uint8_t *bytes, size_t len, const char *from)
+{
+    char *copy = strdup(from);
+    if (!copy) {
+        free(bytes);
+        return -1;
+    }
+    free(s->eroded);
+    free(s->eroded_from);
+    s->eroded = bytes;
+    s->eroded_len = len;
+    s->eroded_from = copy;
+    s->terrain.eroded_bytes = bytes;
+    s->terrain.eroded_len = len;
+    s->terrain.eroded_from = copy;
+    return 0;
 }
 
 static tf_scene *scene_new(const char *name, const char *text, size_t len)

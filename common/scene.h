@@ -123,6 +123,12 @@ typedef struct tf_terrain {
     size_t file_len;
     const char *file_name;
     double file_sea_level;
+    /* Not part of the file format: the eroded terrain's blob (terrain/eroded.h), borrowed from
+     * the tf_scene that owns it, when the coordinator has it: then nothing is generated or
+     * eroded here, the blob is checked and used. */
+    const uint8_t *eroded_bytes;
+    size_t eroded_len;
+    const char *eroded_from;
 } tf_terrain;
 
 typedef struct tf_scene {
@@ -185,6 +191,11 @@ typedef struct tf_scene {
     uint8_t *heightmap;
     size_t heightmap_len;
     char *heightmap_name;
+    /* [erosion]: the eroded terrain's blob (terrain.eroded_bytes borrows it), see
+     * tf_scene_attach_eroded */
+    uint8_t *eroded;
+    size_t eroded_len;
+    char *eroded_from;
 
     uint8_t hash[32];          /* SHA-256 of the canonical form (see tf_scene_canonical) */
     char hash_hex[65];
@@ -209,6 +220,11 @@ void tf_scene_free(tf_scene *s);
 int tf_scene_attach_heightmap(tf_scene *s, uint8_t *bytes, size_t len, const char *name,
                               char *err, size_t errlen);
 
+/* Give an [erosion] scene its eroded terrain's blob (terrain/eroded.h): takes ownership of
+ * bytes (malloc'd); `from` names it in messages.  It is checked against the scene when the
+ * terrain is built.  Returns 0, or -1 on out of memory (bytes freed). */
+int tf_scene_attach_eroded(tf_scene *s, uint8_t *bytes, size_t len, const char *from);
+
 /* Override the image size (render --size) and recompute the hash. */
 void tf_scene_set_size(tf_scene *s, int width, int height);
 
@@ -217,6 +233,9 @@ void tf_scene_set_size(tf_scene *s, int width, int height);
  * SHA-256 of it.  Returns a malloc'd string. */
 char *tf_scene_canonical(const tf_scene *s);
 void tf_scene_rehash(tf_scene *s);
+/* The canonical text of the [terrain] and [erosion] sections only: what determines the
+ * terrain's heights (terrain/eroded.h keys its cache with it). */
+char *tf_scene_canonical_terrain(const tf_scene *s);
 
 const char *tf_generator_name(enum tf_generator g);
 

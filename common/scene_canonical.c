@@ -142,11 +142,14 @@ static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
     }
 }
 
-char *tf_scene_canonical(const tf_scene *s)
+/* The canonical text of the sections in `mask` (bit per enum section). */
+static char *canonical_sections(const tf_scene *s, unsigned mask)
 {
     struct strbuf b = {0};
     sb_printf(&b, "; terrafarm canonical scene, format 1\n");
     for (int sec = 0; sec < SEC_COUNT; sec++) {
+        if (!(mask & (1u << sec)))
+            continue;
         if (sec == SEC_ANIMATION && s->animation.frames == 0)
             continue; /* a still: no section, and the hash of every still scene is unchanged */
         if (sec == SEC_EROSION && s->terrain.erosion.fluvial_steps == 0)
@@ -162,6 +165,13 @@ char *tf_scene_canonical(const tf_scene *s)
         return NULL;
     }
     return b.data;
+}
+
+char *tf_scene_canonical(const tf_scene *s) { return canonical_sections(s, ~0u); }
+
+char *tf_scene_canonical_terrain(const tf_scene *s)
+{
+    return canonical_sections(s, (1u << SEC_TERRAIN) | (1u << SEC_EROSION));
 }
 
 void tf_scene_rehash(tf_scene *s)

@@ -157,6 +157,9 @@ void tf_heightfield_free(tf_heightfield *hf)
         return;
     free_grids(hf);
     free(hf->h);
+    free(hf->water);
+    free(hf->silt);
+    free(hf->flow);
     tf_procedural_free(hf->proc);
     free(hf);
 }

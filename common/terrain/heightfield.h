@@ -35,6 +35,10 @@ typedef struct tf_heightfield {
      * height map the grid stays (the base the detail is added to) and hmin, hmax widen to the
      * procedural bound. */
     struct tf_procedural *proc;
+    /* [erosion]: the erosion's maps (n * n world metres; NULL without erosion): standing and
+     * running water depth, deposited silt, and the decaying flow of water through each vertex
+     * (terrain/eroded.h); the shading darkens wet beds and colours deposits with them */
+    float *water, *silt, *flow;
 } tf_heightfield;
 
 /* Build the scene's height field with `threads` threads (0 = all online CPUs); for a

@@ -8,6 +8,7 @@
  * generators (midpoint.c, fault.c, subdivide.c) own their parallelism; weathering.c likewise. */
 #include "terrain/terrain_build.h"
 #include "terrain/procedural.h"
+#include "terrain/eroded.h"
 
 #include <math.h>
 #include <pthread.h>
@@ -131,7 +132,8 @@ static float *file_heights(const tf_terrain *t, int threads, double *extent, cha
     return h;
 }
 
-float *tf_terrain_heights(const tf_terrain *t, int threads, double *extent, char *err,
+/* The generator's heights, then thermal weathering: everything but the erosion. */
+static float *raw_heights(const tf_terrain *t, int threads, double *extent, char *err,
                           size_t errlen)
 {
     double side = t->extent;
@@ -199,6 +201,69 @@ float *tf_terrain_heights(const tf_terrain *t, int threads, double *extent, char
     return h;
 }
 
+int tf_terrain_eroded_bytes(const tf_terrain *t, int threads, uint8_t **bytes, size_t *len,
+                            tf_erosion_report *rep, char *err, size_t errlen)
+{
+    double extent;
+    float *raw = raw_heights(t, threads, &extent, err, errlen);
+    if (!raw)
+        return -1;
+    int n = (1 << t->size_exp) + 1;
+    int rc = tf_eroded_get(t, raw, n, extent, threads, bytes, len, rep, err, errlen);
+    free(raw);
+    return rc;
+}
+
+/* The eroded terrain's extent, from its blob's header (the blob is checked after). */
+static double blob_extent(const uint8_t *b, size_t len, double fallback)
+{
+    double e;
+    if (len < 52)
+        return fallback;
+    memcpy(&e, b + 44, sizeof e);
+    return isfinite(e) && e > 0 ? e : fallback;
+}
+
+float *tf_terrain_heights_maps(const tf_terrain *t, int threads, double *extent,
+                               tf_eroded_maps *maps, tf_erosion_report *rep, char *err,
+                               size_t errlen)
+{
+    double side = t->extent;
+    if (!extent)
+        extent = &side;
+    if (t->erosion.fluvial_steps <= 0)
+        return raw_heights(t, threads, extent, err, errlen);
+    if (t->size_exp < 1 || t->size_exp > TF_TERRAIN_MAX_SIZE_EXP)
+        return raw_heights(t, threads, extent, err, errlen); /* says what is wrong */
+    uint8_t *owned = NULL;
+    const uint8_t *b = t->eroded_bytes;
+    size_t len = t->eroded_len;
+    const char *from = t->eroded_from ? t->eroded_from : "eroded terrain";
+    if (!b) {
+        if (tf_terrain_eroded_bytes(t, threads, &owned, &len, rep, err, errlen) != 0)
+            return NULL;
+        b = owned;
+        from = "erosion cache";
+    }
+    int n = (1 << t->size_exp) + 1;
+    float *h = malloc((size_t)n * (size_t)n * sizeof *h);
+    if (!h)
+        tf_seterr(err, errlen, "out of memory: a %dx%d height field", n, n);
+    else if (tf_eroded_parse(t, n, b, len, from, h, maps, err, errlen) != 0) {
+        free(h);
+        h = NULL;
+    }
+    *extent = blob_extent(b, len, t->extent);
+    free(owned);
+    return h;
+}
+
+float *tf_terrain_heights(const tf_terrain *t, int threads, double *extent, char *err,
+                          size_t errlen)
+{
+    return tf_terrain_heights_maps(t, threads, extent, NULL, NULL, err, errlen);
+}
+
 /* The procedural terrain as a height field without samples (heightfield.h). */
 static tf_heightfield *procedural_build(const tf_scene *s, char *err, size_t errlen)
 {
@@ -244,15 +309,20 @@ tf_heightfield *tf_heightfield_build(const tf_scene *s, int threads, char *err, 
     if (s->terrain.procedural && noise_generator(s->terrain.generator))
         return procedural_build(s, err, errlen);
     double extent;
-    float *h = tf_terrain_heights(&s->terrain, threads, &extent, err, errlen);
+    tf_eroded_maps maps = {0};
+    float *h = tf_terrain_heights_maps(&s->terrain, threads, &extent, &maps, NULL, err, errlen);
     if (!h)
         return NULL;
     /* tf_heightfield_wrap owns h from here, and frees it if it fails. */
     tf_heightfield *hf = tf_heightfield_wrap(h, s->terrain.size_exp, extent, threads);
     if (!hf) {
         int n = (1 << s->terrain.size_exp) + 1;
+        tf_eroded_maps_free(&maps);
         tf_seterr(err, errlen, "out of memory: max/min grids of a %dx%d height field", n, n);
         return NULL;
     }
+    hf->water = maps.water;
+    hf->silt = maps.silt;
+    hf->flow = maps.flow;
     return s->terrain.procedural ? detail_over(hf, s, err, errlen) : hf;
 }

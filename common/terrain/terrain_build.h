@@ -6,6 +6,7 @@
 #define TF_TERRAIN_BUILD_H
 
 #include <stddef.h>
+#include <stdint.h>
 #include "scene.h"
 
 /* Largest size_exp accepted: 8193^2 floats = 268 MB of heights. */
@@ -21,5 +22,20 @@
  * Returns NULL with one line in err on failure (bad size, out of memory, non-finite output). */
 float *tf_terrain_heights(const tf_terrain *t, int threads, double *extent, char *err,
                           size_t errlen);
+
+/* The same heights, and for an [erosion] scene the maps of its erosion (maps and rep may be
+ * NULL; maps are left zero when there is no erosion).  An eroded terrain comes from the blob
+ * t->eroded_bytes when the scene has one (a networked worker's, from its coordinator), else from
+ * the erosion cache, else from eroding now (terrain/eroded.h); rep says which. */
+struct tf_eroded_maps;
+struct tf_erosion_report;
+float *tf_terrain_heights_maps(const tf_terrain *t, int threads, double *extent,
+                               struct tf_eroded_maps *maps, struct tf_erosion_report *rep,
+                               char *err, size_t errlen);
+
+/* The blob of t's eroded terrain (terrain/eroded.h): generated, weathered and eroded here, or
+ * read from the erosion cache.  0, or -1 with one line in err. */
+int tf_terrain_eroded_bytes(const tf_terrain *t, int threads, uint8_t **bytes, size_t *len,
+                            struct tf_erosion_report *rep, char *err, size_t errlen);
 
 #endif

@@ -1,0 +1,312 @@
+/* erosion_farm.c: an erosion run on forked workers through the tuple space (erosion_farm.h):
+ * the coordinator's side of common/erosion_tuples.h.
+ *
+ * Steps: 1. the initial state (every worker inherits it: the scene determines it) and the
+ * plan; 2. a tuple space and its server, one forked worker per patch on a socketpair; 3. one
+ * ("erode_patch") tuple per patch; 4. serve the space while the workers trade edges, taking
+ * their final bands and tallies as they come, each checked; 5. the blob, into the cache. */
+#include "coordinator/erosion_farm.h"
+
+#include <errno.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/prctl.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "linda/tsclient.h"
+#include "linda/tsserver.h"
+#include "linda/tuplespace.h"
+#include "terrain/eroded.h"
+#include "terrain/erosion_state.h"
+#include "terrain/terrain_build.h"
+#include "worker/erosion_patch.h"
+#include "clock.h"
+#include "log.h"
+
+typedef struct farm {
+    const tf_terrain *t;
+    tf_erosion_plan plan;
+    tf_erosion_model m;
+    tf_erosion_state st;       /* the initial state, then the final one, band by band */
+    ts_space *space;
+    ts_server *srv;
+    pid_t *pid;
+    int patches;
+    int *rows_in;              /* per patch: rows of its final state received */
+    int *tallied;
+    tf_erosion_tally tally;
+    int done;                  /* patches complete */
+} farm;
+
+/* The child: one patch, then leave. */
+static void child(farm *f, int fd, int index)
+{
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    signal(SIGINT, SIG_IGN);
+    signal(SIGPIPE, SIG_IGN);
+    char tag[32];
+    snprintf(tag, sizeof tag, "erosion worker %d", index);
+    tf_log_set_tag(tag);
+    ts_client *c = ts_client_from_fd(fd);
+    int status = c ? tf_erosion_patch_serve(c, &f->plan, &f->m, &f->st, tag) : 1;
+    ts_client_close(c);
+    _exit(status);
+}
+
+static int spawn(farm *f, int index, char *err, size_t errlen)
+{
+    int sv[2];
+    if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv))
+        return tf_seterr(err, errlen, "socketpair: %s", strerror(errno));
+    pid_t pid = fork();
+    if (pid < 0) {
+        close(sv[0]);
+        close(sv[1]);
+        return tf_seterr(err, errlen, "fork: %s", strerror(errno));
+    }
+    if (pid == 0) {
+        close(sv[0]);
+        child(f, sv[1], index);
+    }
+    close(sv[1]);
+    f->pid[index] = pid;
+    char peer[40];
+    snprintf(peer, sizeof peer, "erosion worker %d", index);
+    if (!ts_server_add_fd(f->srv, sv[0], peer))
+        return tf_seterr(err, errlen, "cannot serve erosion worker %d", index);
+    return 0;
+}
+
+static int deal(farm *f)
+{
+    for (int p = 0; p < f->patches; p++) {
+        tf_tuple t;
+        tf_tuple_init(&t);
+        if (tf_tuple_pack(&t, "sii", "erode_patch", f->plan.job, (int64_t)p) ||
+            ts_space_out(f->space, &t))
+            return -1;
+    }
+    return 0;
+}
+
+/* A final band of patch p: its place, its size, its values; then into the grid state. */
+static int take_band(farm *f, const tf_tuple *got, char *err, size_t errlen)
+{
+    int64_t p, row, rows;
+    const uint8_t *data;
+    size_t len;
+    if (got->nfields != 6 || tf_tuple_get_int(got, 2, &p) || tf_tuple_get_int(got, 3, &row) ||
+        tf_tuple_get_int(got, 4, &rows) || tf_tuple_get_blob(got, 5, &data, &len) || p < 0 ||
+        p >= f->patches)
+        return tf_seterr(err, errlen, "erosion: malformed final band");
+    int i0, i1, j0, j1;
+    tf_erosion_patch_rect(&f->plan, (int)p, &i0, &i1, &j0, &j1);
+    char from[64];
+    snprintf(from, sizeof from, "erosion: patch %d's final band at row %d", (int)p, (int)row);
+    if (row != f->rows_in[p] || rows < 1 || row + rows > j1 - j0)
+        return tf_seterr(err, errlen, "%s: %d rows where row %d of %d was due", from, (int)rows,
+                         f->rows_in[p], j1 - j0);
+    if (tf_erosion_block_check(data, len, (int)rows, i1 - i0, from, err, errlen) != 0)
+        return -1;
+    tf_erosion_view v = {f->st.b, f->st.t, f->st.d, f->st.w, f->st.s, f->st.flow, f->st.soft,
+                         (size_t)f->st.n, 0, 0, f->st.n, f->st.n};
+    tf_erosion_rect r = {j0 + (int)row, j0 + (int)(row + rows), i0, i1};
+    tf_erosion_block_unpack(&v, r, data);
+    f->rows_in[p] += (int)rows;
+    f->done += f->rows_in[p] == j1 - j0 && f->tallied[p];
+    return 0;
+}
+
+static int take_tally(farm *f, const tf_tuple *got, char *err, size_t errlen)
+{
+    int64_t p, v[4];
+    if (got->nfields != 7 || tf_tuple_get_int(got, 2, &p) || p < 0 || p >= f->patches ||
+        f->tallied[p])
+        return tf_seterr(err, errlen, "erosion: malformed or repeated tally");
+    for (int k = 0; k < 4; k++)
+        if (tf_tuple_get_int(got, 3 + k, &v[k]) || v[k] < 0)
+            return tf_seterr(err, errlen, "erosion: patch %d's tally is malformed", (int)p);
+    f->tally.rain += v[0];
+    f->tally.evaporated += v[1];
+    f->tally.out_water += v[2];
+    f->tally.out_load += v[3];
+    f->tallied[p] = 1;
+    int i0, i1, j0, j1;
+    tf_erosion_patch_rect(&f->plan, (int)p, &i0, &i1, &j0, &j1);
+    f->done += f->rows_in[p] == j1 - j0;
+    return 0;
+}
+
+/* Take whatever finals, tallies and failures are in the space now.  0, or -1 (err set). */
+static int collect(farm *f, char *err, size_t errlen)
+{
+    static const char *const names[3] = {"erode_final", "erode_tally", "erode_failed"};
+    static const char *const formats[3] = {"siIIIB", "siIIIII", "siIS"};
+    for (int k = 0; k < 3; k++)
+        for (;;) {
+            tf_tuple tmpl, got;
+            tf_tuple_init(&tmpl);
+            tf_tuple_init(&got);
+            int found = tf_tuple_pack(&tmpl, formats[k], names[k], f->plan.job) == 0 &&
+                        ts_space_inp(f->space, &tmpl, &got) == 1;
+            const char *why;
+            int rc = !found ? 1
+                     : k == 0 ? take_band(f, &got, err, errlen)
+                     : k == 1 ? take_tally(f, &got, err, errlen)
+                     : tf_tuple_get_string(&got, 3, &why) == 0
+                         ? tf_seterr(err, errlen, "erosion failed on a worker: %s", why)
+                         : tf_seterr(err, errlen, "erosion failed on a worker");
+            tf_tuple_clear(&tmpl);
+            tf_tuple_clear(&got);
+            if (rc < 0)
+                return -1;
+            if (rc > 0)
+                break;
+        }
+    return 0;
+}
+
+/* A worker that left before its patch was in fails the erosion (its neighbours would wait). */
+static int check_workers(farm *f, char *err, size_t errlen)
+{
+    for (int p = 0; p < f->patches; p++) {
+        int status;
+        if (f->pid[p] > 0 && waitpid(f->pid[p], &status, WNOHANG) == f->pid[p]) {
+            f->pid[p] = 0;
+            if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+                return tf_seterr(err, errlen, "erosion worker %d died (%s %d) before the "
+                                 "erosion finished", p, WIFEXITED(status) ? "exit" : "signal",
+                                 WIFEXITED(status) ? WEXITSTATUS(status) : WTERMSIG(status));
+        }
+    }
+    return 0;
+}
+
+static int serve(farm *f, char *err, size_t errlen)
+{
+    while (f->done < f->patches) {
+        if (ts_server_run_once(f->srv, 100) < 0)
+            return tf_seterr(err, errlen, "erosion: the tuple-space server failed");
+        if (collect(f, err, errlen) != 0)
+            return -1;
+        if (f->done < f->patches && check_workers(f, err, errlen) != 0) {
+            collect(f, err, errlen); /* a worker's own word on why, if it said */
+            return -1;
+        }
+    }
+    return 0;
+}
+
+static void stop_workers(farm *f)
+{
+    for (int p = 0; p < f->patches; p++)
+        if (f->pid[p] > 0) {
+            kill(f->pid[p], SIGKILL);
+            waitpid(f->pid[p], NULL, 0);
+        }
+}
+
+/* 1. The raw heights' state and the plan. */
+static int prepare(farm *f, int workers, int halo, double *extent, char *err, size_t errlen)
+{
+    tf_terrain raw = *f->t;
+    raw.erosion.fluvial_steps = 0;
+    int n = (1 << f->t->size_exp) + 1;
+    float *h = tf_terrain_heights(&raw, 0, extent, err, errlen);
+    if (!h)
+        return -1;
+    float lo = h[0], hi = h[0];
+    for (size_t i = 0; i < (size_t)n * (size_t)n; i++) {
+        lo = h[i] < lo ? h[i] : lo;
+        hi = h[i] > hi ? h[i] : hi;
+    }
+    int rc = tf_erosion_model_init(&f->m, &f->t->erosion, f->t->seed, n, lo, hi, err, errlen);
+    if (rc == 0 && tf_erosion_state_from_heights(&f->st, &f->m, &f->t->erosion, h) != 0)
+        rc = tf_seterr(err, errlen, "out of memory: erosion of a %dx%d grid", n, n);
+    free(h);
+    if (rc == 0 && tf_erosion_plan_make(&f->plan, 1, n, workers, halo > 0 ? halo : 8,
+                                        f->m.steps) != 0)
+        rc = tf_seterr(err, errlen, "erosion: a %dx%d grid is too small for %d workers", n, n,
+                       workers);
+    return rc;
+}
+
+/* 2-4. The space, the workers, the patches, the rounds. */
+static int run(farm *f, char *err, size_t errlen)
+{
+    f->patches = f->plan.px * f->plan.py;
+    f->pid = calloc((size_t)f->patches, sizeof *f->pid);
+    f->rows_in = calloc((size_t)f->patches, sizeof *f->rows_in);
+    f->tallied = calloc((size_t)f->patches, sizeof *f->tallied);
+    f->space = ts_space_new();
+    if (!f->pid || !f->rows_in || !f->tallied || !f->space)
+        return tf_seterr(err, errlen, "out of memory");
+    f->srv = ts_server_new(f->space, NULL, NULL, err, errlen);
+    if (!f->srv)
+        return -1;
+    for (int p = 0; p < f->patches; p++)
+        if (spawn(f, p, err, errlen) != 0)
+            return -1;
+    if (deal(f) != 0)
+        return tf_seterr(err, errlen, "out of memory");
+    return serve(f, err, errlen);
+}
+
+static void farm_free(farm *f)
+{
+    if (f->pid)
+        stop_workers(f);
+    ts_server_free(f->srv);
+    ts_space_free(f->space);
+    free(f->pid);
+    free(f->rows_in);
+    free(f->tallied);
+    tf_erosion_state_free(&f->st);
+}
+
+int tf_erosion_farm(const tf_terrain *t, int workers, int halo, uint8_t **bytes, size_t *len,
+                    tf_erosion_report *rep, tf_erosion_farm_report *fr, char *err,
+                    size_t errlen)
+{
+    int n = (1 << t->size_exp) + 1;
+    memset(rep, 0, sizeof *rep);
+    memset(fr, 0, sizeof *fr);
+    *bytes = tf_eroded_from_cache(t, n, len, rep);
+    if (*bytes)
+        return 0;
+    farm f = {.t = t};
+    double extent = t->extent;
+    int rc = prepare(&f, workers, halo, &extent, err, errlen);
+    rep->solid_before = rc == 0 ? tf_erosion_solid(&f.st, n) : 0;
+    double t0 = tf_now_s();
+    if (rc == 0)
+        rc = run(&f, err, errlen);
+    if (rc == 0) {
+        rep->seconds = tf_now_s() - t0;
+        rep->vertex_steps = (double)n * n * f.m.steps;
+        rep->tally = f.tally;
+        rep->solid_after = tf_erosion_solid(&f.st, n);
+        rep->quantum = f.m.q;
+        rep->isa = tf_erosion_isa();
+        rep->threads = 1;
+        fr->workers = f.patches;
+        fr->px = f.plan.px;
+        fr->py = f.plan.py;
+        fr->halo = f.plan.halo;
+        *bytes = tf_eroded_encode(t, &f.st, &f.m, extent, len);
+        rc = *bytes ? 0 : tf_seterr(err, errlen, "out of memory: the eroded terrain");
+    }
+    if (rc == 0) {
+        fr->edge_bytes_per_step = tf_erosion_plan_edge_bytes(&f.plan) / f.plan.halo;
+        char how[48];
+        snprintf(how, sizeof how, "%d workers, %dx%d patches", f.patches, f.plan.px, f.plan.py);
+        tf_eroded_log(t, n, rep, how);
+        tf_eroded_to_cache(t, *bytes, *len, rep);
+    }
+    farm_free(&f);
+    return rc;
+}

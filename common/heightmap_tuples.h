@@ -26,12 +26,16 @@
 
 #define TF_HEIGHTMAP_CHUNK_BYTES ((size_t)8 << 20)
 
-/* Coordinator: put the descriptor and chunks of s's height map (nothing unless generator =
- * file).  0, or -1 on out of memory. */
+/* Coordinator: put the descriptor and chunks of s's height map (generator = file), and of
+ * its eroded terrain when one is attached (the same two tuples named "eroded" and
+ * "eroded_chunk": terrain/eroded.h; a worker never erodes again).  0, or -1 on out of
+ * memory. */
 int tf_heightmap_tuples_put(ts_space *space, const tf_scene *s);
 
 /* Worker: if s is a generator = file scene, read its height map from the coordinator's space
- * (c), check it, and attach it to s.  0, or -1 with one line in err naming `coordinator`. */
+ * (c), check it, and attach it to s; if it has [erosion], the same for its eroded terrain
+ * (checked again against the scene when the terrain is built).  0, or -1 with one line in
+ * err naming `coordinator`. */
 int tf_heightmap_fetch(ts_client *c, tf_scene *s, const char *coordinator, char *err,
                        size_t errlen);
 
@@ -41,6 +45,7 @@ int tf_heightmap_fetch(ts_client *c, tf_scene *s, const char *coordinator, char 
  * ("FROM: ..."); after -1, or instead of finish, call tf_heightmap_rx_free. */
 typedef struct tf_heightmap_rx {
     const char *from;
+    const struct blob_kind *kind;
     size_t len, got;
     int64_t chunks, next;
     char sha256[65];

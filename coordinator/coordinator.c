@@ -19,6 +19,7 @@
 #include "linda/auth.h"
 #include "image/exrfile.h"
 #include "farmproto.h"
+#include "terrain/eroded.h"
 #include "terrain/heightfield.h"
 #include "terrain/terrain_build.h"
 #include "log.h"
@@ -400,10 +401,33 @@ static int open_dashboard(render *r)
     return 0;
 }
 
+/* An [erosion] scene's eroded terrain, once: from the cache beside the output, or eroded here
+ * on every core; attached to the scene so the height field below, and every networked worker
+ * (through the tuple space), use it instead of eroding again. */
+static int erode_once(render *r, char *err, size_t errlen)
+{
+    char dir[600];
+    const char *slash = strrchr(r->pattern, '/');
+    if (slash)
+        snprintf(dir, sizeof dir, "%.*s/.terrafarm-cache", (int)(slash - r->pattern), r->pattern);
+    else
+        snprintf(dir, sizeof dir, ".terrafarm-cache");
+    tf_eroded_set_cache_dir(dir);
+    uint8_t *blob;
+    size_t len;
+    if (tf_terrain_eroded_bytes(&r->scene->terrain, 0, &blob, &len, NULL, err, errlen) != 0)
+        return -1;
+    if (tf_scene_attach_eroded(r->scene, blob, len, "the coordinator's erosion") != 0)
+        return tf_seterr(err, errlen, "out of memory");
+    return 0;
+}
+
 /* 2. The terrain, built once before forking so every local worker shares it. */
 static int build_terrain(render *r)
 {
     char err[1024];
+    if (r->scene->terrain.erosion.fluvial_steps > 0 && erode_once(r, err, sizeof err) != 0)
+        return step_failed(r, 1, err);
     if (r->nworkers > 0 && r->scene->terrain.procedural && r->o->backend &&
         !strcmp(r->o->backend, "opencl"))
         return step_failed(r, 2, "--backend opencl: the OpenCL backend cannot trace procedural "

@@ -419,7 +419,7 @@ tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err
         goto fail;
     }
     tf_scene_set_size(s, (int)m.width, (int)m.height);
-    if (tf_heightmap_fetch(c, s, coordinator, err, errlen)) { /* generator = file only */
+    if (tf_heightmap_fetch(c, s, coordinator, err, errlen)) { /* height map, eroded terrain */
         tf_scene_free(s);
         goto fail;
     }

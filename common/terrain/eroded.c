@@ -188,12 +188,27 @@ static uint8_t *cache_read(const tf_terrain *t, int n, const char *path, size_t 
     return NULL;
 }
 
+/* mkdir -p dir (mode 0700 for what it creates).  0, or -1 with errno set. */
+static int make_dirs(const char *dir)
+{
+    char path[400];
+    snprintf(path, sizeof path, "%s", dir);
+    for (char *p = path + 1; *p; p++)
+        if (*p == '/') {
+            *p = '\0';
+            if (mkdir(path, 0700) != 0 && errno != EEXIST)
+                return -1;
+            *p = '/';
+        }
+    return mkdir(path, 0700) != 0 && errno != EEXIST ? -1 : 0;
+}
+
 /* Write the blob atomically (temporary file, fsync, rename); a failure only costs the cache. */
 static void cache_write(const char *dir, const char *path, const uint8_t *b, size_t len)
 {
     char tmp[600];
     snprintf(tmp, sizeof tmp, "%s.%ld.tmp", path, (long)getpid());
-    if (mkdir(dir, 0700) != 0 && errno != EEXIST) {
+    if (make_dirs(dir) != 0) {
         tf_warn("%s: cannot create the erosion cache: %s", dir, strerror(errno));
         return;
     }

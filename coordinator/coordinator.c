@@ -426,6 +426,10 @@ static int erode_once(render *r, char *err, size_t errlen)
 static int build_terrain(render *r)
 {
     char err[1024];
+    if (r->nworkers > 0 && r->scene->terrain.erosion.fluvial_steps > 0 && r->o->backend &&
+        !strcmp(r->o->backend, "opencl"))
+        return step_failed(r, 2, "--backend opencl: the OpenCL backend cannot shade an eroded "
+                                 "terrain's water and silt ([erosion]); use --backend c or auto");
     if (r->scene->terrain.erosion.fluvial_steps > 0 && erode_once(r, err, sizeof err) != 0)
         return step_failed(r, 1, err);
     if (r->nworkers > 0 && r->scene->terrain.procedural && r->o->backend &&

@@ -498,6 +498,11 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
                   "([terrain] procedural = yes); use --backend c");
         return NULL;
     }
+    if (hf->silt) { /* the kernels do not read erosion's maps: they would shade it dry */
+        tf_seterr(err, errlen, "the OpenCL backend cannot shade an eroded terrain's water and "
+                  "silt ([erosion]); use --backend c");
+        return NULL;
+    }
     tf_cl_backend *b = calloc(1, sizeof *b);
     if (!b) {
         tf_seterr(err, errlen, "out of memory");

@@ -53,6 +53,11 @@
 #define TF_ALBEDO_ROCK 0.200, 0.180, 0.160
 #define TF_ALBEDO_SNOW 0.800, 0.820, 0.860
 #define TF_ALBEDO_SAND 0.330, 0.290, 0.200
+/* [erosion]: silt deposited by water (a pale dry wash, Musgrave's plates 2.10-2.11), the
+ * depth at which it hides what is below, and how much darker the wettest bed is. */
+#define TF_ALBEDO_SILT 0.420, 0.380, 0.300
+#define TF_SILT_COVER_M 0.5
+#define TF_WET_DARKEN 0.55
 #define TF_WATER_BODY 0.010, 0.028, 0.040
 
 #endif

@@ -47,6 +47,40 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
         sh->pixel_angle = 2.0 * tan(0.5 * s->camera.fov_deg * TF_DEG2RAD) / columns;
     if (hf->proc)
         sh->view = tf_proc_view_of(hf->proc, s->camera.position, sh->pixel_angle);
+    if (hf->flow) {
+        double sum = 0;
+        for (size_t i = 0; i < (size_t)hf->n * (size_t)hf->n; i++)
+            sum += hf->flow[i];
+        sh->flow_ref = 8.0 * sum / ((double)hf->n * (double)hf->n) + 1e-12;
+    }
+}
+
+/* ---------------------------------------------------------------- erosion's maps */
+
+/* A map (n x n over the terrain, like the heights) at world (x, y), bilinear. */
+static double map_at(const tf_heightfield *hf, const float *map, double x, double y)
+{
+    double u = fmin(fmax(x / hf->cell, 0.0), hf->n - 1.0);
+    double v = fmin(fmax(y / hf->cell, 0.0), hf->n - 1.0);
+    int i = (int)u < hf->n - 1 ? (int)u : hf->n - 2, j = (int)v < hf->n - 1 ? (int)v : hf->n - 2;
+    double fu = u - i, fv = v - j;
+    const float *r0 = map + (size_t)j * (size_t)hf->n + (size_t)i, *r1 = r0 + hf->n;
+    return (1 - fv) * ((1 - fu) * r0[0] + fu * r0[1]) + fv * ((1 - fu) * r1[0] + fu * r1[1]);
+}
+
+/* What erosion left at p: silt covers the ground with a pale wash, and beds where water runs
+ * or stands are darker (wet), fading with the flow through them. */
+static tf_vec3 erosion_tint(const tf_shader *sh, tf_vec3 p, tf_vec3 albedo)
+{
+    const tf_heightfield *hf = sh->hf;
+    const tf_vec3 silt_colour = {TF_ALBEDO_SILT};
+    double silt = map_at(hf, hf->silt, p.x, p.y), water = map_at(hf, hf->water, p.x, p.y);
+    double flow = map_at(hf, hf->flow, p.x, p.y);
+    double cover = tf_smoothstep(0.0, TF_SILT_COVER_M, silt);
+    double wet = fmax(tf_smoothstep(0.0, 1.0, flow / sh->flow_ref),
+                      tf_smoothstep(0.0, 0.2, water));
+    tf_vec3 c = v3_lerp(albedo, silt_colour, cover);
+    return v3_scale(c, 1.0 - TF_WET_DARKEN * wet);
 }
 
 /* ---------------------------------------------------------------- the terrain, either kind */
@@ -391,6 +425,8 @@ tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shado
         nb = tf_bump_normal(n, sh->scene->materials.bump, gx, gy);
     }
     tf_vec3 albedo = terrain_albedo(sh, hit->p, n, variation);
+    if (sh->hf->silt)
+        albedo = erosion_tint(sh, hit->p, albedo);
     double cos_sun = v3_dot(nb, sh->sun_dir);
     tf_vec3 light = tf_sky_light_on(sh->sky_light, nb.z);
     if (cos_sun > 0 && terrain_sunlit(sh, hit, &tri, n, shadow_rays))

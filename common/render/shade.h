@@ -56,6 +56,7 @@ typedef struct tf_shader {
     double shadow_lift;      /* shadow ray start offset along the normal */
     double pixel_angle;      /* angle one pixel subtends at the image centre, radians */
     tf_proc_view view;       /* a procedural terrain's levels of detail for this camera */
+    double flow_ref;         /* [erosion]: flow at which a bed looks fully wet (mean * 8) */
 } tf_shader;
 
 /* One camera sample: linear RGB, alpha (1 = terrain or water), distance to the hit (or

@@ -17,6 +17,8 @@
 #include "terrain/erosion_run.h"
 #include "terrain/erosion_state.h"
 #include "terrain/terrain_build.h"
+#include "terrain/eroded.h"
+#include "erosion_tuples.h"
 
 static tf_erosion_keys keys(int steps)
 {
@@ -244,6 +246,94 @@ static void test_ramp_erodes_and_deposits(void **state)
     free(h);
 }
 
+/* A worker's block (an edge or a final band) is refused unless its size and every value are
+ * ones an erosion produces. */
+static void test_block_check(void **state)
+{
+    (void)state;
+    int n = 17;
+    float *h = fbm_heights(4);
+    tf_erosion_keys k = keys(30);
+    run r;
+    start(&r, h, n, &k);
+    go(&r, 0, 30, 1, 8, 0, 0);
+    tf_erosion_view v = {r.st.b, r.st.t, r.st.d, r.st.w, r.st.s, r.st.flow, r.st.soft,
+                         (size_t)n, 0, 0, n, n};
+    tf_erosion_rect rect = {2, 5, 1, 16};
+    size_t len = tf_erosion_block_bytes(3, 15);
+    uint8_t *b = malloc(len + 4);
+    tf_erosion_block_pack(&v, rect, b);
+    char err[256];
+    assert_int_equal(tf_erosion_block_check(b, len, 3, 15, "peer", err, sizeof err), 0);
+    assert_int_equal(tf_erosion_block_check(b, len - 4, 3, 15, "peer", err, sizeof err), -1);
+    assert_non_null(strstr(err, "peer: erosion block of"));
+    assert_int_equal(tf_erosion_block_check(b, len, 15, 3 + 1, "peer", err, sizeof err), -1);
+    size_t count = 3 * 15;
+    struct { int field; int32_t value; const char *says; } lie[] = {
+        {3, -5, "water = -5"}, {4, -1, "load = -1"}, {1, -7, "talus = -7"},
+        {0, 1 << 29, "bedrock"}, {2, INT32_MIN, "silt"},
+    };
+    for (size_t l = 0; l < sizeof lie / sizeof lie[0]; l++) {
+        uint8_t *c = malloc(len);
+        memcpy(c, b, len);
+        memcpy(c + ((size_t)lie[l].field * count + 7) * 4, &lie[l].value, 4);
+        assert_int_equal(tf_erosion_block_check(c, len, 3, 15, "peer", err, sizeof err), -1);
+        assert_non_null(strstr(err, lie[l].says));
+        free(c);
+    }
+    float nan = NAN;
+    memcpy(b + (5 * count + 3) * 4, &nan, 4);
+    assert_int_equal(tf_erosion_block_check(b, len, 3, 15, "peer", err, sizeof err), -1);
+    assert_non_null(strstr(err, "flow"));
+    free(b);
+    tf_erosion_state_free(&r.st);
+    free(h);
+}
+
+/* An eroded terrain's blob: accepted whole for its own scene only. */
+static void test_blob_checks(void **state)
+{
+    (void)state;
+    int n = 17;
+    float *h = fbm_heights(4);
+    tf_terrain t = {0};
+    t.generator = TF_GEN_FBM;
+    t.size_exp = 4;
+    t.erosion = keys(20);
+    run r;
+    start(&r, h, n, &t.erosion);
+    r.m.steps = 20;
+    go(&r, 0, 20, 1, 8, 0, 0);
+    size_t len;
+    uint8_t *b = tf_eroded_encode(&t, &r.st, &r.m, 1000.0, &len);
+    assert_non_null(b);
+    float *out = malloc((size_t)n * n * sizeof *out);
+    char err[256];
+    tf_eroded_maps maps = {0};
+    assert_int_equal(tf_eroded_parse(&t, n, b, len, "blob", out, &maps, err, sizeof err), 0);
+    assert_non_null(maps.silt);
+    tf_eroded_maps_free(&maps);
+    float *want = malloc((size_t)n * n * sizeof *want);
+    tf_erosion_heights(&r.st, &r.m, want);
+    assert_memory_equal(out, want, (size_t)n * n * sizeof *out);
+    /* another scene's terrain: its key differs */
+    tf_terrain other = t;
+    other.erosion.softness = 0.31;
+    assert_int_equal(tf_eroded_parse(&other, n, b, len, "blob", out, NULL, err, sizeof err), -1);
+    assert_non_null(strstr(err, "another scene"));
+    /* the wrong size, a damaged byte, a truncated blob */
+    assert_int_equal(tf_eroded_parse(&t, 33, b, len, "blob", out, NULL, err, sizeof err), -1);
+    assert_int_equal(tf_eroded_parse(&t, n, b, len - 1, "blob", out, NULL, err, sizeof err), -1);
+    b[len / 2] ^= 1;
+    assert_int_equal(tf_eroded_parse(&t, n, b, len, "blob", out, NULL, err, sizeof err), -1);
+    assert_non_null(strstr(err, "blob: eroded terrain damaged"));
+    free(b);
+    free(out);
+    free(want);
+    tf_erosion_state_free(&r.st);
+    free(h);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -252,6 +342,8 @@ int main(void)
         cmocka_unit_test(test_flat_plane),
         cmocka_unit_test(test_single_vertex),
         cmocka_unit_test(test_ramp_erodes_and_deposits),
+        cmocka_unit_test(test_block_check),
+        cmocka_unit_test(test_blob_checks),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -28,6 +28,8 @@
 
 #include "cli/commands.h"
 #include "coordinator/erosion_farm.h"
+#include "linda/auth.h"
+#include "linda/sock.h"
 #include "terrain/drainage.h"
 #include "terrain/eroded.h"
 #include "image/exrfile.h"
@@ -58,6 +60,10 @@ static const char usage[] =
     "                        edges through the tuple space (default: in this process, on\n"
     "                        every core)\n"
     "      --halo K          erosion: steps between edge exchanges, K rows each (default 8)\n"
+    "      --remote M        erosion: M more patches for networked workers (terrafarm worker\n"
+    "                        --connect HOST:PORT), who read the scene and derive the start\n"
+    "      --listen ADDR     where they connect (default 127.0.0.1:7879; port 0: any)\n"
+    "      --secret-file F   their shared secret (needed off loopback)\n"
     "      --stats FILE      write JSON: erosion_vertex_steps_per_s, seconds, the mass\n"
     "                        balance, pits and the largest basin before and after\n"
     "      --maps PREFIX     erosion: also write PREFIX-water.exr, PREFIX-silt.exr and\n"
@@ -90,6 +96,8 @@ struct hf_options {
     int workers; /* -j given: erosion on this many forked workers */
     int halo;
     const char *stats, *maps;
+    int remote;  /* --remote: this many networked erosion workers */
+    const char *listen, *secret_file;
 };
 
 static int ends_with(const char *s, const char *suffix)
@@ -118,6 +126,8 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
         {"srs", required_argument, NULL, 's'},      {"origin", required_argument, NULL, 'O'},
         {"workers", required_argument, NULL, 'j'},  {"halo", required_argument, NULL, 'H'},
         {"stats", required_argument, NULL, 'S'},    {"maps", required_argument, NULL, 'M'},
+        {"remote", required_argument, NULL, 'R'},   {"listen", required_argument, NULL, 'L'},
+        {"secret-file", required_argument, NULL, 'F'},
         {NULL, 0, NULL, 0},
     };
     memset(o, 0, sizeof *o);
@@ -161,6 +171,18 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
         case 'S':
             o->stats = optarg;
             break;
+        case 'R':
+            if (parse_int(optarg, 1, 1024, &o->remote) != 0) {
+                tf_error("heightfield: --remote wants an integer 1..1024, not '%s'", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
+        case 'L':
+            o->listen = optarg;
+            break;
+        case 'F':
+            o->secret_file = optarg;
+            break;
         case 'M':
             o->maps = optarg;
             break;
@@ -189,6 +211,13 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
         return TF_EXIT_USAGE;
     }
     o->scene_path = argv[optind];
+    if (o->remote > 0 && !o->listen)
+        o->listen = "127.0.0.1:7879";
+    if (o->remote > 0 && o->size_exp) {
+        tf_error("heightfield: --remote with --size-exp: networked workers erode the scene's "
+                 "own size_exp; set it in the scene");
+        return TF_EXIT_USAGE;
+    }
     if (!o->output) {
         tf_error("heightfield: -o FILE.png, -o FILE.exr or -o FILE.tif is required");
         return TF_EXIT_USAGE;
@@ -321,16 +350,36 @@ static void set_cache_beside(const char *output)
     tf_eroded_set_cache_dir(dir);
 }
 
-/* The heights: with -j and [erosion], eroded on forked workers; else in this process. */
-static float *heights(const struct hf_options *o, const tf_terrain *t, double *extent,
-                      erosion_run *er, char *err, size_t errlen)
+/* The networked workers' key: a secret file, or none on a loopback address. */
+static int erosion_key(const struct hf_options *o, uint8_t *key, const uint8_t **out, char *err,
+                       size_t errlen)
 {
-    if (t->erosion.fluvial_steps <= 0 || o->workers <= 0)
+    *out = NULL;
+    if (o->secret_file) {
+        if (tf_auth_init() || tf_secret_load(o->secret_file, key, err, errlen))
+            return -1;
+        *out = key;
+    } else if (!tf_listen_is_loopback(o->listen)) {
+        return tf_seterr(err, errlen, "--listen %s is not a loopback address: networked "
+                         "workers there need --secret-file FILE", o->listen);
+    }
+    return 0;
+}
+
+/* The heights: with -j (or --remote) and [erosion], eroded on the farm; else in this
+ * process.  s's terrain is t (its size_exp may be overridden: then no networked worker). */
+static float *heights(const struct hf_options *o, const tf_scene *s, const tf_terrain *t,
+                      double *extent, erosion_run *er, char *err, size_t errlen)
+{
+    if (t->erosion.fluvial_steps <= 0 || (o->workers <= 0 && o->remote <= 0))
         return tf_terrain_heights_maps(t, o->threads, extent, &er->maps, &er->rep, err, errlen);
+    uint8_t key[32];
+    tf_erosion_farm_opts fo = {o->workers, o->remote, o->halo, o->listen, NULL};
+    if (o->remote > 0 && erosion_key(o, key, &fo.key, err, errlen) != 0)
+        return NULL;
     uint8_t *blob;
     size_t len;
-    if (tf_erosion_farm(t, o->workers, o->halo, &blob, &len, &er->rep, &er->farm, err,
-                        errlen) != 0)
+    if (tf_erosion_farm(s, &fo, &blob, &len, &er->rep, &er->farm, err, errlen) != 0)
         return NULL;
     tf_terrain with = *t;
     with.eroded_bytes = blob;
@@ -424,15 +473,15 @@ int cmd_heightfield(int argc, char **argv)
         tf_error("%s", err);
         return TF_EXIT_FAIL;
     }
+    if (o.size_exp) /* the farm erodes the scene's terrain: the same size */
+        scene->terrain.size_exp = o.size_exp;
     tf_terrain terrain = scene->terrain;
-    if (o.size_exp)
-        terrain.size_exp = o.size_exp;
     int n = (1 << terrain.size_exp) + 1;
 
     double extent;
     set_cache_beside(o.output);
     erosion_run er = {0};
-    float *h = heights(&o, &terrain, &extent, &er, err, sizeof err);
+    float *h = heights(&o, scene, &terrain, &extent, &er, err, sizeof err);
     if (!h) {
         tf_error("%s", err);
         tf_scene_free(scene);

@@ -222,6 +222,14 @@ int tf_heightmap_fetch(ts_client *c, tf_scene *s, const char *coordinator, char 
         if (tf_scene_attach_heightmap(s, data, len, name, err, errlen))
             return -1;
     }
+    return 0;
+}
+
+int tf_eroded_fetch(ts_client *c, tf_scene *s, const char *coordinator, char *err,
+                    size_t errlen)
+{
+    uint8_t *data;
+    size_t len;
     if (s->terrain.erosion.fluvial_steps <= 0)
         return 0;
     if (fetch_blob(c, &ERODED, coordinator, &data, &len, err, errlen))

@@ -33,11 +33,14 @@
 int tf_heightmap_tuples_put(ts_space *space, const tf_scene *s);
 
 /* Worker: if s is a generator = file scene, read its height map from the coordinator's space
- * (c), check it, and attach it to s; if it has [erosion], the same for its eroded terrain
- * (checked again against the scene when the terrain is built).  0, or -1 with one line in
- * err naming `coordinator`. */
+ * (c), check it, and attach it to s.  0, or -1 with one line in err naming `coordinator`. */
 int tf_heightmap_fetch(ts_client *c, tf_scene *s, const char *coordinator, char *err,
                        size_t errlen);
+/* Worker: if s has [erosion], the same for its eroded terrain (checked against the scene when
+ * the terrain is built).  Not in an erosion's own space (common/erosion_tuples.h), which is
+ * computing it. */
+int tf_eroded_fetch(ts_client *c, tf_scene *s, const char *coordinator, char *err,
+                    size_t errlen);
 
 /* The receiving side's checks, one tuple at a time (what tf_heightmap_fetch runs; separate for
  * the unit tests).  begin takes the descriptor, chunk each chunk in order, finish checks the

@@ -24,11 +24,16 @@
 #include "terrain/erosion_state.h"
 #include "terrain/terrain_build.h"
 #include "worker/erosion_patch.h"
+#include "coordinator/erosion_role.h"
+#include "farmproto.h"
+#include "heightmap_tuples.h"
 #include "clock.h"
 #include "log.h"
 
 typedef struct farm {
+    const tf_scene *s;
     const tf_terrain *t;
+    const tf_erosion_farm_opts *o;
     tf_erosion_plan plan;
     tf_erosion_model m;
     tf_erosion_state st;       /* the initial state, then the final one, band by band */
@@ -40,7 +45,38 @@ typedef struct farm {
     int *tallied;
     tf_erosion_tally tally;
     int done;                  /* patches complete */
+    tf_erosion_owners owners;  /* which connection took which patch (erosion_role.h) */
+    ts_role role;
+    int *left;                 /* per patch: its worker left (check it handed all in) */
+    char (*peer)[64];          /* per patch: that worker's name */
 } farm;
+
+static void on_take(void *ctx, uint64_t conn, const tf_tuple *t)
+{
+    farm *f = ctx;
+    tf_erosion_owners_take(&f->owners, conn, t);
+}
+
+/* A connection that leaves holding a patch: its final bands were put before it left (one
+ * connection's requests are served in order), so serve() checks, after collecting, that the
+ * patch is complete; if not, its neighbours would wait for its edges forever. */
+static void on_disconnect(void *ctx, uint64_t conn, const char *peer)
+{
+    farm *f = ctx;
+    int p = tf_erosion_owners_patch(&f->owners, conn);
+    if (p < 0)
+        return;
+    f->left[p] = 1;
+    f->owners.conn[p] = 0;
+    snprintf(f->peer[p], sizeof f->peer[p], "%s", peer ? peer : "a worker");
+}
+
+static int patch_complete(const farm *f, int p)
+{
+    int i0, i1, j0, j1;
+    tf_erosion_patch_rect(&f->plan, p, &i0, &i1, &j0, &j1);
+    return f->rows_in[p] == j1 - j0 && f->tallied[p];
+}
 
 /* The child: one patch, then leave. */
 static void child(farm *f, int fd, int index)
@@ -81,8 +117,27 @@ static int spawn(farm *f, int index, char *err, size_t errlen)
     return 0;
 }
 
+/* What a networked worker reads first: the plan, then the scene (with its height map). */
+static int put_plan_and_scene(farm *f)
+{
+    const tf_erosion_plan *p = &f->plan;
+    tf_tuple t;
+    tf_tuple_init(&t);
+    if (tf_tuple_pack(&t, "siiiiii", "erode_plan", p->job, (int64_t)p->n, (int64_t)p->px,
+                      (int64_t)p->py, (int64_t)p->halo, (int64_t)p->steps) ||
+        ts_space_out(f->space, &t))
+        return -1;
+    tf_scene_msg m = {f->s->text, f->s->width, f->s->height, f->s->hash_hex, "erosion"};
+    tf_tuple_init(&t);
+    if (tf_scene_tuple_pack(&t, &m) || ts_space_out(f->space, &t))
+        return -1;
+    return tf_heightmap_tuples_put(f->space, f->s);
+}
+
 static int deal(farm *f)
 {
+    if (put_plan_and_scene(f) != 0)
+        return -1;
     for (int p = 0; p < f->patches; p++) {
         tf_tuple t;
         tf_tuple_init(&t);
@@ -193,6 +248,10 @@ static int serve(farm *f, char *err, size_t errlen)
             return tf_seterr(err, errlen, "erosion: the tuple-space server failed");
         if (collect(f, err, errlen) != 0)
             return -1;
+        for (int p = 0; p < f->patches; p++)
+            if (f->left[p] && !patch_complete(f, p))
+                return tf_seterr(err, errlen, "erosion: %s left holding patch %d before handing "
+                                 "it in", f->peer[p], p);
         if (f->done < f->patches && check_workers(f, err, errlen) != 0) {
             collect(f, err, errlen); /* a worker's own word on why, if it said */
             return -1;
@@ -235,6 +294,28 @@ static int prepare(farm *f, int workers, int halo, double *extent, char *err, si
     return rc;
 }
 
+/* 2. The server: fds of forked workers, and a listening socket for networked ones. */
+static int open_server(farm *f, char *err, size_t errlen)
+{
+    f->owners.patches = f->patches;
+    f->owners.conn = calloc((size_t)f->patches, sizeof *f->owners.conn);
+    if (!f->owners.conn)
+        return tf_seterr(err, errlen, "out of memory");
+    /* the largest tuple: a final band (8 MiB, erosion_patch.c) or an edge */
+    size_t edge = tf_erosion_block_bytes(f->plan.halo, f->plan.n);
+    tf_erosion_role_init(&f->role, &f->owners, (edge > (9u << 20) ? edge : (9u << 20)) + 4096);
+    ts_server_config cfg = {0};
+    cfg.listen = f->o->remote > 0 ? f->o->listen : NULL;
+    cfg.key = f->o->key;
+    cfg.role = &f->role;
+    ts_server_hooks hooks = {f, on_take, NULL, on_disconnect};
+    f->srv = ts_server_new(f->space, &cfg, &hooks, err, errlen);
+    if (f->srv && cfg.listen)
+        tf_info("erosion: %d patches (%dx%d), %d networked workers expected at port %d",
+                f->patches, f->plan.px, f->plan.py, f->o->remote, ts_server_port(f->srv));
+    return f->srv ? 0 : -1;
+}
+
 /* 2-4. The space, the workers, the patches, the rounds. */
 static int run(farm *f, char *err, size_t errlen)
 {
@@ -242,13 +323,14 @@ static int run(farm *f, char *err, size_t errlen)
     f->pid = calloc((size_t)f->patches, sizeof *f->pid);
     f->rows_in = calloc((size_t)f->patches, sizeof *f->rows_in);
     f->tallied = calloc((size_t)f->patches, sizeof *f->tallied);
+    f->left = calloc((size_t)f->patches, sizeof *f->left);
+    f->peer = calloc((size_t)f->patches, sizeof *f->peer);
     f->space = ts_space_new();
-    if (!f->pid || !f->rows_in || !f->tallied || !f->space)
+    if (!f->pid || !f->rows_in || !f->tallied || !f->left || !f->peer || !f->space)
         return tf_seterr(err, errlen, "out of memory");
-    f->srv = ts_server_new(f->space, NULL, NULL, err, errlen);
-    if (!f->srv)
+    if (open_server(f, err, errlen) != 0)
         return -1;
-    for (int p = 0; p < f->patches; p++)
+    for (int p = 0; p < f->o->forked; p++)
         if (spawn(f, p, err, errlen) != 0)
             return -1;
     if (deal(f) != 0)
@@ -265,22 +347,27 @@ static void farm_free(farm *f)
     free(f->pid);
     free(f->rows_in);
     free(f->tallied);
+    free(f->owners.conn);
+    free(f->left);
+    free(f->peer);
     tf_erosion_state_free(&f->st);
 }
 
-int tf_erosion_farm(const tf_terrain *t, int workers, int halo, uint8_t **bytes, size_t *len,
-                    tf_erosion_report *rep, tf_erosion_farm_report *fr, char *err,
+int tf_erosion_farm(const tf_scene *s, const tf_erosion_farm_opts *o, uint8_t **bytes,
+                    size_t *len, tf_erosion_report *rep, tf_erosion_farm_report *fr, char *err,
                     size_t errlen)
 {
+    const tf_terrain *t = &s->terrain;
+    int workers = o->forked + o->remote;
     int n = (1 << t->size_exp) + 1;
     memset(rep, 0, sizeof *rep);
     memset(fr, 0, sizeof *fr);
     *bytes = tf_eroded_from_cache(t, n, len, rep);
     if (*bytes)
         return 0;
-    farm f = {.t = t};
+    farm f = {.s = s, .t = t, .o = o};
     double extent = t->extent;
-    int rc = prepare(&f, workers, halo, &extent, err, errlen);
+    int rc = prepare(&f, workers, o->halo, &extent, err, errlen);
     rep->solid_before = rc == 0 ? tf_erosion_solid(&f.st, n) : 0;
     double t0 = tf_now_s();
     if (rc == 0)
@@ -294,6 +381,7 @@ int tf_erosion_farm(const tf_terrain *t, int workers, int halo, uint8_t **bytes,
         rep->isa = tf_erosion_isa();
         rep->threads = 1;
         fr->workers = f.patches;
+        fr->remote = o->remote;
         fr->px = f.plan.px;
         fr->py = f.plan.py;
         fr->halo = f.plan.halo;
@@ -303,7 +391,8 @@ int tf_erosion_farm(const tf_terrain *t, int workers, int halo, uint8_t **bytes,
     if (rc == 0) {
         fr->edge_bytes_per_step = tf_erosion_plan_edge_bytes(&f.plan) / f.plan.halo;
         char how[48];
-        snprintf(how, sizeof how, "%d workers, %dx%d patches", f.patches, f.plan.px, f.plan.py);
+        snprintf(how, sizeof how, "%d workers (%d networked), %dx%d patches", f.patches,
+                 o->remote, f.plan.px, f.plan.py);
         tf_eroded_log(t, n, rep, how);
         tf_eroded_to_cache(t, *bytes, *len, rep);
     }

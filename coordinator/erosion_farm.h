@@ -13,15 +13,25 @@
 #include "scene.h"
 
 typedef struct tf_erosion_farm_report {
-    int workers, px, py, halo;
+    int workers, remote, px, py, halo;
     double edge_bytes_per_step; /* edges traded through the space, per time step */
 } tf_erosion_farm_report;
 
-/* t's eroded terrain's blob (*bytes malloc'd): from the cache, or eroded now on `workers`
- * forked workers with edges traded every `halo` steps (<= 0: 8).  0, or -1 with one line in
- * err (a worker that fails or dies fails the erosion; none is left behind). */
-int tf_erosion_farm(const tf_terrain *t, int workers, int halo, uint8_t **bytes, size_t *len,
-                    tf_erosion_report *rep, tf_erosion_farm_report *fr, char *err,
+typedef struct tf_erosion_farm_opts {
+    int forked;             /* workers forked here, one patch each */
+    int remote;             /* networked workers expected (terrafarm worker --connect) */
+    int halo;               /* steps per round; <= 0: 8 */
+    const char *listen;     /* where networked workers connect (remote > 0) */
+    const uint8_t *key;     /* their secret (tf_secret_load), or NULL on loopback */
+} tf_erosion_farm_opts;
+
+/* s's eroded terrain's blob (*bytes malloc'd): from the cache, or eroded now on o->forked
+ * forked workers and o->remote networked ones, edges traded every o->halo steps.  The
+ * networked workers read the scene and derive the initial state themselves; the plan's grid
+ * is s->terrain's.  0, or -1 with one line in err (a worker that fails, dies or leaves with its
+ * patch fails the erosion; no forked worker is left behind). */
+int tf_erosion_farm(const tf_scene *s, const tf_erosion_farm_opts *o, uint8_t **bytes,
+                    size_t *len, tf_erosion_report *rep, tf_erosion_farm_report *fr, char *err,
                     size_t errlen);
 
 #endif

@@ -8,6 +8,8 @@
 #include <string.h>
 
 #include "log.h"
+#include "terrain/terrain_build.h"
+#include "worker/worker.h"
 
 typedef struct patch {
     ts_client *c;
@@ -280,4 +282,91 @@ int tf_erosion_patch_serve(ts_client *c, const tf_erosion_plan *plan, const tf_e
         return 1;
     }
     return 0;
+}
+
+/* ---- a networked erosion worker ------------------------------------------------------ */
+
+/* The plan in c's space, if it is an erosion's: 1 found, 0 not an erosion, -1 error. */
+static int fetch_plan(ts_client *c, tf_erosion_plan *p)
+{
+    tf_tuple tmpl, got;
+    tf_tuple_init(&tmpl);
+    tf_tuple_init(&got);
+    int64_t v[6];
+    int rc = tf_tuple_pack(&tmpl, "sIIIIII", "erode_plan") ? -1 : ts_rdp(c, &tmpl, &got);
+    for (int k = 0; rc == 1 && k < 6; k++)
+        if (tf_tuple_get_int(&got, 1 + k, &v[k]) || v[k] < 0 || v[k] > (1 << 24))
+            rc = -1;
+    if (rc == 1)
+        *p = (tf_erosion_plan){v[0], (int)v[1], (int)v[2], (int)v[3], (int)v[4], (int)v[5]};
+    tf_tuple_clear(&tmpl);
+    tf_tuple_clear(&got);
+    return rc;
+}
+
+/* The plan must be the one this scene makes: else the patches would not fit. */
+static int plan_fits(const tf_erosion_plan *p, const tf_scene *s, const char *from, char *err,
+                     size_t errlen)
+{
+    tf_erosion_plan mine;
+    int n = (1 << s->terrain.size_exp) + 1;
+    if (p->px < 1 || p->py < 1 || p->px > 1024 || p->py > 1024 ||
+        tf_erosion_plan_make(&mine, p->job, n, p->px * p->py, p->halo, p->steps) != 0 ||
+        mine.px != p->px || mine.py != p->py || mine.halo != p->halo || p->n != n ||
+        p->steps != s->terrain.erosion.fluvial_steps)
+        return tf_seterr(err, errlen, "%s: an erosion plan (%dx%d patches of a %d grid, halo "
+                         "%d, %d steps) that does not fit its scene", from, p->px, p->py, p->n,
+                         p->halo, p->steps);
+    return 0;
+}
+
+/* The initial state every worker derives from the scene, as the coordinator does. */
+static int initial_state(const tf_scene *s, tf_erosion_model *m, tf_erosion_state *st,
+                         char *err, size_t errlen)
+{
+    tf_terrain raw = s->terrain;
+    raw.erosion.fluvial_steps = 0;
+    int n = (1 << s->terrain.size_exp) + 1;
+    float *h = tf_terrain_heights(&raw, 0, NULL, err, errlen);
+    if (!h)
+        return -1;
+    float lo = h[0], hi = h[0];
+    for (size_t i = 0; i < (size_t)n * (size_t)n; i++) {
+        lo = h[i] < lo ? h[i] : lo;
+        hi = h[i] > hi ? h[i] : hi;
+    }
+    int rc = tf_erosion_model_init(m, &s->terrain.erosion, s->terrain.seed, n, lo, hi, err,
+                                   errlen);
+    if (rc == 0 && tf_erosion_state_from_heights(st, m, &s->terrain.erosion, h) != 0)
+        rc = tf_seterr(err, errlen, "out of memory: erosion of a %dx%d grid", n, n);
+    free(h);
+    return rc;
+}
+
+int tf_erosion_networked(ts_client *c, const char *from, int heartbeat_ms)
+{
+    tf_erosion_plan plan;
+    int found = fetch_plan(c, &plan);
+    if (found <= 0) {
+        if (found < 0)
+            tf_error("%s: malformed erosion plan", from);
+        return found < 0 ? 1 : -1;
+    }
+    char err[1024];
+    tf_erosion_model m;
+    tf_erosion_state st = {0};
+    ts_client_heartbeat(c, heartbeat_ms); /* rounds can outlast the server's silence timeout */
+    tf_scene *s = tf_worker_fetch_scene_ex(c, from, 0, err, sizeof err);
+    int rc = !s || plan_fits(&plan, s, from, err, sizeof err) != 0 ||
+             initial_state(s, &m, &st, err, sizeof err) != 0;
+    if (rc)
+        tf_error("%s", err);
+    else {
+        tf_info("joining %s: erosion of a %dx%d grid, %d steps, as one of %d patches", from,
+                plan.n, plan.n, plan.steps, plan.px * plan.py);
+        rc = tf_erosion_patch_serve(c, &plan, &m, &st, from);
+    }
+    tf_erosion_state_free(&st);
+    tf_scene_free(s);
+    return rc;
 }

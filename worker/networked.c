@@ -13,6 +13,7 @@
 #include "clock.h"
 #include "log.h"
 #include "scene.h"
+#include "worker/erosion_patch.h"
 #include "worker/payloads.h"
 #include "linda/auth.h"
 #include "linda/tsclient.h"
@@ -201,6 +202,11 @@ int tf_networked_worker_run(const tf_networked_opts *o)
     if (!c) {
         tf_error("%s", err);
         return 1;
+    }
+    int eroded = model ? -1 : tf_erosion_networked(c, connect, TF_WORKER_HEARTBEAT_MS);
+    if (eroded >= 0) { /* the coordinator was an erosion's: one patch served */
+        ts_client_close(c);
+        return eroded;
     }
     tf_scene *s = tf_worker_fetch_scene(c, connect, err, sizeof err);
     if (!s) {

@@ -400,6 +400,12 @@ int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t err
 
 tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen)
 {
+    return tf_worker_fetch_scene_ex(c, coordinator, 1, err, errlen);
+}
+
+tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int eroded, char *err,
+                                   size_t errlen)
+{
     tf_tuple tmpl, got;
     tf_tuple_init(&got);
     tf_scene_msg m;
@@ -419,7 +425,8 @@ tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err
         goto fail;
     }
     tf_scene_set_size(s, (int)m.width, (int)m.height);
-    if (tf_heightmap_fetch(c, s, coordinator, err, errlen)) { /* height map, eroded terrain */
+    if (tf_heightmap_fetch(c, s, coordinator, err, errlen) ||
+        (eroded && tf_eroded_fetch(c, s, coordinator, err, errlen))) {
         tf_scene_free(s);
         goto fail;
     }

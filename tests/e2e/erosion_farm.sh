@@ -101,3 +101,31 @@ same_pixels "$T/r/forked.exr" "$T/r/net.exr" "a networked worker's render of the
 [ $rc -ne 0 ] && grep -q 'cannot shade an eroded terrain' "$T/cl.err" ||
     fail "--backend opencl on an eroded terrain: exit $rc, $(cat "$T/cl.err")"
 say "refused: $(cat "$T/cl.err")"
+
+say "networked erosion workers: a real one, then a liar"
+hf_remote() {
+    : >"$T/hfr.err"
+    TF_EROSION_CACHE=off "$TF_BIN" heightfield "$SCENE" -o "$1" -j 1 --remote 1 \
+        --listen 127.0.0.1:0 2>"$T/hfr.err" >/dev/null &
+    hfc=$!; e2e_track $hfc
+    i=0
+    while ! grep -q 'networked workers expected at port' "$T/hfr.err"; do
+        sleep 0.1; i=$((i + 1)); [ $i -lt 200 ] || fail "no port: $(cat "$T/hfr.err")"
+    done
+    hport=$(sed -n 's/.*expected at port \([0-9]*\).*/\1/p' "$T/hfr.err")
+}
+hf_remote "$T/net.exr"
+"$TF_BIN" worker --connect 127.0.0.1:$hport 2>"$T/ew.err" || fail "erosion worker: $(cat "$T/ew.err")"
+wait_exit $hfc 60
+[ $rc -eq 0 ] || fail "heightfield with a networked worker exited $rc: $(cat "$T/hfr.err")"
+grep -q 'erosion of a 129x129 grid' "$T/ew.err" || fail "the worker did not erode: $(cat "$T/ew.err")"
+same "$T/ref.exr" "$T/net.exr" "heights eroded by a forked and a networked worker"
+hf_remote "$T/lie.exr"
+python3 "$TF_ROOT/tests/tools/erosion_liar.py" 127.0.0.1 "$hport" >"$T/liar.out" 2>&1 ||
+    fail "the liar was not refused: $(cat "$T/liar.out")"
+wait_exit $hfc 60
+[ $rc -ne 0 ] || fail "an erosion with a lying worker exited 0"
+grep -q "erosion failed on a worker: .*edge .* of round 0: erosion block of" "$T/hfr.err" ||
+    fail "the short edge was not refused: $(cat "$T/hfr.err")"
+[ -e "$T/lie.exr" ] && fail "a failed erosion wrote its output"
+say "liar: $(grep -c '^refused' "$T/liar.out") requests refused; $(grep 'erosion failed' "$T/hfr.err")"

@@ -11,6 +11,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "terrain/cachefile.h"
+#include "terrain/erosion_checkpoint.h"
 #include "terrain/erosion_run.h"
 #include "terrain/erosion_state.h"
 #include "terrain/heightfield.h"
@@ -188,47 +190,6 @@ static uint8_t *cache_read(const tf_terrain *t, int n, const char *path, size_t 
     return NULL;
 }
 
-/* mkdir -p dir (mode 0700 for what it creates).  0, or -1 with errno set. */
-static int make_dirs(const char *dir)
-{
-    char path[400];
-    snprintf(path, sizeof path, "%s", dir);
-    for (char *p = path + 1; *p; p++)
-        if (*p == '/') {
-            *p = '\0';
-            if (mkdir(path, 0700) != 0 && errno != EEXIST)
-                return -1;
-            *p = '/';
-        }
-    return mkdir(path, 0700) != 0 && errno != EEXIST ? -1 : 0;
-}
-
-/* Write the blob atomically (temporary file, fsync, rename); a failure only costs the cache. */
-static void cache_write(const char *dir, const char *path, const uint8_t *b, size_t len)
-{
-    char tmp[600];
-    snprintf(tmp, sizeof tmp, "%s.%ld.tmp", path, (long)getpid());
-    if (make_dirs(dir) != 0) {
-        tf_warn("%s: cannot create the erosion cache: %s", dir, strerror(errno));
-        return;
-    }
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0600);
-    size_t off = 0;
-    while (fd >= 0 && off < len) {
-        ssize_t w = write(fd, b + off, len - off);
-        if (w <= 0)
-            break;
-        off += (size_t)w;
-    }
-    int ok = fd >= 0 && off == len && fsync(fd) == 0;
-    if (fd >= 0)
-        ok = close(fd) == 0 && ok;
-    if (!ok || rename(tmp, path) != 0) {
-        tf_warn("%s: cannot write the erosion cache entry: %s", path, strerror(errno));
-        unlink(tmp);
-    }
-}
-
 /* Erode raw (n x n) by t's [erosion] keys; the blob, or NULL with one line in err. */
 static uint8_t *erode(const tf_terrain *t, const float *raw, int n, double extent, int threads,
                       size_t *len, tf_erosion_report *rep, char *err, size_t errlen)
@@ -247,12 +208,19 @@ static uint8_t *erode(const tf_terrain *t, const float *raw, int n, double exten
         return NULL;
     }
     rep->solid_before = tf_erosion_solid(&st, n);
-    tf_erosion_run_opts o = {0, m.steps, threads, 0, 0, 0};
+    const char *dir = tf_eroded_cache_dir();
+    int done = dir && tf_erosion_checkpoints_enabled()
+                   ? tf_erosion_checkpoint_find(t, dir, m.steps, &st) : 0;
+    if (done > 0)
+        tf_info("erosion: continuing from the checkpoint after %d steps", done);
+    tf_erosion_run_opts o = {done, m.steps - done, threads, 0, 0, 0};
     double t0 = tf_now_s();
     uint8_t *b = NULL;
     if (tf_erosion_run(&st, &m, &o, &rep->tally, err, errlen) == 0) {
+        if (dir && tf_erosion_checkpoints_enabled())
+            tf_erosion_checkpoint_save(t, dir, &st, m.steps);
         rep->seconds = tf_now_s() - t0;
-        rep->vertex_steps = (double)n * (double)n * (double)m.steps;
+        rep->vertex_steps = (double)n * (double)n * (double)(m.steps - done);
         rep->solid_after = tf_erosion_solid(&st, n);
         rep->quantum = m.q;
         rep->isa = tf_erosion_isa();
@@ -286,7 +254,7 @@ void tf_eroded_to_cache(const tf_terrain *t, const uint8_t *b, size_t len,
     if (!dir)
         return;
     entry_path(rep->cache_path, sizeof rep->cache_path, dir, t);
-    cache_write(dir, rep->cache_path, b, len);
+    tf_cachefile_write(dir, rep->cache_path, b, len);
 }
 
 void tf_eroded_log(const tf_terrain *t, int n, const tf_erosion_report *rep, const char *how)

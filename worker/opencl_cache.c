@@ -70,7 +70,9 @@ static int open_checked_dir(const char *dir, char *err, size_t errlen)
     tf_make_private_dirs(dir); /* what it could not do, the checks below name */
     int fd = open(dir, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
     if (fd < 0)
-        return tf_seterr(err, errlen, "cannot open %s: %s", dir, strerror(errno));
+        return tf_seterr(err, errlen, "cannot open %s: %s", dir,
+                         errno == ENOTDIR || errno == ELOOP ? "not a directory, or a symbolic link"
+                                                            : strerror(errno));
     if (fstat(fd, &st) != 0 || st.st_uid != geteuid())
         tf_seterr(err, errlen, "%s is not owned by this user (uid %u)", dir, (unsigned)geteuid());
     else if (st.st_mode & (S_IWGRP | S_IWOTH))
@@ -224,12 +226,14 @@ static int check_entry(const tf_clcache *c, const unsigned char *buf, size_t siz
     unsigned char sum[crypto_generichash_BYTES];
     size_t n = size - TF_CLCACHE_HEADER_BYTES;
     if (memcmp(buf, MAGIC, 8) != 0)
-        return tf_seterr(err, errlen, "not a terrafarm OpenCL cache entry (magic)");
-    if (get_le(buf + OFF_FORMAT, 4) != FORMAT || get_le(buf + OFF_ZERO, 4) != 0)
+        return tf_seterr(err, errlen, "its magic is not a terrafarm OpenCL cache entry's");
+    if (get_le(buf + OFF_FORMAT, 4) != FORMAT)
         return tf_seterr(err, errlen, "header format %u, expected %u",
                          (unsigned)get_le(buf + OFF_FORMAT, 4), FORMAT);
+    if (get_le(buf + OFF_ZERO, 4) != 0)
+        return tf_seterr(err, errlen, "the header's reserved word is not zero");
     if (memcmp(buf + OFF_KEY, c->key, sizeof c->key) != 0)
-        return tf_seterr(err, errlen, "stored for another program or device (key)");
+        return tf_seterr(err, errlen, "its key is another program's or device's");
     if (get_le(buf + OFF_LENGTH, 8) != n)
         return tf_seterr(err, errlen, "length %llu in the header, %zu bytes follow it",
                          (unsigned long long)get_le(buf + OFF_LENGTH, 8), n);
@@ -251,7 +255,7 @@ static cl_program program_from_binary(cl_context ctx, cl_device_id dev, const un
         return p;
     if (p)
         clReleaseProgram(p);
-    tf_seterr(err, errlen, "the driver rejected the stored binary (error %d, status %d)", rc,
+    tf_seterr(err, errlen, "the driver rejected the stored binary: error %d, status %d", rc,
               status);
     return NULL;
 }

@@ -337,6 +337,7 @@ static cl_program cached_program(tf_cl_backend *b, cl_device_id dev, char **src,
 {
     tf_clcache c;
     char why[PATH_MAX + 256];
+    double t0 = tf_now_s();
     if (tf_clcache_open(&c, dev, NSRC, (const char *const *)src, len, options, why,
                         sizeof why) && c.state == TF_CLCACHE_REFUSED)
         tf_warn("OpenCL program cache not used: %s; building from source", why);
@@ -351,7 +352,8 @@ static cl_program cached_program(tf_cl_backend *b, cl_device_id dev, char **src,
         c.dirfd >= 0 && tf_clcache_store(&c, p, why, sizeof why))
         tf_warn("OpenCL program cache: %s", why);
     if (p)
-        tf_debug("OpenCL program cache %s: %s/%s", tf_clcache_state_name(c.state), c.dir, c.name);
+        tf_debug("OpenCL program cache %s: %s/%s (program ready in %.3f s)",
+                 tf_clcache_state_name(c.state), c.dir, c.name, tf_now_s() - t0);
     b->cache_state = c.state;
     tf_clcache_close(&c);
     return p;

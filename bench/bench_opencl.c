@@ -9,8 +9,9 @@
  * The C and OpenCL stamp renders alternate REPEATS times; the ratios printed are the medians
  * of the per-round ratios (each round's C and OpenCL run back to back, so a slow spell of a
  * shared machine hits both), with the spread.
- * Also: the kernel build time cold (a fresh, empty POCL_CACHE_DIR) and cached (the same
- * directory again), device time per kernel (corners vs adaptive pixels), rays per second, and
+ * Also: the kernel build time cold (a fresh, empty POCL_CACHE_DIR, and terrafarm's own binary
+ * cache, TF_OPENCL_CACHE, empty in it) and cached (the same directories again: a binary-cache
+ * hit), device time per kernel (corners vs adaptive pixels), rays per second, and
  * the image match (PSNR, equal sample counts, bit-identical pixels).
  *
  *   build/bench/bench_opencl SCENE [WxH] [STAMP] [REPEATS]   (defaults: the scene's size, 64, 5)
@@ -191,9 +192,15 @@ int main(int argc, char **argv)
     char dir[4096];
     const char *user_cache = getenv("POCL_CACHE_DIR");
     char *saved = user_cache ? strdup(user_cache) : NULL;
+    const char *user_tf_cache = getenv("TF_OPENCL_CACHE");
+    char *saved_tf = user_tf_cache ? strdup(user_tf_cache) : NULL;
     dir[0] = '\0';
-    if (!smoke && fresh_cache_dir(dir, sizeof dir) == 0)
+    char tf_cache[4096 + 16];
+    if (!smoke && fresh_cache_dir(dir, sizeof dir) == 0) {
         setenv("POCL_CACHE_DIR", dir, 1);
+        snprintf(tf_cache, sizeof tf_cache, "%s/tf-opencl", dir); /* removed with it */
+        setenv("TF_OPENCL_CACHE", tf_cache, 1);
+    }
     double t0 = now();
     tf_cl_backend *cold = tf_cl_backend_new(s, hf, err, sizeof err);
     double cold_total = now() - t0;
@@ -211,9 +218,10 @@ int main(int argc, char **argv)
         return 1;
     }
     printf("device     %s\n", tf_cl_backend_device(cl));
-    printf("build      %s %.2f s (backend ready in %.2f s), cached %.3f s (ready in %.3f s)\n",
+    printf("build      %s %.2f s (backend ready in %.2f s), cached %.3f s (ready in %.3f s; "
+           "binary cache %s)\n",
            smoke ? "first (PoCL's cache, --smoke)" : "cold", cold_build, cold_total,
-           tf_cl_backend_build_seconds(cl), warm_total);
+           tf_cl_backend_build_seconds(cl), warm_total, tf_cl_backend_cache(cl));
 
     /* the first launches compile PoCL's work-group functions (cached on disk too): timed apart */
     t0 = now();
@@ -316,7 +324,8 @@ int main(int argc, char **argv)
     free(cl_img);
     free(whole);
     free(buf);
-    /* the private cache goes; the user's POCL_CACHE_DIR comes back (for anything after us) */
+    /* the private caches go; the user's POCL_CACHE_DIR and TF_OPENCL_CACHE come back (for
+     * anything after us) */
     if (strstr(dir, "tf-bench-pocl-"))
         nftw(dir, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
     if (saved)
@@ -324,5 +333,10 @@ int main(int argc, char **argv)
     else
         unsetenv("POCL_CACHE_DIR");
     free(saved);
+    if (saved_tf)
+        setenv("TF_OPENCL_CACHE", saved_tf, 1);
+    else
+        unsetenv("TF_OPENCL_CACHE");
+    free(saved_tf);
     return 0;
 }

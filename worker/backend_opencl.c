@@ -10,9 +10,12 @@
  *      tf_cl_params.h, so the device never re-derives a scene constant.
  *   2. A device is chosen (choose_device): TERRAFARM_CL_DEVICE ("P:D" indices or a substring
  *      of the device name) or else the first GPU with fp64, else the first device with fp64.
- *   3. The kernel source is read at run time (find_kernel_dir) and built; on failure the build
- *      log goes to stderr and the error is one line.  PoCL caches compiled programs in
- *      POCL_CACHE_DIR, which defaults here to a per-user cache directory (set_pocl_cache_dir).
+ *   3. The kernel source is read at run time (find_kernel_dir); the program is made from the
+ *      binary cache (worker/opencl_cache.h: a binary this device built before from these
+ *      sources and options) or else built from source and stored there; on failure the build
+ *      log goes to stderr and the error is one line.  PoCL also caches compiled programs (and
+ *      the work-group functions of the first launches) in POCL_CACHE_DIR, which defaults here
+ *      to a per-user cache directory (set_pocl_cache_dir).
  *   4. The height field, all max/min grid levels (concatenated, offsets in I[]) and the texture
  *      permutation are uploaded once.
  * Each tf_cl_backend_render then runs tf_corners8 over the (w+1) x (h+1) corners (the
@@ -37,6 +40,7 @@
 #include <unistd.h>
 
 #include "worker/kernels/tf_cl_params.h"
+#include "worker/opencl_cache.h"
 #include "render/render_internal.h"
 #include "log.h"
 
@@ -72,29 +76,12 @@ struct tf_cl_backend {
     int lattice;
     size_t local;          /* work-group size: fixed, so PoCL specialises each kernel once */
     char device_name[256];
-    double build_seconds;
+    double build_seconds;  /* making the program: from the binary cache, or from source */
+    enum tf_clcache_state cache_state;
     double corner_seconds, pixel_seconds; /* device time of each kernel, from profiling events */
 };
 
 /* ---------------------------------------------------------------- environment */
-
-static int make_dirs(const char *path)
-{
-    char buf[PATH_MAX];
-    if (snprintf(buf, sizeof buf, "%s", path) >= (int)sizeof buf)
-        return -1;
-    for (char *p = buf + 1; *p; p++) {
-        if (*p != '/')
-            continue;
-        *p = 0;
-        if (mkdir(buf, 0700) != 0 && errno != EEXIST)
-            return -1;
-        *p = '/';
-    }
-    if (mkdir(buf, 0700) != 0 && errno != EEXIST)
-        return -1;
-    return access(buf, W_OK) == 0 ? 0 : -1;
-}
 
 /* PoCL keeps compiled programs in POCL_CACHE_DIR.  If the user set none, use
  * $XDG_CACHE_HOME/terrafarm/pocl, else $HOME/.cache/terrafarm/pocl, else /tmp/terrafarm-pocl-UID,
@@ -106,18 +93,18 @@ static void set_pocl_cache_dir(void)
     char dir[PATH_MAX];
     const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
     if (xdg && *xdg && snprintf(dir, sizeof dir, "%s/terrafarm/pocl", xdg) < (int)sizeof dir &&
-        make_dirs(dir) == 0) {
+        tf_make_private_dirs(dir) == 0) {
         setenv("POCL_CACHE_DIR", dir, 0);
         return;
     }
     if (home && *home && snprintf(dir, sizeof dir, "%s/.cache/terrafarm/pocl", home) <
                              (int)sizeof dir &&
-        make_dirs(dir) == 0) {
+        tf_make_private_dirs(dir) == 0) {
         setenv("POCL_CACHE_DIR", dir, 0);
         return;
     }
     snprintf(dir, sizeof dir, "/tmp/terrafarm-pocl-%u", (unsigned)getuid());
-    if (make_dirs(dir) == 0)
+    if (tf_make_private_dirs(dir) == 0)
         setenv("POCL_CACHE_DIR", dir, 0);
 }
 
@@ -276,17 +263,15 @@ static char *read_source(const char *dir, const char *name, size_t *len, char *w
     return read_text(where, len);
 }
 
-/* Build the program from SOURCE_FILES, concatenated in that order.  On failure the build log
- * goes to stderr (it is many lines; the error itself stays one line). */
-static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t errlen)
+static const char *const source_names[] = SOURCE_FILES;
+enum { NSRC = sizeof source_names / sizeof source_names[0] };
+
+/* Read every file of SOURCE_FILES for kernel directory dir into src[] and len[].  0, or -1 with
+ * a message naming the first file missing (nothing left allocated). */
+static int read_sources(const char *dir, char **src, size_t *len, char *err, size_t errlen)
 {
-    char dir[PATH_MAX], path[PATH_MAX + 64], missing_path[PATH_MAX + 64] = "";
-    if (find_kernel_dir(dir, sizeof dir, err, errlen))
-        return -1;
-    const char *names[] = SOURCE_FILES;
-    enum { NSRC = sizeof names / sizeof names[0] };
-    size_t len[NSRC];
-    char *src[NSRC];
+    const char *const *names = source_names;
+    char path[PATH_MAX + 64], missing_path[PATH_MAX + 64] = "";
     int missing = -1;
     for (int i = 0; i < NSRC; i++) {
         src[i] = read_source(dir, names[i], &len[i], path, sizeof path);
@@ -295,49 +280,105 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
             snprintf(missing_path, sizeof missing_path, "%s", path);
         }
     }
-    if (missing >= 0) {
-        if (strchr(names[missing], '/'))
-            tf_seterr(err, errlen,
-                      "cannot read the shared OpenCL kernel header %s (looked beside the "
-                      "kernels in %s, then in the checkout at %s)",
-                      names[missing], dir, missing_path);
-        else
-            tf_seterr(err, errlen, "cannot read the OpenCL kernel source %s", missing_path);
-        for (int i = 0; i < NSRC; i++)
-            free(src[i]);
-        return -1;
-    }
-    cl_int rc;
-    double t0 = tf_now_s();
-    b->program = clCreateProgramWithSource(b->ctx, NSRC, (const char **)src, len, &rc);
+    if (missing < 0)
+        return 0;
     for (int i = 0; i < NSRC; i++)
         free(src[i]);
+    if (strchr(names[missing], '/'))
+        return tf_seterr(err, errlen,
+                         "cannot read the shared OpenCL kernel header %s (looked beside the "
+                         "kernels in %s, then in the checkout at %s)",
+                         names[missing], dir, missing_path);
+    return tf_seterr(err, errlen, "cannot read the OpenCL kernel source %s", missing_path);
+}
+
+/* A failed build's log, to stderr (it is many lines; the error itself stays one line). */
+static void print_build_log(cl_program program, cl_device_id dev, const char *dir)
+{
+    size_t loglen = 0;
+    clGetProgramBuildInfo(program, dev, CL_PROGRAM_BUILD_LOG, 0, NULL, &loglen);
+    if (loglen == 0 || loglen >= ((size_t)16 << 20))
+        return;
+    char *log = malloc(loglen + 1);
+    if (log && clGetProgramBuildInfo(program, dev, CL_PROGRAM_BUILD_LOG, loglen, log, NULL) ==
+                   CL_SUCCESS) {
+        log[loglen] = 0;
+        fprintf(stderr, "--- OpenCL build log (%s) ---\n%s\n---\n", dir, log);
+    }
+    free(log);
+}
+
+/* The program built from the sources.  NULL with a message (and the build log on stderr). */
+static cl_program program_from_source(cl_context ctx, cl_device_id dev, char **src,
+                                      const size_t *len, const char *options, const char *dir,
+                                      char *err, size_t errlen)
+{
+    cl_int rc;
+    cl_program p = clCreateProgramWithSource(ctx, NSRC, (const char **)src, len, &rc);
     if (rc != CL_SUCCESS) {
         tf_seterr(err, errlen, "OpenCL: cannot create the program (error %d)", rc);
-        return -1;
+        return NULL;
     }
+    rc = clBuildProgram(p, 1, &dev, options, NULL, NULL);
+    if (rc == CL_SUCCESS)
+        return p;
+    print_build_log(p, dev, dir);
+    clReleaseProgram(p);
+    tf_seterr(err, errlen, "OpenCL: building the kernels in %s failed (error %d; build log "
+              "above)", dir, rc);
+    return NULL;
+}
+
+/* The program from the binary cache (worker/opencl_cache.h) if it holds a good entry, else built
+ * from the sources and stored there.  A refused directory or entry is one warning. */
+static cl_program cached_program(tf_cl_backend *b, cl_device_id dev, char **src,
+                                 const size_t *len, const char *options, const char *dir,
+                                 char *err, size_t errlen)
+{
+    tf_clcache c;
+    char why[PATH_MAX + 256];
+    double t0 = tf_now_s();
+    if (tf_clcache_open(&c, dev, NSRC, (const char *const *)src, len, options, why,
+                        sizeof why) && c.state == TF_CLCACHE_REFUSED)
+        tf_warn("OpenCL program cache not used: %s; building from source", why);
+    cl_program p = tf_clcache_load(&c, b->ctx, dev, options, why, sizeof why);
+    if (p)
+        c.state = TF_CLCACHE_HIT;
+    else if (why[0]) {
+        tf_warn("OpenCL program cache: %s/%s refused (%s); rebuilding it", c.dir, c.name, why);
+        c.state = TF_CLCACHE_REBUILT;
+    }
+    if (!p && (p = program_from_source(b->ctx, dev, src, len, options, dir, err, errlen)) &&
+        c.dirfd >= 0 && tf_clcache_store(&c, p, why, sizeof why))
+        tf_warn("OpenCL program cache: %s", why);
+    if (p)
+        tf_debug("OpenCL program cache %s: %s/%s (program ready in %.3f s)",
+                 tf_clcache_state_name(c.state), c.dir, c.name, tf_now_s() - t0);
+    b->cache_state = c.state;
+    tf_clcache_close(&c);
+    return p;
+}
+
+/* Make the program from SOURCE_FILES, concatenated in that order (through the binary cache),
+ * and its two kernels. */
+static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t errlen)
+{
+    char dir[PATH_MAX];
+    size_t len[NSRC];
+    char *src[NSRC];
+    if (find_kernel_dir(dir, sizeof dir, err, errlen) || read_sources(dir, src, len, err, errlen))
+        return -1;
     char options[128];
     snprintf(options, sizeof options, "-cl-std=CL1.2 -DTF_STREAM=%d -DTF_PIX=%d",
              CORNERS_PER_ITEM, PIXELS_PER_ITEM);
-    rc = clBuildProgram(b->program, 1, &dev, options, NULL, NULL);
+    double t0 = tf_now_s();
+    b->program = cached_program(b, dev, src, len, options, dir, err, errlen);
     b->build_seconds = tf_now_s() - t0;
-    if (rc != CL_SUCCESS) {
-        size_t loglen = 0;
-        clGetProgramBuildInfo(b->program, dev, CL_PROGRAM_BUILD_LOG, 0, NULL, &loglen);
-        if (loglen > 0 && loglen < ((size_t)16 << 20)) {
-            char *log = malloc(loglen + 1);
-            if (log && clGetProgramBuildInfo(b->program, dev, CL_PROGRAM_BUILD_LOG, loglen, log,
-                                             NULL) == CL_SUCCESS) {
-                log[loglen] = 0;
-                fprintf(stderr, "--- OpenCL build log (%s) ---\n%s\n---\n", dir,
-                        log);
-            }
-            free(log);
-        }
-        tf_seterr(err, errlen, "OpenCL: building the kernels in %s failed (error %d; build log "
-                 "above)", dir, rc);
+    for (int i = 0; i < NSRC; i++)
+        free(src[i]);
+    if (!b->program)
         return -1;
-    }
+    cl_int rc;
     b->k_corners = clCreateKernel(b->program, "tf_corners8", &rc);
     if (rc == CL_SUCCESS)
         b->k_pixels = clCreateKernel(b->program, "tf_pixels8", &rc);
@@ -579,6 +620,10 @@ int tf_cl_backend_set_scene(tf_cl_backend *b, const tf_scene *s, char *err, size
 
 const char *tf_cl_backend_device(const tf_cl_backend *b) { return b->device_name; }
 double tf_cl_backend_build_seconds(const tf_cl_backend *b) { return b->build_seconds; }
+const char *tf_cl_backend_cache(const tf_cl_backend *b)
+{
+    return tf_clcache_state_name(b->cache_state);
+}
 
 void tf_cl_backend_kernel_seconds(const tf_cl_backend *b, double *corners, double *pixels)
 {

@@ -23,9 +23,14 @@ void tf_cl_backend_free(tf_cl_backend *b);
  * bytes); the program and the height field stay.  s must outlive the backend's use of it.
  * 0, or -1 with a message (the backend then still renders its previous scene). */
 int tf_cl_backend_set_scene(tf_cl_backend *b, const tf_scene *s, char *err, size_t errlen);
-/* The chosen device's name, and the seconds clBuildProgram took (a PoCL cache hit is fast). */
+/* The chosen device's name, and the seconds making the program took (from the binary cache,
+ * or clBuildProgram from source: a PoCL cache hit is faster than a cold build). */
 const char *tf_cl_backend_device(const tf_cl_backend *b);
 double tf_cl_backend_build_seconds(const tf_cl_backend *b);
+/* How the program was made, by the binary cache (worker/opencl_cache.h): "hit", "miss" (built
+ * and stored), "rebuilt" (the entry was refused, built and stored again), "refused" (the
+ * directory was: built, not stored) or "off" (TF_OPENCL_CACHE=off). */
+const char *tf_cl_backend_cache(const tf_cl_backend *b);
 /* Device seconds spent so far in the corner and the pixel kernels (profiling events). */
 void tf_cl_backend_kernel_seconds(const tf_cl_backend *b, double *corners, double *pixels);
 

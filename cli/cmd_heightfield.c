@@ -338,18 +338,6 @@ typedef struct erosion_run {
     tf_erosion_farm_report farm;
 } erosion_run;
 
-/* The erosion cache: .terrafarm-cache beside the output file. */
-static void set_cache_beside(const char *output)
-{
-    char dir[400];
-    const char *slash = strrchr(output, '/');
-    if (slash)
-        snprintf(dir, sizeof dir, "%.*s/.terrafarm-cache", (int)(slash - output), output);
-    else
-        snprintf(dir, sizeof dir, ".terrafarm-cache");
-    tf_eroded_set_cache_dir(dir);
-}
-
 /* The networked workers' key: a secret file, or none on a loopback address. */
 static int erosion_key(const struct hf_options *o, uint8_t *key, const uint8_t **out, char *err,
                        size_t errlen)
@@ -479,7 +467,7 @@ int cmd_heightfield(int argc, char **argv)
     int n = (1 << terrain.size_exp) + 1;
 
     double extent;
-    set_cache_beside(o.output);
+    tf_eroded_cache_beside(o.output);
     erosion_run er = {0};
     float *h = heights(&o, scene, &terrain, &extent, &er, err, sizeof err);
     if (!h) {

@@ -28,6 +28,9 @@ tf_scene *tf_scene_at_frame(const tf_scene *s, int f)
     c->heightmap = NULL;
     c->heightmap_len = 0;
     c->heightmap_name = NULL;
+    c->eroded = NULL; /* borrowed the same way (terrain.eroded_bytes) */
+    c->eroded_len = 0;
+    c->eroded_from = NULL;
     c->path = strdup(s->path ? s->path : "<string>");
     c->text = malloc(s->text_len + 1);
     if (!c->path || !c->text) {

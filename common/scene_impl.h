@@ -52,7 +52,7 @@ struct key_def {
     double def[3];      /* default (def[0] for scalars) */
 };
 
-#define SCENE_KEY_COUNT 86 /* entries of SCENE_KEYS */
+#define SCENE_KEY_COUNT 87 /* entries of SCENE_KEYS */
 extern const struct key_def SCENE_KEYS[SCENE_KEY_COUNT];
 /* 1 if the canonical form leaves key out: a key added to the format after its first version
  * (terrain smooth) while it is at its default, so every scene that does not set it keeps its

@@ -107,6 +107,7 @@ const struct key_def SCENE_KEYS[SCENE_KEY_COUNT] = {
     {SEC_ANIMATION, "fps", KT_DOUBLE, F(animation.fps), 0, 1000, 1, 0, {24}},
     {SEC_ANIMATION, "camera", KT_CAMERA_KEY, F(animation), -BIG, BIG, 0, 0, {0}},
     {SEC_ANIMATION, "sun", KT_SUN_KEY, F(animation), -360, 360, 0, 0, {0}},
+    {SEC_ANIMATION, "erosion_steps", KT_INT, F(animation.erosion_steps), 0, 1000000, 0, 0, {0}},
 
 #define E(field) F(terrain.erosion.field)
     {SEC_EROSION, "fluvial_steps", KT_INT, E(fluvial_steps), 0, 10000000, 0, 0, {0}},
@@ -171,9 +172,11 @@ const void *scene_cfield(const tf_scene *s, int key)
 int scene_key_silent(const tf_scene *s, int key)
 {
     const struct key_def *k = &SCENE_KEYS[key];
-    if (k->section != SEC_TERRAIN || (strcmp(k->name, "smooth") != 0 &&
-                                       strcmp(k->name, "procedural") != 0 &&
-                                       strcmp(k->name, "detail") != 0))
+    int silent = k->section == SEC_TERRAIN
+                     ? !strcmp(k->name, "smooth") || !strcmp(k->name, "procedural") ||
+                           !strcmp(k->name, "detail")
+                     : k->section == SEC_ANIMATION && !strcmp(k->name, "erosion_steps");
+    if (!silent)
         return 0;
     if (k->type == KT_DOUBLE)
         return *(const double *)scene_cfield(s, key) == k->def[0];

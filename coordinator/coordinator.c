@@ -2,6 +2,7 @@
  * call per step; each step is a function below, in the order they run, sharing one struct
  * render that holds everything a render owns (freed by render_close whatever step failed). */
 #include "coordinator/coordinator.h"
+#include "coordinator/erosion_film.h"
 #include "clock.h"
 
 #include <errno.h>
@@ -201,7 +202,7 @@ static int load_scene(render *r)
 {
     char err[1024];
     const tf_render_opts *o = r->o;
-    r->scene = tf_scene_load(o->scene_path, err, sizeof err);
+    r->scene = o->scene ? o->scene : tf_scene_load(o->scene_path, err, sizeof err);
     if (!r->scene)
         return step_failed(r, 2, err);
     if (o->width > 0)
@@ -406,13 +407,7 @@ static int open_dashboard(render *r)
  * (through the tuple space), use it instead of eroding again. */
 static int erode_once(render *r, char *err, size_t errlen)
 {
-    char dir[600];
-    const char *slash = strrchr(r->pattern, '/');
-    if (slash)
-        snprintf(dir, sizeof dir, "%.*s/.terrafarm-cache", (int)(slash - r->pattern), r->pattern);
-    else
-        snprintf(dir, sizeof dir, ".terrafarm-cache");
-    tf_eroded_set_cache_dir(dir);
+    tf_eroded_cache_beside(r->pattern);
     uint8_t *blob;
     size_t len;
     if (tf_terrain_eroded_bytes(&r->scene->terrain, 0, &blob, &len, NULL, err, errlen) != 0)
@@ -970,7 +965,7 @@ static void render_close(render *r)
     free(r->pattern);
 }
 
-int tf_coordinator_run(const tf_render_opts *o)
+static int render_run(const tf_render_opts *o)
 {
     render r;
     memset(&r, 0, sizeof r);
@@ -1021,4 +1016,21 @@ out:
     run_on_done(&r); /* the dashboard still shows the final state meanwhile */
     render_close(&r);
     return r.status;
+}
+
+int tf_coordinator_run(const tf_render_opts *o)
+{
+    if (o->scene)
+        return render_run(o);
+    char err[1024];
+    tf_scene *s = tf_scene_load(o->scene_path, err, sizeof err);
+    if (!s) {
+        tf_error("%s", err);
+        return 2;
+    }
+    if (s->animation.erosion_steps > 0)
+        return tf_erosion_film_run(o, s);
+    tf_render_opts loaded = *o;
+    loaded.scene = s;
+    return render_run(&loaded);
 }

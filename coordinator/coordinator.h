@@ -23,6 +23,9 @@
 
 typedef struct tf_render_opts {
     const char *scene_path;
+    struct tf_scene *scene;    /* given: render this scene (taken over and freed) instead of
+                                * loading scene_path, which still names it (an erosion film's
+                                * frame: erosion_film.h) */
     const char *output;        /* NULL: out/<scene>.exr, or out/<scene>.####.exr for a sequence */
     int frames_given;          /* --frames / --frame: render frames first..last by step */
     int frame_first, frame_last, frame_step;

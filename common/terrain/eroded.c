@@ -30,6 +30,16 @@ void tf_eroded_set_cache_dir(const char *dir)
     snprintf(cache_dir, sizeof cache_dir, "%s", dir ? dir : "");
 }
 
+void tf_eroded_cache_beside(const char *output)
+{
+    const char *slash = strrchr(output, '/');
+    if (slash)
+        snprintf(cache_dir, sizeof cache_dir, "%.*s/.terrafarm-cache", (int)(slash - output),
+                 output);
+    else
+        snprintf(cache_dir, sizeof cache_dir, ".terrafarm-cache");
+}
+
 const char *tf_eroded_cache_dir(void)
 {
     const char *env = getenv("TF_EROSION_CACHE");
@@ -231,6 +241,15 @@ static uint8_t *erode(const tf_terrain *t, const float *raw, int n, double exten
     }
     tf_erosion_state_free(&st);
     return b;
+}
+
+int tf_eroded_cache_path(const tf_terrain *t, char *out, size_t len)
+{
+    const char *dir = tf_eroded_cache_dir();
+    if (!dir)
+        return -1;
+    entry_path(out, len, dir, t);
+    return 0;
 }
 
 uint8_t *tf_eroded_from_cache(const tf_terrain *t, int n, size_t *len, tf_erosion_report *rep)

@@ -49,6 +49,11 @@ typedef struct tf_erosion_report {
  * environment's TF_EROSION_CACHE (a directory, or "off") overrides what a command sets. */
 void tf_eroded_set_cache_dir(const char *dir);
 const char *tf_eroded_cache_dir(void);
+/* The cache directory .terrafarm-cache beside the file `output` (what render and heightfield
+ * use). */
+void tf_eroded_cache_beside(const char *output);
+/* Where t's entry is (or would be) in the cache: 0, or -1 without a cache. */
+int tf_eroded_cache_path(const tf_terrain *t, char *out, size_t len);
 
 /* The blob of t's eroded terrain: from the cache when an entry checks out, else the raw
  * heights raw (n x n, the generator's, after thermal weathering) eroded with `threads` threads

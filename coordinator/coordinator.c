@@ -1024,10 +1024,8 @@ int tf_coordinator_run(const tf_render_opts *o)
         return render_run(o);
     char err[1024];
     tf_scene *s = tf_scene_load(o->scene_path, err, sizeof err);
-    if (!s) {
-        tf_error("%s", err);
-        return 2;
-    }
+    if (!s) /* the render's own steps say why, and run --on-done */
+        return render_run(o);
     if (s->animation.erosion_steps > 0)
         return tf_erosion_film_run(o, s);
     tf_render_opts loaded = *o;

@@ -29,6 +29,11 @@
 
 #define TF_EROSION_FIELDS 6 /* b, t, d, w, s, flow */
 
+/* An erosion's space also holds the scene tuple (farmproto.h) for networked workers, with this
+ * in place of an output layout, and ("erode_plan", job, n, px, py, halo, steps): a worker that
+ * reads the one goes on to the other instead of rendering. */
+#define TF_EROSION_LAYOUT "erosion"
+
 typedef struct tf_erosion_plan {
     int64_t job;
     int n;        /* grid side */

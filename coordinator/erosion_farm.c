@@ -127,7 +127,7 @@ static int put_plan_and_scene(farm *f)
                       (int64_t)p->py, (int64_t)p->halo, (int64_t)p->steps) ||
         ts_space_out(f->space, &t))
         return -1;
-    tf_scene_msg m = {f->s->text, f->s->width, f->s->height, f->s->hash_hex, "erosion"};
+    tf_scene_msg m = {f->s->text, f->s->width, f->s->height, f->s->hash_hex, TF_EROSION_LAYOUT};
     tf_tuple_init(&t);
     if (tf_scene_tuple_pack(&t, &m) || ts_space_out(f->space, &t))
         return -1;

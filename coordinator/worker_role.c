@@ -10,7 +10,6 @@ static const ts_cap_rule worker_rules[] = {
     {TS_CAP_RD, "heightmap_chunk", 3, 0, NULL},
     {TS_CAP_RD, "eroded", 4, 0, NULL},          /* [erosion]: the eroded terrain, the same way */
     {TS_CAP_RD, "eroded_chunk", 3, 0, NULL},
-    {TS_CAP_RD, "erode_plan", 7, 0, NULL},      /* a worker asks whether this is an erosion */
     {TS_CAP_IN, TF_TAG_NEXT_WORKER, TF_NEXT_WORKER_FIELDS, 1, tf_supervisor_admit},
     {TS_CAP_OUT, TF_TAG_HELLO, TF_HELLO_FIELDS, 1, tf_supervisor_admit},
     {TS_CAP_IN, TF_TAG_TASK, TF_TASK_FIELDS, 0, tf_supervisor_admit},

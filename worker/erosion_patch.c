@@ -9,7 +9,6 @@
 
 #include "log.h"
 #include "terrain/terrain_build.h"
-#include "worker/worker.h"
 
 typedef struct patch {
     ts_client *c;
@@ -343,21 +342,18 @@ static int initial_state(const tf_scene *s, tf_erosion_model *m, tf_erosion_stat
     return rc;
 }
 
-int tf_erosion_networked(ts_client *c, const char *from, int heartbeat_ms)
+int tf_erosion_networked(ts_client *c, const tf_scene *s, const char *from, int heartbeat_ms)
 {
     tf_erosion_plan plan;
-    int found = fetch_plan(c, &plan);
-    if (found <= 0) {
-        if (found < 0)
-            tf_error("%s: malformed erosion plan", from);
-        return found < 0 ? 1 : -1;
-    }
     char err[1024];
+    if (fetch_plan(c, &plan) != 1) {
+        tf_error("%s: an erosion without a readable plan: %s", from, ts_client_error(c));
+        return 1;
+    }
     tf_erosion_model m;
     tf_erosion_state st = {0};
     ts_client_heartbeat(c, heartbeat_ms); /* rounds can outlast the server's silence timeout */
-    tf_scene *s = tf_worker_fetch_scene_ex(c, from, 0, err, sizeof err);
-    int rc = !s || plan_fits(&plan, s, from, err, sizeof err) != 0 ||
+    int rc = plan_fits(&plan, s, from, err, sizeof err) != 0 ||
              initial_state(s, &m, &st, err, sizeof err) != 0;
     if (rc)
         tf_error("%s", err);
@@ -367,6 +363,5 @@ int tf_erosion_networked(ts_client *c, const char *from, int heartbeat_ms)
         rc = tf_erosion_patch_serve(c, &plan, &m, &st, from);
     }
     tf_erosion_state_free(&st);
-    tf_scene_free(s);
     return rc;
 }

@@ -15,10 +15,9 @@
 int tf_erosion_patch_serve(ts_client *c, const tf_erosion_plan *plan, const tf_erosion_model *m,
                            const tf_erosion_state *init, const char *from);
 
-/* A networked worker whose coordinator turns out to run an erosion (its space holds an
- * ("erode_plan", ...)): read the scene, check the plan fits it, derive the initial state,
- * serve one patch.  -1 when c's space is not an erosion's (the caller renders instead);
- * else the exit status, 0 or 1. */
-int tf_erosion_networked(ts_client *c, const char *from, int heartbeat_ms);
+/* A networked worker whose coordinator runs an erosion (its scene tuple said so:
+ * TF_EROSION_LAYOUT): read the plan, check it fits the scene s, derive the initial state,
+ * serve one patch.  The exit status, 0 or 1. */
+int tf_erosion_networked(ts_client *c, const tf_scene *s, const char *from, int heartbeat_ms);
 
 #endif

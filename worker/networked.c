@@ -203,16 +203,18 @@ int tf_networked_worker_run(const tf_networked_opts *o)
         tf_error("%s", err);
         return 1;
     }
-    int eroded = model ? -1 : tf_erosion_networked(c, connect, TF_WORKER_HEARTBEAT_MS);
-    if (eroded >= 0) { /* the coordinator was an erosion's: one patch served */
-        ts_client_close(c);
-        return eroded;
-    }
-    tf_scene *s = tf_worker_fetch_scene(c, connect, err, sizeof err);
+    int erosion = 0;
+    tf_scene *s = tf_worker_fetch_scene_ex(c, connect, &erosion, err, sizeof err);
     if (!s) {
         tf_error("%s", err);
         ts_client_close(c);
         return 1;
+    }
+    if (erosion) { /* the coordinator runs an erosion: serve one patch of it */
+        int status = tf_erosion_networked(c, s, connect, TF_WORKER_HEARTBEAT_MS);
+        tf_scene_free(s);
+        ts_client_close(c);
+        return status;
     }
     if (model) {
         if (o->payloads) { /* refuse a recording that cannot stand in before joining */

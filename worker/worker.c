@@ -12,6 +12,7 @@
 #include "worker/backend.h"
 #include "farmproto.h"
 #include "image/exrencode.h"
+#include "erosion_tuples.h"
 #include "heightmap_tuples.h"
 #include "log.h"
 
@@ -400,11 +401,11 @@ int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t err
 
 tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen)
 {
-    return tf_worker_fetch_scene_ex(c, coordinator, 1, err, errlen);
+    return tf_worker_fetch_scene_ex(c, coordinator, NULL, err, errlen);
 }
 
-tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int eroded, char *err,
-                                   size_t errlen)
+tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int *erosion,
+                                   char *err, size_t errlen)
 {
     tf_tuple tmpl, got;
     tf_tuple_init(&got);
@@ -425,8 +426,12 @@ tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int er
         goto fail;
     }
     tf_scene_set_size(s, (int)m.width, (int)m.height);
+    /* an erosion's space (common/erosion_tuples.h) is computing the eroded terrain */
+    int eroding = !strcmp(m.layout, TF_EROSION_LAYOUT);
+    if (erosion)
+        *erosion = eroding;
     if (tf_heightmap_fetch(c, s, coordinator, err, errlen) ||
-        (eroded && tf_eroded_fetch(c, s, coordinator, err, errlen))) {
+        (!eroding && tf_eroded_fetch(c, s, coordinator, err, errlen))) {
         tf_scene_free(s);
         goto fail;
     }

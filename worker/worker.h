@@ -84,9 +84,10 @@ int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t err
 /* rd the ("scene", ...) tuple, parse it and apply the render's image size.  NULL with a message
  * on failure (including a scene whose hash differs from the coordinator's). */
 tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen);
-/* The same; eroded = 0 leaves out an [erosion] scene's eroded terrain (an erosion worker's
- * scene: its space is computing it). */
-tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int eroded, char *err,
-                                   size_t errlen);
+/* The same, and *erosion (if not NULL) says whether the coordinator runs an erosion
+ * (common/erosion_tuples.h: its scene tuple's layout is TF_EROSION_LAYOUT): then the scene's
+ * eroded terrain is not read (that space is computing it). */
+tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int *erosion,
+                                   char *err, size_t errlen);
 
 #endif

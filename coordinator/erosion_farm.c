@@ -47,6 +47,8 @@ typedef struct farm {
     int done;                  /* patches complete */
     tf_erosion_owners owners;  /* which connection took which patch (erosion_role.h) */
     ts_role role;
+    int taken;                 /* patches taken so far, and when the last one was */
+    double t_all_taken;
     int *left;                 /* per patch: its worker left (check it handed all in) */
     char (*peer)[64];          /* per patch: that worker's name */
 } farm;
@@ -54,7 +56,10 @@ typedef struct farm {
 static void on_take(void *ctx, uint64_t conn, const tf_tuple *t)
 {
     farm *f = ctx;
+    const char *name = tf_tuple_name(t);
     tf_erosion_owners_take(&f->owners, conn, t);
+    if (name && !strcmp(name, "erode_patch") && ++f->taken == f->patches)
+        f->t_all_taken = tf_now_s(); /* the erosion's clock: every worker has its patch */
 }
 
 /* A connection that leaves holding a patch: its final bands were put before it left (one
@@ -373,7 +378,8 @@ int tf_erosion_farm(const tf_scene *s, const tf_erosion_farm_opts *o, uint8_t **
     if (rc == 0)
         rc = run(&f, err, errlen);
     if (rc == 0) {
-        rep->seconds = tf_now_s() - t0;
+        /* from the moment every patch has a worker (networked ones join when they join) */
+        rep->seconds = tf_now_s() - (f.t_all_taken > 0 ? f.t_all_taken : t0);
         rep->vertex_steps = (double)n * n * f.m.steps;
         rep->tally = f.tally;
         rep->solid_after = tf_erosion_solid(&f.st, n);

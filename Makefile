@@ -32,7 +32,7 @@ LDLIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXR_LIBS) $(CL_LIBS
 TEST_LIBS := $(shell pkg-config --libs cmocka 2>/dev/null)
 
 # 0. base: messages, clocks, vectors; the scene file (parsed, validated, hashed)
-BASE_SRC    := common/log.c common/clock.c common/datadir.c common/animation.c common/scene_keys.c \
+BASE_SRC    := common/log.c common/clock.c common/datadir.c common/cachefile.c common/animation.c common/scene_keys.c \
                common/scene_report.c common/scene_values.c common/scene_ini.c common/scene_check.c \
                common/scene_canonical.c common/scene_frame.c common/scene.c
 # 1. terrain: noise, fractal and grid generators, erosion, the height field and its max/min grids

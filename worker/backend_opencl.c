@@ -42,6 +42,7 @@
 #include "worker/kernels/tf_cl_params.h"
 #include "worker/opencl_cache.h"
 #include "render/render_internal.h"
+#include "cachefile.h"
 #include "log.h"
 
 #define KERNEL_FILE "terrafarm.cl" /* the file that marks a kernel directory */

@@ -14,6 +14,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "cachefile.h"
 #include "log.h"
 
 #define MAGIC "TFCLPRG\0"        /* 8 bytes */
@@ -24,24 +25,6 @@
 enum { OFF_FORMAT = 8, OFF_ZERO = 12, OFF_KEY = 16, OFF_LENGTH = 48, OFF_SUM = 56 };
 
 /* ---------------------------------------------------------------- the directory */
-
-int tf_make_private_dirs(const char *path)
-{
-    char buf[PATH_MAX];
-    if (snprintf(buf, sizeof buf, "%s", path) >= (int)sizeof buf)
-        return -1;
-    for (char *p = buf + 1; *p; p++) {
-        if (*p != '/')
-            continue;
-        *p = 0;
-        if (mkdir(buf, 0700) != 0 && errno != EEXIST)
-            return -1;
-        *p = '/';
-    }
-    if (mkdir(buf, 0700) != 0 && errno != EEXIST)
-        return -1;
-    return access(buf, W_OK) == 0 ? 0 : -1;
-}
 
 /* The cache directory (opencl_cache.h).  0, 1 when TF_OPENCL_CACHE=off, -1 when none is known. */
 static int cache_dir(char *dir, size_t len)

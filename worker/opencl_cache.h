@@ -66,8 +66,4 @@ int tf_clcache_write(const tf_clcache *c, const unsigned char *bin, size_t len, 
 /* "off", "refused", "hit", "miss", "rebuilt". */
 const char *tf_clcache_state_name(enum tf_clcache_state s);
 
-/* mkdir -p with mode 0700 for every directory it creates; 0 if path is then a writable
- * directory, else -1 (errno set).  Also used for PoCL's own cache directory. */
-int tf_make_private_dirs(const char *path);
-
 #endif

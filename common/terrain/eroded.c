@@ -11,7 +11,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "terrain/cachefile.h"
+#include "cachefile.h"
 #include "terrain/erosion_checkpoint.h"
 #include "terrain/erosion_run.h"
 #include "terrain/erosion_state.h"

@@ -14,7 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "terrain/cachefile.h"
+#include "cachefile.h"
 #include "log.h"
 
 #define MAGIC "TFESTAT1"

@@ -1,8 +1,9 @@
-/* cachefile.c: files of the erosion cache, written whole or not at all (cachefile.h). */
-#include "terrain/cachefile.h"
+/* cachefile.c: a cache's directories and files (cachefile.h). */
+#include "cachefile.h"
 
 #include <errno.h>
 #include <fcntl.h>
+#include <limits.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -10,26 +11,29 @@
 
 #include "log.h"
 
-/* mkdir -p dir (mode 0700 for what it creates).  0, or -1 with errno set. */
-static int make_dirs(const char *dir)
+int tf_make_private_dirs(const char *path)
 {
-    char path[400];
-    snprintf(path, sizeof path, "%s", dir);
-    for (char *p = path + 1; *p; p++)
-        if (*p == '/') {
-            *p = '\0';
-            if (mkdir(path, 0700) != 0 && errno != EEXIST)
-                return -1;
-            *p = '/';
-        }
-    return mkdir(path, 0700) != 0 && errno != EEXIST ? -1 : 0;
+    char buf[PATH_MAX];
+    if (snprintf(buf, sizeof buf, "%s", path) >= (int)sizeof buf)
+        return -1;
+    for (char *p = buf + 1; *p; p++) {
+        if (*p != '/')
+            continue;
+        *p = 0;
+        if (mkdir(buf, 0700) != 0 && errno != EEXIST)
+            return -1;
+        *p = '/';
+    }
+    if (mkdir(buf, 0700) != 0 && errno != EEXIST)
+        return -1;
+    return access(buf, W_OK) == 0 ? 0 : -1;
 }
 
 void tf_cachefile_write(const char *dir, const char *path, const uint8_t *b, size_t len)
 {
     char tmp[600];
     snprintf(tmp, sizeof tmp, "%s.%ld.tmp", path, (long)getpid());
-    if (make_dirs(dir) != 0) {
+    if (tf_make_private_dirs(dir) != 0) {
         tf_warn("%s: cannot create the erosion cache: %s", dir, strerror(errno));
         return;
     }

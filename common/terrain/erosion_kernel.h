@@ -1,0 +1,412 @@
+/* erosion_kernel.h: one time step of the erosion model (erosion.h, E1-E3) over a rectangle, W
+ * vertices at a time: the kernels erosion_step.c chooses from, and the code they are made of.
+ *
+ * The first part declares the kernels.  The rest is a template: erosion_step_<isa>.c defines W,
+ * TF_KERNEL (the kernel's name), the vector types vi (W x int32), vf (W x float) and vm (a
+ * lane mask), and the lane operations listed below for its ISA, then includes this file
+ * (portable: 4 lanes, SSE2 or plain vectors; avx2: 8).  The
+ * arithmetic is GCC's vector operators and those operations: IEEE add, subtract, multiply,
+ * compare, min and max as `a < b ? a : b` and `a > b ? a : b` (what minps and maxps compute)
+ * and float <-> int truncation, never a fused multiply-add; every operation acts on each lane
+ * alone, so every ISA and width computes the same bits (tests/unit/test_erosion.c runs them
+ * all and compares).
+ *
+ * Within the rectangle the rows are updated in place from the bottom up.  Before row j changes:
+ * the derived values of row j + 1 (ground a = b + t + d, water surface h = a + w, top-layer
+ * softness k) join those of row j in two rolling row buffers (each vertex's are computed once a
+ * step); from them the transfers on the edges between rows j and j + 1 and along row j are
+ * computed from the old state and kept (the edges between rows j - 1 and j were kept from the
+ * previous row), so every transfer sees only the old state (erosion.h, E1) and each edge is
+ * computed once. */
+#ifndef TF_EROSION_KERNEL_H
+#define TF_EROSION_KERNEL_H
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "terrain/erosion.h"
+
+/* tf_erosion_step's work, with the step's rain already looked up (0 on dry steps). */
+typedef int tf_erosion_kernel(const tf_erosion_model *m, const tf_erosion_view *v,
+                              tf_erosion_rect rect, tf_erosion_rect own, float rain_now,
+                              tf_erosion_tally *tally);
+tf_erosion_kernel tf_erosion_kernel_portable;
+#if defined(__x86_64__) && defined(__GNUC__)
+#define TF_EROSION_X86 1
+tf_erosion_kernel tf_erosion_kernel_avx2;
+#endif
+
+#endif
+
+#ifdef TF_KERNEL
+/* The lane operations the including file provides (all `static inline`, always inlined):
+ *   vm gt_i(vi, vi), eq_i(vi, vi), lt_f(vf, vf)     lane masks of a > b, a == b, a < b
+ *   vm m_and(vm, vm), m_or(vm, vm), m_all(int)     and, or; every lane if the int is nonzero
+ *   vi sel_i(vm, vi a, vi b), vf sel_f(vm, vf, vf)  a where the mask is set, else b
+ *   vi keep_i(vm, vi)                               the lanes the mask sets, 0 elsewhere
+ *   vi min_i, max_i (vi, vi), vf min_f, max_f (vf, vf), vf to_f(vi), vi to_i(vf) (truncates)
+ *   int any_i(vi)                                   a lane is nonzero
+ *   int64_t sum_i(vi)                               the lanes' sum, exact */
+
+#define INLINE static inline __attribute__((always_inline))
+
+INLINE vi ld_i(const int32_t *p)
+{
+    vi x;
+    memcpy(&x, p, sizeof x);
+    return x;
+}
+INLINE vf ld_f(const float *p)
+{
+    vf x;
+    memcpy(&x, p, sizeof x);
+    return x;
+}
+INLINE void st_i(int32_t *p, vi x) { memcpy(p, &x, sizeof x); }
+INLINE void st_f(float *p, vf x) { memcpy(p, &x, sizeof x); }
+INLINE vi splat_i(int32_t x)
+{
+    vi r;
+    for (int l = 0; l < W; l++)
+        r[l] = x;
+    return r;
+}
+INLINE vf splat_f(float x)
+{
+    vf r;
+    for (int l = 0; l < W; l++)
+        r[l] = x;
+    return r;
+}
+/* global columns c, c + 1, ..., c + W - 1 */
+INLINE vi cols(int c)
+{
+    vi x;
+    for (int l = 0; l < W; l++)
+        x[l] = c + l;
+    return x;
+}
+INLINE vi pos(vi x) { return max_i(x, splat_i(0)); }
+INLINE vi neg(vi x) { return max_i(-x, splat_i(0)); }
+
+/* The bedrock's strata factor at altitude b: a triangle wave between 1 - contrast and 1. */
+INLINE vf strata(const tf_erosion_model *m, vi b)
+{
+    vf u = to_f(b) * splat_f(m->inv_strata_units);
+    vf fl = to_f(to_i(u));
+    fl = sel_f(lt_f(u, fl), fl - splat_f(1.0f), fl); /* floor */
+    vf f = (u - fl) * splat_f(2.0f) - splat_f(1.0f);
+    return splat_f(1.0f) - splat_f(m->strata_contrast) * max_f(f, -f);
+}
+
+/* What the edges need of a row of vertices beyond w and s: a, h and k, per column. */
+typedef struct {
+    int32_t *a, *h;
+    float *k;
+} derived_row;
+
+/* The derived values of window row j, columns [c, c + count), into r from index 0. */
+INLINE void derive_row(const tf_erosion_model *m, const tf_erosion_view *v, int j, int c,
+                       int count, const derived_row *r)
+{
+    for (int i = 0; i < count; i += W) {
+        size_t at = (size_t)j * v->stride + (size_t)(c + i);
+        vi b = ld_i(v->b + at), t = ld_i(v->t + at), d = ld_i(v->d + at);
+        vi a = b + t + d;
+        st_i(r->a + i, a);
+        st_i(r->h + i, a + ld_i(v->w + at));
+        vf rock = splat_f(m->ks) * ld_f(v->soft + at);
+        if (m->inv_strata_units > 0.0f)
+            rock = rock * strata(m, b);
+        vf k = sel_f(gt_i(d, splat_i(0)), splat_f(m->k_silt),
+                     sel_f(gt_i(t, splat_i(0)), splat_f(m->k_talus), rock));
+        st_f(r->k + i, k);
+    }
+}
+
+/* W vertices' old state as the edges see it. */
+typedef struct {
+    vi w, s, a, h;
+    vf k;
+} vtx;
+
+/* The vertices at window offset `at` (w, s) and derived index i. */
+INLINE vtx vtx_at(const tf_erosion_view *v, size_t at, const derived_row *r, int i)
+{
+    return (vtx){ld_i(v->w + at), ld_i(v->s + at), ld_i(r->a + i), ld_i(r->h + i),
+                 ld_f(r->k + i)};
+}
+
+/* The transfers on W edges P-Q, positive from P to Q (erosion.h, E1). */
+typedef struct {
+    vi dw, sus, ero, crp;
+} edge;
+
+INLINE edge edge_of(const tf_erosion_model *m, vtx p, vtx q, vm inner)
+{
+    vm pq = gt_i(p.h, q.h), qp = gt_i(q.h, p.h);
+    vi ws = sel_i(pq, p.w, q.w), ss = sel_i(pq, p.s, q.s);
+    vi drop = sel_i(pq, p.a - q.a, q.a - p.a);
+    vi dh = sel_i(pq, p.h - q.h, q.h - p.h);
+    vf k = sel_f(pq, p.k, q.k);
+    vi dw = to_i(splat_f(0.25f) * min_f(to_f(ws), splat_f(0.5f) * to_f(dh)));
+    vf cap = splat_f(m->kc) * to_f(dw);
+    vf share = splat_f(0.25f) * to_f(ss);
+    vi sus = to_i(min_f(share, cap));
+    vf deficit = max_f(cap - share, splat_f(0.0f));
+    vf limit = splat_f(0.125f) * max_f(to_f(drop), splat_f(0.0f));
+    vi ero = to_i(min_f(k * deficit, limit));
+    edge e;
+    e.dw = sel_i(qp, -dw, dw);
+    e.sus = sel_i(qp, -sus, sus);
+    e.ero = sel_i(qp, -ero, ero);
+    e.crp = keep_i(inner, to_i(splat_f(m->creep) * to_f(p.a - q.a)));
+    return e;
+}
+
+/* Edge buffers: transfers stored per component, so a row of them is four int32 arrays. */
+typedef struct {
+    int32_t *dw, *sus, *ero, *crp;
+} edge_row;
+
+INLINE void put_edge(const edge_row *r, int k, edge e)
+{
+    st_i(r->dw + k, e.dw);
+    st_i(r->sus + k, e.sus);
+    st_i(r->ero + k, e.ero);
+    st_i(r->crp + k, e.crp);
+}
+INLINE edge get_edge(const edge_row *r, int k)
+{
+    return (edge){ld_i(r->dw + k), ld_i(r->sus + k), ld_i(r->ero + k), ld_i(r->crp + k)};
+}
+
+/* The edges between window rows j (derived p) and j + 1 (derived q) at columns
+ * [c0, c0 + count), into r; the derived rows start at column c0 - 1. */
+INLINE void vertical_edges(const tf_erosion_model *m, const tf_erosion_view *v, int j, int c0,
+                           int count, const derived_row *p, const derived_row *q,
+                           const edge_row *r)
+{
+    int gj = v->gj + j;
+    vm row_inner = m_all(gj > 0 && gj + 1 < m->n - 1);
+    for (int k = 0; k < count; k += W) {
+        size_t at = (size_t)j * v->stride + (size_t)(c0 + k);
+        vi col = cols(v->gi + c0 + k);
+        vm inner = m_and(m_and(gt_i(col, splat_i(0)), gt_i(splat_i(m->n - 1), col)), row_inner);
+        put_edge(r, k,
+                 edge_of(m, vtx_at(v, at, p, k + 1), vtx_at(v, at + v->stride, q, k + 1), inner));
+    }
+}
+
+/* The edges along window row j (derived p) between columns c-1 and c for c in
+ * [c0, c0 + count]: count + 1 edges. */
+INLINE void horizontal_edges(const tf_erosion_model *m, const tf_erosion_view *v, int j, int c0,
+                             int count, const derived_row *p, const edge_row *r)
+{
+    int gj = v->gj + j;
+    vm row_inner = m_all(gj > 0 && gj < m->n - 1);
+    for (int k = 0; k <= count; k += W) {
+        size_t at = (size_t)j * v->stride + (size_t)(c0 - 1 + k);
+        vi col = cols(v->gi + c0 - 1 + k);
+        vm inner = m_and(m_and(gt_i(col, splat_i(0)), gt_i(splat_i(m->n - 1), col + 1)),
+                         row_inner);
+        put_edge(r, k, edge_of(m, vtx_at(v, at, p, k), vtx_at(v, at + 1, p, k + 1), inner));
+    }
+}
+
+/* What flows into a vertex from its four edges (erosion.h, E2): from the left and from below
+ * the edge's positive direction is inwards, to the right and above outwards. */
+typedef struct {
+    vi water, out_water, out_load, in_load, ground_out, creep_in;
+} inflow;
+
+INLINE void add_in(inflow *f, edge e)
+{
+    f->water += e.dw;
+    f->out_water += neg(e.dw);
+    f->out_load += neg(e.sus);
+    f->in_load += pos(e.sus) + pos(e.ero);
+    f->ground_out += neg(e.ero) + neg(e.crp);
+    f->creep_in += pos(e.crp);
+}
+/* add_in of the reversed edge -e (neg(-x) = max(x, 0) = pos(x), pos(-x) = neg(x), also for
+ * INT32_MIN) */
+INLINE void add_out(inflow *f, edge e)
+{
+    f->water -= e.dw;
+    f->out_water += pos(e.dw);
+    f->out_load += pos(e.sus);
+    f->in_load += neg(e.sus) + neg(e.ero);
+    f->ground_out += pos(e.ero) + pos(e.crp);
+    f->creep_in += neg(e.crp);
+}
+
+/* Add the lanes of x selected by mask to *sum (most steps, most vectors: none are nonzero). */
+INLINE void tally_add(int64_t *sum, vi x, vm mask)
+{
+    x = keep_i(mask, x);
+    if (any_i(x))
+        *sum += sum_i(x);
+}
+
+typedef struct {
+    const tf_erosion_model *m;
+    const tf_erosion_view *v;
+    float rain_now;
+    int row_ring;       /* this row is the grid's first or last */
+    vm own_row;         /* all lanes if the row is owned, none if not */
+    int own_c0, own_c1;
+    int c1;             /* the rectangle's end column */
+    tf_erosion_tally *tally;
+} row_ctx;
+
+/* E3's rain on the vertices of ground a_old (0 on dry steps). */
+INLINE vi rain_on(const row_ctx *rc, vi a_old)
+{
+    const tf_erosion_model *m = rc->m;
+    if (!(rc->rain_now > 0.0f))
+        return splat_i(0);
+    vf lift =
+        splat_f(1.0f) + splat_f(m->rain_altitude) * to_f(a_old) * splat_f(m->inv_range_units);
+    return to_i(splat_f(rc->rain_now) * max_f(lift, splat_f(0.0f)));
+}
+
+/* Lanes of window column c that lie on the grid's outer ring, or all if the row does. */
+INLINE vm ring_lanes(const row_ctx *rc, int c)
+{
+    int n = rc->m->n, g = rc->v->gi + c;
+    if (rc->row_ring || g <= 0 || g + W - 1 >= n - 1) {
+        vi col = cols(g);
+        return m_or(m_all(rc->row_ring), m_or(eq_i(col, splat_i(0)), eq_i(col, splat_i(n - 1))));
+    }
+    return m_all(0);
+}
+
+/* E2 and E3 for the W vertices at column c of row j (ground a_old); k indexes the edges. */
+INLINE void update(const row_ctx *rc, size_t at, int c, const edge_row *hor,
+                   const edge_row *down, const edge_row *up, int k, vi a_old)
+{
+    const tf_erosion_model *m = rc->m;
+    const tf_erosion_view *v = rc->v;
+    inflow f = {0};
+    add_in(&f, get_edge(hor, k));
+    add_out(&f, get_edge(hor, k + 1));
+    add_in(&f, get_edge(down, k));
+    add_out(&f, get_edge(up, k));
+
+    vi b0 = ld_i(v->b + at), t0 = ld_i(v->t + at), d0 = ld_i(v->d + at);
+    vi w0 = ld_i(v->w + at), s0 = ld_i(v->s + at);
+    vi kept = s0 - f.out_load;
+    vi dep = to_i(splat_f(m->kd) * to_f(kept));
+    vi s = kept - dep + f.in_load;
+    vi w = w0 + f.water;
+    vi take = min_i(d0, f.ground_out);
+    vi d = d0 - take;
+    vi rest = f.ground_out - take;
+    take = min_i(t0, rest);
+    vi t = t0 - take;
+    vi b = b0 - (rest - take);
+    d = d + dep;
+    t = t + f.creep_in;
+
+    vi rain = rain_on(rc, a_old);
+    w = w + rain;
+    vi evap = to_i(splat_f(m->evaporation) * to_f(w));
+    w = w - evap;
+    vm ring = ring_lanes(rc, c);
+    vi out_w = keep_i(ring, w), out_s = keep_i(ring, s);
+    w = w - out_w;
+    s = s - out_s;
+
+    vf flow_old = ld_f(v->flow + at);
+    vf flow = flow_old * splat_f(m->flow_decay) + to_f(f.out_water);
+    /* lanes past the rectangle's end keep their old state (they are rewritten unchanged) */
+    vi col = cols(c);
+    vm live = gt_i(splat_i(rc->c1), col);
+    st_i(v->b + at, sel_i(live, b, b0));
+    st_i(v->t + at, sel_i(live, t, t0));
+    st_i(v->d + at, sel_i(live, d, d0));
+    st_i(v->w + at, sel_i(live, w, w0));
+    st_i(v->s + at, sel_i(live, s, s0));
+    st_f(v->flow + at, sel_f(live, flow, flow_old));
+
+    vm own = m_and(rc->own_row, m_and(gt_i(col, splat_i(rc->own_c0 - 1)),
+                                      gt_i(splat_i(rc->own_c1), col)));
+    tally_add(&rc->tally->rain, rain, own);
+    tally_add(&rc->tally->evaporated, evap, own);
+    tally_add(&rc->tally->out_water, out_w, own);
+    tally_add(&rc->tally->out_load, out_s, own);
+}
+
+/* The buffers of one call: two derived rows and three edge rows, `len` elements each, zeroed
+ * (lanes past the rectangle's end read what no loop wrote; they are discarded). */
+typedef struct {
+    int32_t *mem;
+    derived_row der[2];
+    edge_row edges[3];
+} step_bufs;
+
+INLINE int bufs_alloc(step_bufs *sb, int len)
+{
+    sb->mem = calloc(18 * (size_t)len, sizeof(int32_t));
+    if (!sb->mem)
+        return -1;
+    int32_t *p = sb->mem;
+    for (int r = 0; r < 2; r++, p += 3 * (size_t)len)
+        sb->der[r] = (derived_row){p, p + len, (float *)(p + 2 * (size_t)len)};
+    for (int e = 0; e < 3; e++, p += 4 * (size_t)len)
+        sb->edges[e] = (edge_row){p, p + len, p + 2 * (size_t)len, p + 3 * (size_t)len};
+    return 0;
+}
+
+/* Row j: derive row j + 1, compute the edges above and along j, update j. */
+INLINE void step_row(row_ctx *rc, tf_erosion_rect rect, tf_erosion_rect own, int j,
+                     const derived_row *dj, const derived_row *dj1, const edge_row *down,
+                     const edge_row *up, const edge_row *hor)
+{
+    const tf_erosion_model *m = rc->m;
+    const tf_erosion_view *v = rc->v;
+    int count = rect.c1 - rect.c0;
+    derive_row(m, v, j + 1, rect.c0 - 1, count + 2, dj1);
+    vertical_edges(m, v, j, rect.c0, count, dj, dj1, up);
+    horizontal_edges(m, v, j, rect.c0, count, dj, hor);
+    int gj = v->gj + j;
+    rc->row_ring = gj == 0 || gj == m->n - 1;
+    rc->own_row = m_all(j >= own.r0 && j < own.r1);
+    for (int k = 0; k < count; k += W)
+        update(rc, (size_t)j * v->stride + (size_t)(rect.c0 + k), rect.c0 + k, hor, down, up,
+               k, ld_i(dj->a + k + 1));
+}
+
+int TF_KERNEL(const tf_erosion_model *m, const tf_erosion_view *v, tf_erosion_rect rect,
+              tf_erosion_rect own, float rain_now, tf_erosion_tally *tally)
+{
+    int count = rect.c1 - rect.c0;
+    if (count <= 0 || rect.r1 <= rect.r0)
+        return 0;
+    /* the loops read and rewrite up to W vertices past the row's last needed one: the
+     * window's arrays must have them (erosion.h, TF_EROSION_PAD) */
+    step_bufs sb;
+    if (bufs_alloc(&sb, (count + 2 + W - 1) / W * W + 2 * W) != 0)
+        return -1;
+    const derived_row *dj = &sb.der[0], *dj1 = &sb.der[1];
+    const edge_row *down = &sb.edges[0], *up = &sb.edges[1], *hor = &sb.edges[2];
+    derive_row(m, v, rect.r0 - 1, rect.c0 - 1, count + 2, dj);
+    derive_row(m, v, rect.r0, rect.c0 - 1, count + 2, dj1);
+    vertical_edges(m, v, rect.r0 - 1, rect.c0, count, dj, dj1, down);
+    row_ctx rc = {m, v, rain_now, 0, m_all(0), own.c0, own.c1, rect.c1, tally};
+    for (int j = rect.r0; j < rect.r1; j++) {
+        const derived_row *swap_d = dj;
+        dj = dj1;
+        dj1 = swap_d;
+        step_row(&rc, rect, own, j, dj, dj1, down, up, hor);
+        const edge_row *swap_e = down;
+        down = up;
+        up = swap_e;
+    }
+    free(sb.mem);
+    return 0;
+}
+
+#undef INLINE
+#endif

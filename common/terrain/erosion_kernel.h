@@ -4,7 +4,7 @@
  * The first part declares the kernels.  The rest is a template: erosion_step_<isa>.c defines W,
  * TF_KERNEL (the kernel's name), the vector types vi (W x int32), vf (W x float) and vm (a
  * lane mask), and the lane operations listed below for its ISA, then includes this file
- * (portable: 4 lanes, SSE2 or plain vectors; avx2: 8).  The
+ * (portable: 4 lanes, SSE2 or plain vectors; avx2: 8; avx512: 16 with mask registers).  The
  * arithmetic is GCC's vector operators and those operations: IEEE add, subtract, multiply,
  * compare, min and max as `a < b ? a : b` and `a > b ? a : b` (what minps and maxps compute)
  * and float <-> int truncation, never a fused multiply-add; every operation acts on each lane
@@ -33,7 +33,7 @@ typedef int tf_erosion_kernel(const tf_erosion_model *m, const tf_erosion_view *
 tf_erosion_kernel tf_erosion_kernel_portable;
 #if defined(__x86_64__) && defined(__GNUC__)
 #define TF_EROSION_X86 1
-tf_erosion_kernel tf_erosion_kernel_avx2;
+tf_erosion_kernel tf_erosion_kernel_avx2, tf_erosion_kernel_avx512;
 #endif
 
 #endif

@@ -1,7 +1,7 @@
 /* erosion_step.c: one time step of the erosion model (erosion.h, E1-E3) over a rectangle: the
- * step's rain, then the kernel for the best ISA the CPU has (erosion_kernel.h: AVX2 or the
- * portable one).  Every kernel computes the same bits; TF_EROSION_ISA=portable
- * forces the portable one. */
+ * step's rain, then the kernel for the best ISA the CPU has (erosion_kernel.h: AVX-512, AVX2,
+ * or the portable one).  Every kernel computes the same bits; TF_EROSION_ISA=portable (or
+ * avx2) forces a slower one. */
 #include "terrain/erosion.h"
 
 #include <stdlib.h>
@@ -14,6 +14,7 @@ static const struct {
     tf_erosion_kernel *fn;
 } kernels[] = {
 #ifdef TF_EROSION_X86
+    {"avx512", tf_erosion_kernel_avx512},
     {"avx2", tf_erosion_kernel_avx2},
 #endif
     {"portable", tf_erosion_kernel_portable},
@@ -24,6 +25,9 @@ enum { KERNELS = sizeof kernels / sizeof kernels[0] };
 static int kernel_runs(int i)
 {
 #ifdef TF_EROSION_X86
+    if (!strcmp(kernels[i].name, "avx512"))
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
+               __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq");
     if (!strcmp(kernels[i].name, "avx2"))
         return __builtin_cpu_supports("avx2");
 #endif

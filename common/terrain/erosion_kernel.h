@@ -160,7 +160,9 @@ INLINE edge edge_of(const tf_erosion_model *m, vtx p, vtx q, vm inner)
     e.dw = sel_i(qp, -dw, dw);
     e.sus = sel_i(qp, -sus, sus);
     e.ero = sel_i(qp, -ero, ero);
-    e.crp = keep_i(inner, to_i(splat_f(m->creep) * to_f(p.a - q.a)));
+    e.crp = splat_i(0);
+    if (m->creep != 0.0f) /* else trunc(0 * x) = 0 */
+        e.crp = keep_i(inner, to_i(splat_f(m->creep) * to_f(p.a - q.a)));
     return e;
 }
 
@@ -169,16 +171,19 @@ typedef struct {
     int32_t *dw, *sus, *ero, *crp;
 } edge_row;
 
-INLINE void put_edge(const edge_row *r, int k, edge e)
+/* creep: whether c_d is nonzero (else crp is 0 and neither stored nor read) */
+INLINE void put_edge(const edge_row *r, int k, edge e, int creep)
 {
     st_i(r->dw + k, e.dw);
     st_i(r->sus + k, e.sus);
     st_i(r->ero + k, e.ero);
-    st_i(r->crp + k, e.crp);
+    if (creep)
+        st_i(r->crp + k, e.crp);
 }
-INLINE edge get_edge(const edge_row *r, int k)
+INLINE edge get_edge(const edge_row *r, int k, int creep)
 {
-    return (edge){ld_i(r->dw + k), ld_i(r->sus + k), ld_i(r->ero + k), ld_i(r->crp + k)};
+    return (edge){ld_i(r->dw + k), ld_i(r->sus + k), ld_i(r->ero + k),
+                  creep ? ld_i(r->crp + k) : splat_i(0)};
 }
 
 /* The edges between window rows j (derived p) and j + 1 (derived q) at columns
@@ -193,8 +198,8 @@ INLINE void vertical_edges(const tf_erosion_model *m, const tf_erosion_view *v, 
         size_t at = (size_t)j * v->stride + (size_t)(c0 + k);
         vi col = cols(v->gi + c0 + k);
         vm inner = m_and(m_and(gt_i(col, splat_i(0)), gt_i(splat_i(m->n - 1), col)), row_inner);
-        put_edge(r, k,
-                 edge_of(m, vtx_at(v, at, p, k + 1), vtx_at(v, at + v->stride, q, k + 1), inner));
+        edge e = edge_of(m, vtx_at(v, at, p, k + 1), vtx_at(v, at + v->stride, q, k + 1), inner);
+        put_edge(r, k, e, m->creep != 0.0f);
     }
 }
 
@@ -210,7 +215,8 @@ INLINE void horizontal_edges(const tf_erosion_model *m, const tf_erosion_view *v
         vi col = cols(v->gi + c0 - 1 + k);
         vm inner = m_and(m_and(gt_i(col, splat_i(0)), gt_i(splat_i(m->n - 1), col + 1)),
                          row_inner);
-        put_edge(r, k, edge_of(m, vtx_at(v, at, p, k), vtx_at(v, at + 1, p, k + 1), inner));
+        edge e = edge_of(m, vtx_at(v, at, p, k), vtx_at(v, at + 1, p, k + 1), inner);
+        put_edge(r, k, e, m->creep != 0.0f);
     }
 }
 
@@ -220,28 +226,34 @@ typedef struct {
     vi water, out_water, out_load, in_load, ground_out, creep_in;
 } inflow;
 
-INLINE void add_in(inflow *f, edge e)
+INLINE void add_in(inflow *f, edge e, int creep)
 {
     f->water += e.dw;
     f->out_water += neg(e.dw);
     f->out_load += neg(e.sus);
     f->in_load += pos(e.sus) + pos(e.ero);
-    f->ground_out += neg(e.ero) + neg(e.crp);
-    f->creep_in += pos(e.crp);
+    f->ground_out += neg(e.ero);
+    if (creep) {
+        f->ground_out += neg(e.crp);
+        f->creep_in += pos(e.crp);
+    }
 }
 /* add_in of the reversed edge -e (neg(-x) = max(x, 0) = pos(x), pos(-x) = neg(x), also for
  * INT32_MIN) */
-INLINE void add_out(inflow *f, edge e)
+INLINE void add_out(inflow *f, edge e, int creep)
 {
     f->water -= e.dw;
     f->out_water += pos(e.dw);
     f->out_load += pos(e.sus);
     f->in_load += neg(e.sus) + neg(e.ero);
-    f->ground_out += pos(e.ero) + pos(e.crp);
-    f->creep_in += neg(e.crp);
+    f->ground_out += pos(e.ero);
+    if (creep) {
+        f->ground_out += pos(e.crp);
+        f->creep_in += neg(e.crp);
+    }
 }
 
-/* Add the lanes of x selected by mask to *sum (most steps, most vectors: none are nonzero). */
+/* Add the lanes of x selected by mask to *sum (most vectors have none nonzero). */
 INLINE void tally_add(int64_t *sum, vi x, vm mask)
 {
     x = keep_i(mask, x);
@@ -260,39 +272,70 @@ typedef struct {
     tf_erosion_tally *tally;
 } row_ctx;
 
+/* The lanes of window column c that the tally counts. */
+INLINE vm owned(const row_ctx *rc, int c)
+{
+    vi col = cols(c);
+    return m_and(rc->own_row,
+                 m_and(gt_i(col, splat_i(rc->own_c0 - 1)), gt_i(splat_i(rc->own_c1), col)));
+}
+
 /* E3's rain on the vertices of ground a_old (0 on dry steps). */
 INLINE vi rain_on(const row_ctx *rc, vi a_old)
 {
     const tf_erosion_model *m = rc->m;
-    if (!(rc->rain_now > 0.0f))
-        return splat_i(0);
     vf lift =
         splat_f(1.0f) + splat_f(m->rain_altitude) * to_f(a_old) * splat_f(m->inv_range_units);
     return to_i(splat_f(rc->rain_now) * max_f(lift, splat_f(0.0f)));
 }
 
-/* Lanes of window column c that lie on the grid's outer ring, or all if the row does. */
-INLINE vm ring_lanes(const row_ctx *rc, int c)
+/* Whether W vertices from window column c may touch the grid's outer ring. */
+INLINE int near_ring(const row_ctx *rc, int c)
 {
-    int n = rc->m->n, g = rc->v->gi + c;
-    if (rc->row_ring || g <= 0 || g + W - 1 >= n - 1) {
-        vi col = cols(g);
-        return m_or(m_all(rc->row_ring), m_or(eq_i(col, splat_i(0)), eq_i(col, splat_i(n - 1))));
-    }
-    return m_all(0);
+    int g = rc->v->gi + c;
+    return rc->row_ring || g <= 0 || g + W - 1 >= rc->m->n - 1;
 }
 
-/* E2 and E3 for the W vertices at column c of row j (ground a_old); k indexes the edges. */
+/* E3 after the transfers: rain (on rain steps), evaporation, the outlet; counted. */
+INLINE void rain_evaporate_drain(const row_ctx *rc, int c, vi a_old, vi *w, vi *s)
+{
+    const tf_erosion_model *m = rc->m;
+    if (rc->rain_now > 0.0f) { /* else no rain */
+        vi rain = rain_on(rc, a_old);
+        *w = *w + rain;
+        tally_add(&rc->tally->rain, rain, owned(rc, c));
+    }
+    if (m->evaporation != 0.0f) { /* else trunc(0 * w) = 0 */
+        vi evap = to_i(splat_f(m->evaporation) * to_f(*w));
+        *w = *w - evap;
+        tally_add(&rc->tally->evaporated, evap, owned(rc, c));
+    }
+    if (near_ring(rc, c)) {
+        vi col = cols(rc->v->gi + c);
+        vm ring = m_or(m_all(rc->row_ring),
+                       m_or(eq_i(col, splat_i(0)), eq_i(col, splat_i(m->n - 1))));
+        vi out_w = keep_i(ring, *w), out_s = keep_i(ring, *s);
+        *w = *w - out_w;
+        *s = *s - out_s;
+        tally_add(&rc->tally->out_water, out_w, owned(rc, c));
+        tally_add(&rc->tally->out_load, out_s, owned(rc, c));
+    }
+}
+
+/* E2 and E3 for the W vertices at column c of row j (ground a_old); k indexes the edges.
+ * partial: some lanes lie past the rectangle's end and keep their old state (they are
+ * rewritten unchanged). */
 INLINE void update(const row_ctx *rc, size_t at, int c, const edge_row *hor,
-                   const edge_row *down, const edge_row *up, int k, vi a_old)
+                   const edge_row *down, const edge_row *up, int k, vi a_old, int partial)
 {
     const tf_erosion_model *m = rc->m;
     const tf_erosion_view *v = rc->v;
+    int creep = m->creep != 0.0f;
     inflow f = {0};
-    add_in(&f, get_edge(hor, k));
-    add_out(&f, get_edge(hor, k + 1));
-    add_in(&f, get_edge(down, k));
-    add_out(&f, get_edge(up, k));
+    add_in(&f, get_edge(hor, k, creep), creep);
+    add_out(&f, get_edge(hor, k + 1, creep), creep);
+    add_in(&f, get_edge(down, k, creep), creep);
+    add_out(&f, get_edge(up, k, creep), creep);
 
     vi b0 = ld_i(v->b + at), t0 = ld_i(v->t + at), d0 = ld_i(v->d + at);
     vi w0 = ld_i(v->w + at), s0 = ld_i(v->s + at);
@@ -308,34 +351,25 @@ INLINE void update(const row_ctx *rc, size_t at, int c, const edge_row *hor,
     vi b = b0 - (rest - take);
     d = d + dep;
     t = t + f.creep_in;
-
-    vi rain = rain_on(rc, a_old);
-    w = w + rain;
-    vi evap = to_i(splat_f(m->evaporation) * to_f(w));
-    w = w - evap;
-    vm ring = ring_lanes(rc, c);
-    vi out_w = keep_i(ring, w), out_s = keep_i(ring, s);
-    w = w - out_w;
-    s = s - out_s;
+    rain_evaporate_drain(rc, c, a_old, &w, &s);
 
     vf flow_old = ld_f(v->flow + at);
     vf flow = flow_old * splat_f(m->flow_decay) + to_f(f.out_water);
-    /* lanes past the rectangle's end keep their old state (they are rewritten unchanged) */
-    vi col = cols(c);
-    vm live = gt_i(splat_i(rc->c1), col);
-    st_i(v->b + at, sel_i(live, b, b0));
-    st_i(v->t + at, sel_i(live, t, t0));
-    st_i(v->d + at, sel_i(live, d, d0));
-    st_i(v->w + at, sel_i(live, w, w0));
-    st_i(v->s + at, sel_i(live, s, s0));
-    st_f(v->flow + at, sel_f(live, flow, flow_old));
-
-    vm own = m_and(rc->own_row, m_and(gt_i(col, splat_i(rc->own_c0 - 1)),
-                                      gt_i(splat_i(rc->own_c1), col)));
-    tally_add(&rc->tally->rain, rain, own);
-    tally_add(&rc->tally->evaporated, evap, own);
-    tally_add(&rc->tally->out_water, out_w, own);
-    tally_add(&rc->tally->out_load, out_s, own);
+    if (partial) {
+        vm live = gt_i(splat_i(rc->c1), cols(c));
+        b = sel_i(live, b, b0);
+        t = sel_i(live, t, t0);
+        d = sel_i(live, d, d0);
+        w = sel_i(live, w, w0);
+        s = sel_i(live, s, s0);
+        flow = sel_f(live, flow, flow_old);
+    }
+    st_i(v->b + at, b);
+    st_i(v->t + at, t);
+    st_i(v->d + at, d);
+    st_i(v->w + at, w);
+    st_i(v->s + at, s);
+    st_f(v->flow + at, flow);
 }
 
 /* The buffers of one call: two derived rows and three edge rows, `len` elements each, zeroed
@@ -373,9 +407,12 @@ INLINE void step_row(row_ctx *rc, tf_erosion_rect rect, tf_erosion_rect own, int
     int gj = v->gj + j;
     rc->row_ring = gj == 0 || gj == m->n - 1;
     rc->own_row = m_all(j >= own.r0 && j < own.r1);
-    for (int k = 0; k < count; k += W)
-        update(rc, (size_t)j * v->stride + (size_t)(rect.c0 + k), rect.c0 + k, hor, down, up,
-               k, ld_i(dj->a + k + 1));
+    size_t row = (size_t)j * v->stride + (size_t)rect.c0;
+    int k = 0;
+    for (; k + W <= count; k += W)
+        update(rc, row + (size_t)k, rect.c0 + k, hor, down, up, k, ld_i(dj->a + k + 1), 0);
+    if (k < count)
+        update(rc, row + (size_t)k, rect.c0 + k, hor, down, up, k, ld_i(dj->a + k + 1), 1);
 }
 
 int TF_KERNEL(const tf_erosion_model *m, const tf_erosion_view *v, tf_erosion_rect rect,
@@ -386,6 +423,8 @@ int TF_KERNEL(const tf_erosion_model *m, const tf_erosion_view *v, tf_erosion_re
         return 0;
     /* the loops read and rewrite up to W vertices past the row's last needed one: the
      * window's arrays must have them (erosion.h, TF_EROSION_PAD) */
+    tf_erosion_model local = *m; /* no store to the arrays can change it: its constants stay */
+    m = &local;                  /* in registers */
     step_bufs sb;
     if (bufs_alloc(&sb, (count + 2 + W - 1) / W * W + 2 * W) != 0)
         return -1;

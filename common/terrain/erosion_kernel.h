@@ -89,14 +89,40 @@ INLINE vi cols(int c)
 INLINE vi pos(vi x) { return max_i(x, splat_i(0)); }
 INLINE vi neg(vi x) { return max_i(-x, splat_i(0)); }
 
-/* The bedrock's strata factor at altitude b: a triangle wave between 1 - contrast and 1. */
-INLINE vf strata(const tf_erosion_model *m, vi b)
+/* The model's constants for one call: its scalars (a copy, which no store to the arrays can
+ * change, so the compiler keeps them) and, splatted once, the factors the lanes multiply by. */
+typedef struct {
+    tf_erosion_model s;
+    vf v_kc, v_kd, v_ks, v_k_silt, v_k_talus, v_creep, v_evaporation, v_flow_decay;
+    vf v_rain_altitude, v_inv_range_units, v_inv_strata_units, v_strata_contrast, v_rain_now;
+} consts;
+
+INLINE consts consts_of(const tf_erosion_model *m, float rain_now)
 {
-    vf u = to_f(b) * splat_f(m->inv_strata_units);
+    return (consts){*m,
+                    splat_f(m->kc),
+                    splat_f(m->kd),
+                    splat_f(m->ks),
+                    splat_f(m->k_silt),
+                    splat_f(m->k_talus),
+                    splat_f(m->creep),
+                    splat_f(m->evaporation),
+                    splat_f(m->flow_decay),
+                    splat_f(m->rain_altitude),
+                    splat_f(m->inv_range_units),
+                    splat_f(m->inv_strata_units),
+                    splat_f(m->strata_contrast),
+                    splat_f(rain_now)};
+}
+
+/* The bedrock's strata factor at altitude b: a triangle wave between 1 - contrast and 1. */
+INLINE vf strata(const consts *m, vi b)
+{
+    vf u = to_f(b) * m->v_inv_strata_units;
     vf fl = to_f(to_i(u));
     fl = sel_f(lt_f(u, fl), fl - splat_f(1.0f), fl); /* floor */
     vf f = (u - fl) * splat_f(2.0f) - splat_f(1.0f);
-    return splat_f(1.0f) - splat_f(m->strata_contrast) * max_f(f, -f);
+    return splat_f(1.0f) - m->v_strata_contrast * max_f(f, -f);
 }
 
 /* What the edges need of a row of vertices beyond w and s: a, h and k, per column. */
@@ -106,7 +132,7 @@ typedef struct {
 } derived_row;
 
 /* The derived values of window row j, columns [c, c + count), into r from index 0. */
-INLINE void derive_row(const tf_erosion_model *m, const tf_erosion_view *v, int j, int c,
+INLINE void derive_row(const consts *m, const tf_erosion_view *v, int j, int c,
                        int count, const derived_row *r)
 {
     for (int i = 0; i < count; i += W) {
@@ -115,11 +141,11 @@ INLINE void derive_row(const tf_erosion_model *m, const tf_erosion_view *v, int 
         vi a = b + t + d;
         st_i(r->a + i, a);
         st_i(r->h + i, a + ld_i(v->w + at));
-        vf rock = splat_f(m->ks) * ld_f(v->soft + at);
-        if (m->inv_strata_units > 0.0f)
+        vf rock = m->v_ks * ld_f(v->soft + at);
+        if (m->s.inv_strata_units > 0.0f)
             rock = rock * strata(m, b);
-        vf k = sel_f(gt_i(d, splat_i(0)), splat_f(m->k_silt),
-                     sel_f(gt_i(t, splat_i(0)), splat_f(m->k_talus), rock));
+        vf k = sel_f(gt_i(d, splat_i(0)), m->v_k_silt,
+                     sel_f(gt_i(t, splat_i(0)), m->v_k_talus, rock));
         st_f(r->k + i, k);
     }
 }
@@ -142,7 +168,7 @@ typedef struct {
     vi dw, sus, ero, crp;
 } edge;
 
-INLINE edge edge_of(const tf_erosion_model *m, vtx p, vtx q, vm inner)
+INLINE edge edge_of(const consts *m, vtx p, vtx q, vm inner)
 {
     vm pq = gt_i(p.h, q.h), qp = gt_i(q.h, p.h);
     vi ws = sel_i(pq, p.w, q.w), ss = sel_i(pq, p.s, q.s);
@@ -150,7 +176,7 @@ INLINE edge edge_of(const tf_erosion_model *m, vtx p, vtx q, vm inner)
     vi dh = sel_i(pq, p.h - q.h, q.h - p.h);
     vf k = sel_f(pq, p.k, q.k);
     vi dw = to_i(splat_f(0.25f) * min_f(to_f(ws), splat_f(0.5f) * to_f(dh)));
-    vf cap = splat_f(m->kc) * to_f(dw);
+    vf cap = m->v_kc * to_f(dw);
     vf share = splat_f(0.25f) * to_f(ss);
     vi sus = to_i(min_f(share, cap));
     vf deficit = max_f(cap - share, splat_f(0.0f));
@@ -161,8 +187,8 @@ INLINE edge edge_of(const tf_erosion_model *m, vtx p, vtx q, vm inner)
     e.sus = sel_i(qp, -sus, sus);
     e.ero = sel_i(qp, -ero, ero);
     e.crp = splat_i(0);
-    if (m->creep != 0.0f) /* else trunc(0 * x) = 0 */
-        e.crp = keep_i(inner, to_i(splat_f(m->creep) * to_f(p.a - q.a)));
+    if (m->s.creep != 0.0f) /* else trunc(0 * x) = 0 */
+        e.crp = keep_i(inner, to_i(m->v_creep * to_f(p.a - q.a)));
     return e;
 }
 
@@ -188,35 +214,35 @@ INLINE edge get_edge(const edge_row *r, int k, int creep)
 
 /* The edges between window rows j (derived p) and j + 1 (derived q) at columns
  * [c0, c0 + count), into r; the derived rows start at column c0 - 1. */
-INLINE void vertical_edges(const tf_erosion_model *m, const tf_erosion_view *v, int j, int c0,
+INLINE void vertical_edges(const consts *m, const tf_erosion_view *v, int j, int c0,
                            int count, const derived_row *p, const derived_row *q,
                            const edge_row *r)
 {
     int gj = v->gj + j;
-    vm row_inner = m_all(gj > 0 && gj + 1 < m->n - 1);
+    vm row_inner = m_all(gj > 0 && gj + 1 < m->s.n - 1);
     for (int k = 0; k < count; k += W) {
         size_t at = (size_t)j * v->stride + (size_t)(c0 + k);
         vi col = cols(v->gi + c0 + k);
-        vm inner = m_and(m_and(gt_i(col, splat_i(0)), gt_i(splat_i(m->n - 1), col)), row_inner);
+        vm inner = m_and(m_and(gt_i(col, splat_i(0)), gt_i(splat_i(m->s.n - 1), col)), row_inner);
         edge e = edge_of(m, vtx_at(v, at, p, k + 1), vtx_at(v, at + v->stride, q, k + 1), inner);
-        put_edge(r, k, e, m->creep != 0.0f);
+        put_edge(r, k, e, m->s.creep != 0.0f);
     }
 }
 
 /* The edges along window row j (derived p) between columns c-1 and c for c in
  * [c0, c0 + count]: count + 1 edges. */
-INLINE void horizontal_edges(const tf_erosion_model *m, const tf_erosion_view *v, int j, int c0,
+INLINE void horizontal_edges(const consts *m, const tf_erosion_view *v, int j, int c0,
                              int count, const derived_row *p, const edge_row *r)
 {
     int gj = v->gj + j;
-    vm row_inner = m_all(gj > 0 && gj < m->n - 1);
+    vm row_inner = m_all(gj > 0 && gj < m->s.n - 1);
     for (int k = 0; k <= count; k += W) {
         size_t at = (size_t)j * v->stride + (size_t)(c0 - 1 + k);
         vi col = cols(v->gi + c0 - 1 + k);
-        vm inner = m_and(m_and(gt_i(col, splat_i(0)), gt_i(splat_i(m->n - 1), col + 1)),
+        vm inner = m_and(m_and(gt_i(col, splat_i(0)), gt_i(splat_i(m->s.n - 1), col + 1)),
                          row_inner);
         edge e = edge_of(m, vtx_at(v, at, p, k), vtx_at(v, at + 1, p, k + 1), inner);
-        put_edge(r, k, e, m->creep != 0.0f);
+        put_edge(r, k, e, m->s.creep != 0.0f);
     }
 }
 
@@ -262,7 +288,7 @@ INLINE void tally_add(int64_t *sum, vi x, vm mask)
 }
 
 typedef struct {
-    const tf_erosion_model *m;
+    const consts *m;
     const tf_erosion_view *v;
     float rain_now;
     int row_ring;       /* this row is the grid's first or last */
@@ -283,37 +309,37 @@ INLINE vm owned(const row_ctx *rc, int c)
 /* E3's rain on the vertices of ground a_old (0 on dry steps). */
 INLINE vi rain_on(const row_ctx *rc, vi a_old)
 {
-    const tf_erosion_model *m = rc->m;
+    const consts *m = rc->m;
     vf lift =
-        splat_f(1.0f) + splat_f(m->rain_altitude) * to_f(a_old) * splat_f(m->inv_range_units);
-    return to_i(splat_f(rc->rain_now) * max_f(lift, splat_f(0.0f)));
+        splat_f(1.0f) + m->v_rain_altitude * to_f(a_old) * m->v_inv_range_units;
+    return to_i(m->v_rain_now * max_f(lift, splat_f(0.0f)));
 }
 
 /* Whether W vertices from window column c may touch the grid's outer ring. */
 INLINE int near_ring(const row_ctx *rc, int c)
 {
     int g = rc->v->gi + c;
-    return rc->row_ring || g <= 0 || g + W - 1 >= rc->m->n - 1;
+    return rc->row_ring || g <= 0 || g + W - 1 >= rc->m->s.n - 1;
 }
 
 /* E3 after the transfers: rain (on rain steps), evaporation, the outlet; counted. */
 INLINE void rain_evaporate_drain(const row_ctx *rc, int c, vi a_old, vi *w, vi *s)
 {
-    const tf_erosion_model *m = rc->m;
+    const consts *m = rc->m;
     if (rc->rain_now > 0.0f) { /* else no rain */
         vi rain = rain_on(rc, a_old);
         *w = *w + rain;
         tally_add(&rc->tally->rain, rain, owned(rc, c));
     }
-    if (m->evaporation != 0.0f) { /* else trunc(0 * w) = 0 */
-        vi evap = to_i(splat_f(m->evaporation) * to_f(*w));
+    if (m->s.evaporation != 0.0f) { /* else trunc(0 * w) = 0 */
+        vi evap = to_i(m->v_evaporation * to_f(*w));
         *w = *w - evap;
         tally_add(&rc->tally->evaporated, evap, owned(rc, c));
     }
     if (near_ring(rc, c)) {
         vi col = cols(rc->v->gi + c);
         vm ring = m_or(m_all(rc->row_ring),
-                       m_or(eq_i(col, splat_i(0)), eq_i(col, splat_i(m->n - 1))));
+                       m_or(eq_i(col, splat_i(0)), eq_i(col, splat_i(m->s.n - 1))));
         vi out_w = keep_i(ring, *w), out_s = keep_i(ring, *s);
         *w = *w - out_w;
         *s = *s - out_s;
@@ -328,9 +354,9 @@ INLINE void rain_evaporate_drain(const row_ctx *rc, int c, vi a_old, vi *w, vi *
 INLINE void update(const row_ctx *rc, size_t at, int c, const edge_row *hor,
                    const edge_row *down, const edge_row *up, int k, vi a_old, int partial)
 {
-    const tf_erosion_model *m = rc->m;
+    const consts *m = rc->m;
     const tf_erosion_view *v = rc->v;
-    int creep = m->creep != 0.0f;
+    int creep = m->s.creep != 0.0f;
     inflow f = {0};
     add_in(&f, get_edge(hor, k, creep), creep);
     add_out(&f, get_edge(hor, k + 1, creep), creep);
@@ -340,7 +366,7 @@ INLINE void update(const row_ctx *rc, size_t at, int c, const edge_row *hor,
     vi b0 = ld_i(v->b + at), t0 = ld_i(v->t + at), d0 = ld_i(v->d + at);
     vi w0 = ld_i(v->w + at), s0 = ld_i(v->s + at);
     vi kept = s0 - f.out_load;
-    vi dep = to_i(splat_f(m->kd) * to_f(kept));
+    vi dep = to_i(m->v_kd * to_f(kept));
     vi s = kept - dep + f.in_load;
     vi w = w0 + f.water;
     vi take = min_i(d0, f.ground_out);
@@ -354,7 +380,7 @@ INLINE void update(const row_ctx *rc, size_t at, int c, const edge_row *hor,
     rain_evaporate_drain(rc, c, a_old, &w, &s);
 
     vf flow_old = ld_f(v->flow + at);
-    vf flow = flow_old * splat_f(m->flow_decay) + to_f(f.out_water);
+    vf flow = flow_old * m->v_flow_decay + to_f(f.out_water);
     if (partial) {
         vm live = gt_i(splat_i(rc->c1), cols(c));
         b = sel_i(live, b, b0);
@@ -398,14 +424,14 @@ INLINE void step_row(row_ctx *rc, tf_erosion_rect rect, tf_erosion_rect own, int
                      const derived_row *dj, const derived_row *dj1, const edge_row *down,
                      const edge_row *up, const edge_row *hor)
 {
-    const tf_erosion_model *m = rc->m;
+    const consts *m = rc->m;
     const tf_erosion_view *v = rc->v;
     int count = rect.c1 - rect.c0;
     derive_row(m, v, j + 1, rect.c0 - 1, count + 2, dj1);
     vertical_edges(m, v, j, rect.c0, count, dj, dj1, up);
     horizontal_edges(m, v, j, rect.c0, count, dj, hor);
     int gj = v->gj + j;
-    rc->row_ring = gj == 0 || gj == m->n - 1;
+    rc->row_ring = gj == 0 || gj == m->s.n - 1;
     rc->own_row = m_all(j >= own.r0 && j < own.r1);
     size_t row = (size_t)j * v->stride + (size_t)rect.c0;
     int k = 0;
@@ -415,7 +441,7 @@ INLINE void step_row(row_ctx *rc, tf_erosion_rect rect, tf_erosion_rect own, int
         update(rc, row + (size_t)k, rect.c0 + k, hor, down, up, k, ld_i(dj->a + k + 1), 1);
 }
 
-int TF_KERNEL(const tf_erosion_model *m, const tf_erosion_view *v, tf_erosion_rect rect,
+int TF_KERNEL(const tf_erosion_model *model, const tf_erosion_view *v, tf_erosion_rect rect,
               tf_erosion_rect own, float rain_now, tf_erosion_tally *tally)
 {
     int count = rect.c1 - rect.c0;
@@ -423,8 +449,8 @@ int TF_KERNEL(const tf_erosion_model *m, const tf_erosion_view *v, tf_erosion_re
         return 0;
     /* the loops read and rewrite up to W vertices past the row's last needed one: the
      * window's arrays must have them (erosion.h, TF_EROSION_PAD) */
-    tf_erosion_model local = *m; /* no store to the arrays can change it: its constants stay */
-    m = &local;                  /* in registers */
+    consts local = consts_of(model, rain_now);
+    const consts *m = &local;
     step_bufs sb;
     if (bufs_alloc(&sb, (count + 2 + W - 1) / W * W + 2 * W) != 0)
         return -1;

@@ -22,7 +22,10 @@ LANE vm lt_f(vf a, vf b) { return a < b; }
 LANE vm m_and(vm a, vm b) { return a & b; }
 LANE vm m_or(vm a, vm b) { return a | b; }
 LANE vm m_all(int yes) { return (vm){0} - (yes != 0); }
-LANE vi sel_i(vm m, vi a, vi b) { return (vi)_mm256_blendv_epi8((__m256i)b, (__m256i)a, (__m256i)m); }
+LANE vi sel_i(vm m, vi a, vi b)
+{
+    return (vi)_mm256_blendv_epi8((__m256i)b, (__m256i)a, (__m256i)m);
+}
 LANE vf sel_f(vm m, vf a, vf b) { return (vf)_mm256_blendv_ps((__m256)b, (__m256)a, (__m256)m); }
 LANE vi keep_i(vm m, vi x) { return x & m; }
 LANE vi min_i(vi a, vi b) { return (vi)_mm256_min_epi32((__m256i)a, (__m256i)b); }

@@ -48,6 +48,12 @@ tf_erosion_kernel tf_erosion_kernel_avx2, tf_erosion_kernel_avx512;
  *   int any_i(vi)                                   a lane is nonzero
  *   int64_t sum_i(vi)                               the lanes' sum, exact */
 
+/* No fused multiply-add (the build's -ffp-contract=off; clang, which builds the library for the
+ * fuzz targets without it, would fuse in the AVX-512 copy, whose target implies FMA). */
+#ifdef __clang__
+#pragma STDC FP_CONTRACT OFF
+#endif
+
 #define INLINE static inline __attribute__((always_inline))
 
 INLINE vi ld_i(const int32_t *p)

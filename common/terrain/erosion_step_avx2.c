@@ -3,9 +3,16 @@
 #include "terrain/erosion_kernel.h"
 
 #ifdef TF_EROSION_X86
+#include <immintrin.h>
+
+/* Every function below is compiled for the ISA (clang has no target pragma, but applies the
+ * attribute to a region). */
+#ifdef __clang__
+#pragma clang attribute push(__attribute__((target("avx2"))), apply_to = function)
+#else
 #pragma GCC push_options
 #pragma GCC target("avx2")
-#include <immintrin.h>
+#endif
 
 #pragma GCC diagnostic ignored "-Wpsabi" /* no vector crosses a call: all inlined */
 
@@ -46,5 +53,9 @@ LANE int64_t sum_i(vi x)
 #undef LANE
 
 #include "terrain/erosion_kernel.h"
+#ifdef __clang__
+#pragma clang attribute pop
+#else
 #pragma GCC pop_options
+#endif
 #endif

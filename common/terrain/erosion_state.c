@@ -8,10 +8,11 @@
 #define ARRAYS 7 /* b, t, d, w, s, flow, soft: all 4 bytes an element */
 #define HUGE_PAGE ((size_t)2 << 20)
 
-/* bytes of zeros that free() releases.  A big grid's arrays lie in 2 MiB pages where the
- * kernel offers them: a round reads and writes 7 rows of every tile in 7 arrays, and with 4 KiB
- * pages each of those rows was a TLB miss (a costly one under a hypervisor), and every page's
- * first touch a fault. */
+/* `bytes` zeroed bytes that free() releases.  A big grid's arrays lie in 2 MiB pages where the
+ * operating system offers them (transparent huge pages): a round copies every row of a tile
+ * and its halo out of 7 arrays and every row of the tile into 6, and with 4 KiB pages each of
+ * those rows was a TLB miss (a costly one under a hypervisor) and each page's first touch a
+ * fault. */
 static void *zeroed(size_t bytes)
 {
     if (bytes < 2 * HUGE_PAGE)

@@ -33,7 +33,7 @@
  * function of its own and its 4 neighbours' old states: k steps need a halo of k vertices,
  * whatever cut the grid into pieces, and the result is bit-identical for any tiling, thread
  * count or farm of patches.  The float arithmetic is IEEE single without fused multiply-add,
- * the same bits on the AVX2 and the portable path (erosion_step.c). */
+ * the same bits on every kernel (erosion_kernel.h: AVX-512, AVX2, portable). */
 #ifndef TF_EROSION_H
 #define TF_EROSION_H
 
@@ -91,11 +91,11 @@ int tf_erosion_model_init(tf_erosion_model *m, const tf_erosion_keys *k, uint64_
  * every piece of the grid (a function of the model and the step only). */
 float tf_erosion_rain_now(const tf_erosion_model *m, int step);
 
-/* The kernel works 8 vertices at a time: it reads, and rewrites unchanged, up to this many
- * elements past the end of a rectangle's row, so a window's arrays need that much room after
- * each row's last needed vertex (a stride of nx + TF_EROSION_PAD, and as many spare elements
- * after the last row). */
-#define TF_EROSION_PAD 8
+/* The kernel works up to 16 vertices at a time: it reads, and rewrites unchanged, up to this
+ * many elements past the end of a rectangle's row, so a window's arrays need that much room
+ * after each row's last needed vertex (a stride of nx + TF_EROSION_PAD, and as many spare
+ * elements after the last row). */
+#define TF_EROSION_PAD 16
 
 /* One time step on the vertices [r0, r1) x [c0, c1) of view v (window coordinates), in place.
  * Needs the old state of one more vertex on every side of the rectangle (inside the window;
@@ -108,10 +108,13 @@ typedef struct tf_erosion_rect {
 int tf_erosion_step(const tf_erosion_model *m, const tf_erosion_view *v, tf_erosion_rect rect,
                      tf_erosion_rect own, int step, tf_erosion_tally *tally);
 
-/* Which kernel tf_erosion_step uses: "avx2" or "portable" (TF_EROSION_ISA=portable forces the
- * portable one; both give the same bits). */
+/* Which kernel tf_erosion_step uses: "avx512", "avx2" or "portable", the best the CPU runs
+ * (TF_EROSION_ISA=avx2 or portable caps it; all give the same bits). */
 const char *tf_erosion_isa(void);
 /* Tests and benchmarks: 1 forces the portable kernel, 0 the best, -1 back to the variable. */
 void tf_erosion_force_portable(int portable);
+/* Tests and benchmarks: use the kernel named isa (NULL: back to the variable); -1 if this CPU
+ * cannot run it (nothing changes). */
+int tf_erosion_force_isa(const char *isa);
 
 #endif

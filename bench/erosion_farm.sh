@@ -38,7 +38,7 @@ EOF
 echo "cpu: $(sed -n 's/^model name[^:]*: //p' /proc/cpuinfo | head -1); $CORES cores;" \
      "$("$TF" heightfield "$T/s.scene" -o "$T/isa.exr" --stats "$T/isa.json" >/dev/null 2>&1 &&
         python3 -c 'import json,sys; print("erosion kernel:", json.load(open(sys.argv[1]))["isa"])' "$T/isa.json")"
-echo "grid $(( (1 << E) + 1 ))^2, $STEPS steps, halo 8"
+echo "grid $(( (1 << E) + 1 ))^2, $STEPS steps, the default halo"
 
 secs() { python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["erosion_seconds"])' "$1"; }
 edge() { python3 -c 'import json,sys; print(int(json.load(open(sys.argv[1]))["edge_bytes_per_step"]))' "$1"; }

@@ -59,7 +59,7 @@ static const char usage[] =
     "                        runs on N forked workers, one patch each, exchanging their\n"
     "                        edges through the tuple space (default: in this process, on\n"
     "                        every core)\n"
-    "      --halo K          erosion: steps between edge exchanges, K rows each (default 8)\n"
+    "      --halo K          erosion: steps between edge exchanges, K rows each (default 12)\n"
     "      --remote M        erosion: M more patches for networked workers (terrafarm worker\n"
     "                        --connect HOST:PORT), who read the scene and derive the start\n"
     "      --listen ADDR     where they connect (default 127.0.0.1:7879; port 0: any)\n"

@@ -21,6 +21,7 @@
 #include "linda/tsserver.h"
 #include "linda/tuplespace.h"
 #include "terrain/eroded.h"
+#include "terrain/erosion_run.h"
 #include "terrain/erosion_state.h"
 #include "terrain/terrain_build.h"
 #include "worker/erosion_patch.h"
@@ -292,7 +293,8 @@ static int prepare(farm *f, int workers, int halo, double *extent, char *err, si
     if (rc == 0 && tf_erosion_state_from_heights(&f->st, &f->m, &f->t->erosion, h) != 0)
         rc = tf_seterr(err, errlen, "out of memory: erosion of a %dx%d grid", n, n);
     free(h);
-    if (rc == 0 && tf_erosion_plan_make(&f->plan, 1, n, workers, halo > 0 ? halo : 8,
+    if (rc == 0 && tf_erosion_plan_make(&f->plan, 1, n, workers,
+                                        halo > 0 ? halo : TF_EROSION_DEFAULT_HALO,
                                         f->m.steps) != 0)
         rc = tf_seterr(err, errlen, "erosion: a %dx%d grid is too small for %d workers", n, n,
                        workers);

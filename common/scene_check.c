@@ -166,7 +166,7 @@ static void check_terrain_file(struct parser *p)
 }
 
 /* detail adds to a grid or a height map under procedural = yes; a noise generator has its
- * own octaves for that. */
+ * own octaves for that.  Erosion changes a grid: a procedural noise terrain has none. */
 static void check_procedural(struct parser *p)
 {
     const tf_terrain *t = &p->s->terrain;
@@ -176,6 +176,12 @@ static void check_procedural(struct parser *p)
         scene_fail_at(p, blame_line(p, scene_key_index(SEC_TERRAIN, "detail")),
                       "detail: only for a grid generator or generator = file with procedural "
                       "= yes (a noise generator's detail is its octaves)");
+    int eroded = t->erosion.fluvial_steps > 0 || p->s->animation.erosion_steps > 0;
+    if (!p->failed && eroded && noise && t->procedural)
+        scene_fail_at(p, p->section_line[SEC_EROSION] ? p->section_line[SEC_EROSION]
+                                                     : p->section_line[SEC_ANIMATION],
+                      "erosion: needs a grid; procedural = yes with a noise generator has none "
+                      "(set size_exp and drop procedural, or add detail over a grid)");
 }
 
 void scene_check_semantics(struct parser *p)

@@ -23,8 +23,8 @@
  *    (in double; only the final store to float rounds).
  * The slope between neighbours approaches T asymptotically; thermal_iterations time steps.
  *
- * Fluvial erosion (2.4.1) is not implemented: Musgrave reports its finite-difference transport
- * as numerically unstable, and a stable variant is a research task of its own. */
+ * Fluvial erosion (2.4.1) and dry creep (2.4.3) are terrain/erosion.h's, which run after this;
+ * that model shares the Jacobi update and the exact antisymmetry of transfers used here. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>

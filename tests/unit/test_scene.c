@@ -95,6 +95,13 @@ static void test_error_wrong_type(void **state)
     expect_error_text(MINIMAL "extent = big\n", "t.scene:10: extent: expected a number, got \"big\"");
     expect_error_text(MINIMAL "H =\n", "t.scene:10: H: missing value");
     expect_error_text(MINIMAL "[mist]\nenabled = maybe\n", "t.scene:11: enabled: unknown value \"maybe\"");
+    /* [erosion]: its keys' ranges, and a grid to erode */
+    expect_error_text(MINIMAL "[erosion]\nfluvial_steps = -1\n", "t.scene:11: fluvial_steps: ");
+    expect_error_text(MINIMAL "[erosion]\ncreep = 0.2\n", "t.scene:11: creep: ");
+    expect_error_text(MINIMAL "procedural = yes\n[erosion]\nfluvial_steps = 5\n",
+                      "t.scene:11: erosion: needs a grid; procedural = yes with a noise generator");
+    expect_error_text(MINIMAL "[animation]\nframes = 2\nerosion_steps = -3\n",
+                      "t.scene:12: erosion_steps: -3 is out of range 0..1000000");
     const char *bad_gen = "[terrain]\ngenerator = perlin\n";
     expect_error_text(bad_gen, "t.scene:2: generator: unknown value \"perlin\" (expected "
                                "fbm|hetero|hybrid|ridged|midpoint|fault|subdivide|file)");

@@ -10,7 +10,8 @@ Reads the plan, takes one patch as a real worker would, then:
   3. puts its own edges of round 0 (allowed: they are its to put) one element short, so the
      real worker next to it must refuse them when it reads them and fail the erosion, naming
      the patch and what is wrong; the coordinator then exits non-zero and writes nothing.
-Prints one line per step; exits 1 if a refusal did not come, 0 when the coordinator hangs up."""
+Prints one line per step; exits 1 if a refusal did not come, 0 when the coordinator hangs up
+(which it may do while the short edges are still being put)."""
 import os
 import struct
 import sys
@@ -52,21 +53,22 @@ def main():
     refused("a tally of patch %d" % other, OUT,
             [(STRING, "erode_tally"), (INT, job), (INT, other)] + [(INT, 0)] * 4)
     refused("a second patch", IN, [(STRING, "erode_patch"), (INT, job), (INT, None)])
-    # its own edges, one element short: its neighbour must refuse them
-    n_cols = n // px + 2
-    short = bytes(FIELDS * 4 * halo * n_cols - 4)
-    for side in range(4):
-        op, _ = c.call(OUT, [(STRING, "erode_edge"), (INT, job), (INT, mine), (INT, 0),
-                             (INT, side), (BLOB, short)])
-        if op != OK:
-            bad.append("own edge %d" % side)
-            print("own edge %d not stored: %s" % (side, OP_NAMES.get(op, op)))
-    print("put its own edges of round 0, short")
     if bad:
         sys.exit(1)
+    # its own edges, one element short: its neighbour must refuse them.  The coordinator may
+    # fail the erosion and hang up as soon as the first one it needs is read, even before this
+    # client has read the reply: a closed connection from here on is the expected end.
+    n_cols = n // px + 2
+    short = bytes(FIELDS * 4 * halo * n_cols - 4)
     c.s.settimeout(120)
-    try:  # hold the patch until the coordinator gives up and hangs up
-        c.recv()
+    try:
+        for side in range(4):
+            op, _ = c.call(OUT, [(STRING, "erode_edge"), (INT, job), (INT, mine), (INT, 0),
+                                 (INT, side), (BLOB, short)])
+            if op != OK:
+                sys.exit("own edge %d not stored: %s" % (side, OP_NAMES.get(op, op)))
+        print("put its own edges of round 0, short")
+        c.recv()  # hold the patch until the coordinator gives up and hangs up
     except (EOFError, OSError):
         pass
     print("the coordinator hung up")

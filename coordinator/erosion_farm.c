@@ -360,12 +360,44 @@ static void farm_free(farm *f)
     tf_erosion_state_free(&f->st);
 }
 
+/* What the erosion cost and how it was cut (after a successful run). */
+static void fill_reports(const farm *f, double t0, tf_erosion_report *rep,
+                         tf_erosion_farm_report *fr)
+{
+    int n = f->m.n;
+    /* from the moment every patch has a worker (networked ones join when they join) */
+    rep->seconds = tf_now_s() - (f->t_all_taken > 0 ? f->t_all_taken : t0);
+    rep->vertex_steps = (double)n * n * f->m.steps;
+    rep->tally = f->tally;
+    rep->solid_after = tf_erosion_solid(&f->st, n);
+    rep->quantum = f->m.q;
+    rep->isa = tf_erosion_isa();
+    rep->threads = 1;
+    *fr = (tf_erosion_farm_report){f->patches, f->o->remote, f->plan.px, f->plan.py,
+                                   f->plan.halo,
+                                   tf_erosion_plan_edge_bytes(&f->plan) / f->plan.halo};
+}
+
+/* 5. The blob of the final state, logged and kept in the cache. */
+static int keep(const farm *f, double extent, uint8_t **bytes, size_t *len,
+                tf_erosion_report *rep, char *err, size_t errlen)
+{
+    *bytes = tf_eroded_encode(f->t, &f->st, &f->m, extent, len);
+    if (!*bytes)
+        return tf_seterr(err, errlen, "out of memory: the eroded terrain");
+    char how[64];
+    snprintf(how, sizeof how, "%d workers (%d networked), %dx%d patches", f->patches,
+             f->o->remote, f->plan.px, f->plan.py);
+    tf_eroded_log(f->t, f->m.n, rep, how);
+    tf_eroded_to_cache(f->t, *bytes, *len, rep);
+    return 0;
+}
+
 int tf_erosion_farm(const tf_scene *s, const tf_erosion_farm_opts *o, uint8_t **bytes,
                     size_t *len, tf_erosion_report *rep, tf_erosion_farm_report *fr, char *err,
                     size_t errlen)
 {
     const tf_terrain *t = &s->terrain;
-    int workers = o->forked + o->remote;
     int n = (1 << t->size_exp) + 1;
     memset(rep, 0, sizeof *rep);
     memset(fr, 0, sizeof *fr);
@@ -374,35 +406,14 @@ int tf_erosion_farm(const tf_scene *s, const tf_erosion_farm_opts *o, uint8_t **
         return 0;
     farm f = {.s = s, .t = t, .o = o};
     double extent = t->extent;
-    int rc = prepare(&f, workers, o->halo, &extent, err, errlen);
+    int rc = prepare(&f, o->forked + o->remote, o->halo, &extent, err, errlen);
     rep->solid_before = rc == 0 ? tf_erosion_solid(&f.st, n) : 0;
     double t0 = tf_now_s();
     if (rc == 0)
         rc = run(&f, err, errlen);
     if (rc == 0) {
-        /* from the moment every patch has a worker (networked ones join when they join) */
-        rep->seconds = tf_now_s() - (f.t_all_taken > 0 ? f.t_all_taken : t0);
-        rep->vertex_steps = (double)n * n * f.m.steps;
-        rep->tally = f.tally;
-        rep->solid_after = tf_erosion_solid(&f.st, n);
-        rep->quantum = f.m.q;
-        rep->isa = tf_erosion_isa();
-        rep->threads = 1;
-        fr->workers = f.patches;
-        fr->remote = o->remote;
-        fr->px = f.plan.px;
-        fr->py = f.plan.py;
-        fr->halo = f.plan.halo;
-        *bytes = tf_eroded_encode(t, &f.st, &f.m, extent, len);
-        rc = *bytes ? 0 : tf_seterr(err, errlen, "out of memory: the eroded terrain");
-    }
-    if (rc == 0) {
-        fr->edge_bytes_per_step = tf_erosion_plan_edge_bytes(&f.plan) / f.plan.halo;
-        char how[48];
-        snprintf(how, sizeof how, "%d workers (%d networked), %dx%d patches", f.patches,
-                 o->remote, f.plan.px, f.plan.py);
-        tf_eroded_log(t, n, rep, how);
-        tf_eroded_to_cache(t, *bytes, *len, rep);
+        fill_reports(&f, t0, rep, fr);
+        rc = keep(&f, extent, bytes, len, rep, err, errlen);
     }
     farm_free(&f);
     return rc;

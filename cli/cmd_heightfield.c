@@ -49,7 +49,8 @@ static const char usage[] =
     "\n"
     "  -o, --output FILE     FILE.png: 16-bit grayscale, the height range [hmin, hmax]\n"
     "                        mapped to 0..65535 (readable by POV-Ray's height_field);\n"
-    "                        FILE.exr: one float channel Y of world heights;\n"
+    "                        FILE.exr: one float channel Y of world heights (with\n"
+    "                        [erosion] also water, silt and flow, world metres);\n"
     "                        FILE.tif: a Float32 GeoTIFF of world heights, north-up (its\n"
     "                        first row is the far edge), georeferenced\n"
     "      --srs SRS         GeoTIFF: its CRS, e.g. EPSG:32632 (default: none, only the\n"
@@ -434,6 +435,17 @@ static int write_stats(const char *path, const tf_terrain *t, int n, const erosi
     return rc ? tf_seterr(err, errlen, "%s: cannot write the statistics", path) : 0;
 }
 
+/* EXR: channel Y, and with erosion's maps also flow, silt and water (world metres). */
+static int write_exr(const char *path, int n, const float *h, const tf_eroded_maps *m,
+                     const char *const *meta, char *err, size_t errlen)
+{
+    if (!m->water)
+        return tf_exr_write_gray_attrs(path, n, n, h, meta, err, errlen);
+    const char *names[4] = {"Y", "flow", "silt", "water"}; /* sorted, as OpenEXR lists them */
+    const float *planes[4] = {h, m->flow, m->silt, m->water};
+    return tf_exr_write_planes(path, n, n, names, planes, 4, meta, err, errlen);
+}
+
 /* The maps and the statistics of the eroded heights h. */
 static int erosion_outputs(const struct hf_options *o, const tf_terrain *t, int n,
                            const float *h, const erosion_run *er, char *err, size_t errlen)
@@ -486,7 +498,7 @@ int cmd_heightfield(int argc, char **argv)
     int rc = png ? write_png(o.output, h, n, lo, hi, meta, err, sizeof err)
              : tif ? tf_geotiff_write_heights(o.output, n, h, extent / (n - 1), o.east0, o.north0,
                                               o.srs, meta, err, sizeof err)
-                   : tf_exr_write_gray_attrs(o.output, n, n, h, meta, err, sizeof err);
+                   : write_exr(o.output, n, h, &er.maps, meta, err, sizeof err);
     if (rc == 0)
         print_placement(o.output, n, extent, lo, hi, png, tif);
     if (rc == 0 && terrain.erosion.fluvial_steps > 0)

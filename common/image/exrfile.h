@@ -126,5 +126,10 @@ int tf_exr_write_gray(const char *path, int width, int height, const float *data
 /* The same with string attributes in its header: attrs is NULL or name, value, ..., NULL. */
 int tf_exr_write_gray_attrs(const char *path, int width, int height, const float *data,
                             const char *const *attrs, char *err, size_t errlen);
+/* Several FLOAT channels, plane c named names[c] (the names sorted, as OpenEXR lists them),
+ * with string attributes as above: a height field with its erosion maps. */
+int tf_exr_write_planes(const char *path, int width, int height, const char *const *names,
+                        const float *const *planes, int nplanes, const char *const *attrs,
+                        char *err, size_t errlen);
 
 #endif

@@ -411,11 +411,14 @@ int tf_exr_write_gray(const char *path, int width, int height, const float *data
     return tf_exr_write_gray_attrs(path, width, height, data, NULL, err, errlen);
 }
 
-int tf_exr_write_gray_attrs(const char *path, int width, int height, const float *data,
-                            const char *const *attrs, char *err, size_t errlen)
+/* FLOAT channels (sorted by name) over interleaved pixels of nchannels floats. */
+static int write_floats(const char *path, int width, int height, const tf_exr_channel *channels,
+                        int nchannels, const float *data, const char *const *attrs, char *err,
+                        size_t errlen)
 {
     tf_exr_layout layout = {width, height, 0, 0, 0, TF_PIXEL_FLOAT};
-    tf_exr_writer *w = writer_open(path, &layout, GRAY_CHANNELS, 1, sizeof(float), err, errlen);
+    tf_exr_writer *w = writer_open(path, &layout, channels, nchannels,
+                                   (size_t)nchannels * sizeof(float), err, errlen);
     if (!w)
         return -1;
     exr_result_t rv = exr_attr_set_string(w->ctx, 0, TF_EXR_ATTR_VERSION, TF_VERSION);
@@ -429,4 +432,32 @@ int tf_exr_write_gray_attrs(const char *path, int width, int height, const float
         return -1;
     }
     return tf_exr_finish(w, err, errlen);
+}
+
+int tf_exr_write_gray_attrs(const char *path, int width, int height, const float *data,
+                            const char *const *attrs, char *err, size_t errlen)
+{
+    return write_floats(path, width, height, GRAY_CHANNELS, 1, data, attrs, err, errlen);
+}
+
+int tf_exr_write_planes(const char *path, int width, int height, const char *const *names,
+                        const float *const *planes, int nplanes, const char *const *attrs,
+                        char *err, size_t errlen)
+{
+    size_t count = (size_t)width * (size_t)height;
+    tf_exr_channel *ch = calloc((size_t)nplanes, sizeof *ch);
+    float *px = malloc(count * (size_t)nplanes * sizeof *px);
+    int rc = -1;
+    if (!ch || !px)
+        tf_seterr(err, errlen, "%s: out of memory", path);
+    for (int c = 0; ch && px && c < nplanes; c++) {
+        ch[c] = (tf_exr_channel){names[c], (size_t)c * sizeof(float), EXR_PIXEL_FLOAT};
+        for (size_t i = 0; i < count; i++)
+            px[i * (size_t)nplanes + (size_t)c] = planes[c][i];
+    }
+    if (ch && px)
+        rc = write_floats(path, width, height, ch, nplanes, px, attrs, err, errlen);
+    free(px);
+    free(ch);
+    return rc;
 }

@@ -3,7 +3,7 @@
 #  - `terrafarm heightfield -j N` erodes on N forked workers (patches trading edges through the
 #    tuple space): the heights are byte-identical to one process for N = 1, 2, 3, 4 (patch grids
 #    1x1, 2x1, 3x1, 2x2) and for other halos; the statistics balance the mass exactly and say
-#    erosion removed pits;
+#    erosion removed pits; the EXR holds channels Y, flow, silt and water;
 #  - the eroded terrain is cached by the hash of [terrain] and [erosion]: a second run reads
 #    it (no erosion), a changed key erodes again, a damaged entry is refused and rebuilt;
 #  - a render erodes once (cache beside the output); a networked worker receives the eroded
@@ -35,6 +35,11 @@ for j in 1 2 3 4; do
     grep -q "$j workers" "$T/hf.err" || fail "-j $j did not erode on $j workers: $(cat "$T/hf.err")"
     same "$T/ref.exr" "$T/j$j.exr" "heights eroded on $j workers"
 done
+if command -v exrheader >/dev/null 2>&1; then
+    chans=$(exrheader "$T/ref.exr" | sed -n 's/^ *\([A-Za-z]*\), 32-bit floating-point.*/\1/p' | tr '\n' ' ')
+    [ "$chans" = "Y flow silt water " ] || fail "the eroded EXR's channels: '$chans'"
+    say "the EXR holds the heights and the maps: $chans"
+fi
 TF_EROSION_CACHE=off hf -o "$T/h3.exr" -j 2 --halo 3 || fail "--halo 3: $(cat "$T/hf.err")"
 same "$T/ref.exr" "$T/h3.exr" "2 workers trading edges every 3 steps"
 

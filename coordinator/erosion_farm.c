@@ -278,21 +278,8 @@ static void stop_workers(farm *f)
 /* 1. The raw heights' state and the plan. */
 static int prepare(farm *f, int workers, int halo, double *extent, char *err, size_t errlen)
 {
-    tf_terrain raw = *f->t;
-    raw.erosion.fluvial_steps = 0;
     int n = (1 << f->t->size_exp) + 1;
-    float *h = tf_terrain_heights(&raw, 0, extent, err, errlen);
-    if (!h)
-        return -1;
-    float lo = h[0], hi = h[0];
-    for (size_t i = 0; i < (size_t)n * (size_t)n; i++) {
-        lo = h[i] < lo ? h[i] : lo;
-        hi = h[i] > hi ? h[i] : hi;
-    }
-    int rc = tf_erosion_model_init(&f->m, &f->t->erosion, f->t->seed, n, lo, hi, err, errlen);
-    if (rc == 0 && tf_erosion_state_from_heights(&f->st, &f->m, &f->t->erosion, h) != 0)
-        rc = tf_seterr(err, errlen, "out of memory: erosion of a %dx%d grid", n, n);
-    free(h);
+    int rc = tf_terrain_erosion_start(f->t, extent, &f->m, &f->st, err, errlen);
     if (rc == 0 && tf_erosion_plan_make(&f->plan, 1, n, workers,
                                         halo > 0 ? halo : TF_EROSION_DEFAULT_HALO,
                                         f->m.steps) != 0)

@@ -319,29 +319,6 @@ static int plan_fits(const tf_erosion_plan *p, const tf_scene *s, const char *fr
     return 0;
 }
 
-/* The initial state every worker derives from the scene, as the coordinator does. */
-static int initial_state(const tf_scene *s, tf_erosion_model *m, tf_erosion_state *st,
-                         char *err, size_t errlen)
-{
-    tf_terrain raw = s->terrain;
-    raw.erosion.fluvial_steps = 0;
-    int n = (1 << s->terrain.size_exp) + 1;
-    float *h = tf_terrain_heights(&raw, 0, NULL, err, errlen);
-    if (!h)
-        return -1;
-    float lo = h[0], hi = h[0];
-    for (size_t i = 0; i < (size_t)n * (size_t)n; i++) {
-        lo = h[i] < lo ? h[i] : lo;
-        hi = h[i] > hi ? h[i] : hi;
-    }
-    int rc = tf_erosion_model_init(m, &s->terrain.erosion, s->terrain.seed, n, lo, hi, err,
-                                   errlen);
-    if (rc == 0 && tf_erosion_state_from_heights(st, m, &s->terrain.erosion, h) != 0)
-        rc = tf_seterr(err, errlen, "out of memory: erosion of a %dx%d grid", n, n);
-    free(h);
-    return rc;
-}
-
 int tf_erosion_networked(ts_client *c, const tf_scene *s, const char *from, int heartbeat_ms)
 {
     tf_erosion_plan plan;
@@ -354,7 +331,7 @@ int tf_erosion_networked(ts_client *c, const tf_scene *s, const char *from, int 
     tf_erosion_state st = {0};
     ts_client_heartbeat(c, heartbeat_ms); /* rounds can outlast the server's silence timeout */
     int rc = plan_fits(&plan, s, from, err, sizeof err) != 0 ||
-             initial_state(s, &m, &st, err, sizeof err) != 0;
+             tf_terrain_erosion_start(&s->terrain, NULL, &m, &st, err, sizeof err) != 0;
     if (rc)
         tf_error("%s", err);
     else {

@@ -204,19 +204,10 @@ static uint8_t *cache_read(const tf_terrain *t, int n, const char *path, size_t 
 static uint8_t *erode(const tf_terrain *t, const float *raw, int n, double extent, int threads,
                       size_t *len, tf_erosion_report *rep, char *err, size_t errlen)
 {
-    float lo = raw[0], hi = raw[0];
-    for (size_t i = 0; i < (size_t)n * (size_t)n; i++) {
-        lo = raw[i] < lo ? raw[i] : lo;
-        hi = raw[i] > hi ? raw[i] : hi;
-    }
     tf_erosion_model m;
     tf_erosion_state st;
-    if (tf_erosion_model_init(&m, &t->erosion, t->seed, n, lo, hi, err, errlen) != 0)
+    if (tf_erosion_begin(t, raw, n, &m, &st, err, errlen) != 0)
         return NULL;
-    if (tf_erosion_state_from_heights(&st, &m, &t->erosion, raw) != 0) {
-        tf_seterr(err, errlen, "out of memory: erosion of a %dx%d grid", n, n);
-        return NULL;
-    }
     rep->solid_before = tf_erosion_solid(&st, n);
     const char *dir = tf_eroded_cache_dir();
     int done = dir && tf_erosion_checkpoints_enabled()

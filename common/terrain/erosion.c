@@ -108,6 +108,21 @@ int tf_erosion_state_from_heights(tf_erosion_state *st, const tf_erosion_model *
     return 0;
 }
 
+int tf_erosion_begin(const tf_terrain *t, const float *h, int n, tf_erosion_model *m,
+                     tf_erosion_state *st, char *err, size_t errlen)
+{
+    float lo = h[0], hi = h[0];
+    for (size_t i = 0; i < (size_t)n * (size_t)n; i++) {
+        lo = h[i] < lo ? h[i] : lo;
+        hi = h[i] > hi ? h[i] : hi;
+    }
+    if (tf_erosion_model_init(m, &t->erosion, t->seed, n, lo, hi, err, errlen) != 0)
+        return -1;
+    if (tf_erosion_state_from_heights(st, m, &t->erosion, h) != 0)
+        return tf_seterr(err, errlen, "out of memory: erosion of a %dx%d grid", n, n);
+    return 0;
+}
+
 void tf_erosion_heights(const tf_erosion_state *st, const tf_erosion_model *m, float *h)
 {
     size_t count = (size_t)m->n * (size_t)m->n;

@@ -24,6 +24,10 @@ void tf_erosion_state_free(tf_erosion_state *st);
  * softness field from the keys.  0, or -1 on out of memory. */
 int tf_erosion_state_from_heights(tf_erosion_state *st, const tf_erosion_model *m,
                                   const tf_erosion_keys *k, const float *h);
+/* Both for t's erosion of the heights h (n x n): the model (its quantum from h's range) and
+ * the initial state.  0, or -1 with one line in err. */
+int tf_erosion_begin(const tf_terrain *t, const float *h, int n, tf_erosion_model *m,
+                     tf_erosion_state *st, char *err, size_t errlen);
 /* World heights of the ground (bedrock + talus + silt) into h (n x n). */
 void tf_erosion_heights(const tf_erosion_state *st, const tf_erosion_model *m, float *h);
 /* Sums over the grid, exact: bedrock + talus + silt + load, and water (quanta). */

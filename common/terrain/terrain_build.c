@@ -9,6 +9,7 @@
 #include "terrain/terrain_build.h"
 #include "terrain/procedural.h"
 #include "terrain/eroded.h"
+#include "terrain/erosion_state.h"
 
 #include <math.h>
 #include <pthread.h>
@@ -199,6 +200,18 @@ static float *raw_heights(const tf_terrain *t, int threads, double *extent, char
         return NULL;
     }
     return h;
+}
+
+int tf_terrain_erosion_start(const tf_terrain *t, double *extent, tf_erosion_model *m,
+                             tf_erosion_state *st, char *err, size_t errlen)
+{
+    double side;
+    float *raw = raw_heights(t, 0, extent ? extent : &side, err, errlen);
+    if (!raw)
+        return -1;
+    int rc = tf_erosion_begin(t, raw, (1 << t->size_exp) + 1, m, st, err, errlen);
+    free(raw);
+    return rc;
 }
 
 int tf_terrain_eroded_bytes(const tf_terrain *t, int threads, uint8_t **bytes, size_t *len,

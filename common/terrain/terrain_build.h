@@ -33,6 +33,14 @@ float *tf_terrain_heights_maps(const tf_terrain *t, int threads, double *extent,
                                struct tf_eroded_maps *maps, struct tf_erosion_report *rep,
                                char *err, size_t errlen);
 
+/* The start of t's erosion: its generated, weathered heights made into the erosion's model and
+ * initial state (erosion_state.h; what every farm worker derives alike); *extent (if not
+ * NULL) the terrain's side.  0, or -1 with one line in err. */
+struct tf_erosion_model;
+struct tf_erosion_state;
+int tf_terrain_erosion_start(const tf_terrain *t, double *extent, struct tf_erosion_model *m,
+                             struct tf_erosion_state *st, char *err, size_t errlen);
+
 /* The blob of t's eroded terrain (terrain/eroded.h): generated, weathered and eroded here, or
  * read from the erosion cache.  0, or -1 with one line in err. */
 int tf_terrain_eroded_bytes(const tf_terrain *t, int threads, uint8_t **bytes, size_t *len,

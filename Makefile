@@ -15,7 +15,7 @@ BUILD   ?= build
 BIN     ?= bin
 VERSION := 0.2.0
 
-PKGS      := inih libpng libsodium zlib gdal libmicrohttpd jansson
+PKGS      := inih libpng libsodium zlib gdal libmicrohttpd jansson sqlite3
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
 EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
@@ -44,11 +44,11 @@ RENDER_SRC  := $(wildcard common/render/*.c)
 # 4. linda: tuples, the wire protocol, sockets, authentication, the store, client and server
 LINDA_SRC   := $(wildcard common/linda/*.c)
 # 5. the farm's tuples (task, result, failure, scene, height map), spoken by both sides
-FARM_SRC    := common/farmproto.c common/heightmap_tuples.c common/erosion_tuples.c
+FARM_SRC    := common/http_client.c common/farm_keys.c common/farmproto.c common/heightmap_tuples.c common/erosion_tuples.c
 # 6. worker: the worker loop, its C and OpenCL backends, the simulated worker
 WORKER_SRC  := $(wildcard worker/*.c)
 # 7. coordinator: the farm's policy (dealer and watermark, leases, in-order writer, progress)
-COORD_SRC   := $(wildcard coordinator/*.c)
+COORD_SRC   := $(wildcard coordinator/*.c) $(wildcard coordinator/farm/*.c)
 LIB_SRC     := $(BASE_SRC) $(TERRAIN_SRC) $(IMAGE_SRC) $(RENDER_SRC) $(LINDA_SRC) $(FARM_SRC) \
                $(WORKER_SRC) $(COORD_SRC)
 # 8. cli: bin/terrafarm's subcommands
@@ -152,7 +152,7 @@ bench: $(PROG) $(BENCHES)
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
             iproute2 python3 gnuplot-nox ffmpeg libgdal-dev gdal-bin openssh-server openssh-client \
-            slurm-wlm munge libmicrohttpd-dev libjansson-dev chromium povray redis-server
+            slurm-wlm munge libmicrohttpd-dev libjansson-dev libsqlite3-dev sqlite3 chromium povray redis-server
 # The benchmarks' measuring tools (make bench-deps); their peers POV-Ray and Redis are in
 # DEB_PKGS, since the tests run every benchmark's smoke mode (tests/e2e/bench_smoke.sh).
 BENCH_PKGS := hyperfine linux-perf valgrind

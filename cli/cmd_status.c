@@ -1,7 +1,7 @@
 /* cmd_status.c: `terrafarm status HOST:PORT [--json]`: what a running render's dashboard shows
  * (its /api/status and /api/workers, README "Dashboard and API"), in a terminal or as one JSON
  * document for scripts.  A plain HTTP/1.0 GET over the project's sockets (linda/sock.h); the
- * answer is bounded in size and time and parsed with jansson. */
+ * answer is bounded in size and time and parsed with jansson (http_client.h). */
 #include <errno.h>
 #include <getopt.h>
 #include <jansson.h>
@@ -14,11 +14,10 @@
 #include "clock.h"
 #include "cli/commands.h"
 #include "coordinator/httpauth.h"
+#include "http_client.h"
 #include "linda/auth.h"
 #include "linda/sock.h"
 #include "log.h"
-
-#define MAX_ANSWER (4u << 20)
 
 static const char usage[] =
     "usage: terrafarm status HOST:PORT [options]\n"
@@ -33,96 +32,16 @@ static const char usage[] =
     "      --timeout T           give up after this long (default 5s; 500ms, 2m, ...)\n"
     "  -h, --help                this help\n";
 
-typedef struct answer {
-    int code;
-    char *body;
-    size_t len;
-} answer;
-
-/* GET path from addr; 0 and the answer, or -1 with a message. */
-static int http_get(const char *addr, const char *path, const char *token, int64_t deadline,
-                    answer *a, char *err, size_t errlen)
-{
-    memset(a, 0, sizeof *a);
-    int fd = tf_sock_connect(addr, deadline, err, errlen);
-    if (fd < 0)
-        return -1;
-    char req[1024];
-    int n = snprintf(req, sizeof req,
-                     "GET %s HTTP/1.0\r\nHost: %s\r\n%s%s%sAccept: application/json\r\n"
-                     "Connection: close\r\n\r\n",
-                     path, addr, token ? "Authorization: Bearer " : "", token ? token : "",
-                     token ? "\r\n" : "");
-    if (n <= 0 || n >= (int)sizeof req || write(fd, req, (size_t)n) != n) {
-        close(fd);
-        return tf_seterr(err, errlen, "%s: cannot send the request: %s", addr, strerror(errno));
-    }
-    size_t cap = 65536, len = 0;
-    char *buf = malloc(cap + 1);
-    while (buf) {
-        int64_t left = deadline - tf_now_ms();
-        struct pollfd p = {fd, POLLIN, 0};
-        if (left <= 0 || poll(&p, 1, (int)left) <= 0) {
-            free(buf);
-            close(fd);
-            return tf_seterr(err, errlen, "%s: no complete answer in time", addr);
-        }
-        if (len == cap) {
-            if (cap >= MAX_ANSWER)
-                break;
-            char *nb = realloc(buf, 2 * cap + 1);
-            if (!nb)
-                break;
-            buf = nb;
-            cap *= 2;
-        }
-        ssize_t got = read(fd, buf + len, cap - len);
-        if (got < 0 && errno == EINTR)
-            continue;
-        if (got <= 0)
-            break;
-        len += (size_t)got;
-    }
-    close(fd);
-    if (!buf)
-        return tf_seterr(err, errlen, "out of memory");
-    buf[len] = 0;
-    char *body = strstr(buf, "\r\n\r\n");
-    if (len >= cap || !body || sscanf(buf, "HTTP/1.%*d %d", &a->code) != 1) {
-        free(buf);
-        return tf_seterr(err, errlen, "%s: not an HTTP answer from a terrafarm dashboard", addr);
-    }
-    body += 4;
-    a->len = len - (size_t)(body - buf);
-    memmove(buf, body, a->len + 1);
-    a->body = buf;
-    return 0;
-}
-
 /* GET a JSON document; NULL with a message. */
 static json_t *get_json(const char *addr, const char *path, const char *token, int64_t deadline,
                         char *err, size_t errlen)
 {
-    answer a;
-    if (http_get(addr, path, token, deadline, &a, err, errlen))
-        return NULL;
-    json_t *doc = NULL;
-    if (a.code != 200) {
-        char *nl = strchr(a.body, '\n');
-        if (nl)
-            *nl = 0;
-        tf_seterr(err, errlen, "%s%s answered %d: %.200s%s", addr, path, a.code, a.body,
-                  a.code == 401 ? " (give --token-file or --secret-file)" : "");
-    } else {
-        json_error_t jerr;
-        doc = json_loadb(a.body, a.len, JSON_REJECT_DUPLICATES, &jerr);
-        if (!json_is_object(doc)) {
-            json_decref(doc);
-            doc = NULL;
-            tf_seterr(err, errlen, "%s%s: not a JSON object: %s", addr, path, jerr.text);
-        }
+    int code = 0;
+    json_t *doc = tf_http_json(addr, "GET", path, token, NULL, deadline, &code, err, errlen);
+    if (!doc && code == 401) {
+        size_t n = strlen(err);
+        snprintf(err + n, errlen - n, " (give --token-file or --secret-file)");
     }
-    free(a.body);
     return doc;
 }
 

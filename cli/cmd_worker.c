@@ -11,15 +11,19 @@
 #include "clock.h"
 #include "cli/commands.h"
 #include "log.h"
+#include "worker/farm_worker.h"
 #include "worker/networked.h"
 
 static const char usage[] =
     "usage: terrafarm worker --connect HOST:PORT [options]\n"
+    "       terrafarm worker --connect http://HOST:PORT --secret-file FILE [farm options]\n"
     "\n"
     "Join a render as a networked worker: fetch the scene from the coordinator, build the\n"
-    "terrain, and render tasks until the render is finished.\n"
+    "terrain, and render tasks until the render is finished.  Given a standing farm\n"
+    "(http://, terrafarm farm), serve its jobs one after another until stopped.\n"
     "\n"
     "  -c, --connect HOST:PORT   the coordinator (terrafarm render ... --listen HOST:PORT)\n"
+    "                            or http://HOST:PORT, a standing farm (terrafarm farm)\n"
     "      --secret-file FILE    shared secret, if the coordinator requires one\n"
     "      --backend c|opencl|auto  rendering backend (default c; auto: OpenCL if a device\n"
     "                            works, else C with a warning)\n"
@@ -37,13 +41,20 @@ static const char usage[] =
     "      --payloads FILE.exr   with --simulate: answer tasks with the packed chunks of this\n"
     "                            finished render (same --tasks and --pixel), as real workers\n"
     "                            would; without it simulated results are encoded black pixels\n"
+    "farm options (--connect http://...):\n"
+    "      --pool P              serve only jobs of pool P (default: default)\n"
+    "      --tags T1,T2          what this machine offers; a job may require tags\n"
+    "      --name NAME           the worker's name on the farm (default HOST:PID)\n"
+    "      --terrain-memory SIZE keep the terrains of recent jobs within SIZE (default an\n"
+    "                            eighth of memory), so returning to a job costs no rebuild\n"
+    "      --max-sessions N      leave after serving N jobs (default: stay)\n"
     "  -q, --quiet / -v, --verbose\n"
     "  -h, --help\n";
 
 int cmd_worker(int argc, char **argv)
 {
     enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE, O_PAYLOADS,
-           O_TERRAIN_CACHE };
+           O_TERRAIN_CACHE, O_POOL, O_TAGS, O_NAME, O_TERRAIN_MEMORY, O_MAX_SESSIONS };
     static const struct option longopts[] = {
         {"connect", required_argument, NULL, 'c'},
         {"secret-file", required_argument, NULL, O_SECRET},
@@ -55,6 +66,11 @@ int cmd_worker(int argc, char **argv)
         {"payloads", required_argument, NULL, O_PAYLOADS},
         {"cl-device", required_argument, NULL, O_CL_DEVICE},
         {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
+        {"pool", required_argument, NULL, O_POOL},
+        {"tags", required_argument, NULL, O_TAGS},
+        {"name", required_argument, NULL, O_NAME},
+        {"terrain-memory", required_argument, NULL, O_TERRAIN_MEMORY},
+        {"max-sessions", required_argument, NULL, O_MAX_SESSIONS},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -63,6 +79,7 @@ int cmd_worker(int argc, char **argv)
     const char *connect = NULL, *secret = NULL, *backend = "c", *model = NULL, *payloads = NULL;
     double pixel_us = 50.0;
     size_t terrain_cache = 0;
+    tf_farm_worker_opts fo = {0};
     int nproc = 0, timeout_ms = 10000, ch;
     char *end;
     optind = 1;
@@ -102,6 +119,20 @@ int cmd_worker(int argc, char **argv)
             if (tf_parse_byte_size("--terrain-cache", optarg, &terrain_cache))
                 return TF_EXIT_USAGE;
             break;
+        case O_POOL: fo.pool = optarg; break;
+        case O_TAGS: fo.tags = optarg; break;
+        case O_NAME: fo.name = optarg; break;
+        case O_TERRAIN_MEMORY:
+            if (tf_parse_byte_size("--terrain-memory", optarg, &fo.terrain_memory))
+                return TF_EXIT_USAGE;
+            break;
+        case O_MAX_SESSIONS:
+            fo.max_sessions = (int)strtol(optarg, &end, 10);
+            if (end == optarg || *end || fo.max_sessions < 1) {
+                tf_error("--max-sessions '%s': expected a positive integer", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
         case O_PIXEL_US:
             pixel_us = strtod(optarg, &end);
@@ -128,6 +159,14 @@ int cmd_worker(int argc, char **argv)
         return TF_EXIT_USAGE;
     }
     signal(SIGPIPE, SIG_IGN);
+    if (!strncmp(connect, "http://", 7)) { /* a standing farm */
+        fo.farm = connect + 7;
+        fo.secret_file = secret;
+        fo.processes = nproc;
+        fo.backend = backend;
+        fo.terrain_cache = terrain_cache;
+        return tf_farm_worker_run(&fo) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
+    }
     tf_networked_opts o = {connect, secret,   timeout_ms, nproc,   backend,
                            model,   pixel_us, payloads,   terrain_cache};
     return tf_networked_worker_run(&o) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;

@@ -8,6 +8,8 @@ int cmd_worker(int argc, char **argv);      /* cmd_worker.c: a networked worker 
 int cmd_heightfield(int argc, char **argv); /* cmd_heightfield.c: export the terrain */
 int cmd_bench(int argc, char **argv);       /* cmd_bench.c: speedup against worker count */
 int cmd_status(int argc, char **argv);      /* cmd_status.c: a running render's dashboard */
+int cmd_farm(int argc, char **argv);        /* cmd_farm.c: a standing farm */
+int cmd_jobs(int argc, char **argv);        /* cmd_jobs.c: submit, jobs, job, cancel, ... */
 
 /* Exit statuses shared by all commands. */
 /* `--terrain-cache SIZE` and the like: a byte count with an optional K, M, G or T (powers of

@@ -17,6 +17,10 @@ static const char usage[] =
     "  heightfield SCENE -o FILE       export the terrain as 16-bit PNG or float EXR\n"
     "  bench SCENE --workers 1,2,4     measure speedup against worker count\n"
     "  status HOST:PORT [--json]       a running render's progress, from its dashboard\n"
+    "  farm --listen HOST:PORT --state DIR   a standing farm: a durable queue of jobs\n"
+    "  submit SCENE [options]          queue a job on a standing farm (prints its id)\n"
+    "  jobs | job ID                   the farm's jobs, one job (and its output)\n"
+    "  cancel|pause|resume ID, priority ID N   steer a job\n"
     "\n"
     "  terrafarm COMMAND --help        options of one command\n"
     "  terrafarm --version             print the version\n";
@@ -45,6 +49,14 @@ int main(int argc, char **argv)
         {"heightfield", cmd_heightfield},
         {"bench", cmd_bench},
         {"status", cmd_status},
+        {"farm", cmd_farm},
+        {"submit", cmd_jobs},
+        {"jobs", cmd_jobs},
+        {"job", cmd_jobs},
+        {"cancel", cmd_jobs},
+        {"pause", cmd_jobs},
+        {"resume", cmd_jobs},
+        {"priority", cmd_jobs},
     };
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
         if (!strcmp(cmd, commands[i].name))

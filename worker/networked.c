@@ -42,8 +42,8 @@ static int failure_is_final(const char *err)
  * lost it (a pause, a partition, a restart) comes back, and one whose address is crowded by
  * failed handshakes (a guesser beside it) tries again.  A final failure (its own wrong secret,
  * answered as such; not a coordinator) ends at once. */
-static ts_client *connect_patiently(const char *hostport, const uint8_t *key, int timeout_ms,
-                                    char *err, size_t errlen)
+ts_client *tf_networked_connect(const char *hostport, const uint8_t *key, int timeout_ms,
+                                char *err, size_t errlen)
 {
     int64_t t0 = tf_now_ms();
     int backoff_ms = 250;
@@ -88,7 +88,7 @@ static int run_one(const char *connect, const uint8_t *key, int timeout_ms, cons
     char err[1024];
     for (int round = 0;; round++) {
         ts_client *c = round == 0 && first ? first
-                                           : connect_patiently(connect, key, timeout_ms, err,
+                                           : tf_networked_connect(connect, key, timeout_ms, err,
                                                                sizeof err);
         if (!c) {
             tf_error("%s%s", round ? "cannot reconnect: " : "", err);
@@ -198,7 +198,7 @@ int tf_networked_worker_run(const tf_networked_opts *o)
     const uint8_t *k = secret ? key : NULL;
 
     /* The scene, from the coordinator (tsnet model): the first connection only reads it. */
-    ts_client *c = connect_patiently(connect, k, timeout_ms, err, sizeof err);
+    ts_client *c = tf_networked_connect(connect, k, timeout_ms, err, sizeof err);
     if (!c) {
         tf_error("%s", err);
         return 1;

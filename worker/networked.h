@@ -23,6 +23,13 @@ typedef struct tf_networked_opts {
     size_t terrain_cache;       /* procedural terrain cache per process, bytes; 0 = default */
 } tf_networked_opts;
 
+/* Connect to a coordinator, retrying with backoff (250 ms doubling to 4 s) for at most
+ * timeout_ms while it cannot be reached; a final refusal (a wrong secret, not a coordinator)
+ * ends at once.  NULL with one line in err. */
+struct ts_client;
+struct ts_client *tf_networked_connect(const char *hostport, const uint8_t *key, int timeout_ms,
+                                       char *err, size_t errlen);
+
 /* Run until the render is finished.  Returns the process exit status (0, or 1 after one
  * line on stderr). */
 int tf_networked_worker_run(const tf_networked_opts *o);

@@ -167,12 +167,35 @@ static int listen_tcp(const char *spec, int *port_out, char *err, size_t errlen)
     return fd;
 }
 
+/* "fd:N": a listening TCP socket inherited from the parent (a standing farm binds its jobs'
+ * ports itself, so no other process can take one between choosing it and listening). */
+static int listen_inherited(const char *num, int *port_out, char *err, size_t errlen)
+{
+    char *end;
+    long fd = strtol(num, &end, 10);
+    int on = 0;
+    socklen_t ol = sizeof on;
+    if (end == num || *end || fd < 3 || fd > 65535 ||
+        getsockopt((int)fd, SOL_SOCKET, SO_ACCEPTCONN, &on, &ol) || !on)
+        return tf_seterr(err, errlen, "listen fd:%s: not an inherited listening socket", num);
+    fcntl((int)fd, F_SETFD, FD_CLOEXEC);
+    tf_sock_set_nonblocking((int)fd);
+    struct sockaddr_storage ss;
+    socklen_t sl = sizeof ss;
+    if (port_out && getsockname((int)fd, (struct sockaddr *)&ss, &sl) == 0)
+        *port_out = ntohs(ss.ss_family == AF_INET6 ? ((struct sockaddr_in6 *)&ss)->sin6_port
+                                                   : ((struct sockaddr_in *)&ss)->sin_port);
+    return (int)fd;
+}
+
 int tf_sock_listen(const char *spec, int *port_out, char *err, size_t errlen)
 {
     if (port_out)
         *port_out = 0;
     if (strncmp(spec, "unix:", 5) == 0)
         return listen_unix(spec + 5, err, errlen);
+    if (strncmp(spec, "fd:", 3) == 0)
+        return listen_inherited(spec + 3, port_out, err, errlen);
     return listen_tcp(spec, port_out, err, errlen);
 }
 

@@ -18,7 +18,7 @@ int tf_addr_is_loopback(const char *host);
 int tf_listen_is_loopback(const char *spec);
 
 /* A non-blocking, close-on-exec listening socket on spec (a stale unix socket file is
- * replaced).  *port_out (may be NULL) gets the bound TCP port, 0 for unix. */
+ * replaced; "fd:N" adopts the listening TCP socket N inherited from the parent).  *port_out (may be NULL) gets the bound TCP port, 0 for unix. */
 int tf_sock_listen(const char *spec, int *port_out, char *err, size_t errlen);
 
 /* Connect to spec, trying each address getaddrinfo gives, until the monotonic deadline

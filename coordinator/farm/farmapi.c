@@ -1,0 +1,268 @@
+/* farmapi.c: the standing farm's HTTP JSON API (docs/farm-api.yaml), on libmicrohttpd with a
+ * thread per connection (a worker's request for a job is a long poll).  Every request names
+ * its caller with a bearer token: the workers' token derived from the farm secret, or a
+ * person's token (submitter or admin) found by its hash in the database.  Each route takes the
+ * farm's lock and calls farm_jobs.c or farm_workers.c; bodies are bounded and parsed with
+ * jansson; nothing a caller sends is trusted beyond what those functions check. */
+#include "coordinator/farm/farm_internal.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <microhttpd.h>
+#include <sodium.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "linda/sock.h"
+#include "log.h"
+
+#define MAX_BODY ((size_t)96 << 20) /* a 64 MiB height map in base64 and its scene */
+
+struct farm_http {
+    tf_farm *f;
+    struct MHD_Daemon *mhd;
+};
+
+typedef struct request_body {
+    char *data;
+    size_t len, cap;
+    int too_large;
+} request_body;
+
+static enum MHD_Result send_json(struct MHD_Connection *c, int status, json_t *doc)
+{
+    char *text = doc ? json_dumps(doc, JSON_COMPACT) : NULL;
+    json_decref(doc);
+    if (!text)
+        text = strdup("{\"error\":\"out of memory\"}"), status = 500;
+    struct MHD_Response *r = MHD_create_response_from_buffer(
+        status == 204 ? 0 : strlen(text), text, MHD_RESPMEM_MUST_FREE);
+    if (!r) {
+        free(text);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, "Content-Type", "application/json");
+    MHD_add_response_header(r, "Cache-Control", "no-store");
+    if (status == 401)
+        MHD_add_response_header(r, "WWW-Authenticate", "Bearer realm=\"terrafarm farm\"");
+    enum MHD_Result ok = MHD_queue_response(c, (unsigned)status, r);
+    MHD_destroy_response(r);
+    return ok;
+}
+
+static enum MHD_Result send_error(struct MHD_Connection *c, int status, const char *msg)
+{
+    return send_json(c, status, json_pack("{s:s}", "error", msg));
+}
+
+/* Who is asking: 1 and *who, or 0 (no or unknown token). */
+static int authenticate(tf_farm *f, struct MHD_Connection *c, farm_caller *who)
+{
+    const char *a = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Authorization");
+    if (!a || strncmp(a, "Bearer ", 7))
+        return 0;
+    const char *token = a + 7;
+    memset(who, 0, sizeof *who);
+    if (strlen(token) == 64 && sodium_memcmp(token, f->worker_token, 64) == 0) {
+        snprintf(who->name, sizeof who->name, "worker");
+        snprintf(who->role, sizeof who->role, "worker");
+        return 1;
+    }
+    char hash[TF_FARM_TOKEN_HEX];
+    tf_farm_token_hash(token, hash);
+    return tf_farmdb_token_find(f->db, hash, who->name, sizeof who->name, who->role,
+                                sizeof who->role) == 1;
+}
+
+/* "/api/jobs/ID[/ACTION]": the id and the action (NULL), or -1. */
+static int64_t job_route(const char *url, const char **action)
+{
+    const char *p = url + strlen("/api/jobs/");
+    char *end;
+    long long id = strtoll(p, &end, 10);
+    if (end == p || id <= 0 || (*end && *end != '/'))
+        return -1;
+    *action = *end ? end + 1 : NULL;
+    return id;
+}
+
+static enum MHD_Result serve_output(tf_farm *f, struct MHD_Connection *c, const farm_caller *who,
+                                    int64_t id)
+{
+    const char *fr = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "frame");
+    char path[4200], err[512];
+    pthread_mutex_lock(&f->lock);
+    int code = farm_output_path(f, who, id, fr ? atoi(fr) : 0, path, sizeof path, err,
+                                sizeof err);
+    pthread_mutex_unlock(&f->lock);
+    if (code)
+        return send_error(c, code, err);
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    struct stat st;
+    if (fd < 0 || fstat(fd, &st)) {
+        if (fd >= 0)
+            close(fd);
+        return send_error(c, 404, "the job's output is not there");
+    }
+    struct MHD_Response *r = MHD_create_response_from_fd((uint64_t)st.st_size, fd);
+    if (!r) {
+        close(fd);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, "Content-Type", "image/x-exr");
+    enum MHD_Result ok = MHD_queue_response(c, 200, r);
+    MHD_destroy_response(r);
+    return ok;
+}
+
+static json_t *farm_summary(tf_farm *f)
+{
+    json_t *counts = json_object();
+    for (int i = 0; i < f->njobs; i++) {
+        const char *s = f->jobs[i].state;
+        json_object_set_new(counts, s, json_integer(json_integer_value(json_object_get(counts, s)) + 1));
+    }
+    return json_pack("{s:s,s:o,s:i}", "version", TF_VERSION, "jobs", counts, "workers",
+                     f->nworkers);
+}
+
+/* A JSON route under the lock: the answer and its status. */
+static json_t *route(tf_farm *f, const farm_caller *who, const char *method, const char *url,
+                     json_t *body, int *status)
+{
+    const char *action = NULL;
+    int post = !strcmp(method, "POST"), get = !strcmp(method, "GET");
+    if (get && !strcmp(url, "/api/farm"))
+        return *status = 200, farm_summary(f);
+    if (!strcmp(url, "/api/jobs"))
+        return post ? farm_submit(f, who, body, status)
+               : get ? farm_list(f, who, status)
+                     : farm_error(status, 405, "GET or POST");
+    if (!strncmp(url, "/api/jobs/", 10)) {
+        int64_t id = job_route(url, &action);
+        if (id < 0)
+            return farm_error(status, 404, "no such job");
+        if (!action && get)
+            return farm_show(f, who, id, status);
+        if (action && post)
+            return farm_control(f, who, id, action, body, status);
+        return farm_error(status, 405, "GET /api/jobs/ID or POST /api/jobs/ID/ACTION");
+    }
+    if (post && !strcmp(url, "/api/workers/next"))
+        return farm_worker_next(f, who, body, status);
+    if (post && !strcmp(url, "/api/workers/heartbeat"))
+        return farm_worker_heartbeat(f, who, body, status);
+    if (get && !strcmp(url, "/api/workers"))
+        return strcmp(who->role, "admin") ? farm_error(status, 403, "admins only")
+                                          : (*status = 200, farm_workers_json(f));
+    return farm_error(status, 404, "no such route: %s %s", method, url);
+}
+
+/* Collect the body; 1 while more is coming. */
+static int collect(request_body *b, const char *data, size_t *size)
+{
+    if (!*size)
+        return 0;
+    if (b->len + *size > MAX_BODY)
+        b->too_large = 1;
+    if (!b->too_large && b->len + *size + 1 > b->cap) {
+        size_t cap = (b->len + *size + 1) * 2;
+        char *nd = realloc(b->data, cap > MAX_BODY + 1 ? MAX_BODY + 1 : cap);
+        if (!nd)
+            b->too_large = 1;
+        else
+            b->data = nd, b->cap = cap > MAX_BODY + 1 ? MAX_BODY + 1 : cap;
+    }
+    if (!b->too_large) {
+        memcpy(b->data + b->len, data, *size);
+        b->len += *size;
+        b->data[b->len] = 0;
+    }
+    *size = 0;
+    return 1;
+}
+
+static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url,
+                                  const char *method, const char *version,
+                                  const char *upload_data, size_t *upload_size, void **con_cls)
+{
+    (void)version;
+    farm_http *h = cls;
+    if (!*con_cls) {
+        *con_cls = calloc(1, sizeof(request_body));
+        return *con_cls ? MHD_YES : MHD_NO;
+    }
+    request_body *b = *con_cls;
+    if (collect(b, upload_data, upload_size))
+        return MHD_YES;
+    if (b->too_large)
+        return send_error(c, 413, "the request body is too large");
+    farm_caller who;
+    if (!authenticate(h->f, c, &who))
+        return send_error(c, 401, "give a farm token: Authorization: Bearer TOKEN");
+    const char *action;
+    int64_t id = !strncmp(url, "/api/jobs/", 10) ? job_route(url, &action) : -1;
+    if (id > 0 && action && !strcmp(action, "output") && !strcmp(method, "GET"))
+        return serve_output(h->f, c, &who, id);
+    json_error_t jerr;
+    json_t *body = b->len ? json_loadb(b->data, b->len, JSON_REJECT_DUPLICATES, &jerr) : NULL;
+    if (b->len && !json_is_object(body)) {
+        json_decref(body);
+        return send_error(c, 400, "the body is not a JSON object");
+    }
+    int status = 500;
+    pthread_mutex_lock(&h->f->lock);
+    json_t *answer = route(h->f, &who, method, url, body, &status);
+    pthread_mutex_unlock(&h->f->lock);
+    json_decref(body);
+    return send_json(c, status, answer);
+}
+
+static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
+                         enum MHD_RequestTerminationCode toe)
+{
+    (void)cls, (void)c, (void)toe;
+    request_body *b = *con_cls;
+    if (b)
+        free(b->data);
+    free(b);
+    *con_cls = NULL;
+}
+
+farm_http *farm_http_start(tf_farm *f, const char *listen, int *port, char *err, size_t errlen)
+{
+    int fd = tf_sock_listen(listen, port, err, errlen);
+    if (fd < 0)
+        return NULL;
+    farm_http *h = calloc(1, sizeof *h);
+    if (!h) {
+        close(fd);
+        tf_seterr(err, errlen, "out of memory");
+        return NULL;
+    }
+    h->f = f;
+    h->mhd = MHD_start_daemon(MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_THREAD_PER_CONNECTION |
+                                  MHD_USE_ERROR_LOG,
+                              0, NULL, NULL, on_request, h, MHD_OPTION_LISTEN_SOCKET, fd,
+                              MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
+                              MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)60,
+                              MHD_OPTION_CONNECTION_LIMIT, (unsigned)1024, MHD_OPTION_END);
+    if (!h->mhd) {
+        close(fd);
+        free(h);
+        tf_seterr(err, errlen, "%s: cannot start the farm's HTTP server", listen);
+        return NULL;
+    }
+    return h;
+}
+
+void farm_http_stop(farm_http *h)
+{
+    if (!h)
+        return;
+    MHD_stop_daemon(h->mhd);
+    free(h);
+}

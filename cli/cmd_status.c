@@ -13,7 +13,7 @@
 
 #include "clock.h"
 #include "cli/commands.h"
-#include "coordinator/httpauth.h"
+#include "coordinator/dashboard/httpauth.h"
 #include "linda/auth.h"
 #include "linda/sock.h"
 #include "log.h"

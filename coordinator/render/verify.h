@@ -5,7 +5,7 @@
  * result of a worker that has not yet passed a check, on a different worker, and compares the
  * results' digests; on a mismatch a third worker decides, the one that disagrees is excluded
  * and every task it rendered is dealt again, those already written too, through a rewind of
- * the output (supervisor.c, "spot checks").  This file holds the two pure parts: which tasks
+ * the output (supervisor_verify.c, "spot checks").  This file holds the two pure parts: which tasks
  * are checked, and the digest of a result. */
 #ifndef TF_VERIFY_H
 #define TF_VERIFY_H

@@ -6,7 +6,7 @@
 #
 # The objects are listed by layer, lowest first, as Lua's makefile lists its core and its
 # libraries: a layer uses only the layers above it in this list, never one below.  Headers are
-# included by folder ("render/trace.h", "coordinator/supervisor.h").  Every unit test
+# included by folder ("render/trace.h", "coordinator/render/supervisor.h").  Every unit test
 # tests/unit/test_*.c is its own cmocka program, every bench/*.c its own benchmark, every
 # tests/fuzz/fuzz_*.c a fuzz target; all of them link the same objects as bin/terrafarm.
 
@@ -47,8 +47,24 @@ LINDA_SRC   := $(wildcard common/linda/*.c)
 FARM_SRC    := common/http_client.c common/farm_keys.c common/farmproto.c common/heightmap_tuples.c common/erosion_tuples.c
 # 6. worker: the worker loop, its C and OpenCL backends, the simulated worker
 WORKER_SRC  := $(wildcard worker/*.c)
-# 7. coordinator: the farm's policy (dealer and watermark, leases, in-order writer, progress)
-COORD_SRC   := $(wildcard coordinator/*.c) $(wildcard coordinator/farm/*.c)
+# 7. coordinator, in sub-layers of its own folders, lowest first like the layers above (a folder
+#    uses only the folders before it in this list, never one after):
+#    7a. render: one job's render, the run as a sequence of steps (coordinator.c), the supervisor
+#        (dealer and watermark, leases, admission, spot checks, stragglers), the in-order
+#        writer, progress, stats and the event log
+#    7b. erosion: an erosion on the farm and the erosion film (uses render/)
+#    7c. dashboard: the HTTP server, its API and the snapshots it reads of the render (uses
+#        render/)
+#    7d. farm: the standing farm: its queue (SQLite), scheduler, jobs' renders and API (uses
+#        the folders before it)
+#    Two arrows still point back up, both from the render's entry point (render/coordinator.c):
+#    it opens, feeds and closes its dashboard (dashboard/dashboard.h) and hands an erosion film
+#    to erosion/erosion_film.c.  No other file of a folder includes one of a later folder.
+COORD_RENDER_SRC    := $(wildcard coordinator/render/*.c)
+COORD_EROSION_SRC   := $(wildcard coordinator/erosion/*.c)
+COORD_DASHBOARD_SRC := $(wildcard coordinator/dashboard/*.c)
+COORD_FARM_SRC      := $(wildcard coordinator/farm/*.c)
+COORD_SRC   := $(COORD_RENDER_SRC) $(COORD_EROSION_SRC) $(COORD_DASHBOARD_SRC) $(COORD_FARM_SRC)
 LIB_SRC     := $(BASE_SRC) $(TERRAIN_SRC) $(IMAGE_SRC) $(RENDER_SRC) $(LINDA_SRC) $(FARM_SRC) \
                $(WORKER_SRC) $(COORD_SRC)
 # 8. cli: bin/terrafarm's subcommands

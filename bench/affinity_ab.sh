@@ -1,5 +1,5 @@
 #!/bin/bash
-# affinity_ab.sh: what horizontal-extent affinity (--affinity, coordinator/affinity.h) costs or
+# affinity_ab.sh: what horizontal-extent affinity (--affinity, coordinator/render/affinity.h) costs or
 # saves on a scene, against plain FIFO dealing.  The same render with --affinity on (A) and off
 # (B), alternated A/B/A/B... so that a change in the machine's load falls on both alike, each run
 # timed by hyperfine (one run per call, after one warm-up of each; without hyperfine, by the

@@ -34,7 +34,7 @@
 #include "log.h"
 #include "scene.h"
 #include "worker/simulate.h"
-#include "coordinator/tasks.h"
+#include "coordinator/render/tasks.h"
 #include "image/exrfile.h"
 
 #define MAX_COUNTS 64

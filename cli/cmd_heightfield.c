@@ -27,7 +27,7 @@
 #include <jansson.h>
 
 #include "cli/commands.h"
-#include "coordinator/erosion_farm.h"
+#include "coordinator/erosion/erosion_farm.h"
 #include "linda/auth.h"
 #include "linda/sock.h"
 #include "terrain/drainage.h"

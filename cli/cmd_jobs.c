@@ -11,7 +11,7 @@
 
 #include "clock.h"
 #include "cli/commands.h"
-#include "coordinator/httpauth.h"
+#include "coordinator/dashboard/httpauth.h"
 #include "http_client.h"
 #include "log.h"
 #include "scene.h"

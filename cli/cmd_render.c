@@ -7,8 +7,8 @@
 
 #include "clock.h"
 #include "cli/commands.h"
-#include "coordinator/coordinator.h"
-#include "coordinator/frames.h"
+#include "coordinator/render/coordinator.h"
+#include "coordinator/render/frames.h"
 #include "image/exrlayout.h"
 #include "log.h"
 

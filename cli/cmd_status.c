@@ -13,7 +13,7 @@
 
 #include "clock.h"
 #include "cli/commands.h"
-#include "coordinator/httpauth.h"
+#include "coordinator/dashboard/httpauth.h"
 #include "http_client.h"
 #include "linda/auth.h"
 #include "linda/sock.h"

@@ -50,7 +50,7 @@ typedef struct tf_animation {
     double fps;          /* frame rate of --movie */
     int ncamera, nsun;   /* 0 = that part is not animated: the [camera] / [sun] values hold */
     int erosion_steps;   /* > 0: an erosion film: frame k shows the terrain after k times this
-                          * many steps of [erosion] (coordinator/erosion_film.h) */
+                          * many steps of [erosion] (coordinator/erosion/erosion_film.h) */
     tf_camera_key camera[TF_ANIM_MAX_KEYS];
     tf_sun_key sun[TF_ANIM_MAX_KEYS];
 } tf_animation;

@@ -17,7 +17,7 @@
 #include "log.h"
 
 /* Linda's counter idiom, half of it: in ("next_worker", ?n).  The coordinator binds id n to
- * this connection and puts the counter back itself (coordinator/worker_role.h): a worker that
+ * this connection and puts the counter back itself (coordinator/render/worker_role.h): a worker that
  * could hold the counter could stop every other worker from joining. */
 static int take_worker_id(ts_client *c, int64_t *id)
 {

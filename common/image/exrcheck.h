@@ -6,7 +6,7 @@
  * OpenEXR's decoding cannot fail, so "decodes" here is what every OpenEXR reader accepts.
  * The values are then those a reader gets: each line of the chunk holds, channel by channel in
  * name order (A B G R Z spp), the line's values of that channel (exrpart.c).  Per-pixel work:
- * the coordinator runs it off its event loop (coordinator/resultcheck.h). */
+ * the coordinator runs it off its event loop (coordinator/render/resultcheck.h). */
 #ifndef TF_EXRCHECK_H
 #define TF_EXRCHECK_H
 

@@ -94,7 +94,7 @@ tf_exr_writer *tf_exr_resume(const char *path, const tf_exr_meta *expect, int *r
 /* The same, keeping at most the first keep_chunks chunks of the file: the chunks after them are
  * dropped as a torn tail would be (the new prefix is made beside and renamed over PATH, so PATH
  * is at every instant the old partial or the shorter one).  --verify uses it to take back
- * chunks a liar wrote (coordinator/supervisor.c, "rewind"). */
+ * chunks a liar wrote (coordinator/render/supervisor_verify.c, rewind_liar). */
 tf_exr_writer *tf_exr_resume_prefix(const char *path, const tf_exr_meta *expect,
                                     int64_t keep_chunks, int *rows_done, char *err, size_t errlen);
 

@@ -9,7 +9,7 @@
  * actual string in the tuple or template), the arity, an optional cap on how many times one
  * connection may use it, and an optional guard: a function of the role's owner that looks at
  * the tuple and the connection and answers allow / refuse / discard (e.g. the farm checks that
- * a result answers a task this connection holds; see coordinator/worker_role.c).  The first
+ * a result answers a task this connection holds; see coordinator/render/worker_role.c).  The first
  * rule whose ops, name and arity match decides; a request no rule grants is refused.
  *
  * A refused request gets an ERROR reply for its request id and changes nothing in the space;

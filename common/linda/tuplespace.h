@@ -21,7 +21,7 @@
  * with the lowest rank for it (the oldest among equals; rd waiters queued before that one get
  * their copies as above).  Takes naming taker 0, and every take while no chooser is set, are
  * the plain FIFO ones.  The space knows nothing of what the ranks mean (the farm's supervisor
- * uses them for horizontal-extent affinity, coordinator/affinity.h).
+ * uses them for horizontal-extent affinity, coordinator/render/affinity.h).
  *
  * Callbacks run after the store is consistent, so a callback may call any function here
  * (ts_space_out, ts_wait, ts_cancel, ...) on the same space.

@@ -8,7 +8,7 @@
  * the tile into the next state.  Tiles read the old state and write the new, so they run in
  * any order on any thread; the halo's work is done twice (by the tile and by its neighbour),
  * the price of reading the grid from memory once per k steps instead of once per step.  The
- * farm's patches (coordinator/erosion_farm.c) do the same with tuples for the halo. */
+ * farm's patches (coordinator/erosion/erosion_farm.c) do the same with tuples for the halo. */
 #include "terrain/erosion_run.h"
 
 #include <stdlib.h>

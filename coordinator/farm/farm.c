@@ -19,7 +19,7 @@
 #include "cachefile.h"
 #include "clock.h"
 #include "coordinator/farm/jobrun.h"
-#include "coordinator/httpauth.h"
+#include "coordinator/dashboard/httpauth.h"
 #include "http_client.h"
 #include "linda/auth.h"
 #include "linda/sock.h"

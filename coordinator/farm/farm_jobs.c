@@ -12,7 +12,7 @@
 #include <time.h>
 
 #include "coordinator/farm/jobrun.h"
-#include "coordinator/frames.h"
+#include "coordinator/render/frames.h"
 #include "log.h"
 #include "scene.h"
 

@@ -1,5 +1,5 @@
 #!/bin/sh
-# erosion_film.sh: an erosion film ([animation] erosion_steps, coordinator/erosion_film.h).
+# erosion_film.sh: an erosion film ([animation] erosion_steps, coordinator/erosion/erosion_film.h).
 # Frame k shows the terrain after k * 100 steps: frames differ as the erosion proceeds; the
 # eroder continues each frame from the previous one's checkpoint, and that is exact: frame 3
 # is pixel for pixel a still of the same scene eroded 300 steps in one go (no cache); a

@@ -1,5 +1,5 @@
 #!/bin/sh
-# farm_affinity.sh: horizontal-extent affinity (--affinity, coordinator/affinity.h) end to end.
+# farm_affinity.sh: horizontal-extent affinity (--affinity, coordinator/render/affinity.h) end to end.
 # Two forked workers (--wait-workers 2: both joined before the first task is dealt) render
 # 32x32 stamps of a 320-pixel-wide image: 10 stamps a band, 5 in each worker's column range.
 # Checked, none of it by timing:

@@ -1,5 +1,5 @@
 #!/bin/sh
-# farm_hostile.sh: a client holding the secret can only render (coordinator/worker_role.h).
+# farm_hostile.sh: a client holding the secret can only render (coordinator/render/worker_role.h).
 # tests/tools/hostile_worker.py joins a render in progress and tries each class of attack: forged,
 # duplicate, empty and short results (non-finite values are refused by the worker itself,
 # tests/unit/test_worker.c; in encoded chunks only --verify can catch them); forged tasks and stops;

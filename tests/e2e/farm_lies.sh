@@ -5,7 +5,7 @@
 # task, packed sizes that do not add up, a chunk too few, a preview share of the wrong size, and
 # a perfect structure over bytes that do not decode, chunks stored raw full of NaN and infinity,
 # and a count of 2^62 rays.  No option is needed: a networked worker's pixels are always
-# checked (coordinator/resultcheck.h).  Each lie is refused with a line naming the peer and
+# checked (coordinator/render/resultcheck.h).  Each lie is refused with a line naming the peer and
 # what is wrong, counted in results_refused, the task is dealt again, and nothing of it reaches
 # the file: a real worker then finishes the render, the image is byte-identical to a clean one,
 # and the rays in the statistics are the real ones.  Scanline (rows:9) and tiled (stamps:40x27).

@@ -1,5 +1,5 @@
 #!/bin/sh
-# farm_verify.sh: spot checks catch a lying worker (--verify, coordinator/verify.h; docs/contract.md
+# farm_verify.sh: spot checks catch a lying worker (--verify, coordinator/render/verify.h; docs/contract.md
 # section 3). Three networked workers; one of them is a real `terrafarm worker` whose results pass
 # through tests/tools/lying_proxy.py (connecting from 127.0.0.2, a machine of its own), which
 # changes one byte of every result's packed chunks (sizes kept: the structural checks cannot see

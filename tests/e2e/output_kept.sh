@@ -1,5 +1,5 @@
 #!/bin/sh
-# output_kept.sh: a finished output is never lost (coordinator/output.h; docs/contract.md
+# output_kept.sh: a finished output is never lost (coordinator/render/output.h; docs/contract.md
 # section 2: no error path leaves a corrupted output).
 #  1. A new render over a finished one (another size: nothing to resume) renders beside it
 #     and replaces it only when complete: on a full disk (a small tmpfs) it fails with a clear

@@ -1,6 +1,6 @@
 #!/bin/sh
 # verify_liveness.sh: under --verify, a check copy taken by a worker it excludes is dealt again
-# (coordinator/supervisor.c, invariant S9).  tests/tools/check_copy_thief.py joins as two
+# (coordinator/render/supervisor.c, invariant S9).  tests/tools/check_copy_thief.py joins as two
 # workers: one that takes nothing, and a thief that answers every task, the check copies of its
 # own results included (they exclude it).  With --verify 1 and a watermark of 2 nothing else can
 # be dealt, so the thief's next task is a copy it already answered only if the coordinator dealt

@@ -1,7 +1,7 @@
 /* fuzz_result.c: libFuzzer harness for the checks a worker's result passes before the
- * coordinator writes its chunks (coordinator/supervisor.c refuse_result): tf_result_unpack
+ * coordinator writes its chunks (coordinator/render/supervisor.c refuse_result): tf_result_unpack
  * (common/farmproto.c), the structural tf_result_check against the task, the counts bound
- * (tf_result_counts_check), and the pixel check of coordinator/resultcheck.c:
+ * (tf_result_counts_check), and the pixel check of coordinator/render/resultcheck.c:
  * tf_exr_chunk_check on every chunk (common/image/exrcheck.c: inflate, undo the ZIP filter,
  * scan every value).
  *
@@ -63,7 +63,7 @@ static void check_repack(const tf_result_msg *m, const uint8_t *enc, size_t len)
     tf_tuple_clear(&t);
 }
 
-/* The pixel check's walk over an accepted result, as coordinator/resultcheck.c does it. */
+/* The pixel check's walk over an accepted result, as coordinator/render/resultcheck.c does it. */
 static void walk_chunks(const tf_result_msg *m, const tf_exr_layout *l)
 {
     uint8_t *scratch = NULL;

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """tests/tools/check_copy_thief.py: a worker that takes --verify check copies it is excluded
-from and answers them (coordinator/supervisor.c, "spot checks"; invariant S9).
+from and answers them (coordinator/render/supervisor_verify.c,
+spot checks; invariant S9 in supervisor.c).
 
 Usage: check_copy_thief.py HOST PORT
 Joins twice (from 127.0.0.2, a machine of its own), in this order, on two connections:

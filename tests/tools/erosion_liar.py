@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """tests/tools/erosion_liar.py: a networked erosion worker that lies (common/erosion_tuples.h,
-coordinator/erosion_role.h).
+coordinator/erosion/erosion_role.h).
 
 Usage: erosion_liar.py HOST PORT
 Reads the plan, takes one patch as a real worker would, then:

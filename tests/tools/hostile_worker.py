@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """tests/tools/hostile_worker.py: a client holding the secret that tries, against a render in
-progress, every attack that the worker role (coordinator/worker_role.h) must refuse,
+progress, every attack that the worker role (coordinator/render/worker_role.h) must refuse,
 then hoards tasks on several connections until the coordinator goes away.
 
 Usage: hostile_worker.py HOST PORT SECRET_FILE WIDTH HEIGHT READY_FILE

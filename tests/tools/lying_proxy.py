@@ -5,7 +5,7 @@ through but changes one pixel of every result the worker puts (("result", ...) f
 common/farmproto.h): its first chunk is inflated, its ZIP filter undone (image/exrcheck.c),
 the lowest bit of its first value flipped, and it is sent back stored raw (packed = unpacked).
 The result stays structurally valid, decodes and holds finite values: only its pixels lie,
-and only --verify (coordinator/verify.h) can tell.
+and only --verify (coordinator/render/verify.h) can tell.
 
 Usage: lying_proxy.py HOST PORT [SOURCE_ADDRESS [HONEST_FIRST]]
 It connects to the coordinator from SOURCE_ADDRESS (e.g. 127.0.0.2), as a machine of its own.

@@ -15,7 +15,7 @@ back a result that lies in one of these ways, in turn:
   nonfinite chunks stored raw (packed = unpacked) whose values are NaN and infinity
   rays      a perfect structure claiming 2^62 primary rays (more than the task can hold)
 The last three are refused only by what the coordinator checks of a result beyond its
-structure: its counts at once, its pixels in the checker thread (coordinator/resultcheck.h).
+structure: its counts at once, its pixels in the checker thread (coordinator/render/resultcheck.h).
 After MAX_LIES results it stops lying and leaves (so a real worker finishes the render); it also
 leaves on the stop task.  Prints one line per lie: "lie MODE task ID"."""
 import os

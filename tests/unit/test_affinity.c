@@ -1,4 +1,4 @@
-/* test_affinity.c: horizontal-extent affinity (coordinator/affinity.c): the column ranges for n
+/* test_affinity.c: horizontal-extent affinity (coordinator/render/affinity.c): the column ranges for n
  * workers (they tile the width in worker id order), first / second / elsewhere for a task's
  * centre column, the ranks (own range first, then the neighbours' and the rest by lowest id),
  * and the ranges following joins and leaves. */
@@ -8,7 +8,7 @@
 #include <stdint.h>
 #include <cmocka.h>
 
-#include "coordinator/affinity.h"
+#include "coordinator/render/affinity.h"
 
 static tf_rect stamp(int x, int w) { return (tf_rect){x, 0, w, 16}; }
 

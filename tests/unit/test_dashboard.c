@@ -1,8 +1,8 @@
 /* test_dashboard.c: the dashboard's pieces that need no network: the event ring
- * (coordinator/events.c), the snapshot hub between the event loop and the HTTP threads
- * (coordinator/snapshot.c: the event loop never waits for the lock, references keep a snapshot
- * alive), the live preview (coordinator/livepreview.c: stamps land where they belong, the PNG
- * decodes), the JSON documents (coordinator/api.c) and the token rules (httpauth.c). */
+ * (coordinator/render/events.c), the snapshot hub between the event loop and the HTTP threads
+ * (coordinator/dashboard/snapshot.c: the event loop never waits for the lock, references keep a snapshot
+ * alive), the live preview (coordinator/dashboard/livepreview.c: stamps land where they belong, the PNG
+ * decodes), the JSON documents (coordinator/dashboard/api.c) and the token rules (httpauth.c). */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -14,11 +14,11 @@
 #include <cmocka.h>
 #include <png.h>
 
-#include "coordinator/api.h"
-#include "coordinator/events.h"
-#include "coordinator/httpauth.h"
-#include "coordinator/livepreview.h"
-#include "coordinator/snapshot.h"
+#include "coordinator/dashboard/api.h"
+#include "coordinator/render/events.h"
+#include "coordinator/dashboard/httpauth.h"
+#include "coordinator/dashboard/livepreview.h"
+#include "coordinator/dashboard/snapshot.h"
 #include "farmproto.h"
 
 static void test_event_ring(void **state)

@@ -1,4 +1,4 @@
-/* test_frames.c: unit tests for coordinator/frames.c: --frames / --frame ranges (and their
+/* test_frames.c: unit tests for coordinator/render/frames.c: --frames / --frame ranges (and their
  * one-line refusals) and the #### output pattern. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -9,7 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "coordinator/frames.h"
+#include "coordinator/render/frames.h"
 
 static void test_ranges(void **state)
 {

@@ -1,4 +1,4 @@
-/* test_idmap.c: the supervisor's connection index (coordinator/idmap.c) against a plain array
+/* test_idmap.c: the supervisor's connection index (coordinator/render/idmap.c) against a plain array
  * under a long random mix of puts, updates and deletions: backward-shift deletion must never
  * lose an entry of a probe run, including runs that wrap round the end of the table. */
 #include <stdarg.h>
@@ -8,7 +8,7 @@
 #include <stdlib.h>
 #include <cmocka.h>
 
-#include "coordinator/idmap.h"
+#include "coordinator/render/idmap.h"
 
 #define KEYS 3000
 

@@ -1,0 +1,682 @@
+/* httpd.c: see httpd.h.  libmicrohttpd with a thread per connection (an event stream blocks its
+ * own thread waiting for the next snapshot), a bounded number of connections, and nothing that
+ * reaches beyond the hub. */
+#include "coordinator/dashboard/httpd.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <inttypes.h>
+#include <limits.h>
+#include <microhttpd.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <unistd.h>
+
+#include "clock.h"
+#include "datadir.h"
+#include "coordinator/dashboard/api.h"
+#include "coordinator/dashboard/httpauth.h"
+#include "coordinator/dashboard/livepreview.h"
+#include "linda/sock.h"
+#include "log.h"
+
+#define MAX_BODY 4096              /* a control's JSON body */
+#define MAX_WEB_FILE (1 << 20)
+#define MAX_CONNECTIONS 32
+#define MAX_PER_IP 16
+#define CONNECTION_TIMEOUT_S 15    /* idle connections are closed */
+#define CONNECTION_MEMORY (32 * 1024) /* request line + headers; larger gets 431 from MHD */
+#define STREAM_KEEPALIVE_MS 5000
+
+typedef struct web_file {
+    const char *name, *type;
+    char *data;
+    size_t len;
+} web_file;
+
+struct tf_httpd {
+    struct MHD_Daemon *mhd;
+    tf_dash_hub *hub;
+    char token[TF_HTTP_TOKEN_MAX + 1];
+    int have_token, loopback, port;
+    web_file files[3];
+    pthread_mutex_t png_lock;      /* the encoded preview, shared by requests */
+    uint64_t png_version;
+    uint8_t *png;
+    size_t png_len;
+    pthread_mutex_t streams_lock;  /* event streams that have not yet sent the final state */
+    pthread_cond_t streams_done;
+    int streams_open;
+};
+
+/* Per request: the body of a POST, read up to MAX_BODY. */
+typedef struct request {
+    int started;
+    char body[MAX_BODY + 1];
+    size_t len;
+    int too_big;
+} request;
+
+/* ---- the page's files ---------------------------------------------------------------------- */
+
+int tf_web_dir_find(char *dir, size_t len)
+{
+    static const char *const beside[] = {"/../web", "/../../web", "/../share/terrafarm/web",
+                                         NULL};
+    static const char *const fixed[] = {"/usr/local/share/terrafarm/web",
+                                        "/usr/share/terrafarm/web", NULL};
+    return tf_datadir_find("TERRAFARM_WEB", beside, fixed, "index.html", dir, len) == 0 ? 0 : -1;
+}
+
+static int load_file(const char *dir, web_file *f, char *err, size_t errlen)
+{
+    char p[PATH_MAX];
+    snprintf(p, sizeof p, "%s/%s", dir, f->name);
+    FILE *in = fopen(p, "rb");
+    if (!in)
+        return tf_seterr(err, errlen, "%s: %s", p, strerror(errno));
+    f->data = malloc(MAX_WEB_FILE);
+    f->len = f->data ? fread(f->data, 1, MAX_WEB_FILE, in) : 0;
+    int bad = !f->data || ferror(in) || f->len == MAX_WEB_FILE;
+    fclose(in);
+    if (bad)
+        return tf_seterr(err, errlen, "%s: unreadable or larger than %d bytes", p, MAX_WEB_FILE);
+    return 0;
+}
+
+/* ---- responses ------------------------------------------------------------------------------ */
+
+static void common_headers(struct MHD_Response *r)
+{
+    MHD_add_response_header(r, "Cache-Control", "no-store");
+    MHD_add_response_header(r, "X-Content-Type-Options", "nosniff");
+    MHD_add_response_header(r, "X-Frame-Options", "DENY");
+    MHD_add_response_header(r, "Referrer-Policy", "no-referrer");
+    MHD_add_response_header(r, "Content-Security-Policy",
+                            "default-src 'self'; img-src 'self' blob: data:; "
+                            "frame-ancestors 'none'; form-action 'none'");
+}
+
+static enum MHD_Result send_bytes(struct MHD_Connection *c, unsigned status, const char *type,
+                                  const void *data, size_t len)
+{
+    struct MHD_Response *r =
+        MHD_create_response_from_buffer(len, (void *)data, MHD_RESPMEM_MUST_COPY);
+    if (!r)
+        return MHD_NO;
+    MHD_add_response_header(r, "Content-Type", type);
+    common_headers(r);
+    enum MHD_Result ok = MHD_queue_response(c, status, r);
+    MHD_destroy_response(r);
+    return ok;
+}
+
+static enum MHD_Result send_text(struct MHD_Connection *c, unsigned status, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static enum MHD_Result send_text(struct MHD_Connection *c, unsigned status, const char *fmt, ...)
+{
+    char buf[512];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(buf, sizeof buf - 1, fmt, ap);
+    va_end(ap);
+    if (n < 0)
+        n = 0;
+    if (n > (int)sizeof buf - 2)
+        n = (int)sizeof buf - 2;
+    buf[n++] = '\n';
+    return send_bytes(c, status, "text/plain; charset=utf-8", buf, (size_t)n);
+}
+
+static enum MHD_Result send_json(struct MHD_Connection *c, unsigned status, json_t *doc)
+{
+    if (!doc)
+        return send_text(c, 500, "out of memory");
+    char *text = json_dumps(doc, JSON_COMPACT);
+    json_decref(doc);
+    if (!text)
+        return send_text(c, 500, "out of memory");
+    enum MHD_Result ok = send_bytes(c, status, "application/json", text, strlen(text));
+    free(text);
+    return ok;
+}
+
+static enum MHD_Result send_unauthorized(struct MHD_Connection *c)
+{
+    static const char body[] = "401 unauthorized\n";
+    struct MHD_Response *r =
+        MHD_create_response_from_buffer(sizeof body - 1, (void *)body, MHD_RESPMEM_PERSISTENT);
+    if (!r)
+        return MHD_NO;
+    MHD_add_response_header(r, "Content-Type", "text/plain; charset=utf-8");
+    MHD_add_response_header(r, "WWW-Authenticate", "Bearer realm=\"terrafarm\"");
+    common_headers(r);
+    enum MHD_Result ok = MHD_queue_response(c, 401, r);
+    MHD_destroy_response(r);
+    return ok;
+}
+
+/* ---- who may ask -------------------------------------------------------------------------- */
+
+/* The token from a header: "Authorization: Bearer T" or "X-Terrafarm-Token: T". */
+static const char *header_token(struct MHD_Connection *c)
+{
+    const char *a = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Authorization");
+    if (a && !strncasecmp(a, "Bearer ", 7)) {
+        a += 7;
+        while (*a == ' ')
+            a++;
+        return a;
+    }
+    return MHD_lookup_connection_value(c, MHD_HEADER_KIND, "X-Terrafarm-Token");
+}
+
+static int token_ok(const tf_httpd *h, const char *given)
+{
+    return given && tf_http_token_matches(h->token, given, strlen(given));
+}
+
+/* On loopback the Host header must name this machine, so a page from elsewhere that rebinds
+ * its DNS name to 127.0.0.1 cannot read the API. */
+static int host_ok(struct MHD_Connection *c)
+{
+    const char *host = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Host");
+    if (!host)
+        return 0;
+    char name[256];
+    size_t n = strlen(host);
+    if (n >= sizeof name)
+        return 0;
+    if (host[0] == '[') {
+        const char *end = strchr(host, ']');
+        if (!end)
+            return 0;
+        snprintf(name, sizeof name, "%.*s", (int)(end - host - 1), host + 1);
+    } else {
+        const char *colon = strchr(host, ':');
+        snprintf(name, sizeof name, "%.*s", colon ? (int)(colon - host) : (int)n, host);
+    }
+    return tf_addr_is_loopback(name);
+}
+
+/* ---- the API ---------------------------------------------------------------------------------- */
+
+static int parse_u64(const char *s, uint64_t *out)
+{
+    if (!s || !*s)
+        return -1;
+    uint64_t v = 0;
+    for (; *s; s++) {
+        if (!isdigit((unsigned char)*s) || v > (UINT64_MAX - 9) / 10)
+            return -1;
+        v = v * 10 + (uint64_t)(*s - '0');
+    }
+    *out = v;
+    return 0;
+}
+
+static enum MHD_Result serve_preview(tf_httpd *h, struct MHD_Connection *c, const tf_snapshot *s)
+{
+    if (!s->preview_rgba)
+        return send_text(c, 503, "no preview yet");
+    pthread_mutex_lock(&h->png_lock);
+    if (!h->png || h->png_version != s->preview_version) {
+        uint8_t *png;
+        size_t len;
+        if (tf_png_encode_rgba(s->preview_rgba, s->preview_w, s->preview_h, &png, &len) == 0) {
+            free(h->png);
+            h->png = png;
+            h->png_len = len;
+            h->png_version = s->preview_version;
+        }
+    }
+    enum MHD_Result ok = h->png ? send_bytes(c, 200, "image/png", h->png, h->png_len)
+                                : send_text(c, 500, "cannot encode the preview");
+    pthread_mutex_unlock(&h->png_lock);
+    return ok;
+}
+
+/* The event stream (text/event-stream): every event after Last-Event-ID (or all kept), then
+ * each new one as it is published, with a status event per snapshot and a comment now and then
+ * to keep the connection alive. */
+typedef struct stream {
+    tf_httpd *h;
+    int counted;                   /* in h->streams_open */
+    int final;                     /* the final state is queued: end after sending it */
+    uint64_t last_seq, version;
+    char *pending;
+    size_t len, off;
+} stream;
+
+static int append(stream *st, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static int append(stream *st, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    char *s = NULL;
+    int n = vasprintf(&s, fmt, ap);
+    va_end(ap);
+    if (n < 0)
+        return -1;
+    char *p = realloc(st->pending, st->len + (size_t)n + 1);
+    if (!p) {
+        free(s);
+        return -1;
+    }
+    memcpy(p + st->len, s, (size_t)n + 1);
+    free(s);
+    st->pending = p;
+    st->len += (size_t)n;
+    return 0;
+}
+
+static int append_json(stream *st, uint64_t id, const char *event, json_t *doc)
+{
+    char *text = doc ? json_dumps(doc, JSON_COMPACT) : NULL;
+    json_decref(doc);
+    if (!text)
+        return -1;
+    int rc = id ? append(st, "id: %" PRIu64 "\nevent: %s\ndata: %s\n\n", id, event, text)
+                : append(st, "event: %s\ndata: %s\n\n", event, text);
+    free(text);
+    return rc;
+}
+
+static void fill_stream(stream *st)
+{
+    tf_snapshot *s = tf_hub_acquire(st->h->hub);
+    if (!s)
+        return;
+    st->version = s->version;
+    for (int i = 0; i < s->nevents; i++)
+        if (s->events[i].seq > st->last_seq) {
+            append_json(st, s->events[i].seq, tf_event_kind_name(s->events[i].kind),
+                        tf_api_event(s, &s->events[i]));
+            st->last_seq = s->events[i].seq;
+        }
+    append_json(st, 0, "status", tf_api_status(s));
+    st->final = s->state != TF_RUN_STARTING && s->state != TF_RUN_RENDERING;
+    tf_hub_release(st->h->hub, s);
+}
+
+static void stream_uncount(stream *st)
+{
+    if (!st->counted)
+        return;
+    st->counted = 0;
+    pthread_mutex_lock(&st->h->streams_lock);
+    st->h->streams_open--;
+    pthread_mutex_unlock(&st->h->streams_lock);
+    pthread_cond_broadcast(&st->h->streams_done);
+}
+
+static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
+{
+    (void)pos;
+    stream *st = cls;
+    while (st->off == st->len) {
+        if (st->final) { /* the render's end has been sent: the stream is over */
+            stream_uncount(st);
+            return MHD_CONTENT_READER_END_OF_STREAM;
+        }
+        free(st->pending);
+        st->pending = NULL;
+        st->len = st->off = 0;
+        int w = tf_hub_wait(st->h->hub, st->version, STREAM_KEEPALIVE_MS);
+        if (w < 0)
+            return MHD_CONTENT_READER_END_OF_STREAM;
+        if (w == 0)
+            append(st, ": keepalive\n\n");
+        else
+            fill_stream(st);
+        if (st->len == 0 && w > 0)
+            return MHD_CONTENT_READER_END_WITH_ERROR; /* out of memory */
+    }
+    size_t n = st->len - st->off < max ? st->len - st->off : max;
+    memcpy(buf, st->pending + st->off, n);
+    st->off += n;
+    return (ssize_t)n;
+}
+
+static void stream_free(void *cls)
+{
+    stream *st = cls;
+    stream_uncount(st);
+    free(st->pending);
+    free(st);
+}
+
+static enum MHD_Result serve_stream(tf_httpd *h, struct MHD_Connection *c)
+{
+    stream *st = calloc(1, sizeof *st);
+    if (!st)
+        return send_text(c, 500, "out of memory");
+    st->h = h;
+    pthread_mutex_lock(&h->streams_lock);
+    h->streams_open++;
+    pthread_mutex_unlock(&h->streams_lock);
+    st->counted = 1;
+    const char *last = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Last-Event-ID");
+    uint64_t v;
+    if (last && parse_u64(last, &v) == 0)
+        st->last_seq = v;
+    append(st, "retry: 2000\n\n");
+    fill_stream(st);
+    struct MHD_Response *r =
+        MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, stream_read, st, stream_free);
+    if (!r) {
+        stream_free(st);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, "Content-Type", "text/event-stream");
+    common_headers(r);
+    enum MHD_Result ok = MHD_queue_response(c, 200, r);
+    MHD_destroy_response(r);
+    return ok;
+}
+
+static enum MHD_Result serve_get(tf_httpd *h, struct MHD_Connection *c, const char *url)
+{
+    for (size_t i = 0; i < sizeof h->files / sizeof h->files[0]; i++) {
+        const web_file *f = &h->files[i];
+        if (!f->data)
+            continue;
+        if (!strcmp(url + 1, f->name) || (!strcmp(url, "/") && !strcmp(f->name, "index.html")))
+            return send_bytes(c, 200, f->type, f->data, f->len);
+    }
+    if (!strcmp(url, "/") || !strcmp(url, "/index.html"))
+        return send_text(c, 404, "the dashboard's page is not installed (web/index.html); the "
+                                 "JSON API is at /api/status");
+    if (!strcmp(url, "/api/events/stream"))
+        return serve_stream(h, c);
+    tf_snapshot *s = tf_hub_acquire(h->hub);
+    if (!s)
+        return send_text(c, 503, "the render is starting");
+    enum MHD_Result ok;
+    if (!strcmp(url, "/api/status"))
+        ok = send_json(c, 200, tf_api_status(s));
+    else if (!strcmp(url, "/api/workers"))
+        ok = send_json(c, 200, tf_api_workers(s));
+    else if (!strcmp(url, "/api/tasks"))
+        ok = send_json(c, 200, tf_api_tasks(s));
+    else if (!strcmp(url, "/api/history"))
+        ok = send_json(c, 200, tf_api_history(s));
+    else if (!strcmp(url, "/api/preview.png"))
+        ok = serve_preview(h, c, s);
+    else if (!strcmp(url, "/api/events")) {
+        const char *a = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
+        uint64_t after = 0;
+        if (a && parse_u64(a, &after))
+            ok = send_text(c, 400, "after=%s: expected an event number", a);
+        else
+            ok = send_json(c, 200, tf_api_events(s, after));
+    } else
+        ok = send_text(c, 404, "no such page: %s", url);
+    tf_hub_release(h->hub, s);
+    return ok;
+}
+
+/* POST /api/stop, /api/workers/ID/drop, /api/watermark {"watermark": N}. */
+static enum MHD_Result serve_post(tf_httpd *h, struct MHD_Connection *c, const char *url,
+                                  request *rq)
+{
+    if (rq->too_big)
+        return send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
+    tf_snapshot *s = tf_hub_acquire(h->hub);
+    if (!s)
+        return send_text(c, 503, "the render is starting");
+    enum MHD_Result ok;
+    tf_command cmd = {TF_CMD_STOP, 0};
+    int have_cmd = 0;
+    const char *ok_msg = NULL;
+    char detail[160] = "";
+    int status = 0;
+    int64_t id = -1;
+    if (s->state != TF_RUN_RENDERING && s->state != TF_RUN_STARTING) {
+        status = 409;
+        snprintf(detail, sizeof detail, "the render has ended (%s)", tf_run_state_name(s->state));
+    } else if (!strcmp(url, "/api/stop")) {
+        cmd = (tf_command){TF_CMD_STOP, 0};
+        have_cmd = 1;
+        ok_msg = "stopping: the rows on disk stay; continue with --resume";
+    } else if (!strncmp(url, "/api/workers/", 13)) {
+        char idtext[32];
+        const char *slash = strchr(url + 13, '/');
+        uint64_t v;
+        if (!slash || strcmp(slash, "/drop") || slash - (url + 13) >= (long)sizeof idtext) {
+            status = 404;
+        } else {
+            snprintf(idtext, sizeof idtext, "%.*s", (int)(slash - (url + 13)), url + 13);
+            if (parse_u64(idtext, &v) || v > INT64_MAX) {
+                status = 400;
+                snprintf(detail, sizeof detail, "worker '%s': expected a worker id", idtext);
+            } else {
+                id = (int64_t)v;
+                int live = 0;
+                for (int i = 0; i < s->nworkers; i++)
+                    live |= s->workers[i].id == id && (s->workers[i].state == TF_WS_BUSY ||
+                                                       s->workers[i].state == TF_WS_IDLE);
+                if (!live) {
+                    status = 404;
+                    snprintf(detail, sizeof detail, "no connected worker %" PRId64, id);
+                }
+                cmd = (tf_command){TF_CMD_DROP_WORKER, id};
+                have_cmd = 1;
+                ok_msg = "dropping the worker: its task is dealt again";
+            }
+        }
+    } else if (!strcmp(url, "/api/watermark")) {
+        json_error_t jerr;
+        json_t *doc = json_loadb(rq->body, rq->len, JSON_REJECT_DUPLICATES, &jerr);
+        json_t *v = doc ? json_object_get(doc, "watermark") : NULL;
+        if (!json_is_integer(v)) {
+            status = 400;
+            snprintf(detail, sizeof detail, "expected a JSON body {\"watermark\": N}");
+        } else if (json_integer_value(v) < s->watermark_min ||
+                   json_integer_value(v) > s->watermark_max) {
+            status = 400;
+            snprintf(detail, sizeof detail, "watermark %" JSON_INTEGER_FORMAT
+                     " is outside %d (one band of tasks) .. %d", json_integer_value(v),
+                     s->watermark_min, s->watermark_max);
+        } else {
+            cmd = (tf_command){TF_CMD_WATERMARK, (int64_t)json_integer_value(v)};
+            have_cmd = 1;
+            ok_msg = "watermark changing";
+        }
+        json_decref(doc);
+    } else {
+        status = 404;
+    }
+    tf_hub_release(h->hub, s);
+    if (status == 404 && !detail[0])
+        return send_text(c, 404, "no such control: %s", url);
+    if (status || !have_cmd)
+        return send_text(c, status ? (unsigned)status : 500, "%s", detail);
+    if (tf_hub_push_command(h->hub, cmd))
+        return send_text(c, 503, "too many controls queued; try again");
+    json_t *o = json_object();
+    json_object_set_new(o, "ok", json_true());
+    json_object_set_new(o, "message", json_string(ok_msg));
+    ok = send_json(c, 202, o);
+    return ok;
+}
+
+/* GET /login?token=T: a browser's way in; sets the cookie and goes to the page. */
+static enum MHD_Result serve_login(tf_httpd *h, struct MHD_Connection *c)
+{
+    const char *t = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "token");
+    if (!h->have_token || !token_ok(h, t))
+        return send_unauthorized(c);
+    char cookie[TF_HTTP_TOKEN_MAX + 64];
+    snprintf(cookie, sizeof cookie, "tf_token=%s; Path=/; SameSite=Strict", h->token);
+    struct MHD_Response *r = MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+    if (!r)
+        return MHD_NO;
+    MHD_add_response_header(r, "Set-Cookie", cookie);
+    MHD_add_response_header(r, "Location", "/");
+    common_headers(r);
+    enum MHD_Result ok = MHD_queue_response(c, 303, r);
+    MHD_destroy_response(r);
+    return ok;
+}
+
+static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *url,
+                              const char *method, const char *version, const char *upload,
+                              size_t *upload_size, void **con_cls)
+{
+    (void)version;
+    tf_httpd *h = cls;
+    request *rq = *con_cls;
+    if (!rq) {
+        rq = calloc(1, sizeof *rq);
+        if (!rq)
+            return MHD_NO;
+        *con_cls = rq;
+        const char *cl = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Content-Length");
+        if (cl && strtoull(cl, NULL, 10) > MAX_BODY) {
+            rq->too_big = 1;
+            return send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
+        }
+        return MHD_YES; /* headers are in; the body (if any) follows */
+    }
+    if (*upload_size) {
+        size_t n = *upload_size;
+        *upload_size = 0;
+        if (rq->too_big || rq->len + n > MAX_BODY) {
+            rq->too_big = 1; /* answer now and close: the rest is not read */
+            return send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
+        }
+        memcpy(rq->body + rq->len, upload, n);
+        rq->len += n;
+        return MHD_YES;
+    }
+    if (h->loopback && !host_ok(c))
+        return send_text(c, 403, "the Host header must name a loopback address");
+    int is_get = !strcmp(method, "GET") || !strcmp(method, "HEAD");
+    int is_post = !strcmp(method, "POST");
+    if (h->have_token && is_get && !strcmp(url, "/login"))
+        return serve_login(h, c);
+    if (h->have_token) {
+        const char *cookie = MHD_lookup_connection_value(c, MHD_COOKIE_KIND, "tf_token");
+        if (!token_ok(h, header_token(c)) && !token_ok(h, cookie))
+            return send_unauthorized(c);
+    }
+    if (is_get)
+        return serve_get(h, c, url);
+    if (!is_post)
+        return send_text(c, 405, "method %.20s not allowed", method);
+    /* A control: the token must come in a header (a cookie alone could be a cross-site form);
+     * on loopback without a token, a header no plain form can set. */
+    const char *ht = header_token(c);
+    if (h->have_token ? !token_ok(h, ht) : !ht)
+        return send_text(c, 403, "controls need the token in a header (Authorization: Bearer "
+                                 "TOKEN or X-Terrafarm-Token)");
+    return serve_post(h, c, url, rq);
+}
+
+static void request_done(void *cls, struct MHD_Connection *c, void **con_cls,
+                         enum MHD_RequestTerminationCode why)
+{
+    (void)cls;
+    (void)c;
+    (void)why;
+    free(*con_cls);
+    *con_cls = NULL;
+}
+
+static void mhd_log(void *cls, const char *fmt, va_list ap)
+{
+    (void)cls;
+    char buf[512];
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    size_t n = strlen(buf);
+    while (n && buf[n - 1] == '\n')
+        buf[--n] = 0;
+    tf_debug("dashboard: %s", buf);
+}
+
+tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen)
+{
+    tf_httpd *h = calloc(1, sizeof *h);
+    if (!h) {
+        close(cfg->listen_fd);
+        tf_seterr(err, errlen, "out of memory");
+        return NULL;
+    }
+    h->hub = cfg->hub;
+    h->loopback = cfg->loopback;
+    h->port = cfg->port;
+    if (cfg->token) {
+        snprintf(h->token, sizeof h->token, "%s", cfg->token);
+        h->have_token = 1;
+    }
+    pthread_mutex_init(&h->png_lock, NULL);
+    pthread_mutex_init(&h->streams_lock, NULL);
+    pthread_cond_init(&h->streams_done, NULL);
+    h->files[0] = (web_file){"index.html", "text/html; charset=utf-8", NULL, 0};
+    h->files[1] = (web_file){"dashboard.js", "text/javascript; charset=utf-8", NULL, 0};
+    h->files[2] = (web_file){"dashboard.css", "text/css; charset=utf-8", NULL, 0};
+    if (cfg->web_dir)
+        for (size_t i = 0; i < sizeof h->files / sizeof h->files[0]; i++)
+            if (load_file(cfg->web_dir, &h->files[i], err, errlen)) {
+                close(cfg->listen_fd);
+                tf_httpd_stop(h);
+                return NULL;
+            }
+    /* The server's threads inherit this signal mask: they never take SIGINT or SIGTERM, so
+     * an interrupt always reaches the event loop's thread (and wakes its poll). */
+    sigset_t block, old;
+    sigemptyset(&block);
+    sigaddset(&block, SIGINT);
+    sigaddset(&block, SIGTERM);
+    sigaddset(&block, SIGPIPE);
+    pthread_sigmask(SIG_BLOCK, &block, &old);
+    h->mhd = MHD_start_daemon(
+        MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL |
+            MHD_USE_ERROR_LOG,
+        0, NULL, NULL, handle, h, MHD_OPTION_LISTEN_SOCKET, cfg->listen_fd,
+        MHD_OPTION_CONNECTION_LIMIT, (unsigned)MAX_CONNECTIONS, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
+        (unsigned)MAX_PER_IP, MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S,
+        MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)CONNECTION_MEMORY,
+        MHD_OPTION_NOTIFY_COMPLETED, request_done, NULL, MHD_OPTION_EXTERNAL_LOGGER, mhd_log,
+        NULL, MHD_OPTION_END);
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
+    if (!h->mhd) {
+        close(cfg->listen_fd);
+        tf_seterr(err, errlen, "cannot start the dashboard's HTTP server on port %d", cfg->port);
+        tf_httpd_stop(h);
+        return NULL;
+    }
+    return h;
+}
+
+void tf_httpd_linger(tf_httpd *h, int ms)
+{
+    if (!h)
+        return;
+    struct timespec deadline = tf_realtime_in(ms);
+    pthread_mutex_lock(&h->streams_lock);
+    while (h->streams_open > 0)
+        if (pthread_cond_timedwait(&h->streams_done, &h->streams_lock, &deadline) == ETIMEDOUT)
+            break;
+    pthread_mutex_unlock(&h->streams_lock);
+}
+
+void tf_httpd_stop(tf_httpd *h)
+{
+    if (!h)
+        return;
+    if (h->mhd)
+        MHD_stop_daemon(h->mhd); /* closes the listening socket it was given */
+    for (size_t i = 0; i < sizeof h->files / sizeof h->files[0]; i++)
+        free(h->files[i].data);
+    free(h->png);
+    pthread_mutex_destroy(&h->png_lock);
+    pthread_mutex_destroy(&h->streams_lock);
+    pthread_cond_destroy(&h->streams_done);
+    free(h);
+}

@@ -1,0 +1,165 @@
+/* local_workers.c: see local_workers.h. */
+#include "coordinator/render/local_workers.h"
+
+#include <errno.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/prctl.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "clock.h"
+#include "log.h"
+#include "worker/worker.h"
+
+/* In the child: keep stdin/stdout/stderr and our socket, close every other inherited fd (the
+ * listening socket, other workers' sockets, the output file). */
+static void close_inherited_fds(int keep)
+{
+    if (keep > 3)
+        close_range(3, (unsigned)keep - 1, 0);
+    close_range((unsigned)keep + 1, ~0U, 0);
+}
+
+pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *hf,
+                      const char *backend, int index, char *err, size_t errlen)
+{
+    int sv[2];
+    if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv)) {
+        tf_seterr(err, errlen, "socketpair: %s", strerror(errno));
+        return -1;
+    }
+    pid_t pid = fork();
+    if (pid < 0) {
+        tf_seterr(err, errlen, "fork: %s", strerror(errno));
+        close(sv[0]);
+        close(sv[1]);
+        return -1;
+    }
+    if (pid == 0) {
+        /* A worker must not outlive its coordinator, nor react to its terminal's ^C on its own
+         * terms: the coordinator decides (it kills or stops its workers). */
+        prctl(PR_SET_PDEATHSIG, SIGKILL);
+        signal(SIGINT, SIG_IGN);
+        signal(SIGTERM, SIG_DFL);
+        signal(SIGPIPE, SIG_IGN);
+        close_inherited_fds(sv[1]);
+        char tag[32];
+        snprintf(tag, sizeof tag, "local worker %d", index);
+        tf_log_set_tag(tag);
+        ts_client *c = ts_client_from_fd(sv[1]);
+        if (!c)
+            _exit(1);
+        int status = tf_worker_loop(c, s, hf, "forked", backend);
+        ts_client_close(c);
+        _exit(status);
+    }
+    close(sv[1]);
+    char peer[32];
+    snprintf(peer, sizeof peer, "local worker %d", index);
+    if (!ts_server_add_fd(srv, sv[0], peer)) {
+        tf_seterr(err, errlen, "cannot serve local worker %d", index);
+        kill(pid, SIGKILL);
+        return -1;
+    }
+    return pid;
+}
+
+/* ---- the pool ---- */
+
+#define MAX_RESPAWNS_PER_WORKER 3
+
+int tf_local_workers_start(tf_local_workers *lw, int n, ts_server *srv, const tf_scene *s,
+                           const tf_heightfield *hf, const char *backend, char *err,
+                           size_t errlen)
+{
+    memset(lw, 0, sizeof *lw);
+    lw->srv = srv;
+    lw->scene = s;
+    lw->hf = hf;
+    lw->backend = backend;
+    lw->pid = calloc((size_t)(n > 0 ? n : 1), sizeof *lw->pid);
+    lw->respawns = calloc((size_t)(n > 0 ? n : 1), sizeof *lw->respawns);
+    if (!lw->pid || !lw->respawns)
+        return tf_seterr(err, errlen, "out of memory");
+    for (int i = 0; i < n; i++) {
+        pid_t p = tf_spawn_worker(srv, s, hf, backend, i, err, errlen);
+        if (p < 0)
+            return -1;
+        lw->pid[i] = p;
+        lw->n = i + 1;
+    }
+    return 0;
+}
+
+void tf_local_workers_reap(tf_local_workers *lw, int respawn)
+{
+    for (int i = 0; i < lw->n; i++) {
+        if (lw->pid[i] <= 0)
+            continue;
+        int status;
+        pid_t r = waitpid(lw->pid[i], &status, WNOHANG);
+        if (r != lw->pid[i])
+            continue;
+        lw->pid[i] = 0;
+        int clean = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+        if (clean || !respawn)
+            continue;
+        if (WIFEXITED(status) && WEXITSTATUS(status) == TF_WORKER_EXIT_NOSTART) {
+            lw->gave_up++; /* it said why; restarting would say it again */
+            continue;
+        }
+        if (WIFSIGNALED(status))
+            tf_warn("local worker %d killed by signal %d", i, WTERMSIG(status));
+        else
+            tf_warn("local worker %d exited with status %d", i, WEXITSTATUS(status));
+        if (lw->respawns[i] >= MAX_RESPAWNS_PER_WORKER) {
+            lw->gave_up++;
+            continue;
+        }
+        lw->respawns[i]++;
+        char err[512];
+        pid_t p = tf_spawn_worker(lw->srv, lw->scene, lw->hf, lw->backend, i, err, sizeof err);
+        if (p > 0) {
+            lw->pid[i] = p;
+            tf_info("restarted local worker %d", i);
+        } else {
+            tf_warn("cannot restart local worker %d: %s", i, err);
+        }
+    }
+}
+
+int tf_local_workers_alive(const tf_local_workers *lw)
+{
+    int n = 0;
+    for (int i = 0; i < lw->n; i++)
+        n += lw->pid[i] > 0;
+    return n;
+}
+
+void tf_local_workers_drain(tf_local_workers *lw, double grace_s)
+{
+    double until = tf_now_s() + grace_s;
+    while (tf_local_workers_alive(lw) && tf_now_s() < until) {
+        ts_server_run_once(lw->srv, 20);
+        tf_local_workers_reap(lw, 0);
+    }
+    for (int i = 0; i < lw->n; i++)
+        if (lw->pid[i] > 0) {
+            kill(lw->pid[i], SIGKILL);
+            waitpid(lw->pid[i], NULL, 0);
+            lw->pid[i] = 0;
+        }
+}
+
+void tf_local_workers_free(tf_local_workers *lw)
+{
+    free(lw->pid);
+    free(lw->respawns);
+    lw->pid = NULL;
+    lw->respawns = NULL;
+    lw->n = 0;
+}

@@ -1,0 +1,107 @@
+/* tasks.c: see tasks.h. */
+#include "coordinator/render/tasks.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include "log.h"
+
+static int parse_positive(const char *s, char **end, int *out)
+{
+    char *e;
+    long v = strtol(s, &e, 10);
+    if (e == s || v <= 0 || v > 65536)
+        return -1;
+    *out = (int)v;
+    *end = e;
+    return 0;
+}
+
+int tf_task_spec_parse(const char *text, tf_task_spec *spec, char *err, size_t errlen)
+{
+    char *end;
+    if (!strncmp(text, "rows:", 5)) {
+        if (parse_positive(text + 5, &end, &spec->h) == 0 && *end == '\0') {
+            spec->shape = TF_TASKS_ROWS;
+            spec->w = 0;
+            return 0;
+        }
+    } else if (!strncmp(text, "stamps:", 7)) {
+        if (parse_positive(text + 7, &end, &spec->w) == 0 && (*end == 'x' || *end == 'X') &&
+            parse_positive(end + 1, &end, &spec->h) == 0 && *end == '\0') {
+            spec->shape = TF_TASKS_STAMPS;
+            return 0;
+        }
+    }
+    tf_seterr(err, errlen, "--tasks '%s': expected rows:K or stamps:WxH with positive sizes up to 65536",
+             text);
+    return -1;
+}
+
+/* A band (one row of tasks) waits in the tuple space until its last task is done, so its size
+ * is the coordinator's memory: keep it under this many pixels whatever the image width. */
+#define BAND_PIXEL_BUDGET (128 * 1024)
+
+tf_task_spec tf_task_spec_default(int width, int height, int workers)
+{
+    /* Aim for at least 24 tasks per worker, sides between 32 and 128 pixels.  A 64x64 stamp
+     * computes (65 * 65) corner samples for 4096 pixels: 3% extra corner rays, well under 1% of
+     * all rays once adaptive subdivision adds its samples.  On very wide images the stamps get
+     * flatter (down to 8 rows) so that one band stays within BAND_PIXEL_BUDGET. */
+    if (workers < 1)
+        workers = 1;
+    long pixels = (long)width * height;
+    int side = 128;
+    while (side > 32 && pixels / ((long)side * side) < 24L * workers)
+        side /= 2;
+    tf_task_spec s = {TF_TASKS_STAMPS, side, side};
+    long band_rows = BAND_PIXEL_BUDGET / (width > 0 ? width : 1);
+    if (band_rows < s.h)
+        s.h = band_rows < 8 ? 8 : (int)band_rows;
+    if (s.w > width)
+        s.w = width;
+    if (s.h > height)
+        s.h = height;
+    return s;
+}
+
+void tf_tasks_init(tf_tasks *t, int width, int height, int first_row, tf_task_spec spec)
+{
+    memset(t, 0, sizeof *t);
+    t->width = width;
+    t->height = height;
+    t->first_row = first_row;
+    t->tw = spec.shape == TF_TASKS_ROWS ? width : (spec.w < width ? spec.w : width);
+    t->th = spec.h < height ? spec.h : height;
+    if (t->th < 1)
+        t->th = 1;
+    t->cols = (width + t->tw - 1) / t->tw;
+    int rows = height - first_row;
+    t->bands = rows > 0 ? (rows + t->th - 1) / t->th : 0;
+    t->count = t->cols * t->bands;
+}
+
+void tf_band_rows(const tf_tasks *t, int band, int *y0, int *rows)
+{
+    *y0 = t->first_row + band * t->th;
+    *rows = t->height - *y0 < t->th ? t->height - *y0 : t->th;
+}
+
+void tf_tasks_skip(tf_tasks *t, int n)
+{
+    if (n < 0 || n >= t->cols || t->count == 0)
+        return;
+    t->skip = n;
+    t->count = t->cols * t->bands - n;
+}
+
+tf_rect tf_task_rect(const tf_tasks *t, int id)
+{
+    int g = id + t->skip;
+    int band = g / t->cols, col = g % t->cols;
+    tf_rect r;
+    r.x = col * t->tw;
+    r.w = t->width - r.x < t->tw ? t->width - r.x : t->tw;
+    tf_band_rows(t, band, &r.y, &r.h);
+    return r;
+}

@@ -21,7 +21,10 @@ typedef struct proc_entry {
     pid_t pid, ppid;
     uint64_t start_ticks; /* since boot; with the pid, names the process across samples */
     uint64_t cpu_ticks;   /* utime + stime */
+    uid_t uid;            /* real; NO_UID until read, or if unreadable */
 } proc_entry;
+
+#define NO_UID ((uid_t)-1)
 
 /* Processes sorted by pid. */
 typedef struct proc_table {
@@ -34,6 +37,8 @@ struct tf_presence {
     char proc_root[PATH_MAX], dev_root[PATH_MAX];
     double ticks_per_s;
     proc_table all;   /* scratch: every process of the current scan */
+    proc_table known; /* every process of the previous scan, with the uids it read */
+    uint64_t scans;   /* every TF_PRESENCE_UID_RECHECK-th reads every uid afresh */
     proc_table owner; /* scratch: the owner's processes of the current scan */
     proc_table prev;  /* the owner's processes at the last sample */
     int64_t prev_boot_ns;
@@ -104,7 +109,8 @@ static int parse_stat(const char *line, proc_entry *e)
                               "%llu %*d %*d %*d %*d %*d %*d %llu", &state, &ppid, &utime,
                               &stime, &start) != 5)
         return -1;
-    *e = (proc_entry){.ppid = ppid, .start_ticks = start, .cpu_ticks = utime + stime};
+    *e = (proc_entry){.ppid = ppid, .start_ticks = start, .cpu_ticks = utime + stime,
+                      .uid = NO_UID};
     return 0;
 }
 
@@ -199,22 +205,38 @@ static int in_tree(const proc_table *t, pid_t pid, pid_t root)
     return 0;
 }
 
-static int owned_by(int procfd, pid_t pid, uid_t owner)
+static uid_t read_real_uid(int procfd, pid_t pid)
 {
     char path[32], status[2048];
     uid_t uid;
     snprintf(path, sizeof path, "%d/status", (int)pid);
-    return read_text(procfd, path, status, sizeof status) >= 0 &&
-           parse_real_uid(status, &uid) == 0 && uid == owner;
+    if (read_text(procfd, path, status, sizeof status) < 0 || parse_real_uid(status, &uid) < 0)
+        return NO_UID;
+    return uid;
 }
 
-/* p->all's processes of the owner, outside the worker's tree, into p->owner (sorted). */
+/* e's real uid: the previous scan's if it saw the same process (pid and start time) and no
+ * recheck is due, else read from its status (the costlier file: see owner_presence.h). */
+static uid_t real_uid_of(const tf_presence *p, int procfd, const proc_entry *e, int recheck)
+{
+    const proc_entry *seen = table_find(&p->known, e->pid);
+    if (!recheck && seen && seen->start_ticks == e->start_ticks && seen->uid != NO_UID)
+        return seen->uid;
+    return read_real_uid(procfd, e->pid);
+}
+
+/* p->all's processes of the owner, outside the worker's tree, into p->owner (sorted); the
+ * uids read are kept in p->all. */
 static int keep_owner_processes(tf_presence *p, int procfd)
 {
+    int recheck = p->scans % TF_PRESENCE_UID_RECHECK == 0;
     p->owner.n = 0;
     for (size_t i = 0; i < p->all.n; i++) {
-        const proc_entry *e = &p->all.v[i];
-        if (in_tree(&p->all, e->pid, p->o.self_root) || !owned_by(procfd, e->pid, p->o.owner))
+        proc_entry *e = &p->all.v[i];
+        if (in_tree(&p->all, e->pid, p->o.self_root))
+            continue;
+        e->uid = real_uid_of(p, procfd, e, recheck);
+        if (e->uid != p->o.owner)
             continue;
         proc_entry *slot = table_add(&p->owner);
         if (!slot)
@@ -233,7 +255,13 @@ static int sample_owner_processes(tf_presence *p, char *err, size_t errlen)
                          strerror(errno));
     int rc = scan_processes(p, proc) < 0 ? -1 : keep_owner_processes(p, dirfd(proc));
     closedir(proc);
-    return rc < 0 ? tf_seterr(err, errlen, "presence: out of memory") : 0;
+    if (rc < 0)
+        return tf_seterr(err, errlen, "presence: out of memory");
+    proc_table t = p->known; /* this scan's uids serve the next */
+    p->known = p->all;
+    p->all = t;
+    p->scans++;
+    return 0;
 }
 
 /* The ticks process e spent since the previous sample (the rules are in owner_presence.h). */
@@ -389,6 +417,7 @@ void tf_presence_free(tf_presence *p)
     if (!p)
         return;
     free(p->all.v);
+    free(p->known.v);
     free(p->owner.v);
     free(p->prev.v);
     free(p);

@@ -19,6 +19,12 @@
  *      - that vanished counts nothing (its last ticks are lost: at most one interval's).
  *    A process that starts and ends between two samples is not seen, so the interval should
  *    be short (50 ms).  Resolution: one tick per interval, 0.2 cores at 50 ms and 100 ticks/s.
+ *    Cost: reading a status costs about as much as a stat (the kernel makes each file whole on
+ *    every open), so a process's uid is read when the sampler first sees it (pid and start
+ *    time) and again every TF_PRESENCE_UID_RECHECK-th sample: a process that changes its uid
+ *    (setuid, then exec or not) is seen as the owner's within that many samples.  One sample
+ *    of 210 processes took 2.4 ms of CPU on a quiet 2-core machine (4.8 ms reading every
+ *    status): 5% of a core at 50 ms.
  *
  * 2. Input, the slow one: the newest atime of the owner's terminals (dev_root/pts/N and
  *    dev_root/ttyN whose st_uid is the owner), as seconds since the last input.  The kernel
@@ -34,6 +40,9 @@
 #include <sys/types.h>
 #include <stdint.h>
 #include <time.h>
+
+/* Every this many samples, the uid of every process is read afresh (1 s at 50 ms). */
+#define TF_PRESENCE_UID_RECHECK 20
 
 typedef struct tf_presence_opts {
     uid_t owner;

@@ -1,8 +1,8 @@
 /* test_owner_presence.c: is the owner of this machine present? (worker/owner_presence.c).
  * A real child playing the owner (user nobody, busy) is seen present, then away once killed;
  * the CPU arithmetic exactly on a fake /proc (growth, vanished, new and reused pids, real uid,
- * the worker's own tree, malformed and unreadable files) and the input signal exactly on a
- * fake /dev, both under a fake clock; owner names and bad options. */
+ * the worker's own tree, malformed and unreadable files, a uid that changes) and the input
+ * signal exactly on a fake /dev, both under a fake clock; owner names and bad options. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -246,6 +246,32 @@ static void test_cpu_arithmetic_on_a_fake_proc(void **state)
     tf_presence_free(whole);
 }
 
+/* A process that becomes the owner's (setuid, same pid and start time) is seen as such at the
+ * next recheck of every uid, and its CPU counts from the sample after. */
+static void test_uid_change_seen_at_recheck(void **state)
+{
+    (void)state;
+    long hz = sysconf(_SC_CLK_TCK);
+    const char *proc = scratch_path("proc-recheck"), *dev = scratch_path("dev-recheck");
+    make_dir(proc);
+    make_dir(dev);
+    put_proc(proc, &(fake_proc){800, 1, 0, 0, 10, 0, 0, "login"});
+    put_proc(proc, &(fake_proc){801, 1, OWNER, OWNER, 20, 0, 0, NULL}); /* its pid is reused */
+    fake_boot_ns = 3000 * SECOND;
+    tf_presence *p = fake_sampler(proc, dev, 0.05, 0, 0); /* the first scan, a recheck */
+    char why[128];
+    for (int scan = 1; scan <= TF_PRESENCE_UID_RECHECK + 1; scan++) {
+        put_proc(proc, &(fake_proc){800, 1, OWNER, OWNER, 10, 10ULL * scan, 0, "bash"});
+        put_proc(proc, &(fake_proc){801, 1, 0, 0, 3000ULL * hz + 1, 50ULL * scan, 0, "reused"});
+        fake_boot_ns += SECOND;
+        int want = scan == TF_PRESENCE_UID_RECHECK + 1;
+        if (tf_presence_sample(p, why, sizeof why) != want)
+            fail_msg("scan %d: %s", scan, why);
+        assert_near(tf_presence_owner_cpu(p), want ? 10.0 / (double)hz : 0);
+    }
+    tf_presence_free(p);
+}
+
 /* ---- a fake /dev ---- */
 
 /* dev/name, owned by uid, last read (atime) `ago_ns` before the fake wall clock. */
@@ -439,6 +465,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_cpu_arithmetic_on_a_fake_proc),
+        cmocka_unit_test(test_uid_change_seen_at_recheck),
         cmocka_unit_test(test_input_idle_on_a_fake_dev),
         cmocka_unit_test_teardown(test_a_busy_nobody_is_present_until_killed, kill_owner_child),
         cmocka_unit_test(test_owner_names),

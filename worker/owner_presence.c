@@ -186,7 +186,8 @@ static int scan_processes(tf_presence *p, DIR *proc)
     while ((de = readdir(proc)))
         if (add_process(&p->all, dirfd(proc), pid_of_name(de->d_name)) < 0)
             return -1;
-    qsort(p->all.v, p->all.n, sizeof *p->all.v, by_pid);
+    if (p->all.n > 1) /* an empty table has no array: qsort(NULL, 0) is undefined */
+        qsort(p->all.v, p->all.n, sizeof *p->all.v, by_pid);
     return 0;
 }
 

@@ -7,11 +7,13 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "clock.h"
 #include "cli/commands.h"
 #include "log.h"
 #include "worker/farm_worker.h"
+#include "worker/owner_presence.h"
 #include "worker/networked.h"
 
 static const char usage[] =
@@ -48,13 +50,58 @@ static const char usage[] =
     "      --terrain-memory SIZE keep the terrains of recent jobs within SIZE (default an\n"
     "                            eighth of memory), so returning to a job costs no rebuild\n"
     "      --max-sessions N      leave after serving N jobs (default: stay)\n"
+    "      --idle-only           Piranha: take work only while the machine's owner is away, and\n"
+    "                            retreat at once (tasks dealt again elsewhere) when the owner\n"
+    "                            comes back: the owner's processes using more than\n"
+    "                            --cpu-threshold cores, or terminal input in --idle-after\n"
+    "      --owner USER          the machine's owner (default: the user running the worker)\n"
+    "      --idle-after T        the owner must be away this long before work is taken\n"
+    "                            (default 60s)\n"
+    "      --cpu-threshold C     the owner's CPU use, in cores, that means present (default 0.25)\n"
     "  -q, --quiet / -v, --verbose\n"
     "  -h, --help\n";
+
+/* --idle-only: the owner watch of a Piranha worker (worker/farm_worker.h) over the presence
+ * sampler (worker/owner_presence.h). */
+typedef struct piranha {
+    int on;
+    const char *owner;
+    int idle_after_ms;
+    double cpu_threshold;
+    tf_presence *presence;
+} piranha;
+
+static int owner_present(void *ctx, char *why, size_t whylen)
+{
+    return tf_presence_sample(((piranha *)ctx)->presence, why, whylen);
+}
+
+static int run_farm_worker(tf_farm_worker_opts *fo, piranha *pir)
+{
+    char err[512];
+    tf_presence_opts po = {.owner = getuid(), .cpu_threshold = pir->cpu_threshold,
+                           .idle_after_s = pir->idle_after_ms / 1000.0, .self_root = getpid()};
+    tf_owner_watch watch = {owner_present, pir, 50, pir->idle_after_ms};
+    if (pir->on && ((pir->owner && tf_presence_owner_uid(pir->owner, &po.owner, err, sizeof err)) ||
+                    !(pir->presence = tf_presence_new(&po, err, sizeof err)))) {
+        tf_error("--idle-only: %s", err);
+        return TF_EXIT_USAGE;
+    }
+    if (pir->on) {
+        fo->owner = &watch;
+        tf_info("idle-only: serving while uid %u is away (CPU <= %.2f cores, no input for %.1f s)",
+                (unsigned)po.owner, po.cpu_threshold, po.idle_after_s);
+    }
+    int rc = tf_farm_worker_run(fo);
+    tf_presence_free(pir->presence);
+    return rc == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
+}
 
 int cmd_worker(int argc, char **argv)
 {
     enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE, O_PAYLOADS,
-           O_TERRAIN_CACHE, O_POOL, O_TAGS, O_NAME, O_TERRAIN_MEMORY, O_MAX_SESSIONS };
+           O_TERRAIN_CACHE, O_POOL, O_TAGS, O_NAME, O_TERRAIN_MEMORY, O_MAX_SESSIONS, O_IDLE_ONLY, O_OWNER, O_IDLE_AFTER,
+           O_CPU_THRESHOLD };
     static const struct option longopts[] = {
         {"connect", required_argument, NULL, 'c'},
         {"secret-file", required_argument, NULL, O_SECRET},
@@ -71,6 +118,10 @@ int cmd_worker(int argc, char **argv)
         {"name", required_argument, NULL, O_NAME},
         {"terrain-memory", required_argument, NULL, O_TERRAIN_MEMORY},
         {"max-sessions", required_argument, NULL, O_MAX_SESSIONS},
+        {"idle-only", no_argument, NULL, O_IDLE_ONLY},
+        {"owner", required_argument, NULL, O_OWNER},
+        {"idle-after", required_argument, NULL, O_IDLE_AFTER},
+        {"cpu-threshold", required_argument, NULL, O_CPU_THRESHOLD},
         {"quiet", no_argument, NULL, 'q'},
         {"verbose", no_argument, NULL, 'v'},
         {"help", no_argument, NULL, 'h'},
@@ -80,6 +131,7 @@ int cmd_worker(int argc, char **argv)
     double pixel_us = 50.0;
     size_t terrain_cache = 0;
     tf_farm_worker_opts fo = {0};
+    piranha pir = {.idle_after_ms = 60000, .cpu_threshold = 0.25};
     int nproc = 0, timeout_ms = 10000, ch;
     char *end;
     optind = 1;
@@ -133,6 +185,25 @@ int cmd_worker(int argc, char **argv)
                 return TF_EXIT_USAGE;
             }
             break;
+        case O_IDLE_ONLY: pir.on = 1; break;
+        case O_OWNER: pir.owner = optarg; break;
+        case O_IDLE_AFTER:
+        {
+            int64_t ms;
+            if (tf_parse_duration_ms(optarg, &ms) || ms < 0 || ms > INT32_MAX) {
+                tf_error("--idle-after '%s': expected a duration (e.g. 1s, 5m)", optarg);
+                return TF_EXIT_USAGE;
+            }
+            pir.idle_after_ms = (int)ms;
+            break;
+        }
+        case O_CPU_THRESHOLD:
+            pir.cpu_threshold = strtod(optarg, &end);
+            if (end == optarg || *end || !(pir.cpu_threshold >= 0 && pir.cpu_threshold <= 4096)) {
+                tf_error("--cpu-threshold '%s': expected a number of cores >= 0", optarg);
+                return TF_EXIT_USAGE;
+            }
+            break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
         case O_PIXEL_US:
             pixel_us = strtod(optarg, &end);
@@ -165,7 +236,7 @@ int cmd_worker(int argc, char **argv)
         fo.processes = nproc;
         fo.backend = backend;
         fo.terrain_cache = terrain_cache;
-        return tf_farm_worker_run(&fo) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
+        return run_farm_worker(&fo, &pir);
     }
     tf_networked_opts o = {connect, secret,   timeout_ms, nproc,   backend,
                            model,   pixel_us, payloads,   terrain_cache};

@@ -1,0 +1,73 @@
+#!/bin/sh
+# farm_piranha.sh: a Piranha worker (terrafarm worker --idle-only, Musgrave A.7.2.3.3) on a
+# standing farm.  A process running as user nobody plays the machine's owner (a busy loop).
+# While the owner is busy the worker takes no job; once the owner has been away for
+# --idle-after it serves; when the owner comes back mid-job it retreats (its processes are
+# killed, their tasks dealt again) and says how fast; when the owner leaves again it returns
+# and the job completes, pixel for pixel a plain render.  Prints the retreat latency (owner
+# started -> worker's processes gone, as seen from here) and the share of tasks dealt again.
+. "$(dirname "$0")/lib.sh"
+e2e_init
+command -v setpriv >/dev/null 2>&1 || skip "setpriv (util-linux) is not installed"
+[ "$(id -u)" = 0 ] || skip "playing another user's owner needs root"
+(umask 077; head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/secret")
+"$TF_BIN" farm --state "$T/state" --add-token alice --role submitter >"$T/alice" || fail "token"
+chmod 600 "$T/alice"
+"$TF_BIN" farm --listen 127.0.0.1:0 --state "$T/state" --secret-file "$T/secret" >"$T/farm.log" 2>&1 &
+e2e_track $!
+i=0
+until PORT=$(sed -n 's/.*farm on http:\/\/127.0.0.1:\([0-9]*\):.*/\1/p' "$T/farm.log") && [ -n "$PORT" ]; do
+    sleep 0.1; i=$((i + 1)); [ $i -lt 600 ] || fail "the farm printed no port: $(cat "$T/farm.log")"
+done
+export TERRAFARM_FARM=127.0.0.1:$PORT TERRAFARM_TOKEN_FILE=$T/alice
+field() { "$TF_BIN" job "$1" --json | python3 -c 'import json,sys; print(json.load(sys.stdin)[sys.argv[1]])' "$2"; }
+owner_start() { setpriv --reuid=65534 --regid=65534 --clear-groups sh -c 'while :; do :; done' & OWNER=$!; e2e_track $OWNER; }
+owner_stop() { kill -KILL $OWNER; wait $OWNER 2>/dev/null; }
+wait_log() { # PATTERN [SECONDS]
+    i=0 lim=$(( ${2:-120} * 20 ))
+    until grep -q "$1" "$T/worker.log"; do
+        i=$((i + 1)); [ $i -lt $lim ] || fail "the worker never logged '$1': $(cat "$T/worker.log")"
+        sleep 0.05
+    done
+}
+ARGS="--size 480x270 --tasks rows:2"
+
+say "the owner is busy: the worker takes nothing"
+owner_start
+job=$("$TF_BIN" submit "$TF_ROOT/scenes/alps.scene" $ARGS --name piranha) || fail "submit"
+"$TF_BIN" worker --connect "http://$TERRAFARM_FARM" --secret-file "$T/secret" -j 1 --idle-only \
+    --owner nobody --idle-after 2s --name piranha >"$T/worker.log" 2>&1 &
+e2e_track $!
+wait_log "owner present"
+[ "$(field "$job" attempts)" = 0 ] || fail "the job started while the owner was present"
+
+say "the owner leaves: the worker serves"
+owner_stop
+wait_log "serving job $job"
+say "the owner comes back in the middle of the job"
+owner_start
+t0=$(date +%s%N)
+wait_log "retreated from job"
+t1=$(date +%s%N)
+state=$(field "$job" state)
+[ "$state" = running ] || fail "after the retreat the job is $state, not running"
+latency=$(( (t1 - t0) / 1000000 ))
+say "retreat seen $latency ms after the owner started ($(sed -n 's/.*\(retreated from job .*\)/\1/p' "$T/worker.log"))"
+
+say "the owner leaves again: the worker returns and the job completes"
+owner_stop
+i=0
+until [ "$(field "$job" state)" = done ]; do
+    i=$((i + 1)); [ $i -lt 3000 ] || fail "job $job never completed: $(cat "$T/worker.log")"; sleep 0.2
+done
+"$TF_BIN" render "$TF_ROOT/scenes/alps.scene" $ARGS --listen 127.0.0.1:0 -j 2 -o "$T/ref.exr" \
+    2>"$T/ref.err" || fail "reference: $(cat "$T/ref.err")"
+"$TF_BIN" job "$job" --output "$T/got.exr" || fail "download"
+same_pixels "$T/ref.exr" "$T/got.exr" "the job a Piranha worker retreated from"
+python3 - "$T/state/jobs/$job/stats.json" "$latency" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+print("-- piranha: retreat latency %s ms (from here); tasks dealt again %d of %d (%.1f%%)" % (
+    sys.argv[2], s["tasks_redealt"], s["tasks_total"], 100.0 * s["tasks_redealt"] / s["tasks_total"]))
+PY
+echo "farm_piranha: the idle-only worker waits for the owner to leave, retreats, returns"

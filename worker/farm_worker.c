@@ -43,6 +43,7 @@ typedef struct farm_worker {
     tf_terrain_shelf *shelf;
     json_t *last;      /* how the last session ended, for the next request */
     int sessions;
+    int64_t ended_ms;  /* when the last session's processes were gone (0: none yet) */
 } farm_worker;
 
 typedef struct session {
@@ -133,11 +134,23 @@ static void set_last(farm_worker *fw, int64_t job, const char *outcome)
 
 /* ---- one session: a job's terrain, processes, and watching them ---- */
 
+/* Connect to a job's render.  The farm bound its socket before starting it, so a connection
+ * waits in the backlog while the render starts (up to CONNECT_MS for the handshake), and a
+ * refused one means the render is gone: no retrying then. */
+static ts_client *connect_job(const session *ss, char *err, size_t errlen)
+{
+    ts_client *c = ts_client_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
+    if (!c && !strstr(err, "refused"))
+        c = tf_networked_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
+    return c;
+}
+
 /* The job's scene from its render and its terrain (kept or built): the scene, or NULL. */
-static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfield **hf)
+static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfield **hf,
+                           double *build_s)
 {
     char err[1024], key[TF_FARM_TOKEN_HEX];
-    ts_client *c = tf_networked_connect(ss->connect, ss->key, CONNECT_MS, err, sizeof err);
+    ts_client *c = connect_job(ss, err, sizeof err);
     int erosion = 0;
     tf_scene *s = c ? tf_worker_fetch_scene_ex(c, ss->connect, &erosion, err, sizeof err) : NULL;
     if (s && (erosion || tf_farm_terrain_key(s, key) || strcmp(key, ss->terrain)))
@@ -146,7 +159,9 @@ static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfi
     else if (s && !(*hf = tf_terrain_shelf_get(fw->shelf, key))) {
         tf_info("job %lld (%s): building its terrain", (long long)ss->job, ss->job_name);
         ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS);
+        double t0 = tf_now_s();
         tf_heightfield *built = tf_heightfield_build(s, 0, err, sizeof err);
+        *build_s = tf_now_s() - t0;
         if (built && fw->o->terrain_cache)
             tf_heightfield_set_cache(built, fw->o->terrain_cache);
         if (built)
@@ -173,7 +188,7 @@ static void serve_in_child(const session *ss, const tf_scene *s, const tf_height
     signal(SIGTERM, SIG_DFL);
     signal(SIGINT, SIG_DFL);
     char err[1024];
-    ts_client *c = tf_networked_connect(ss->connect, ss->key, CONNECT_MS, err, sizeof err);
+    ts_client *c = connect_job(ss, err, sizeof err);
     if (!c) {
         tf_error("%s", err);
         _exit(TF_WORKER_EXIT_LOST);
@@ -273,16 +288,26 @@ static const char *watch(farm_worker *fw, const session *ss, pid_t *pids, int n)
 static void serve(farm_worker *fw, const session *ss)
 {
     const tf_heightfield *hf = NULL;
-    tf_scene *s = fetch_job(fw, ss, &hf);
+    double build_s = -1;
+    tf_scene *s = fetch_job(fw, ss, &hf, &build_s);
     if (!s) {
         set_last(fw, ss->job, "failed");
+        fw->ended_ms = tf_now_ms();
         return;
     }
     int n = fw->o->processes > 0 ? fw->o->processes : tf_thread_count(0);
     pid_t pids[MAX_PROCS] = {0};
     n = spawn(fw, ss, s, hf, pids, n > MAX_PROCS ? MAX_PROCS : n);
-    tf_info("serving job %lld (%s) with %d processes", (long long)ss->job, ss->job_name, n);
+    char gap[96] = "";
+    if (fw->ended_ms)
+        snprintf(gap, sizeof gap, "; %lld ms since the last job", (long long)(tf_now_ms() - fw->ended_ms));
+    char terrain[64];
+    snprintf(terrain, sizeof terrain, build_s < 0 ? "terrain kept" : "terrain built in %.3f s",
+             build_s);
+    tf_info("serving job %lld (%s) with %d processes (%s%s)", (long long)ss->job, ss->job_name, n,
+            terrain, gap);
     const char *outcome = watch(fw, ss, pids, n);
+    fw->ended_ms = tf_now_ms();
     tf_info("job %lld (%s): %s", (long long)ss->job, ss->job_name, outcome);
     set_last(fw, ss->job, outcome);
     tf_scene_free(s);

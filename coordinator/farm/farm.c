@@ -207,6 +207,7 @@ static void render_ended(tf_farm *f, int i, int status)
     r->pid = 0;
     r->port = 0;
     r->http_port = 0;
+    r->closing = 0;
     for (int w = 0; w < f->nworkers; w++) /* its workers are free now */
         if (f->workers[w].job == j->id) {
             f->workers[w].job = 0;

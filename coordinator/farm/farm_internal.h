@@ -32,6 +32,7 @@ typedef struct farm_run {
     int port;
     int want;           /* a worker waits for the render to start */
     int stopping;       /* we signalled it: its exit sets `then` */
+    int closing;        /* a worker saw its stop tuple: it is about to exit, done */
     char then[16];      /* the state after a stop: queued, paused or cancelled */
     int failures;       /* renders in a row that failed on their own */
     int workers;        /* live workers serving the job */

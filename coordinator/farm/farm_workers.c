@@ -90,6 +90,9 @@ static void record_outcome(tf_farm *f, farm_worker *w, json_t *last)
         return;
     w->sessions++;
     w->retreats += !strcmp(outcome, "retreated");
+    int i = farm_job_index(f, job);
+    if (i >= 0 && !strcmp(outcome, "done") && f->runs[i].pid) /* its render is finishing */
+        f->runs[i].closing = 1;
     if (strcmp(outcome, "failed"))
         return;
     farm_bar *b = bar_of(w, job);
@@ -119,6 +122,7 @@ static tf_sched_job *sched_view(tf_farm *f, farm_worker *w, tf_sched_worker *sw,
         v[i].job = &f->jobs[i];
         v[i].workers = f->runs[i].workers;
         v[i].after_state = farm_after_state(f, &f->jobs[i]);
+        v[i].closing = f->runs[i].closing;
     }
     for (int i = 0; i < w->nterrains; i++)
         terrains[i] = w->terrains[i];

@@ -34,7 +34,7 @@ static const char *pool_of(const char *p)
 
 int tf_sched_servable(const tf_sched_job *j, const tf_sched_worker *w)
 {
-    return !strcmp(j->job->state, "queued") && j->after_state == 0 &&
+    return !strcmp(j->job->state, "queued") && j->after_state == 0 && !j->closing &&
            !strcmp(pool_of(j->job->pool), pool_of(w->pool)) &&
            tf_sched_tags_cover(w->tags ? w->tags : "", j->job->tags) &&
            !(w->barred && w->barred(w->ctx, j->job->id));

@@ -1,7 +1,8 @@
 /* scheduler.h: the standing farm's policy, as pure functions over a snapshot of its jobs: which
  * job an idle worker serves next, and whether a busy worker should leave its job for another.
  *
- * A worker may serve a job when the job is queued (not paused, finished or cancelled), the job
+ * A worker may serve a job when the job is queued (not paused, finished or cancelled) and its
+ * render is not closing (a worker saw its stop tuple; the process is about to exit), the job
  * it waits for (--after) is done, its pool is the worker's, every tag it asks for is one of
  * the worker's, and the worker is not barred from it (too many failed sessions lately).
  * Among those: the highest priority first; then fair share, the fewest workers, counting a
@@ -21,6 +22,7 @@ typedef struct tf_sched_job {
     const tf_job *job;
     int workers;     /* workers serving it now */
     int after_state; /* 0: no dependency or it is done; 1: waiting for it; 2: it failed */
+    int closing;     /* its render has finished (a worker saw the stop tuple): no new workers */
 } tf_sched_job;
 
 typedef struct tf_sched_worker {

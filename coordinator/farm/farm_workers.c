@@ -86,7 +86,7 @@ static void record_outcome(tf_farm *f, farm_worker *w, json_t *last)
 {
     const char *outcome = json_string_value(json_object_get(last, "outcome"));
     json_int_t job = json_integer_value(json_object_get(last, "job"));
-    if (!outcome || job <= 0)
+    if (!outcome || job <= 0 || job != w->job) /* only the session the farm knows of */
         return;
     w->sessions++;
     w->retreats += !strcmp(outcome, "retreated");

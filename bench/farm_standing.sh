@@ -8,13 +8,15 @@
 #     pixel for pixel a plain `terrafarm render` of it (jobs lost and images wrong must be 0);
 #  3. load: N tiny jobs queued at once for W staying workers while a client polls GET /api/jobs
 #     every 50 ms: jobs per second, assignments per second and the API's p50/p99 latency.
-# usage: bench/farm_standing.sh [KILLS] [JOBS] [LOAD_JOBS] [LOAD_WORKERS]  (defaults 20 6 100 16)
-#        bench/farm_standing.sh --smoke                                    (2 kills, 2 jobs, 4, 2)
+# usage: bench/farm_standing.sh [KILLS] [JOBS] [LOAD_JOBS] [LOAD_WORKERS] [STORM_SIZE]
+#          (defaults 20 6 100 16 960x540; the storm's jobs must outlast the kills)
+#        bench/farm_standing.sh --smoke          (2 kills, 2 jobs of 320x180, 4 tiny jobs, 2 workers)
 set -u
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 TF=${TF:-$ROOT/bin/terrafarm}
 EXRCMP=${TF_BUILD:-$ROOT/build}/tools/exrcmp
-if [ "${1:-}" = --smoke ]; then K=2 J=2 LN=4 LW=2; else K=${1:-20} J=${2:-6} LN=${3:-100} LW=${4:-16}; fi
+if [ "${1:-}" = --smoke ]; then K=2 J=2 LN=4 LW=2 SZ=320x180
+else K=${1:-20} J=${2:-6} LN=${3:-100} LW=${4:-16} SZ=${5:-960x540}; fi
 T=$(mktemp -d "${TMPDIR:-/tmp}/tf-farm-bench.XXXXXX")
 PIDS=""
 cleanup() { for p in $PIDS; do pkill -KILL -P "$p" 2>/dev/null; kill -KILL "$p" 2>/dev/null; done; rm -rf "$T"; }
@@ -83,7 +85,7 @@ n=0
 for sc in $SCENES; do
     [ $n -lt "$J" ] || break
     n=$((n + 1))
-    "$TF" submit "$ROOT/scenes/$sc.scene" --size 320x180 --tasks rows:4 --name "s$n" >/dev/null || die "submit $sc"
+    "$TF" submit "$ROOT/scenes/$sc.scene" --size "$SZ" --tasks rows:4 --name "s$n" >/dev/null || die "submit $sc"
     echo "$n $sc" >>"$T/storm.jobs"
 done
 worker "$T/storm-w1.log"; worker "$T/storm-w2.log"
@@ -98,7 +100,7 @@ done
 wait_done "$J"
 identical=0 resumed=0 attempts=0
 while read -r id sc; do
-    "$TF" render "$ROOT/scenes/$sc.scene" --size 320x180 --tasks rows:4 --listen 127.0.0.1:0 -j 2 -q \
+    "$TF" render "$ROOT/scenes/$sc.scene" --size "$SZ" --tasks rows:4 --listen 127.0.0.1:0 -j 2 -q \
         -o "$T/ref$id.exr" || die "reference $sc"
     "$TF" job "$id" --output "$T/got$id.exr" || die "download $id"
     "$EXRCMP" "$T/ref$id.exr" "$T/got$id.exr" >/dev/null 2>&1 && identical=$((identical + 1))

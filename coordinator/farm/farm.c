@@ -213,9 +213,10 @@ static void render_ended(tf_farm *f, int i, int status)
             f->workers[w].job = 0;
             r->workers--;
         }
-    if (r->stopping) {
+    if (r->stopping) { /* the state was stored when we stopped it, unless a restart */
         r->stopping = 0;
-        farm_set_state(f, i, r->then, j->reason, r->then);
+        if (strcmp(j->state, r->then))
+            farm_set_state(f, i, r->then, j->reason, r->then);
         return;
     }
     if (WIFEXITED(status) && WEXITSTATUS(status) == 0) {

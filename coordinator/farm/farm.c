@@ -168,27 +168,48 @@ static void poll_progress(tf_farm *f)
     }
 }
 
+/* Write job j's folder and start its render: the pid (0 on failure, err set).  Runs without
+ * the farm's lock (the files are fsync'd): j is a copy. */
+static pid_t launch(tf_farm *f, const tf_job *j, int *port, int *http_port, char *err,
+                    size_t errlen)
+{
+    tf_job_content c;
+    pid_t pid = 0;
+    if (tf_farmdb_content(f->db, j->id, &c, err, errlen) == 0 &&
+        tf_jobrun_prepare(f->o.state_dir, j, &c, f->key, err, errlen) == 0)
+        pid = tf_jobrun_start(f->exe, f->o.state_dir, j, c.options, f->host, port, http_port,
+                              err, errlen);
+    tf_job_content_free(&c);
+    return pid > 0 ? pid : 0;
+}
+
+/* Called with the lock held; releases it while the render is launched. */
 static void start_render(tf_farm *f, int i)
 {
+    tf_job copy = f->jobs[i];
+    char err[1024] = "";
+    int port = 0, http_port = 0;
+    f->runs[i].want = 0;
+    pthread_mutex_unlock(&f->lock);
+    pid_t pid = launch(f, &copy, &port, &http_port, err, sizeof err);
+    pthread_mutex_lock(&f->lock);
+    i = farm_job_index(f, copy.id); /* jobs are only appended: the same index */
     farm_run *r = &f->runs[i];
     tf_job *j = &f->jobs[i];
-    char err[1024];
-    tf_job_content c;
-    r->want = 0;
-    if (tf_farmdb_content(f->db, j->id, &c, err, sizeof err) == 0 &&
-        tf_jobrun_prepare(f->o.state_dir, j, &c, f->key, err, sizeof err) == 0) {
-        r->pid = tf_jobrun_start(f->exe, f->o.state_dir, j, c.options, f->host, &r->port,
-                                 &r->http_port, err, sizeof err);
-    }
-    tf_job_content_free(&c);
-    if (r->pid <= 0) {
-        r->pid = 0;
+    if (!pid) {
         tf_error("job %lld: %s", (long long)j->id, err);
         farm_set_state(f, i, "failed", err, "failed to start");
         return;
     }
+    r->pid = pid;
+    r->port = port;
+    r->http_port = http_port;
     job_dashboard_token(f, j, r->token);
     r->percent = -1;
+    if (strcmp(j->state, "queued")) { /* paused or cancelled meanwhile */
+        farm_stop_render(f, i, j->state);
+        return;
+    }
     j->attempts++;
     if (!j->started)
         j->started = unix_now();

@@ -9,15 +9,16 @@
 #  3. load: N tiny jobs queued at once for W staying workers while a client polls GET /api/jobs
 #     every 50 ms: jobs per second, assignments per second and the API's p50/p99 latency.
 # usage: bench/farm_standing.sh [KILLS] [JOBS] [LOAD_JOBS] [LOAD_WORKERS] [STORM_SIZE]
-#          (defaults 20 6 100 16 960x540; the storm's jobs must outlast the kills)
+#          (defaults 20 6 100 16 1920x1080; the storm's jobs must outlast the kills)
 #        bench/farm_standing.sh --smoke          (2 kills, 2 jobs of 320x180, 4 tiny jobs, 2 workers)
 set -u
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 TF=${TF:-$ROOT/bin/terrafarm}
 EXRCMP=${TF_BUILD:-$ROOT/build}/tools/exrcmp
 if [ "${1:-}" = --smoke ]; then K=2 J=2 LN=4 LW=2 SZ=320x180
-else K=${1:-20} J=${2:-6} LN=${3:-100} LW=${4:-16} SZ=${5:-960x540}; fi
+else K=${1:-20} J=${2:-6} LN=${3:-100} LW=${4:-16} SZ=${5:-1920x1080}; fi
 T=$(mktemp -d "${TMPDIR:-/tmp}/tf-farm-bench.XXXXXX")
+export TERRAFARM_WEB=${TERRAFARM_WEB:-$ROOT/web}
 PIDS=""
 cleanup() { for p in $PIDS; do pkill -KILL -P "$p" 2>/dev/null; kill -KILL "$p" 2>/dev/null; done; rm -rf "$T"; }
 trap cleanup EXIT

@@ -256,6 +256,7 @@ static enum MHD_Result serve_output(tf_farm *f, struct MHD_Connection *c, const 
         return MHD_NO;
     }
     MHD_add_response_header(r, "Content-Type", "image/x-exr");
+    security_headers(r);
     enum MHD_Result ok = MHD_queue_response(c, 200, r);
     MHD_destroy_response(r);
     return ok;
@@ -277,6 +278,12 @@ static json_t *caller_json(const farm_caller *who)
     return json_pack("{s:s,s:s}", "name", who->name, "role", who->role);
 }
 
+static int known_action(const char *a)
+{
+    return !strcmp(a, "cancel") || !strcmp(a, "pause") || !strcmp(a, "resume") ||
+           !strcmp(a, "priority");
+}
+
 /* A JSON route under the lock: the answer and its status. */
 static json_t *route(tf_farm *f, const farm_caller *who, const char *method, const char *url,
                      json_t *body, int *status)
@@ -291,16 +298,17 @@ static json_t *route(tf_farm *f, const farm_caller *who, const char *method, con
     if (!strcmp(url, "/api/jobs"))
         return post ? farm_submit(f, who, body, status)
                : get ? farm_list(f, who, status)
-                     : farm_error(status, 405, "GET or POST");
+                     : farm_error(status, 404, "no such route: %s /api/jobs (GET or POST)", method);
     if (!strncmp(url, "/api/jobs/", 10)) {
         int64_t id = job_route(url, &action);
         if (id < 0)
             return farm_error(status, 404, "no such job");
         if (!action && get)
             return farm_show(f, who, id, status);
-        if (action && post)
+        if (action && post && known_action(action))
             return farm_control(f, who, id, action, body, status);
-        return farm_error(status, 405, "GET /api/jobs/ID or POST /api/jobs/ID/ACTION");
+        return farm_error(status, 404, "no such route: %s %s (GET /api/jobs/ID, POST "
+                          "/api/jobs/ID/ACTION, GET /api/jobs/ID/output)", method, url);
     }
     if (post && !strcmp(url, "/api/workers/next"))
         return farm_worker_next(f, who, body, status);

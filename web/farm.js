@@ -133,10 +133,12 @@ function drawWorkers(doc) {
   document.getElementById('assignments').textContent = '(' + doc.assignments + ' assignments)';
 }
 
-function drawSummary(farm) {
-  const parts = Object.entries(farm.jobs).map(([s, n]) => n + ' ' + s);
-  document.getElementById('summary').textContent =
-    'v' + farm.version + ' · ' + (parts.join(', ') || 'no jobs') + ' · ' + farm.workers + ' workers known';
+function drawSummary(farm, jobs) {
+  const counts = {};
+  for (const j of jobs) counts[j.state] = (counts[j.state] || 0) + 1;
+  const parts = Object.entries(counts).map(([s, n]) => n + ' ' + s);
+  document.getElementById('summary').textContent = 'v' + farm.version + ' · ' +
+    (parts.join(', ') || 'no jobs') + ' · workers known: ' + farm.workers;
   document.getElementById('who').textContent = farm.caller.name + ' (' + farm.caller.role + ')';
   document.body.dataset.role = farm.caller.role;
 }
@@ -147,8 +149,8 @@ async function refresh() {
   busy = true;
   try {
     const farm = await api('GET', '/api/farm');
-    drawSummary(farm);
     const jobs = (await api('GET', '/api/jobs')).jobs;
+    drawSummary(farm, jobs);
     await fetchDashboards(jobs);
     drawJobs(jobs);
     if (farm.caller.role === 'admin') drawWorkers(await api('GET', '/api/workers'));

@@ -344,6 +344,36 @@ static int collect(request_body *b, const char *data, size_t *size)
     return 1;
 }
 
+/* An API request from who: the job's output, or a JSON route under the lock. */
+static enum MHD_Result serve_api(farm_http *h, struct MHD_Connection *c, const farm_caller *who,
+                                 const char *method, const char *url, const request_body *b)
+{
+    const char *action;
+    int64_t id = !strncmp(url, "/api/jobs/", 10) ? job_route(url, &action) : -1;
+    if (id > 0 && action && !strcmp(action, "output") && !strcmp(method, "GET"))
+        return serve_output(h->f, c, who, id);
+    json_error_t jerr;
+    json_t *body = b->len ? json_loadb(b->data, b->len, JSON_REJECT_DUPLICATES, &jerr) : NULL;
+    if (b->len && !json_is_object(body)) {
+        json_decref(body);
+        return send_error(c, 400, "the body is not a JSON object");
+    }
+    int status = 500;
+    pthread_mutex_lock(&h->f->lock);
+    json_t *answer = route(h->f, who, method, url, body, &status);
+    pthread_mutex_unlock(&h->f->lock);
+    json_decref(body);
+    return send_json(c, status, answer);
+}
+
+/* A request the cookie alone authenticates may only read, unless it carries a header that no
+ * cross-site form can send. */
+static int cookie_request_ok(struct MHD_Connection *c, int how, const char *method)
+{
+    const char *xr = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "X-Terrafarm-Request");
+    return how != AUTH_COOKIE || !strcmp(method, "GET") || (xr && !strcmp(xr, "1"));
+}
+
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url,
                                   const char *method, const char *version,
                                   const char *upload_data, size_t *upload_size, void **con_cls)
@@ -366,26 +396,10 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     int how = authenticate(h->f, c, &who);
     if (how == AUTH_NONE)
         return send_error(c, 401, "give a farm token: Authorization: Bearer TOKEN");
-    const char *xr = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "X-Terrafarm-Request");
-    if (how == AUTH_COOKIE && strcmp(method, "GET") && (!xr || strcmp(xr, "1")))
+    if (!cookie_request_ok(c, how, method))
         return send_error(c, 403, "a request authenticated by the cookie must carry the header "
                                   "X-Terrafarm-Request: 1");
-    const char *action;
-    int64_t id = !strncmp(url, "/api/jobs/", 10) ? job_route(url, &action) : -1;
-    if (id > 0 && action && !strcmp(action, "output") && !strcmp(method, "GET"))
-        return serve_output(h->f, c, &who, id);
-    json_error_t jerr;
-    json_t *body = b->len ? json_loadb(b->data, b->len, JSON_REJECT_DUPLICATES, &jerr) : NULL;
-    if (b->len && !json_is_object(body)) {
-        json_decref(body);
-        return send_error(c, 400, "the body is not a JSON object");
-    }
-    int status = 500;
-    pthread_mutex_lock(&h->f->lock);
-    json_t *answer = route(h->f, &who, method, url, body, &status);
-    pthread_mutex_unlock(&h->f->lock);
-    json_decref(body);
-    return send_json(c, status, answer);
+    return serve_api(h, c, &who, method, url, b);
 }
 
 static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,

@@ -67,7 +67,7 @@ function controls(job) {
   const td = el('td');
   if (['done', 'failed', 'cancelled'].includes(job.state)) return td;
   if (job.state === 'paused') td.append(control(job, 'resume', 'resume'));
-  else if (job.state !== 'running') td.append(control(job, 'pause', 'pause'));
+  else td.append(control(job, 'pause', 'pause'));
   td.append(control(job, 'cancel', 'cancel'),
             control(job, 'priority', 'prio +', { priority: Math.min(1000, job.priority + 1) }),
             control(job, 'priority', 'prio −', { priority: Math.max(-1000, job.priority - 1) }));

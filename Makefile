@@ -190,7 +190,7 @@ bench-deps:
 PREFIX ?= /usr/local
 KERNEL_SHARED := common/portable.h common/render/constants.h common/render/sample_math.h \
                  common/render/trace_math.h common/terrain/noise_kernel.h
-WEB_FILES := web/index.html web/dashboard.js web/dashboard.css
+WEB_FILES := web/index.html web/dashboard.js web/dashboard.css web/farm.html web/farm.js web/farm.css
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
 	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels $(DESTDIR)$(PREFIX)/share/terrafarm/web

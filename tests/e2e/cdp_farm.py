@@ -1,0 +1,218 @@
+#!/usr/bin/env python3
+"""tests/e2e/cdp_farm.py: drive a real headless Chromium at a standing farm's web view over the
+DevTools protocol (--remote-debugging-pipe: NUL-separated JSON on fds 3 and 4, no extra Python
+modules), as tests/e2e/farm_browser.sh asks: log in through /login?token=, see the queue with
+its states, click "resume" on the paused job with the mouse and see it run to done, see a running
+job's dashboard link (and that it answers), see the workers table, save a screenshot.
+
+usage: cdp_farm.py CHROMIUM BASE_URL TOKEN SHOT.png READY_FILE PAUSED_ID JOB_ID... [--limit S]
+READY_FILE is created once the page shows every job (the caller then starts the worker).
+Exit 0 if every check holds, 1 with a FAIL line per failed check, 77 if Chromium cannot start."""
+import base64, http.client, json, os, select, subprocess, sys, tempfile, time, urllib.parse
+
+args = sys.argv[1:]
+limit = 300.0
+if "--limit" in args:
+    i = args.index("--limit")
+    limit = float(args[i + 1])
+    del args[i:i + 2]
+chromium, base, token, shot, ready_file, paused = args[:6]
+jobs = [paused] + args[6:]
+
+profile = tempfile.mkdtemp(prefix="tf-chromium-")
+to_chrome_r, to_chrome_w = os.pipe()
+from_chrome_r, from_chrome_w = os.pipe()
+argv = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync",
+        "--disable-dev-shm-usage", "--user-data-dir=" + profile, "--window-size=1280,900",
+        "--remote-debugging-pipe", "about:blank"]
+
+
+def child_fds():
+    os.dup2(to_chrome_r, 3)
+    os.dup2(from_chrome_w, 4)
+
+
+log = open(os.path.join(profile, "chromium.log"), "w")
+proc = subprocess.Popen(argv, pass_fds=(3, 4), preexec_fn=child_fds, stdout=log, stderr=log)
+os.close(to_chrome_r)
+os.close(from_chrome_w)
+buf = b""
+next_id = 0
+
+
+def finish(code, lines=()):
+    for line in lines:
+        print(line)
+    try:
+        proc.kill()
+        proc.wait(5)
+    except Exception:
+        pass
+    subprocess.call(["rm", "-rf", profile])
+    sys.exit(code)
+
+
+def read_message(deadline):
+    global buf
+    while b"\0" not in buf:
+        left = deadline - time.time()
+        if left <= 0:
+            finish(1, ["FAIL: Chromium did not answer in time"])
+        r, _, _ = select.select([from_chrome_r], [], [], left)
+        if not r:
+            continue
+        chunk = os.read(from_chrome_r, 1 << 20)
+        if not chunk:
+            log.flush()
+            tail = open(os.path.join(profile, "chromium.log")).read()[-600:]
+            finish(77, ["Chromium cannot run here: it closed the DevTools pipe: " + tail.strip().replace("\n", " | ")])
+        buf += chunk
+    msg, buf = buf.split(b"\0", 1)
+    return json.loads(msg)
+
+
+def call(method, params=None, session=None, timeout=60):
+    global next_id
+    next_id += 1
+    m = {"id": next_id, "method": method, "params": params or {}}
+    if session:
+        m["sessionId"] = session
+    os.write(to_chrome_w, json.dumps(m).encode() + b"\0")
+    deadline = time.time() + timeout
+    while True:
+        r = read_message(deadline)
+        if r.get("id") == next_id:
+            if "error" in r:
+                finish(1, ["FAIL: DevTools %s: %s" % (method, r["error"])])
+            return r["result"]
+
+
+target = call("Target.createTarget", {"url": base + "/login?token=" + token})["targetId"]
+session = call("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+
+PROBE = """JSON.stringify({
+  refreshes: +(document.body && document.body.dataset.refreshes || 0),
+  role: document.body ? document.body.dataset.role : null,
+  error: (document.getElementById('error') && !document.getElementById('error').hidden)
+         ? document.getElementById('error').textContent : null,
+  jobs: Array.from(document.querySelectorAll('#jobs tbody tr')).map(tr => ({
+    id: tr.dataset.job, state: tr.dataset.state,
+    bar: (tr.querySelector('.bar > div') || {style: {}}).style.width,
+    dashboard: (tr.querySelector('a.dashboard') || {}).href || null})),
+  workers: Array.from(document.querySelectorAll('#workers tbody tr')).map(tr => tr.dataset.worker),
+  workersShown: !!document.getElementById('workers-box') && !document.getElementById('workers-box').hidden
+})"""
+
+
+def probe():
+    r = call("Runtime.evaluate", {"expression": PROBE, "returnByValue": True}, session)
+    v = r["result"].get("value")
+    return json.loads(v) if isinstance(v, str) else None
+
+
+def state_of(v, job):
+    return next((j["state"] for j in v["jobs"] if j["id"] == job), None)
+
+
+def click(selector):
+    """A real mouse click at the middle of the element; False if it is not on the page."""
+    expr = ("(() => { const e = document.querySelector(%s); if (!e) return null; e.scrollIntoView();"
+            " const r = e.getBoundingClientRect(); return [r.x + r.width / 2, r.y + r.height / 2]; })()"
+            % json.dumps(selector))
+    xy = call("Runtime.evaluate", {"expression": expr, "returnByValue": True}, session)["result"].get("value")
+    if not xy:
+        return False
+    for kind in ("mousePressed", "mouseReleased"):
+        call("Input.dispatchMouseEvent", {"type": kind, "x": xy[0], "y": xy[1], "button": "left",
+                                          "clickCount": 1}, session)
+    return True
+
+
+def screenshot():
+    """The page down to the workers table."""
+    r = call("Runtime.evaluate", {"returnByValue": True, "expression":
+             "document.getElementById('workers-box').getBoundingClientRect().bottom"}, session)
+    bottom = r["result"].get("value") or 900
+    clip = {"x": 0, "y": 0, "width": 1280, "height": min(900, int(bottom) + 16), "scale": 1}
+    data = call("Page.captureScreenshot", {"format": "png", "clip": clip}, session)["data"]
+    open(shot, "wb").write(base64.b64decode(data))
+
+
+def dashboard_answers(url):
+    """The render's dashboard login answers with a redirect that sets its cookie."""
+    u = urllib.parse.urlsplit(url)
+    try:
+        c = http.client.HTTPConnection(u.hostname, u.port, timeout=30)
+        c.request("GET", u.path + "?" + u.query)
+        r = c.getresponse()
+        ok = r.status == 303 and bool(r.getheader("Set-Cookie"))
+        c.close()
+        return ok
+    except OSError:
+        return False  # the job ended meanwhile
+
+
+def wait_for(cond, what, seconds):
+    """Sample the page until cond(sample) holds; the last sample, or FAIL after the deadline."""
+    end = time.time() + seconds
+    while time.time() < end:
+        v = probe()
+        if v and v["error"]:
+            finish(1, ["FAIL: the page shows an error: %s" % v["error"]])
+        if v and cond(v):
+            return v
+        time.sleep(0.25)
+    finish(1, ["FAIL: %s within %d s (last: %s)" % (what, seconds, json.dumps(probe())[:400])])
+
+
+start = time.time()
+v = wait_for(lambda v: v["refreshes"] > 0 and all(state_of(v, j) for j in jobs),
+             "the page never listed jobs %s" % jobs, 60)
+if state_of(v, paused) != "paused":
+    finish(1, ["FAIL: job %s shows %s, not paused" % (paused, state_of(v, paused))])
+if v["role"] != "admin" or not v["workersShown"]:
+    finish(1, ["FAIL: logged in as %s, workers table shown: %s" % (v["role"], v["workersShown"])])
+print("page lists jobs %s: %s" % (jobs, [state_of(v, j) for j in jobs]))
+
+if not click('tr[data-job="%s"] button[data-action="resume"]' % paused):
+    finish(1, ["FAIL: no resume button on job %s" % paused])
+wait_for(lambda v: state_of(v, paused) != "paused", "the click did not resume job %s" % paused, 60)
+print("clicked resume on job %s" % paused)
+open(ready_file, "w").close()
+
+seen_link = shot_taken = False
+seen_workers = set()
+end = start + limit
+while time.time() < end:
+    v = probe()
+    if v["error"]:
+        finish(1, ["FAIL: the page shows an error: %s" % v["error"]])
+    seen_workers |= set(v["workers"])
+    for j in v["jobs"]:
+        if j["dashboard"] and not seen_link:
+            if not j["dashboard"].startswith(base.rsplit(":", 1)[0]) or "/login?token=" not in j["dashboard"]:
+                finish(1, ["FAIL: job %s's dashboard link is %s" % (j["id"], j["dashboard"])])
+            seen_link = dashboard_answers(j["dashboard"]) or seen_link
+            print("job %s running, its dashboard at %s" % (j["id"], j["dashboard"].split("?")[0]))
+        if j["dashboard"] and not shot_taken and j["bar"] not in ("", "0%") and v["workers"]:
+            screenshot()
+            shot_taken = True
+    if all(state_of(v, j) == "done" for j in jobs):
+        break
+    time.sleep(0.25)
+problems = []
+states = [state_of(v, j) for j in jobs]
+if any(s != "done" for s in states):
+    problems.append("FAIL: jobs %s are %s after %d s, not all done" % (jobs, states, limit))
+if not seen_link:
+    problems.append("FAIL: no running job ever showed a working dashboard link")
+if not seen_workers:
+    problems.append("FAIL: the workers table stayed empty")
+if any(j["bar"] != "100%" for j in v["jobs"] if j["state"] == "done"):
+    problems.append("FAIL: a done job's bar is not full: %s" % v["jobs"])
+if not shot_taken:
+    screenshot()
+if not problems:
+    print("page ok: jobs %s done, workers seen %s, screenshot %s" % (jobs, sorted(seen_workers), shot))
+finish(1 if problems else 0, problems)

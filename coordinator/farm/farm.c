@@ -283,6 +283,24 @@ static void fail_orphans(tf_farm *f)
         }
 }
 
+/* Start the render of the job next in line ahead of any worker, so a worker moving to it
+ * finds it listening (a render's start-up is most of a switch between jobs).  At most one
+ * render waits without workers at a time, and only while the farm has workers. */
+static void start_next_ahead(tf_farm *f)
+{
+    int best = -1;
+    for (int i = 0; i < f->njobs; i++) {
+        const farm_run *r = &f->runs[i];
+        if (r->pid && !r->workers && !r->closing && !r->stopping)
+            return; /* one is waiting already */
+        if (!r->pid && !strcmp(f->jobs[i].state, "queued") && !farm_after_state(f, &f->jobs[i]) &&
+            (best < 0 || f->jobs[i].priority > f->jobs[best].priority))
+            best = i;
+    }
+    if (best >= 0 && f->nworkers > 0)
+        f->runs[best].want = 1;
+}
+
 static void main_loop(tf_farm *f)
 {
     int64_t next_poll = 0;
@@ -294,6 +312,7 @@ static void main_loop(tf_farm *f)
         }
         reap_renders(f);
         fail_orphans(f);
+        start_next_ahead(f);
         for (int i = 0; i < f->njobs; i++)
             if (f->runs[i].want && !f->runs[i].pid && !strcmp(f->jobs[i].state, "queued"))
                 start_render(f, i);

@@ -86,8 +86,8 @@ static void record_outcome(tf_farm *f, farm_worker *w, json_t *last)
 {
     const char *outcome = json_string_value(json_object_get(last, "outcome"));
     json_int_t job = json_integer_value(json_object_get(last, "job"));
-    if (!outcome || job <= 0)
-        return;
+    if (!outcome || job <= 0 || farm_job_index(f, job) < 0) /* jobs are never removed: an */
+        return;                                              /* unknown one is a lie */
     w->sessions++;
     w->retreats += !strcmp(outcome, "retreated");
     if (strcmp(outcome, "failed"))

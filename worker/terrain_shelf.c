@@ -76,6 +76,15 @@ static int least_recent(const tf_terrain_shelf *sh)
 void tf_terrain_shelf_put(tf_terrain_shelf *sh, const char *key, tf_heightfield *hf)
 {
     size_t bytes = tf_heightfield_bytes(hf);
+    for (int i = 0; i < sh->n; i++) /* a key put again: the new terrain replaces the old */
+        if (!strncmp(sh->e[i].key, key, sizeof sh->e[i].key - 1)) {
+            if (sh->e[i].hf == hf) { /* the same one: only its use is new */
+                sh->e[i].used = ++sh->clock;
+                return;
+            }
+            drop(sh, i);
+            break;
+        }
     while (sh->n && (sh->n == SHELF_MAX || sh->total + bytes > sh->budget))
         drop(sh, least_recent(sh));
     shelf_entry *e = &sh->e[sh->n++];

@@ -46,7 +46,7 @@ static void worker_update(farm_worker *w, json_t *req)
     w->nterrains = 0;
     for (size_t i = 0; i < json_array_size(terrains) && w->nterrains < FARM_MAX_TERRAINS; i++) {
         const char *t = json_string_value(json_array_get(terrains, i));
-        if (t && strlen(t) == 64)
+        if (t && strlen(t) == 64 && strspn(t, "0123456789abcdef") == 64) /* a terrain key */
             snprintf(w->terrains[w->nterrains++], 65, "%s", t);
     }
     w->seen_ms = tf_now_ms();

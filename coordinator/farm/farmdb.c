@@ -348,10 +348,18 @@ int tf_farmdb_token_add(tf_farmdb *db, const char *name, const char *role, const
     sqlite3_bind_text(st, 2, name, -1, SQLITE_STATIC);
     sqlite3_bind_text(st, 3, role, -1, SQLITE_STATIC);
     sqlite3_bind_double(st, 4, unix_now());
-    int rc = sqlite3_step(st);
+    int rc = sqlite3_step(st), ext = sqlite3_extended_errcode(db->db);
     sqlite3_finalize(st);
-    if (rc == SQLITE_CONSTRAINT)
+    /* Which constraint refused it: the name (UNIQUE), the token itself (its hash is the
+     * PRIMARY KEY) or the role (CHECK); each says so, not all "the name exists". */
+    if (rc == SQLITE_CONSTRAINT && ext == SQLITE_CONSTRAINT_UNIQUE)
         return tf_seterr(err, errlen, "farm database: a token named '%s' exists already", name);
+    if (rc == SQLITE_CONSTRAINT && ext == SQLITE_CONSTRAINT_PRIMARYKEY)
+        return tf_seterr(err, errlen, "farm database: this token exists already (under "
+                         "another name)");
+    if (rc == SQLITE_CONSTRAINT && ext == SQLITE_CONSTRAINT_CHECK)
+        return tf_seterr(err, errlen, "farm database: role '%s': a token's role is submitter "
+                         "or admin", role);
     return rc == SQLITE_DONE ? 0 : db_fail(db, "token", err, errlen);
 }
 

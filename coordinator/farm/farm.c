@@ -283,9 +283,18 @@ static void fail_orphans(tf_farm *f)
         }
 }
 
+/* 1 when a worker of job j's pool is serving some job now: its pool is at work. */
+static int pool_busy(const tf_farm *f, const tf_job *j)
+{
+    for (int w = 0; w < f->nworkers; w++)
+        if (f->workers[w].job && !strcmp(f->workers[w].pool, j->pool))
+            return 1;
+    return 0;
+}
+
 /* Start the render of the job next in line ahead of any worker, so a worker moving to it
  * finds it listening (a render's start-up is most of a switch between jobs).  At most one
- * render waits without workers at a time, and only while the farm has workers. */
+ * render waits without workers at a time, and only for a pool whose workers are at work. */
 static void start_next_ahead(tf_farm *f)
 {
     int best = -1;
@@ -294,10 +303,11 @@ static void start_next_ahead(tf_farm *f)
         if (r->pid && !r->workers && !r->closing && !r->stopping)
             return; /* one is waiting already */
         if (!r->pid && !strcmp(f->jobs[i].state, "queued") && !farm_after_state(f, &f->jobs[i]) &&
+            pool_busy(f, &f->jobs[i]) &&
             (best < 0 || f->jobs[i].priority > f->jobs[best].priority))
             best = i;
     }
-    if (best >= 0 && f->nworkers > 0)
+    if (best >= 0)
         f->runs[best].want = 1;
 }
 

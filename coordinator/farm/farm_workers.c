@@ -16,6 +16,7 @@
 #include "log.h"
 
 #define MAX_WAIT_MS 10000
+#define FORGET_MS (600 * 1000) /* a worker silent this long is forgotten */
 
 static farm_worker *worker_find(tf_farm *f, const char *name)
 {
@@ -247,6 +248,8 @@ void farm_expire_workers(tf_farm *f, int64_t now_ms)
                     (now_ms - w->seen_ms) / 1000.0, (long long)w->job);
             leave_job(f, w);
         }
+        if (!w->job && now_ms - w->seen_ms > FORGET_MS) /* gone: forgotten (bars too) */
+            f->workers[i--] = f->workers[--f->nworkers];
     }
 }
 

@@ -27,6 +27,7 @@
 #include "log.h"
 
 #define MAX_BODY ((size_t)96 << 20) /* a 64 MiB height map in base64 and its scene */
+#define MAX_WORKER_BODY ((size_t)64 << 10) /* a worker's request is a few hundred bytes */
 #define MAX_WEB_FILE (1 << 20)
 #define COOKIE "tf_farm_token"
 #define NWEB 3
@@ -55,10 +56,14 @@ static const char login_page[] =
     "autocomplete=\"off\" placeholder=\"token\" required> <button>Log in</button></form>"
     "</main></body></html>\n";
 
+/* A request being read.  Its caller is known from the headers, before any of the body: a
+ * stranger's body is not kept at all, a worker's at most MAX_WORKER_BODY. */
 typedef struct request_body {
     char *data;
-    size_t len, cap;
+    size_t len, cap, max;
     int too_large;
+    int how;        /* AUTH_*, from the headers */
+    farm_caller who;
 } request_body;
 
 /* On every answer: no caching, no sniffing, no framing, only our own scripts and styles. */
@@ -325,15 +330,15 @@ static int collect(request_body *b, const char *data, size_t *size)
 {
     if (!*size)
         return 0;
-    if (b->len + *size > MAX_BODY)
+    if (b->len + *size > b->max)
         b->too_large = 1;
     if (!b->too_large && b->len + *size + 1 > b->cap) {
         size_t cap = (b->len + *size + 1) * 2;
-        char *nd = realloc(b->data, cap > MAX_BODY + 1 ? MAX_BODY + 1 : cap);
+        char *nd = realloc(b->data, cap > b->max + 1 ? b->max + 1 : cap);
         if (!nd)
             b->too_large = 1;
         else
-            b->data = nd, b->cap = cap > MAX_BODY + 1 ? MAX_BODY + 1 : cap;
+            b->data = nd, b->cap = cap > b->max + 1 ? b->max + 1 : cap;
     }
     if (!b->too_large) {
         memcpy(b->data + b->len, data, *size);
@@ -380,26 +385,30 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 {
     (void)version;
     farm_http *h = cls;
-    if (!*con_cls) {
-        *con_cls = calloc(1, sizeof(request_body));
-        return *con_cls ? MHD_YES : MHD_NO;
+    if (!*con_cls) { /* the headers: who is asking decides how much body is kept */
+        request_body *nb = calloc(1, sizeof *nb);
+        if (!nb)
+            return MHD_NO;
+        nb->how = authenticate(h->f, c, &nb->who);
+        nb->max = nb->how == AUTH_NONE ? 0 : !strcmp(nb->who.role, "worker") ? MAX_WORKER_BODY
+                                                                            : MAX_BODY;
+        *con_cls = nb;
+        return MHD_YES;
     }
     request_body *b = *con_cls;
     if (collect(b, upload_data, upload_size))
         return MHD_YES;
-    if (b->too_large)
-        return send_error(c, 413, "the request body is too large");
     int page = !strcmp(method, "GET") || !strcmp(method, "HEAD") ? serve_web(h, c, url) : -1;
     if (page >= 0)
         return (enum MHD_Result)page;
-    farm_caller who;
-    int how = authenticate(h->f, c, &who);
-    if (how == AUTH_NONE)
+    if (b->how == AUTH_NONE)
         return send_error(c, 401, "give a farm token: Authorization: Bearer TOKEN");
-    if (!cookie_request_ok(c, how, method))
+    if (b->too_large)
+        return send_error(c, 413, "the request body is too large");
+    if (!cookie_request_ok(c, b->how, method))
         return send_error(c, 403, "a request authenticated by the cookie must carry the header "
                                   "X-Terrafarm-Request: 1");
-    return serve_api(h, c, &who, method, url, b);
+    return serve_api(h, c, &b->who, method, url, b);
 }
 
 static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,

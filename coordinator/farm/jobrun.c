@@ -212,6 +212,17 @@ pid_t tf_jobrun_start(const char *exe, const char *state_dir, const tf_job *j,
     return pid;
 }
 
+/* The job's folder is the farm's business: "STATE/jobs/ID/out.exr" is shown as "out.exr". */
+static void strip_job_folder(const char *state_dir, int64_t id, char *text)
+{
+    char dir[4200];
+    if (tf_job_path(state_dir, id, "", dir, sizeof dir))
+        return;
+    size_t k = strlen(dir);
+    for (char *p = strstr(text, dir); p; p = strstr(p, dir))
+        memmove(p, p + k, strlen(p + k) + 1);
+}
+
 void tf_jobrun_last_error(const char *state_dir, int64_t id, char *out, size_t n)
 {
     char path[4200], line[1024];
@@ -227,4 +238,5 @@ void tf_jobrun_last_error(const char *state_dir, int64_t id, char *out, size_t n
             snprintf(out, n, "%s", line);
         }
     fclose(f);
+    strip_job_folder(state_dir, id, out);
 }

@@ -36,7 +36,8 @@ pid_t tf_jobrun_start(const char *exe, const char *state_dir, const tf_job *j,
                       const char *options, const char *host, int *port, int *http_port,
                       char *err, size_t errlen);
 
-/* The last line the render wrote to its log (its one-line error), or "" into out. */
+/* The last line the render wrote to its log (its one-line error, with the job's folder left
+ * out: a submitter sees file names, not the farm's paths), or "" into out. */
 void tf_jobrun_last_error(const char *state_dir, int64_t id, char *out, size_t n);
 
 #endif

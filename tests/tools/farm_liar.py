@@ -314,13 +314,13 @@ def main():
     for method, path, st in (("GET", "/api/jobs/-1", 404), ("GET", "/api/jobs/0", 404),
                              ("GET", "/api/jobs/99999999999999999999", 404),
                              ("GET", "/api/jobs/-99999999999999999999", 404),
-                             ("GET", "/api/jobs/1/../../etc", 405),
-                             ("GET", "/api/jobs/1/../../../etc/passwd", 405),
+                             ("GET", "/api/jobs/1/../../etc", 404),
+                             ("GET", "/api/jobs/1/../../../etc/passwd", 404),
                              ("GET", "/api/jobs/abc", 404), ("GET", "/api/jobs/", 404),
                              ("GET", "/api/jobs/1abc", 404), ("GET", "/api/jobs/%00", 404),
                              ("GET", "/api/../api/jobs", 404),
-                             ("GET", "/api/nothing", 404), ("GET", "/", 404),
-                             ("DELETE", f"/api/jobs/{a}", 405), ("PUT", "/api/jobs", 405),
+                             ("GET", "/api/nothing", 404),
+                             ("DELETE", f"/api/jobs/{a}", 404), ("PUT", "/api/jobs", 404),
                              ("POST", "/api/farm", 404),
                              ("POST", f"/api/jobs/{a}/output", 404),
                              ("POST", "/api/jobs/99999999999999999999/cancel", 404),
@@ -391,7 +391,7 @@ def main():
         body.update(extra)
         t0 = time.monotonic()
         st, data = farm.call("POST", "/api/workers/next", wtok, body, timeout=60)
-        if st not in (204, 400):
+        if st not in (204, 400, 413):  # a worker's body is at most 64 KiB
             fail(f"next with {what} answered {st}: {data[:200]!r}")
         if time.monotonic() - t0 > 30:
             fail(f"next with {what} took {time.monotonic() - t0:.0f} s (the longest wait is 10 s)")
@@ -408,8 +408,8 @@ def main():
         fail(f"the liar is not listed among the workers: {list(ws)}")
     if liar["job"] != 0:
         fail(f"the liar is counted on job {liar['job']}")
-    if liar["sessions"] != 3 * 4:  # only well-formed outcomes of existing jobs (a, b) count
-        fail(f"the liar's malformed outcomes counted: {liar['sessions']} sessions, not 12")
+    if liar["sessions"] != 0:  # only the outcome of a job the farm sent it to counts
+        fail(f"the liar's outcomes of jobs it was never sent to counted: {liar['sessions']} sessions")
     for i in (a, b):
         j = job(i)
         if j["workers"] != 0 or j["attempts"] != 0 or j["state"] != "queued":

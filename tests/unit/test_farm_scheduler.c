@@ -37,7 +37,7 @@ static int add(snap *s, int64_t id, int priority, int workers, const char *terra
     snprintf(j->state, sizeof j->state, "queued");
     snprintf(j->pool, sizeof j->pool, "default");
     snprintf(j->terrain, sizeof j->terrain, "%s", terrain ? terrain : "t0");
-    s->jobs[i] = (tf_sched_job){j, workers, 0};
+    s->jobs[i] = (tf_sched_job){.job = j, .workers = workers};
     return i;
 }
 
@@ -118,6 +118,20 @@ static void dependency(void **state)
     assert_false(tf_sched_servable(&s.jobs[a], &w));
     assert_int_equal(tf_sched_pick(s.jobs, s.n, &w), b);
     s.jobs[a].after_state = 0; /* done */
+    assert_int_equal(tf_sched_pick(s.jobs, s.n, &w), a);
+}
+
+/* A render a worker saw finish takes no new worker, whatever its priority. */
+static void closing_never_picked(void **state)
+{
+    (void)state;
+    snap s = {0};
+    int a = add(&s, 1, 9, 0, NULL), b = add(&s, 2, 0, 0, NULL);
+    tf_sched_worker w = plain_worker();
+    s.jobs[a].closing = 1;
+    assert_false(tf_sched_servable(&s.jobs[a], &w));
+    assert_int_equal(tf_sched_pick(s.jobs, s.n, &w), b);
+    s.jobs[a].closing = 0;
     assert_int_equal(tf_sched_pick(s.jobs, s.n, &w), a);
 }
 
@@ -355,6 +369,7 @@ int main(void)
         cmocka_unit_test(tags_cover_edges),
         cmocka_unit_test(states_never_picked),
         cmocka_unit_test(dependency),
+        cmocka_unit_test(closing_never_picked),
         cmocka_unit_test(empty_and_none),
         cmocka_unit_test(pools),
         cmocka_unit_test(tags),

@@ -10,17 +10,9 @@
 e2e_init
 command -v setpriv >/dev/null 2>&1 || skip "setpriv (util-linux) is not installed"
 [ "$(id -u)" = 0 ] || skip "playing another user's owner needs root"
-(umask 077; head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/secret")
-"$TF_BIN" farm --state "$T/state" --add-token alice --role submitter >"$T/alice" || fail "token"
-chmod 600 "$T/alice"
-"$TF_BIN" farm --listen 127.0.0.1:0 --state "$T/state" --secret-file "$T/secret" >"$T/farm.log" 2>&1 &
-e2e_track $!
-i=0
-until PORT=$(sed -n 's/.*farm on http:\/\/127.0.0.1:\([0-9]*\):.*/\1/p' "$T/farm.log") && [ -n "$PORT" ]; do
-    sleep 0.1; i=$((i + 1)); [ $i -lt 600 ] || fail "the farm printed no port: $(cat "$T/farm.log")"
-done
-export TERRAFARM_FARM=127.0.0.1:$PORT TERRAFARM_TOKEN_FILE=$T/alice
-field() { "$TF_BIN" job "$1" --json | python3 -c 'import json,sys; print(json.load(sys.stdin)[sys.argv[1]])' "$2"; }
+. "$(dirname "$0")/lib_farm.sh"
+farm_init
+start_farm
 owner_start() { setpriv --reuid=65534 --regid=65534 --clear-groups sh -c 'while :; do :; done' & OWNER=$!; e2e_track $OWNER; }
 owner_stop() { kill -KILL $OWNER; wait $OWNER 2>/dev/null; }
 wait_log() { # PATTERN [SECONDS]

@@ -8,44 +8,11 @@
 # started again on the same state folder finishes every job, with the same pixels.
 . "$(dirname "$0")/lib.sh"
 e2e_init
-(umask 077; head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/secret")
-"$TF_BIN" farm --state "$T/state" --add-token alice --role submitter >"$T/alice" ||
-    fail "add-token"
-chmod 600 "$T/alice"
-
-start_farm() { # [PORT]: the workers' farm address stays the same across a restart
-    : >"$T/farm.log"
-    "$TF_BIN" farm --listen "127.0.0.1:${1:-0}" --state "$T/state" --secret-file "$T/secret" \
-        >>"$T/farm.log" 2>&1 &
-    FARM=$!
-    e2e_track $FARM
-    i=0
-    until PORT=$(sed -n 's/.*farm on http:\/\/127.0.0.1:\([0-9]*\):.*/\1/p' "$T/farm.log") &&
-          [ -n "$PORT" ]; do
-        kill -0 $FARM 2>/dev/null || fail "the farm did not start: $(cat "$T/farm.log")"
-        sleep 0.1; i=$((i + 1)); [ $i -lt 600 ] || fail "the farm printed no port"
-    done
-    export TERRAFARM_FARM=127.0.0.1:$PORT TERRAFARM_TOKEN_FILE=$T/alice
-}
+. "$(dirname "$0")/lib_farm.sh"
+farm_init
 tf() { "$TF_BIN" "$@"; }
 submit() { tf submit "$@" 2>>"$T/submit.err" || fail "submit $*: $(cat "$T/submit.err")"; }
-# field ID KEY: one field of a job
-field() { tf job "$1" --json | python3 -c 'import json,sys; print(json.load(sys.stdin)[sys.argv[1]])' "$2"; }
-# wait_state ID STATE [SECONDS]
-wait_state() {
-    i=0 lim=$(( ${3:-300} * 5 ))
-    while [ "$(field "$1" state 2>/dev/null)" != "$2" ]; do
-        i=$((i + 1)); [ $i -lt $lim ] || fail "job $1 is $(field "$1" state), not $2: $(cat "$T/farm.log")"
-        sleep 0.2
-    done
-}
-worker() { # NAME [worker options]: a staying worker in the background
-    n=$1; shift
-    tf worker --connect "http://$TERRAFARM_FARM" --secret-file "$T/secret" --name "$n" -j 2 \
-        "$@" >"$T/worker-$n.log" 2>&1 &
-    e2e_track $!
-    eval "W_$n=$!"
-}
+worker() { farm_worker "$@"; }
 reference() { # NAME SCENE OPTIONS...: the plain render of a job
     r=$1; s=$2; shift 2
     tf render "$s" --listen 127.0.0.1:0 -j 2 -o "$T/ref/$r.exr" "$@" 2>"$T/ref.err" ||
@@ -117,7 +84,6 @@ say "a farm killed mid-queue continues where it stopped"
 # The workers are frozen (SIGSTOP) once the job runs, and the job is seen still running with
 # them frozen, so the kill lands while it is unfinished whatever the machine's speed; they are
 # thawed after the farm is killed.
-workers_signal() { pgrep -f "worker --connect http://127.0.0.1:$1" | xargs -r kill -"$2"; }
 tries=0
 while :; do
     tries=$((tries + 1)); [ $tries -le 3 ] || fail "three jobs finished before the workers could be frozen"

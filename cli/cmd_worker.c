@@ -236,6 +236,9 @@ int cmd_worker(int argc, char **argv)
         fo.processes = nproc;
         fo.backend = backend;
         fo.terrain_cache = terrain_cache;
+        fo.simulate_model = model;
+        fo.pixel_us = pixel_us;
+        fo.payloads = payloads;
         return run_farm_worker(&fo, &pir);
     }
     tf_networked_opts o = {connect, secret,   timeout_ms, nproc,   backend,

@@ -19,6 +19,8 @@
 #include "log.h"
 #include "scene.h"
 #include "worker/networked.h"
+#include "worker/payloads.h"
+#include "worker/simulate.h"
 #include "worker/terrain_shelf.h"
 #include "worker/worker.h"
 
@@ -41,6 +43,8 @@ typedef struct farm_worker {
     uint8_t farm_key[32];
     char name[96];
     tf_terrain_shelf *shelf;
+    tf_cost_map map;           /* simulated: the model */
+    tf_payloads *payloads;     /* simulated: the recording, or NULL */
     json_t *last;      /* how the last session ended, for the next request */
     int sessions;
     int64_t ended_ms;  /* when the last session's processes were gone (0: none yet) */
@@ -285,8 +289,62 @@ static const char *watch(farm_worker *fw, const session *ss, pid_t *pids, int n)
     return !worst ? "done" : worst == TF_WORKER_EXIT_LOST ? "lost" : "failed";
 }
 
+/* Simulated: the job's size from its render, then a child running the synthetic workers
+ * (their report line on stdout).  0 and the child, or -1. */
+static int spawn_simulated(farm_worker *fw, const session *ss, pid_t *pid)
+{
+    char err[1024];
+    ts_client *c = connect_job(ss, err, sizeof err);
+    tf_scene *s = c ? tf_worker_fetch_scene(c, ss->connect, err, sizeof err) : NULL;
+    tf_exr_layout l;
+    int fits = s && (!fw->payloads || (tf_worker_fetch_layout(c, &l, err, sizeof err) == 0 &&
+                                       tf_payloads_fit(fw->payloads, &l, err, sizeof err) == 0));
+    if (c)
+        ts_client_close(c);
+    if (!fits) {
+        tf_error("%s", err);
+        tf_scene_free(s);
+        return -1;
+    }
+    tf_sim_config cfg = {ss->connect, ss->key, CONNECT_MS,
+                         fw->o->processes > 0 ? fw->o->processes : 16, fw->o->pixel_us, &fw->map,
+                         s->width, s->height, fw->payloads};
+    tf_scene_free(s);
+    pid_t me = getpid();
+    if ((*pid = fork()) == 0) {
+        prctl(PR_SET_PDEATHSIG, SIGKILL);
+        if (getppid() != me)
+            _exit(1);
+        tf_sim_report r;
+        int rc = tf_simulate_run(&cfg, &r, err, sizeof err);
+        printf("simulated job=%lld workers=%d tasks=%lld wall_s=%.3f modelled_s=%.3f "
+               "efficiency=%.4f bound_efficiency=%.4f take_p99_ms=%.3f\n", (long long)ss->job,
+               r.workers, (long long)r.tasks, r.wall_s, r.modelled_s, r.efficiency,
+               r.bound_efficiency, r.take_p99_ms);
+        fflush(stdout);
+        _exit(rc ? TF_WORKER_EXIT_LOST : 0);
+    }
+    return *pid > 0 ? 0 : -1;
+}
+
+static void serve_simulated(farm_worker *fw, const session *ss)
+{
+    pid_t pid = 0;
+    if (spawn_simulated(fw, ss, &pid)) {
+        set_last(fw, ss->job, "failed");
+        return;
+    }
+    const char *outcome = watch(fw, ss, &pid, 1);
+    tf_info("job %lld (%s): %s (simulated)", (long long)ss->job, ss->job_name, outcome);
+    set_last(fw, ss->job, outcome);
+}
+
 static void serve(farm_worker *fw, const session *ss)
 {
+    if (fw->o->simulate_model) {
+        serve_simulated(fw, ss);
+        return;
+    }
     const tf_heightfield *hf = NULL;
     double build_s = -1;
     tf_scene *s = fetch_job(fw, ss, &hf, &build_s);
@@ -360,6 +418,12 @@ static int setup(farm_worker *fw, const tf_farm_worker_opts *o)
     if (!budget)
         budget = (size_t)sysconf(_SC_PHYS_PAGES) * (size_t)sysconf(_SC_PAGESIZE) / 8;
     fw->shelf = tf_terrain_shelf_new(budget);
+    if (o->simulate_model && (tf_cost_map_load(o->simulate_model, &fw->map, err, sizeof err) ||
+                              (o->payloads &&
+                               !(fw->payloads = tf_payloads_load(o->payloads, err, sizeof err))))) {
+        tf_error("%s", err);
+        return -1;
+    }
     return fw->shelf ? 0 : -1;
 }
 
@@ -393,5 +457,8 @@ int tf_farm_worker_run(const tf_farm_worker_opts *o)
     }
     json_decref(fw.last);
     tf_terrain_shelf_free(fw.shelf);
+    if (o->simulate_model)
+        tf_cost_map_free(&fw.map);
+    tf_payloads_free(fw.payloads);
     return 0;
 }

@@ -36,6 +36,11 @@ typedef struct tf_farm_worker_opts {
     size_t terrain_memory;     /* kept terrains; 0 = an eighth of memory */
     const tf_owner_watch *owner; /* NULL: serve whenever there is work */
     int max_sessions;          /* leave after this many job sessions; 0 = never */
+    /* Simulated (simulate.h): each session joins the job's render as `processes` synthetic
+     * workers sleeping the cost map's modelled costs instead of tracing; NULL: real ones. */
+    const char *simulate_model;
+    double pixel_us;
+    const char *payloads;      /* their results: this recording's chunks (payloads.h), or NULL */
 } tf_farm_worker_opts;
 
 /* Serve the farm until SIGINT/SIGTERM (or max_sessions).  Returns the exit status. */

@@ -33,6 +33,7 @@ script_want() {
     case $1 in
     affinity_ab) WANT='^affinity on/off wall ratio: [0-9]' ;;
     erosion_farm) WANT="^erosion farm: every run's heights equal the 1-worker run's" ;;
+    farm_sim) WANT='^farm_sim: 3 jobs, 2 x 2 simulated workers' ;;
     farm_standing) WANT='^killstorm: .* lost=0 identical=2/2' ;;
     povray_compare) WANT='^65 *noaa *| *[0-9]' ;;
     procedural_superlinear) WANT='^superlinear: 2-worker speedup [0-9]' ;;

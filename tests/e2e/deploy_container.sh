@@ -36,6 +36,7 @@ for p in $pkgs OpenEXR OpenCL; do
     zlib) dev=zlib1g-dev run=zlib1g ;;
     libmicrohttpd) dev=libmicrohttpd-dev run=libmicrohttpd12 ;;
     jansson) dev=libjansson-dev run=libjansson4 ;;
+    sqlite3) dev=libsqlite3-dev run=libsqlite3-0 ;;
     gdal) dev=libgdal-dev run=libgdal32 ;;
     OpenEXR) dev=libopenexr-dev run=libopenexr-3-1-30 ;;
     OpenCL) dev=ocl-icd-opencl-dev run=ocl-icd-libopencl1 ;;

@@ -5,8 +5,8 @@
 # recorded chunks, worker/simulate.h), so F*S workers on 2 cores.  Every job is SIZE of
 # default.scene in 8x8 stamps whose average costs TASK_MS.  Prints tasks dealt per second over
 # the farm, the farm's efficiency (the modelled work of all jobs over F*S workers' wall time:
-# 1.0 would be no worker ever idle, between jobs included), the mean of the sessions' own
-# efficiency against their schedule bound, and the API's latency (GET /api/jobs every 50 ms).
+# 1.0 would be no worker ever idle, between jobs included) and the API's latency (GET /api/jobs
+# every 50 ms).
 # usage: bench/farm_sim.sh [JOBS] [FARM_WORKERS] [SIM_PER_WORKER] [SIZE] [TASK_MS]
 #          (defaults 100 4 16 256x144 10: 64 simulated workers)
 #        bench/farm_sim.sh --smoke   (3 jobs, 2 x 2 workers, 64x32, 1 ms)
@@ -82,10 +82,8 @@ w, h = map(int, sys.argv[6].split("x")); pixel_us = float(sys.argv[7]); wall = i
 tasks = sum(int(x["tasks"]) for x in sessions)
 work = n * w * h * pixel_us / 1e6
 p = lambda q: lat[min(len(lat) - 1, int(q * len(lat)))]
-eff = [float(x["bound_efficiency"]) for x in sessions if float(x["bound_efficiency"]) > 0]
 print("farm_sim: %d jobs, %d x %d simulated workers, %d sessions: %.0f tasks dealt/s; farm efficiency %.3f "
-      "(%.1f s of modelled work over %d workers in %.1f s); sessions' bound efficiency mean %.3f; "
-      "GET /api/jobs p50 %.1f ms p99 %.1f ms (%d requests)" % (
-      n, f, s, len(sessions), tasks / wall, work / (f * s * wall), work, f * s, wall,
-      sum(eff) / len(eff) if eff else 0, p(0.5), p(0.99), len(lat)))
+      "(%.1f s of modelled work over %d workers in %.1f s); GET /api/jobs p50 %.1f ms p99 %.1f ms "
+      "(%d requests)" % (n, f, s, len(sessions), tasks / wall, work / (f * s * wall), work, f * s,
+                         wall, p(0.5), p(0.99), len(lat)))
 PY

@@ -164,7 +164,7 @@ static float *raw_heights(const tf_terrain *t, int threads, double *extent, char
         return NULL;
     }
 
-    float *h = malloc(count * sizeof *h);
+    float *h = tf_alloc_heights(count * sizeof *h);
     if (!h) {
         tf_seterr(err, errlen, "out of memory: a %dx%d height field needs %zu MB", n, n,
                  (count * sizeof *h + (1u << 20) - 1) >> 20);
@@ -259,7 +259,7 @@ float *tf_terrain_heights_maps(const tf_terrain *t, int threads, double *extent,
         from = "erosion cache";
     }
     int n = (1 << t->size_exp) + 1;
-    float *h = malloc((size_t)n * (size_t)n * sizeof *h);
+    float *h = tf_alloc_heights((size_t)n * (size_t)n * sizeof *h);
     if (!h)
         tf_seterr(err, errlen, "out of memory: a %dx%d height field", n, n);
     else if (tf_eroded_parse(t, n, b, len, from, h, maps, err, errlen) != 0) {

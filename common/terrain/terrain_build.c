@@ -5,7 +5,8 @@
  * of T computes rows t, t + T, t + 2T, ...  A row's values depend only on its index, never on
  * which thread computed it, so the result is bit-identical for every thread count.  Interleaved
  * rows also balance the load for generators whose cost varies across the terrain.  Grid
- * generators (midpoint.c, fault.c, subdivide.c) own their parallelism; weathering.c likewise. */
+ * generators (midpoint.c, fault.c, subdivide.c) own their parallelism; weathering.c likewise.
+ * The sweeps after them (height_scale, the non-finite check) split rows with gridgen.h. */
 #include "terrain/terrain_build.h"
 #include "terrain/procedural.h"
 #include "terrain/eroded.h"
@@ -19,6 +20,7 @@
 #include <string.h>
 
 #include "terrain/fractal.h"
+#include "terrain/gridgen.h"
 #include "terrain/heightfield.h"
 #include "terrain/heightmap_file.h"
 #include "terrain/noise.h"
@@ -101,12 +103,52 @@ static int run_grid_generator(float *h, const tf_terrain *t, int threads, char *
     }
 }
 
-/* Index of the first non-finite height, or -1. */
-static ptrdiff_t first_non_finite(const float *h, size_t count)
+/* Whole-grid sweeps after the generator, rows split over the threads (gridgen.h): each
+ * sample is scaled alone, and the first non-finite sample is the first one found by the
+ * lowest band that found one, so neither depends on the split. */
+typedef struct sweep {
+    float *h;
+    int n;
+    double scale;
+    ptrdiff_t bad[TF_GRID_MAX_THREADS]; /* per band: first non-finite index, or -1 */
+} sweep;
+
+static void scale_rows(void *arg, int piece, int begin, int end)
 {
-    for (size_t i = 0; i < count; i++)
-        if (!isfinite(h[i]))
-            return (ptrdiff_t)i;
+    sweep *w = arg;
+    (void)piece;
+    for (size_t i = (size_t)begin * w->n; i < (size_t)end * w->n; i++)
+        w->h[i] = (float)((double)w->h[i] * w->scale);
+}
+
+static void find_non_finite_rows(void *arg, int piece, int begin, int end)
+{
+    sweep *w = arg;
+    w->bad[piece] = -1;
+    for (size_t i = (size_t)begin * w->n; i < (size_t)end * w->n; i++)
+        if (!isfinite(w->h[i])) {
+            w->bad[piece] = (ptrdiff_t)i;
+            return;
+        }
+}
+
+/* Rows per band below which a sweep is not split (a row of 8193 is ~10 microseconds). */
+#define SWEEP_MIN_ROWS 64
+
+static void scale_heights(float *h, int n, double scale, int threads)
+{
+    sweep w = {.h = h, .n = n, .scale = scale};
+    tf_grid_parallel(n, threads, SWEEP_MIN_ROWS, scale_rows, &w);
+}
+
+/* Index of the first non-finite height of the n x n grid, or -1. */
+static ptrdiff_t first_non_finite(float *h, int n, int threads)
+{
+    sweep w = {.h = h, .n = n};
+    tf_grid_parallel(n, threads, SWEEP_MIN_ROWS, find_non_finite_rows, &w);
+    for (int p = 0; p < tf_grid_pieces(n, threads, SWEEP_MIN_ROWS); p++)
+        if (w.bad[p] >= 0)
+            return w.bad[p];
     return -1;
 }
 
@@ -180,8 +222,7 @@ static float *raw_heights(const tf_terrain *t, int threads, double *extent, char
             free(h);
             return NULL;
         }
-        for (size_t i = 0; i < count; i++)
-            h[i] = (float)((double)h[i] * t->height_scale);
+        scale_heights(h, n, t->height_scale, threads);
     }
 
     if (t->thermal_iterations > 0 &&
@@ -190,7 +231,7 @@ static float *raw_heights(const tf_terrain *t, int threads, double *extent, char
         return NULL;
     }
 
-    ptrdiff_t bad = first_non_finite(h, count);
+    ptrdiff_t bad = first_non_finite(h, n, threads);
     if (bad >= 0) {
         snprintf(err, errlen,
                  "terrain: %s generator produced a non-finite height at sample (%d, %d); "

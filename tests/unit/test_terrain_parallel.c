@@ -11,6 +11,7 @@
 #include <stdint.h>
 #include <cmocka.h>
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -139,6 +140,33 @@ static void test_grids_of_given_heights(void **state)
     free(h);
 }
 
+/* A build that overflows float names the same first bad sample whatever the thread count
+ * (the check splits rows over the threads). */
+static void test_non_finite_report_is_the_same(void **state)
+{
+    (void)state;
+    static const enum tf_generator gens[] = {TF_GEN_FBM, TF_GEN_MIDPOINT};
+    for (size_t g = 0; g < 2; g++) {
+        tf_terrain t = terrain(gens[g], 9, 0);
+        char one[256] = "", many[256] = "";
+        t.height_scale = 1.0;
+        float *h = tf_terrain_heights(&t, 1, NULL, one, sizeof one);
+        assert_non_null(h);
+        float top = 0.0f;
+        for (size_t i = 0; i < (size_t)513 * 513; i++)
+            top = fabsf(h[i]) > top ? fabsf(h[i]) : top;
+        free(h);
+        t.height_scale = 3.4e38 / (0.9 * top); /* only the highest tenth overflows */
+        assert_null(tf_terrain_heights(&t, 1, NULL, one, sizeof one));
+        assert_non_null(strstr(one, "non-finite"));
+        static const int counts[] = {2, 3, 7};
+        for (size_t c = 0; c < 3; c++) {
+            assert_null(tf_terrain_heights(&t, counts[c], NULL, many, sizeof many));
+            assert_string_equal(one, many);
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -146,6 +174,7 @@ int main(void)
         cmocka_unit_test(test_every_generator_weathered_at_257),
         cmocka_unit_test(test_fbm_and_midpoint_at_1025),
         cmocka_unit_test(test_grids_of_given_heights),
+        cmocka_unit_test(test_non_finite_report_is_the_same),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -215,14 +215,13 @@ static void row_octaves(const tf_fractal *f, const tf_noise *nz, const tf_noise_
 {
     const tf_octaves *o = &f->octaves;
     const double offset = f->offset, gain = f->gain, lacunarity = o->lacunarity;
-    /* restrict and the local constants let the compiler run these loops two samples at a
-     * time (element by element: the same operations) */
+    /* restrict and the local constants let the compiler pair the multifractals' loops;
+     * x's scaling and fBm's sum run eight at a time where the CPU can (noise_row.h) */
     double *restrict x = b->x, *restrict v = b->value, *restrict s = b->signal;
     const double *restrict n = b->noise;
     for (int i = 0; i < o->count; i++) {
         if (i > 0)
-            for (int k = 0; k < count; k++)
-                x[k] *= lacunarity;
+            tf_row_scale(x, count, lacunarity);
         noise_row(nz, &axes[i], x, count, b->noise, b->columns);
         const double amp = o->amp[i];
         switch (f->generator) {
@@ -253,7 +252,7 @@ static void row_octaves(const tf_fractal *f, const tf_noise *nz, const tf_noise_
         default:
             if (i == 0)
                 for (int k = 0; k < count; k++) v[k] = 0.0;
-            for (int k = 0; k < count; k++) v[k] += amp * n[k];
+            tf_row_accumulate(v, amp, n, count);
             break;
         }
     }

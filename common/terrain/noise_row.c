@@ -7,7 +7,8 @@
  *   floor split  i = trunc(x); d = (double)i; below = x < d; fx = x - (d - (below ? 1 : 0))
  *   fade         u = ((fx fx) fx) ((fx ((fx 6) - 15)) + 10)
  *   blend        l = sl fx + il; r = sr (fx - 1) + ir; noise = (l + u (r - l)) 1.41421
- * AVX-512 converts with cvttpd2qq / cvtqq2pd exactly like the scalar casts. */
+ * AVX-512 converts with cvttpd2qq / cvtqq2pd exactly like the scalar casts.  The octave's two
+ * other row loops (x times the lacunarity, fBm's sum) are here too, for the same reason. */
 #include "terrain/noise_row.h"
 
 #include <stdlib.h>
@@ -77,6 +78,27 @@ blend_avx512(const double *x, int count, int64_t first, const tf_noise_column *c
     }
     return k;
 }
+
+__attribute__((target("avx512f"))) static int scale_avx512(double *x, int count, double by)
+{
+    const __m512d b = _mm512_set1_pd(by);
+    int k = 0;
+    for (; k + 8 <= count; k += 8)
+        _mm512_storeu_pd(x + k, _mm512_mul_pd(_mm512_loadu_pd(x + k), b));
+    return k;
+}
+
+__attribute__((target("avx512f"))) static int
+accumulate_avx512(double *v, double amp, const double *n, int count)
+{
+    const __m512d a = _mm512_set1_pd(amp);
+    int k = 0;
+    for (; k + 8 <= count; k += 8) {
+        __m512d term = _mm512_mul_pd(a, _mm512_loadu_pd(n + k));
+        _mm512_storeu_pd(v + k, _mm512_add_pd(_mm512_loadu_pd(v + k), term));
+    }
+    return k;
+}
 #endif
 
 /* ---- choosing the kernel -------------------------------------------------------------------- */
@@ -132,6 +154,28 @@ int tf_noise_row_force_isa(const char *isa)
         return -1;
     __atomic_store_n(&isa_chosen, i, __ATOMIC_RELAXED);
     return 0;
+}
+
+void tf_row_scale(double *x, int count, double by)
+{
+    int k = 0;
+#ifdef TF_NOISE_X86
+    if (isa_now() == ISA_AVX512)
+        k = scale_avx512(x, count, by);
+#endif
+    for (; k < count; k++)
+        x[k] *= by;
+}
+
+void tf_row_accumulate(double *v, double amp, const double *n, int count)
+{
+    int k = 0;
+#ifdef TF_NOISE_X86
+    if (isa_now() == ISA_AVX512)
+        k = accumulate_avx512(v, amp, n, count);
+#endif
+    for (; k < count; k++)
+        v[k] += amp * n[k];
 }
 
 int tf_noise_row_blend(const double *x, int count, int64_t first, const tf_noise_column *columns,

@@ -19,6 +19,11 @@
 int tf_noise_row_blend(const double *x, int count, int64_t first, const tf_noise_column *columns,
                        double *noise);
 
+/* The two other loops of a row's octave, with the same kernel: x[k] *= by, and
+ * v[k] += amp * n[k] (one multiply, one add, rounded each: the scalar expressions). */
+void tf_row_scale(double *x, int count, double by);
+void tf_row_accumulate(double *v, double amp, const double *n, int count);
+
 /* The kernel tf_noise_row_blend uses: "avx512" or "portable". */
 const char *tf_noise_row_isa(void);
 /* Use kernel `isa` from now on (NULL: the best again; tests compare the kernels).  -1 when

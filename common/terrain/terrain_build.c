@@ -1,10 +1,12 @@
 /* terrain_build.c: builds a scene's height field (tf_heightfield_build, heightfield.h) and its
  * bare heights (tf_terrain_heights, terrain_build.h).
  *
- * Point generators (fractal.c) are evaluated row by row by a small pool of pthreads: thread t
- * of T computes rows t, t + T, t + 2T, ...  A row's values depend only on its index, never on
- * which thread computed it, so the result is bit-identical for every thread count.  Interleaved
- * rows also balance the load for generators whose cost varies across the terrain.  Grid
+ * Point generators (fractal.c) are evaluated row by row by a small pool of pthreads, each
+ * claiming the next unclaimed row from a shared counter.  A row's values depend only on its
+ * index, never on which thread computed it, so the result is bit-identical for every thread
+ * count.  Claiming rows one at a time balances the load both for generators whose cost varies
+ * across the terrain and on a machine whose other load takes a core away from one thread
+ * (thread t taking rows t, t + T, ..., as before, waited for the slowest).  Grid
  * generators (midpoint.c, fault.c, subdivide.c) own their parallelism; weathering.c likewise.
  * The sweeps after them (height_scale, the non-finite check) split rows with gridgen.h. */
 #include "terrain/terrain_build.h"
@@ -27,7 +29,7 @@
 #include "terrain/terrain.h"
 #include "log.h"
 
-/* More threads than this never help a row-interleaved build on any machine we target, and the
+/* More threads than this never help the row-by-row build on any machine we target, and the
  * bound keeps the thread array on the stack. */
 #define MAX_BUILD_THREADS 256
 
@@ -37,16 +39,18 @@ typedef struct row_job {
     float *h;
     int n;
     double cell, scale;
-    int first, stride; /* rows first, first + stride, ... */
+    int *next; /* the first row no thread has claimed (atomic) */
 } row_job;
 
+/* Claim rows one at a time until none is left.  One job is shared by every thread. */
 static void *run_rows(void *arg)
 {
     const row_job *job = arg;
     /* Without scratch memory tf_fractal_row evaluates point by point: same bits, slower. */
     tf_fractal_rowbuf buf;
     int have_buf = tf_fractal_rowbuf_init(&buf, job->n) == 0;
-    for (int j = job->first; j < job->n; j += job->stride)
+    int j;
+    while ((j = __atomic_fetch_add(job->next, 1, __ATOMIC_RELAXED)) < job->n)
         tf_fractal_row(job->fractal, job->noise, (double)j * job->cell, job->cell, job->n,
                        job->scale, job->h + (size_t)j * (size_t)job->n, have_buf ? &buf : NULL);
     if (have_buf)
@@ -54,21 +58,19 @@ static void *run_rows(void *arg)
     return NULL;
 }
 
-/* Evaluate every sample of a point generator with `threads` threads.  If a thread cannot be
- * created its rows are computed by the calling thread instead: slower, same bits. */
+/* Evaluate every sample of a point generator with `threads` threads.  The calling thread
+ * works too and takes whatever rows are left, so a thread that cannot be created (or one the
+ * machine's other load keeps off a core) only makes the build slower, never different. */
 static void fill_point_generator(const tf_fractal *f, const tf_noise *nz, float *h, int n,
                                  double cell, double scale, int threads)
 {
-    row_job jobs[MAX_BUILD_THREADS];
+    int next = 0;
+    row_job job = {f, nz, h, n, cell, scale, &next};
     pthread_t tids[MAX_BUILD_THREADS];
     int started[MAX_BUILD_THREADS];
-    for (int t = 0; t < threads; t++) {
-        jobs[t] = (row_job){f, nz, h, n, cell, scale, t, threads};
-        started[t] = t > 0 && pthread_create(&tids[t], NULL, run_rows, &jobs[t]) == 0;
-    }
-    for (int t = 0; t < threads; t++)
-        if (!started[t])
-            run_rows(&jobs[t]);
+    for (int t = 1; t < threads; t++)
+        started[t] = pthread_create(&tids[t], NULL, run_rows, &job) == 0;
+    run_rows(&job);
     for (int t = 1; t < threads; t++)
         if (started[t])
             pthread_join(tids[t], NULL);

@@ -4,7 +4,8 @@
  * thermal weathering, is built at 257^2 (and fbm and midpoint at 1025^2) with 1, 2, 3 and 7
  * threads; every height and every level of the max and min grids must equal the 1-thread
  * build's, compared with memcmp.  Odd counts (3, 7) split rows into uneven bands, so an
- * off-by-one at a band's edge shows as a wrong or missing row. */
+ * off-by-one at a band's edge shows as a wrong or missing row; and every row of a point
+ * generator's build must be the row evaluator's own, whoever claimed it. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <setjmp.h>
@@ -15,6 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "terrain/fractal.h"
 #include "terrain/heightfield.h"
 #include "terrain/terrain_build.h"
 
@@ -140,6 +142,32 @@ static void test_grids_of_given_heights(void **state)
     free(h);
 }
 
+/* Each row of a point generator's build, on any thread count, is the row evaluator's for that
+ * row's y: a reference that does not go through the build's sharing of rows. */
+static void test_rows_are_the_row_evaluators(void **state)
+{
+    (void)state;
+    tf_terrain t = terrain(TF_GEN_RIDGED, 8, 0);
+    int n = 257;
+    double cell = t.extent / (n - 1);
+    tf_fractal f;
+    tf_noise nz;
+    assert_int_equal(tf_fractal_prepare(&f, &t), 0);
+    tf_noise_init(&nz, t.seed);
+    float row[257];
+    static const int counts[] = {1, 2, 3, 7};
+    for (size_t c = 0; c < 4; c++) {
+        char err[256];
+        float *h = tf_terrain_heights(&t, counts[c], NULL, err, sizeof err);
+        assert_non_null(h);
+        for (int j = 0; j < n; j++) {
+            tf_fractal_row(&f, &nz, (double)j * cell, cell, n, t.height_scale, row, NULL);
+            assert_memory_equal(h + (size_t)j * n, row, sizeof row);
+        }
+        free(h);
+    }
+}
+
 /* A build that overflows float names the same first bad sample whatever the thread count
  * (the check splits rows over the threads). */
 static void test_non_finite_report_is_the_same(void **state)
@@ -174,6 +202,7 @@ int main(void)
         cmocka_unit_test(test_every_generator_weathered_at_257),
         cmocka_unit_test(test_fbm_and_midpoint_at_1025),
         cmocka_unit_test(test_grids_of_given_heights),
+        cmocka_unit_test(test_rows_are_the_row_evaluators),
         cmocka_unit_test(test_non_finite_report_is_the_same),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

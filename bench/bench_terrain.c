@@ -10,6 +10,11 @@
  * as a peer baseline.  Each generator runs in a forked child so one that fails (or is not yet
  * written) is reported and the others still run.
  *
+ * Two A/B lines come first, each timed in the same run: the fBm heights on one thread with the
+ * row evaluator's scalar noise blend and with its vector one (noise_row.h), and the whole
+ * height field of fBm (heights plus max/min grids, what a render builds) on one thread and on
+ * all, in wall time.
+ *
  * usage: build/bench/bench_terrain [SIZE_EXP] [OCTAVES]     (defaults 10 and 8)
  *        build/bench/bench_terrain --smoke   (33x33 samples, 2 octaves, one build each, few
  *                                             noise calls: for tests/e2e/bench_smoke.sh) */
@@ -22,7 +27,9 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "terrain/heightfield.h"
 #include "terrain/noise.h"
+#include "terrain/noise_row.h"
 #include "scene.h"
 #include "terrain/terrain_build.h"
 
@@ -79,32 +86,55 @@ static tf_terrain bench_terrain(enum tf_generator g, int size_exp, double octave
     return t;
 }
 
+/* What a measurement times: the heights alone, or the whole height field (heights and
+ * max/min grids), and with which noise blend ("portable" forces the scalar one). */
+typedef struct what {
+    int field;
+    const char *isa; /* NULL: the best this CPU runs */
+} what;
+
+/* One build of t's heights (and grids if w->field); 0, or -1 with the message printed. */
+static int build_once(const tf_terrain *t, const what *w, int threads)
+{
+    char err[256];
+    float *h = tf_terrain_heights(t, threads, NULL, err, sizeof err);
+    if (!h) {
+        fprintf(stderr, "  %s\n", err);
+        return -1;
+    }
+    if (!w->field) {
+        free(h);
+        return 0;
+    }
+    tf_heightfield *hf = tf_heightfield_wrap(h, t->size_exp, t->extent, threads);
+    tf_heightfield_free(hf);
+    return hf ? 0 : -1;
+}
+
 /* Best of `reps` builds (by wall time); wall < 0 on failure (message printed). */
-static timing time_build(const tf_terrain *t, int threads, int reps)
+static timing time_build(const tf_terrain *t, const what *w, int threads, int reps)
 {
     timing best = {-1.0, -1.0};
     for (int r = 0; r < reps; r++) {
-        char err[256];
         double w0 = now_s(), c0 = cpu_s();
-        float *h = tf_terrain_heights(t, threads, NULL, err, sizeof err);
-        timing now = {now_s() - w0, cpu_s() - c0};
-        if (!h) {
-            fprintf(stderr, "  %s\n", err);
+        if (build_once(t, w, threads) != 0)
             return (timing){-1.0, -1.0};
-        }
-        free(h);
+        timing now = {now_s() - w0, cpu_s() - c0};
         if (best.wall < 0 || now.wall < best.wall)
             best = now;
     }
     return best;
 }
 
-/* Child process: time generator g, write the four figures to fd. */
-static void measure_child(enum tf_generator g, int size_exp, double octaves, int cpus, int fd)
+/* Child process: time generator g on one thread and on `cpus`, write the four figures to fd. */
+static void measure_child(enum tf_generator g, int size_exp, double octaves, int cpus,
+                          const what *w, int fd)
 {
     tf_terrain t = bench_terrain(g, size_exp, octaves);
-    timing one = time_build(&t, 1, builds);
-    timing all = one.wall < 0 ? one : time_build(&t, cpus, builds);
+    if (tf_noise_row_force_isa(w->isa) != 0)
+        _exit(1);
+    timing one = time_build(&t, w, 1, builds);
+    timing all = one.wall < 0 || cpus < 1 ? one : time_build(&t, w, cpus, builds);
     char line[128];
     int len = snprintf(line, sizeof line, "%.9f %.9f %.9f %.9f\n", one.wall, one.cpu, all.wall,
                        all.cpu);
@@ -113,8 +143,9 @@ static void measure_child(enum tf_generator g, int size_exp, double octaves, int
     _exit(one.wall < 0 || all.wall < 0 ? 1 : 0);
 }
 
-static int measure(enum tf_generator g, int size_exp, double octaves, int cpus, timing *one,
-                   timing *all)
+/* Time g in a child (cpus 0: one thread only, *all = *one). */
+static int measure(enum tf_generator g, int size_exp, double octaves, int cpus, const what *w,
+                   timing *one, timing *all)
 {
     int fds[2];
     if (pipe(fds) != 0)
@@ -125,7 +156,7 @@ static int measure(enum tf_generator g, int size_exp, double octaves, int cpus, 
         return -1;
     if (pid == 0) {
         close(fds[0]);
-        measure_child(g, size_exp, octaves, cpus, fds[1]);
+        measure_child(g, size_exp, octaves, cpus, w, fds[1]);
     }
     close(fds[1]);
     char buf[128] = {0};
@@ -178,6 +209,25 @@ static double time_noise(int plain, int count)
     return best * 1e9 / count;
 }
 
+/* The two A/B lines (see the top of the file); 0, or -1 if a build failed. */
+static int print_ab(int size_exp, double octaves, int cpus, double samples)
+{
+    timing scalar, vec, one, all, unused;
+    const char *isa = tf_noise_row_isa();
+    if (measure(TF_GEN_FBM, size_exp, octaves, 0, &(what){0, "portable"}, &scalar, &unused) ||
+        measure(TF_GEN_FBM, size_exp, octaves, 0, &(what){0, NULL}, &vec, &unused) ||
+        measure(TF_GEN_FBM, size_exp, octaves, cpus, &(what){1, NULL}, &one, &all)) {
+        printf("A/B builds failed (see above)\n");
+        return -1;
+    }
+    double per = samples * ceil(octaves) * 1e-9;
+    printf("fbm heights on 1 thread, noise blend: portable %.2f ns, %s %.2f ns per octave per "
+           "sample (CPU; %.2fx)\n", scalar.cpu / per, isa, vec.cpu / per, scalar.cpu / vec.cpu);
+    printf("fbm height field (heights + max/min grids), wall: 1 thread %.3f s, %d threads "
+           "%.3f s (%.2fx)\n\n", one.wall, cpus, all.wall, one.wall / all.wall);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     int smoke = argc == 2 && !strcmp(argv[1], "--smoke");
@@ -202,6 +252,7 @@ int main(int argc, char **argv)
     double tf_ns = time_noise(0, noise_calls), plain_ns = time_noise(1, noise_calls);
     printf("single 2D noise call: terrafarm %.2f ns, plain Perlin %.2f ns (%.2fx faster)\n\n",
            tf_ns, plain_ns, plain_ns / tf_ns);
+    int failures = print_ab(size_exp, octaves, cpus, samples) != 0;
     printf("%-10s %12s %8s %14s %8s %9s\n", "generator", "1 core", "ratio", "all cores/core",
            "ratio", "speedup");
 
@@ -210,11 +261,10 @@ int main(int argc, char **argv)
                                              TF_GEN_SUBDIVIDE};
     static const char *names[] = {"fbm", "hetero", "hybrid", "ridged", "midpoint", "fault",
                                   "subdivide"};
-    int failures = 0;
     for (size_t i = 0; i < sizeof gens / sizeof gens[0]; i++) {
         timing one, all;
         int point = gens[i] <= TF_GEN_RIDGED;
-        if (measure(gens[i], size_exp, octaves, cpus, &one, &all) != 0) {
+        if (measure(gens[i], size_exp, octaves, cpus, &(what){0, NULL}, &one, &all) != 0) {
             printf("%-10s %s\n", names[i], "failed (see above)");
             failures++;
             continue;

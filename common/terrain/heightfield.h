@@ -66,6 +66,10 @@ double tf_heightfield_grid_height_at(const tf_heightfield *hf, double x, double 
 void tf_heightfield_range(const tf_heightfield *hf, double x0, double x1, double y0, double y1,
                           float *lo, float *hi);
 
+/* malloc for a large array of heights or grid entries (free() frees it): 2 MB aligned and
+ * marked for transparent huge pages when it is large.  NULL when out of memory. */
+float *tf_alloc_heights(size_t bytes);
+
 /* Number of worker threads to use for `threads` (0 -> online CPUs). */
 int tf_thread_count(int threads);
 

@@ -1,11 +1,14 @@
 /* terrain_build.c: builds a scene's height field (tf_heightfield_build, heightfield.h) and its
  * bare heights (tf_terrain_heights, terrain_build.h).
  *
- * Point generators (fractal.c) are evaluated row by row by a small pool of pthreads: thread t
- * of T computes rows t, t + T, t + 2T, ...  A row's values depend only on its index, never on
- * which thread computed it, so the result is bit-identical for every thread count.  Interleaved
- * rows also balance the load for generators whose cost varies across the terrain.  Grid
- * generators (midpoint.c, fault.c, subdivide.c) own their parallelism; weathering.c likewise. */
+ * Point generators (fractal.c) are evaluated row by row by a small pool of pthreads, each
+ * claiming the next unclaimed row from a shared counter.  A row's values depend only on its
+ * index, never on which thread computed it, so the result is bit-identical for every thread
+ * count.  Claiming rows one at a time balances the load both for generators whose cost varies
+ * across the terrain and on a machine whose other load takes a core away from one thread
+ * (thread t taking rows t, t + T, ..., as before, waited for the slowest).  Grid
+ * generators (midpoint.c, fault.c, subdivide.c) own their parallelism; weathering.c likewise.
+ * The sweeps after them (height_scale, the non-finite check) split rows with gridgen.h. */
 #include "terrain/terrain_build.h"
 #include "terrain/procedural.h"
 #include "terrain/eroded.h"
@@ -19,13 +22,14 @@
 #include <string.h>
 
 #include "terrain/fractal.h"
+#include "terrain/gridgen.h"
 #include "terrain/heightfield.h"
 #include "terrain/heightmap_file.h"
 #include "terrain/noise.h"
 #include "terrain/terrain.h"
 #include "log.h"
 
-/* More threads than this never help a row-interleaved build on any machine we target, and the
+/* More threads than this never help the row-by-row build on any machine we target, and the
  * bound keeps the thread array on the stack. */
 #define MAX_BUILD_THREADS 256
 
@@ -35,16 +39,18 @@ typedef struct row_job {
     float *h;
     int n;
     double cell, scale;
-    int first, stride; /* rows first, first + stride, ... */
+    int *next; /* the first row no thread has claimed (atomic) */
 } row_job;
 
+/* Claim rows one at a time until none is left.  One job is shared by every thread. */
 static void *run_rows(void *arg)
 {
     const row_job *job = arg;
     /* Without scratch memory tf_fractal_row evaluates point by point: same bits, slower. */
     tf_fractal_rowbuf buf;
     int have_buf = tf_fractal_rowbuf_init(&buf, job->n) == 0;
-    for (int j = job->first; j < job->n; j += job->stride)
+    int j;
+    while ((j = __atomic_fetch_add(job->next, 1, __ATOMIC_RELAXED)) < job->n)
         tf_fractal_row(job->fractal, job->noise, (double)j * job->cell, job->cell, job->n,
                        job->scale, job->h + (size_t)j * (size_t)job->n, have_buf ? &buf : NULL);
     if (have_buf)
@@ -52,21 +58,19 @@ static void *run_rows(void *arg)
     return NULL;
 }
 
-/* Evaluate every sample of a point generator with `threads` threads.  If a thread cannot be
- * created its rows are computed by the calling thread instead: slower, same bits. */
+/* Evaluate every sample of a point generator with `threads` threads.  The calling thread
+ * works too and takes whatever rows are left, so a thread that cannot be created (or one the
+ * machine's other load keeps off a core) only makes the build slower, never different. */
 static void fill_point_generator(const tf_fractal *f, const tf_noise *nz, float *h, int n,
                                  double cell, double scale, int threads)
 {
-    row_job jobs[MAX_BUILD_THREADS];
+    int next = 0;
+    row_job job = {f, nz, h, n, cell, scale, &next};
     pthread_t tids[MAX_BUILD_THREADS];
     int started[MAX_BUILD_THREADS];
-    for (int t = 0; t < threads; t++) {
-        jobs[t] = (row_job){f, nz, h, n, cell, scale, t, threads};
-        started[t] = t > 0 && pthread_create(&tids[t], NULL, run_rows, &jobs[t]) == 0;
-    }
-    for (int t = 0; t < threads; t++)
-        if (!started[t])
-            run_rows(&jobs[t]);
+    for (int t = 1; t < threads; t++)
+        started[t] = pthread_create(&tids[t], NULL, run_rows, &job) == 0;
+    run_rows(&job);
     for (int t = 1; t < threads; t++)
         if (started[t])
             pthread_join(tids[t], NULL);
@@ -101,12 +105,52 @@ static int run_grid_generator(float *h, const tf_terrain *t, int threads, char *
     }
 }
 
-/* Index of the first non-finite height, or -1. */
-static ptrdiff_t first_non_finite(const float *h, size_t count)
+/* Whole-grid sweeps after the generator, rows split over the threads (gridgen.h): each
+ * sample is scaled alone, and the first non-finite sample is the first one found by the
+ * lowest band that found one, so neither depends on the split. */
+typedef struct sweep {
+    float *h;
+    int n;
+    double scale;
+    ptrdiff_t bad[TF_GRID_MAX_THREADS]; /* per band: first non-finite index, or -1 */
+} sweep;
+
+static void scale_rows(void *arg, int piece, int begin, int end)
 {
-    for (size_t i = 0; i < count; i++)
-        if (!isfinite(h[i]))
-            return (ptrdiff_t)i;
+    sweep *w = arg;
+    (void)piece;
+    for (size_t i = (size_t)begin * w->n; i < (size_t)end * w->n; i++)
+        w->h[i] = (float)((double)w->h[i] * w->scale);
+}
+
+static void find_non_finite_rows(void *arg, int piece, int begin, int end)
+{
+    sweep *w = arg;
+    w->bad[piece] = -1;
+    for (size_t i = (size_t)begin * w->n; i < (size_t)end * w->n; i++)
+        if (!isfinite(w->h[i])) {
+            w->bad[piece] = (ptrdiff_t)i;
+            return;
+        }
+}
+
+/* Rows per band below which a sweep is not split (a row of 8193 is ~10 microseconds). */
+#define SWEEP_MIN_ROWS 64
+
+static void scale_heights(float *h, int n, double scale, int threads)
+{
+    sweep w = {.h = h, .n = n, .scale = scale};
+    tf_grid_parallel(n, threads, SWEEP_MIN_ROWS, scale_rows, &w);
+}
+
+/* Index of the first non-finite height of the n x n grid, or -1. */
+static ptrdiff_t first_non_finite(float *h, int n, int threads)
+{
+    sweep w = {.h = h, .n = n};
+    tf_grid_parallel(n, threads, SWEEP_MIN_ROWS, find_non_finite_rows, &w);
+    for (int p = 0; p < tf_grid_pieces(n, threads, SWEEP_MIN_ROWS); p++)
+        if (w.bad[p] >= 0)
+            return w.bad[p];
     return -1;
 }
 
@@ -164,7 +208,7 @@ static float *raw_heights(const tf_terrain *t, int threads, double *extent, char
         return NULL;
     }
 
-    float *h = malloc(count * sizeof *h);
+    float *h = tf_alloc_heights(count * sizeof *h);
     if (!h) {
         tf_seterr(err, errlen, "out of memory: a %dx%d height field needs %zu MB", n, n,
                  (count * sizeof *h + (1u << 20) - 1) >> 20);
@@ -180,8 +224,7 @@ static float *raw_heights(const tf_terrain *t, int threads, double *extent, char
             free(h);
             return NULL;
         }
-        for (size_t i = 0; i < count; i++)
-            h[i] = (float)((double)h[i] * t->height_scale);
+        scale_heights(h, n, t->height_scale, threads);
     }
 
     if (t->thermal_iterations > 0 &&
@@ -190,7 +233,7 @@ static float *raw_heights(const tf_terrain *t, int threads, double *extent, char
         return NULL;
     }
 
-    ptrdiff_t bad = first_non_finite(h, count);
+    ptrdiff_t bad = first_non_finite(h, n, threads);
     if (bad >= 0) {
         snprintf(err, errlen,
                  "terrain: %s generator produced a non-finite height at sample (%d, %d); "
@@ -259,7 +302,7 @@ float *tf_terrain_heights_maps(const tf_terrain *t, int threads, double *extent,
         from = "erosion cache";
     }
     int n = (1 << t->size_exp) + 1;
-    float *h = malloc((size_t)n * (size_t)n * sizeof *h);
+    float *h = tf_alloc_heights((size_t)n * (size_t)n * sizeof *h);
     if (!h)
         tf_seterr(err, errlen, "out of memory: a %dx%d height field", n, n);
     else if (tf_eroded_parse(t, n, b, len, from, h, maps, err, errlen) != 0) {

@@ -14,8 +14,8 @@
 
 /* World heights of the terrain t: a malloc'd array of n * n floats, n = 2^size_exp + 1,
  * row-major h[j * n + i] for the sample at world (i * cell, j * cell), cell = extent / (n - 1).
- * Point generators are evaluated with `threads` threads (<= 0: all online CPUs), each taking
- * every threads-th row, so the bits never depend on the thread count.  Grid generators fill
+ * Point generators are evaluated with `threads` threads (<= 0: all online CPUs), each claiming
+ * the next unclaimed row; a row's bits never depend on who computed it or the thread count.  Grid generators fill
  * the grid, then heights are scaled by height_scale, then thermal weathering runs if asked.
  * generator = file reads the height map (heightmap_file.h) instead.  *extent (if not NULL)
  * gets the world size of a side: t->extent, or for a height map what its georeferencing says.

@@ -2,7 +2,8 @@
  * point entry tf_terrain_point (terrain.h).
  *
  * Every generator must be deterministic and finite; the row evaluator the height-field builder
- * uses must give the same bits as evaluating each point alone; and each multifractal must show
+ * uses must give the same bits as evaluating each point alone, with its AVX-512 blend and
+ * without; and each multifractal must show
  * the behaviour that defines it (Musgrave 2.3.2): hetero's detail grows with altitude, hybrid's
  * and ridged's octaves are weighted by the previous one, ridged is built on (offset - |N|)^2. */
 #include <stdarg.h>
@@ -16,6 +17,7 @@
 
 #include "terrain/fractal.h"
 #include "terrain/noise.h"
+#include "terrain/noise_row.h"
 
 static double sample(uint64_t *counter, double lo, double hi)
 {
@@ -227,6 +229,55 @@ static void test_ridged_bounds_and_weighting(void **state)
     assert_true(tf_hybrid2(&nz, x, y, H, lac, 8.0, 0.7, 0.0) == 0.5 * (n + 0.7));
 }
 
+/* Samples first .. first + count - 1 with the row's vector blend (noise_row.h) and without:
+ * the same bits as points. */
+static void check_row_at_every_isa(const tf_terrain *t, double cell, int64_t first, int count)
+{
+    tf_fractal f;
+    tf_noise nz;
+    assert_int_equal(tf_fractal_prepare(&f, t), 0);
+    tf_noise_init(&nz, t->seed);
+    tf_fractal_rowbuf buf;
+    assert_int_equal(tf_fractal_rowbuf_init(&buf, count), 0);
+    float row[300], points[300];
+    assert_true(count <= 300);
+    static const char *isas[] = {"avx512", "portable"};
+    for (size_t a = 0; a < 2; a++) {
+        if (tf_noise_row_force_isa(isas[a]) != 0)
+            continue; /* this CPU has no AVX-512 */
+        for (int j = 0; j < 3; j++) {
+            double y = j * 41.9 - 30.0;
+            tf_fractal_row_at(&f, &nz, y, cell, first, count, t->height_scale, row, &buf);
+            for (int i = 0; i < count; i++)
+                points[i] = (float)(t->height_scale *
+                                    tf_fractal_eval(&f, &nz, (double)(first + i) * cell, y));
+            assert_memory_equal(row, points, count * sizeof(float));
+        }
+    }
+    assert_int_equal(tf_noise_row_force_isa(NULL), 0);
+    tf_fractal_rowbuf_free(&buf);
+}
+
+/* The vector blend's cases: columns picked by permutes (samples denser than the lattice) and by
+ * gathers (about one column per sample), rows across x = 0 and wholly negative, odd lengths
+ * that leave a scalar tail. */
+static void test_row_blend_kernels_agree(void **state)
+{
+    (void)state;
+    for (size_t g = 0; g < 4; g++) {
+        tf_terrain t = terrain(point_gens[g], 6.3);
+        tf_fractal f;
+        assert_int_equal(tf_fractal_prepare(&f, &t), 0);
+        int64_t origin = -(int64_t)(f.ox * t.feature_size / 3.0); /* x = 0 near sample -origin */
+        check_row_at_every_isa(&t, 3.0, origin - 150, 299);
+        check_row_at_every_isa(&t, 3.0, origin - 100000, 173);
+        t.octaves = 1.0;
+        check_row_at_every_isa(&t, 0.95 * t.feature_size, 0, 201);
+        check_row_at_every_isa(&t, 0.95 * t.feature_size, origin / 95 - 40, 97);
+    }
+    assert_int_equal(tf_noise_row_force_isa("no such isa"), -1);
+}
+
 static void test_prepare_rejects_grid_generators(void **state)
 {
     (void)state;
@@ -244,6 +295,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_generators_deterministic_finite_and_seeded),
         cmocka_unit_test(test_row_equals_points_bitwise),
+        cmocka_unit_test(test_row_blend_kernels_agree),
         cmocka_unit_test(test_fbm_terrain_is_fbm_at_mapped_point),
         cmocka_unit_test(test_seed_offset_keeps_origin_off_lattice),
         cmocka_unit_test(test_one_octave_is_the_basis),

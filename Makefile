@@ -167,7 +167,7 @@ bench: $(PROG) $(BENCHES)
 # Every Debian package the build, the tests and the benchmarks use.
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
-            iproute2 python3 gnuplot-nox ffmpeg libgdal-dev gdal-bin openssh-server openssh-client \
+            iproute2 python3 python3-yaml gnuplot-nox ffmpeg libgdal-dev gdal-bin openssh-server openssh-client \
             slurm-wlm munge libmicrohttpd-dev libjansson-dev libsqlite3-dev sqlite3 chromium povray redis-server
 # The benchmarks' measuring tools (make bench-deps); their peers POV-Ray and Redis are in
 # DEB_PKGS, since the tests run every benchmark's smoke mode (tests/e2e/bench_smoke.sh).

@@ -11,20 +11,24 @@ e2e_init
 farm_init
 start_farm
 KILLS=5
-ARGS="--size 640x360 --tasks rows:2"
+ARGS="--size 960x540 --tasks rows:2"
 for sc in alps valley mesa default; do
     "$TF_BIN" submit "$TF_ROOT/scenes/$sc.scene" $ARGS --name "$sc" >>"$T/ids" || fail "submit $sc"
 done
 farm_worker w1 -j 1
 farm_worker w2 -j 1
 
-# running_job: the id of a running job, or nothing
+# running_job: the id of a running job; "none" once every job is done; nothing otherwise
 running_job() {
     "$TF_BIN" jobs --json | python3 -c '
 import json, sys
-r = [j["id"] for j in json.load(sys.stdin)["jobs"] if j["state"] == "running"]
-print(r[0] if r else "")'
+jobs = json.load(sys.stdin)["jobs"]
+r = [j["id"] for j in jobs if j["state"] == "running"]
+print(r[0] if r else "none" if all(j["state"] == "done" for j in jobs) else "")'
 }
+# Each round: a job runs, the workers are frozen at once (so the job cannot finish while the
+# farm is killed), the farm is killed and restarted, the workers thawed.  The rounds end after
+# KILLS kills or when every job is done.
 kills=0
 while [ $kills -lt $KILLS ]; do
     i=0
@@ -32,10 +36,10 @@ while [ $kills -lt $KILLS ]; do
         i=$((i + 1)); [ $i -lt 3000 ] || fail "no job ran (kill $kills): $(cat "$T/farm.log")"
         sleep 0.05
     done
+    [ "$j" = none ] && break
     workers_signal "$PORT" STOP
     if [ "$(field "$j" state)" != running ]; then # it finished just before the freeze
         workers_signal "$PORT" CONT
-        [ "$("$TF_BIN" jobs --json | grep -c '"state": *"done"')" -lt 4 ] || break
         continue
     fi
     kill -KILL $FARM; wait $FARM 2>/dev/null

@@ -26,20 +26,9 @@ done
 grep -q "exists already" "$T/tok.err" || fail "a second alice was refused without saying why: $(cat "$T/tok.err")"
 [ "$(wc -l <"$T/tok.err")" -eq 1 ] || fail "the refusal is not one line: $(cat "$T/tok.err")"
 
-: >"$T/farm.log"
-"$TF_BIN" farm --listen 127.0.0.1:0 --state "$T/state" --secret-file "$T/secret" \
-    >>"$T/farm.log" 2>&1 &
-FARM=$!
-e2e_track $FARM
-i=0
-until PORT=$(sed -n 's/.*farm on http:\/\/127.0.0.1:\([0-9]*\):.*/\1/p' "$T/farm.log") &&
-      [ -n "$PORT" ]; do
-    kill -0 $FARM 2>/dev/null || fail "the farm did not start: $(cat "$T/farm.log")"
-    sleep 0.1; i=$((i + 1)); [ $i -lt 600 ] || fail "the farm printed no port"
-done
-export TERRAFARM_FARM=127.0.0.1:$PORT TERRAFARM_TOKEN_FILE=$T/alice
+. "$(dirname "$0")/lib_farm.sh"   # start_farm, field (wait_state is this script's own)
+start_farm
 tf() { "$TF_BIN" "$@"; }
-field() { tf job "$1" --json | python3 -c 'import json,sys; print(json.load(sys.stdin)[sys.argv[1]])' "$2"; }
 wait_state() { # ID STATE [SECONDS]
     i=0 lim=$(( ${3:-300} * 5 ))
     while s=$(field "$1" state 2>/dev/null); [ "$s" != "$2" ]; do

@@ -44,7 +44,8 @@ RENDER_SRC  := $(wildcard common/render/*.c)
 # 4. linda: tuples, the wire protocol, sockets, authentication, the store, client and server
 LINDA_SRC   := $(wildcard common/linda/*.c)
 # 5. the farm's tuples (task, result, failure, scene, height map), spoken by both sides
-FARM_SRC    := common/http_client.c common/farm_keys.c common/farmproto.c common/heightmap_tuples.c common/erosion_tuples.c
+FARM_SRC    := common/http_client.c common/farm_keys.c common/farmproto.c common/heightmap_tuples.c common/erosion_tuples.c \
+               common/paintproto.c
 # 6. worker: the worker loop, its C and OpenCL backends, the simulated worker
 WORKER_SRC  := $(wildcard worker/*.c)
 # 7. coordinator, in sub-layers of its own folders, lowest first like the layers above (a folder
@@ -57,6 +58,7 @@ WORKER_SRC  := $(wildcard worker/*.c)
 #        render/)
 #    7d. farm: the standing farm: its queue (SQLite), scheduler, jobs' renders and API (uses
 #        the folders before it)
+#    7e. paint: Raypaint, the interactive progressive view (uses render/ and dashboard/)
 #    Two arrows still point back up, both from the render's entry point (render/coordinator.c):
 #    it opens, feeds and closes its dashboard (dashboard/dashboard.h) and hands an erosion film
 #    to erosion/erosion_film.c.  No other file of a folder includes one of a later folder.
@@ -64,7 +66,9 @@ COORD_RENDER_SRC    := $(wildcard coordinator/render/*.c)
 COORD_EROSION_SRC   := $(wildcard coordinator/erosion/*.c)
 COORD_DASHBOARD_SRC := $(wildcard coordinator/dashboard/*.c)
 COORD_FARM_SRC      := $(wildcard coordinator/farm/*.c)
-COORD_SRC   := $(COORD_RENDER_SRC) $(COORD_EROSION_SRC) $(COORD_DASHBOARD_SRC) $(COORD_FARM_SRC)
+COORD_PAINT_SRC     := $(wildcard coordinator/paint/*.c)
+COORD_SRC   := $(COORD_RENDER_SRC) $(COORD_EROSION_SRC) $(COORD_DASHBOARD_SRC) $(COORD_FARM_SRC) \
+               $(COORD_PAINT_SRC)
 LIB_SRC     := $(BASE_SRC) $(TERRAIN_SRC) $(IMAGE_SRC) $(RENDER_SRC) $(LINDA_SRC) $(FARM_SRC) \
                $(WORKER_SRC) $(COORD_SRC)
 # 8. cli: bin/terrafarm's subcommands
@@ -190,7 +194,8 @@ bench-deps:
 PREFIX ?= /usr/local
 KERNEL_SHARED := common/portable.h common/render/constants.h common/render/sample_math.h \
                  common/render/trace_math.h common/terrain/noise_kernel.h
-WEB_FILES := web/index.html web/dashboard.js web/dashboard.css web/farm.html web/farm.js web/farm.css
+WEB_FILES := web/index.html web/dashboard.js web/dashboard.css web/farm.html web/farm.js web/farm.css \
+             web/paint.html web/paint.js web/paint.css
 install: $(PROG)
 	install -D -m 755 $(PROG) $(DESTDIR)$(PREFIX)/bin/terrafarm
 	install -d $(DESTDIR)$(PREFIX)/share/terrafarm/kernels $(DESTDIR)$(PREFIX)/share/terrafarm/web

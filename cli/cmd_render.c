@@ -78,24 +78,6 @@ static int parse_int(const char *flag, const char *s, int lo, int hi, int *out)
     return 0;
 }
 
-static int parse_size(const char *s, int *w, int *h)
-{
-    char *end;
-    long a = strtol(s, &end, 10);
-    if (end == s || (*end != 'x' && *end != 'X'))
-        goto bad;
-    const char *p = end + 1;
-    long b = strtol(p, &end, 10);
-    if (end == p || *end || a < 1 || b < 1 || a > 65536 || b > 65536)
-        goto bad;
-    *w = (int)a;
-    *h = (int)b;
-    return 0;
-bad:
-    tf_error("--size '%s': expected WxH with sides from 1 to 65536", s);
-    return -1;
-}
-
 int cmd_render(int argc, char **argv)
 {
     enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
@@ -170,7 +152,7 @@ int cmd_render(int argc, char **argv)
             o.affinity = !strcmp(optarg, "on");
             break;
         case O_SIZE:
-            if (parse_size(optarg, &o.width, &o.height))
+            if (tf_parse_image_size("--size", optarg, &o.width, &o.height))
                 return TF_EXIT_USAGE;
             break;
         case O_BACKEND:

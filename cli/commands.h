@@ -10,12 +10,15 @@ int cmd_bench(int argc, char **argv);       /* cmd_bench.c: speedup against work
 int cmd_status(int argc, char **argv);      /* cmd_status.c: a running render's dashboard */
 int cmd_farm(int argc, char **argv);        /* cmd_farm.c: a standing farm */
 int cmd_jobs(int argc, char **argv);        /* cmd_jobs.c: submit, jobs, job, cancel, ... */
+int cmd_paint(int argc, char **argv);       /* cmd_paint.c: Raypaint, the interactive view */
 
 /* Exit statuses shared by all commands. */
 /* `--terrain-cache SIZE` and the like: a byte count with an optional K, M, G or T (powers of
  * 1024) and an optional B or iB.  0, or -1 after one line naming flag and text. */
 #include <stddef.h>
 int tf_parse_byte_size(const char *flag, const char *text, size_t *bytes);
+/* `--size WxH`: sides 1 to 65536.  0, or -1 after one line naming flag and text. */
+int tf_parse_image_size(const char *flag, const char *text, int *w, int *h);
 
 enum { TF_EXIT_OK = 0, TF_EXIT_FAIL = 1, TF_EXIT_USAGE = 2 };
 

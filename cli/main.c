@@ -21,6 +21,7 @@ static const char usage[] =
     "  submit SCENE [options]          queue a job on a standing farm (prints its id)\n"
     "  jobs | job ID                   the farm's jobs, one job (and its output)\n"
     "  cancel|pause|resume ID, priority ID N   steer a job\n"
+    "  paint SCENE [options]           paint SCENE progressively in the browser (Raypaint)\n"
     "\n"
     "  terrafarm COMMAND --help        options of one command\n"
     "  terrafarm --version             print the version\n";
@@ -57,6 +58,7 @@ int main(int argc, char **argv)
         {"pause", cmd_jobs},
         {"resume", cmd_jobs},
         {"priority", cmd_jobs},
+        {"paint", cmd_paint},
     };
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
         if (!strcmp(cmd, commands[i].name))

@@ -246,5 +246,8 @@ void tf_scene_apply_frame(tf_scene *s, int f);
  * outlive the copy) with frame f's camera and sun, for a renderer of that frame.  NULL on out
  * of memory.  Free with tf_scene_free. */
 tf_scene *tf_scene_at_frame(const tf_scene *s, int f);
+/* Raypaint's view: set s's camera, sun and mist to view's (everything a paint view may edit;
+ * the terrain, materials and image stay s's).  The hash is not changed (tf_scene_rehash). */
+void tf_scene_set_view(tf_scene *s, const tf_scene *view);
 
 #endif

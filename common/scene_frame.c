@@ -44,3 +44,10 @@ tf_scene *tf_scene_at_frame(const tf_scene *s, int f)
     tf_scene_apply_frame(c, f);
     return c;
 }
+
+void tf_scene_set_view(tf_scene *s, const tf_scene *view)
+{
+    s->camera = view->camera;
+    s->sun = view->sun;
+    s->mist = view->mist;
+}

@@ -155,11 +155,12 @@ static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfi
 {
     char err[1024], key[TF_FARM_TOKEN_HEX];
     ts_client *c = connect_job(ss, err, sizeof err);
-    int erosion = 0;
-    tf_scene *s = c ? tf_worker_fetch_scene_ex(c, ss->connect, &erosion, err, sizeof err) : NULL;
-    if (s && (erosion || tf_farm_terrain_key(s, key) || strcmp(key, ss->terrain)))
+    int kind = TF_SPACE_RENDER;
+    tf_scene *s = c ? tf_worker_fetch_scene_ex(c, ss->connect, &kind, err, sizeof err) : NULL;
+    if (s && (kind != TF_SPACE_RENDER || tf_farm_terrain_key(s, key) || strcmp(key, ss->terrain)))
         tf_seterr(err, sizeof err, "%s: job %lld's render serves another terrain than the farm "
-                  "announced%s", ss->connect, (long long)ss->job, erosion ? " (an erosion)" : "");
+                  "announced%s", ss->connect, (long long)ss->job,
+                  kind != TF_SPACE_RENDER ? " (not a render)" : "");
     else if (s && !(*hf = tf_terrain_shelf_get(fw->shelf, key))) {
         tf_info("job %lld (%s): building its terrain", (long long)ss->job, ss->job_name);
         ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS);

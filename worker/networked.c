@@ -14,6 +14,7 @@
 #include "log.h"
 #include "scene.h"
 #include "worker/erosion_patch.h"
+#include "worker/paint_worker.h"
 #include "worker/payloads.h"
 #include "linda/auth.h"
 #include "linda/tsclient.h"
@@ -83,7 +84,7 @@ static int same_render(ts_client *c, const char *connect, const tf_scene *s)
  * result held when the connection broke is not resent: the coordinator dealt its task again
  * when the connection closed.  first: an open connection to start with, or NULL. */
 static int run_one(const char *connect, const uint8_t *key, int timeout_ms, const tf_scene *s,
-                   const tf_heightfield *hf, const char *backend, ts_client *first)
+                   const tf_heightfield *hf, const char *backend, int paint, ts_client *first)
 {
     char err[1024];
     for (int round = 0;; round++) {
@@ -98,7 +99,8 @@ static int run_one(const char *connect, const uint8_t *key, int timeout_ms, cons
             ts_client_close(c);
             return 1;
         }
-        int status = tf_worker_loop(c, s, hf, "networked", backend);
+        int status = paint ? tf_paint_worker_loop(c, s, hf, "networked")
+                           : tf_worker_loop(c, s, hf, "networked", backend);
         ts_client_close(c);
         if (status != TF_WORKER_EXIT_LOST)
             return status;
@@ -154,7 +156,8 @@ static int run_simulated(const char *connect, const uint8_t *key, int timeout_ms
 /* nproc worker processes sharing the scene and the height field copy-on-write, each with its
  * own connection; 0 when every one finished cleanly. */
 static int run_processes(int nproc, const char *connect, const uint8_t *key, int timeout_ms,
-                         const tf_scene *s, const tf_heightfield *hf, const char *backend)
+                         const tf_scene *s, const tf_heightfield *hf, const char *backend,
+                         int paint)
 {
     pid_t *pids = calloc((size_t)nproc, sizeof *pids);
     if (!pids) {
@@ -166,7 +169,7 @@ static int run_processes(int nproc, const char *connect, const uint8_t *key, int
         pid_t p = fork();
         if (p == 0) {
             prctl(PR_SET_PDEATHSIG, SIGTERM);
-            _exit(run_one(connect, key, timeout_ms, s, hf, backend, NULL));
+            _exit(run_one(connect, key, timeout_ms, s, hf, backend, paint, NULL));
         }
         pids[i] = p;
         if (p < 0)
@@ -203,18 +206,25 @@ int tf_networked_worker_run(const tf_networked_opts *o)
         tf_error("%s", err);
         return 1;
     }
-    int erosion = 0;
-    tf_scene *s = tf_worker_fetch_scene_ex(c, connect, &erosion, err, sizeof err);
+    int kind = TF_SPACE_RENDER;
+    tf_scene *s = tf_worker_fetch_scene_ex(c, connect, &kind, err, sizeof err);
     if (!s) {
         tf_error("%s", err);
         ts_client_close(c);
         return 1;
     }
-    if (erosion) { /* the coordinator runs an erosion: serve one patch of it */
+    if (kind == TF_SPACE_EROSION) { /* the coordinator runs an erosion: serve one patch of it */
         int status = tf_erosion_networked(c, s, connect, TF_WORKER_HEARTBEAT_MS);
         tf_scene_free(s);
         ts_client_close(c);
         return status;
+    }
+    int paint = kind == TF_SPACE_PAINT;
+    if (paint && model) {
+        tf_error("%s paints (terrafarm paint): --simulate serves renders only", connect);
+        tf_scene_free(s);
+        ts_client_close(c);
+        return 1;
     }
     if (model) {
         if (o->payloads) { /* refuse a recording that cannot stand in before joining */
@@ -253,13 +263,13 @@ int tf_networked_worker_run(const tf_networked_opts *o)
         tf_heightfield_set_cache(hf, o->terrain_cache);
     int status;
     if (nproc == 1) {
-        status = run_one(connect, k, timeout_ms, s, hf, backend, c);
+        status = run_one(connect, k, timeout_ms, s, hf, backend, paint, c);
     } else {
         ts_client_close(c);
-        status = run_processes(nproc, connect, k, timeout_ms, s, hf, backend);
+        status = run_processes(nproc, connect, k, timeout_ms, s, hf, backend, paint);
     }
     if (status == 0)
-        tf_info("render finished; worker leaving");
+        tf_info("%s finished; worker leaving", paint ? "painting" : "render");
     tf_heightfield_free(hf);
     tf_scene_free(s);
     return status;

@@ -13,6 +13,7 @@
 #include "farmproto.h"
 #include "image/exrencode.h"
 #include "erosion_tuples.h"
+#include "paintproto.h"
 #include "heightmap_tuples.h"
 #include "log.h"
 
@@ -404,7 +405,7 @@ tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err
     return tf_worker_fetch_scene_ex(c, coordinator, NULL, err, errlen);
 }
 
-tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int *erosion,
+tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int *kind,
                                    char *err, size_t errlen)
 {
     tf_tuple tmpl, got;
@@ -428,8 +429,10 @@ tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int *e
     tf_scene_set_size(s, (int)m.width, (int)m.height);
     /* an erosion's space (common/erosion_tuples.h) is computing the eroded terrain */
     int eroding = !strcmp(m.layout, TF_EROSION_LAYOUT);
-    if (erosion)
-        *erosion = eroding;
+    if (kind)
+        *kind = eroding                               ? TF_SPACE_EROSION
+                : !strcmp(m.layout, TF_PAINT_LAYOUT) ? TF_SPACE_PAINT
+                                                      : TF_SPACE_RENDER;
     if (tf_heightmap_fetch(c, s, coordinator, err, errlen) ||
         (!eroding && tf_eroded_fetch(c, s, coordinator, err, errlen))) {
         tf_scene_free(s);

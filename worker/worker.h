@@ -84,10 +84,12 @@ int tf_worker_fetch_layout(ts_client *c, tf_exr_layout *l, char *err, size_t err
 /* rd the ("scene", ...) tuple, parse it and apply the render's image size.  NULL with a message
  * on failure (including a scene whose hash differs from the coordinator's). */
 tf_scene *tf_worker_fetch_scene(ts_client *c, const char *coordinator, char *err, size_t errlen);
-/* The same, and *erosion (if not NULL) says whether the coordinator runs an erosion
- * (common/erosion_tuples.h: its scene tuple's layout is TF_EROSION_LAYOUT): then the scene's
- * eroded terrain is not read (that space is computing it). */
-tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int *erosion,
+/* What a coordinator's space is doing, from its scene tuple's layout. */
+enum { TF_SPACE_RENDER = 0, TF_SPACE_EROSION = 1, TF_SPACE_PAINT = 2 };
+/* The same, and *kind (if not NULL) says what the space does: a render; an erosion
+ * (common/erosion_tuples.h: its layout is TF_EROSION_LAYOUT), whose eroded terrain is then not
+ * read (that space is computing it); or Raypaint (common/paintproto.h: TF_PAINT_LAYOUT). */
+tf_scene *tf_worker_fetch_scene_ex(ts_client *c, const char *coordinator, int *kind,
                                    char *err, size_t errlen);
 
 #endif

@@ -87,6 +87,20 @@ void tf_render_lattice_sample(const tf_renderer *r, int64_t X, int64_t Y, tf_sam
     tf_render_point(r, x, y, out, shadow_rays);
 }
 
+void tf_render_corner(const tf_renderer *r, int cx, int cy, float rgb[3], tf_render_counts *counts)
+{
+    tf_sample s;
+    uint64_t shadow = 0;
+    tf_render_lattice_sample(r, (int64_t)cx * r->lattice, (int64_t)cy * r->lattice, &s, &shadow);
+    rgb[0] = (float)s.r;
+    rgb[1] = (float)s.g;
+    rgb[2] = (float)s.b;
+    if (counts) {
+        counts->primary_rays++;
+        counts->shadow_rays += shadow;
+    }
+}
+
 /* A sample channel as the eye sees it: the square root of the linear value (close to the sRGB
  * curve the preview and the benchmark's PSNR use), clamped to the displayable [0, 1] since
  * differences above white or below black never show.  sqrt is correctly rounded in IEEE and in

@@ -31,4 +31,9 @@ void tf_renderer_free(tf_renderer *r);
  * Adds to *counts if not NULL.  Thread-safe: a renderer may be shared by threads. */
 void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render_counts *counts);
 
+/* The sample tf_render_rect traces at the top-left corner of pixel (cx, cy), 0 <= cx <= width,
+ * 0 <= cy <= height (the image's far edges included): its linear RGB, the same bits whoever
+ * asks (Raypaint's coarse views are made of these, worker/paint_worker.h).  Adds to *counts. */
+void tf_render_corner(const tf_renderer *r, int cx, int cy, float rgb[3], tf_render_counts *counts);
+
 #endif

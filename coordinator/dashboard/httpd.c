@@ -21,11 +21,11 @@
 #include "coordinator/dashboard/api.h"
 #include "coordinator/dashboard/httpauth.h"
 #include "coordinator/dashboard/livepreview.h"
+#include "coordinator/dashboard/webreply.h"
 #include "linda/sock.h"
 #include "log.h"
 
 #define MAX_BODY 4096              /* a control's JSON body */
-#define MAX_WEB_FILE (1 << 20)
 #define MAX_CONNECTIONS 32
 #define MAX_PER_IP 16
 #define CONNECTION_TIMEOUT_S 15    /* idle connections are closed */
@@ -72,135 +72,16 @@ int tf_web_dir_find(char *dir, size_t len)
     return tf_datadir_find("TERRAFARM_WEB", beside, fixed, "index.html", dir, len) == 0 ? 0 : -1;
 }
 
-static int load_file(const char *dir, web_file *f, char *err, size_t errlen)
-{
-    char p[PATH_MAX];
-    snprintf(p, sizeof p, "%s/%s", dir, f->name);
-    FILE *in = fopen(p, "rb");
-    if (!in)
-        return tf_seterr(err, errlen, "%s: %s", p, strerror(errno));
-    f->data = malloc(MAX_WEB_FILE);
-    f->len = f->data ? fread(f->data, 1, MAX_WEB_FILE, in) : 0;
-    int bad = !f->data || ferror(in) || f->len == MAX_WEB_FILE;
-    fclose(in);
-    if (bad)
-        return tf_seterr(err, errlen, "%s: unreadable or larger than %d bytes", p, MAX_WEB_FILE);
-    return 0;
-}
-
-/* ---- responses ------------------------------------------------------------------------------ */
-
-static void common_headers(struct MHD_Response *r)
-{
-    MHD_add_response_header(r, "Cache-Control", "no-store");
-    MHD_add_response_header(r, "X-Content-Type-Options", "nosniff");
-    MHD_add_response_header(r, "X-Frame-Options", "DENY");
-    MHD_add_response_header(r, "Referrer-Policy", "no-referrer");
-    MHD_add_response_header(r, "Content-Security-Policy",
-                            "default-src 'self'; img-src 'self' blob: data:; "
-                            "frame-ancestors 'none'; form-action 'none'");
-}
-
-static enum MHD_Result send_bytes(struct MHD_Connection *c, unsigned status, const char *type,
-                                  const void *data, size_t len)
-{
-    struct MHD_Response *r =
-        MHD_create_response_from_buffer(len, (void *)data, MHD_RESPMEM_MUST_COPY);
-    if (!r)
-        return MHD_NO;
-    MHD_add_response_header(r, "Content-Type", type);
-    common_headers(r);
-    enum MHD_Result ok = MHD_queue_response(c, status, r);
-    MHD_destroy_response(r);
-    return ok;
-}
-
-static enum MHD_Result send_text(struct MHD_Connection *c, unsigned status, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-static enum MHD_Result send_text(struct MHD_Connection *c, unsigned status, const char *fmt, ...)
-{
-    char buf[512];
-    va_list ap;
-    va_start(ap, fmt);
-    int n = vsnprintf(buf, sizeof buf - 1, fmt, ap);
-    va_end(ap);
-    if (n < 0)
-        n = 0;
-    if (n > (int)sizeof buf - 2)
-        n = (int)sizeof buf - 2;
-    buf[n++] = '\n';
-    return send_bytes(c, status, "text/plain; charset=utf-8", buf, (size_t)n);
-}
-
-static enum MHD_Result send_json(struct MHD_Connection *c, unsigned status, json_t *doc)
-{
-    if (!doc)
-        return send_text(c, 500, "out of memory");
-    char *text = json_dumps(doc, JSON_COMPACT);
-    json_decref(doc);
-    if (!text)
-        return send_text(c, 500, "out of memory");
-    enum MHD_Result ok = send_bytes(c, status, "application/json", text, strlen(text));
-    free(text);
-    return ok;
-}
-
-static enum MHD_Result send_unauthorized(struct MHD_Connection *c)
-{
-    static const char body[] = "401 unauthorized\n";
-    struct MHD_Response *r =
-        MHD_create_response_from_buffer(sizeof body - 1, (void *)body, MHD_RESPMEM_PERSISTENT);
-    if (!r)
-        return MHD_NO;
-    MHD_add_response_header(r, "Content-Type", "text/plain; charset=utf-8");
-    MHD_add_response_header(r, "WWW-Authenticate", "Bearer realm=\"terrafarm\"");
-    common_headers(r);
-    enum MHD_Result ok = MHD_queue_response(c, 401, r);
-    MHD_destroy_response(r);
-    return ok;
-}
-
 /* ---- who may ask -------------------------------------------------------------------------- */
-
-/* The token from a header: "Authorization: Bearer T" or "X-Terrafarm-Token: T". */
-static const char *header_token(struct MHD_Connection *c)
-{
-    const char *a = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Authorization");
-    if (a && !strncasecmp(a, "Bearer ", 7)) {
-        a += 7;
-        while (*a == ' ')
-            a++;
-        return a;
-    }
-    return MHD_lookup_connection_value(c, MHD_HEADER_KIND, "X-Terrafarm-Token");
-}
 
 static int token_ok(const tf_httpd *h, const char *given)
 {
     return given && tf_http_token_matches(h->token, given, strlen(given));
 }
 
-/* On loopback the Host header must name this machine, so a page from elsewhere that rebinds
- * its DNS name to 127.0.0.1 cannot read the API. */
-static int host_ok(struct MHD_Connection *c)
+static int load_file(const char *dir, web_file *f, char *err, size_t errlen)
 {
-    const char *host = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Host");
-    if (!host)
-        return 0;
-    char name[256];
-    size_t n = strlen(host);
-    if (n >= sizeof name)
-        return 0;
-    if (host[0] == '[') {
-        const char *end = strchr(host, ']');
-        if (!end)
-            return 0;
-        snprintf(name, sizeof name, "%.*s", (int)(end - host - 1), host + 1);
-    } else {
-        const char *colon = strchr(host, ':');
-        snprintf(name, sizeof name, "%.*s", colon ? (int)(colon - host) : (int)n, host);
-    }
-    return tf_addr_is_loopback(name);
+    return tf_web_load_file(dir, f->name, &f->data, &f->len, err, errlen);
 }
 
 /* ---- the API ---------------------------------------------------------------------------------- */
@@ -222,7 +103,7 @@ static int parse_u64(const char *s, uint64_t *out)
 static enum MHD_Result serve_preview(tf_httpd *h, struct MHD_Connection *c, const tf_snapshot *s)
 {
     if (!s->preview_rgba)
-        return send_text(c, 503, "no preview yet");
+        return tf_web_send_text(c, 503, "no preview yet");
     pthread_mutex_lock(&h->png_lock);
     if (!h->png || h->png_version != s->preview_version) {
         uint8_t *png;
@@ -234,8 +115,8 @@ static enum MHD_Result serve_preview(tf_httpd *h, struct MHD_Connection *c, cons
             h->png_version = s->preview_version;
         }
     }
-    enum MHD_Result ok = h->png ? send_bytes(c, 200, "image/png", h->png, h->png_len)
-                                : send_text(c, 500, "cannot encode the preview");
+    enum MHD_Result ok = h->png ? tf_web_send_bytes(c, 200, "image/png", h->png, h->png_len)
+                                : tf_web_send_text(c, 500, "cannot encode the preview");
     pthread_mutex_unlock(&h->png_lock);
     return ok;
 }
@@ -354,7 +235,7 @@ static enum MHD_Result serve_stream(tf_httpd *h, struct MHD_Connection *c)
 {
     stream *st = calloc(1, sizeof *st);
     if (!st)
-        return send_text(c, 500, "out of memory");
+        return tf_web_send_text(c, 500, "out of memory");
     st->h = h;
     pthread_mutex_lock(&h->streams_lock);
     h->streams_open++;
@@ -373,7 +254,7 @@ static enum MHD_Result serve_stream(tf_httpd *h, struct MHD_Connection *c)
         return MHD_NO;
     }
     MHD_add_response_header(r, "Content-Type", "text/event-stream");
-    common_headers(r);
+    tf_web_headers(r);
     enum MHD_Result ok = MHD_queue_response(c, 200, r);
     MHD_destroy_response(r);
     return ok;
@@ -386,36 +267,36 @@ static enum MHD_Result serve_get(tf_httpd *h, struct MHD_Connection *c, const ch
         if (!f->data)
             continue;
         if (!strcmp(url + 1, f->name) || (!strcmp(url, "/") && !strcmp(f->name, "index.html")))
-            return send_bytes(c, 200, f->type, f->data, f->len);
+            return tf_web_send_bytes(c, 200, f->type, f->data, f->len);
     }
     if (!strcmp(url, "/") || !strcmp(url, "/index.html"))
-        return send_text(c, 404, "the dashboard's page is not installed (web/index.html); the "
+        return tf_web_send_text(c, 404, "the dashboard's page is not installed (web/index.html); the "
                                  "JSON API is at /api/status");
     if (!strcmp(url, "/api/events/stream"))
         return serve_stream(h, c);
     tf_snapshot *s = tf_hub_acquire(h->hub);
     if (!s)
-        return send_text(c, 503, "the render is starting");
+        return tf_web_send_text(c, 503, "the render is starting");
     enum MHD_Result ok;
     if (!strcmp(url, "/api/status"))
-        ok = send_json(c, 200, tf_api_status(s));
+        ok = tf_web_send_json(c, 200, tf_api_status(s));
     else if (!strcmp(url, "/api/workers"))
-        ok = send_json(c, 200, tf_api_workers(s));
+        ok = tf_web_send_json(c, 200, tf_api_workers(s));
     else if (!strcmp(url, "/api/tasks"))
-        ok = send_json(c, 200, tf_api_tasks(s));
+        ok = tf_web_send_json(c, 200, tf_api_tasks(s));
     else if (!strcmp(url, "/api/history"))
-        ok = send_json(c, 200, tf_api_history(s));
+        ok = tf_web_send_json(c, 200, tf_api_history(s));
     else if (!strcmp(url, "/api/preview.png"))
         ok = serve_preview(h, c, s);
     else if (!strcmp(url, "/api/events")) {
         const char *a = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "after");
         uint64_t after = 0;
         if (a && parse_u64(a, &after))
-            ok = send_text(c, 400, "after=%s: expected an event number", a);
+            ok = tf_web_send_text(c, 400, "after=%s: expected an event number", a);
         else
-            ok = send_json(c, 200, tf_api_events(s, after));
+            ok = tf_web_send_json(c, 200, tf_api_events(s, after));
     } else
-        ok = send_text(c, 404, "no such page: %s", url);
+        ok = tf_web_send_text(c, 404, "no such page: %s", url);
     tf_hub_release(h->hub, s);
     return ok;
 }
@@ -425,10 +306,10 @@ static enum MHD_Result serve_post(tf_httpd *h, struct MHD_Connection *c, const c
                                   request *rq)
 {
     if (rq->too_big)
-        return send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
+        return tf_web_send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
     tf_snapshot *s = tf_hub_acquire(h->hub);
     if (!s)
-        return send_text(c, 503, "the render is starting");
+        return tf_web_send_text(c, 503, "the render is starting");
     enum MHD_Result ok;
     tf_command cmd = {TF_CMD_STOP, 0};
     int have_cmd = 0;
@@ -493,15 +374,15 @@ static enum MHD_Result serve_post(tf_httpd *h, struct MHD_Connection *c, const c
     }
     tf_hub_release(h->hub, s);
     if (status == 404 && !detail[0])
-        return send_text(c, 404, "no such control: %s", url);
+        return tf_web_send_text(c, 404, "no such control: %s", url);
     if (status || !have_cmd)
-        return send_text(c, status ? (unsigned)status : 500, "%s", detail);
+        return tf_web_send_text(c, status ? (unsigned)status : 500, "%s", detail);
     if (tf_hub_push_command(h->hub, cmd))
-        return send_text(c, 503, "too many controls queued; try again");
+        return tf_web_send_text(c, 503, "too many controls queued; try again");
     json_t *o = json_object();
     json_object_set_new(o, "ok", json_true());
     json_object_set_new(o, "message", json_string(ok_msg));
-    ok = send_json(c, 202, o);
+    ok = tf_web_send_json(c, 202, o);
     return ok;
 }
 
@@ -510,18 +391,8 @@ static enum MHD_Result serve_login(tf_httpd *h, struct MHD_Connection *c)
 {
     const char *t = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "token");
     if (!h->have_token || !token_ok(h, t))
-        return send_unauthorized(c);
-    char cookie[TF_HTTP_TOKEN_MAX + 64];
-    snprintf(cookie, sizeof cookie, "tf_token=%s; Path=/; SameSite=Strict", h->token);
-    struct MHD_Response *r = MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
-    if (!r)
-        return MHD_NO;
-    MHD_add_response_header(r, "Set-Cookie", cookie);
-    MHD_add_response_header(r, "Location", "/");
-    common_headers(r);
-    enum MHD_Result ok = MHD_queue_response(c, 303, r);
-    MHD_destroy_response(r);
-    return ok;
+        return tf_web_send_unauthorized(c);
+    return tf_web_send_login(c, h->token, "/");
 }
 
 static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *url,
@@ -539,7 +410,7 @@ static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *u
         const char *cl = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Content-Length");
         if (cl && strtoull(cl, NULL, 10) > MAX_BODY) {
             rq->too_big = 1;
-            return send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
+            return tf_web_send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
         }
         return MHD_YES; /* headers are in; the body (if any) follows */
     }
@@ -548,32 +419,32 @@ static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *u
         *upload_size = 0;
         if (rq->too_big || rq->len + n > MAX_BODY) {
             rq->too_big = 1; /* answer now and close: the rest is not read */
-            return send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
+            return tf_web_send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
         }
         memcpy(rq->body + rq->len, upload, n);
         rq->len += n;
         return MHD_YES;
     }
-    if (h->loopback && !host_ok(c))
-        return send_text(c, 403, "the Host header must name a loopback address");
+    if (h->loopback && !tf_web_host_ok(c))
+        return tf_web_send_text(c, 403, "the Host header must name a loopback address");
     int is_get = !strcmp(method, "GET") || !strcmp(method, "HEAD");
     int is_post = !strcmp(method, "POST");
     if (h->have_token && is_get && !strcmp(url, "/login"))
         return serve_login(h, c);
     if (h->have_token) {
         const char *cookie = MHD_lookup_connection_value(c, MHD_COOKIE_KIND, "tf_token");
-        if (!token_ok(h, header_token(c)) && !token_ok(h, cookie))
-            return send_unauthorized(c);
+        if (!token_ok(h, tf_web_header_token(c)) && !token_ok(h, cookie))
+            return tf_web_send_unauthorized(c);
     }
     if (is_get)
         return serve_get(h, c, url);
     if (!is_post)
-        return send_text(c, 405, "method %.20s not allowed", method);
+        return tf_web_send_text(c, 405, "method %.20s not allowed", method);
     /* A control: the token must come in a header (a cookie alone could be a cross-site form);
      * on loopback without a token, a header no plain form can set. */
-    const char *ht = header_token(c);
+    const char *ht = tf_web_header_token(c);
     if (h->have_token ? !token_ok(h, ht) : !ht)
-        return send_text(c, 403, "controls need the token in a header (Authorization: Bearer "
+        return tf_web_send_text(c, 403, "controls need the token in a header (Authorization: Bearer "
                                  "TOKEN or X-Terrafarm-Token)");
     return serve_post(h, c, url, rq);
 }

@@ -25,7 +25,8 @@ static void close_inherited_fds(int keep)
 }
 
 pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *hf,
-                      const char *backend, int index, char *err, size_t errlen)
+                      const char *backend, tf_local_worker_fn loop, int index, char *err,
+                      size_t errlen)
 {
     int sv[2];
     if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv)) {
@@ -53,7 +54,7 @@ pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *h
         ts_client *c = ts_client_from_fd(sv[1]);
         if (!c)
             _exit(1);
-        int status = tf_worker_loop(c, s, hf, "forked", backend);
+        int status = (loop ? loop : tf_worker_loop)(c, s, hf, "forked", backend);
         ts_client_close(c);
         _exit(status);
     }
@@ -76,17 +77,25 @@ int tf_local_workers_start(tf_local_workers *lw, int n, ts_server *srv, const tf
                            const tf_heightfield *hf, const char *backend, char *err,
                            size_t errlen)
 {
+    return tf_local_workers_start_loop(lw, n, srv, s, hf, backend, NULL, err, errlen);
+}
+
+int tf_local_workers_start_loop(tf_local_workers *lw, int n, ts_server *srv, const tf_scene *s,
+                                const tf_heightfield *hf, const char *backend,
+                                tf_local_worker_fn loop, char *err, size_t errlen)
+{
     memset(lw, 0, sizeof *lw);
     lw->srv = srv;
     lw->scene = s;
     lw->hf = hf;
     lw->backend = backend;
+    lw->loop = loop;
     lw->pid = calloc((size_t)(n > 0 ? n : 1), sizeof *lw->pid);
     lw->respawns = calloc((size_t)(n > 0 ? n : 1), sizeof *lw->respawns);
     if (!lw->pid || !lw->respawns)
         return tf_seterr(err, errlen, "out of memory");
     for (int i = 0; i < n; i++) {
-        pid_t p = tf_spawn_worker(srv, s, hf, backend, i, err, errlen);
+        pid_t p = tf_spawn_worker(srv, s, hf, backend, loop, i, err, errlen);
         if (p < 0)
             return -1;
         lw->pid[i] = p;
@@ -122,7 +131,8 @@ void tf_local_workers_reap(tf_local_workers *lw, int respawn)
         }
         lw->respawns[i]++;
         char err[512];
-        pid_t p = tf_spawn_worker(lw->srv, lw->scene, lw->hf, lw->backend, i, err, sizeof err);
+        pid_t p = tf_spawn_worker(lw->srv, lw->scene, lw->hf, lw->backend, lw->loop, i, err,
+                                  sizeof err);
         if (p > 0) {
             lw->pid[i] = p;
             tf_info("restarted local worker %d", i);

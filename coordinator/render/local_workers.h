@@ -10,12 +10,20 @@
 
 #include "terrain/heightfield.h"
 #include "scene.h"
+#include "linda/tsclient.h"
 #include "linda/tsserver.h"
 
-/* Fork worker number `index`; the parent's end of the socketpair is added to srv as a trusted
- * connection.  Returns the child's pid, or -1 with a message in err. */
+/* What a forked worker runs over its end of the socketpair; its exit status.  NULL in the pool
+ * means tf_worker_loop (worker/worker.h); Raypaint forks its own (worker/paint_worker.h). */
+typedef int (*tf_local_worker_fn)(ts_client *c, const tf_scene *s, const tf_heightfield *hf,
+                                  const char *kind, const char *backend);
+
+/* Fork worker number `index` running loop (NULL: tf_worker_loop); the parent's end of the
+ * socketpair is added to srv as a trusted connection.  Returns the child's pid, or -1 with a
+ * message in err. */
 pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *hf,
-                      const char *backend, int index, char *err, size_t errlen);
+                      const char *backend, tf_local_worker_fn loop, int index, char *err,
+                      size_t errlen);
 
 typedef struct tf_local_workers {
     int n;
@@ -27,12 +35,17 @@ typedef struct tf_local_workers {
     const tf_scene *scene;
     const tf_heightfield *hf;
     const char *backend;
+    tf_local_worker_fn loop;
 } tf_local_workers;
 
 /* Fork n workers.  0, or -1 with a message in err (those already forked stay in the pool). */
 int tf_local_workers_start(tf_local_workers *lw, int n, ts_server *srv, const tf_scene *s,
                            const tf_heightfield *hf, const char *backend, char *err,
                            size_t errlen);
+/* The same, each running loop. */
+int tf_local_workers_start_loop(tf_local_workers *lw, int n, ts_server *srv, const tf_scene *s,
+                                const tf_heightfield *hf, const char *backend,
+                                tf_local_worker_fn loop, char *err, size_t errlen);
 /* Reap workers that exited; restart those that died (respawn != 0). */
 void tf_local_workers_reap(tf_local_workers *lw, int respawn);
 /* How many are running. */

@@ -1,0 +1,38 @@
+/* webreply.h: what every terrafarm web server of one render says and checks the same way (the
+ * dashboard, httpd.c; Raypaint's page, coordinator/paint/paint_http.c): the replies with their
+ * security headers, the token in a request's headers, the Host check on loopback (DNS
+ * rebinding), and a page's static file.  libmicrohttpd's types, nothing of a render's. */
+#ifndef TF_WEBREPLY_H
+#define TF_WEBREPLY_H
+
+#include <jansson.h>
+#include <microhttpd.h>
+#include <stddef.h>
+
+#define TF_WEB_MAX_FILE (1 << 20)
+
+/* No caching, no sniffing, no framing, no referrer, only this origin's scripts. */
+void tf_web_headers(struct MHD_Response *r);
+enum MHD_Result tf_web_send_bytes(struct MHD_Connection *c, unsigned status, const char *type,
+                                  const void *data, size_t len);
+/* One line of text/plain (a newline added). */
+enum MHD_Result tf_web_send_text(struct MHD_Connection *c, unsigned status, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+/* doc is consumed; NULL answers 500. */
+enum MHD_Result tf_web_send_json(struct MHD_Connection *c, unsigned status, json_t *doc);
+enum MHD_Result tf_web_send_unauthorized(struct MHD_Connection *c);
+/* 303 to location, setting the tf_token cookie to token (a browser's login). */
+enum MHD_Result tf_web_send_login(struct MHD_Connection *c, const char *token,
+                                  const char *location);
+
+/* The token from "Authorization: Bearer T" or "X-Terrafarm-Token: T", or NULL. */
+const char *tf_web_header_token(struct MHD_Connection *c);
+/* 1 when the Host header names a loopback address. */
+int tf_web_host_ok(struct MHD_Connection *c);
+
+/* dir/name read whole (at most TF_WEB_MAX_FILE bytes) into *data (malloc'd).  0, or -1 with a
+ * message naming the file. */
+int tf_web_load_file(const char *dir, const char *name, char **data, size_t *len, char *err,
+                     size_t errlen);
+
+#endif

@@ -76,6 +76,7 @@ function drawExact(x, y, s, src, at) {
     for (let c = 0; c < pw; c++) {
       const o = ((y + r) * w + x + c) * 4, i = at + (r * pw + c) * 3;
       data[o] = src[i]; data[o + 1] = src[i + 1]; data[o + 2] = src[i + 2]; data[o + 3] = 255;
+      paint.exact[(y + r) * w + x + c] = 1;
     }
   return pw * ph * 3;
 }
@@ -106,7 +107,30 @@ function resize(w, h) {
   paint.width = canvas.width = w;
   paint.height = canvas.height = h;
   paint.img = ctx.createImageData(w, h);
+  paint.exact = new Uint8Array(w * h);
 }
+
+// What share of the pixels inside and outside area a are exact (the tests' measure of "the
+// area pointed at first").
+paint.exactShares = (a) => {
+  let inside = 0, outside = 0;
+  for (let y = 0; y < paint.height; y++)
+    for (let x = 0; x < paint.width; x++) {
+      const e = paint.exact[y * paint.width + x];
+      if (x >= a.x && x < a.x + a.w && y >= a.y && y < a.y + a.h) inside += e; else outside += e;
+    }
+  const n = a.w * a.h;
+  return [inside / n, outside / (paint.width * paint.height - n)];
+};
+
+// The canvas as RGB bytes, base64 (the tests compare it with the render's PNG).
+paint.rgb = () => {
+  flush();
+  const d = ctx.getImageData(0, 0, paint.width, paint.height).data;
+  let bin = "";
+  for (let i = 0; i < d.length; i += 4) bin += String.fromCharCode(d[i], d[i + 1], d[i + 2]);
+  return btoa(bin);
+};
 
 // A new view: the old picture dimmed until the new one covers it.
 function newView(gen) {
@@ -117,6 +141,7 @@ function newView(gen) {
   paint.gen = gen;
   paint.end = 0;
   paint.messages = 0;
+  paint.exact.fill(0);
   paint.dirty = true;
 }
 

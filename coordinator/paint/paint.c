@@ -149,14 +149,17 @@ static int start_space(paint *p)
 {
     char err[1024];
     p->space = ts_space_new();
-    p->tree = tf_paint_tree_new(p->scene->width, p->scene->height, &p->o->params,
-                                p->o->pixel == TF_PIXEL_HALF);
+    p->tree = tf_paint_tree_new(p->scene->width, p->scene->height, &p->o->params);
     p->hub = tf_paint_hub_new(p->scene->width, p->scene->height);
     if (!p->space || !p->tree || !p->hub || put_scene_tuples(p)) {
         tf_error("out of memory");
         return 1;
     }
     tf_paint_role_init(&p->role, p->space, p->scene->width, p->scene->height, &p->o->params);
+    p->st.width = p->scene->width;
+    p->st.height = p->scene->height;
+    snprintf(p->st.output, sizeof p->st.output, "%s", p->o->output ? p->o->output : "");
+    snprintf(p->st.save, sizeof p->st.save, "%s", p->o->save ? p->o->save : "");
     ts_server_config cfg = {0};
     cfg.listen = p->o->listen;
     cfg.key = p->have_key ? p->key : NULL;
@@ -312,6 +315,7 @@ static void publish_status(paint *p)
     double now = tf_now_s();
     p->st.view_age_s = now - p->view_t0;
     p->st.workers = p->role.workers;
+    p->st.outstanding = p->role.nleases;
     p->st.results = p->role.results;
     p->st.stale = p->role.stale;
     p->st.refused = p->role.refused;

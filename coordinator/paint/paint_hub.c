@@ -119,6 +119,7 @@ void tf_paint_hub_status(tf_paint_hub *h, tf_paint_status *s)
 {
     pthread_mutex_lock(&h->lock);
     *s = h->status;
+    s->log_bytes = (int64_t)h->log.len;
     pthread_mutex_unlock(&h->lock);
 }
 

@@ -26,7 +26,8 @@ typedef struct tf_paint_status {
     int width, height;
     tf_paint_view_values view;
     tf_paint_counts counts;
-    int workers, paused;
+    int workers, paused, outstanding; /* outstanding: tasks dealt and not yet answered */
+    int64_t log_bytes;          /* the view's display messages so far (filled by the hub) */
     int64_t results, stale, refused;  /* results used; dropped as of an old view; refused */
     double view_age_s;          /* since this view began */
     double coarse_s, painted_s; /* from the view's start to its first complete coarse image,

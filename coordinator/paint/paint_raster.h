@@ -11,7 +11,8 @@
  *          (c00 bx by + c10 ax by + c01 bx ay + c11 ax ay + D/2) / D,  D = 4 (x1-x0)(y1-y0),
  *          integer division.  Pixels px in [x0, x1), py in [y0, y1).
  *   kind 2 (EXACT): the node's pixels [x, min(x+s, W)) x [y, min(y+s, H)), 3 bytes each, row
- *          by row: the final render's pixel as the render's PNG preview shows it.
+ *          by row: the final render's pixel as the render's PNG preview shows it (the sRGB
+ *          of its float value, image/preview.h tf_srgb8).
  * A later message over the same pixels wins; a region is only ever refined. */
 #ifndef TF_PAINT_RASTER_H
 #define TF_PAINT_RASTER_H

@@ -18,7 +18,7 @@ typedef struct cell {
 } cell;
 
 struct tf_paint_tree {
-    int w, h, half;
+    int w, h;
     tf_paint_params p;
     tf_rect interest;
     cell *heap;
@@ -153,13 +153,13 @@ static float cell_contrast(const tf_paint_tree *t, int x0, int x1, int y0, int y
 
 /* ---- the tree ---- */
 
-tf_paint_tree *tf_paint_tree_new(int w, int h, const tf_paint_params *p, int half)
+tf_paint_tree *tf_paint_tree_new(int w, int h, const tf_paint_params *p)
 {
     tf_paint_tree *t = calloc(1, sizeof *t);
     size_t corners = (size_t)(w + 1) * (size_t)(h + 1);
     if (!t)
         return NULL;
-    *t = (tf_paint_tree){.w = w, .h = h, .half = half, .p = *p};
+    *t = (tf_paint_tree){.w = w, .h = h, .p = *p};
     t->level = malloc(corners * 3 * sizeof *t->level);
     t->srgb = malloc(corners * 3);
     t->px = malloc((size_t)w * (size_t)h * sizeof *t->px);
@@ -325,10 +325,11 @@ static const float *apply_sample(tf_paint_tree *t, const tf_paint_node *n, const
     return v;
 }
 
-/* What the render's PNG preview shows for a channel of an exact pixel. */
-static uint8_t shown(const tf_paint_tree *t, float v)
+/* What the render's PNG preview shows for a channel of an exact pixel: the sRGB of its float
+ * value, as the workers make the preview (image/exrencode.h, tf_preview_share). */
+static uint8_t shown(float v)
 {
-    return tf_srgb8(t->half ? (float)(_Float16)v : v);
+    return tf_srgb8(v);
 }
 
 static const float *apply_exact(tf_paint_tree *t, const tf_paint_node *n, const float *v,
@@ -341,7 +342,7 @@ static const float *apply_exact(tf_paint_tree *t, const tf_paint_node *n, const 
         for (int c = 0; c < pw; c++, v += TF_PAINT_PIXEL_FLOATS) {
             tf_pixel *p = &t->px[(size_t)(n->y + row) * (size_t)t->w + (size_t)(n->x + c)];
             memcpy(p, v, sizeof *p);
-            uint8_t rgb[3] = {shown(t, p->r), shown(t, p->g), shown(t, p->b)};
+            uint8_t rgb[3] = {shown(p->r), shown(p->g), shown(p->b)};
             *rc |= tf_paint_bytes_add(out, rgb, 3);
         }
     t->exact_pixels += (int64_t)pw * ph;

@@ -53,9 +53,8 @@ void tf_paint_bytes_free(tf_paint_bytes *b);
 
 typedef struct tf_paint_tree tf_paint_tree;
 
-/* half: the output keeps half floats, so an exact pixel is shown as its half value would be
- * (what the render's PNG preview shows).  NULL on out of memory. */
-tf_paint_tree *tf_paint_tree_new(int w, int h, const tf_paint_params *p, int half);
+/* NULL on out of memory. */
+tf_paint_tree *tf_paint_tree_new(int w, int h, const tf_paint_params *p);
 void tf_paint_tree_free(tf_paint_tree *t);
 /* A new view: nothing known, every root queued.  0, or -1 on out of memory. */
 int tf_paint_tree_reset(tf_paint_tree *t);

@@ -111,7 +111,7 @@ $(BUILD)/tests/%: tests/unit/%.c $(LIB_OBJ)
 
 $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
+	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB_OBJ) $(LDLIBS)
 
 # libFuzzer targets (clang).  The harness sources are plain LLVMFuzzerTestOneInput files; the
 # test suite also links each one with tests/fuzz/replay_main.c (gcc) to replay the corpus.

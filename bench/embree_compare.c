@@ -245,30 +245,43 @@ static RTCGeometry new_geometry(const embree *e, const tf_heightfield *hf, int g
     return g;
 }
 
-/* Build Embree's scene of the height field; the buffers' bytes and the BVH's (the monitor's
- * count after the commit, less the buffers) go into e.  Returns the seconds of rtcCommitScene,
- * or -1 with one line in err. */
-static double embree_build(embree *e, const tf_heightfield *hf, const opts *o, char *err,
-                           size_t errlen)
+/* Embree's scene of one geometry, the height field (not yet committed); the bytes of its
+ * buffers into e.  0, or -1 with one line in err. */
+static int embree_scene(embree *e, const tf_heightfield *hf, const opts *o, char *err,
+                        size_t errlen)
 {
     long long before = atomic_load(&e->bytes);
     e->scene = rtcNewScene(e->dev);
     RTCGeometry g = e->scene ? new_geometry(e, hf, o->grid) : NULL;
+    if (g && !e->err[0]) {
+        rtcSetSceneFlags(e->scene, o->robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+        rtcCommitGeometry(g);
+        rtcAttachGeometry(e->scene, g);
+    }
+    if (g)
+        rtcReleaseGeometry(g);
     if (!g || e->err[0])
         return tf_seterr(err, errlen, "%s", e->err[0] ? e->err : "rtcNewGeometry failed");
-    rtcSetSceneFlags(e->scene, o->robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
-    rtcCommitGeometry(g);
-    rtcAttachGeometry(e->scene, g);
-    rtcReleaseGeometry(g);
     e->buffer_bytes = atomic_load(&e->bytes) - before;
-    atomic_store(&e->peak, atomic_load(&e->bytes));
+    return 0;
+}
+
+/* Build Embree's scene and its BVH; the BVH's bytes (the monitor's count over the commit) and
+ * the high mark into e.  Returns the seconds of rtcCommitScene, or -1 with one line in err. */
+static double embree_build(embree *e, const tf_heightfield *hf, const opts *o, char *err,
+                           size_t errlen)
+{
+    if (embree_scene(e, hf, o, err, errlen) != 0)
+        return -1;
+    long long before = atomic_load(&e->bytes);
+    atomic_store(&e->peak, before);
     double t0 = clock_s(CLOCK_MONOTONIC);
     rtcCommitScene(e->scene);
     double secs = clock_s(CLOCK_MONOTONIC) - t0;
     if (e->err[0])
         return tf_seterr(err, errlen, "%s", e->err);
-    e->bvh_bytes = atomic_load(&e->bytes) - before - e->buffer_bytes;
-    e->build_peak = atomic_load(&e->peak) - before;
+    e->bvh_bytes = atomic_load(&e->bytes) - before;
+    e->build_peak = atomic_load(&e->peak) - before + e->buffer_bytes;
     return secs;
 }
 
@@ -281,30 +294,41 @@ static void embree_drop_scene(embree *e)
 
 /* ---- the builds, alternating ---------------------------------------------------------- */
 
-/* Build both `rounds` times, terrafarm's grids then Embree's BVH; keep the last of each and
- * the medians of their times.  Takes over h.  0, or -1 with one line in err. */
+/* terrafarm's build: the max/min grids over a fresh copy of h (what tf_heightfield_build
+ * does once the heights exist); its wall seconds into *secs.  0, or -1 when out of memory. */
+static int tf_build(bench *b, const float *h, size_t nn, double extent, const opts *o,
+                    double *secs)
+{
+    if (b->hf)
+        tf_heightfield_free(b->hf);
+    float *mine = copy_heights(h, nn * nn);
+    double t0 = clock_s(CLOCK_MONOTONIC);
+    b->hf = mine ? tf_heightfield_wrap(mine, o->k, extent, o->threads) : NULL;
+    *secs = clock_s(CLOCK_MONOTONIC) - t0;
+    return b->hf ? 0 : -1;
+}
+
+/* Build both up to 3 times, terrafarm's grids then Embree's BVH; keep the last of each and
+ * the medians of their times.  Frees h.  0, or -1 with one line in err. */
 static int build_both(bench *b, float *h, double extent, const opts *o, char *err, size_t errlen)
 {
     const size_t nn = ((size_t)1 << o->k) + 1;
-    int rounds = o->rounds < 3 ? o->rounds : 3;
+    int rounds = o->rounds < 3 ? o->rounds : 3, r;
     double tf_s[MAX_ROUNDS], e_s[MAX_ROUNDS];
-    for (int r = 0; r < rounds; r++) {
-        float *mine = r + 1 < rounds ? copy_heights(h, nn * nn) : h;
-        if (b->hf)
-            tf_heightfield_free(b->hf);
-        double t0 = clock_s(CLOCK_MONOTONIC);
-        b->hf = mine ? tf_heightfield_wrap(mine, o->k, extent, o->threads) : NULL;
-        tf_s[r] = clock_s(CLOCK_MONOTONIC) - t0;
-        if (!b->hf)
-            return tf_seterr(err, errlen, "out of memory: a %zux%zu height field", nn, nn);
+    for (r = 0; r < rounds; r++) {
+        if (tf_build(b, h, nn, extent, o, &tf_s[r]) != 0) {
+            tf_seterr(err, errlen, "out of memory: a %zux%zu height field", nn, nn);
+            break;
+        }
         embree_drop_scene(&b->e);
         if ((e_s[r] = embree_build(&b->e, b->hf, o, err, errlen)) < 0)
-            return -1;
+            break;
     }
+    free(h);
     b->build_rounds = rounds;
-    b->tf_build_s = median(tf_s, rounds);
-    b->e_build_s = median(e_s, rounds);
-    return 0;
+    b->tf_build_s = r == rounds ? median(tf_s, rounds) : 0;
+    b->e_build_s = r == rounds ? median(e_s, rounds) : 0;
+    return r == rounds ? 0 : -1;
 }
 
 static void print_builds(const bench *b, const opts *o)
@@ -467,7 +491,7 @@ static void embree_primaryN(const bench *b, int w, found *out)
     struct RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     struct RTCRayHit16 pk; /* 64-byte aligned; the 8-wide packets use its first part */
-    int valid[16];
+    _Alignas(64) int valid[16]; /* Embree reads the mask with aligned vector loads */
     for (int first = 0; first < b->prim.count; first += w) {
         int m = fill_packet(&pk, w, &b->prim, first, valid, 1);
         if (w == 8)
@@ -488,7 +512,7 @@ static void embree_shadowN(const bench *b, int w, found *out)
     struct RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     struct RTCRay16 pk;
-    int valid[16];
+    _Alignas(64) int valid[16]; /* Embree reads the mask with aligned vector loads */
     for (int first = 0; first < b->shad.count; first += w) {
         int m = fill_packet(&pk, w, &b->shad, first, valid, 0);
         if (w == 8)
@@ -557,7 +581,7 @@ static void list_primary(const bench *b, const found *e, int i)
            i % w, i / w, tt, e->t[i], one.grazing, edge_distance(b->hf, p.x, p.y));
 }
 
-static tally primary_disagreements(const bench *b, const found *e)
+static tally primary_disagreements(const bench *b, const found *e, int list)
 {
     tally t = {0};
     for (int i = 0; i < b->prim.count; i++) {
@@ -568,7 +592,7 @@ static tally primary_disagreements(const bench *b, const found *e)
             continue;
         t.total++, t.tf_only += tf_only, t.embree_only += e_only, t.distance += dist;
         classify_primary(b, e, i, &t);
-        if (b->list)
+        if (list)
             list_primary(b, e, i);
     }
     return t;
@@ -602,7 +626,7 @@ static tally shadow_disagreements(const bench *b, const found *tf, const found *
 
 static void print_disagreements(const bench *b, int m)
 {
-    tally p = primary_disagreements(b, &b->prim_found[m]);
+    tally p = primary_disagreements(b, &b->prim_found[m], b->list && m == M_E1);
     tally s = shadow_disagreements(b, &b->shad_found[M_TF], &b->shad_found[m]);
     printf("  %-22s primary %ld of %d (terrafarm hit only %ld, Embree hit only %ld, distance %ld;"
            " grazing %ld, at a cell edge %ld)\n", mode_name[m], p.total, b->prim.count,
@@ -755,9 +779,14 @@ static int parse_opts(opts *o, int argc, char **argv)
         else if (!strcmp(s, "-s") && a + 1 < argc) {
             if (sscanf(argv[++a], "%dx%d", &o->w, &o->h) != 2 || o->w < 1 || o->h < 1 || o->w > 8192 || o->h > 8192)
                 return -1;
-        } else if (!strcmp(s, "-k") || !strcmp(s, "-r") || !strcmp(s, "-j")) {
-            int *dst = s[1] == 'k' ? &o->k : s[1] == 'r' ? &o->rounds : &o->threads;
-            if ((*dst = int_arg(argc, argv, &a, s[1] == 'j' ? 0 : 1, s[1] == 'k' ? 13 : s[1] == 'r' ? MAX_ROUNDS : 1024)) < 0)
+        } else if (!strcmp(s, "-k")) {
+            if ((o->k = int_arg(argc, argv, &a, 1, TF_TERRAIN_MAX_SIZE_EXP)) < 0)
+                return -1;
+        } else if (!strcmp(s, "-r")) {
+            if ((o->rounds = int_arg(argc, argv, &a, 1, MAX_ROUNDS)) < 0)
+                return -1;
+        } else if (!strcmp(s, "-j")) {
+            if ((o->threads = int_arg(argc, argv, &a, 0, 1024)) < 0)
                 return -1;
         } else if (s[0] != '-')
             o->scene = s;

@@ -30,6 +30,12 @@ ALL_CFLAGS := $(CFLAGS) $(SAN) -std=c11 -D_GNU_SOURCE -Wall -Wextra -ffp-contrac
             $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS)
 LDLIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXR_LIBS) $(CL_LIBS) -lm -pthread
 TEST_LIBS := $(shell pkg-config --libs cmocka 2>/dev/null)
+# Embree 3 (libembree-dev), linked into bench/embree_compare alone: from its pkg-config file
+# where there is one, else -lembree3 when the compiler finds its header (Debian's package ships
+# no .pc file).  Without it that bench is not built, and tests/e2e/bench_smoke.sh skips it.
+EMBREE_CFLAGS := $(shell pkg-config --cflags embree3 2>/dev/null)
+EMBREE_LIBS   := $(shell pkg-config --libs embree3 2>/dev/null || \
+                   { $(CC) -E -include embree3/rtcore.h -x c /dev/null >/dev/null 2>&1 && echo -lembree3; })
 
 # 0. base: messages, clocks, vectors; the scene file (parsed, validated, hashed)
 BASE_SRC    := common/log.c common/clock.c common/datadir.c common/cachefile.c common/animation.c common/scene_keys.c \
@@ -74,7 +80,7 @@ LIB_SRC     := $(BASE_SRC) $(TERRAIN_SRC) $(IMAGE_SRC) $(RENDER_SRC) $(LINDA_SRC
 # 8. cli: bin/terrafarm's subcommands
 CLI_SRC   := $(wildcard cli/*.c)
 TEST_SRC  := $(wildcard tests/unit/test_*.c)
-BENCH_SRC := $(wildcard bench/*.c)
+BENCH_SRC := $(if $(EMBREE_LIBS),$(wildcard bench/*.c),$(filter-out bench/embree_compare.c,$(wildcard bench/*.c)))
 FUZZ_SRC  := $(wildcard tests/fuzz/fuzz_*.c)
 KERNELS   := $(wildcard worker/kernels/*.cl)
 
@@ -115,7 +121,9 @@ $(BUILD)/tests/%: tests/unit/%.c $(LIB_OBJ)
 
 $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -o $@ $< $(LIB_OBJ) $(LDLIBS)
+	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB_OBJ) $(LDLIBS)
+$(BUILD)/bench/embree_compare: ALL_CFLAGS += $(EMBREE_CFLAGS)
+$(BUILD)/bench/embree_compare: LDLIBS += $(EMBREE_LIBS)
 
 # libFuzzer targets (clang).  The harness sources are plain LLVMFuzzerTestOneInput files; the
 # test suite also links each one with tests/fuzz/replay_main.c (gcc) to replay the corpus.
@@ -172,8 +180,9 @@ bench: $(PROG) $(BENCHES)
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
             libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
             iproute2 python3 python3-yaml gnuplot-nox ffmpeg libgdal-dev gdal-bin openssh-server openssh-client \
-            slurm-wlm munge libmicrohttpd-dev libjansson-dev libsqlite3-dev sqlite3 chromium povray redis-server
-# The benchmarks' measuring tools (make bench-deps); their peers POV-Ray and Redis are in
+            slurm-wlm munge libmicrohttpd-dev libjansson-dev libsqlite3-dev sqlite3 chromium povray redis-server \
+            libembree-dev
+# The benchmarks' measuring tools (make bench-deps); their peers POV-Ray, Redis and Embree are in
 # DEB_PKGS, since the tests run every benchmark's smoke mode (tests/e2e/bench_smoke.sh).
 BENCH_PKGS := hyperfine linux-perf valgrind
 deps:

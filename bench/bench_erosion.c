@@ -15,6 +15,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "bench/bench_cpu.h"
 #include "terrain/erosion.h"
 #include "terrain/erosion_run.h"
 #include "terrain/erosion_state.h"
@@ -25,21 +26,6 @@ static double clock_s(clockid_t id)
     struct timespec ts;
     clock_gettime(id, &ts);
     return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static void cpu_model(char *out, size_t len)
-{
-    snprintf(out, len, "unknown");
-    FILE *f = fopen("/proc/cpuinfo", "r");
-    char line[256];
-    while (f && fgets(line, sizeof line, f))
-        if (!strncmp(line, "model name", 10) && strchr(line, ':')) {
-            snprintf(out, len, "%s", strchr(line, ':') + 2);
-            out[strcspn(out, "\n")] = '\0';
-            break;
-        }
-    if (f)
-        fclose(f);
 }
 
 static tf_erosion_keys musgrave_keys(int steps)
@@ -127,7 +113,7 @@ int main(int argc, char **argv)
     int steps = smoke ? 16 : argc > 2 ? atoi(argv[2]) : 64;
     int n = (1 << e) + 1;
     char cpu[128];
-    cpu_model(cpu, sizeof cpu);
+    tf_bench_cpu_model(cpu, sizeof cpu);
     printf("cpu: %s; erosion kernel: %s\n", cpu, tf_erosion_isa());
     /* the AVX2 kernel too where it is not the best (AVX-512 machines) */
     int avx2 = strcmp(tf_erosion_isa(), "avx2") && tf_erosion_force_isa("avx2") == 0;

@@ -23,6 +23,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "bench/bench_cpu.h"
 #include "linda/tsserver.h"
 #include "log.h"
 #include "linda/tsclient.h"
@@ -259,20 +260,6 @@ static run_result run(const uint8_t *key)
     return r;
 }
 
-static void print_cpu_model(void)
-{
-    FILE *f = fopen("/proc/cpuinfo", "r");
-    char line[256];
-    while (f && fgets(line, sizeof line, f))
-        if (!strncmp(line, "model name", 10)) {
-            char *colon = strchr(line, ':');
-            printf("cpu=%s", colon ? colon + 2 : line);
-            break;
-        }
-    if (f)
-        fclose(f);
-}
-
 int main(int argc, char **argv)
 {
     for (int i = 1; i < argc; i++) {
@@ -293,7 +280,9 @@ int main(int argc, char **argv)
     if (consumers < 1 || consumers > 256 || tasks < 1 || tasks > 10000000)
         tf_die(2, "bad -n or -t");
     latency_us = calloc((size_t)tasks, sizeof *latency_us);
-    print_cpu_model();
+    char cpu[256];
+    tf_bench_cpu_model(cpu, sizeof cpu);
+    printf("cpu=%s\n", cpu);
     run_result clear = run(NULL);
     if (sealed_compare) {
         uint8_t key[TF_KEY_BYTES];

@@ -3,7 +3,7 @@
 # each bench/*.sh script is run once in its --smoke mode (tiny sizes, a few processes at most)
 # and must exit 0 having printed its closing line: a bench that no longer runs, or no longer gets
 # to its result, fails here instead of rotting until someone measures.  No figure or timing is
-# judged.  A bench whose peer tool is missing (redis-server, povray, an OpenCL platform) is
+# judged.  A bench whose peer tool is missing (redis-server, povray, an OpenCL platform, Embree) is
 # skipped by name; the others still run, and then the test exits 77 naming what was skipped.
 # A new bench without an entry below fails: give it a --smoke mode and add it.
 . "$(dirname "$0")/lib.sh"
@@ -22,6 +22,7 @@ program_case() {
     bench_terrain) ARGS="--smoke"; WANT='^subdivide ' ;;
     bench_trace) ARGS="--smoke"; WANT='^  shadow .*hierarchy/flat' ;;
     bench_tuplespace) ARGS="--smoke --sealed"; WANT='^sealed/clear: ops_per_s' ;;
+    embree_compare) ARGS="--smoke $SCENE"; WANT='^terrafarm/embree8 ratio: primary [0-9]' ;;
     povray_tf_render) ARGS="--smoke $SCENE $T/povray_tf_render.png"; WANT='^render_cpu_s=' ;;
     render_png) ARGS="$SCENE $T/render_png.png --smoke"; WANT='camera rays/pixel' ;;
     *) return 1 ;;
@@ -58,6 +59,12 @@ check() {
 for src in "$TF_ROOT"/bench/*.c; do
     name=$(basename "$src" .c)
     program_case "$name" || fail "bench/$name.c has no smoke entry in bench_smoke.sh"
+    # the Makefile builds embree_compare only where Embree's headers are (libembree-dev)
+    if [ "$name" = embree_compare ] && [ ! -x "$BENCH_BIN/$name" ] &&
+        ! ${CC:-cc} -E -include embree3/rtcore.h -x c /dev/null >/dev/null 2>&1; then
+        echo "no Embree 3 headers (libembree-dev): embree_compare not built" >"$T/$name.out"
+        check "$name" 77; continue
+    fi
     [ -x "$BENCH_BIN/$name" ] || fail "no $BENCH_BIN/$name (make test builds every bench)"
     timeout 300 "$BENCH_BIN/$name" $ARGS >"$T/$name.out" 2>&1; rc=$?
     # no OpenCL platform or device is a missing peer, not a broken bench

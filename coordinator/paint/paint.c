@@ -356,11 +356,18 @@ static int paint_run_loop(paint *p)
 
 /* ---- 7. the end ---- */
 
+/* The stop task, then the space served until every worker has read it and left (networked
+ * ones too: closing on them would send them reconnecting), for at most a few seconds. */
 static void stop_workers(paint *p)
 {
     tf_tuple t;
     if (tf_paint_task_pack(&t, TF_PAINT_STOP, TF_PAINT_STOP, NULL, 0) == 0)
         ts_space_out(p->space, &t);
+    double until = tf_now_s() + 3.0;
+    while (p->role.workers > 0 && tf_now_s() < until) {
+        ts_server_run_once(p->srv, 20);
+        tf_local_workers_reap(&p->lw, 0);
+    }
     tf_local_workers_drain(&p->lw, 2.0);
 }
 
@@ -372,8 +379,8 @@ static void paint_close(paint *p)
     if (p->srv)
         stop_workers(p);
     tf_local_workers_free(&p->lw);
+    ts_server_free(p->srv); /* its disconnects still reach the role */
     tf_paint_role_free(&p->role);
-    ts_server_free(p->srv);
     ts_space_free(p->space);
     tf_paint_hub_free(p->hub);
     tf_paint_tree_free(p->tree);

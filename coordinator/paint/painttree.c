@@ -229,6 +229,8 @@ int tf_paint_tree_next(tf_paint_tree *t, tf_paint_node *nodes, int max)
     int count = 0;
     int64_t rays = 0;
     while (count < max && t->n > 0 && rays < t->p.task_rays) {
+        if (count > 0 && !t->heap[0].corners_known != !(nodes[0].flags & TF_PAINT_CORNERS_KNOWN))
+            break; /* roots travel alone: the coarse picture is not held up by finer work */
         cell c = pop(t);
         int64_t r;
         nodes[count++] = node_of(t, &c, &r);

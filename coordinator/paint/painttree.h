@@ -14,7 +14,8 @@
  * a tier, by contrast times area: the widest per-channel range of the cell's corners' display
  * levels (the antialiasing's own measure, render.c), plus a floor so flat cells are not left to
  * the very end, times its side squared.  A task is the best cells, batched up to about
- * `task_rays` rays (the granularity, measured in bench/paint_granularity.sh).
+ * `task_rays` rays (the granularity, measured in bench/paint_progress.sh); the roots go in
+ * tasks of their own, so the coarse picture never waits for finer work.
  *
  * What the page draws comes out of tf_paint_tree_apply as display messages (paint_raster.h).
  *

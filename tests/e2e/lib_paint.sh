@@ -32,3 +32,25 @@ wait_painted() {
         sleep 0.1; i=$((i + 1)); [ $i -lt $(($1 * 10)) ] || fail "not painted within $1 s"
     done
 }
+
+# paint_http METHOD PATH [BODY] [HEADER]: one request to the paint's page; the body of the
+# answer goes to $T/ctl.out and its HTTP status is printed.  BODY "@FILE" sends FILE; HEADER
+# is "Name: value" (default "X-Terrafarm-Token: x", which loopback controls need); "Host: ..."
+# replaces the Host header.
+paint_http() {
+    python3 -c 'import http.client, sys, urllib.parse
+method, url, body, header, out = sys.argv[1:6]
+u = urllib.parse.urlsplit(url)
+if body.startswith("@"): body = open(body[1:], "rb").read()
+else: body = body.encode()
+name, _, value = header.partition(":")
+c = http.client.HTTPConnection(u.hostname, u.port, timeout=30)
+c.putrequest(method, u.path + ("?" + u.query if u.query else ""), skip_host=name.lower() == "host")
+c.putheader(name.strip(), value.strip())
+c.putheader("Content-Length", str(len(body)))
+c.endheaders()
+if body: c.send(body)
+r = c.getresponse()
+open(out, "wb").write(r.read())
+print(r.status)' "$1" "${PAINT_URL%/}$2" "${3:-}" "${4:-X-Terrafarm-Token: x}" "$T/ctl.out"
+}

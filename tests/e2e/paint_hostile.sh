@@ -19,10 +19,7 @@ python3 "$TF_ROOT/tests/tools/paint_liar.py" "$PAINT_WORKERS" "$PAINT_URL" >"$T/
 cat "$T/liar.out"
 
 say "bad controls"
-control() { # control PATH BODY [HEADER]: prints the HTTP status
-    curl -s -o "$T/ctl.out" -w '%{http_code}' -X POST -H "${3:-X-Terrafarm-Token: x}" \
-        --data-binary "$2" "${PAINT_URL}api/paint/$1"
-}
+control() { paint_http POST "/api/paint/$1" "$2" "${3:-}"; }
 expect() { [ "$1" = "$2" ] || fail "$3: HTTP $1, expected $2 ($(cat "$T/ctl.out"))"; say "$3: $1"; }
 expect "$(control view '{"camera": ')" 400 "a view that is not JSON"
 expect "$(control view '{"camera": {"fov": 400}}')" 400 "a field of view out of range"
@@ -32,12 +29,9 @@ expect "$(control interest '{"x": -1, "y": 0, "w": 5, "h": 5}')" 400 "a negative
 expect "$(control view '{}' 'X-Other: 1')" 403 "a control without the token header"
 expect "$(control nonsense '{}')" 404 "an unknown control"
 head -c 10000 /dev/zero | tr '\0' 'a' >"$T/big"
-expect "$(curl -s -o "$T/ctl.out" -w '%{http_code}' -X POST -H 'X-Terrafarm-Token: x' \
-    --data-binary @"$T/big" "${PAINT_URL}api/paint/view")" 413 "a body over 4 KiB"
-expect "$(curl -s -o "$T/ctl.out" -w '%{http_code}' -H 'Host: evil.example' \
-    "${PAINT_URL}api/paint/status")" 403 "a foreign Host header"
-expect "$(curl -s -o "$T/ctl.out" -w '%{http_code}' "${PAINT_URL}api/paint/updates?gen=x")" 400 \
-    "updates of a view that is not a number"
+expect "$(control view @"$T/big")" 413 "a body over 4 KiB"
+expect "$(paint_http GET /api/paint/status '' 'Host: evil.example')" 403 "a foreign Host header"
+expect "$(paint_http GET '/api/paint/updates?gen=x')" 400 "updates of a view that is not a number"
 
 say "an honest networked worker paints the view to the end"
 "$TF_BIN" worker --connect "$PAINT_WORKERS" -j 1 2>"$T/worker.err" &
@@ -46,8 +40,7 @@ wait_painted 120
 i=0; while [ "$(paint_status output_written)" != True ]; do
     sleep 0.1; i=$((i + 1)); [ $i -lt 100 ] || fail "the painted view was not written"
 done
-curl -s -o /dev/null -X POST -H 'X-Terrafarm-Token: x' "${PAINT_URL}api/paint/save" \
-    || fail "save failed"
+[ "$(paint_http POST /api/paint/save)" = 200 ] || fail "save failed: $(cat "$T/ctl.out")"
 kill -TERM $PAINT_PID; wait_exit $PAINT_PID 30
 [ $rc -eq 0 ] || fail "terrafarm paint exited $rc: $(tail -3 "$T/paint.err")"
 wait_exit $wpid 30

@@ -52,7 +52,7 @@ wait_painted 120
 i=0; while [ "$(paint_status output_written)" != True ]; do
     sleep 0.1; i=$((i + 1)); [ $i -lt 100 ] || fail "the painted view 2 was not written"
 done
-curl -s -o /dev/null -X POST -H 'X-Terrafarm-Token: x' "${PAINT_URL}api/paint/save" || fail "save"
+[ "$(paint_http POST /api/paint/save)" = 200 ] || fail "save failed: $(cat "$T/ctl.out")"
 kill -TERM $PAINT_PID; wait_exit $PAINT_PID 30
 [ $rc -eq 0 ] || fail "paint exited $rc: $(tail -3 "$T/proc.err")"
 wait_exit $w3 30

@@ -1,0 +1,236 @@
+/* trace_packet_kernel.h: the packet walk, W rays at a time: the kernels trace_packet.c chooses
+ * from, and the code they are made of (the pattern of terrain/erosion_kernel.h).
+ *
+ * The first part declares the kernels.  The rest is a template: trace_packet_<isa>.c defines W
+ * (lanes), TF_KERNEL (the kernel's name), the vector types vd (W doubles) and vl (W int64s,
+ * which is also the type of a comparison of vds: a lane mask, all bits set or none), then
+ * includes this file (portable: 4 lanes; avx2: 8; avx512: 16).
+ *
+ * Each lane runs trace.c's walk_hier for its own ray -- its own level, cell, stale axis and
+ * event time -- so the lanes need not agree on anything.  A step computes, for all lanes at
+ * once, what walk_hier computes at the top of its loop: the block's exit crossings tx, ty, the
+ * segment's end t_out, the altitudes z(t_cur), z(t_out) and the cull against the block's max
+ * and min (loaded lane by lane: the loads of W independent rays are in flight together, where
+ * the single walk waits on each).  These are walk_hier's expressions term for term
+ * (tf_grid_cross, tf_span_culled in trace_math.h), on IEEE vector add, subtract, multiply and
+ * compare, never a fused multiply-add (-ffp-contract=off; the clang pragma below), so a lane
+ * computes walk_hier's bits.  The lanes not culled leave the vector step: at level 0 they call
+ * trace.c's own test_cell, above it trace.c's own fix_stale_axis (trace_internal.h), one lane
+ * at a time.  Then the lanes that move on (culled, or a level-0 cell that missed) take
+ * walk_hier's block step with masks.  Setup and the hit record are trace.c's too.  So every
+ * lane's hit is tf_trace's to the bit, and its occlusion tf_occluded's (tests/unit/
+ * test_trace_packet.c checks it on every ISA).
+ *
+ * Integers (cells, levels, block indexes) are int64 lanes, the width of a double's mask; they
+ * become doubles through the exact 1.5 * 2^52 trick (|x| < 2^51), the value (double)x. */
+#ifndef TF_TRACE_PACKET_KERNEL_H
+#define TF_TRACE_PACKET_KERNEL_H
+
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "render/trace_internal.h"
+
+/* Trace rays 0 .. n-1 (o[i] + t d[i], t in (tmin[i], tmax[i])): found[i] = 1 on a hit, and
+ * hits[i] filled when hits is not NULL (NULL: occlusion only, as tf_occluded). */
+typedef void tf_trace_packet_kernel(const tf_heightfield *hf, int n, const tf_vec3 *o,
+                                    const tf_vec3 *d, const double *tmin, const double *tmax,
+                                    unsigned char *found, tf_hit *hits);
+tf_trace_packet_kernel tf_trace_packet_portable;
+#if defined(__x86_64__) && defined(__GNUC__)
+#define TF_TRACE_X86 1
+tf_trace_packet_kernel tf_trace_packet_avx2, tf_trace_packet_avx512;
+#endif
+
+#endif
+
+#ifdef TF_KERNEL
+
+#ifdef __clang__
+#pragma STDC FP_CONTRACT OFF
+#endif
+
+#define INLINE static inline __attribute__((always_inline))
+
+INLINE vd sel_d(vl m, vd a, vd b) { return (vd)((m & (vl)a) | (~m & (vl)b)); }
+INLINE vl sel_l(vl m, vl a, vl b) { return (m & a) | (~m & b); }
+INLINE vd splat_d(double x) { return (vd){0} + x; }
+INLINE vl splat_l(int64_t x) { return (vl){0} + x; }
+INLINE int any_l(vl m)
+{
+    int64_t r = 0;
+    for (int l = 0; l < W; l++)
+        r |= m[l];
+    return r != 0;
+}
+/* (double)x exactly, for |x| < 2^51. */
+INLINE vd to_d(vl x)
+{
+    return (vd)(x + splat_l(0x4338000000000000LL)) - splat_d(6755399441055744.0);
+}
+
+/* Where every lane's walk stands: walk_hier's locals, and the ray's constants it reads. */
+typedef struct lanes {
+    vd ox, oy, oz, dz, t1, inv_dx, inv_dy, margin;
+    vl sx, sy, x_ahead, y_ahead;
+    vl ci, cj, level, stale;
+    vd t_cur, t_event;
+    vl active;
+} lanes;
+
+/* Rays first .. first+W-1 (those below n) into the lanes; a lane whose ray cannot meet the
+ * terrain is left inactive (found = 0). */
+INLINE void load_lanes(const tf_heightfield *hf, int first, int n, const tf_vec3 *o,
+                       const tf_vec3 *d, const double *tmin, const double *tmax,
+                       tf_ray_ctx *ctx, lanes *L)
+{
+    memset(L, 0, sizeof *L);
+    for (int l = 0; l < W && first + l < n; l++) {
+        int i = first + l;
+        tf_ray_ctx *r = &ctx[l];
+        if (!tf_trace_setup(r, hf, o[i], d[i], tmin[i], tmax[i]))
+            continue;
+        L->ox[l] = r->o[0], L->oy[l] = r->o[1], L->oz[l] = r->o[2], L->dz[l] = r->d[2];
+        L->t1[l] = r->t1, L->inv_dx[l] = r->inv_dx, L->inv_dy[l] = r->inv_dy;
+        L->margin[l] = r->margin;
+        L->sx[l] = r->sx, L->sy[l] = r->sy, L->x_ahead[l] = r->sx > 0, L->y_ahead[l] = r->sy > 0;
+        L->ci[l] = r->ci, L->cj[l] = r->cj, L->level[l] = tf_trace_start_level(r);
+        L->stale[l] = TF_STALE_NONE;
+        L->t_cur[l] = r->t0, L->t_event[l] = r->t0;
+        L->active[l] = -1;
+    }
+}
+
+/* The step's view of every lane: walk_hier's tx, ty, tc, t_out and the cull. */
+typedef struct step {
+    vl bi, bj;
+    vd tx, ty, tc, t_out;
+    vl culled;
+} step;
+
+/* The block's max and min per lane (inactive lanes read block 0 of level 0). */
+INLINE void load_bounds(const tf_heightfield *hf, vl level, vl idx, vd *hi, vd *lo)
+{
+    for (int l = 0; l < W; l++) {
+        (*hi)[l] = hf->maxgrid[level[l]][idx[l]];
+        (*lo)[l] = hf->mingrid[level[l]][idx[l]];
+    }
+}
+
+INLINE void compute_step(const tf_heightfield *hf, const lanes *L, step *s)
+{
+    const vd cell = splat_d(hf->cell), inf = splat_d(INFINITY);
+    const vl level = sel_l(L->active, L->level, splat_l(0));
+    s->bi = sel_l(L->active, L->ci >> level, splat_l(0));
+    s->bj = sel_l(L->active, L->cj >> level, splat_l(0));
+    vd tx = (to_d((s->bi + L->x_ahead) << level) * cell - L->ox) * L->inv_dx;
+    vd ty = (to_d((s->bj + L->y_ahead) << level) * cell - L->oy) * L->inv_dy;
+    s->tx = sel_d(L->sx != 0, tx, inf);
+    s->ty = sel_d(L->sy != 0, ty, inf);
+    s->tc = sel_d(s->tx <= s->ty, s->tx, s->ty);
+    vd t_out = sel_d(s->tc < L->t1, s->tc, L->t1);
+    s->t_out = sel_d(t_out < L->t_cur, L->t_cur, t_out);
+    vl idx = s->bj * (splat_l(hf->cells) >> level) + s->bi;
+    vd hi, lo;
+    load_bounds(hf, level, idx, &hi, &lo);
+    vd z_in = L->oz + L->t_cur * L->dz, z_out = L->oz + s->t_out * L->dz;
+    vl rising = z_in < z_out;
+    vd zlo = sel_d(rising, z_in, z_out), zhi = sel_d(rising, z_out, z_in);
+    s->culled = (zlo > hi + L->margin) | (zhi < lo - L->margin);
+}
+
+/* Lane l was not culled: walk_hier's test of a level-0 cell (1: a hit, the lane's walk ends;
+ * 0: a miss, the lane moves on) or its descent (-1: the lane stays where it is). */
+INLINE int visit_lane(const tf_ray_ctx *r, lanes *L, const step *s, int l, tf_trace_cand *best)
+{
+    int level = (int)L->level[l];
+    if (level == 0)
+        return tf_trace_test_cell(r, (int)L->ci[l], (int)L->cj[l], s->tx[l], s->ty[l], best);
+    if (L->stale[l] == TF_STALE_Y)
+        L->cj[l] = tf_trace_fix_stale(r, 1, (int)L->cj[l], level, L->t_event[l], 1);
+    else if (L->stale[l] == TF_STALE_X)
+        L->ci[l] = tf_trace_fix_stale(r, 0, (int)L->ci[l], level, L->t_event[l], 0);
+    L->stale[l] = TF_STALE_NONE;
+    L->level[l] = level - 1;
+    return -1;
+}
+
+/* walk_hier's block step for the lanes of adv; returns the lanes whose walk ends (a miss). */
+INLINE vl advance(const tf_heightfield *hf, lanes *L, const step *s, vl adv)
+{
+    const vl zero = splat_l(0), cells = splat_l(hf->cells), top = splat_l(hf->levels - 1);
+    vl ends = adv & ~(s->tc < L->t1);
+    adv &= ~ends;
+    L->t_cur = sel_d(adv, s->t_out, L->t_cur);
+    L->t_event = sel_d(adv, s->tc, L->t_event);
+    vl x_first = s->tx <= s->ty;
+    vl xs = adv & x_first, ys = adv & ~x_first;
+    vl bx = s->bi + L->x_ahead, by = s->bj + L->y_ahead;
+    L->ci = sel_l(xs, (bx << L->level) + L->x_ahead - 1, L->ci);
+    L->cj = sel_l(ys, (by << L->level) + L->y_ahead - 1, L->cj);
+    vl out = (xs & ((L->ci < zero) | (L->ci >= cells))) |
+             (ys & ((L->cj < zero) | (L->cj >= cells)));
+    xs &= ~out;
+    ys &= ~out;
+    vl deep = L->level > zero;
+    L->stale = sel_l(xs, sel_l(deep & (L->sy != zero), splat_l(TF_STALE_Y), zero), L->stale);
+    L->stale = sel_l(ys, sel_l(deep & (L->sx != zero), splat_l(TF_STALE_X), zero), L->stale);
+    vl boundary = sel_l(xs, bx, by);
+    vl climb = (xs | ys) & (L->level < top) & ((boundary & 1) == zero);
+    L->level = L->level - climb; /* a mask is -1 where set */
+    return ends | out;
+}
+
+/* One step of every active lane; the lanes that hit join *hit, the lanes done leave active. */
+INLINE void walk_step(const tf_heightfield *hf, const tf_ray_ctx *ctx, lanes *L,
+                      tf_trace_cand *best, vl *hit)
+{
+    step s;
+    compute_step(hf, L, &s);
+    vl visit = L->active & ~s.culled, adv = L->active & s.culled, found = splat_l(0);
+    if (any_l(visit))
+        for (int l = 0; l < W; l++) {
+            if (!visit[l])
+                continue;
+            int v = visit_lane(&ctx[l], L, &s, l, &best[l]);
+            if (v > 0)
+                found[l] = -1;
+            else if (v == 0)
+                adv[l] = -1;
+        }
+    vl ends = advance(hf, L, &s, adv);
+    *hit |= found;
+    L->active &= ~(found | ends);
+}
+
+/* Rays first .. first+W-1 (those below n), walked until every lane is done. */
+INLINE void trace_packet(const tf_heightfield *hf, int first, int n, const tf_vec3 *o,
+                         const tf_vec3 *d, const double *tmin, const double *tmax,
+                         unsigned char *found, tf_hit *hits)
+{
+    tf_ray_ctx ctx[W];
+    tf_trace_cand best[W];
+    lanes L;
+    vl hit = splat_l(0);
+    load_lanes(hf, first, n, o, d, tmin, tmax, ctx, &L);
+    for (int l = 0; l < W; l++)
+        best[l] = (tf_trace_cand){INFINITY, 0, 0, 0};
+    while (any_l(L.active))
+        walk_step(hf, ctx, &L, best, &hit);
+    for (int l = 0; l < W && first + l < n; l++) {
+        found[first + l] = hit[l] != 0;
+        if (hit[l] && hits)
+            tf_trace_finish(&ctx[l], &best[l], &hits[first + l]);
+    }
+}
+
+void TF_KERNEL(const tf_heightfield *hf, int n, const tf_vec3 *o, const tf_vec3 *d,
+               const double *tmin, const double *tmax, unsigned char *found, tf_hit *hits)
+{
+    for (int first = 0; first < n; first += W)
+        trace_packet(hf, first, n, o, d, tmin, tmax, found, hits);
+}
+
+#undef INLINE
+#endif

@@ -14,10 +14,10 @@ static const struct {
     tf_trace_packet_kernel *fn;
 } kernels[] = {
 #ifdef TF_TRACE_X86
-    {"avx512", 16, tf_trace_packet_avx512},
-    {"avx2", 8, tf_trace_packet_avx2},
+    {"avx512", 8, tf_trace_packet_avx512},
+    {"avx2", 4, tf_trace_packet_avx2},
 #endif
-    {"portable", 4, tf_trace_packet_portable},
+    {"portable", 2, tf_trace_packet_portable},
 };
 enum { KERNELS = sizeof kernels / sizeof kernels[0] };
 

@@ -4,7 +4,12 @@
  * The first part declares the kernels.  The rest is a template: trace_packet_<isa>.c defines W
  * (lanes), TF_KERNEL (the kernel's name), the vector types vd (W doubles) and vl (W int64s,
  * which is also the type of a comparison of vds: a lane mask, all bits set or none), then
- * includes this file (portable: 4 lanes; avx2: 8; avx512: 16).
+ * includes this file (portable: 2 lanes; avx2: 4; avx512: 8 -- one register of doubles each;
+ * two registers a vector measured 2-3x slower, bench/README.md), with these lane operations:
+ *   unsigned bits_l(vl m)        bit l set where lane l of the mask is set
+ *   vd gather_f(const float *base, vl off)   (double)base[off[l]] per lane (the walk's max
+ *                                or min of each lane's block; off may reach any level's grid)
+ *   vl gather_i(const int64_t *table, vl idx) table[idx[l]] per lane
  *
  * Each lane runs trace.c's walk_hier for its own ray -- its own level, cell, stale axis and
  * event time -- so the lanes need not agree on anything.  A step computes, for all lanes at
@@ -57,12 +62,14 @@ INLINE vd sel_d(vl m, vd a, vd b) { return (vd)((m & (vl)a) | (~m & (vl)b)); }
 INLINE vl sel_l(vl m, vl a, vl b) { return (m & a) | (~m & b); }
 INLINE vd splat_d(double x) { return (vd){0} + x; }
 INLINE vl splat_l(int64_t x) { return (vl){0} + x; }
-INLINE int any_l(vl m)
+INLINE int any_l(vl m) { return bits_l(m) != 0; }
+/* The mask whose lane l is set where bit l of b is. */
+INLINE vl from_bits(unsigned b)
 {
-    int64_t r = 0;
+    vl lane_bit;
     for (int l = 0; l < W; l++)
-        r |= m[l];
-    return r != 0;
+        lane_bit[l] = (int64_t)1 << l;
+    return (splat_l((int64_t)b) & lane_bit) != 0;
 }
 /* (double)x exactly, for |x| < 2^51. */
 INLINE vd to_d(vl x)
@@ -72,7 +79,7 @@ INLINE vd to_d(vl x)
 
 /* Where every lane's walk stands: walk_hier's locals, and the ray's constants it reads. */
 typedef struct lanes {
-    vd ox, oy, oz, dz, t1, inv_dx, inv_dy, margin;
+    vd ox, oy, oz, dx, dy, dz, t1, inv_dx, inv_dy, margin;
     vl sx, sy, x_ahead, y_ahead;
     vl ci, cj, level, stale;
     vd t_cur, t_event;
@@ -91,7 +98,8 @@ INLINE void load_lanes(const tf_heightfield *hf, int first, int n, const tf_vec3
         tf_ray_ctx *r = &ctx[l];
         if (!tf_trace_setup(r, hf, o[i], d[i], tmin[i], tmax[i]))
             continue;
-        L->ox[l] = r->o[0], L->oy[l] = r->o[1], L->oz[l] = r->o[2], L->dz[l] = r->d[2];
+        L->ox[l] = r->o[0], L->oy[l] = r->o[1], L->oz[l] = r->o[2];
+        L->dx[l] = r->d[0], L->dy[l] = r->d[1], L->dz[l] = r->d[2];
         L->t1[l] = r->t1, L->inv_dx[l] = r->inv_dx, L->inv_dy[l] = r->inv_dy;
         L->margin[l] = r->margin;
         L->sx[l] = r->sx, L->sy[l] = r->sy, L->x_ahead[l] = r->sx > 0, L->y_ahead[l] = r->sy > 0;
@@ -99,6 +107,22 @@ INLINE void load_lanes(const tf_heightfield *hf, int first, int n, const tf_vec3
         L->stale[l] = TF_STALE_NONE;
         L->t_cur[l] = r->t0, L->t_event[l] = r->t0;
         L->active[l] = -1;
+    }
+}
+
+/* Every level's max and min grid as offsets (in floats) from level 0's: a lane's block is
+ * maxgrid[0][max_at[level] + idx], whatever its level, so one gather loads the lanes' blocks. */
+typedef struct grids {
+    const float *max0, *min0;
+    int64_t max_at[64], min_at[64];
+} grids;
+
+static void grids_of(const tf_heightfield *hf, grids *g)
+{
+    g->max0 = hf->maxgrid[0], g->min0 = hf->mingrid[0];
+    for (int L = 0; L < hf->levels && L < 64; L++) {
+        g->max_at[L] = (int64_t)(hf->maxgrid[L] - hf->maxgrid[0]);
+        g->min_at[L] = (int64_t)(hf->mingrid[L] - hf->mingrid[0]);
     }
 }
 
@@ -110,15 +134,13 @@ typedef struct step {
 } step;
 
 /* The block's max and min per lane (inactive lanes read block 0 of level 0). */
-INLINE void load_bounds(const tf_heightfield *hf, vl level, vl idx, vd *hi, vd *lo)
+INLINE void load_bounds(const grids *g, vl level, vl idx, vd *hi, vd *lo)
 {
-    for (int l = 0; l < W; l++) {
-        (*hi)[l] = hf->maxgrid[level[l]][idx[l]];
-        (*lo)[l] = hf->mingrid[level[l]][idx[l]];
-    }
+    *hi = gather_f(g->max0, gather_i(g->max_at, level) + idx);
+    *lo = gather_f(g->min0, gather_i(g->min_at, level) + idx);
 }
 
-INLINE void compute_step(const tf_heightfield *hf, const lanes *L, step *s)
+INLINE void compute_step(const tf_heightfield *hf, const grids *g, const lanes *L, step *s)
 {
     const vd cell = splat_d(hf->cell), inf = splat_d(INFINITY);
     const vl level = sel_l(L->active, L->level, splat_l(0));
@@ -133,27 +155,77 @@ INLINE void compute_step(const tf_heightfield *hf, const lanes *L, step *s)
     s->t_out = sel_d(t_out < L->t_cur, L->t_cur, t_out);
     vl idx = s->bj * (splat_l(hf->cells) >> level) + s->bi;
     vd hi, lo;
-    load_bounds(hf, level, idx, &hi, &lo);
+    load_bounds(g, level, idx, &hi, &lo);
     vd z_in = L->oz + L->t_cur * L->dz, z_out = L->oz + s->t_out * L->dz;
     vl rising = z_in < z_out;
     vd zlo = sel_d(rising, z_in, z_out), zhi = sel_d(rising, z_out, z_in);
     s->culled = (zlo > hi + L->margin) | (zhi < lo - L->margin);
 }
 
-/* Lane l was not culled: walk_hier's test of a level-0 cell (1: a hit, the lane's walk ends;
- * 0: a miss, the lane moves on) or its descent (-1: the lane stays where it is). */
-INLINE int visit_lane(const tf_ray_ctx *r, lanes *L, const step *s, int l, tf_trace_cand *best)
+/* trace.c's fix_stale_axis for the lanes of `fix` (the axis per lane: y where `y`): the
+ * index on that axis the flat walk holds at t_event, searched as trace.c searches it, the
+ * lanes stepping together while some lane still moves.  The crossings are xcross / ycross,
+ * term for term. */
+INLINE vl entered(vd o, vd inv, vd cell, vl back, vl j, vd t_event, vl strict)
 {
-    int level = (int)L->level[l];
-    if (level == 0)
-        return tf_trace_test_cell(r, (int)L->ci[l], (int)L->cj[l], s->tx[l], s->ty[l], best);
-    if (L->stale[l] == TF_STALE_Y)
-        L->cj[l] = tf_trace_fix_stale(r, 1, (int)L->cj[l], level, L->t_event[l], 1);
-    else if (L->stale[l] == TF_STALE_X)
-        L->ci[l] = tf_trace_fix_stale(r, 0, (int)L->ci[l], level, L->t_event[l], 0);
-    L->stale[l] = TF_STALE_NONE;
-    L->level[l] = level - 1;
-    return -1;
+    vd t = (to_d(j + (back > 0)) * cell - o) * inv; /* back > 0: s < 0 */
+    return sel_l(strict, t < t_event, t <= t_event);
+}
+
+INLINE vl fix_stale_v(const tf_heightfield *hf, const lanes *L, vl fix, vl y)
+{
+    const vd cell = splat_d(hf->cell);
+    const vl one = splat_l(1), s = sel_l(y, L->sy, L->sx), stale = sel_l(y, L->cj, L->ci);
+    const vd o = sel_d(y, L->oy, L->ox), dd = sel_d(y, L->dy, L->dx);
+    const vd inv = sel_d(y, L->inv_dy, L->inv_dx), t_event = L->t_event;
+    const vl level = L->level, lo = (stale >> level) << level, hi = lo + (one << level) - 1;
+    const vl up = s > 0, back = sel_l(up, -one, one), strict = y; /* y crossings: strict */
+    vd g = (o + t_event * dd) / cell;
+    vl j = sel_l(g > to_d(lo), sel_l(g < to_d(hi), __builtin_convertvector(g, vl), hi), lo);
+    j = sel_l(fix & sel_l(up, j < stale, j > stale), stale, j);
+    vl m = fix & sel_l(up, j > stale, j < stale) & ~entered(o, inv, cell, back, j, t_event, strict);
+    while (any_l(m)) {
+        j = sel_l(m, j + back, j);
+        m &= sel_l(up, j > stale, j < stale) & ~entered(o, inv, cell, back, j, t_event, strict);
+    }
+    m = fix & sel_l(up, j < hi, j > lo) & entered(o, inv, cell, back, j - back, t_event, strict);
+    while (any_l(m)) {
+        j = sel_l(m, j - back, j);
+        m &= sel_l(up, j < hi, j > lo) & entered(o, inv, cell, back, j - back, t_event, strict);
+    }
+    return j;
+}
+
+/* walk_hier's descent for the lanes of `down` (not culled, above level 0). */
+INLINE void descend(const tf_heightfield *hf, lanes *L, vl down)
+{
+    const vl zero = splat_l(0);
+    vl fix_y = down & (L->stale == TF_STALE_Y), fix_x = down & (L->stale == TF_STALE_X);
+    if (any_l(fix_y | fix_x)) {
+        vl j = fix_stale_v(hf, L, fix_y | fix_x, fix_y);
+        L->cj = sel_l(fix_y, j, L->cj);
+        L->ci = sel_l(fix_x, j, L->ci);
+    }
+    L->stale = sel_l(down, zero, L->stale);
+    L->level = L->level + (down & splat_l(-1));
+}
+
+/* walk_hier's test of the level-0 cells of the lanes of bits `cells`, by trace.c's own
+ * test_cell: the lanes that hit (bits); best holds their hits. */
+INLINE unsigned test_cells(const tf_ray_ctx *ctx, const lanes *L, const step *s, unsigned cells,
+                           tf_trace_cand *best)
+{
+    int64_t ci[W], cj[W];
+    double tx[W], ty[W];
+    unsigned found = 0;
+    memcpy(ci, &L->ci, sizeof ci), memcpy(cj, &L->cj, sizeof cj);
+    memcpy(tx, &s->tx, sizeof tx), memcpy(ty, &s->ty, sizeof ty);
+    for (; cells; cells &= cells - 1) {
+        int l = __builtin_ctz(cells);
+        if (tf_trace_test_cell(&ctx[l], (int)ci[l], (int)cj[l], tx[l], ty[l], &best[l]))
+            found |= 1u << l;
+    }
+    return found;
 }
 
 /* walk_hier's block step for the lanes of adv; returns the lanes whose walk ends (a miss). */
@@ -183,31 +255,28 @@ INLINE vl advance(const tf_heightfield *hf, lanes *L, const step *s, vl adv)
 }
 
 /* One step of every active lane; the lanes that hit join *hit, the lanes done leave active. */
-INLINE void walk_step(const tf_heightfield *hf, const tf_ray_ctx *ctx, lanes *L,
+INLINE void walk_step(const tf_heightfield *hf, const grids *g, const tf_ray_ctx *ctx, lanes *L,
                       tf_trace_cand *best, vl *hit)
 {
     step s;
-    compute_step(hf, L, &s);
-    vl visit = L->active & ~s.culled, adv = L->active & s.culled, found = splat_l(0);
-    if (any_l(visit))
-        for (int l = 0; l < W; l++) {
-            if (!visit[l])
-                continue;
-            int v = visit_lane(&ctx[l], L, &s, l, &best[l]);
-            if (v > 0)
-                found[l] = -1;
-            else if (v == 0)
-                adv[l] = -1;
-        }
-    vl ends = advance(hf, L, &s, adv);
+    compute_step(hf, g, L, &s);
+    const vl zero = splat_l(0), keep = L->active & ~s.culled;
+    const vl at_cell = keep & (L->level == zero), down = keep & (L->level > zero);
+    vl found = zero;
+    unsigned cells = bits_l(at_cell);
+    if (cells)
+        found = from_bits(test_cells(ctx, L, &s, cells, best));
+    if (any_l(down))
+        descend(hf, L, down);
+    vl ends = advance(hf, L, &s, L->active & ~down & ~found);
     *hit |= found;
     L->active &= ~(found | ends);
 }
 
 /* Rays first .. first+W-1 (those below n), walked until every lane is done. */
-INLINE void trace_packet(const tf_heightfield *hf, int first, int n, const tf_vec3 *o,
-                         const tf_vec3 *d, const double *tmin, const double *tmax,
-                         unsigned char *found, tf_hit *hits)
+INLINE void trace_packet(const tf_heightfield *hf, const grids *g, int first, int n,
+                         const tf_vec3 *o, const tf_vec3 *d, const double *tmin,
+                         const double *tmax, unsigned char *found, tf_hit *hits)
 {
     tf_ray_ctx ctx[W];
     tf_trace_cand best[W];
@@ -217,7 +286,7 @@ INLINE void trace_packet(const tf_heightfield *hf, int first, int n, const tf_ve
     for (int l = 0; l < W; l++)
         best[l] = (tf_trace_cand){INFINITY, 0, 0, 0};
     while (any_l(L.active))
-        walk_step(hf, ctx, &L, best, &hit);
+        walk_step(hf, g, ctx, &L, best, &hit);
     for (int l = 0; l < W && first + l < n; l++) {
         found[first + l] = hit[l] != 0;
         if (hit[l] && hits)
@@ -228,8 +297,10 @@ INLINE void trace_packet(const tf_heightfield *hf, int first, int n, const tf_ve
 void TF_KERNEL(const tf_heightfield *hf, int n, const tf_vec3 *o, const tf_vec3 *d,
                const double *tmin, const double *tmax, unsigned char *found, tf_hit *hits)
 {
+    grids g;
+    grids_of(hf, &g);
     for (int first = 0; first < n; first += W)
-        trace_packet(hf, first, n, o, d, tmin, tmax, found, hits);
+        trace_packet(hf, &g, first, n, o, d, tmin, tmax, found, hits);
 }
 
 #undef INLINE

@@ -361,7 +361,7 @@ static void test_isa_switches(void **state)
     (void)state;
     assert_int_equal(tf_trace_packet_force_isa("portable"), 0);
     assert_string_equal(tf_trace_packet_isa(), "portable");
-    assert_int_equal(tf_trace_packet_lanes(), 4);
+    assert_int_equal(tf_trace_packet_lanes(), 2);
     assert_int_equal(tf_trace_packet_force_isa("sse9"), -1);
     tf_trace_packet_force_isa(NULL);
     setenv("TF_TRACE_ISA", "portable", 1);

@@ -273,34 +273,59 @@ INLINE void walk_step(const tf_heightfield *hf, const grids *g, const tf_ray_ctx
     L->active &= ~(found | ends);
 }
 
-/* Rays first .. first+W-1 (those below n), walked until every lane is done. */
-INLINE void trace_packet(const tf_heightfield *hf, const grids *g, int first, int n,
-                         const tf_vec3 *o, const tf_vec3 *d, const double *tmin,
-                         const double *tmax, unsigned char *found, tf_hit *hits)
-{
+/* Rays first .. first+W-1 (those below n): the packet's rays, its lanes, their hits. */
+typedef struct packet {
+    int first;
     tf_ray_ctx ctx[W];
     tf_trace_cand best[W];
     lanes L;
-    vl hit = splat_l(0);
-    load_lanes(hf, first, n, o, d, tmin, tmax, ctx, &L);
+    vl hit;
+} packet;
+
+INLINE void packet_start(const tf_heightfield *hf, int first, int n, const tf_vec3 *o,
+                         const tf_vec3 *d, const double *tmin, const double *tmax, packet *p)
+{
+    p->first = first;
+    p->hit = splat_l(0);
+    load_lanes(hf, first, n, o, d, tmin, tmax, p->ctx, &p->L);
     for (int l = 0; l < W; l++)
-        best[l] = (tf_trace_cand){INFINITY, 0, 0, 0};
-    while (any_l(L.active))
-        walk_step(hf, g, ctx, &L, best, &hit);
-    for (int l = 0; l < W && first + l < n; l++) {
-        found[first + l] = hit[l] != 0;
-        if (hit[l] && hits)
-            tf_trace_finish(&ctx[l], &best[l], &hits[first + l]);
+        p->best[l] = (tf_trace_cand){INFINITY, 0, 0, 0};
+}
+
+static inline void packet_answer(const packet *p, int n, unsigned char *found, tf_hit *hits)
+{
+    for (int l = 0; l < W && p->first + l < n; l++) {
+        found[p->first + l] = p->hit[l] != 0;
+        if (p->hit[l] && hits)
+            tf_trace_finish(&p->ctx[l], &p->best[l], &hits[p->first + l]);
     }
 }
 
+/* TF_PACKETS packets walked side by side, a step of each in turn: one packet's gathers are in
+ * flight while the others step. */
+#ifndef TF_PACKETS
+#define TF_PACKETS 2
+#endif
 void TF_KERNEL(const tf_heightfield *hf, int n, const tf_vec3 *o, const tf_vec3 *d,
                const double *tmin, const double *tmax, unsigned char *found, tf_hit *hits)
 {
     grids g;
+    packet p[TF_PACKETS];
     grids_of(hf, &g);
-    for (int first = 0; first < n; first += W)
-        trace_packet(hf, &g, first, n, o, d, tmin, tmax, found, hits);
+    for (int first = 0; first < n; first += TF_PACKETS * W) {
+        for (int k = 0; k < TF_PACKETS; k++)
+            packet_start(hf, first + k * W, n, o, d, tmin, tmax, &p[k]);
+        for (int busy = 1; busy;) {
+            busy = 0;
+            for (int k = 0; k < TF_PACKETS; k++)
+                if (any_l(p[k].L.active)) {
+                    walk_step(hf, &g, p[k].ctx, &p[k].L, p[k].best, &p[k].hit);
+                    busy = 1;
+                }
+        }
+        for (int k = 0; k < TF_PACKETS; k++)
+            packet_answer(&p[k], n, found, hits);
+    }
 }
 
 #undef INLINE

@@ -1,7 +1,7 @@
 /* trace_internal.h: the pieces of trace.c's single-ray walk that the packet tracer
  * (trace_packet.c and its kernels) calls lane by lane, so that every lane runs exactly the
  * single-ray code where it matters: the ray's setup, the start level, a level-0 cell's
- * triangle tests, the re-entry search after a descent (fix_stale_axis) and the hit record.
+ * triangle tests and the hit record.
  * Not an interface for anyone else: render code calls trace.h or trace_packet.h. */
 #ifndef TF_TRACE_INTERNAL_H
 #define TF_TRACE_INTERNAL_H
@@ -41,9 +41,6 @@ int tf_trace_start_level(const tf_ray_ctx *r);
 /* The complete test of level-0 cell (ci, cj) whose exit crossings are tx, ty: 1 on a hit. */
 int tf_trace_test_cell(const tf_ray_ctx *r, int ci, int cj, double tx, double ty,
                        tf_trace_cand *best);
-/* walk_hier's fix_stale_axis: the index on `axis` the flat walk holds at t_event. */
-int tf_trace_fix_stale(const tf_ray_ctx *r, int axis, int stale, int level, double t_event,
-                       int strict);
 /* Fill *hit from the winning candidate. */
 void tf_trace_finish(const tf_ray_ctx *r, const tf_trace_cand *c, tf_hit *hit);
 

@@ -15,16 +15,19 @@
  * event time -- so the lanes need not agree on anything.  A step computes, for all lanes at
  * once, what walk_hier computes at the top of its loop: the block's exit crossings tx, ty, the
  * segment's end t_out, the altitudes z(t_cur), z(t_out) and the cull against the block's max
- * and min (loaded lane by lane: the loads of W independent rays are in flight together, where
- * the single walk waits on each).  These are walk_hier's expressions term for term
- * (tf_grid_cross, tf_span_culled in trace_math.h), on IEEE vector add, subtract, multiply and
- * compare, never a fused multiply-add (-ffp-contract=off; the clang pragma below), so a lane
- * computes walk_hier's bits.  The lanes not culled leave the vector step: at level 0 they call
- * trace.c's own test_cell, above it trace.c's own fix_stale_axis (trace_internal.h), one lane
- * at a time.  Then the lanes that move on (culled, or a level-0 cell that missed) take
- * walk_hier's block step with masks.  Setup and the hit record are trace.c's too.  So every
- * lane's hit is tf_trace's to the bit, and its occlusion tf_occluded's (tests/unit/
- * test_trace_packet.c checks it on every ISA).
+ * and min (gathered: the loads of W independent rays are in flight together, where the single
+ * walk waits on each).  Then, each lane taking the branch walk_hier takes for its ray: a
+ * descent (and the stale axis's re-entry search, fix_stale_axis, the lanes searching together
+ * while some lane still moves), or the block step (the next block, the climb), with masks.
+ * These are walk_hier's expressions term for term (tf_grid_cross, tf_span_culled in
+ * trace_math.h, spelled here on vectors: the one place the walk's arithmetic is written twice
+ * in C), on IEEE vector add, subtract, multiply, divide and compare, never a fused
+ * multiply-add (-ffp-contract=off; the clang pragma below), so a lane computes walk_hier's
+ * bits.  A level-0 cell that is not culled is tested lane by lane by trace.c's own test_cell,
+ * and setup and the hit record are trace.c's too (trace_internal.h).  So every lane's hit is
+ * tf_trace's to the bit, and its occlusion tf_occluded's (tests/unit/test_trace_packet.c
+ * checks it on every ISA).  Two packets are walked side by side (TF_PACKETS), a step of each
+ * in turn, so that one packet's gathers are in flight while the other steps.
  *
  * Integers (cells, levels, block indexes) are int64 lanes, the width of a double's mask; they
  * become doubles through the exact 1.5 * 2^52 trick (|x| < 2^51), the value (double)x. */

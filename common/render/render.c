@@ -24,8 +24,9 @@
  * A corner row's samples are coherent camera rays: on a grid terrain they are traced together
  * in SIMD packets (trace_packet.h), then shaded up to their shadow rays, which are traced
  * together too, then finished (tf_shade_begin / tf_shade_end): the same bits as one
- * tf_shade_ray a sample.  TF_TRACE_PACKETS=0 traces them one by one; a procedural terrain
- * always does (its packets are not done). */
+ * tf_shade_ray a sample.  Whether packets are used is tf_trace_packets_enabled's choice
+ * (TF_TRACE_PACKETS; unset, the AVX-512 kernel only); a procedural terrain is always traced one
+ * ray at a time (its packets are not done). */
 #include "render/render.h"
 
 #include <math.h>

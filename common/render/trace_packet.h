@@ -1,10 +1,13 @@
-/* trace_packet.h: many rays through the grid height field at once, in SIMD packets (4 lanes
- * portable, 8 AVX2, 16 AVX-512; trace_packet_kernel.h), each ray's hit bit-identical to
- * tf_trace's and each occlusion to tf_occluded's.  The renderer uses it for coherent rays: a
- * corner row's primary rays and their shadow rays (render.c).
+/* trace_packet.h: many rays through the grid height field at once, in SIMD packets (2 lanes
+ * portable, 4 AVX2, 8 AVX-512: one register of doubles; trace_packet_kernel.h), each ray's
+ * hit bit-identical to tf_trace's and each occlusion to tf_occluded's.  The renderer uses it
+ * for coherent rays: a corner row's camera rays and their shadow rays (render.c).
  *
- * TF_TRACE_ISA=portable|avx2|avx512 caps the ISA (like TF_EROSION_ISA); TF_TRACE_PACKETS=0
- * turns the packets off in the renderer (the single-ray path, for A/B).
+ * TF_TRACE_ISA=portable|avx2|avx512 caps the ISA (like TF_EROSION_ISA).  TF_TRACE_PACKETS=0
+ * turns the renderer's packets off, =1 on; unset, they are on only with the AVX-512 kernel,
+ * the one measured faster than single rays (bench/README.md, "Packets of rays": AVX2's and the
+ * portable kernel's walks are slower than the scalar walk; they are kept correct and tested,
+ * for A/B and for CPUs to come).
  *
  * NOT DONE: procedural terrain (`procedural = yes`, trace_procedural.c's quad-tree) has no
  * packet tracer.  These functions take grid height fields only; for a procedural terrain
@@ -31,8 +34,9 @@ int tf_trace_packet_lanes(void);
  * -1 if the name is unknown or this CPU cannot run it. */
 int tf_trace_packet_force_isa(const char *isa);
 
-/* Whether the renderer traces in packets: TF_TRACE_PACKETS (unset or not "0": yes), unless
- * forced (1 on, 0 off, -1: the variable decides again). */
+/* Whether the renderer traces in packets: TF_TRACE_PACKETS ("0": no, anything else: yes;
+ * unset: yes with the AVX-512 kernel only), unless forced (1 on, 0 off, -1: the variable
+ * decides again). */
 int tf_trace_packets_enabled(void);
 void tf_trace_packets_force(int on);
 

@@ -372,8 +372,13 @@ static void test_isa_switches(void **state)
     tf_trace_packets_force(1);
     assert_true(tf_trace_packets_enabled());
     tf_trace_packets_force(-1);
-    unsetenv("TF_TRACE_PACKETS");
+    setenv("TF_TRACE_PACKETS", "1", 1);
     assert_true(tf_trace_packets_enabled());
+    unsetenv("TF_TRACE_PACKETS"); /* on with the AVX-512 kernel only, the one measured faster */
+    assert_int_equal(tf_trace_packets_enabled(), !strcmp(tf_trace_packet_isa(), "avx512"));
+    setenv("TF_TRACE_ISA", "avx2", 1);
+    assert_false(tf_trace_packets_enabled());
+    unsetenv("TF_TRACE_ISA");
     printf("packet ISA here: %s, %d lanes\n", tf_trace_packet_isa(), tf_trace_packet_lanes());
 }
 

@@ -447,6 +447,12 @@ int tf_trace_test_cell(const tf_ray_ctx *r, int ci, int cj, double tx, double ty
     return test_cell(r, ci, cj, tx, ty, best);
 }
 
+int tf_trace_fix_stale(const tf_ray_ctx *r, int axis, int stale, int level, double t_event,
+                       int strict)
+{
+    return fix_stale_axis(r, axis, stale, level, t_event, strict);
+}
+
 void tf_trace_finish(const tf_ray_ctx *r, const tf_trace_cand *c, tf_hit *hit)
 {
     finish_hit(r, c, hit);

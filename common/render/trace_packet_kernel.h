@@ -34,6 +34,7 @@
 #ifndef TF_TRACE_PACKET_KERNEL_H
 #define TF_TRACE_PACKET_KERNEL_H
 
+#include <assert.h>
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
@@ -171,7 +172,7 @@ INLINE void compute_step(const tf_heightfield *hf, const grids *g, const lanes *
  * term for term. */
 INLINE vl entered(vd o, vd inv, vd cell, vl back, vl j, vd t_event, vl strict)
 {
-    vd t = (to_d(j + (back > 0)) * cell - o) * inv; /* back > 0: s < 0 */
+    vd t = (to_d(j + ((back > 0) & splat_l(1))) * cell - o) * inv; /* back > 0: s < 0 */
     return sel_l(strict, t < t_event, t <= t_event);
 }
 
@@ -199,13 +200,28 @@ INLINE vl fix_stale_v(const tf_heightfield *hf, const lanes *L, vl fix, vl y)
     return j;
 }
 
+/* In builds with assertions (make asan): every lane's search found what trace.c's
+ * fix_stale_axis finds.  (Hits alone rarely show a wrong index here: the walk catches up.) */
+static inline int fix_matches(const tf_ray_ctx *ctx, const lanes *L, vl fix, vl y, vl j)
+{
+    for (int l = 0; l < W; l++)
+        if (fix[l] && j[l] != tf_trace_fix_stale(&ctx[l], y[l] ? 1 : 0, (int)(y[l] ? L->cj[l]
+                                                 : L->ci[l]), (int)L->level[l], L->t_event[l],
+                                                 y[l] != 0))
+            return 0;
+    return 1;
+}
+
 /* walk_hier's descent for the lanes of `down` (not culled, above level 0). */
-INLINE void descend(const tf_heightfield *hf, lanes *L, vl down)
+INLINE void descend(const tf_heightfield *hf, const tf_ray_ctx *ctx, lanes *L, vl down)
 {
     const vl zero = splat_l(0);
     vl fix_y = down & (L->stale == TF_STALE_Y), fix_x = down & (L->stale == TF_STALE_X);
+    (void)ctx;
     if (any_l(fix_y | fix_x)) {
         vl j = fix_stale_v(hf, L, fix_y | fix_x, fix_y);
+        assert(fix_matches(ctx, L, fix_y | fix_x, fix_y, j) &&
+               "the vector re-entry search is trace.c's fix_stale_axis");
         L->cj = sel_l(fix_y, j, L->cj);
         L->ci = sel_l(fix_x, j, L->ci);
     }
@@ -270,7 +286,7 @@ INLINE void walk_step(const tf_heightfield *hf, const grids *g, const tf_ray_ctx
     if (cells)
         found = from_bits(test_cells(ctx, L, &s, cells, best));
     if (any_l(down))
-        descend(hf, L, down);
+        descend(hf, ctx, L, down);
     vl ends = advance(hf, L, &s, L->active & ~down & ~found);
     *hit |= found;
     L->active &= ~(found | ends);

@@ -233,6 +233,35 @@ static void test_adversarial(void **state)
     tf_heightfield_free(hf);
 }
 
+/* Rays from grid vertices along rational slopes (p, q) in every direction: their crossings of
+ * x and y lines tie exactly at vertices all along the way, where the walk's x-before-y rule and
+ * the re-entry search after a descent (fix_stale_axis, strict on one axis, not the other)
+ * decide which cell comes first. */
+static void test_vertex_ties(void **state)
+{
+    (void)state;
+    height_fn fields[] = {terraces, hills, rough};
+    for (int f = 0; f < 3; f++) {
+        tf_heightfield *hf = make_field(fields[f], 6, 64.0);
+        const double c = hf->cell, top = hf->hmax, low = hf->hmin;
+        rng r = {40 + (uint64_t)f};
+        batch b = {0};
+        for (int p = -3; p <= 3; p++)
+            for (int q = -3; q <= 3; q++) {
+                if (!p && !q)
+                    continue;
+                for (int k = 0; k < 9; k++) {
+                    int i = (int)range(&r, 0, hf->cells + 1), j = (int)range(&r, 0, hf->cells + 1);
+                    double z = k < 6 ? top + range(&r, 0, 3) : low + range(&r, 0, top - low);
+                    double dz = k % 3 == 0 ? -(top - low) / (64.0 * c) : range(&r, -0.2, 0.02);
+                    add(&b, v3(i * c, j * c, z), v3(p * c, q * c, dz * c), 0, INFINITY);
+                }
+            }
+        compare_all(hf, &b);
+        tf_heightfield_free(hf);
+    }
+}
+
 /* A camera's row of rays (coherent, as tf_render_rect traces them), then shadow rays from
  * every hit toward a low sun, starting a hair above the hit as the shader does. */
 static void test_camera_row_and_shadows(void **state)
@@ -388,6 +417,7 @@ int main(void)
         cmocka_unit_test(test_isa_switches),
         cmocka_unit_test(test_adversarial),
         cmocka_unit_test(test_sizes_and_kinds),
+        cmocka_unit_test(test_vertex_ties),
         cmocka_unit_test(test_camera_row_and_shadows),
         cmocka_unit_test(test_random_rough),
         cmocka_unit_test(test_random_hills),

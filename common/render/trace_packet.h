@@ -5,9 +5,10 @@
  *
  * TF_TRACE_ISA=portable|avx2|avx512 caps the ISA (like TF_EROSION_ISA).  TF_TRACE_PACKETS=0
  * turns the renderer's packets off, =1 on; unset, they are on only with the AVX-512 kernel,
- * the one measured faster than single rays (bench/README.md, "Packets of rays": AVX2's and the
- * portable kernel's walks are slower than the scalar walk; they are kept correct and tested,
- * for A/B and for CPUs to come).
+ * the one not slower than single rays (bench/README.md, "Packets of rays": on this EPYC
+ * AVX-512 packets match single camera rays, lose on shadow rays (0.8x) and leave a whole
+ * render unchanged (1.00-1.01x); the AVX2 and portable walks are slower than the scalar walk,
+ * kept correct and tested for A/B and for other CPUs).
  *
  * NOT DONE: procedural terrain (`procedural = yes`, trace_procedural.c's quad-tree) has no
  * packet tracer.  These functions take grid height fields only; for a procedural terrain

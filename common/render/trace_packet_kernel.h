@@ -7,8 +7,9 @@
  * includes this file (portable: 2 lanes; avx2: 4; avx512: 8 -- one register of doubles each;
  * two registers a vector measured 2-3x slower, bench/README.md), with these lane operations:
  *   unsigned bits_l(vl m)        bit l set where lane l of the mask is set
- *   vd gather_f(const float *base, vl off)   (double)base[off[l]] per lane (the walk's max
- *                                or min of each lane's block; off may reach any level's grid)
+ *   vd gather_f(const float *base, vl off)   (double) of the float at base + 4 off[l] bytes
+ *                                per lane (the walk's max or min of each lane's block; off may
+ *                                reach any level's grid, a separate allocation)
  *   vl gather_i(const int64_t *table, vl idx) table[idx[l]] per lane
  *
  * Each lane runs trace.c's walk_hier for its own ray -- its own level, cell, stale axis and
@@ -114,19 +115,26 @@ INLINE void load_lanes(const tf_heightfield *hf, int first, int n, const tf_vec3
     }
 }
 
-/* Every level's max and min grid as offsets (in floats) from level 0's: a lane's block is
- * maxgrid[0][max_at[level] + idx], whatever its level, so one gather loads the lanes' blocks. */
+/* Every level's max and min grid as addresses relative to level 0's, in floats (the grids are
+ * separate allocations, all float-aligned): a lane's block is at max0 + 4 * (max_at[level] +
+ * idx) bytes, whatever its level, so one gather (gather_f) loads the lanes' blocks. */
 typedef struct grids {
     const float *max0, *min0;
     int64_t max_at[64], min_at[64];
 } grids;
 
+static int64_t floats_from(const float *base, const float *p)
+{
+    return ((int64_t)(intptr_t)p - (int64_t)(intptr_t)base) / (int64_t)sizeof(float);
+}
+
 static void grids_of(const tf_heightfield *hf, grids *g)
 {
+    memset(g, 0, sizeof *g);
     g->max0 = hf->maxgrid[0], g->min0 = hf->mingrid[0];
     for (int L = 0; L < hf->levels && L < 64; L++) {
-        g->max_at[L] = (int64_t)(hf->maxgrid[L] - hf->maxgrid[0]);
-        g->min_at[L] = (int64_t)(hf->mingrid[L] - hf->mingrid[0]);
+        g->max_at[L] = floats_from(g->max0, hf->maxgrid[L]);
+        g->min_at[L] = floats_from(g->min0, hf->mingrid[L]);
     }
 }
 

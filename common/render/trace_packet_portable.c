@@ -3,6 +3,8 @@
  * (trace_packet.c) where the CPU has nothing better, or under TF_TRACE_ISA=portable. */
 #include "render/trace_packet_kernel.h"
 
+#include <stdint.h>
+
 /* The vector helpers are always inlined, so no vector crosses a call: GCC's note that passing
  * one would change the ABI does not apply. */
 #pragma GCC diagnostic ignored "-Wpsabi"
@@ -24,7 +26,7 @@ LANE vd gather_f(const float *base, vl off)
 {
     vd r;
     for (int l = 0; l < W; l++)
-        r[l] = base[off[l]];
+        r[l] = *(const float *)((intptr_t)base + (intptr_t)off[l] * (intptr_t)sizeof(float));
     return r;
 }
 LANE vl gather_i(const int64_t *table, vl idx)

@@ -19,7 +19,14 @@
  * every sample is a function of its lattice point only (render_internal.h) and the pixel's
  * refinement looks at nothing but its own samples, a pixel's bits do not depend on the
  * rectangle: THE DECOMPOSITION INVARIANT.  No recursion and no function pointers, so the same
- * loop ports to OpenCL C. */
+ * loop ports to OpenCL C.
+ *
+ * A corner row's samples are coherent camera rays: on a grid terrain they are traced together
+ * in SIMD packets (trace_packet.h), then shaded up to their shadow rays, which are traced
+ * together too, then finished (tf_shade_begin / tf_shade_end): the same bits as one
+ * tf_shade_ray a sample.  Whether packets are used is tf_trace_packets_enabled's choice
+ * (TF_TRACE_PACKETS; unset, the AVX-512 kernel only); a procedural terrain is always traced one
+ * ray at a time (its packets are not done). */
 #include "render/render.h"
 
 #include <math.h>
@@ -29,6 +36,7 @@
 #include "log.h"
 #include "render/render_internal.h"
 #include "render/sample_math.h"
+#include "render/trace_packet.h"
 #include "terrain/tilecache.h"
 
 tf_renderer *tf_renderer_new(const tf_scene *s, const tf_heightfield *hf, char *err, size_t errlen)
@@ -212,17 +220,113 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
                       (float)(sum_a / area), zmin, (float)spp};
 }
 
-/* Corner samples of one corner row (image row of corners cy) for columns rect.x .. rect.x+w. */
-static void corner_row(const tf_renderer *r, tf_rect rect, int cy, int external_row,
-                       tf_sample *row, tf_render_counts *tally)
+/* Corner sample c's lattice point on corner row cy. */
+static void corner_point(const tf_renderer *r, tf_rect rect, int cy, int c, int64_t *X,
+                         int64_t *Y)
+{
+    *X = (int64_t)(rect.x + c) * r->lattice;
+    *Y = (int64_t)cy * r->lattice;
+}
+
+/* Corner samples of one corner row (image row of corners cy) for columns rect.x .. rect.x+w,
+ * one ray at a time. */
+static void corner_row_single(const tf_renderer *r, tf_rect rect, int cy, tf_sample *row,
+                              tf_render_counts *tally)
 {
     for (int c = 0; c <= rect.w; c++) {
-        int64_t X = (int64_t)(rect.x + c) * r->lattice, Y = (int64_t)cy * r->lattice;
+        int64_t X, Y;
+        corner_point(r, rect, cy, c, &X, &Y);
         tf_render_lattice_sample(r, X, Y, &row[c], &tally->shadow_rays);
-        tally->primary_rays++;
-        if (external_row || c == rect.w)
-            tally->external_rays++;
     }
+}
+
+/* A corner row's rays for the packet tracer, w + 1 of each (allocated once a rectangle). */
+typedef struct row_rays {
+    tf_vec3 *o, *d, *so, *sd;
+    double *tmin, *tmax, *stmin, *stmax;
+    unsigned char *found, *occluded;
+    tf_hit *hits;
+    tf_shade_pending *pending;
+} row_rays;
+
+static int row_rays_alloc(row_rays *q, size_t n)
+{
+    q->o = malloc(n * sizeof *q->o), q->d = malloc(n * sizeof *q->d);
+    q->so = malloc(n * sizeof *q->so), q->sd = malloc(n * sizeof *q->sd);
+    q->tmin = malloc(n * sizeof *q->tmin), q->tmax = malloc(n * sizeof *q->tmax);
+    q->stmin = malloc(n * sizeof *q->stmin), q->stmax = malloc(n * sizeof *q->stmax);
+    q->found = malloc(n), q->occluded = malloc(n);
+    q->hits = malloc(n * sizeof *q->hits), q->pending = malloc(n * sizeof *q->pending);
+    return q->o && q->d && q->so && q->sd && q->tmin && q->tmax && q->stmin && q->stmax &&
+           q->found && q->occluded && q->hits && q->pending;
+}
+
+static void row_rays_free(row_rays *q)
+{
+    free(q->o), free(q->d), free(q->so), free(q->sd), free(q->tmin), free(q->tmax);
+    free(q->stmin), free(q->stmax), free(q->found), free(q->occluded), free(q->hits);
+    free(q->pending);
+}
+
+/* The camera rays of corner row cy, as tf_render_lattice_sample makes them, with their
+ * interval (0, t_water) (tf_shade_ray's). */
+static void camera_rays(const tf_renderer *r, tf_rect rect, int cy, row_rays *q)
+{
+    for (int c = 0; c <= rect.w; c++) {
+        int64_t X, Y;
+        double x, y;
+        corner_point(r, rect, cy, c, &X, &Y);
+        tf_lattice_position(r->jitter_key, (double)r->lattice, X, Y, &x, &y);
+        q->o[c] = r->camera.position;
+        q->d[c] = tf_camera_dir(&r->camera, x, y);
+        q->tmin[c] = 0.0;
+        q->tmax[c] = tf_shade_t_water(&r->shader, q->o[c], q->d[c]);
+    }
+}
+
+/* Shade the row's hits up to their shadow rays; returns how many shadow rays they cast. */
+static int shade_begin_row(const tf_renderer *r, int n, row_rays *q)
+{
+    int k = 0;
+    for (int c = 0; c < n; c++) {
+        tf_shade_pending *p = &q->pending[c];
+        tf_shade_begin(&r->shader, q->o[c], q->d[c], q->tmax[c], q->found[c] ? &q->hits[c] : NULL,
+                       p);
+        if (!p->shadow)
+            continue;
+        q->so[k] = p->start, q->sd[k] = r->shader.sun_dir;
+        q->stmin[k] = 0.0, q->stmax[k] = TF_FAR_AWAY;
+        k++;
+    }
+    return k;
+}
+
+/* The same samples as corner_row_single, their rays traced in packets. */
+static void corner_row_packets(const tf_renderer *r, tf_rect rect, int cy, row_rays *q,
+                               tf_sample *row, tf_render_counts *tally)
+{
+    const int n = rect.w + 1;
+    camera_rays(r, rect, cy, q);
+    tf_trace_packets(r->hf, n, q->o, q->d, q->tmin, q->tmax, q->found, q->hits);
+    int shadows = shade_begin_row(r, n, q);
+    tf_occluded_packets(r->hf, shadows, q->so, q->sd, q->stmin, q->stmax, q->occluded);
+    for (int c = 0, k = 0; c < n; c++) {
+        int occluded = q->pending[c].shadow ? q->occluded[k++] : 0;
+        tf_shade_end(&r->shader, q->o[c], q->d[c], &q->pending[c], occluded, &row[c]);
+    }
+    tally->shadow_rays += (uint64_t)shadows;
+}
+
+/* Corner samples of one corner row: in packets when q is not NULL. */
+static void corner_row(const tf_renderer *r, tf_rect rect, int cy, int external_row,
+                       row_rays *q, tf_sample *row, tf_render_counts *tally)
+{
+    if (q)
+        corner_row_packets(r, rect, cy, q, row, tally);
+    else
+        corner_row_single(r, rect, cy, row, tally);
+    tally->primary_rays += (uint64_t)rect.w + 1;
+    tally->external_rays += external_row ? (uint64_t)rect.w + 1 : 1;
 }
 
 void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render_counts *counts)
@@ -240,11 +344,18 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
     if (!above || !below || !pc.sample || !pc.have)
         tf_die(71, "tf_render_rect: out of memory for a %d-pixel row", rect.w);
 
+    row_rays rays, *q = NULL;
+    if (!r->hf->proc && tf_trace_packets_enabled()) {
+        if (!row_rays_alloc(&rays, (size_t)rect.w + 1))
+            tf_die(71, "tf_render_rect: out of memory for a %d-pixel row", rect.w);
+        q = &rays;
+    }
+
     tf_render_counts tally = {0};
     tf_tile_counts cache_before = tf_tilecache_thread_counts();
-    corner_row(r, rect, rect.y, 0, above, &tally);
+    corner_row(r, rect, rect.y, 0, q, above, &tally);
     for (int row = 0; row < rect.h; row++) {
-        corner_row(r, rect, rect.y + row + 1, row + 1 == rect.h, below, &tally);
+        corner_row(r, rect, rect.y + row + 1, row + 1 == rect.h, q, below, &tally);
         for (int c = 0; c < rect.w; c++)
             render_pixel(r, &pc, rect.x + c, rect.y + row, &above[c], &above[c + 1], &below[c],
                          &below[c + 1], &out[(size_t)row * (size_t)rect.w + (size_t)c], &tally);
@@ -261,6 +372,8 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
     free(below);
     free(pc.sample);
     free(pc.have);
+    if (q)
+        row_rays_free(q);
     if (counts) {
         counts->primary_rays += tally.primary_rays;
         counts->shadow_rays += tally.shadow_rays;

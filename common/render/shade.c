@@ -360,27 +360,40 @@ tf_vec3 tf_mist_apply(const tf_shader *sh, tf_vec3 c, tf_vec3 origin, tf_vec3 di
 
 /* ---------------------------------------------------------------- surfaces */
 
-/* 1 if the sun is visible from p on a surface of normal ng: the sun in front of it, and a
- * shadow ray from p lifted along ng reaches the sky. */
-static int sunlit(const tf_shader *sh, tf_vec3 p, tf_vec3 ng, uint64_t *shadow_rays)
+/* The sun is visible from p on a surface of normal ng when the sun is in front of it and a
+ * shadow ray from p lifted along ng reaches the sky.  sun_request: 1 if the sun is in front,
+ * with the shadow ray's start in *start (the ray goes toward sh->sun_dir); 0 if not (dark,
+ * no ray).  Shading is split at the shadow ray (tf_shade_begin / tf_shade_end) so that the
+ * renderer can trace a row's shadow rays together (trace_packet.h). */
+static int sun_request(const tf_shader *sh, tf_vec3 p, tf_vec3 ng, tf_vec3 *start)
 {
     if (v3_dot(ng, sh->sun_dir) <= 0 || sh->sun_dir.z <= -1.0)
         return 0;
-    tf_vec3 start = v3_add(p, v3_scale(ng, shadow_lift_at(sh, p)));
-    (*shadow_rays)++;
-    return !terrain_occludes(sh, start, sh->sun_dir);
+    *start = v3_add(p, v3_scale(ng, shadow_lift_at(sh, p)));
+    return 1;
 }
 
-/* sunlit for a terrain hit with smooth normal n.  Flat (every scene before terrain smooth):
- * the sun must face the hit triangle itself, and the ray starts on it, lifted along its normal
- * -- so near the terminator each triangle is lit or dark on its own.  Smooth: the sun must
- * face n, and the ray starts on the smooth surface (tf_smooth_shadow_origin), lifted along n. */
-static int terrain_sunlit(const tf_shader *sh, const tf_hit *hit, const hit_triangle *t,
-                          tf_vec3 n, uint64_t *shadow_rays)
+/* sun_request for a terrain hit with smooth normal n.  Flat (every scene before terrain
+ * smooth): the sun must face the hit triangle itself, and the ray starts on it, lifted along
+ * its normal -- so near the terminator each triangle is lit or dark on its own.  Smooth: the
+ * sun must face n, and the ray starts on the smooth surface (tf_smooth_shadow_origin), lifted
+ * along n. */
+static int terrain_sun_request(const tf_shader *sh, const tf_hit *hit, const hit_triangle *t,
+                               tf_vec3 n, tf_vec3 *start)
 {
     if (!sh->smooth || sh->hf->proc) /* procedural: hit->n is n, the surface has no facets */
-        return sunlit(sh, hit->p, hit->n, shadow_rays);
-    return sunlit(sh, smooth_shadow_origin(sh->hf, t, hit->p), n, shadow_rays);
+        return sun_request(sh, hit->p, hit->n, start);
+    return sun_request(sh, smooth_shadow_origin(sh->hf, t, hit->p), n, start);
+}
+
+/* Whether a pending sample's shadow ray is occluded, traced now (the single-ray path); 0 when
+ * it casts none. */
+static int resolve_shadow(const tf_shader *sh, const tf_shade_pending *p, uint64_t *shadow_rays)
+{
+    if (!p->shadow)
+        return 0;
+    (*shadow_rays)++;
+    return terrain_occludes(sh, p->start, sh->sun_dir);
 }
 
 /* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */
@@ -407,7 +420,9 @@ static tf_vec3 terrain_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double 
                              variation);
 }
 
-tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays)
+/* A terrain hit shaded up to its shadow ray: the albedo, the sky's light and the sun's
+ * weight in *p (terrain_end adds the sun's light unless the ray is occluded). */
+static void terrain_begin(const tf_shader *sh, const tf_hit *hit, tf_shade_pending *p)
 {
     hit_triangle tri = {0};
     tf_vec3 n = hit->n; /* a procedural hit's normal is the surface's own gradient: smooth */
@@ -427,15 +442,31 @@ tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shado
     tf_vec3 albedo = terrain_albedo(sh, hit->p, n, variation);
     if (sh->hf->silt)
         albedo = erosion_tint(sh, hit->p, albedo);
-    double cos_sun = v3_dot(nb, sh->sun_dir);
-    tf_vec3 light = tf_sky_light_on(sh->sky_light, nb.z);
-    if (cos_sun > 0 && terrain_sunlit(sh, hit, &tri, n, shadow_rays))
-        light = v3_add(light, v3_scale(sh->sun_light, cos_sun));
-    return v3_mul(albedo, light);
+    p->surface = TF_SURFACE_TERRAIN;
+    p->base = albedo;
+    p->cos_sun = v3_dot(nb, sh->sun_dir);
+    p->light = tf_sky_light_on(sh->sky_light, nb.z);
+    p->shadow = p->cos_sun > 0 && terrain_sun_request(sh, hit, &tri, n, &p->start);
 }
 
-tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
-                       uint64_t *shadow_rays)
+static tf_vec3 terrain_end(const tf_shader *sh, const tf_shade_pending *p, int occluded)
+{
+    tf_vec3 light = p->light;
+    if (p->shadow && !occluded)
+        light = v3_add(light, v3_scale(sh->sun_light, p->cos_sun));
+    return v3_mul(p->base, light);
+}
+
+tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shadow_rays)
+{
+    tf_shade_pending p = {0};
+    terrain_begin(sh, hit, &p);
+    return terrain_end(sh, &p, resolve_shadow(sh, &p, shadow_rays));
+}
+
+/* The water plane at p seen along dir from dist, up to its shadow ray. */
+static void water_begin(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
+                        tf_shade_pending *pd)
 {
     tf_vec3 n = v3(0, 0, 1);
     double octaves = visible_octaves(sh, sh->ripple_scale, dist, TF_RIPPLE_OCTAVES);
@@ -445,38 +476,77 @@ tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
                           TF_RIPPLE_SALT, &gx, &gy);
         n = tf_ripple_normal(gx, gy);
     }
-    tf_vec3 refl;
-    double fresnel = tf_water_surface(dir, n, &refl);
-    tf_vec3 light = sh->sky_light;
-    if (sh->sun_dir.z > 0 && sunlit(sh, p, v3(0, 0, 1), shadow_rays))
-        light = v3_add(light, v3_scale(sh->sun_light, sh->sun_dir.z));
-    return tf_water_color(light, tf_sky_color(sh, v3_norm(refl)), fresnel);
+    pd->surface = TF_SURFACE_WATER;
+    pd->fresnel = tf_water_surface(dir, n, &pd->base); /* base: the reflected direction */
+    pd->light = sh->sky_light;
+    pd->cos_sun = sh->sun_dir.z;
+    pd->shadow = sh->sun_dir.z > 0 && sun_request(sh, p, v3(0, 0, 1), &pd->start);
+}
+
+static tf_vec3 water_end(const tf_shader *sh, const tf_shade_pending *p, int occluded)
+{
+    tf_vec3 light = p->light;
+    if (p->shadow && !occluded)
+        light = v3_add(light, v3_scale(sh->sun_light, p->cos_sun));
+    return tf_water_color(light, tf_sky_color(sh, v3_norm(p->base)), p->fresnel);
+}
+
+tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
+                       uint64_t *shadow_rays)
+{
+    tf_shade_pending pd = {0};
+    water_begin(sh, p, dir, dist, &pd);
+    return water_end(sh, &pd, resolve_shadow(sh, &pd, shadow_rays));
 }
 
 /* ---------------------------------------------------------------- the ray */
 
-void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,
-                  uint64_t *shadow_rays)
+double tf_shade_t_water(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir)
 {
     double sea = sh->scene->materials.sea_level;
     double t_water = TF_FAR_AWAY;
     if (dir.z < 0 && origin.z > sea)
         t_water = (sea - origin.z) / dir.z;
+    return t_water;
+}
 
-    tf_hit hit;
-    tf_vec3 c;
-    double dist;
-    if (trace_terrain(sh, origin, dir, t_water, &hit)) {
-        dist = hit.t;
-        c = tf_shade_terrain(sh, &hit, shadow_rays);
+void tf_shade_begin(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, double t_water,
+                    const tf_hit *hit, tf_shade_pending *p)
+{
+    *p = (tf_shade_pending){0};
+    if (hit) {
+        p->dist = hit->t;
+        terrain_begin(sh, hit, p);
     } else if (t_water < TF_FAR_AWAY) {
-        dist = t_water;
-        c = tf_shade_water(sh, v3_add(origin, v3_scale(dir, t_water)), dir, t_water, shadow_rays);
+        p->dist = t_water;
+        water_begin(sh, v3_add(origin, v3_scale(dir, t_water)), dir, t_water, p);
     } else {
+        p->surface = TF_SURFACE_SKY;
+    }
+}
+
+void tf_shade_end(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, const tf_shade_pending *p,
+                  int occluded, tf_sample *out)
+{
+    tf_vec3 c;
+    if (p->surface == TF_SURFACE_SKY) {
         c = tf_mist_apply(sh, tf_sky_color(sh, dir), origin, dir, INFINITY);
         *out = (tf_sample){(float)c.x, (float)c.y, (float)c.z, 0.0f, TF_SKY_DIST};
         return;
     }
-    c = tf_mist_apply(sh, c, origin, dir, dist);
-    *out = (tf_sample){(float)c.x, (float)c.y, (float)c.z, 1.0f, (float)dist};
+    c = p->surface == TF_SURFACE_TERRAIN ? terrain_end(sh, p, occluded)
+                                         : water_end(sh, p, occluded);
+    c = tf_mist_apply(sh, c, origin, dir, p->dist);
+    *out = (tf_sample){(float)c.x, (float)c.y, (float)c.z, 1.0f, (float)p->dist};
+}
+
+void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,
+                  uint64_t *shadow_rays)
+{
+    double t_water = tf_shade_t_water(sh, origin, dir);
+    tf_hit hit;
+    tf_shade_pending p;
+    int found = trace_terrain(sh, origin, dir, t_water, &hit);
+    tf_shade_begin(sh, origin, dir, t_water, found ? &hit : NULL, &p);
+    tf_shade_end(sh, origin, dir, &p, resolve_shadow(sh, &p, shadow_rays), out);
 }

@@ -74,6 +74,30 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,
                   uint64_t *shadow_rays);
 
+/* tf_shade_ray in three steps, split at the shadow ray, so that a caller can trace many
+ * samples' rays together (render.c's corner rows, trace_packet.h) with the same bits:
+ *   t_water = tf_shade_t_water(sh, o, d);
+ *   hit = tf_trace(sh->hf, o, d, 0.0, t_water, &h) ? &h : NULL;   (grid terrains)
+ *   tf_shade_begin(sh, o, d, t_water, hit, &p);
+ *   occluded = p.shadow && tf_occluded(sh->hf, p.start, sh->sun_dir, 0.0, TF_FAR_AWAY);
+ *   tf_shade_end(sh, o, d, &p, occluded, &sample);       (p.shadow: one shadow ray cast) */
+enum { TF_SURFACE_SKY, TF_SURFACE_TERRAIN, TF_SURFACE_WATER };
+typedef struct tf_shade_pending {
+    int surface;     /* TF_SURFACE_* */
+    int shadow;      /* 1: the sun is in front; a shadow ray from start toward sh->sun_dir */
+    tf_vec3 start;
+    tf_vec3 base;    /* terrain: the albedo; water: the reflected direction */
+    tf_vec3 light;   /* the light before the sun's */
+    double cos_sun;  /* the sun's weight where the shadow ray escapes */
+    double fresnel;  /* water */
+    double dist;     /* distance to the surface */
+} tf_shade_pending;
+double tf_shade_t_water(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir);
+void tf_shade_begin(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, double t_water,
+                    const tf_hit *hit, tf_shade_pending *p);
+void tf_shade_end(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, const tf_shade_pending *p,
+                  int occluded, tf_sample *out);
+
 /* The two surfaces, before mist (tf_shade_ray calls them; tests call them directly).
  * tf_shade_terrain: colour at a terrain hit; tf_shade_water: colour of the water plane at p
  * seen along unit dir from distance dist.  Both cast one shadow ray when the sun is in front of the surface. */

@@ -37,34 +37,16 @@
 #include <float.h>
 #include <math.h>
 #include "render/trace.h"
+#include "render/trace_internal.h"
 
 /* The arithmetic of the walk and the triangle tests, shared with the OpenCL kernels
  * (packet_trace.cl); what is here is the walk itself. */
 #include "render/trace_math.h"
 
-/* A triangle hit found so far. */
-typedef struct candidate {
-    double t;
-    int ci, cj;
-    int tri; /* 0: (A, B, C), 1: (A, C, D) */
-} candidate;
-
+/* The candidate hit and the ray's context are shared with the packet tracer (trace_internal.h). */
+typedef tf_trace_cand candidate;
+typedef tf_ray_ctx ray_ctx;
 typedef tf_sheared sheared; /* a vertex in ray space (trace_math.h) */
-
-/* Everything a walk needs about one ray, computed once. */
-typedef struct ray_ctx {
-    const tf_heightfield *hf;
-    double o[3], d[3];
-    double inv_dx, inv_dy; /* only used on axes with a nonzero step */
-    int sx, sy;            /* -1, 0, +1: direction of travel across columns / rows */
-    double tmin, tmax;     /* the caller's open interval for hits */
-    double t0, t1;         /* the part of [tmin, tmax] inside the terrain box (widened a hair) */
-    double margin;         /* altitude slack of the culling tests */
-    double tie_tol;        /* crossings closer than this pass "through a corner" */
-    int ci, cj;            /* the cell containing the point at t0 */
-    int kx, ky, kz;        /* ray-space axes (kz: the dominant direction) */
-    double shx, shy, shz;  /* shear constants */
-} ray_ctx;
 
 /* ---- crossings ---------------------------------------------------------------------------- */
 
@@ -288,7 +270,7 @@ static int walk_flat(const ray_ctx *r, candidate *best)
 
 /* ---- the hierarchical walk ---------------------------------------------------------------- */
 
-enum { STALE_NONE, STALE_X, STALE_Y };
+enum { STALE_NONE = TF_STALE_NONE, STALE_X = TF_STALE_X, STALE_Y = TF_STALE_Y };
 
 /* After a block step the index on the other axis was not followed.  Recompute it inside the
  * current level-L block as the flat walk has it right after the crossing at t_event: on an x
@@ -326,6 +308,20 @@ static int fix_stale_axis(const ray_ctx *r, int axis, int stale, int level, doub
     return j;
 }
 
+/* walk_hier's first level: see "Where to start" in walk_hier. */
+static int start_level(const ray_ctx *r)
+{
+    const tf_heightfield *hf = r->hf;
+    const int cells = hf->cells, top = hf->levels - 1;
+    if (top > 0) {
+        const double z0 = r->o[2] + r->t0 * r->d[2];
+        const size_t i1 = (size_t)(r->cj >> 1) * (size_t)(cells >> 1) + (size_t)(r->ci >> 1);
+        if (z0 <= hf->maxgrid[1][i1] + r->margin && z0 >= hf->mingrid[1][i1] - r->margin)
+            return 0;
+    }
+    return top;
+}
+
 static int walk_hier(const ray_ctx *r, candidate *best)
 {
     const tf_heightfield *hf = r->hf;
@@ -347,13 +343,7 @@ static int walk_hier(const ray_ctx *r, candidate *best)
      * The hit is the same from any start level: every level's walk groups the same cell
      * sequence and skips only culled blocks (top of the file), and level 0 is the flat walk
      * itself, from which the usual climbing resumes. */
-    int level = top;
-    if (top > 0) {
-        const double z0 = oz + t_cur * dz;
-        const size_t i1 = (size_t)(cj >> 1) * (size_t)(cells >> 1) + (size_t)(ci >> 1);
-        if (z0 <= hf->maxgrid[1][i1] + margin && z0 >= hf->mingrid[1][i1] - margin)
-            level = 0;
-    }
+    int level = start_level(r);
     for (;;) {
         const int bi = ci >> level, bj = cj >> level;
         double tx = sx ? tf_grid_cross((double)((bi + x_ahead) << level), cell, ox, inv_dx)
@@ -439,4 +429,31 @@ int tf_trace(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin,
 int tf_occluded(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax)
 {
     return trace_ray(hf, origin, dir, tmin, tmax, 0, NULL);
+}
+
+/* ---- the pieces the packet tracer calls per lane (trace_internal.h) -------------------------- */
+
+int tf_trace_setup(tf_ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmin,
+                   double tmax)
+{
+    return setup_ray(r, hf, o, d, tmin, tmax);
+}
+
+int tf_trace_start_level(const tf_ray_ctx *r) { return start_level(r); }
+
+int tf_trace_test_cell(const tf_ray_ctx *r, int ci, int cj, double tx, double ty,
+                       tf_trace_cand *best)
+{
+    return test_cell(r, ci, cj, tx, ty, best);
+}
+
+int tf_trace_fix_stale(const tf_ray_ctx *r, int axis, int stale, int level, double t_event,
+                       int strict)
+{
+    return fix_stale_axis(r, axis, stale, level, t_event, strict);
+}
+
+void tf_trace_finish(const tf_ray_ctx *r, const tf_trace_cand *c, tf_hit *hit)
+{
+    finish_hit(r, c, hit);
 }

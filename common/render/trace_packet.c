@@ -1,0 +1,116 @@
+/* trace_packet.c: tf_trace_packets and tf_occluded_packets (trace_packet.h): the packet kernel
+ * for the best ISA the CPU has (trace_packet_kernel.h: AVX-512, AVX2, or the portable one),
+ * capped by TF_TRACE_ISA; and the renderer's switch, TF_TRACE_PACKETS (unset: on with the
+ * AVX-512 kernel only). */
+#include "render/trace_packet.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "render/trace_packet_kernel.h"
+
+static const struct {
+    const char *name;
+    int lanes;
+    tf_trace_packet_kernel *fn;
+} kernels[] = {
+#ifdef TF_TRACE_X86
+    {"avx512", 8, tf_trace_packet_avx512},
+    {"avx2", 4, tf_trace_packet_avx2},
+#endif
+    {"portable", 2, tf_trace_packet_portable},
+};
+enum { KERNELS = sizeof kernels / sizeof kernels[0] };
+
+/* Whether this CPU runs kernel i. */
+static int kernel_runs(int i)
+{
+#ifdef TF_TRACE_X86
+    if (!strcmp(kernels[i].name, "avx512"))
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
+               __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq");
+    if (!strcmp(kernels[i].name, "avx2"))
+        return __builtin_cpu_supports("avx2");
+#endif
+    return 1;
+}
+
+static const char *forced = NULL; /* NULL: TF_TRACE_ISA decides */
+
+/* The kernel named isa, or KERNELS. */
+static int kernel_named(const char *isa)
+{
+    int i = 0;
+    while (i < KERNELS && strcmp(kernels[i].name, isa))
+        i++;
+    return i;
+}
+
+/* The best kernel this CPU runs, no better than the cap (an unknown name: no cap). */
+static int chosen(void)
+{
+    const char *cap = forced ? forced : getenv("TF_TRACE_ISA");
+    int i = cap ? kernel_named(cap) : 0;
+    if (i == KERNELS)
+        i = 0;
+    while (!kernel_runs(i))
+        i++;
+    return i;
+}
+
+int tf_trace_packet_force_isa(const char *isa)
+{
+    if (isa && (kernel_named(isa) == KERNELS || !kernel_runs(kernel_named(isa))))
+        return -1;
+    forced = isa;
+    return 0;
+}
+
+const char *tf_trace_packet_isa(void) { return kernels[chosen()].name; }
+int tf_trace_packet_lanes(void) { return kernels[chosen()].lanes; }
+
+static int packets_forced = -1;
+
+/* Unset, packets are on only with the AVX-512 kernel, the one not slower than single rays
+ * (bench/README.md, "Packets of rays": a whole render 1.00-1.01x with it; the AVX2 kernel
+ * 0.97-0.98x, its rays 0.7x; the portable one 0.3x). */
+int tf_trace_packets_enabled(void)
+{
+    if (packets_forced >= 0)
+        return packets_forced;
+    const char *v = getenv("TF_TRACE_PACKETS");
+    if (v && *v)
+        return strcmp(v, "0") != 0;
+    return !strcmp(kernels[chosen()].name, "avx512");
+}
+
+void tf_trace_packets_force(int on) { packets_forced = on < 0 ? -1 : on != 0; }
+
+/* A procedural terrain has no packet walk (trace_packet.h: not done): one ray at a time. */
+static void single_rays(const tf_heightfield *hf, int n, const tf_vec3 *o, const tf_vec3 *d,
+                        const double *tmin, const double *tmax, unsigned char *found,
+                        tf_hit *hits)
+{
+    for (int i = 0; i < n; i++)
+        found[i] = (unsigned char)(hits ? tf_trace(hf, o[i], d[i], tmin[i], tmax[i], &hits[i])
+                                        : tf_occluded(hf, o[i], d[i], tmin[i], tmax[i]));
+}
+
+void tf_trace_packets(const tf_heightfield *hf, int n, const tf_vec3 *o, const tf_vec3 *d,
+                      const double *tmin, const double *tmax, unsigned char *found,
+                      tf_hit *hits)
+{
+    if (!hf || hf->proc)
+        single_rays(hf, n, o, d, tmin, tmax, found, hits);
+    else
+        kernels[chosen()].fn(hf, n, o, d, tmin, tmax, found, hits);
+}
+
+void tf_occluded_packets(const tf_heightfield *hf, int n, const tf_vec3 *o, const tf_vec3 *d,
+                         const double *tmin, const double *tmax, unsigned char *occluded)
+{
+    if (!hf || hf->proc)
+        single_rays(hf, n, o, d, tmin, tmax, occluded, NULL);
+    else
+        kernels[chosen()].fn(hf, n, o, d, tmin, tmax, occluded, NULL);
+}

@@ -17,8 +17,9 @@
 # usage: bench/paint_progress.sh [SCENE]       (default scenes/default.scene at SIZE=1920x1080)
 #        bench/paint_progress.sh --smoke       (160x90, one configuration, 1 round)
 # env:   SIZE LEVELS="1 2 3" LEAVES="2 4 8" RAYS="4096" WORKERS="1 2" NET=2 ROUNDS=1
-#        TF=bin/terrafarm WATCH=build/tools/paint_watch
-set -eu
+#        TF=bin/terrafarm WATCH=build/tools/paint_watch (a TF copied elsewhere needs
+#        TERRAFARM_WEB=path/to/web for the paint's page)
+set -euo pipefail
 cd "$(dirname "$0")/.."
 TF=${TF:-bin/terrafarm}
 WATCH=${WATCH:-${TF_BUILD:-build}/tools/paint_watch}
@@ -68,6 +69,7 @@ paint_run() {
     pp=$!; PIDS="$PIDS $pp"
     for _ in $(seq 600); do grep -q 'paint: open' "$W/p.err" 2>/dev/null && break; sleep 0.05; done
     addr=$(sed -n 's/.*paint: open http:\/\/\([^/]*\)\/.*/\1/p' "$W/p.err")
+    [ -n "$addr" ] || { echo "paint_progress.sh: terrafarm paint did not start: $(cat "$W/p.err")" >&2; exit 1; }
     if [ "$2" -gt 0 ]; then
         port=$(sed -n 's/.*worker --connect HOST:\([0-9]*\).*/\1/p' "$W/p.err")
         for _ in $(seq "$2"); do "$TF" worker --connect "127.0.0.1:$port" -j 1 -q & PIDS="$PIDS $!"; done
@@ -78,7 +80,7 @@ print(json.load(urllib.request.urlopen(sys.argv[1]))["workers"])' "http://$addr/
             sleep 0.05
         done
     fi
-    "$WATCH" "$addr" 100 --resume >"$W/watch.out" || { cat "$W/p.err" >&2; exit 1; }
+    "$WATCH" "$addr" 50 --resume >"$W/watch.out" || { cat "$W/p.err" >&2; exit 1; }
     kill -TERM $pp; wait $pp 2>/dev/null || true
     wait 2>/dev/null || true
     tail -1 "$W/watch.out"

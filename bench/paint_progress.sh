@@ -10,13 +10,14 @@
 #              is the render's: tests/e2e/paint_browser.sh), also as a fraction of the render's
 #              wall time; painted_s, every pixel exact
 # Configurations: the granularity (A.7.2.4.2) -- levels a task descends (LEVELS), the side of
-# the cells rendered exactly (LEAVES), rays a task (RAYS) -- with WORKERS forked workers, and
+# the cells rendered exactly (LEAVES), the stride of their lattice before that (FINES), rays a
+# task (RAYS) -- with WORKERS forked workers, and
 # with NET networked workers (terrafarm worker --connect, one process each) instead.
 # PSNR_CURVE=1 prints the whole curve of the default configuration.
 #
 # usage: bench/paint_progress.sh [SCENE]       (default scenes/default.scene at SIZE=1920x1080)
 #        bench/paint_progress.sh --smoke       (160x90, one configuration, 1 round)
-# env:   SIZE LEVELS="1 2 3" LEAVES="2 4 8" RAYS="4096" WORKERS="1 2" NET=2 ROUNDS=1
+# env:   SIZE LEVELS="1 2 3" LEAVES="2 4 8" FINES="2" RAYS="4096" WORKERS="1 2" NET=2 ROUNDS=1
 #        TF=bin/terrafarm WATCH=build/tools/paint_watch (a TF copied elsewhere needs
 #        TERRAFARM_WEB=path/to/web for the paint's page)
 set -euo pipefail
@@ -25,13 +26,14 @@ TF=${TF:-bin/terrafarm}
 WATCH=${WATCH:-${TF_BUILD:-build}/tools/paint_watch}
 if [ "${1:-}" = --smoke ]; then
     shift
-    SIZE=160x90 LEVELS=2 LEAVES=8 RAYS=4096 WORKERS=2 NET=0 ROUNDS=1
+    SIZE=160x90 LEVELS=2 LEAVES=8 RAYS=4096 FINES=2 WORKERS=2 NET=0 ROUNDS=1
 fi
 SCENE=${1:-scenes/default.scene}
 SIZE=${SIZE:-1920x1080}
 LEVELS=${LEVELS:-1 2 3}
 LEAVES=${LEAVES:-2 4 8}
 RAYS=${RAYS:-4096}
+FINES=${FINES:-2}
 WORKERS=${WORKERS:-1 2}
 NET=${NET:-2}
 ROUNDS=${ROUNDS:-1}
@@ -56,15 +58,15 @@ render_wall() {
     awk -v a="$t0" -v b="$(now)" 'BEGIN {print b - a}'
 }
 
-# paint_run J NET LEVELS LEAF RAYS: one paint watched to the end; paint_watch's last line.
+# paint_run J NET LEVELS LEAF RAYS FINE: one paint watched to the end; paint_watch's last line.
 paint_run() {
     rm -f "$W/p.err"
     if [ "$2" -gt 0 ]; then
         "$TF" paint "$SCENE" --size "$SIZE" -j 0 --listen 127.0.0.1:0 --http 127.0.0.1:0 \
-            --paused --levels "$3" --leaf "$4" --task-rays "$5" 2>"$W/p.err" &
+            --paused --levels "$3" --leaf "$4" --task-rays "$5" --fine "$6" 2>"$W/p.err" &
     else
         "$TF" paint "$SCENE" --size "$SIZE" -j "$1" --http 127.0.0.1:0 --paused \
-            --levels "$3" --leaf "$4" --task-rays "$5" 2>"$W/p.err" &
+            --levels "$3" --leaf "$4" --task-rays "$5" --fine "$6" 2>"$W/p.err" &
     fi
     pp=$!; PIDS="$PIDS $pp"
     for _ in $(seq 600); do grep -q 'paint: open' "$W/p.err" 2>/dev/null && break; sleep 0.05; done
@@ -88,7 +90,7 @@ print(json.load(urllib.request.urlopen(sys.argv[1]))["workers"])' "http://$addr/
 
 field() { sed -n "s/.*$1=\([-0-9.]*\).*/\1/p"; }
 
-# config J NET LEVELS LEAF RAYS: medians of ROUNDS paint runs, each after a render.
+# config J NET LEVELS LEAF RAYS FINE: medians of ROUNDS paint runs, each after a render.
 config() {
     : >"$W/renders"; : >"$W/paints"
     for _ in $(seq "$ROUNDS"); do
@@ -102,23 +104,23 @@ config() {
     done
     t30=$(echo "$line" | field t30_s)
     frac=$(awk -v a="$t30" -v b="$rw" 'BEGIN {print a / b}')
-    printf '%-28s %s t30/render=%.3f\n' "workers=$1 net=$2 levels=$3 leaf=$4 rays=$5" "$line" "$frac"
+    printf '%-28s %s t30/render=%.3f\n' "workers=$1 net=$2 levels=$3 leaf=$4 fine=$6 rays=$5" "$line" "$frac"
 }
 
 best=""
 for j in $WORKERS; do
-    for l in $LEVELS; do for f in $LEAVES; do for r in $RAYS; do
-        config "$j" 0 "$l" "$f" "$r" | tee -a "$W/table"
-    done; done; done
+    for l in $LEVELS; do for f in $LEAVES; do for r in $RAYS; do for q in $FINES; do
+        [ "$q" -le "$f" ] && config "$j" 0 "$l" "$f" "$r" "$q" | tee -a "$W/table"
+    done; done; done; done
 done
 if [ "$NET" -gt 0 ]; then
-    for l in $LEVELS; do for f in $LEAVES; do for r in $RAYS; do
-        config 0 "$NET" "$l" "$f" "$r" | tee -a "$W/table"
-    done; done; done
+    for l in $LEVELS; do for f in $LEAVES; do for r in $RAYS; do for q in $FINES; do
+        [ "$q" -le "$f" ] && config 0 "$NET" "$l" "$f" "$r" "$q" | tee -a "$W/table"
+    done; done; done; done
 fi
 if [ "${PSNR_CURVE:-0}" = 1 ]; then
     echo "PSNR curve, 2 forked workers, default granularity:"
-    paint_run 2 0 2 4 4096 >/dev/null
+    paint_run 2 0 2 8 4096 2 >/dev/null
     cat "$W/watch.out"
 fi
 best=$(sort -t= -k9 -g "$W/table" | awk '{print $NF, $0}' | sort -g | head -1 | cut -d' ' -f2-)

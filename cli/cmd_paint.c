@@ -33,7 +33,8 @@ static const char usage[] =
     "      --paused              start paused (the page's Resume starts the dealing)\n"
     "      --root N              side of the quad-tree's roots (default 64)\n"
     "      --levels N            quad-tree levels a task descends (default 2)\n"
-    "      --leaf N              cells this side or smaller are rendered exactly (default 8)\n"
+    "      --leaf N              cells of this side are rendered exactly (default 8)\n"
+    "      --fine N              ... after their lattice at this stride (default 2)\n"
     "      --task-rays N         rays per task, about (default 4096)\n"
     "  -q, --quiet / -v, --verbose\n"
     "  -h, --help\n";
@@ -51,7 +52,7 @@ static int parse_int(const char *flag, const char *text, int lo, int hi, int *ou
 }
 
 enum { O_LISTEN = 256, O_SECRET, O_HTTP, O_HTTP_TOKEN, O_SIZE, O_PIXEL, O_SAVE, O_FARM,
-       O_UNTIL, O_PAUSED, O_ROOT, O_LEVELS, O_LEAF, O_RAYS };
+       O_UNTIL, O_PAUSED, O_ROOT, O_LEVELS, O_LEAF, O_RAYS, O_FINE };
 
 static const struct option longopts[] = {
     {"workers", required_argument, NULL, 'j'}, {"listen", required_argument, NULL, O_LISTEN},
@@ -62,7 +63,7 @@ static const struct option longopts[] = {
     {"farm", required_argument, NULL, O_FARM}, {"until-painted", no_argument, NULL, O_UNTIL},
     {"paused", no_argument, NULL, O_PAUSED}, {"root", required_argument, NULL, O_ROOT},
     {"levels", required_argument, NULL, O_LEVELS}, {"leaf", required_argument, NULL, O_LEAF},
-    {"task-rays", required_argument, NULL, O_RAYS}, {"quiet", no_argument, NULL, 'q'},
+    {"task-rays", required_argument, NULL, O_RAYS}, {"fine", required_argument, NULL, O_FINE}, {"quiet", no_argument, NULL, 'q'},
     {"verbose", no_argument, NULL, 'v'}, {"help", no_argument, NULL, 'h'},
     {NULL, 0, NULL, 0},
 };
@@ -92,6 +93,7 @@ static int take_option(int ch, tf_paint_opts *o, char **argv)
     case O_LEVELS: return parse_int("--levels", optarg, 1, 10, &p->levels);
     case O_LEAF: return parse_int("--leaf", optarg, 1, 1024, &p->leaf);
     case O_RAYS: return parse_int("--task-rays", optarg, 1, 1 << 24, &p->task_rays);
+    case O_FINE: return parse_int("--fine", optarg, 1, 1024, &p->fine);
     case 'q': tf_log_set_level(TF_LOG_ERROR); return 0;
     case 'v': tf_log_set_level(TF_LOG_DEBUG); return 0;
     case 'h': fputs(usage, stdout); return 1;

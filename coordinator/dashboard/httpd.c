@@ -25,7 +25,6 @@
 #include "linda/sock.h"
 #include "log.h"
 
-#define MAX_BODY 4096              /* a control's JSON body */
 #define MAX_CONNECTIONS 32
 #define MAX_PER_IP 16
 #define CONNECTION_TIMEOUT_S 15    /* idle connections are closed */
@@ -53,13 +52,6 @@ struct tf_httpd {
     int streams_open;
 };
 
-/* Per request: the body of a POST, read up to MAX_BODY. */
-typedef struct request {
-    int started;
-    char body[MAX_BODY + 1];
-    size_t len;
-    int too_big;
-} request;
 
 /* ---- the page's files ---------------------------------------------------------------------- */
 
@@ -303,10 +295,8 @@ static enum MHD_Result serve_get(tf_httpd *h, struct MHD_Connection *c, const ch
 
 /* POST /api/stop, /api/workers/ID/drop, /api/watermark {"watermark": N}. */
 static enum MHD_Result serve_post(tf_httpd *h, struct MHD_Connection *c, const char *url,
-                                  request *rq)
+                                  tf_web_body *rq)
 {
-    if (rq->too_big)
-        return tf_web_send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
     tf_snapshot *s = tf_hub_acquire(h->hub);
     if (!s)
         return tf_web_send_text(c, 503, "the render is starting");
@@ -352,7 +342,7 @@ static enum MHD_Result serve_post(tf_httpd *h, struct MHD_Connection *c, const c
         }
     } else if (!strcmp(url, "/api/watermark")) {
         json_error_t jerr;
-        json_t *doc = json_loadb(rq->body, rq->len, JSON_REJECT_DUPLICATES, &jerr);
+        json_t *doc = json_loadb(rq->data, rq->len, JSON_REJECT_DUPLICATES, &jerr);
         json_t *v = doc ? json_object_get(doc, "watermark") : NULL;
         if (!json_is_integer(v)) {
             status = 400;
@@ -401,30 +391,10 @@ static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *u
 {
     (void)version;
     tf_httpd *h = cls;
-    request *rq = *con_cls;
-    if (!rq) {
-        rq = calloc(1, sizeof *rq);
-        if (!rq)
-            return MHD_NO;
-        *con_cls = rq;
-        const char *cl = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Content-Length");
-        if (cl && strtoull(cl, NULL, 10) > MAX_BODY) {
-            rq->too_big = 1;
-            return tf_web_send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
-        }
-        return MHD_YES; /* headers are in; the body (if any) follows */
-    }
-    if (*upload_size) {
-        size_t n = *upload_size;
-        *upload_size = 0;
-        if (rq->too_big || rq->len + n > MAX_BODY) {
-            rq->too_big = 1; /* answer now and close: the rest is not read */
-            return tf_web_send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
-        }
-        memcpy(rq->body + rq->len, upload, n);
-        rq->len += n;
-        return MHD_YES;
-    }
+    enum MHD_Result ret;
+    tf_web_body *rq = tf_web_collect(c, con_cls, upload, upload_size, &ret);
+    if (!rq)
+        return ret;
     if (h->loopback && !tf_web_host_ok(c))
         return tf_web_send_text(c, 403, "the Host header must name a loopback address");
     int is_get = !strcmp(method, "GET") || !strcmp(method, "HEAD");
@@ -447,16 +417,6 @@ static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *u
         return tf_web_send_text(c, 403, "controls need the token in a header (Authorization: Bearer "
                                  "TOKEN or X-Terrafarm-Token)");
     return serve_post(h, c, url, rq);
-}
-
-static void request_done(void *cls, struct MHD_Connection *c, void **con_cls,
-                         enum MHD_RequestTerminationCode why)
-{
-    (void)cls;
-    (void)c;
-    (void)why;
-    free(*con_cls);
-    *con_cls = NULL;
 }
 
 static void mhd_log(void *cls, const char *fmt, va_list ap)
@@ -513,7 +473,7 @@ tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen)
         MHD_OPTION_CONNECTION_LIMIT, (unsigned)MAX_CONNECTIONS, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
         (unsigned)MAX_PER_IP, MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S,
         MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)CONNECTION_MEMORY,
-        MHD_OPTION_NOTIFY_COMPLETED, request_done, NULL, MHD_OPTION_EXTERNAL_LOGGER, mhd_log,
+        MHD_OPTION_NOTIFY_COMPLETED, tf_web_request_done, NULL, MHD_OPTION_EXTERNAL_LOGGER, mhd_log,
         NULL, MHD_OPTION_END);
     pthread_sigmask(SIG_SETMASK, &old, NULL);
     if (!h->mhd) {

@@ -147,3 +147,44 @@ int tf_web_load_file(const char *dir, const char *name, char **data, size_t *len
                          TF_WEB_MAX_FILE);
     return 0;
 }
+
+tf_web_body *tf_web_collect(struct MHD_Connection *c, void **con_cls, const char *upload,
+                            size_t *upload_size, enum MHD_Result *ret)
+{
+    tf_web_body *b = *con_cls;
+    *ret = MHD_YES;
+    if (!b) {
+        if (!(b = calloc(1, sizeof *b))) {
+            *ret = MHD_NO;
+            return NULL;
+        }
+        *con_cls = b;
+        const char *cl = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Content-Length");
+        if (cl && strtoull(cl, NULL, 10) > TF_WEB_MAX_BODY) {
+            b->too_big = 1;
+            *ret = tf_web_send_text(c, 413, "request body larger than %d bytes", TF_WEB_MAX_BODY);
+        }
+        return NULL; /* headers are in; the body (if any) follows */
+    }
+    if (*upload_size) {
+        size_t n = *upload_size;
+        *upload_size = 0;
+        if (b->too_big || b->len + n > TF_WEB_MAX_BODY) {
+            b->too_big = 1; /* answer now and close: the rest is not read */
+            *ret = tf_web_send_text(c, 413, "request body larger than %d bytes", TF_WEB_MAX_BODY);
+            return NULL;
+        }
+        memcpy(b->data + b->len, upload, n);
+        b->len += n;
+        return NULL;
+    }
+    return b->too_big ? NULL : b;
+}
+
+void tf_web_request_done(void *cls, struct MHD_Connection *c, void **con_cls,
+                         enum MHD_RequestTerminationCode why)
+{
+    (void)cls, (void)c, (void)why;
+    free(*con_cls);
+    *con_cls = NULL;
+}

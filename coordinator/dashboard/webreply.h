@@ -10,6 +10,24 @@
 #include <stddef.h>
 
 #define TF_WEB_MAX_FILE (1 << 20)
+#define TF_WEB_MAX_BODY 4096   /* a control's JSON body */
+
+/* A request's body, collected over libmicrohttpd's calls of the access handler (*con_cls). */
+typedef struct tf_web_body {
+    char data[TF_WEB_MAX_BODY + 1];
+    size_t len;
+    int too_big;
+} tf_web_body;
+
+/* The first calls of an access handler for one request: allocate its body, take the uploaded
+ * bytes, answer 413 beyond TF_WEB_MAX_BODY.  Returns the body once the request is whole (the
+ * handler answers it), or NULL with *ret what the handler returns now.  Free *con_cls in the
+ * completion callback. */
+tf_web_body *tf_web_collect(struct MHD_Connection *c, void **con_cls, const char *upload,
+                            size_t *upload_size, enum MHD_Result *ret);
+/* The completion callback that frees it. */
+void tf_web_request_done(void *cls, struct MHD_Connection *c, void **con_cls,
+                         enum MHD_RequestTerminationCode why);
 
 /* No caching, no sniffing, no framing, no referrer, only this origin's scripts. */
 void tf_web_headers(struct MHD_Response *r);

@@ -23,7 +23,6 @@
 #include "linda/sock.h"
 #include "log.h"
 
-#define MAX_BODY 4096
 #define MAX_WAIT_MS 2000
 #define MAX_CONNECTIONS 32
 #define MAX_PER_IP 16
@@ -42,12 +41,6 @@ struct tf_paint_http {
     int have_token, have_farm_token, loopback, port;
     web_file files[3];
 };
-
-typedef struct request {
-    int started, too_big;
-    char body[MAX_BODY + 1];
-    size_t len;
-} request;
 
 /* ---- reading ---- */
 
@@ -256,10 +249,10 @@ static enum MHD_Result post_submit(tf_paint_http *h, struct MHD_Connection *c)
 }
 
 static enum MHD_Result serve_post(tf_paint_http *h, struct MHD_Connection *c, const char *url,
-                                  request *rq)
+                                  tf_web_body *rq)
 {
     json_error_t jerr;
-    json_t *doc = rq->len ? json_loadb(rq->body, rq->len, 0, &jerr) : json_object();
+    json_t *doc = rq->len ? json_loadb(rq->data, rq->len, 0, &jerr) : json_object();
     if (!doc || !json_is_object(doc)) {
         json_decref(doc);
         return tf_web_send_text(c, 400, "the body must be a JSON object");
@@ -291,7 +284,7 @@ static int token_ok(const tf_paint_http *h, const char *given)
 }
 
 static enum MHD_Result gate(tf_paint_http *h, struct MHD_Connection *c, const char *url,
-                            const char *method, request *rq)
+                            const char *method, tf_web_body *rq)
 {
     if (h->loopback && !tf_web_host_ok(c))
         return tf_web_send_text(c, 403, "the Host header must name a loopback address");
@@ -321,40 +314,11 @@ static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *u
 {
     (void)version;
     tf_paint_http *h = cls;
-    request *rq = *con_cls;
-    if (!rq) {
-        if (!(rq = calloc(1, sizeof *rq)))
-            return MHD_NO;
-        *con_cls = rq;
-        const char *cl = MHD_lookup_connection_value(c, MHD_HEADER_KIND, "Content-Length");
-        if (cl && strtoull(cl, NULL, 10) > MAX_BODY) {
-            rq->too_big = 1;
-            return tf_web_send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
-        }
-        return MHD_YES;
-    }
-    if (*upload_size) {
-        size_t n = *upload_size;
-        *upload_size = 0;
-        if (rq->too_big || rq->len + n > MAX_BODY) {
-            rq->too_big = 1;
-            return tf_web_send_text(c, 413, "request body larger than %d bytes", MAX_BODY);
-        }
-        memcpy(rq->body + rq->len, upload, n);
-        rq->len += n;
-        return MHD_YES;
-    }
-    if (rq->too_big)
-        return MHD_YES;
+    enum MHD_Result ret;
+    tf_web_body *rq = tf_web_collect(c, con_cls, upload, upload_size, &ret);
+    if (!rq)
+        return ret;
     return gate(h, c, url, method, rq);
-}
-
-static void request_done(void *cls, struct MHD_Connection *c, void **con_cls,
-                         enum MHD_RequestTerminationCode why)
-{
-    (void)cls, (void)c, (void)why;
-    free(*con_cls);
-    *con_cls = NULL;
 }
 
 /* ---- start and stop ---- */
@@ -413,7 +377,7 @@ static int start_daemon(tf_paint_http *h, int fd, char *err, size_t errlen)
         NULL, handle, h, MHD_OPTION_LISTEN_SOCKET, fd, MHD_OPTION_CONNECTION_LIMIT,
         (unsigned)MAX_CONNECTIONS, MHD_OPTION_PER_IP_CONNECTION_LIMIT, (unsigned)MAX_PER_IP,
         MHD_OPTION_CONNECTION_TIMEOUT, 15u, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
-        (size_t)(32 * 1024), MHD_OPTION_NOTIFY_COMPLETED, request_done, NULL, MHD_OPTION_END);
+        (size_t)(32 * 1024), MHD_OPTION_NOTIFY_COMPLETED, tf_web_request_done, NULL, MHD_OPTION_END);
     pthread_sigmask(SIG_SETMASK, &old, NULL);
     if (!h->mhd) {
         close(fd);

@@ -15,6 +15,7 @@ typedef struct cell {
     int x, y, s, corners_known;
     float contrast;
     double key;
+    int fine;      /* a leaf-sized cell whose lattice at the fine stride is known */
 } cell;
 
 struct tf_paint_tree {
@@ -31,7 +32,7 @@ struct tf_paint_tree {
 
 void tf_paint_params_default(tf_paint_params *p)
 {
-    *p = (tf_paint_params){64, 2, 8, 4096};
+    *p = (tf_paint_params){64, 2, 8, 4096, 2};
 }
 
 static int pow2(int v) { return v > 0 && (v & (v - 1)) == 0; }
@@ -46,6 +47,8 @@ const char *tf_paint_params_problem(const tf_paint_params *p)
         return "levels per task must be 1 to 10";
     if (p->task_rays < 1 || p->task_rays > 1 << 24)
         return "rays per task must be 1 to 16777216";
+    if (!pow2(p->fine) || p->fine > p->leaf)
+        return "the fine stride must be a power of two no larger than the exact side";
     return NULL;
 }
 
@@ -191,7 +194,7 @@ int tf_paint_tree_reset(tf_paint_tree *t)
     t->exact_pixels = t->samples = t->queued_pixels = t->out_pixels = t->roots_left = 0;
     for (int y = 0; y < t->h; y += t->p.root)
         for (int x = 0; x < t->w; x += t->p.root) {
-            if (push(t, (cell){x, y, t->p.root, 0, 0, 0}) != 0)
+            if (push(t, (cell){x, y, t->p.root, 0, 0, 0, 0}) != 0)
                 return -1;
             t->roots_left++;
         }
@@ -207,13 +210,22 @@ void tf_paint_tree_set_interest(tf_paint_tree *t, tf_rect area)
         sift_down(t->heap, t->n, i);
 }
 
-/* The node a cell becomes, and about how many rays it costs. */
+/* Does a cell of side s still want its fine pass (its lattice at the fine stride)? */
+static int wants_fine(const tf_paint_tree *t, const cell *c)
+{
+    return !c->fine && t->p.fine < c->s;
+}
+
+/* The node a cell becomes, and about how many rays it costs: a coarse cell (or a root) is
+ * refined `levels` levels, down to the exact side; a cell of the exact side gets its fine
+ * pass first, then is rendered exactly. */
 static tf_paint_node node_of(const tf_paint_tree *t, const cell *c, int64_t *rays)
 {
     tf_paint_node n = {c->x, c->y, c->s, 0, c->corners_known ? TF_PAINT_CORNERS_KNOWN : 0};
-    if (c->s > t->p.leaf || !c->corners_known) {
+    if (c->s > t->p.leaf || !c->corners_known || wants_fine(t, c)) {
         int d = c->s >> t->p.levels;
-        n.d = d > t->p.leaf ? d : t->p.leaf;
+        n.d = c->s > t->p.leaf || !c->corners_known ? (d > t->p.leaf ? d : t->p.leaf)
+                                                    : t->p.fine;
         if (n.d > c->s)
             n.d = c->s;
         *rays = (int64_t)(tf_paint_node_values(&n, t->w, t->h) / TF_PAINT_SAMPLE_FLOATS);
@@ -245,7 +257,8 @@ void tf_paint_tree_requeue(tf_paint_tree *t, const tf_paint_node *nodes, int cou
     for (int k = 0; k < count; k++) {
         const tf_paint_node *n = &nodes[k];
         t->out_pixels -= cell_pixels(t, n->x, n->y, n->s);
-        cell c = {n->x, n->y, n->s, (n->flags & TF_PAINT_CORNERS_KNOWN) != 0, 0, 0};
+        cell c = {n->x, n->y, n->s, (n->flags & TF_PAINT_CORNERS_KNOWN) != 0, 0, 0, 0};
+        c.fine = n->d == 0 && t->p.fine < n->s; /* an exact node had had its fine pass */
         if (c.corners_known)
             c.contrast = cell_contrast(t, n->x, n->x + n->s < t->w ? n->x + n->s : t->w, n->y,
                                        n->y + n->s < t->h ? n->y + n->s : t->h);
@@ -295,6 +308,24 @@ static int put_header(tf_paint_bytes *out, uint32_t kind, const tf_paint_node *n
     return tf_paint_bytes_add(out, b, sizeof b);
 }
 
+/* After a SAMPLE node: a fine pass queues its node again, to be rendered exactly, with the
+ * widest contrast of its fine cells; any other queues its sub-squares as cells. */
+static void queue_after_sample(tf_paint_tree *t, const tf_paint_node *n, const int *xs, int ni,
+                               const int *ys, int nj, int *rc)
+{
+    int fine_pass = (n->flags & TF_PAINT_CORNERS_KNOWN) && n->s <= t->p.leaf && n->d < n->s;
+    float widest = 0;
+    for (int j = 0; j + 1 < nj; j++)
+        for (int i = 0; i + 1 < ni; i++) {
+            float c = cell_contrast(t, xs[i], xs[i + 1], ys[j], ys[j + 1]);
+            if (!fine_pass)
+                *rc |= push(t, (cell){xs[i], ys[j], n->d, 1, c, 0, 0});
+            widest = fmaxf(widest, c);
+        }
+    if (fine_pass)
+        *rc |= push(t, (cell){n->x, n->y, n->s, 1, widest, 0, 1});
+}
+
 /* A SAMPLE node's values into the corners, its lattice to the page, its sub-squares queued. */
 static const float *apply_sample(tf_paint_tree *t, const tf_paint_node *n, const float *v,
                                  tf_paint_bytes *out, int *rc)
@@ -320,10 +351,7 @@ static const float *apply_sample(tf_paint_tree *t, const tf_paint_node *n, const
         for (int i = 0; i < ni; i++)
             *rc |= tf_paint_bytes_add(out, &t->srgb[corner_index(t, xs[i], ys[j])], 3);
     t->out_pixels -= cell_pixels(t, n->x, n->y, n->s);
-    for (int j = 0; j + 1 < nj; j++)
-        for (int i = 0; i + 1 < ni; i++)
-            *rc |= push(t, (cell){xs[i], ys[j], n->d, 1,
-                                  cell_contrast(t, xs[i], xs[i + 1], ys[j], ys[j + 1]), 0});
+    queue_after_sample(t, n, xs, ni, ys, nj, rc);
     return v;
 }
 

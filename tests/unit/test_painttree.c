@@ -129,7 +129,8 @@ static void every_size_and_parameter(void **state)
     (void)state;
     static const int sizes[][2] = {{1, 1}, {7, 3}, {64, 64}, {65, 33}, {200, 113}, {320, 180}};
     static const tf_paint_params params[] = {
-        {64, 2, 8, 4096}, {64, 1, 1, 100}, {16, 3, 4, 1}, {128, 4, 16, 20000}, {1, 1, 1, 50}};
+        {64, 2, 8, 4096, 2}, {64, 1, 1, 100, 1}, {16, 3, 4, 1, 1}, {128, 4, 16, 20000, 4},
+        {1, 1, 1, 50, 1},     {64, 2, 8, 4096, 8}, {32, 1, 16, 700, 1}};
     for (size_t s = 0; s < sizeof sizes / sizeof sizes[0]; s++)
         for (size_t p = 0; p < sizeof params / sizeof params[0]; p++) {
             run r;
@@ -156,7 +157,7 @@ static void exact_shares(const run *r, tf_rect a, int *inside, int *outside)
 static void interest_first(void **state)
 {
     (void)state;
-    tf_paint_params p = {64, 2, 8, 512};
+    tf_paint_params p = {64, 2, 8, 512, 2};
     run r;
     run_init(&r, 320, 180, &p);
     step(&r); /* the roots */
@@ -177,7 +178,7 @@ static void interest_first(void **state)
 static void lost_task_comes_back(void **state)
 {
     (void)state;
-    tf_paint_params p = {32, 2, 4, 300};
+    tf_paint_params p = {32, 2, 4, 300, 2};
     run r;
     run_init(&r, 100, 70, &p);
     tf_paint_node lost[TF_PAINT_MAX_NODES];
@@ -197,7 +198,7 @@ static void lost_task_comes_back(void **state)
 static void new_view_starts_over(void **state)
 {
     (void)state;
-    tf_paint_params p = {64, 2, 8, 2000};
+    tf_paint_params p = {64, 2, 8, 2000, 2};
     run r;
     run_init(&r, 150, 100, &p);
     for (int k = 0; k < 5; k++)

@@ -92,11 +92,18 @@ static int meets_interest(const tf_paint_tree *t, const cell *c)
            a->y < c->y + c->s;
 }
 
-/* Roots first, then the area of interest, then contrast times area (painttree.h). */
+static tf_paint_node node_of(const tf_paint_tree *t, const cell *c, int64_t *rays);
+
+/* Roots first, then the area of interest, then what a ray buys: contrast times area over the
+ * rays the cell's next node costs (painttree.h), so the cheap passes that sharpen the most
+ * come before the exact ones that only settle what is already nearly right. */
 static double key_of(const tf_paint_tree *t, const cell *c)
 {
     double tier = !c->corners_known ? 2 : meets_interest(t, c) ? 1 : 0;
-    return tier * 1e13 + ((double)c->contrast + 1.0 / 64) * (double)c->s * (double)c->s;
+    int64_t rays;
+    node_of(t, c, &rays);
+    double area = (double)c->s * (double)c->s;
+    return tier * 1e13 + ((double)c->contrast + 1.0 / 64) * area / (double)(rays > 0 ? rays : 1);
 }
 
 static void sift_up(cell *h, size_t i)

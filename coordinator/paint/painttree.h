@@ -13,9 +13,10 @@
  *
  * Which cell first: every root before anything else (the first complete coarse image); then
  * the cells that meet the area of interest (where the person pointed); then the rest; within
- * a tier, by contrast times area: the widest per-channel range of the cell's corners' display
+ * a tier, by what a ray buys: the widest per-channel range of the cell's corners' display
  * levels (the antialiasing's own measure, render.c), plus a floor so flat cells are not left to
- * the very end, times its side squared.  A task is the best cells, batched up to about
+ * the very end, times its side squared, over the rays its next node costs -- so the cheap
+ * passes that sharpen most come before the exact ones that settle what is nearly right.  A task is the best cells, batched up to about
  * `task_rays` rays (the granularity, measured in bench/paint_progress.sh); the roots go in
  * tasks of their own, so the coarse picture never waits for finer work.
  *

@@ -5,9 +5,11 @@
  * tests/e2e/paint_browser.sh), and the times to reach 20, 25, 30 and 35 dB.  For
  * bench/paint_progress.sh; the view must not change while it watches.
  *
- *   paint_watch HOST:PORT [INTERVAL_MS] [--resume]
+ *   paint_watch HOST:PORT [INTERVAL_MS] [--resume] [--then-move]
  * With --resume (a paint started --paused) it resumes the paint itself and times everything
- * from then, so its own start-up is not counted.
+ * from then, so its own start-up is not counted.  With --then-move, once painted it posts a new
+ * view (the sun turned 10 degrees) as the page does and times the first pixels of the new view
+ * and its complete coarse picture ("move_first_ms=... move_coarse_ms=...").
  * Output: "t_s=T psnr_db=P exact=F" lines, then "coarse_s=... painted_s=... t20_s=... t25_s=...
  * t30_s=... t35_s=..." (-1: not reached before painted). */
 #include <inttypes.h>
@@ -56,6 +58,43 @@ static int64_t pull(const char *addr, int64_t gen, int64_t from, uint8_t *rgb, i
     return from;
 }
 
+/* Post a view with the sun turned and time, on the page's terms, its first pixels and its
+ * complete coarse picture. */
+static void move_and_time(const char *addr, int64_t gen, int64_t end)
+{
+    char err[512];
+    json_t *s = status(addr);
+    json_t *view = json_deep_copy(json_object_get(s, "view"));
+    json_t *sun = json_object_get(view, "sun");
+    json_object_set_new(sun, "azimuth", json_real(fmod(num(sun, "azimuth") + 10, 360)));
+    json_decref(s);
+    double t0 = tf_now_s(), first = -1, coarse = -1;
+    json_t *a = tf_http_json(addr, "POST", "/api/paint/view", "watch", view, tf_now_ms() + 10000,
+                             NULL, err, sizeof err);
+    json_decref(view);
+    if (!a)
+        tf_die(1, "%s", err);
+    json_decref(a);
+    while (coarse < 0) {
+        char path[128];
+        snprintf(path, sizeof path, "/api/paint/updates?gen=%" PRId64 "&from=%" PRId64 "&wait=5",
+                 gen, end);
+        tf_http_answer ans;
+        if (tf_http_request(addr, "GET", path, NULL, NULL, NULL, 0, tf_now_ms() + 30000,
+                            (size_t)1 << 30, &ans, err, sizeof err))
+            tf_die(1, "%s", err);
+        if (ans.len > 0 && first < 0) /* the old view is painted: these are the new one's */
+            first = tf_now_s() - t0;
+        free(ans.body);
+        s = status(addr);
+        int64_t now_gen = (int64_t)num(s, "gen");
+        if (first >= 0 && now_gen > gen && num(json_object_get(s, "counts"), "roots_left") == 0)
+            coarse = tf_now_s() - t0;
+        json_decref(s);
+    }
+    printf("move_first_ms=%.1f move_coarse_ms=%.1f\n", first * 1000, coarse * 1000);
+}
+
 int main(int argc, char **argv)
 {
     if (argc < 2)
@@ -67,7 +106,12 @@ int main(int argc, char **argv)
     int64_t gen = (int64_t)num(s, "gen"), end = 0;
     double t0 = tf_now_s() - num(s, "view_age_s"); /* the view's start, on our clock */
     json_decref(s);
-    if (argc > 3 && !strcmp(argv[3], "--resume")) {
+    int resume = 0, move = 0;
+    for (int k = 3; k < argc; k++) {
+        resume |= !strcmp(argv[k], "--resume");
+        move |= !strcmp(argv[k], "--then-move");
+    }
+    if (resume) {
         char err[512];
         json_t *a = tf_http_json(addr, "POST", "/api/paint/resume", "watch", NULL,
                                  tf_now_ms() + 10000, NULL, err, sizeof err);
@@ -108,6 +152,8 @@ int main(int argc, char **argv)
                 reach[q] = shots[k].t;
         free(shots[k].rgb);
     }
+    if (move)
+        move_and_time(addr, gen, end);
     printf("coarse_s=%.3f painted_s=%.3f t20_s=%.3f t25_s=%.3f t30_s=%.3f t35_s=%.3f\n", coarse,
            painted, reach[0], reach[1], reach[2], reach[3]);
     free(shots);

@@ -13,7 +13,8 @@
 # the cells rendered exactly (LEAVES), the stride of their lattice before that (FINES), rays a
 # task (RAYS) -- with WORKERS forked workers, and
 # with NET networked workers (terrafarm worker --connect, one process each) instead.
-# PSNR_CURVE=1 prints the whole curve of the default configuration.
+# PSNR_CURVE=1 prints the whole curve of the default configuration, then moves the view as the
+# page does and times the new view's first pixels and its coarse picture.
 #
 # usage: bench/paint_progress.sh [SCENE]       (default scenes/default.scene at SIZE=1920x1080)
 #        bench/paint_progress.sh --smoke       (160x90, one configuration, 1 round)
@@ -82,7 +83,7 @@ print(json.load(urllib.request.urlopen(sys.argv[1]))["workers"])' "http://$addr/
             sleep 0.05
         done
     fi
-    "$WATCH" "$addr" 50 --resume >"$W/watch.out" || { cat "$W/p.err" >&2; exit 1; }
+    "$WATCH" "$addr" 50 --resume ${MOVE:+--then-move} >"$W/watch.out" || { cat "$W/p.err" >&2; exit 1; }
     kill -TERM $pp; wait $pp 2>/dev/null || true
     wait 2>/dev/null || true
     tail -1 "$W/watch.out"
@@ -119,8 +120,8 @@ if [ "$NET" -gt 0 ]; then
     done; done; done; done
 fi
 if [ "${PSNR_CURVE:-0}" = 1 ]; then
-    echo "PSNR curve, 2 forked workers, default granularity:"
-    paint_run 2 0 2 8 4096 2 >/dev/null
+    echo "PSNR curve, 2 forked workers, default granularity, then a new view (the sun turned):"
+    MOVE=1 paint_run 2 0 2 16 16384 2 >/dev/null
     cat "$W/watch.out"
 fi
 best=$(sort -t= -k9 -g "$W/table" | awk '{print $NF, $0}' | sort -g | head -1 | cut -d' ' -f2-)

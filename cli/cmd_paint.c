@@ -33,9 +33,9 @@ static const char usage[] =
     "      --paused              start paused (the page's Resume starts the dealing)\n"
     "      --root N              side of the quad-tree's roots (default 64)\n"
     "      --levels N            quad-tree levels a task descends (default 2)\n"
-    "      --leaf N              cells of this side are rendered exactly (default 8)\n"
+    "      --leaf N              cells of this side are rendered exactly (default 16)\n"
     "      --fine N              ... after their lattice at this stride (default 2)\n"
-    "      --task-rays N         rays per task, about (default 4096)\n"
+    "      --task-rays N         rays per task, about (default 16384)\n"
     "  -q, --quiet / -v, --verbose\n"
     "  -h, --help\n";
 

@@ -32,7 +32,7 @@ struct tf_paint_tree {
 
 void tf_paint_params_default(tf_paint_params *p)
 {
-    *p = (tf_paint_params){64, 2, 8, 4096, 2};
+    *p = (tf_paint_params){64, 2, 16, 16384, 2}; /* bench/README.md section 11 */
 }
 
 static int pow2(int v) { return v > 0 && (v & (v - 1)) == 0; }

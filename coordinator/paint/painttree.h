@@ -39,8 +39,8 @@
 typedef struct tf_paint_params {
     int root;        /* side of a root node, a power of two (64) */
     int levels;      /* quad-tree levels a SAMPLE node descends (2) */
-    int leaf;        /* a cell this side or smaller is rendered exactly (8) */
-    int task_rays;   /* about this many rays per task (4096) */
+    int leaf;        /* a cell this side or smaller is rendered exactly (16) */
+    int task_rays;   /* about this many rays per task (16384) */
     int fine;        /* a leaf-sized cell's lattice is traced at this stride before it is
                         rendered exactly (2; = leaf: no such pass) */
 } tf_paint_params;

@@ -186,7 +186,14 @@ function showFigures(s) {
 
 function showView(v) {
   paint.view = v;
-  const set = (id, value) => { $(id).value = value; $(id).nextElementSibling.value = value; };
+  // a slider never clamps the scene's own value: its range grows to hold it
+  const set = (id, value) => {
+    const e = $(id);
+    if (value > Number(e.max)) e.max = String(value * 2);
+    if (value < Number(e.min)) e.min = String(value);
+    e.value = value;
+    e.nextElementSibling.value = value;
+  };
   set("fov", v.camera.fov);
   set("azimuth", ((v.sun.azimuth % 360) + 360) % 360);
   set("elevation", v.sun.elevation);

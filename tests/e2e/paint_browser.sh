@@ -15,7 +15,9 @@ render -q -j 2 --size $SIZE --http none -o "$T/ref.exr" || fail "reference: $(ca
 [ -s "$T/ref.png" ] || fail "the reference render wrote no preview PNG"
 
 say "terrafarm paint, paused, watched by Chromium"
-start_paint "$T/paint.err" --size $SIZE -j 2 --paused --http 127.0.0.1:0 --save "$T/saved.scene"
+# tasks of ~1000 rays: a 320x180 picture in dozens of tasks, so the order of dealing shows
+start_paint "$T/paint.err" --size $SIZE -j 2 --paused --http 127.0.0.1:0 --save "$T/saved.scene" \
+    --task-rays 1000
 python3 "$(dirname "$0")/cdp_paint.py" "$CHROMIUM" "$PAINT_URL" "$T/ref.png" "$T" >"$T/cdp.out" 2>&1
 crc=$?
 cat "$T/cdp.out"

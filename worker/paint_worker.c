@@ -25,7 +25,11 @@ static void view_clear(paint_view *v)
     *v = (paint_view){0, NULL, NULL};
 }
 
-/* rd the scene of view gen and make a renderer of it.  0, or -1 with err. */
+/* Read the scene of view gen and make a renderer of it: 0; 1 when the view is gone (a newer
+ * one replaced it after this task was dealt: the task is stale, and skipped); -1 with err.
+ * The coordinator puts a view before any of its tasks, and a connection's requests are served
+ * in order, so a view missing here can only have been replaced: an rdp, never a blocking rd
+ * that would wait for a view that will not come back. */
 static int load_view(ts_client *c, const tf_scene *s, const tf_heightfield *hf, int64_t gen,
                      paint_view *v, char *err, size_t errlen)
 {
@@ -33,10 +37,14 @@ static int load_view(ts_client *c, const tf_scene *s, const tf_heightfield *hf, 
     tf_tuple_init(&tmpl);
     tf_tuple_init(&got);
     const char *text;
-    int rc = -1;
-    if (tf_tuple_pack(&tmpl, "siSS", TF_TAG_PAINT_VIEW, gen) || ts_rd(c, &tmpl, &got) ||
-        tf_tuple_get_string(&got, 2, &text)) {
+    int rc = -1, found = 0;
+    if (tf_tuple_pack(&tmpl, "siSS", TF_TAG_PAINT_VIEW, gen) ||
+        (found = ts_rdp(c, &tmpl, &got)) < 0 || (found && tf_tuple_get_string(&got, 2, &text))) {
         tf_seterr(err, errlen, "cannot read view %" PRId64 ": %s", gen, ts_client_error(c));
+        goto out;
+    }
+    if (!found) {
+        rc = 1;
         goto out;
     }
     char perr[1024];
@@ -108,10 +116,13 @@ static int answer(ts_client *c, const tf_scene *s, const tf_heightfield *hf, pai
         tf_error("paint task %" PRId64 ": %s", m->id, why);
         return 1;
     }
-    if (m->gen != v->gen && load_view(c, s, hf, m->gen, v, err, sizeof err) != 0) {
+    int fresh = m->gen == v->gen ? 0 : load_view(c, s, hf, m->gen, v, err, sizeof err);
+    if (fresh < 0) {
         tf_error("%s", err);
         return 1;
     }
+    if (fresh > 0) /* a task of a view already replaced: nobody wants its answer */
+        return ts_in(c, tmpl, next) ? -1 : 0;
     size_t n = tf_paint_task_values(nodes, count, s->width, s->height);
     float *values = malloc(n * sizeof *values + 1);
     if (!values) {

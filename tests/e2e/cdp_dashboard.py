@@ -1,80 +1,32 @@
 #!/usr/bin/env python3
 """tests/e2e/cdp_dashboard.py: drive a real headless Chromium at the dashboard of a running
-render over the DevTools protocol (--remote-debugging-pipe: NUL-separated JSON on fds 3 and 4,
-no extra Python modules), sample what the page shows while the render runs, save a screenshot,
-and check it: no error shown, workers listed, progress rising, finished stamps drawn.
+render over the DevTools protocol (cdp_lib.py), sample what the page shows while the render
+runs, save a screenshot, and check it: no error shown, workers listed, progress rising,
+finished stamps drawn.
 
 usage: cdp_dashboard.py CHROMIUM URL SCREENSHOT.png [SECONDS]
 Exit 0 if every check holds, 1 with one line per failed check, 77 if Chromium cannot start."""
-import base64, json, os, subprocess, sys, tempfile, time
+import base64, json, os, sys, time
 
 chromium, url, shot = sys.argv[1], sys.argv[2], sys.argv[3]
 limit = float(sys.argv[4]) if len(sys.argv) > 4 else 40.0
 
-profile = tempfile.mkdtemp(prefix="tf-chromium-")
-to_chrome_r, to_chrome_w = os.pipe()
-from_chrome_r, from_chrome_w = os.pipe()
-args = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync",
-        "--disable-dev-shm-usage", "--user-data-dir=" + profile, "--window-size=1280,1280",
-        "--remote-debugging-pipe", "about:blank"]
-def child_fds():
-    os.dup2(to_chrome_r, 3)
-    os.dup2(from_chrome_w, 4)
-log = open(os.path.join(profile, "chromium.log"), "w")
-proc = subprocess.Popen(args, pass_fds=(3, 4), preexec_fn=child_fds, stdout=log, stderr=log)
-os.close(to_chrome_r)
-os.close(from_chrome_w)
-buf = b""
-next_id = 0
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from cdp_lib import Chrome  # noqa: E402  (the DevTools plumbing the browser tests share)
+
+ch = Chrome(chromium, 1280, 1280)
+
 
 def finish(code, lines=()):
-    for line in lines:
-        print(line)
-    try:
-        proc.kill()
-        proc.wait(5)
-    except Exception:
-        pass
-    subprocess.call(["rm", "-rf", profile])
-    sys.exit(code)
+    ch.finish(code, lines)
 
-def read_message(deadline):
-    global buf
-    import select
-    while b"\0" not in buf:
-        left = deadline - time.time()
-        if left <= 0:
-            finish(1, ["FAIL: Chromium did not answer in time"])
-        r, _, _ = select.select([from_chrome_r], [], [], left)
-        if not r:
-            continue
-        chunk = os.read(from_chrome_r, 1 << 20)
-        if not chunk:
-            log.flush()
-            tail = open(os.path.join(profile, "chromium.log")).read()[-600:]
-            finish(77, ["Chromium cannot run here: it closed the DevTools pipe: " + tail.strip().replace("\n", " | ")])
-        buf += chunk
-    msg, buf = buf.split(b"\0", 1)
-    return json.loads(msg)
 
 def call(method, params=None, session=None, timeout=20):
-    global next_id
-    next_id += 1
-    m = {"id": next_id, "method": method, "params": params or {}}
-    if session:
-        m["sessionId"] = session
-    os.write(to_chrome_w, json.dumps(m).encode() + b"\0")
-    deadline = time.time() + timeout
-    while True:
-        r = read_message(deadline)
-        if r.get("id") == next_id:
-            if "error" in r:
-                finish(1, ["FAIL: DevTools %s: %s" % (method, r["error"])])
-            return r["result"]
+    return ch.call(method, params, timeout, session=session is not None)
 
-target = call("Target.createTarget", {"url": url})["targetId"]
-session = call("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+
+ch.open(url)
+session = ch.session
 
 PROBE = """JSON.stringify({
   data: Object.assign({}, document.body ? document.body.dataset : {}),

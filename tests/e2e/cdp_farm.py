@@ -1,14 +1,13 @@
 #!/usr/bin/env python3
 """tests/e2e/cdp_farm.py: drive a real headless Chromium at a standing farm's web view over the
-DevTools protocol (--remote-debugging-pipe: NUL-separated JSON on fds 3 and 4, no extra Python
-modules), as tests/e2e/farm_browser.sh asks: log in through /login?token=, see the queue with
+DevTools protocol (cdp_lib.py), as tests/e2e/farm_browser.sh asks: log in through /login?token=, see the queue with
 its states, click "resume" on the paused job with the mouse and see it run to done, see a running
 job's dashboard link (and that it answers), see the workers table, save a screenshot.
 
 usage: cdp_farm.py CHROMIUM BASE_URL TOKEN SHOT.png READY_FILE PAUSED_ID JOB_ID... [--limit S]
 READY_FILE is created once the page shows every job (the caller then starts the worker).
 Exit 0 if every check holds, 1 with a FAIL line per failed check, 77 if Chromium cannot start."""
-import base64, http.client, json, os, select, subprocess, sys, tempfile, time, urllib.parse
+import base64, http.client, json, os, sys, time, urllib.parse
 
 args = sys.argv[1:]
 limit = 300.0
@@ -19,77 +18,22 @@ if "--limit" in args:
 chromium, base, token, shot, ready_file, paused = args[:6]
 jobs = [paused] + args[6:]
 
-profile = tempfile.mkdtemp(prefix="tf-chromium-")
-to_chrome_r, to_chrome_w = os.pipe()
-from_chrome_r, from_chrome_w = os.pipe()
-argv = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync",
-        "--disable-dev-shm-usage", "--user-data-dir=" + profile, "--window-size=1280,900",
-        "--remote-debugging-pipe", "about:blank"]
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from cdp_lib import Chrome  # noqa: E402  (the DevTools plumbing the browser tests share)
 
-
-def child_fds():
-    os.dup2(to_chrome_r, 3)
-    os.dup2(from_chrome_w, 4)
-
-
-log = open(os.path.join(profile, "chromium.log"), "w")
-proc = subprocess.Popen(argv, pass_fds=(3, 4), preexec_fn=child_fds, stdout=log, stderr=log)
-os.close(to_chrome_r)
-os.close(from_chrome_w)
-buf = b""
-next_id = 0
+ch = Chrome(chromium, 1280, 900)
 
 
 def finish(code, lines=()):
-    for line in lines:
-        print(line)
-    try:
-        proc.kill()
-        proc.wait(5)
-    except Exception:
-        pass
-    subprocess.call(["rm", "-rf", profile])
-    sys.exit(code)
-
-
-def read_message(deadline):
-    global buf
-    while b"\0" not in buf:
-        left = deadline - time.time()
-        if left <= 0:
-            finish(1, ["FAIL: Chromium did not answer in time"])
-        r, _, _ = select.select([from_chrome_r], [], [], left)
-        if not r:
-            continue
-        chunk = os.read(from_chrome_r, 1 << 20)
-        if not chunk:
-            log.flush()
-            tail = open(os.path.join(profile, "chromium.log")).read()[-600:]
-            finish(77, ["Chromium cannot run here: it closed the DevTools pipe: " + tail.strip().replace("\n", " | ")])
-        buf += chunk
-    msg, buf = buf.split(b"\0", 1)
-    return json.loads(msg)
+    ch.finish(code, lines)
 
 
 def call(method, params=None, session=None, timeout=60):
-    global next_id
-    next_id += 1
-    m = {"id": next_id, "method": method, "params": params or {}}
-    if session:
-        m["sessionId"] = session
-    os.write(to_chrome_w, json.dumps(m).encode() + b"\0")
-    deadline = time.time() + timeout
-    while True:
-        r = read_message(deadline)
-        if r.get("id") == next_id:
-            if "error" in r:
-                finish(1, ["FAIL: DevTools %s: %s" % (method, r["error"])])
-            return r["result"]
+    return ch.call(method, params, timeout, session=session is not None)
 
 
-target = call("Target.createTarget", {"url": base + "/login?token=" + token})["targetId"]
-session = call("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+ch.open(base + "/login?token=" + token)
+session = ch.session
 
 PROBE = """JSON.stringify({
   refreshes: +(document.body && document.body.dataset.refreshes || 0),

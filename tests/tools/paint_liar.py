@@ -19,6 +19,7 @@ import json
 import os
 import struct
 import sys
+import time
 import urllib.request
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -87,13 +88,28 @@ def result(c, gen, tid, wid, values):
                           (w.INT, 1000), (w.BLOB, values)])[0]
 
 
-def closed(c):
-    try:
-        op, _ = c.call(w.RDP, [(w.STRING, "scene"), (w.STRING, None), (w.INT, None),
-                               (w.INT, None), (w.STRING, None), (w.STRING, None)])
-        return False
-    except (EOFError, OSError):
-        return True
+def closed(c, seconds=60):
+    """Whether the paint closes this connection: it does so from its loop, after taking the
+    result from the space, so ask until it has (or until a generous bound has passed)."""
+    end = time.time() + seconds
+    while time.time() < end:
+        try:
+            c.call(w.RDP, [(w.STRING, "scene"), (w.STRING, None), (w.INT, None),
+                           (w.INT, None), (w.STRING, None), (w.STRING, None)])
+        except (EOFError, OSError):
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def wait_status(key, want, seconds=60):
+    """The status's key reaches want (the loop publishes it once an iteration)."""
+    end = time.time() + seconds
+    while time.time() < end:
+        if status()[key] >= want:
+            return True
+        time.sleep(0.02)
+    return False
 
 
 s0 = status()
@@ -129,7 +145,7 @@ vals[len(vals) // 2] = float("nan")
 result(c, gen, tid, wid, struct.pack("<%df" % len(vals), *vals))
 if not closed(c):
     fail("the connection that sent a NaN is still open")
-if status()["refused"] < refused0 + 2:
+if not wait_status("refused", refused0 + 2):
     fail("the status counts %d refused results, expected %d" % (status()["refused"], refused0 + 2))
 print("a result holding a NaN: refused, connection closed")
 
@@ -140,17 +156,12 @@ v = status()["view"]
 v["sun"]["azimuth"] = (v["sun"]["azimuth"] + 40) % 360
 if post("api/paint/view", v) != 202:
     fail("the page's new view was refused")
-for _ in range(500):
-    if status()["gen"] > gen:
-        break
-    import time
-    time.sleep(0.01)
-else:
+if not wait_status("gen", gen + 1):
     fail("the paint never moved to the new view")
 if result(c, gen, tid, wid, struct.pack("<%df" % node_values(nodes, W, H),
                                         *([0.25] * node_values(nodes, W, H)))) != w.OK:
     fail("a result of the view left behind was not quietly discarded")
-if status()["stale"] != stale0 + 1:
+if not wait_status("stale", stale0 + 1) or status()["stale"] != stale0 + 1:
     fail("the stale result was not counted (stale %d, was %d)" % (status()["stale"], stale0))
 print("a result of the view left behind: discarded, counted stale")
 

@@ -66,11 +66,6 @@ int tf_web_dir_find(char *dir, size_t len)
 
 /* ---- who may ask -------------------------------------------------------------------------- */
 
-static int token_ok(const tf_httpd *h, const char *given)
-{
-    return given && tf_http_token_matches(h->token, given, strlen(given));
-}
-
 static int load_file(const char *dir, web_file *f, char *err, size_t errlen)
 {
     return tf_web_load_file(dir, f->name, &f->data, &f->len, err, errlen);
@@ -376,15 +371,6 @@ static enum MHD_Result serve_post(tf_httpd *h, struct MHD_Connection *c, const c
     return ok;
 }
 
-/* GET /login?token=T: a browser's way in; sets the cookie and goes to the page. */
-static enum MHD_Result serve_login(tf_httpd *h, struct MHD_Connection *c)
-{
-    const char *t = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "token");
-    if (!h->have_token || !token_ok(h, t))
-        return tf_web_send_unauthorized(c);
-    return tf_web_send_login(c, h->token, "/");
-}
-
 static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *url,
                               const char *method, const char *version, const char *upload,
                               size_t *upload_size, void **con_cls)
@@ -395,28 +381,10 @@ static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *u
     tf_web_body *rq = tf_web_collect(c, con_cls, upload, upload_size, &ret);
     if (!rq)
         return ret;
-    if (h->loopback && !tf_web_host_ok(c))
-        return tf_web_send_text(c, 403, "the Host header must name a loopback address");
-    int is_get = !strcmp(method, "GET") || !strcmp(method, "HEAD");
-    int is_post = !strcmp(method, "POST");
-    if (h->have_token && is_get && !strcmp(url, "/login"))
-        return serve_login(h, c);
-    if (h->have_token) {
-        const char *cookie = MHD_lookup_connection_value(c, MHD_COOKIE_KIND, "tf_token");
-        if (!token_ok(h, tf_web_header_token(c)) && !token_ok(h, cookie))
-            return tf_web_send_unauthorized(c);
-    }
-    if (is_get)
-        return serve_get(h, c, url);
-    if (!is_post)
-        return tf_web_send_text(c, 405, "method %.20s not allowed", method);
-    /* A control: the token must come in a header (a cookie alone could be a cross-site form);
-     * on loopback without a token, a header no plain form can set. */
-    const char *ht = tf_web_header_token(c);
-    if (h->have_token ? !token_ok(h, ht) : !ht)
-        return tf_web_send_text(c, 403, "controls need the token in a header (Authorization: Bearer "
-                                 "TOKEN or X-Terrafarm-Token)");
-    return serve_post(h, c, url, rq);
+    int g = tf_web_gate(c, url, method, h->have_token ? h->token : NULL, h->loopback, &ret);
+    return g == TF_WEB_GET    ? serve_get(h, c, url)
+           : g == TF_WEB_POST ? serve_post(h, c, url, rq)
+                              : ret;
 }
 
 static void mhd_log(void *cls, const char *fmt, va_list ap)

@@ -188,3 +188,36 @@ void tf_web_request_done(void *cls, struct MHD_Connection *c, void **con_cls,
     free(*con_cls);
     *con_cls = NULL;
 }
+
+static int token_ok(const char *token, const char *given)
+{
+    return given && tf_http_token_matches(token, given, strlen(given));
+}
+
+int tf_web_gate(struct MHD_Connection *c, const char *url, const char *method, const char *token,
+                int loopback, enum MHD_Result *ret)
+{
+    int is_get = !strcmp(method, "GET") || !strcmp(method, "HEAD");
+    const char *cookie = MHD_lookup_connection_value(c, MHD_COOKIE_KIND, "tf_token");
+    const char *ht = tf_web_header_token(c);
+    if (loopback && !tf_web_host_ok(c))
+        *ret = tf_web_send_text(c, 403, "the Host header must name a loopback address");
+    else if (token && is_get && !strcmp(url, "/login"))
+        *ret = token_ok(token, MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "token"))
+                   ? tf_web_send_login(c, token, "/")
+                   : tf_web_send_unauthorized(c);
+    else if (token && !token_ok(token, ht) && !token_ok(token, cookie))
+        *ret = tf_web_send_unauthorized(c);
+    else if (is_get)
+        return TF_WEB_GET;
+    else if (strcmp(method, "POST"))
+        *ret = tf_web_send_text(c, 405, "method %.20s not allowed", method);
+    /* a control: the token in a header (a cookie alone could be a cross-site form); on
+     * loopback without a token, a header no plain form can set */
+    else if (token ? !token_ok(token, ht) : !ht)
+        *ret = tf_web_send_text(c, 403, "controls need the token in a header (Authorization: "
+                                        "Bearer TOKEN or X-Terrafarm-Token)");
+    else
+        return TF_WEB_POST;
+    return TF_WEB_ANSWERED;
+}

@@ -48,6 +48,16 @@ const char *tf_web_header_token(struct MHD_Connection *c);
 /* 1 when the Host header names a loopback address. */
 int tf_web_host_ok(struct MHD_Connection *c);
 
+/* Who may ask, the same for every web server of a render (dashboard/httpd.h says why): on
+ * loopback the Host must be loopback; with a token (NULL: none, loopback only) GET /login?token=
+ * sets the cookie, and every other request needs the token in a header or the cookie; a POST
+ * needs it in a header (or on loopback without a token, an X-Terrafarm-Token header of any
+ * value).  Returns TF_WEB_GET or TF_WEB_POST for the server to answer, or TF_WEB_ANSWERED with
+ * *ret the answer already queued. */
+enum { TF_WEB_ANSWERED = 0, TF_WEB_GET, TF_WEB_POST };
+int tf_web_gate(struct MHD_Connection *c, const char *url, const char *method, const char *token,
+                int loopback, enum MHD_Result *ret);
+
 /* dir/name read whole (at most TF_WEB_MAX_FILE bytes) into *data (malloc'd).  0, or -1 with a
  * message naming the file. */
 int tf_web_load_file(const char *dir, const char *name, char **data, size_t *len, char *err,

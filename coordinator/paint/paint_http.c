@@ -276,38 +276,6 @@ static enum MHD_Result serve_post(tf_paint_http *h, struct MHD_Connection *c, co
     return r;
 }
 
-/* ---- who may ask ---- */
-
-static int token_ok(const tf_paint_http *h, const char *given)
-{
-    return given && tf_http_token_matches(h->token, given, strlen(given));
-}
-
-static enum MHD_Result gate(tf_paint_http *h, struct MHD_Connection *c, const char *url,
-                            const char *method, tf_web_body *rq)
-{
-    if (h->loopback && !tf_web_host_ok(c))
-        return tf_web_send_text(c, 403, "the Host header must name a loopback address");
-    int is_get = !strcmp(method, "GET") || !strcmp(method, "HEAD");
-    if (h->have_token && is_get && !strcmp(url, "/login")) {
-        const char *t = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "token");
-        return token_ok(h, t) ? tf_web_send_login(c, h->token, "/")
-                              : tf_web_send_unauthorized(c);
-    }
-    const char *cookie = MHD_lookup_connection_value(c, MHD_COOKIE_KIND, "tf_token");
-    if (h->have_token && !token_ok(h, tf_web_header_token(c)) && !token_ok(h, cookie))
-        return tf_web_send_unauthorized(c);
-    if (is_get)
-        return serve_get(h, c, url);
-    if (strcmp(method, "POST"))
-        return tf_web_send_text(c, 405, "method %.20s not allowed", method);
-    const char *ht = tf_web_header_token(c);
-    if (h->have_token ? !token_ok(h, ht) : !ht)
-        return tf_web_send_text(c, 403, "controls need the token in a header (Authorization: "
-                                        "Bearer TOKEN or X-Terrafarm-Token)");
-    return serve_post(h, c, url, rq);
-}
-
 static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *url,
                               const char *method, const char *version, const char *upload,
                               size_t *upload_size, void **con_cls)
@@ -318,7 +286,10 @@ static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *u
     tf_web_body *rq = tf_web_collect(c, con_cls, upload, upload_size, &ret);
     if (!rq)
         return ret;
-    return gate(h, c, url, method, rq);
+    int g = tf_web_gate(c, url, method, h->have_token ? h->token : NULL, h->loopback, &ret);
+    return g == TF_WEB_GET    ? serve_get(h, c, url)
+           : g == TF_WEB_POST ? serve_post(h, c, url, rq)
+                              : ret;
 }
 
 /* ---- start and stop ---- */

@@ -54,3 +54,12 @@ r = c.getresponse()
 open(out, "wb").write(r.read())
 print(r.status)' "$1" "${PAINT_URL%/}$2" "${3:-}" "${4:-X-Terrafarm-Token: x}" "$T/ctl.out"
 }
+
+# wait_status FIELD VALUE SECONDS WHAT: until the paint's status FIELD reads VALUE.
+wait_status() {
+    i=0
+    while [ "$(paint_status "$1")" != "$2" ]; do
+        kill -0 $PAINT_PID 2>/dev/null || fail "terrafarm paint ended waiting for $4"
+        sleep 0.05; i=$((i + 1)); [ $i -lt $(($3 * 20)) ] || fail "$4: not within $3 s"
+    done
+}

@@ -37,9 +37,7 @@ say "an honest networked worker paints the view to the end"
 "$TF_BIN" worker --connect "$PAINT_WORKERS" -j 1 2>"$T/worker.err" &
 wpid=$!; e2e_track $wpid
 wait_painted 120
-i=0; while [ "$(paint_status output_written)" != True ]; do
-    sleep 0.1; i=$((i + 1)); [ $i -lt 100 ] || fail "the painted view was not written"
-done
+wait_status output_written True 60 "the painted view written"
 [ "$(paint_http POST /api/paint/save)" = 200 ] || fail "save failed: $(cat "$T/ctl.out")"
 kill -TERM $PAINT_PID; wait_exit $PAINT_PID 30
 [ $rc -eq 0 ] || fail "terrafarm paint exited $rc: $(tail -3 "$T/paint.err")"

@@ -47,11 +47,9 @@ v["camera"]["fov"] = 48
 r = urllib.request.Request(u + "api/paint/view", json.dumps(v).encode(), method="POST",
                            headers={"X-Terrafarm-Token": "x"})
 sys.exit(0 if urllib.request.urlopen(r).status == 202 else 1)' "$PAINT_URL" || fail "the new view was refused"
-i=0; while [ "$(paint_status gen)" != 2 ]; do sleep 0.05; i=$((i+1)); [ $i -lt 200 ] || fail "no view 2"; done
+wait_status gen 2 60 "view 2"
 wait_painted 120
-i=0; while [ "$(paint_status output_written)" != True ]; do
-    sleep 0.1; i=$((i + 1)); [ $i -lt 100 ] || fail "the painted view 2 was not written"
-done
+wait_status output_written True 60 "the painted view 2 written"
 [ "$(paint_http POST /api/paint/save)" = 200 ] || fail "save failed: $(cat "$T/ctl.out")"
 kill -TERM $PAINT_PID; wait_exit $PAINT_PID 30
 [ $rc -eq 0 ] || fail "paint exited $rc: $(tail -3 "$T/proc.err")"

@@ -58,7 +58,7 @@ typedef struct paint {
     tf_paint_http *http;
     tf_paint_tree *tree;
     tf_paint_status st;
-    double view_t0, last_status;
+    double view_t0;
     float *values;
     size_t values_cap;
     tf_paint_bytes msgs;
@@ -159,7 +159,6 @@ static int start_space(paint *p)
     p->st.width = p->scene->width;
     p->st.height = p->scene->height;
     snprintf(p->st.output, sizeof p->st.output, "%s", p->o->output ? p->o->output : "");
-    snprintf(p->st.save, sizeof p->st.save, "%s", p->o->save ? p->o->save : "");
     ts_server_config cfg = {0};
     cfg.listen = p->o->listen;
     cfg.key = p->have_key ? p->key : NULL;
@@ -312,15 +311,13 @@ static void note_progress(paint *p)
 
 static void publish_status(paint *p)
 {
-    double now = tf_now_s();
-    p->st.view_age_s = now - p->view_t0;
+    p->st.view_age_s = tf_now_s() - p->view_t0;
     p->st.workers = p->role.workers;
     p->st.outstanding = p->role.nleases;
     p->st.results = p->role.results;
     p->st.stale = p->role.stale;
     p->st.refused = p->role.refused;
     tf_paint_hub_set_status(p->hub, &p->st);
-    p->last_status = now;
 }
 
 static int painted_and_done(const paint *p)

@@ -33,7 +33,7 @@ typedef struct tf_paint_status {
     double coarse_s, painted_s; /* from the view's start to its first complete coarse image,
                                    to every pixel exact; < 0: not yet */
     int output_written;         /* -o: the painted image of this view is on disk */
-    char output[256], save[256];
+    char output[256];           /* -o, or empty */
 } tf_paint_status;
 
 enum { TF_PAINT_CMD_VIEW = 1, TF_PAINT_CMD_INTEREST, TF_PAINT_CMD_PAUSE, TF_PAINT_CMD_RESUME };

@@ -1,5 +1,6 @@
 /* cmd_jobs.c: a person's commands for a standing farm (terrafarm farm): `submit SCENE`, `jobs`,
- * `job ID`, `cancel ID`, `pause ID`, `resume ID`, `priority ID N`.  Each is one request to the
+ * `job ID` (--paint: a paint job of its scene), `cancel ID`, `pause ID`, `resume ID`,
+ * `priority ID N`.  Each is one request to the
  * farm's API (docs/farm-api.yaml) with the person's token.  submit sends the scene's text and,
  * for a height map scene, the map's bytes: the farm never opens a path a submitter names. */
 #include <getopt.h>
@@ -19,7 +20,7 @@
 static const char usage[] =
     "usage: terrafarm submit SCENE [options] [render options]\n"
     "       terrafarm jobs [--json]\n"
-    "       terrafarm job ID [--json] [--output FILE.exr [--frame N]]\n"
+    "       terrafarm job ID [--json] [--output FILE.exr [--frame N]] [--paint]\n"
     "       terrafarm cancel|pause|resume ID\n"
     "       terrafarm priority ID N\n"
     "\n"
@@ -35,10 +36,13 @@ static const char usage[] =
     "      --pool P              only workers of pool P serve it (default: default)\n"
     "      --tags T1,T2          only workers with all these tags serve it\n"
     "      --after ID            start only once job ID is done\n"
+    "      --paint               a paint job: the scene coming into focus in the browser on\n"
+    "                            the farm's workers (its page: terrafarm job ID --json)\n"
     "      render options: --size --tasks --pixel --verify --verify-chunks --frames --frame\n"
     "                      --watermark --affinity --lease-timeout (as terrafarm render)\n"
     "job:\n"
-    "      --output FILE.exr     download the finished output (--frame N: of a sequence)\n";
+    "      --output FILE.exr     download the finished output (--frame N: of a sequence)\n"
+    "      --paint               open a paint job of job ID's scene; prints its id\n";
 
 typedef struct client {
     const char *farm;
@@ -274,6 +278,8 @@ static int run_control(client *c, const char *action, char **args, int nargs)
         return TF_EXIT_FAIL;
     if (c->json)
         print_json(a);
+    else if (!strcmp(action, "paint"))
+        printf("%lld\n", (long long)json_integer_value(json_object_get(a, "id")));
     else
         printf("job %lld: %s, priority %lld\n", id, json_string_value(json_object_get(a, "state")),
                (long long)json_integer_value(json_object_get(a, "priority")));
@@ -289,7 +295,7 @@ static const char *const render_flags[] = {"size", "tasks", "pixel", "verify", "
 int cmd_jobs(int argc, char **argv)
 {
     enum { O_FARM = 256, O_TOKEN, O_JSON, O_NAME, O_PRIORITY, O_POOL, O_TAGS, O_AFTER, O_OUTPUT,
-           O_FRAMEOUT, O_VERIFY_CHUNKS, O_RENDER };
+           O_FRAMEOUT, O_VERIFY_CHUNKS, O_PAINT, O_RENDER };
     struct option longopts[32] = {
         {"farm", required_argument, NULL, O_FARM}, {"token-file", required_argument, NULL, O_TOKEN},
         {"json", no_argument, NULL, O_JSON},       {"name", required_argument, NULL, O_NAME},
@@ -298,16 +304,17 @@ int cmd_jobs(int argc, char **argv)
         {"after", required_argument, NULL, O_AFTER},
         {"output", required_argument, NULL, O_OUTPUT},
         {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
+        {"paint", no_argument, NULL, O_PAINT},
         {"help", no_argument, NULL, 'h'},
     };
-    int nopt = 11;
+    int nopt = 12;
     for (int i = 0; render_flags[i]; i++)
         longopts[nopt++] = (struct option){render_flags[i], required_argument, NULL, O_RENDER + i};
     longopts[nopt] = (struct option){NULL, 0, NULL, 0};
     const char *cmd = argv[0], *farm = NULL, *token = NULL, *output = NULL;
     json_t *settings = json_object(), *options = json_array();
     client c = {0};
-    int ch, frame = 0, idx, rc = TF_EXIT_USAGE;
+    int ch, frame = 0, idx, rc = TF_EXIT_USAGE, paint = 0;
     optind = 1;
     opterr = 0;
     while ((ch = getopt_long(argc, argv, ":h", longopts, &idx)) != -1) {
@@ -332,6 +339,10 @@ int cmd_jobs(int argc, char **argv)
         }
         case O_OUTPUT: output = optarg; break;
         case O_VERIFY_CHUNKS: json_array_append_new(options, json_string("--verify-chunks")); break;
+        case O_PAINT:
+            paint = 1;
+            json_object_set_new(settings, "kind", json_string("paint"));
+            break;
         case 'h': fputs(usage, stdout); rc = TF_EXIT_OK; goto out;
         case ':': tf_error("%s needs a value", argv[optind - 1]); goto out;
         case '?': tf_error("unknown option '%s' (see terrafarm %s --help)", argv[optind - 1], cmd);
@@ -357,7 +368,9 @@ int cmd_jobs(int argc, char **argv)
         rc = run_submit(&c, args[0], settings, options);
     else if (!strcmp(cmd, "jobs") && nargs == 0)
         rc = run_jobs(&c);
-    else if (!strcmp(cmd, "job") && nargs == 1)
+    else if (!strcmp(cmd, "job") && nargs == 1 && paint && !output)
+        rc = run_control(&c, "paint", args, nargs);
+    else if (!strcmp(cmd, "job") && nargs == 1 && !paint)
         rc = run_job(&c, args[0], output, frame);
     else if (!strcmp(cmd, "cancel") || !strcmp(cmd, "pause") || !strcmp(cmd, "resume") ||
              !strcmp(cmd, "priority"))

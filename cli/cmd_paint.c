@@ -28,7 +28,7 @@ static const char usage[] =
     "  -o, --output FILE         write the painted image (OpenEXR) once every pixel is exact\n"
     "      --save FILE           where the page's Save writes the edited scene\n"
     "      --farm HOST:PORT      the standing farm the page's Submit sends the view to\n"
-    "                            (its token from $TERRAFARM_TOKEN_FILE)\n"
+    "      --farm-token-file F   the token Submit gives the farm (default $TERRAFARM_TOKEN_FILE)\n"
     "      --until-painted       leave once the view is painted (and written, with -o)\n"
     "      --paused              start paused (the page's Resume starts the dealing)\n"
     "      --root N              side of the quad-tree's roots (default 64)\n"
@@ -52,7 +52,7 @@ static int parse_int(const char *flag, const char *text, int lo, int hi, int *ou
 }
 
 enum { O_LISTEN = 256, O_SECRET, O_HTTP, O_HTTP_TOKEN, O_SIZE, O_PIXEL, O_SAVE, O_FARM,
-       O_UNTIL, O_PAUSED, O_ROOT, O_LEVELS, O_LEAF, O_RAYS, O_FINE };
+       O_UNTIL, O_PAUSED, O_ROOT, O_LEVELS, O_LEAF, O_RAYS, O_FINE, O_FARM_TOKEN };
 
 static const struct option longopts[] = {
     {"workers", required_argument, NULL, 'j'}, {"listen", required_argument, NULL, O_LISTEN},
@@ -60,7 +60,9 @@ static const struct option longopts[] = {
     {"http-token-file", required_argument, NULL, O_HTTP_TOKEN},
     {"size", required_argument, NULL, O_SIZE}, {"pixel", required_argument, NULL, O_PIXEL},
     {"output", required_argument, NULL, 'o'}, {"save", required_argument, NULL, O_SAVE},
-    {"farm", required_argument, NULL, O_FARM}, {"until-painted", no_argument, NULL, O_UNTIL},
+    {"farm", required_argument, NULL, O_FARM},
+    {"farm-token-file", required_argument, NULL, O_FARM_TOKEN},
+    {"until-painted", no_argument, NULL, O_UNTIL},
     {"paused", no_argument, NULL, O_PAUSED}, {"root", required_argument, NULL, O_ROOT},
     {"levels", required_argument, NULL, O_LEVELS}, {"leaf", required_argument, NULL, O_LEAF},
     {"task-rays", required_argument, NULL, O_RAYS}, {"fine", required_argument, NULL, O_FINE}, {"quiet", no_argument, NULL, 'q'},
@@ -87,6 +89,7 @@ static int take_option(int ch, tf_paint_opts *o, char **argv)
     case 'o': o->output = optarg; return 0;
     case O_SAVE: o->save = optarg; return 0;
     case O_FARM: o->farm = optarg; return 0;
+    case O_FARM_TOKEN: o->farm_token_file = optarg; return 0;
     case O_UNTIL: o->until_painted = 1; return 0;
     case O_PAUSED: o->paused = 1; return 0;
     case O_ROOT: return parse_int("--root", optarg, 1, 1024, &p->root);

@@ -1,6 +1,7 @@
 /* farm.js: the standing farm's web view (farm.html).  Every second it reads the farm's JSON API
  * with the login cookie (GET /api/farm, /api/jobs, /api/jobs/ID for each running job's
- * dashboard link, and /api/workers for admins) and redraws the tables; the controls POST with
+ * dashboard link (a paint job's: its page), and /api/workers for admins) and redraws the tables;
+ * a job's "paint" button opens a paint job of its scene; the controls POST with
  * the header X-Terrafarm-Request: 1, which the farm requires of cookie-authenticated POSTs (a
  * cross-site form cannot send it).  Everything a job says is shown as text, never as HTML.
  * document.body.dataset.refreshes counts the completed refreshes (for tests). */
@@ -63,9 +64,36 @@ async function act(id, action, body) {
   }
 }
 
+/* Paint a job's scene (a still): POST /api/jobs/ID/paint queues a paint job whose page opens
+ * at once; its row's link leads there. */
+function paintButton(job) {
+  const b = el('button', 'paint', 'paint');
+  b.dataset.job = job.id;
+  b.dataset.action = 'paint';
+  b.title = 'see this scene come into focus on the farm\'s workers, and tune its view';
+  b.addEventListener('click', async () => {
+    try {
+      const a = await api('POST', '/api/jobs/' + job.id + '/paint', {});
+      showError('');
+      document.getElementById('said').textContent =
+        'paint job ' + a.id + ' opened: its link "paint view" appears in its row';
+      refresh();
+    } catch (e) {
+      showError('job ' + job.id + ': ' + e.message, 'control');
+    }
+  });
+  return b;
+}
+
 function controls(job) {
   const td = el('td');
+  const paint = job.kind === 'paint';
+  if (!paint && !job.frames) td.append(paintButton(job));
   if (['done', 'failed', 'cancelled'].includes(job.state)) return td;
+  if (paint) {
+    td.append(control(job, 'cancel', 'close'));
+    return td;
+  }
   if (job.state === 'paused') td.append(control(job, 'resume', 'resume'));
   else td.append(control(job, 'pause', 'pause'));
   td.append(control(job, 'cancel', 'cancel'),
@@ -78,7 +106,7 @@ function dashboardCell(job) {
   const td = el('td');
   const url = dashboards[job.id];
   if (job.state === 'running' && url && /^https?:\/\//.test(url)) {
-    const a = el('a', 'dashboard', 'dashboard');
+    const a = el('a', job.kind === 'paint' ? 'paint view' : 'dashboard', 'dashboard');
     a.href = url;
     a.target = '_blank';
     a.rel = 'noopener noreferrer';
@@ -91,12 +119,15 @@ function jobRow(job) {
   const tr = el('tr');
   tr.dataset.job = job.id;
   tr.dataset.state = job.state;
+  tr.dataset.kind = job.kind || 'render';
+  const name = el('td', job.name);
+  if (job.kind === 'paint') name.append(' ', el('span', 'paint', 'kind'));
   const state = el('td');
   state.append(el('span', job.state, 'state state-' + job.state));
   if (job.reason) state.title = job.reason;
   const prog = el('td');
   prog.append(progressBar(job.percent));
-  tr.append(el('td', job.id, 'num'), el('td', job.name), el('td', job.owner), state, prog,
+  tr.append(el('td', job.id, 'num'), name, el('td', job.owner), state, prog,
             el('td', job.priority, 'num'), el('td', job.pool), el('td', job.workers, 'num'),
             el('td', job.width + '×' + job.height + (job.frames ? ' ×' + job.frames : '')),
             controls(job), dashboardCell(job));

@@ -19,6 +19,7 @@
 #include "log.h"
 #include "scene.h"
 #include "worker/networked.h"
+#include "worker/paint_worker.h"
 #include "worker/payloads.h"
 #include "worker/simulate.h"
 #include "worker/terrain_shelf.h"
@@ -56,6 +57,7 @@ typedef struct session {
     char connect[300];
     uint8_t key[32];
     char terrain[65];
+    int paint;         /* a paint job (Raypaint): its processes paint */
 } session;
 
 /* ---- talking to the farm ---- */
@@ -97,9 +99,12 @@ static int ask_for_job(farm_worker *fw, session *ss)
     const char *nonce = json_string_value(json_object_get(a, "nonce"));
     const char *terrain = json_string_value(json_object_get(a, "terrain"));
     const char *name = json_string_value(json_object_get(a, "name"));
+    const char *kind = json_string_value(json_object_get(a, "kind"));
     int port = (int)json_integer_value(json_object_get(a, "port"));
     char secret[TF_FARM_TOKEN_HEX];
+    ss->paint = kind && !strcmp(kind, "paint");
     if (got && (!nonce || !terrain || strlen(terrain) != 64 || port <= 0 || port > 65535 ||
+                (kind && !ss->paint && strcmp(kind, "render")) ||
                 tf_farm_job_secret(fw->farm_key, ss->job, nonce, secret))) {
         tf_warn("farm: a malformed assignment (job %lld); ignored", (long long)ss->job);
         got = 0;
@@ -155,12 +160,12 @@ static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfi
 {
     char err[1024], key[TF_FARM_TOKEN_HEX];
     ts_client *c = connect_job(ss, err, sizeof err);
-    int kind = TF_SPACE_RENDER;
+    int kind = TF_SPACE_RENDER, want = ss->paint ? TF_SPACE_PAINT : TF_SPACE_RENDER;
     tf_scene *s = c ? tf_worker_fetch_scene_ex(c, ss->connect, &kind, err, sizeof err) : NULL;
-    if (s && (kind != TF_SPACE_RENDER || tf_farm_terrain_key(s, key) || strcmp(key, ss->terrain)))
-        tf_seterr(err, sizeof err, "%s: job %lld's render serves another terrain than the farm "
+    if (s && (kind != want || tf_farm_terrain_key(s, key) || strcmp(key, ss->terrain)))
+        tf_seterr(err, sizeof err, "%s: job %lld's process serves another terrain than the farm "
                   "announced%s", ss->connect, (long long)ss->job,
-                  kind != TF_SPACE_RENDER ? " (not a render)" : "");
+                  kind != want ? (ss->paint ? " (not a paint)" : " (not a render)") : "");
     else if (s && !(*hf = tf_terrain_shelf_get(fw->shelf, key))) {
         tf_info("job %lld (%s): building its terrain", (long long)ss->job, ss->job_name);
         ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS);
@@ -198,7 +203,8 @@ static void serve_in_child(const session *ss, const tf_scene *s, const tf_height
         tf_error("%s", err);
         _exit(TF_WORKER_EXIT_LOST);
     }
-    int status = tf_worker_loop(c, s, hf, "networked", backend);
+    int status = ss->paint ? tf_paint_worker_loop(c, s, hf, "networked")
+                           : tf_worker_loop(c, s, hf, "networked", backend);
     ts_client_close(c);
     _exit(status);
 }
@@ -342,6 +348,12 @@ static void serve_simulated(farm_worker *fw, const session *ss)
 
 static void serve(farm_worker *fw, const session *ss)
 {
+    if (fw->o->simulate_model && ss->paint) {
+        tf_warn("job %lld (%s) paints: a simulated worker serves renders only", (long long)ss->job,
+                ss->job_name);
+        set_last(fw, ss->job, "failed");
+        return;
+    }
     if (fw->o->simulate_model) {
         serve_simulated(fw, ss);
         return;

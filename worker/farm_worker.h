@@ -1,6 +1,7 @@
 /* farm_worker.h: a worker that stays (`terrafarm worker --connect http://FARM`): it asks a
  * standing farm (coordinator/farm/farm.h) which job to serve, joins that job's render with N
- * processes sharing the job's terrain copy-on-write, and when the job ends (or the farm sends
+ * processes sharing the job's terrain copy-on-write (painting, when the job is a paint job:
+ * worker/paint_worker.h), and when the job ends (or the farm sends
  * it away, or its machine's owner comes back) asks again.  It keeps the terrains of recent jobs
  * (terrain_shelf.h), so moving between jobs it has served costs no rebuild.
  *

@@ -6,6 +6,7 @@
 
 #include <assert.h>
 #include <errno.h>
+#include <sodium.h>
 #include <fcntl.h>
 #include <signal.h>
 #include <stdio.h>
@@ -136,15 +137,25 @@ static void job_dashboard_token(const tf_farm *f, const tf_job *j, char out[TF_F
         tf_http_token_derive(key, out, TF_FARM_TOKEN_HEX);
 }
 
+/* A paint page's progress: the share of its view's pixels that are exact, or -1. */
+static double painted_percent(json_t *st)
+{
+    json_t *c = json_object_get(st, "counts");
+    json_int_t exact = json_integer_value(json_object_get(c, "exact_pixels"));
+    json_int_t all = json_integer_value(json_object_get(c, "pixels"));
+    return all > 0 && exact >= 0 && exact <= all ? 100.0 * (double)exact / (double)all : -1;
+}
+
 /* Every running job's progress from its dashboard, asked outside the lock (a render that
  * does not answer within 300 ms keeps its last figure). */
 static void poll_progress(tf_farm *f)
 {
-    struct { int64_t id; int port; char token[TF_FARM_TOKEN_HEX]; double pct; } q[64];
+    struct { int64_t id; int port, paint; char token[TF_FARM_TOKEN_HEX]; double pct; } q[64];
     int n = 0;
     for (int i = 0; i < f->njobs && n < 64; i++)
         if (f->runs[i].pid && f->runs[i].http_port && !f->runs[i].stopping) {
             q[n].id = f->jobs[i].id;
+            q[n].paint = !strcmp(f->jobs[i].kind, "paint");
             q[n].port = f->runs[i].http_port;
             memcpy(q[n].token, f->runs[i].token, sizeof q[n].token);
             q[n++].pct = -1;
@@ -154,10 +165,10 @@ static void poll_progress(tf_farm *f)
         char addr[300], err[256];
         snprintf(addr, sizeof addr, strchr(f->host, ':') ? "[%s]:%d" : "%s:%d", f->host,
                  q[k].port);
-        json_t *st = tf_http_json(addr, "GET", "/api/status", q[k].token, NULL, tf_now_ms() + 300,
-                                  NULL, err, sizeof err);
-        if (json_is_number(json_object_get(st, "percent")))
-            q[k].pct = json_number_value(json_object_get(st, "percent"));
+        json_t *st = tf_http_json(addr, "GET", q[k].paint ? "/api/paint/status" : "/api/status",
+                                  q[k].token, NULL, tf_now_ms() + 300, NULL, err, sizeof err);
+        q[k].pct = q[k].paint ? painted_percent(st) : json_is_number(json_object_get(st, "percent"))
+                                ? json_number_value(json_object_get(st, "percent")) : -1;
         json_decref(st);
     }
     pthread_mutex_lock(&f->lock);
@@ -170,15 +181,17 @@ static void poll_progress(tf_farm *f)
 
 /* Write job j's folder and start its render: the pid (0 on failure, err set).  Runs without
  * the farm's lock (the files are fsync'd): j is a copy. */
-static pid_t launch(tf_farm *f, const tf_job *j, int *port, int *http_port, char *err,
-                    size_t errlen)
+static pid_t launch(tf_farm *f, const tf_job *j, const char *submit_token, int *port,
+                    int *http_port, char *err, size_t errlen)
 {
     tf_job_content c;
     pid_t pid = 0;
+    tf_jobrun_where at = {f->host, f->api_port, 0, 0};
     if (tf_farmdb_content(f->db, j->id, &c, err, errlen) == 0 &&
-        tf_jobrun_prepare(f->o.state_dir, j, &c, f->key, err, errlen) == 0)
-        pid = tf_jobrun_start(f->exe, f->o.state_dir, j, c.options, f->host, port, http_port,
-                              err, errlen);
+        tf_jobrun_prepare(f->o.state_dir, j, &c, f->key, submit_token, err, errlen) == 0)
+        pid = tf_jobrun_start(f->exe, f->o.state_dir, j, c.options, &at, err, errlen);
+    *port = at.port;
+    *http_port = at.http_port;
     tf_job_content_free(&c);
     return pid > 0 ? pid : 0;
 }
@@ -187,11 +200,13 @@ static pid_t launch(tf_farm *f, const tf_job *j, int *port, int *http_port, char
 static void start_render(tf_farm *f, int i)
 {
     tf_job copy = f->jobs[i];
-    char err[1024] = "";
+    char err[1024] = "", token[TF_FARM_TOKEN_HEX] = "";
     int port = 0, http_port = 0;
     f->runs[i].want = 0;
+    if (!strcmp(copy.kind, "paint") && tf_farm_token_new(token))
+        token[0] = 0; /* no token: the page's Submit is refused, the rest works */
     pthread_mutex_unlock(&f->lock);
-    pid_t pid = launch(f, &copy, &port, &http_port, err, sizeof err);
+    pid_t pid = launch(f, &copy, token[0] ? token : NULL, &port, &http_port, err, sizeof err);
     pthread_mutex_lock(&f->lock);
     i = farm_job_index(f, copy.id); /* jobs are only appended: the same index */
     farm_run *r = &f->runs[i];
@@ -205,6 +220,7 @@ static void start_render(tf_farm *f, int i)
     r->port = port;
     r->http_port = http_port;
     job_dashboard_token(f, j, r->token);
+    memcpy(r->submit_token, token, sizeof token);
     r->percent = -1;
     if (strcmp(j->state, "queued")) { /* paused or cancelled meanwhile */
         farm_stop_render(f, i, j->state);
@@ -229,6 +245,7 @@ static void render_ended(tf_farm *f, int i, int status)
     r->port = 0;
     r->http_port = 0;
     r->closing = 0;
+    sodium_memzero(r->submit_token, sizeof r->submit_token);
     for (int w = 0; w < f->nworkers; w++) /* its workers are free now */
         if (f->workers[w].job == j->id) {
             f->workers[w].job = 0;
@@ -300,8 +317,9 @@ static void start_next_ahead(tf_farm *f)
     int best = -1;
     for (int i = 0; i < f->njobs; i++) {
         const farm_run *r = &f->runs[i];
-        if (r->pid && !r->workers && !r->closing && !r->stopping)
-            return; /* one is waiting already */
+        if (r->pid && !r->workers && !r->closing && !r->stopping &&
+            strcmp(f->jobs[i].kind, "paint"))
+            return; /* one is waiting already (a paint page waits for its person) */
         if (!r->pid && !strcmp(f->jobs[i].state, "queued") && !farm_after_state(f, &f->jobs[i]) &&
             pool_busy(f, &f->jobs[i]) &&
             (best < 0 || f->jobs[i].priority > f->jobs[best].priority))
@@ -309,6 +327,16 @@ static void start_next_ahead(tf_farm *f)
     }
     if (best >= 0)
         f->runs[best].want = 1;
+}
+
+/* A paint job's page opens at once, workers or not: a person is waiting for it.  One whose
+ * process keeps failing is failed by render_ended like a render. */
+static void start_paint_pages(tf_farm *f)
+{
+    for (int i = 0; i < f->njobs; i++)
+        if (!strcmp(f->jobs[i].kind, "paint") && !f->runs[i].pid &&
+            !strcmp(f->jobs[i].state, "queued") && !farm_after_state(f, &f->jobs[i]))
+            f->runs[i].want = 1;
 }
 
 static void main_loop(tf_farm *f)
@@ -323,6 +351,7 @@ static void main_loop(tf_farm *f)
         reap_renders(f);
         fail_orphans(f);
         start_next_ahead(f);
+        start_paint_pages(f);
         for (int i = 0; i < f->njobs; i++)
             if (f->runs[i].want && !f->runs[i].pid && !strcmp(f->jobs[i].state, "queued"))
                 start_render(f, i);
@@ -466,6 +495,7 @@ int tf_farm_run(const tf_farm_opts *o)
         tf_error("%s", err);
         goto out;
     }
+    f->api_port = port;
     tf_info("farm on http://%s%s%s:%d: %d jobs queued, %d paused, %d done (state %s)",
             strchr(f->host, ':') ? "[" : "", f->host, strchr(f->host, ':') ? "]" : "", port,
             count_state(f, "queued"), count_state(f, "paused"), count_state(f, "done"),

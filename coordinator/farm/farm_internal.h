@@ -1,6 +1,7 @@
 /* farm_internal.h: the standing farm's state, shared by its files: farm.c (life and the main
  * loop: renders started and reaped), farm_jobs.c (what people do: submit, list, control),
- * farm_workers.c (what workers do: ask for a job, report, heartbeat), farmapi.c (HTTP).
+ * farm_workers.c (what workers do: ask for a job, report, heartbeat), farm_paint.c (Raypaint
+ * jobs and their runs' tokens), farmapi.c (HTTP).
  *
  * One mutex guards everything below; the HTTP threads and the main loop take it for each
  * call.  The database is written before the memory it mirrors changes, so what a caller was
@@ -39,6 +40,7 @@ typedef struct farm_run {
     int http_port;      /* the render's dashboard */
     char token[TF_FARM_TOKEN_HEX]; /* its token (from the job's key) */
     double percent;     /* progress from the dashboard; -1: not known yet */
+    char submit_token[TF_FARM_TOKEN_HEX]; /* a paint run's, for its page's Submit; "": none */
 } farm_run;
 
 typedef struct farm_bar {
@@ -65,6 +67,7 @@ typedef struct tf_farm {
     tf_farm_opts o;
     char exe[4096];
     char host[256];            /* where the renders listen, as workers reach it */
+    int api_port;              /* where the API listens (a paint run submits there) */
     uint8_t key[32];
     char worker_token[TF_FARM_TOKEN_HEX];
     tf_farmdb *db;
@@ -80,7 +83,7 @@ typedef struct tf_farm {
 /* The caller of an API request, from its token. */
 typedef struct farm_caller {
     char name[64];
-    char role[16]; /* worker | submitter | admin */
+    char role[16]; /* worker | submitter | admin | paint (a paint run: may only submit) */
 } farm_caller;
 
 /* farm.c */
@@ -109,6 +112,16 @@ json_t *farm_worker_next(tf_farm *f, const farm_caller *who, json_t *req, int *s
 json_t *farm_worker_heartbeat(tf_farm *f, const farm_caller *who, json_t *req, int *status);
 json_t *farm_workers_json(tf_farm *f);
 void farm_expire_workers(tf_farm *f, int64_t now_ms);
+
+/* farm_paint.c */
+/* POST /api/jobs/ID/paint on job i (who may see it): a paint job of its scene, queued. */
+json_t *farm_paint_from_job(tf_farm *f, const farm_caller *who, int i, json_t *req, int *status);
+/* 1 and *who (the job's owner, role "paint") when token is a live paint run's; takes the lock. */
+int farm_paint_caller(tf_farm *f, const char *token, farm_caller *who);
+/* The options (a JSON array's text) a paint job keeps of a render's, malloc'd. */
+char *farm_paint_options(const char *options);
+/* 0 when opts (a checked options array) holds only what a paint job takes, else -1 and err. */
+int farm_paint_options_ok(json_t *opts, char *err, size_t errlen);
 
 /* farmapi.c */
 typedef struct farm_http farm_http;

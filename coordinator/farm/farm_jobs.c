@@ -1,7 +1,8 @@
 /* farm_jobs.c: what people do with the standing farm's queue: submit a job (its scene and
  * height map as content, checked before it is queued), list and show jobs, and control them
- * (cancel, pause, resume, priority).  A submitter sees and controls only its own jobs; an
- * admin all of them; a worker none.  Every answer is JSON with an HTTP status. */
+ * (cancel, pause, resume, priority; paint: farm_paint.c).  A submitter sees and controls only
+ * its own jobs; an admin all of them; a worker none; a paint run may only submit.  Every
+ * answer is JSON with an HTTP status. */
 #include "coordinator/farm/farm_internal.h"
 
 #include <sodium.h>
@@ -188,9 +189,27 @@ static void size_from_options(json_t *opts, const tf_scene *s, tf_job *j)
                    &j->height);
 }
 
+/* The job's kind from the request ("render" when absent): 0, or -1 and err. */
+static int read_kind(json_t *req, json_t *opts, tf_job *j, char *err, size_t errlen)
+{
+    json_t *k = json_object_get(req, "kind");
+    const char *kind = k ? json_string_value(k) : "render";
+    if (!kind || (strcmp(kind, "render") && strcmp(kind, "paint")))
+        return tf_seterr(err, errlen, "kind: render or paint");
+    snprintf(j->kind, sizeof j->kind, "%s", kind);
+    return !strcmp(kind, "paint") ? farm_paint_options_ok(opts, err, errlen) : 0;
+}
+
+/* Who may submit: people, and a paint run for its job's owner. */
+static int may_submit(const farm_caller *who)
+{
+    return !strcmp(who->role, "submitter") || !strcmp(who->role, "admin") ||
+           !strcmp(who->role, "paint");
+}
+
 json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status)
 {
-    if (strcmp(who->role, "submitter") && strcmp(who->role, "admin"))
+    if (!may_submit(who))
         return farm_error(status, 403, "a %s may not submit jobs", who->role);
     char err[1024];
     tf_job j = {0};
@@ -198,7 +217,8 @@ json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status
     json_t *opts = json_object_get(req, "options");
     if (!text || strlen(text) > SCENE_TEXT_MAX)
         return farm_error(status, 400, "scene: the scene file's text (at most 1 MiB)");
-    if (read_settings(f, who, req, &j, err, sizeof err) || check_options(opts, err, sizeof err))
+    if (read_settings(f, who, req, &j, err, sizeof err) || check_options(opts, err, sizeof err) ||
+        read_kind(req, opts, &j, err, sizeof err))
         return farm_error(status, 400, "%s", err);
     size_t hm_len = 0;
     const char *hm_name;
@@ -209,13 +229,19 @@ json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status
     tf_scene *s = check_scene(text, hm, hm_len, hm_name, &j, err, sizeof err);
     if (!s)
         return farm_error(status, 400, "%s", err);
+    if (!strcmp(j.kind, "paint") && j.frames) {
+        tf_scene_free(s);
+        return farm_error(status, 400, "%s: an [animation] cannot be painted; paint a still",
+                          j.name);
+    }
     size_from_options(opts, s, &j);
     tf_job_content c = {.scene = (char *)text, .scene_len = strlen(text),
                         .heightmap = s->heightmap, .heightmap_len = s->heightmap_len,
                         .heightmap_name = (char *)(hm_name ? hm_name : "heightmap"),
                         .options = opts ? json_dumps(opts, JSON_COMPACT) : strdup("[]")};
     snprintf(j.state, sizeof j.state, "queued");
-    snprintf(j.output, sizeof j.output, "%s", j.frames ? "frame.####.exr" : "out.exr");
+    snprintf(j.output, sizeof j.output, "%s", !strcmp(j.kind, "paint") ? "painted.exr"
+                                              : j.frames ? "frame.####.exr" : "out.exr");
     struct timespec ts;
     clock_gettime(CLOCK_REALTIME, &ts);
     j.created = (double)ts.tv_sec + ts.tv_nsec / 1e9;
@@ -226,10 +252,11 @@ json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status
     if (rc)
         return farm_error(status, 500, "cannot queue the job: %s", err);
     pthread_cond_broadcast(&f->changed);
-    tf_info("job %lld (%s) submitted by %s, priority %d, pool %s", (long long)j.id, j.name,
-            who->name, j.priority, j.pool);
+    tf_info("job %lld (%s, %s) submitted by %s%s, priority %d, pool %s", (long long)j.id,
+            j.name, j.kind, who->name, !strcmp(who->role, "paint") ? "'s paint page" : "",
+            j.priority, j.pool);
     *status = 201;
-    return json_pack("{s:I,s:s}", "id", (json_int_t)j.id, "state", "queued");
+    return json_pack("{s:I,s:s,s:s}", "id", (json_int_t)j.id, "kind", j.kind, "state", "queued");
 }
 
 /* ---- listing and showing ---- */
@@ -253,6 +280,7 @@ static json_t *job_json(const tf_farm *f, int i)
                           j->height, "frames", j->frames, "scene_hash", j->scene_hash,
                           "reason", j->reason, "attempts", j->attempts, "created", j->created,
                           "started", j->started, "finished", j->finished);
+    json_object_set_new(o, "kind", json_string(j->kind[0] ? j->kind : "render"));
     if (o && j->after)
         json_object_set_new(o, "after", json_integer(j->after));
     double pct = !strcmp(j->state, "done") ? 100.0 : f->runs[i].pid ? f->runs[i].percent : -1;
@@ -346,6 +374,8 @@ json_t *farm_control(tf_farm *f, const farm_caller *who, int64_t id, const char 
     if (i < 0)
         return answer;
     tf_job *j = &f->jobs[i];
+    if (!strcmp(action, "paint")) /* any job's scene may be painted, finished ones too */
+        return farm_paint_from_job(f, who, i, req, status);
     if (finished(j))
         return farm_error(status, 409, "job %lld is %s", (long long)id, j->state);
     int rc;
@@ -360,7 +390,8 @@ json_t *farm_control(tf_farm *f, const farm_caller *who, int64_t id, const char 
     else if (!strcmp(action, "pause") || !strcmp(action, "resume"))
         return farm_error(status, 409, "job %lld is %s", (long long)id, j->state);
     else
-        return farm_error(status, 404, "no action '%s' (cancel, pause, resume, priority)", action);
+        return farm_error(status, 404, "no action '%s' (cancel, pause, resume, priority, paint)",
+                          action);
     if (rc)
         return farm_error(status, 500, "cannot store the job's state");
     *status = 200;

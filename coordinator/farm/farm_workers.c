@@ -167,9 +167,10 @@ static json_t *assignment(tf_farm *f, farm_worker *w, int i)
     const tf_job *j = &f->jobs[i];
     join_job(f, w, i);
     f->assignments++;
-    return json_pack("{s:I,s:s,s:i,s:s,s:s,s:s,s:i}", "job", (json_int_t)j->id, "name", j->name,
-                     "port", f->runs[i].port, "nonce", j->nonce, "terrain", j->terrain,
-                     "scene_hash", j->scene_hash, "priority", j->priority);
+    return json_pack("{s:I,s:s,s:i,s:s,s:s,s:s,s:i,s:s}", "job", (json_int_t)j->id, "name",
+                     j->name, "port", f->runs[i].port, "nonce", j->nonce, "terrain", j->terrain,
+                     "scene_hash", j->scene_hash, "priority", j->priority, "kind",
+                     j->kind[0] ? j->kind : "render");
 }
 
 static int worker_name_ok(const char *name)

@@ -1,7 +1,8 @@
 /* farmapi.c: the standing farm's HTTP JSON API (docs/farm-api.yaml), on libmicrohttpd with a
  * thread per connection (a worker's request for a job is a long poll).  Every request names
  * its caller with a bearer token: the workers' token derived from the farm secret, or a
- * person's token (submitter or admin) found by its hash in the database.  Each route takes the
+ * person's token (submitter or admin) found by its hash in the database, or a live paint run's
+ * (farm_paint.c: it may only submit).  Each route takes the
  * farm's lock and calls farm_jobs.c or farm_workers.c; bodies are bounded and parsed with
  * jansson; nothing a caller sends is trusted beyond what those functions check.
  *
@@ -133,7 +134,8 @@ static int authenticate(tf_farm *f, struct MHD_Connection *c, farm_caller *who)
         snprintf(who->role, sizeof who->role, "worker");
         return AUTH_BEARER;
     }
-    return person_token(f, token, who) ? AUTH_BEARER : AUTH_NONE;
+    return person_token(f, token, who) || farm_paint_caller(f, token, who) ? AUTH_BEARER
+                                                                           : AUTH_NONE;
 }
 
 /* ---- the web view ---- */
@@ -286,7 +288,7 @@ static json_t *caller_json(const farm_caller *who)
 static int known_action(const char *a)
 {
     return !strcmp(a, "cancel") || !strcmp(a, "pause") || !strcmp(a, "resume") ||
-           !strcmp(a, "priority");
+           !strcmp(a, "priority") || !strcmp(a, "paint");
 }
 
 /* A JSON route under the lock: the answer and its status. */

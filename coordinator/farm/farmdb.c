@@ -26,7 +26,8 @@ static const char schema[] =
     " reason TEXT NOT NULL, scene_hash TEXT NOT NULL, terrain TEXT NOT NULL,"
     " nonce TEXT NOT NULL, output TEXT NOT NULL, frames INTEGER NOT NULL,"
     " width INTEGER NOT NULL, height INTEGER NOT NULL, attempts INTEGER NOT NULL,"
-    " created REAL NOT NULL, started REAL NOT NULL, finished REAL NOT NULL);"
+    " created REAL NOT NULL, started REAL NOT NULL, finished REAL NOT NULL,"
+    " kind TEXT NOT NULL DEFAULT 'render' CHECK(kind IN ('render','paint')));"
     "CREATE TABLE IF NOT EXISTS content("
     " job INTEGER PRIMARY KEY REFERENCES jobs(id), scene BLOB NOT NULL, heightmap BLOB,"
     " heightmap_name TEXT, options TEXT NOT NULL);"
@@ -36,6 +37,19 @@ static const char schema[] =
     "CREATE TABLE IF NOT EXISTS tokens("
     " hash TEXT PRIMARY KEY, name TEXT NOT NULL UNIQUE,"
     " role TEXT NOT NULL CHECK(role IN ('submitter','admin')), created REAL NOT NULL);";
+
+/* A database written before jobs had a kind: its jobs are renders. */
+static const char add_kind[] =
+    "ALTER TABLE jobs ADD COLUMN kind TEXT NOT NULL DEFAULT 'render' "
+    "CHECK(kind IN ('render','paint'));";
+
+static int has_kind(sqlite3 *db)
+{
+    sqlite3_stmt *st;
+    int ok = sqlite3_prepare_v2(db, "SELECT kind FROM jobs LIMIT 0", -1, &st, NULL) == SQLITE_OK;
+    sqlite3_finalize(st);
+    return ok;
+}
 
 static double unix_now(void)
 {
@@ -61,7 +75,8 @@ tf_farmdb *tf_farmdb_open(const char *path, char *err, size_t errlen)
     if (rc == SQLITE_OK)
         sqlite3_busy_timeout(db->db, 5000);
     char *msg = NULL;
-    if (rc != SQLITE_OK || sqlite3_exec(db->db, schema, NULL, NULL, &msg) != SQLITE_OK) {
+    if (rc != SQLITE_OK || sqlite3_exec(db->db, schema, NULL, NULL, &msg) != SQLITE_OK ||
+        (!has_kind(db->db) && sqlite3_exec(db->db, add_kind, NULL, NULL, &msg) != SQLITE_OK)) {
         tf_seterr(err, errlen, "%s: cannot open the farm database: %s", path,
                   msg ? msg : db->db ? sqlite3_errmsg(db->db) : "out of memory");
         sqlite3_free(msg);
@@ -103,7 +118,7 @@ static int insert_job_row(tf_farmdb *db, tf_job *j, char *err, size_t errlen)
     sqlite3_stmt *st;
     const char *sql = "INSERT INTO jobs(name,owner,pool,tags,priority,after,state,reason,"
                       "scene_hash,terrain,nonce,output,frames,width,height,attempts,created,"
-                      "started,finished) VALUES(?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,0,?,0,0)";
+                      "started,finished,kind) VALUES(?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,0,?,0,0,?)";
     if (sqlite3_prepare_v2(db->db, sql, -1, &st, NULL) != SQLITE_OK)
         return db_fail(db, "insert", err, errlen);
     const char *text[] = {j->name, j->owner, j->pool, j->tags};
@@ -118,6 +133,7 @@ static int insert_job_row(tf_farmdb *db, tf_job *j, char *err, size_t errlen)
     sqlite3_bind_int(st, 14, j->width);
     sqlite3_bind_int(st, 15, j->height);
     sqlite3_bind_double(st, 16, j->created);
+    sqlite3_bind_text(st, 17, j->kind[0] ? j->kind : "render", -1, SQLITE_STATIC);
     int rc = sqlite3_step(st);
     sqlite3_finalize(st);
     if (rc != SQLITE_DONE)
@@ -202,6 +218,7 @@ static void read_job(sqlite3_stmt *st, tf_job *j)
     j->created = sqlite3_column_double(st, 17);
     j->started = sqlite3_column_double(st, 18);
     j->finished = sqlite3_column_double(st, 19);
+    copy_col(st, 20, j->kind, sizeof j->kind);
 }
 
 int tf_farmdb_load(tf_farmdb *db, tf_job **out, int *n, char *err, size_t errlen)
@@ -211,7 +228,7 @@ int tf_farmdb_load(tf_farmdb *db, tf_job **out, int *n, char *err, size_t errlen
     *n = 0;
     if (sqlite3_prepare_v2(db->db, "SELECT id,name,owner,pool,tags,priority,after,state,reason,"
                            "scene_hash,terrain,nonce,output,frames,width,height,attempts,"
-                           "created,started,finished FROM jobs ORDER BY id", -1, &st,
+                           "created,started,finished,kind FROM jobs ORDER BY id", -1, &st,
                            NULL) != SQLITE_OK)
         return db_fail(db, "load", err, errlen);
     int cap = 0, rc;

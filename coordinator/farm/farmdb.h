@@ -1,6 +1,6 @@
 /* farmdb.h: the standing farm's durable queue, an SQLite database in WAL mode
  * (STATE_DIR/farm.db): the jobs with their content (scene text, height map bytes, render
- * options), state, priority, pool, tags and dependency; their history; and the people's
+ * options), kind, state, priority, pool, tags and dependency; their history; and the people's
  * tokens, stored as hashes.  Every change is one transaction with synchronous=FULL, so what
  * an API call answered survives a kill -9 (or a power loss) of the farm.
  *
@@ -28,6 +28,7 @@ typedef struct tf_job {
     char tags[256];     /* comma list a worker must all have */
     int priority;       /* higher first */
     int64_t after;      /* a job that must be done first; 0: none */
+    char kind[8];       /* render | paint (Raypaint: runs until closed); "" is stored as render */
     char state[16];     /* queued | paused | done | failed | cancelled */
     char reason[256];   /* why failed or cancelled */
     char scene_hash[65];

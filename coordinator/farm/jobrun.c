@@ -88,7 +88,8 @@ static char *rewritten_scene(const tf_job *j, const tf_job_content *c, const cha
 }
 
 int tf_jobrun_prepare(const char *state_dir, const tf_job *j, const tf_job_content *c,
-                      const uint8_t farm_key[32], char *err, size_t errlen)
+                      const uint8_t farm_key[32], const char *submit_token, char *err,
+                      size_t errlen)
 {
     char dir[4096], hm[64], secret[TF_FARM_TOKEN_HEX];
     if (tf_job_path(state_dir, j->id, NULL, dir, sizeof dir))
@@ -108,7 +109,52 @@ int tf_jobrun_prepare(const char *state_dir, const tf_job *j, const tf_job_conte
         rc = tf_seterr(err, errlen, "cannot derive job %lld's secret", (long long)j->id);
     if (!rc)
         rc = write_file(dir, "secret", secret, 64, err, errlen);
+    if (!rc && submit_token)
+        rc = write_file(dir, "farm-token", submit_token, strlen(submit_token), err, errlen);
     return rc;
+}
+
+/* argv of a paint job (run in its folder, so its page names no farm path), malloc'd strings
+ * in a NULL-terminated array (freed by free_argv). */
+static char **paint_argv(const char *exe, const tf_jobrun_where *at, const char *options,
+                         int listen_fd, int http_fd)
+{
+    json_t *opts = json_loads(options, 0, NULL);
+    size_t nopt = json_array_size(opts), k = 0;
+    char **av = calloc(24 + nopt, sizeof *av);
+    if (!av) {
+        json_decref(opts);
+        return NULL;
+    }
+    char buf[600];
+#define ARG(...) (snprintf(buf, sizeof buf, __VA_ARGS__), av[k++] = strdup(buf))
+    ARG("%s", exe);
+    ARG("paint");
+    ARG("job.scene");
+    ARG("-j");
+    ARG("0");
+    ARG("--listen");
+    ARG("fd:%d", listen_fd);
+    ARG("--secret-file");
+    ARG("secret");
+    ARG("--http");
+    ARG("fd:%d", http_fd);
+    ARG("-o");
+    ARG("painted.exr");
+    ARG("--save");
+    ARG("edited.scene");
+    ARG("--farm");
+    if (strchr(at->host, ':'))
+        ARG("[%s]:%d", at->host, at->api_port);
+    else
+        ARG("%s:%d", at->host, at->api_port);
+    ARG("--farm-token-file");
+    ARG("farm-token");
+    for (size_t i = 0; i < nopt; i++)
+        ARG("%s", json_string_value(json_array_get(opts, i)));
+#undef ARG
+    json_decref(opts);
+    return av;
 }
 
 /* argv of the render, malloc'd strings in a NULL-terminated array (freed by free_argv). */
@@ -155,11 +201,11 @@ static void free_argv(char **av)
 }
 
 /* In the child, between fork and exec: only async-signal-safe calls. */
-static void exec_render(char **av, pid_t farm, int listen_fd, int http_fd, int lock_fd,
-                        int log_fd)
+static void exec_render(char **av, const char *dir, pid_t farm, int listen_fd, int http_fd,
+                        int lock_fd, int log_fd)
 {
     prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (getppid() != farm) /* the farm died before the line above */
+    if (getppid() != farm || chdir(dir)) /* the farm died before the line above */
         _exit(127);
     flock(lock_fd, LOCK_EX); /* wait for an older render of this job to be gone */
     int devnull = open("/dev/null", O_RDWR);
@@ -175,16 +221,15 @@ static void exec_render(char **av, pid_t farm, int listen_fd, int http_fd, int l
 }
 
 pid_t tf_jobrun_start(const char *exe, const char *state_dir, const tf_job *j,
-                      const char *options, const char *host, int *port, int *http_port,
-                      char *err, size_t errlen)
+                      const char *options, tf_jobrun_where *at, char *err, size_t errlen)
 {
     char dir[4096], spec[300], path[4200];
     tf_job_path(state_dir, j->id, NULL, dir, sizeof dir);
-    snprintf(spec, sizeof spec, strchr(host, ':') ? "[%s]:0" : "%s:0", host);
-    int lfd = tf_sock_listen(spec, port, err, errlen);
+    snprintf(spec, sizeof spec, strchr(at->host, ':') ? "[%s]:0" : "%s:0", at->host);
+    int lfd = tf_sock_listen(spec, &at->port, err, errlen);
     if (lfd < 0)
         return -1;
-    int hfd = tf_sock_listen(spec, http_port, err, errlen);
+    int hfd = tf_sock_listen(spec, &at->http_port, err, errlen);
     if (hfd < 0) {
         close(lfd);
         return -1;
@@ -193,12 +238,13 @@ pid_t tf_jobrun_start(const char *exe, const char *state_dir, const tf_job *j,
     int lock_fd = open(path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
     snprintf(path, sizeof path, "%s/render.log", dir);
     int log_fd = open(path, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0600);
-    char **av = render_argv(exe, dir, j, options, lfd, hfd);
+    char **av = !strcmp(j->kind, "paint") ? paint_argv(exe, at, options, lfd, hfd)
+                                           : render_argv(exe, dir, j, options, lfd, hfd);
     pid_t pid = -1, farm = getpid();
     if (lock_fd < 0 || log_fd < 0 || !av)
         tf_seterr(err, errlen, "%s: cannot prepare the render: %s", dir, strerror(errno));
     else if ((pid = fork()) == 0)
-        exec_render(av, farm, lfd, hfd, lock_fd, log_fd);
+        exec_render(av, dir, farm, lfd, hfd, lock_fd, log_fd);
     else if (pid < 0)
         tf_seterr(err, errlen, "cannot start the render of job %lld: fork: %s",
                   (long long)j->id, strerror(errno));

@@ -243,7 +243,7 @@ static int start_http(paint *p)
 {
     char err[1024];
     tf_paint_http_config hc = {p->o->http, p->o->http_token_file, p->have_key ? p->key : NULL,
-                               p->scene, p->o->save, p->o->farm, NULL, p->hub};
+                               p->scene, p->o->save, p->o->farm, p->o->farm_token_file, p->hub};
     p->http = tf_paint_http_start(&hc, err, sizeof err);
     if (!p->http) {
         tf_error("%s", err);

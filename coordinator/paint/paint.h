@@ -18,6 +18,7 @@ typedef struct tf_paint_opts {
     const char *output;           /* write the painted image (OpenEXR) once every pixel is exact */
     const char *save;             /* where the page's Save writes the edited scene */
     const char *farm;             /* a standing farm (HOST:PORT) the page's Submit sends it to */
+    const char *farm_token_file;  /* its token; NULL: $TERRAFARM_TOKEN_FILE */
     int pixel;                    /* TF_PIXEL_HALF (default) or TF_PIXEL_FLOAT, as render's */
     tf_paint_params params;
     int until_painted;            /* leave once the first view is painted (and written) */

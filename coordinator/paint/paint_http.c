@@ -233,7 +233,7 @@ static enum MHD_Result post_submit(tf_paint_http *h, struct MHD_Connection *c)
         return tf_web_send_text(c, 409, "a height-map scene is submitted with its file: save "
                                         "it and run terrafarm submit");
     char *text = tf_paint_hub_scene_text(h->cfg.hub), err[512];
-    json_t *req = json_pack("{s:s,s:s,s:{}}", "scene", text ? text : "", "name", "painted",
+    json_t *req = json_pack("{s:s,s:s,s:[]}", "scene", text ? text : "", "name", "painted",
                             "options");
     free(text);
     json_t *a = req ? tf_http_json(h->cfg.farm, "POST", "/api/jobs",

@@ -230,9 +230,10 @@ static void start_render(tf_farm *f, int i)
     if (!j->started)
         j->started = unix_now();
     char ev[64];
-    snprintf(ev, sizeof ev, "render started (attempt %d)", j->attempts);
+    const char *what = !strcmp(j->kind, "paint") ? "paint" : "render";
+    snprintf(ev, sizeof ev, "%s started (attempt %d)", what, j->attempts);
     farm_set_state(f, i, j->state, j->reason, ev);
-    tf_info("job %lld (%s): render started on port %d", (long long)j->id, j->name, r->port);
+    tf_info("job %lld (%s): %s started on port %d", (long long)j->id, j->name, what, r->port);
 }
 
 /* A render ended: what it means for its job. */

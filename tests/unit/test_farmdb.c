@@ -4,7 +4,8 @@
  * duplicate name or token and an unknown role refused with a clear message; everything still
  * there after close and reopen; the schema's CHECK refusing a state outside TF_JOB_STATES
  * (through SQLite itself, and through tf_farmdb_update in a child, where a build with asserts
- * on stops at the Q1 assert instead: both are refusals).  And the worker's terrain shelf
+ * on stops at the Q1 assert instead: both are refusals); a job's kind stored and loaded, and
+ * an older database without kinds gaining the column.  And the worker's terrain shelf
  * (worker/terrain_shelf.c) with fake height fields: least recently used out under a byte
  * budget, the newest kept even alone over it, at most 16 held, keys most recent first, a key
  * put again replaced. */
@@ -312,6 +313,64 @@ static void check_refuses_bad_state_sql(void **state)
     sqlite3_close(raw);
 }
 
+/* A job's kind: paint and render come back as stored ("" is stored as render); the schema
+ * refuses any other. */
+static void kinds_round_trip(void **state)
+{
+    (void)state;
+    tf_farmdb *db = open_db("kinds.db");
+    tf_job a = make_job("painted", 1), b = make_job("plain", 0);
+    snprintf(a.kind, sizeof a.kind, "paint");
+    insert(db, &a, 0);
+    insert(db, &b, 0);
+    tf_job *jobs = NULL;
+    int n = 0;
+    char err[512] = "";
+    assert_int_equal(tf_farmdb_load(db, &jobs, &n, err, sizeof err), 0);
+    assert_int_equal(n, 2);
+    assert_string_equal(jobs[0].kind, "paint");
+    assert_string_equal(jobs[1].kind, "render");
+    free(jobs);
+    tf_farmdb_close(db);
+    sqlite3 *raw;
+    assert_int_equal(sqlite3_open(scratch_path("kinds.db"), &raw), SQLITE_OK);
+    assert_int_equal(sqlite3_exec(raw, "UPDATE jobs SET kind='bake'", NULL, NULL, NULL),
+                     SQLITE_CONSTRAINT);
+    sqlite3_close(raw);
+}
+
+/* A database written before jobs had a kind (the jobs table without the column) opens, gains
+ * the column, and its jobs load as renders. */
+static void old_database_gains_kind(void **state)
+{
+    (void)state;
+    sqlite3 *raw;
+    assert_int_equal(sqlite3_open(scratch_path("old.db"), &raw), SQLITE_OK);
+    assert_int_equal(sqlite3_exec(raw,
+        "CREATE TABLE jobs(id INTEGER PRIMARY KEY AUTOINCREMENT, name TEXT NOT NULL,"
+        " owner TEXT NOT NULL, pool TEXT NOT NULL, tags TEXT NOT NULL, priority INTEGER NOT NULL,"
+        " after INTEGER NOT NULL, state TEXT NOT NULL, reason TEXT NOT NULL,"
+        " scene_hash TEXT NOT NULL, terrain TEXT NOT NULL, nonce TEXT NOT NULL,"
+        " output TEXT NOT NULL, frames INTEGER NOT NULL, width INTEGER NOT NULL,"
+        " height INTEGER NOT NULL, attempts INTEGER NOT NULL, created REAL NOT NULL,"
+        " started REAL NOT NULL, finished REAL NOT NULL);"
+        "INSERT INTO jobs(name,owner,pool,tags,priority,after,state,reason,scene_hash,terrain,"
+        "nonce,output,frames,width,height,attempts,created,started,finished) VALUES('old','a',"
+        "'default','',0,0,'queued','','','','n','out.exr',0,8,8,0,1,0,0)", NULL, NULL, NULL),
+        SQLITE_OK);
+    sqlite3_close(raw);
+    tf_farmdb *db = open_db("old.db");
+    tf_job *jobs = NULL;
+    int n = 0;
+    char err[512] = "";
+    assert_int_equal(tf_farmdb_load(db, &jobs, &n, err, sizeof err), 0);
+    assert_int_equal(n, 1);
+    assert_string_equal(jobs[0].name, "old");
+    assert_string_equal(jobs[0].kind, "render");
+    free(jobs);
+    tf_farmdb_close(db);
+}
+
 /* tf_farmdb_update with a bad state, in a child: refused either by the Q1 assert (asserts on:
  * the child aborts) or by the CHECK (NDEBUG: it returns -1 with a message); never stored. */
 static void check_refuses_bad_state_api(void **state)
@@ -489,6 +548,8 @@ int main(void)
         cmocka_unit_test(reopen_keeps_everything),
         cmocka_unit_test(check_refuses_bad_state_sql),
         cmocka_unit_test(check_refuses_bad_state_api),
+        cmocka_unit_test(kinds_round_trip),
+        cmocka_unit_test(old_database_gains_kind),
         cmocka_unit_test(shelf_bytes),
         cmocka_unit_test(shelf_lru),
         cmocka_unit_test(shelf_at_most_sixteen),

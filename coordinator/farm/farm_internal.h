@@ -84,6 +84,7 @@ typedef struct tf_farm {
 typedef struct farm_caller {
     char name[64];
     char role[16]; /* worker | submitter | admin | paint (a paint run: may only submit) */
+    int64_t paint_job; /* role paint: the paint job whose run it is */
 } farm_caller;
 
 /* farm.c */

@@ -148,6 +148,17 @@ static tf_scene *check_scene(const char *text, uint8_t *hm, size_t hm_len, const
     return NULL;
 }
 
+/* A paint page's view goes where its paint job is served, unless it names a pool or tags. */
+static void paint_defaults(const tf_farm *f, const farm_caller *who, const char **pool,
+                           const char **tags)
+{
+    int i = !strcmp(who->role, "paint") ? farm_job_index(f, who->paint_job) : -1;
+    if (i >= 0 && !*pool)
+        *pool = f->jobs[i].pool;
+    if (i >= 0 && !*tags)
+        *tags = f->jobs[i].tags;
+}
+
 /* The job's settings from the request: name, priority, pool, tags, after. */
 static int read_settings(tf_farm *f, const farm_caller *who, json_t *req, tf_job *j, char *err,
                          size_t errlen)
@@ -156,6 +167,7 @@ static int read_settings(tf_farm *f, const farm_caller *who, json_t *req, tf_job
     const char *pool = json_string_value(json_object_get(req, "pool"));
     const char *tags = json_string_value(json_object_get(req, "tags"));
     json_t *prio = json_object_get(req, "priority"), *after = json_object_get(req, "after");
+    paint_defaults(f, who, &pool, &tags);
     snprintf(j->name, sizeof j->name, "%s", name && *name ? name : "job");
     snprintf(j->pool, sizeof j->pool, "%s", pool && *pool ? pool : "default");
     snprintf(j->tags, sizeof j->tags, "%s", tags ? tags : "");

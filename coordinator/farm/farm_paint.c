@@ -8,7 +8,8 @@
  * The page's Submit queues the painted view as a render job of the paint job's owner.  The
  * paint process proves it may do that with a token of its run alone: random, held in memory
  * only, written to the job's folder for the process, and valid while the run lives.  The
- * caller it makes has the role "paint", which may submit and nothing else (farm_jobs.c). */
+ * caller it makes has the role "paint", which may submit and nothing else (farm_jobs.c); what
+ * it submits goes to the paint job's pool and tags unless it names others. */
 #include "coordinator/farm/farm_internal.h"
 
 #include <sodium.h>
@@ -136,6 +137,7 @@ int farm_paint_caller(tf_farm *f, const char *token, farm_caller *who)
             continue;
         snprintf(who->name, sizeof who->name, "%s", f->jobs[i].owner);
         snprintf(who->role, sizeof who->role, "paint");
+        who->paint_job = f->jobs[i].id;
         found = 1;
     }
     pthread_mutex_unlock(&f->lock);

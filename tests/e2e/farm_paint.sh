@@ -4,8 +4,8 @@
 # web view's "paint" button): its page is up before any worker comes (the job's dashboard link
 # is its page), a staying worker comes to it (one priority higher than the still) and paints
 # it; the painted image equals a plain terrafarm render.  The page's Submit queues the view
-# as alice's render job; closed (cancel), the paint job hands the worker to that job, whose
-# output is the painted image pixel for pixel.  What it refuses: bob opening a paint of
+# as alice's render job in the paint job's pool; closed (cancel), the paint job hands the
+# worker to that job, whose output is the painted image pixel for pixel.  What it refuses: bob opening a paint of
 # alice's job or the workers' token opening one (404, as for no job), a paint of a sequence (409), a
 # paint job with a render-only option or an unknown kind (400).  The paint run's own token
 # may only submit (it lists nothing, controls nothing) and dies with the run (401 after).
@@ -40,7 +40,7 @@ worker=$(python3 -c 'import sys; sys.path.insert(0, sys.argv[2]); import farm_li
 print(f.worker_token(f.key_from_secret(sys.argv[1])))' "$T/secret" "$TF_ROOT/tests/tools")
 
 say "alice's still, paused; a sequence"
-still=$("$TF_BIN" submit "$SCENE" --size $SIZE --name still) || fail "submit"
+still=$("$TF_BIN" submit "$SCENE" --size $SIZE --name still --pool studio) || fail "submit"
 "$TF_BIN" pause "$still" >/dev/null || fail "pause"
 seq=$("$TF_BIN" submit "$TF_ROOT/scenes/flyby.scene" --size 64x40 --frames 0-1 --name seq) ||
     fail "submit the sequence"
@@ -67,7 +67,7 @@ expect 200 "its page answers with no worker yet" GET /api/paint/status "$ptok" "
 grep -q '"workers": *0\|"workers":0' "$T/http.out" || fail "workers at the page: $(cat "$T/http.out")"
 
 say "a staying worker paints it"
-farm_worker w1
+farm_worker w1 --pool studio
 i=0
 until [ "$(field "$paint" percent)" = 100.0 ]; do
     i=$((i + 1)); [ $i -lt 1500 ] || fail "not painted within 300 s: $(field "$paint" percent) %"
@@ -93,6 +93,7 @@ expect 200 "Submit" POST /api/paint/submit "$ptok" "" "$page"
 job=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["id"])' "$T/http.out")
 [ "$(field "$job" owner)" = alice ] || fail "job $job belongs to $(field "$job" owner)"
 [ "$(field "$job" kind)" = render ] || fail "job $job is a $(field "$job" kind)"
+[ "$(field "$job" pool)" = studio ] || fail "job $job went to pool $(field "$job" pool), not the paint's"
 
 say "closed, the paint job hands its worker to that render"
 "$TF_BIN" cancel "$paint" >/dev/null || fail "cancel the paint job"

@@ -114,90 +114,66 @@ int tf_jobrun_prepare(const char *state_dir, const tf_job *j, const tf_job_conte
     return rc;
 }
 
-/* argv of a paint job (run in its folder, so its page names no farm path), malloc'd strings
- * in a NULL-terminated array (freed by free_argv). */
-static char **paint_argv(const char *exe, const tf_jobrun_where *at, const char *options,
-                         int listen_fd, int http_fd)
-{
-    json_t *opts = json_loads(options, 0, NULL);
-    size_t nopt = json_array_size(opts), k = 0;
-    char **av = calloc(24 + nopt, sizeof *av);
-    if (!av) {
-        json_decref(opts);
-        return NULL;
-    }
-    char buf[600];
-#define ARG(...) (snprintf(buf, sizeof buf, __VA_ARGS__), av[k++] = strdup(buf))
-    ARG("%s", exe);
-    ARG("paint");
-    ARG("job.scene");
-    ARG("-j");
-    ARG("0");
-    ARG("--listen");
-    ARG("fd:%d", listen_fd);
-    ARG("--secret-file");
-    ARG("secret");
-    ARG("--http");
-    ARG("fd:%d", http_fd);
-    ARG("-o");
-    ARG("painted.exr");
-    ARG("--save");
-    ARG("edited.scene");
-    ARG("--farm");
-    if (strchr(at->host, ':'))
-        ARG("[%s]:%d", at->host, at->api_port);
-    else
-        ARG("%s:%d", at->host, at->api_port);
-    ARG("--farm-token-file");
-    ARG("farm-token");
-    for (size_t i = 0; i < nopt; i++)
-        ARG("%s", json_string_value(json_array_get(opts, i)));
-#undef ARG
-    json_decref(opts);
-    return av;
-}
-
-/* argv of the render, malloc'd strings in a NULL-terminated array (freed by free_argv). */
-static char **render_argv(const char *exe, const char *dir, const tf_job *j, const char *options,
-                          int listen_fd, int http_fd)
-{
-    json_t *opts = json_loads(options, 0, NULL);
-    size_t nopt = json_array_size(opts), k = 0;
-    char **av = calloc(20 + nopt, sizeof *av);
-    if (!av) {
-        json_decref(opts);
-        return NULL;
-    }
-    char buf[4200];
-#define ARG(...) (snprintf(buf, sizeof buf, __VA_ARGS__), av[k++] = strdup(buf))
-    ARG("%s", exe);
-    ARG("render");
-    ARG("%s/job.scene", dir);
-    ARG("-o");
-    ARG("%s/%s", dir, j->output);
-    ARG("-j");
-    ARG("0");
-    ARG("--listen");
-    ARG("fd:%d", listen_fd);
-    ARG("--secret-file");
-    ARG("%s/secret", dir);
-    ARG("--http");
-    ARG("fd:%d", http_fd);
-    ARG("--resume");
-    ARG("--stats");
-    ARG("%s/stats.json", dir);
-    for (size_t i = 0; i < nopt; i++)
-        ARG("%s", json_string_value(json_array_get(opts, i)));
-#undef ARG
-    json_decref(opts);
-    return av;
-}
-
 static void free_argv(char **av)
 {
     for (size_t i = 0; av && av[i]; i++)
         free(av[i]);
     free(av);
+}
+
+/* A command line: the fixed arguments, then the job's options (a JSON array of strings),
+ * as malloc'd strings in a NULL-terminated array (freed by free_argv), or NULL. */
+static char **argv_of(const char *const *fixed, size_t nfixed, const char *options)
+{
+    json_t *opts = json_loads(options, 0, NULL);
+    size_t nopt = json_array_size(opts), k = 0;
+    char **av = calloc(nfixed + nopt + 1, sizeof *av);
+    for (size_t i = 0; av && i < nfixed; i++)
+        av[k++] = strdup(fixed[i]);
+    for (size_t i = 0; av && i < nopt; i++)
+        av[k++] = strdup(json_string_value(json_array_get(opts, i)));
+    json_decref(opts);
+    for (size_t i = 0; av && i < k; i++)
+        if (!av[i]) { /* out of memory: no half command line */
+            for (size_t m = i + 1; m < k; m++)
+                free(av[m]);
+            free_argv(av);
+            return NULL;
+        }
+    return av;
+}
+
+/* argv of a paint job, run in its folder (so its page names no farm path). */
+static char **paint_argv(const char *exe, const tf_jobrun_where *at, const char *options,
+                         int listen_fd, int http_fd)
+{
+    char lfd[32], hfd[32], farm[300];
+    snprintf(lfd, sizeof lfd, "fd:%d", listen_fd);
+    snprintf(hfd, sizeof hfd, "fd:%d", http_fd);
+    snprintf(farm, sizeof farm, strchr(at->host, ':') ? "[%s]:%d" : "%s:%d", at->host,
+             at->api_port);
+    const char *const fixed[] = {exe, "paint", "job.scene", "-j", "0", "--listen", lfd,
+                                 "--secret-file", "secret", "--http", hfd, "-o", "painted.exr",
+                                 "--save", "edited.scene", "--farm", farm, "--farm-token-file",
+                                 "farm-token"};
+    return argv_of(fixed, sizeof fixed / sizeof *fixed, options);
+}
+
+/* argv of the render. */
+static char **render_argv(const char *exe, const char *dir, const tf_job *j, const char *options,
+                          int listen_fd, int http_fd)
+{
+    char lfd[32], hfd[32], scene[4200], out[4200], secret[4200], stats[4200];
+    snprintf(lfd, sizeof lfd, "fd:%d", listen_fd);
+    snprintf(hfd, sizeof hfd, "fd:%d", http_fd);
+    snprintf(scene, sizeof scene, "%s/job.scene", dir);
+    snprintf(out, sizeof out, "%s/%s", dir, j->output);
+    snprintf(secret, sizeof secret, "%s/secret", dir);
+    snprintf(stats, sizeof stats, "%s/stats.json", dir);
+    const char *const fixed[] = {exe, "render", scene, "-o", out, "-j", "0", "--listen", lfd,
+                                 "--secret-file", secret, "--http", hfd, "--resume", "--stats",
+                                 stats};
+    return argv_of(fixed, sizeof fixed / sizeof *fixed, options);
 }
 
 /* In the child, between fork and exec: only async-signal-safe calls. */

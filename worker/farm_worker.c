@@ -145,13 +145,25 @@ static void set_last(farm_worker *fw, int64_t job, const char *outcome)
 
 /* Connect to a job's render.  The farm bound its socket before starting it, so a connection
  * waits in the backlog while the render starts (up to CONNECT_MS for the handshake), and a
- * refused one means the render is gone: no retrying then. */
-static ts_client *connect_job(const session *ss, char *err, size_t errlen)
+ * refused one means the render is gone: no retrying then.  Another failure (the render was
+ * stopped with our connection still in its backlog) is tried again only while the farm still
+ * sends us to the job: the parent (fw) asks it between tries, so a worker sent to a job that
+ * was paused meanwhile moves on at once.  A child (fw NULL) connects right after its parent
+ * did, and retries as any networked worker does. */
+static ts_client *connect_job(farm_worker *fw, const session *ss, char *err, size_t errlen)
 {
     ts_client *c = ts_client_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
-    if (!c && !strstr(err, "refused"))
-        c = tf_networked_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
-    return c;
+    if (c || strstr(err, "refused"))
+        return c;
+    if (!fw)
+        return tf_networked_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
+    for (int backoff = 250; backoff <= 4000 && heartbeat(fw, ss->job) != 0; backoff *= 2) {
+        usleep((useconds_t)backoff * 1000);
+        c = ts_client_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
+        if (c || strstr(err, "refused"))
+            return c;
+    }
+    return NULL;
 }
 
 /* The job's scene from its render and its terrain (kept or built): the scene, or NULL. */
@@ -159,7 +171,7 @@ static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfi
                            double *build_s)
 {
     char err[1024], key[TF_FARM_TOKEN_HEX];
-    ts_client *c = connect_job(ss, err, sizeof err);
+    ts_client *c = connect_job(fw, ss, err, sizeof err);
     int kind = TF_SPACE_RENDER, want = ss->paint ? TF_SPACE_PAINT : TF_SPACE_RENDER;
     tf_scene *s = c ? tf_worker_fetch_scene_ex(c, ss->connect, &kind, err, sizeof err) : NULL;
     if (s && (kind != want || tf_farm_terrain_key(s, key) || strcmp(key, ss->terrain)))
@@ -198,7 +210,7 @@ static void serve_in_child(const session *ss, const tf_scene *s, const tf_height
     signal(SIGTERM, SIG_DFL);
     signal(SIGINT, SIG_DFL);
     char err[1024];
-    ts_client *c = connect_job(ss, err, sizeof err);
+    ts_client *c = connect_job(NULL, ss, err, sizeof err);
     if (!c) {
         tf_error("%s", err);
         _exit(TF_WORKER_EXIT_LOST);
@@ -301,7 +313,7 @@ static const char *watch(farm_worker *fw, const session *ss, pid_t *pids, int n)
 static int spawn_simulated(farm_worker *fw, const session *ss, pid_t *pid)
 {
     char err[1024];
-    ts_client *c = connect_job(ss, err, sizeof err);
+    ts_client *c = connect_job(fw, ss, err, sizeof err);
     tf_scene *s = c ? tf_worker_fetch_scene(c, ss->connect, err, sizeof err) : NULL;
     tf_exr_layout l;
     int fits = s && (!fw->payloads || (tf_worker_fetch_layout(c, &l, err, sizeof err) == 0 &&

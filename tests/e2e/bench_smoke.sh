@@ -37,6 +37,7 @@ script_want() {
     farm_sim) WANT='^farm_sim: 3 jobs, 2 x 2 simulated workers' ;;
     farm_standing) WANT='^killstorm: .* lost=0 identical=2/2' ;;
     povray_compare) WANT='^65 *noaa *| *[0-9]' ;;
+    paint_farm) WANT='^paint_farm: 1 rounds measured' ;;
     paint_progress) WANT='^paint_progress: 1 configurations measured' ;;
     procedural_superlinear) WANT='^superlinear: 2-worker speedup [0-9]' ;;
     rss_flat) WANT='^scanline,rows:8,64x64,[0-9]' ;;

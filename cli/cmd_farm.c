@@ -27,6 +27,8 @@ static const char usage[] =
     "      --max-failures N      failed sessions of a worker on one job before it is barred\n"
     "                            from that job (default 3)\n"
     "      --forgive T           how long such a bar lasts (default 10m)\n"
+    "      --paint-idle T        close a paint job whose page nobody has read this long\n"
+    "                            (default 10m: it holds its pool's workers)\n"
     "      --add-token NAME      create a person's token, print it and exit\n"
     "      --role ROLE           with --add-token: submitter (own jobs) or admin (all)\n"
     "  -q, --quiet / -v, --verbose\n"
@@ -45,7 +47,8 @@ static int parse_ms(const char *flag, const char *text, int *out)
 
 int cmd_farm(int argc, char **argv)
 {
-    enum { O_LISTEN = 256, O_STATE, O_SECRET, O_TIMEOUT, O_FAILURES, O_FORGIVE, O_ADD, O_ROLE };
+    enum { O_LISTEN = 256, O_STATE, O_SECRET, O_TIMEOUT, O_FAILURES, O_FORGIVE, O_ADD, O_ROLE,
+           O_PAINT_IDLE };
     static const struct option longopts[] = {
         {"listen", required_argument, NULL, O_LISTEN},
         {"state", required_argument, NULL, O_STATE},
@@ -53,6 +56,7 @@ int cmd_farm(int argc, char **argv)
         {"worker-timeout", required_argument, NULL, O_TIMEOUT},
         {"max-failures", required_argument, NULL, O_FAILURES},
         {"forgive", required_argument, NULL, O_FORGIVE},
+        {"paint-idle", required_argument, NULL, O_PAINT_IDLE},
         {"add-token", required_argument, NULL, O_ADD},
         {"role", required_argument, NULL, O_ROLE},
         {"quiet", no_argument, NULL, 'q'},
@@ -83,6 +87,10 @@ int cmd_farm(int argc, char **argv)
             break;
         case O_FORGIVE:
             if (parse_ms("--forgive", optarg, &o.forgive_ms))
+                return TF_EXIT_USAGE;
+            break;
+        case O_PAINT_IDLE:
+            if (parse_ms("--paint-idle", optarg, &o.paint_idle_ms))
                 return TF_EXIT_USAGE;
             break;
         case O_ADD: add = optarg; break;

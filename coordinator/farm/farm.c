@@ -146,36 +146,62 @@ static double painted_percent(json_t *st)
     return all > 0 && exact >= 0 && exact <= all ? 100.0 * (double)exact / (double)all : -1;
 }
 
-/* Every running job's progress from its dashboard, asked outside the lock (a render that
- * does not answer within 300 ms keeps its last figure). */
+/* What the farm asks a running job's page, outside the lock. */
+typedef struct progress_probe {
+    int64_t id;
+    int port, paint;
+    char token[TF_FARM_TOKEN_HEX];
+    double pct;        /* -1: not known */
+    double unwatched;  /* a paint's: since its page was last read; -1: not known */
+} progress_probe;
+
+/* One probe's answer (a render that does not answer within 300 ms keeps its last figure). */
+static void probe_job(const tf_farm *f, progress_probe *q)
+{
+    char addr[300], err[256];
+    snprintf(addr, sizeof addr, strchr(f->host, ':') ? "[%s]:%d" : "%s:%d", f->host, q->port);
+    json_t *st = tf_http_json(addr, "GET", q->paint ? "/api/paint/status" : "/api/status",
+                              q->token, NULL, tf_now_ms() + 300, NULL, err, sizeof err);
+    json_t *pct = json_object_get(st, "percent"), *idle = json_object_get(st, "unwatched_s");
+    q->pct = q->paint ? painted_percent(st) : json_is_number(pct) ? json_number_value(pct) : -1;
+    q->unwatched = q->paint && json_is_number(idle) ? json_number_value(idle) : -1;
+    json_decref(st);
+}
+
+/* A paint job nobody has watched for --paint-idle is closed: it holds its pool's workers. */
+static void close_if_unwatched(tf_farm *f, int i, double unwatched_s)
+{
+    if (unwatched_s * 1000.0 < f->o.paint_idle_ms || strcmp(f->jobs[i].state, "queued"))
+        return;
+    char why[128];
+    snprintf(why, sizeof why, "closed: nobody watched its page for %.0f s", unwatched_s);
+    tf_info("job %lld (%s): %s", (long long)f->jobs[i].id, f->jobs[i].name, why);
+    if (farm_set_state(f, i, "cancelled", why, "closed unwatched") == 0)
+        farm_stop_render(f, i, "cancelled");
+}
+
+/* Every running job's progress from its dashboard, asked outside the lock; paint jobs nobody
+ * watches closed. */
 static void poll_progress(tf_farm *f)
 {
-    struct { int64_t id; int port, paint; char token[TF_FARM_TOKEN_HEX]; double pct; } q[64];
+    progress_probe q[64];
     int n = 0;
     for (int i = 0; i < f->njobs && n < 64; i++)
         if (f->runs[i].pid && f->runs[i].http_port && !f->runs[i].stopping) {
-            q[n].id = f->jobs[i].id;
-            q[n].paint = !strcmp(f->jobs[i].kind, "paint");
-            q[n].port = f->runs[i].http_port;
-            memcpy(q[n].token, f->runs[i].token, sizeof q[n].token);
-            q[n++].pct = -1;
+            q[n] = (progress_probe){.id = f->jobs[i].id, .port = f->runs[i].http_port,
+                                    .paint = !strcmp(f->jobs[i].kind, "paint")};
+            memcpy(q[n++].token, f->runs[i].token, sizeof q[0].token);
         }
     pthread_mutex_unlock(&f->lock);
-    for (int k = 0; k < n; k++) {
-        char addr[300], err[256];
-        snprintf(addr, sizeof addr, strchr(f->host, ':') ? "[%s]:%d" : "%s:%d", f->host,
-                 q[k].port);
-        json_t *st = tf_http_json(addr, "GET", q[k].paint ? "/api/paint/status" : "/api/status",
-                                  q[k].token, NULL, tf_now_ms() + 300, NULL, err, sizeof err);
-        q[k].pct = q[k].paint ? painted_percent(st) : json_is_number(json_object_get(st, "percent"))
-                                ? json_number_value(json_object_get(st, "percent")) : -1;
-        json_decref(st);
-    }
+    for (int k = 0; k < n; k++)
+        probe_job(f, &q[k]);
     pthread_mutex_lock(&f->lock);
     for (int k = 0; k < n; k++) {
         int i = farm_job_index(f, q[k].id);
         if (i >= 0 && q[k].pct >= 0)
             f->runs[i].percent = q[k].pct;
+        if (i >= 0 && q[k].unwatched >= 0 && f->runs[i].pid && !f->runs[i].stopping)
+            close_if_unwatched(f, i, q[k].unwatched);
     }
 }
 
@@ -452,6 +478,8 @@ static int setup(tf_farm *f, const tf_farm_opts *o)
         f->o.forgive_ms = 600000;
     if (!f->o.max_render_attempts)
         f->o.max_render_attempts = 3;
+    if (!f->o.paint_idle_ms)
+        f->o.paint_idle_ms = 600000;
     char port[32], err[256];
     if (tf_split_hostport(o->listen, f->host, sizeof f->host, port, sizeof port, err,
                           sizeof err)) {

@@ -18,6 +18,7 @@ typedef struct tf_farm_opts {
     int max_failures;        /* failed sessions of a worker on a job before it is barred (3) */
     int forgive_ms;          /* how long a bar lasts (default 10 min) */
     int max_render_attempts; /* renders of a job that fail before the job fails (3) */
+    int paint_idle_ms;       /* a paint job whose page nobody reads this long is closed (10 min) */
 } tf_farm_opts;
 
 /* Run the farm until SIGINT or SIGTERM.  Returns the exit status (0, or 1 after one line). */

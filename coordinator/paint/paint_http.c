@@ -50,7 +50,7 @@ static json_t *status_json(tf_paint_http *h)
     tf_paint_hub_status(h->cfg.hub, &s);
     const tf_paint_counts *c = &s.counts;
     return json_pack("{s:I,s:i,s:i,s:o,s:{s:I,s:I,s:I,s:I,s:I},s:i,s:b,s:I,s:I,s:I,s:f,s:f,"
-                     "s:f,s:b,s:s,s:s,s:i,s:I}",
+                     "s:f,s:b,s:s,s:s,s:i,s:I,s:i,s:f}",
                      "gen", (json_int_t)s.gen, "width", s.width, "height", s.height, "view",
                      tf_paint_view_json(&s.view), "counts", "exact_pixels",
                      (json_int_t)c->exact_pixels, "pixels", (json_int_t)c->pixels, "samples",
@@ -60,7 +60,8 @@ static json_t *status_json(tf_paint_http *h)
                      (json_int_t)s.refused, "view_age_s", s.view_age_s, "coarse_s", s.coarse_s,
                      "painted_s", s.painted_s, "output_written", s.output_written, "output",
                      s.output, "save", h->cfg.save ? h->cfg.save : "", "outstanding",
-                     s.outstanding, "log_bytes", (json_int_t)s.log_bytes);
+                     s.outstanding, "log_bytes", (json_int_t)s.log_bytes, "watchers",
+                     s.watchers, "unwatched_s", s.unwatched_s);
 }
 
 static int query_i64(struct MHD_Connection *c, const char *key, int64_t lo, int64_t hi,

@@ -20,6 +20,8 @@ struct tf_paint_hub {
     tf_paint_status status;
     tf_paint_cmd queue[MAX_COMMANDS];
     int head, count;
+    int readers;            /* pages waiting on the log now */
+    int64_t last_read_ms;   /* when a page last stopped waiting (or the hub began) */
 };
 
 tf_paint_hub *tf_paint_hub_new(int width, int height)
@@ -32,6 +34,7 @@ tf_paint_hub *tf_paint_hub_new(int width, int height)
     h->status.width = width;
     h->status.height = height;
     h->status.coarse_s = h->status.painted_s = -1;
+    h->last_read_ms = tf_now_ms();
     return h;
 }
 
@@ -120,6 +123,8 @@ void tf_paint_hub_status(tf_paint_hub *h, tf_paint_status *s)
     pthread_mutex_lock(&h->lock);
     *s = h->status;
     s->log_bytes = (int64_t)h->log.len;
+    s->watchers = h->readers;
+    s->unwatched_s = h->readers ? 0 : (double)(tf_now_ms() - h->last_read_ms) / 1000.0;
     pthread_mutex_unlock(&h->lock);
 }
 
@@ -136,9 +141,12 @@ int tf_paint_hub_read(tf_paint_hub *h, int64_t gen, size_t from, int wait_ms, ui
 {
     struct timespec deadline = tf_realtime_in(wait_ms);
     pthread_mutex_lock(&h->lock);
+    h->readers++;
     while (!h->closed && h->gen == gen && h->log.len <= from)
         if (pthread_cond_timedwait(&h->more, &h->lock, &deadline) == ETIMEDOUT)
             break;
+    h->readers--;
+    h->last_read_ms = tf_now_ms();
     size_t start = h->gen == gen && from <= h->log.len ? from : 0;
     *len = h->log.len - start;
     *out = malloc(*len + 1);

@@ -34,6 +34,9 @@ typedef struct tf_paint_status {
                                    to every pixel exact; < 0: not yet */
     int output_written;         /* -o: the painted image of this view is on disk */
     char output[256];           /* -o, or empty */
+    int watchers;               /* pages waiting for the view's messages now (filled by the hub) */
+    double unwatched_s;         /* since a page last read them (0 while one waits; filled by
+                                   the hub): a standing farm closes a paint nobody watches */
 } tf_paint_status;
 
 enum { TF_PAINT_CMD_VIEW = 1, TF_PAINT_CMD_INTEREST, TF_PAINT_CMD_PAUSE, TF_PAINT_CMD_RESUME };

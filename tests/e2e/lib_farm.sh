@@ -12,10 +12,12 @@ farm_init() {
 
 # start_farm [PORT]: a farm on $T/state in the background ($FARM), its port in $PORT, and
 # TERRAFARM_FARM / TERRAFARM_TOKEN_FILE set; restarted on the same PORT, its workers find it.
+# $FARM_ARGS: more options for the farm.
 start_farm() {
     : >"$T/farm.log"
+    # shellcheck disable=SC2086
     "$TF_BIN" farm --listen "127.0.0.1:${1:-0}" --state "$T/state" --secret-file "$T/secret" \
-        >>"$T/farm.log" 2>&1 &
+        ${FARM_ARGS:-} >>"$T/farm.log" 2>&1 &
     FARM=$!
     e2e_track $FARM
     i=0

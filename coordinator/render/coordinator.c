@@ -459,9 +459,10 @@ static tf_rowwriter *start_frame_writer(render *r, frame_output *fo, tf_exr_writ
 {
     /* Room for two bands of results: handing results to the writer must not block the event
      * loop.  Results are packed chunks, and bands are capped in pixels (tasks.c), so this stays
-     * a few MB whatever the image size. */
+     * a few MB whatever the image size.  The thread is woken once half of that is queued (or
+     * half an fsync interval after the first of them), not for every result. */
     tf_rowwriter_config wcfg = {2 * r->tasks.cols + 8, r->o->fsync_interval_ms, fo->preview,
-                                r->o->preview_interval_ms, fo->plan.working};
+                                r->o->preview_interval_ms, fo->plan.working, r->tasks.cols + 4};
     tf_rowwriter *w = tf_rowwriter_start(writer, &r->layout, &wcfg, err, errlen);
     if (!w)
         tf_exr_abandon(writer);

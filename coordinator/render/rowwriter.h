@@ -26,6 +26,8 @@ typedef struct tf_rowwriter_config {
     const char *preview_png;  /* or NULL: no preview */
     int preview_interval_ms;  /* rewrite the preview at most this often while rendering */
     const char *existing;     /* a resume: the output, whose verified chunks fill the preview */
+    int batch;                /* results queued before the thread is woken (<= 1: each one);
+                               * fewer wait at most half the fsync interval */
 } tf_rowwriter_config;
 
 /* Start the thread over w (positioned at its next chunk).  NULL with a message on failure (w is

@@ -713,7 +713,7 @@ static int supervise(render *r)
         double t = tf_now_s();
         tf_supervisor_step(r->sup, t * 1000.0);
         tf_finisher_reap(r->finisher, r->finish_error, sizeof r->finish_error);
-        if (t - last_reap >= 0.05) { /* a waitpid per worker: not at every event */
+        if (t - last_reap >= 0.2) { /* a system call: not at every event */
             tf_local_workers_reap(&r->lw, 1);
             last_reap = t;
         }

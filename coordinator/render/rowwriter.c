@@ -23,6 +23,8 @@
 #include <time.h>
 #include "log.h"
 
+#define HELD_MAX 32 /* results a write may gather (the sink's run: SINK_IOV pieces) */
+
 struct tf_rowwriter {
     tf_exr_writer *w;
     tf_exr_layout layout;
@@ -46,6 +48,10 @@ struct tf_rowwriter {
     int preview_dirty;
     double preview_last;
     double preview_cost_ms;   /* how long the last rewrite took */
+    /* written results whose chunks the sink still references (writer thread only): freed at
+     * the flush, so that one pwritev carries many results' chunks */
+    tf_tuple held[HELD_MAX];
+    int nheld;
     pthread_mutex_t mu;
     pthread_cond_t nonempty, nonfull;
     pthread_t thread;
@@ -242,6 +248,36 @@ static void wait_for_work(tf_rowwriter *rw, int dirty, double last_sync)
     }
 }
 
+/* Flush the sink, then free the results it referenced.  0, or -1 with err set. */
+static int flush_held(tf_rowwriter *rw, char *err, size_t errlen)
+{
+    int rc = tf_exr_flush(rw->w, err, errlen);
+    for (int i = 0; i < rw->nheld; i++)
+        tf_tuple_clear(&rw->held[i]);
+    rw->nheld = 0;
+    return rc;
+}
+
+/* A result just written: kept while the sink references its chunks, else freed.  The write
+ * goes out once nothing is queued behind it (or after a failure, or with HELD_MAX kept), so
+ * that a farm of small tasks does not pay a system call per task; the file grows by whole
+ * results either way.  Returns rc, or the flush's failure. */
+static int written(tf_rowwriter *rw, tf_tuple *item, int rc, int more, char *err, size_t errlen)
+{
+    if (tf_exr_holds_references(rw->w))
+        tf_tuple_move(&rw->held[rw->nheld++], item);
+    else
+        tf_tuple_clear(item);
+    if (rc == 0 && more && rw->nheld < HELD_MAX)
+        return 0;
+    char ferr[512];
+    if (flush_held(rw, ferr, sizeof ferr) && rc == 0) {
+        snprintf(err, errlen, "%s", ferr);
+        return -1;
+    }
+    return rc;
+}
+
 static void *writer_main(void *arg)
 {
     tf_rowwriter *rw = arg;
@@ -270,19 +306,7 @@ static void *writer_main(void *arg)
         int rc = 0;
         if (have) {
             rc = write_result(rw, &item, err, sizeof err);
-            /* One write for as many results as came together (bounded by the sink's buffer),
-             * so that a farm of small tasks does not pay a system call per task; large chunks
-             * go out from the result itself (tf_exr_hold_chunks), so before it is freed, even
-             * after a failure.  The file grows by whole results either way. */
-            if (tf_exr_holds_references(rw->w) || (rc == 0 && !more)) {
-                char ferr[512];
-                int frc = tf_exr_flush(rw->w, ferr, sizeof ferr);
-                if (rc == 0 && frc != 0) {
-                    rc = frc;
-                    snprintf(err, sizeof err, "%s", ferr);
-                }
-            }
-            tf_tuple_clear(&item);
+            rc = written(rw, &item, rc, more, err, sizeof err);
             dirty = 1;
         }
         double now = tf_now_msf();
@@ -323,6 +347,8 @@ static void free_rowwriter(tf_rowwriter *rw)
     if (rw->slot)
         for (int i = 0; i < rw->depth; i++)
             tf_tuple_clear(&rw->slot[i]);
+    for (int i = 0; i < rw->nheld; i++)
+        tf_tuple_clear(&rw->held[i]);
     free(rw->slot);
     free(rw->preview);
     free(rw->preview_path);

@@ -310,7 +310,7 @@ static void *writer_main(void *arg)
             dirty = 1;
         }
         double now = tf_now_msf();
-        if (rc == 0 && dirty && !more && now - last_sync >= rw->fsync_ms) {
+        if (rc == 0 && dirty && now - last_sync >= rw->fsync_ms) { /* held results stay alive */
             rc = tf_exr_sync(rw->w, err, sizeof err);
             last_sync = tf_now_msf();
             dirty = 0;

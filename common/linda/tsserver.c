@@ -655,22 +655,25 @@ static int handle_out(conn *c, const tf_frame *f, char *err, size_t errlen)
             return 0;
         }
     }
-    int want_copy = srv->hooks.on_out != NULL;
-    if (want_copy && tf_tuple_copy(&seen, &t) != 0) {
+    /* The hook sees the tuple's value, not the stored tuple, which it (or a waiter) may take
+     * meanwhile: a view of the frame, which stays in c->in until this request is served (a
+     * closed connection's buffers outlive the loop's turn), so a result's blobs are not
+     * copied once more. */
+    int want_view = srv->hooks.on_out != NULL;
+    if (want_view && tf_tuple_view(f->body, f->body_len, &seen, err, errlen) != 0) {
         tf_tuple_clear(&t);
-        tf_seterr(err, errlen, "out of memory");
         return -1;
     }
     uint64_t id = c->id;
     if (ts_space_out(srv->space, &t) != 0) {
-        if (want_copy)
-            tf_tuple_clear(&seen);
+        if (want_view)
+            tf_tuple_view_clear(&seen);
         tf_seterr(err, errlen, "out of memory storing a tuple");
         return -1;
     }
-    if (want_copy) {
+    if (want_view) {
         srv->hooks.on_out(srv->hooks.ctx, id, &seen);
-        tf_tuple_clear(&seen);
+        tf_tuple_view_clear(&seen);
     }
     if (!c->dead)
         reply_tuple(c, TF_OP_OK, f->request_id, NULL);

@@ -30,7 +30,8 @@
  * Hooks (all optional) let the coordinator lease tasks: on_take runs when a connection removes a
  * tuple with in or inp (immediately or when a blocked in is served later), before the reply is
  * queued; on_out after a connection's tuple has been put in the space (it may already have been
- * handed to a waiter: the hook sees the tuple's value, not a live reference into the store);
+ * handed to a waiter: the hook sees the tuple's value, not a live reference into the store: a
+ * view of the request's frame, tuple.h's tf_tuple_view, read-only and valid during the call);
  * on_disconnect when a connection is closed for any reason (including ts_server_close_conn and
  * ts_server_free).  Hooks may call the ts_space and ts_server_close_conn.
  *

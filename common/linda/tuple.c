@@ -333,9 +333,23 @@ size_t tf_tuple_encode(const tf_tuple *t, uint8_t *buf)
     return (size_t)(p - buf);
 }
 
-/* Decode one actual value of `type` at buf[*pos..len) into tuple t.  0 or -1 with err set. */
-static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type, tf_tuple *t,
-                        char *err, size_t errlen)
+/* A blob field whose bytes stay where they are (tf_tuple_view). */
+static int add_borrowed(tf_tuple *t, const uint8_t *p, size_t len)
+{
+    tf_field *f = next_field(t);
+    if (!f || len > UINT32_MAX - 1)
+        return -1;
+    f->type = TF_FIELD_BLOB;
+    f->v.bytes.ptr = (uint8_t *)p;
+    f->v.bytes.len = (uint32_t)len;
+    t->nfields++;
+    return 0;
+}
+
+/* Decode one actual value of `type` at buf[*pos..len) into tuple t, a blob borrowed from buf
+ * when `borrow` is set.  0 or -1 with err set. */
+static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type, int borrow,
+                        tf_tuple *t, char *err, size_t errlen)
 {
     size_t rest = len - *pos;
     if (type == TF_FIELD_INT || type == TF_FIELD_DOUBLE) {
@@ -370,15 +384,24 @@ static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type, t
         tf_seterr(err, errlen, "string field contains a NUL byte");
         return -1;
     }
-    if (add_bytes(t, type, p, n) != 0) {
+    if ((borrow && type == TF_FIELD_BLOB ? add_borrowed(t, p, n) : add_bytes(t, type, p, n))) {
         tf_seterr(err, errlen, "out of memory decoding a %" PRIu32 "-byte field", n);
         return -1;
     }
     return 0;
 }
 
-int tf_tuple_decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_formals,
-                    char *err, size_t errlen)
+void tf_tuple_view_clear(tf_tuple *view)
+{
+    for (int i = 0; i < view->nfields && i < TF_TUPLE_MAX_FIELDS; i++)
+        if (view->f[i].type == TF_FIELD_STRING && !view->f[i].formal)
+            free(view->f[i].v.bytes.ptr);
+    tf_tuple_init(view);
+}
+
+/* tf_tuple_decode, or with `borrow` tf_tuple_view (formals are never allowed then). */
+static int decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_formals, int borrow,
+                  char *err, size_t errlen)
 {
     tf_tuple_init(out);
     if (len < 1) {
@@ -407,7 +430,7 @@ int tf_tuple_decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_for
                 goto fail;
             }
             tf_tuple_add_formal(out, (enum tf_field_type)type);
-        } else if (decode_value(buf, len, &pos, type, out, err, errlen) != 0) {
+        } else if (decode_value(buf, len, &pos, type, borrow, out, err, errlen) != 0) {
             goto fail;
         }
     }
@@ -417,8 +440,22 @@ int tf_tuple_decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_for
     }
     return 0;
 fail:
-    tf_tuple_clear(out);
+    if (borrow)
+        tf_tuple_view_clear(out);
+    else
+        tf_tuple_clear(out);
     return -1;
+}
+
+int tf_tuple_decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_formals,
+                    char *err, size_t errlen)
+{
+    return decode(buf, len, out, allow_formals, 0, err, errlen);
+}
+
+int tf_tuple_view(const uint8_t *buf, size_t len, tf_tuple *out, char *err, size_t errlen)
+{
+    return decode(buf, len, out, 0, 1, err, errlen);
 }
 
 size_t tf_tuple_bytes(const tf_tuple *t) { return tf_tuple_encoded_size(t); }

@@ -118,6 +118,13 @@ size_t tf_tuple_encode(const tf_tuple *t, uint8_t *buf);
  * fit in the remaining bytes. */
 int tf_tuple_decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_formals,
                     char *err, size_t errlen);
+/* A view of a tuple's encoding (no formals), checked as tf_tuple_decode checks it, whose blob
+ * fields borrow their bytes from buf instead of copying them (not NUL-terminated: only their
+ * length bounds them); its strings are copies as usual.  For a look at a large tuple that
+ * another copy of it keeps: valid while buf is, read-only, and released with
+ * tf_tuple_view_clear (never tf_tuple_clear, tf_tuple_move or a store).  0, or -1 as decode. */
+int tf_tuple_view(const uint8_t *buf, size_t len, tf_tuple *out, char *err, size_t errlen);
+void tf_tuple_view_clear(tf_tuple *view);
 
 /* Bytes this tuple is accounted for in the tuple space (its encoded size). */
 size_t tf_tuple_bytes(const tf_tuple *t);

@@ -459,9 +459,10 @@ static tf_rowwriter *start_frame_writer(render *r, frame_output *fo, tf_exr_writ
 {
     /* Room for two bands of results: handing results to the writer must not block the event
      * loop.  Results are packed chunks, and bands are capped in pixels (tasks.c), so this stays
-     * a few MB whatever the image size. */
+     * a few MB whatever the image size.  The thread is woken once half of that is queued (or
+     * half an fsync interval after the first of them), not for every result. */
     tf_rowwriter_config wcfg = {2 * r->tasks.cols + 8, r->o->fsync_interval_ms, fo->preview,
-                                r->o->preview_interval_ms, fo->plan.working};
+                                r->o->preview_interval_ms, fo->plan.working, r->tasks.cols + 4};
     tf_rowwriter *w = tf_rowwriter_start(writer, &r->layout, &wcfg, err, errlen);
     if (!w)
         tf_exr_abandon(writer);
@@ -712,7 +713,7 @@ static int supervise(render *r)
         double t = tf_now_s();
         tf_supervisor_step(r->sup, t * 1000.0);
         tf_finisher_reap(r->finisher, r->finish_error, sizeof r->finish_error);
-        if (t - last_reap >= 0.05) { /* a waitpid per worker: not at every event */
+        if (t - last_reap >= 0.2) { /* a system call: not at every event */
             tf_local_workers_reap(&r->lw, 1);
             last_reap = t;
         }

@@ -104,8 +104,19 @@ int tf_local_workers_start_loop(tf_local_workers *lw, int n, ts_server *srv, con
     return 0;
 }
 
+/* Has any child of this process exited (not yet waited for)?  One system call, where a waitpid
+ * per worker would be one each; the status stays for the waitpid that collects it. */
+static int any_child_exited(void)
+{
+    siginfo_t si;
+    si.si_pid = 0;
+    return waitid(P_ALL, 0, &si, WEXITED | WNOHANG | WNOWAIT) != 0 || si.si_pid != 0;
+}
+
 void tf_local_workers_reap(tf_local_workers *lw, int respawn)
 {
+    if (!any_child_exited())
+        return;
     for (int i = 0; i < lw->n; i++) {
         if (lw->pid[i] <= 0)
             continue;

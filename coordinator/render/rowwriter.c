@@ -23,12 +23,17 @@
 #include <time.h>
 #include "log.h"
 
+#define HELD_MAX 32 /* results a write may gather (the sink's run: SINK_IOV pieces) */
+
 struct tf_rowwriter {
     tf_exr_writer *w;
     tf_exr_layout layout;
     int depth, fsync_ms, preview_ms;
+    int batch;         /* results queued before the producer wakes the thread */
     tf_tuple *slot;
     int head, count;
+    double queued_ms;  /* when the queue last became non-empty (the producer's clock) */
+    int untimed;       /* the thread waits with no timer: only a signal wakes it */
     int stop;          /* 1: finish after the queue drains */
     int failed;
     char error[512];
@@ -43,6 +48,10 @@ struct tf_rowwriter {
     int preview_dirty;
     double preview_last;
     double preview_cost_ms;   /* how long the last rewrite took */
+    /* written results whose chunks the sink still references (writer thread only): freed at
+     * the flush, so that one pwritev carries many results' chunks */
+    tf_tuple held[HELD_MAX];
+    int nheld;
     pthread_mutex_t mu;
     pthread_cond_t nonempty, nonfull;
     pthread_t thread;
@@ -206,29 +215,79 @@ static int write_result(tf_rowwriter *rw, const tf_tuple *t, char *err, size_t e
     return 0;
 }
 
+/* When the sleeping thread has something to do by itself: the next fsync of written chunks, the
+ * next preview, or the write of results queued for half an fsync interval (fewer than a batch:
+ * the producer woke nobody).  1e300: nothing. */
+static double next_due(const tf_rowwriter *rw, int dirty, double last_sync)
+{
+    double due = 1e300;
+    if (dirty)
+        due = last_sync + rw->fsync_ms;
+    if (rw->preview_dirty && rw->preview && rw->preview_last + rw->preview_ms < due)
+        due = rw->preview_last + rw->preview_ms;
+    if (rw->count > 0 && rw->queued_ms + rw->fsync_ms / 2 < due)
+        due = rw->queued_ms + rw->fsync_ms / 2;
+    return due;
+}
+
+/* Sleep (rw->mu held) until a batch is queued, the render stops, or something falls due. */
+static void wait_for_work(tf_rowwriter *rw, int dirty, double last_sync)
+{
+    while (rw->count < rw->batch && !rw->stop) {
+        double now = tf_now_msf(), due = next_due(rw, dirty, last_sync);
+        if (due == 1e300) {
+            rw->untimed = 1;
+            pthread_cond_wait(&rw->nonempty, &rw->mu);
+            rw->untimed = 0;
+            continue;
+        }
+        if (due - now <= 0)
+            return;
+        struct timespec ts = tf_realtime_in(due - now);
+        pthread_cond_timedwait(&rw->nonempty, &rw->mu, &ts);
+    }
+}
+
+/* Flush the sink, then free the results it referenced.  0, or -1 with err set. */
+static int flush_held(tf_rowwriter *rw, char *err, size_t errlen)
+{
+    int rc = tf_exr_flush(rw->w, err, errlen);
+    for (int i = 0; i < rw->nheld; i++)
+        tf_tuple_clear(&rw->held[i]);
+    rw->nheld = 0;
+    return rc;
+}
+
+/* A result just written: kept while the sink references its chunks, else freed.  The write
+ * goes out once nothing is queued behind it (or after a failure, or with HELD_MAX kept), so
+ * that a farm of small tasks does not pay a system call per task; the file grows by whole
+ * results either way.  Returns rc, or the flush's failure. */
+static int written(tf_rowwriter *rw, tf_tuple *item, int rc, int more, char *err, size_t errlen)
+{
+    if (tf_exr_holds_references(rw->w))
+        tf_tuple_move(&rw->held[rw->nheld++], item);
+    else
+        tf_tuple_clear(item);
+    if (rc == 0 && more && rw->nheld < HELD_MAX)
+        return 0;
+    char ferr[512];
+    if (flush_held(rw, ferr, sizeof ferr) && rc == 0) {
+        snprintf(err, errlen, "%s", ferr);
+        return -1;
+    }
+    return rc;
+}
+
 static void *writer_main(void *arg)
 {
     tf_rowwriter *rw = arg;
     double last_sync = tf_now_msf();
-    int dirty = 0;
+    int dirty = 0, more = 0;
     char err[512];
     pthread_mutex_lock(&rw->mu);
     for (;;) {
-        while (rw->count == 0 && !rw->stop) {
-            double now = tf_now_msf(), due = 1e300;
-            if (dirty)
-                due = last_sync + rw->fsync_ms;
-            if (rw->preview_dirty && rw->preview && rw->preview_last + rw->preview_ms < due)
-                due = rw->preview_last + rw->preview_ms;
-            if (due == 1e300) {
-                pthread_cond_wait(&rw->nonempty, &rw->mu);
-                continue;
-            }
-            if (due - now <= 0)
-                break;
-            struct timespec ts = tf_realtime_in(due - now);
-            pthread_cond_timedwait(&rw->nonempty, &rw->mu, &ts);
-        }
+        if (!more) /* once awake, the thread drains the queue before it sleeps again */
+            wait_for_work(rw, dirty, last_sync);
         assert(assert_queue(rw));
         if (rw->count == 0 && rw->stop)
             break;
@@ -241,29 +300,17 @@ static void *writer_main(void *arg)
             if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
                 pthread_cond_signal(&rw->nonfull);
         }
-        int more = rw->count > 0; /* queued behind this one: their chunks join its write */
+        more = rw->count > 0; /* queued behind this one: their chunks join its write */
         pthread_mutex_unlock(&rw->mu);
 
         int rc = 0;
         if (have) {
             rc = write_result(rw, &item, err, sizeof err);
-            /* One write for as many results as came together (bounded by the sink's buffer),
-             * so that a farm of small tasks does not pay a system call per task; large chunks
-             * go out from the result itself (tf_exr_hold_chunks), so before it is freed, even
-             * after a failure.  The file grows by whole results either way. */
-            if (tf_exr_holds_references(rw->w) || (rc == 0 && !more)) {
-                char ferr[512];
-                int frc = tf_exr_flush(rw->w, ferr, sizeof ferr);
-                if (rc == 0 && frc != 0) {
-                    rc = frc;
-                    snprintf(err, sizeof err, "%s", ferr);
-                }
-            }
-            tf_tuple_clear(&item);
+            rc = written(rw, &item, rc, more, err, sizeof err);
             dirty = 1;
         }
         double now = tf_now_msf();
-        if (rc == 0 && dirty && now - last_sync >= rw->fsync_ms) {
+        if (rc == 0 && dirty && now - last_sync >= rw->fsync_ms) { /* held results stay alive */
             rc = tf_exr_sync(rw->w, err, sizeof err);
             last_sync = tf_now_msf();
             dirty = 0;
@@ -300,6 +347,8 @@ static void free_rowwriter(tf_rowwriter *rw)
     if (rw->slot)
         for (int i = 0; i < rw->depth; i++)
             tf_tuple_clear(&rw->slot[i]);
+    for (int i = 0; i < rw->nheld; i++)
+        tf_tuple_clear(&rw->held[i]);
     free(rw->slot);
     free(rw->preview);
     free(rw->preview_path);
@@ -315,6 +364,7 @@ tf_rowwriter *tf_rowwriter_start(tf_exr_writer *w, const tf_exr_layout *layout,
     rw->w = w;
     rw->layout = *layout;
     rw->depth = cfg->depth < 1 ? 1 : cfg->depth;
+    rw->batch = cfg->batch < 1 ? 1 : cfg->batch > rw->depth ? rw->depth : cfg->batch;
     rw->fsync_ms = cfg->fsync_interval_ms > 0 ? cfg->fsync_interval_ms : 1000;
     rw->preview_ms = cfg->preview_interval_ms > 0 ? cfg->preview_interval_ms : 5000;
     rw->rows_written = tf_exr_next_row(w);
@@ -352,7 +402,11 @@ int tf_rowwriter_put(tf_rowwriter *rw, tf_tuple *result)
     }
     int idx = (rw->head + rw->count) % rw->depth;
     tf_tuple_move(&rw->slot[idx], result);
-    if (rw->count++ == 0) /* the thread sleeps only on an empty queue */
+    if (rw->count++ == 0)
+        rw->queued_ms = tf_now_msf();
+    /* The thread sleeps until a batch is queued or its timer runs out (next_due): one wake-up
+     * a batch, not one a result; a thread with no timer must hear of the first one. */
+    if (rw->count == rw->batch || (rw->untimed && rw->count == 1))
         pthread_cond_signal(&rw->nonempty);
     assert(assert_queue(rw));
     pthread_mutex_unlock(&rw->mu);

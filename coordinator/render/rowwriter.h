@@ -4,7 +4,10 @@
  * tf_exr_write_chunk -- no pixel is decoded or compressed here), makes them durable (fsync) at a
  * bounded interval, and stitches each result's preview share into the progress preview, which
  * it rewrites (PNG, atomic rename) every few seconds while the render runs and once at the end.
- * The event loop meanwhile goes on serving workers.
+ * The event loop meanwhile goes on serving workers.  The thread is woken once `batch` results
+ * are queued, not for each (a wake-up is a system call and a context switch of each thread);
+ * fewer wait at most half the fsync interval, on the thread's own timer.  What it has written
+ * goes out in one pwritev for as many results as came together.
  *
  * Memory is bounded: at most `depth` results wait in the queue; tf_rowwriter_put blocks while the
  * queue is full, which slows dealing down to the disk's pace.  The preview is the decimated
@@ -26,6 +29,8 @@ typedef struct tf_rowwriter_config {
     const char *preview_png;  /* or NULL: no preview */
     int preview_interval_ms;  /* rewrite the preview at most this often while rendering */
     const char *existing;     /* a resume: the output, whose verified chunks fill the preview */
+    int batch;                /* results queued before the thread is woken (<= 1: each one);
+                               * fewer wait at most half the fsync interval */
 } tf_rowwriter_config;
 
 /* Start the thread over w (positioned at its next chunk).  NULL with a message on failure (w is

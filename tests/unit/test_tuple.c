@@ -144,6 +144,32 @@ static void test_decode_rejects_malformed(void **state)
     assert_int_equal(out.nfields, 0);
 }
 
+/* tf_tuple_view: equal to the decoded tuple, its blobs inside the encoding (not copied), its
+ * strings copies; the same rejections as the decoder, formals included; a failed view is
+ * empty (a blob before the fault is not freed: the sanitizer build would catch it). */
+static void test_view_borrows_blobs(void **state)
+{
+    (void)state;
+    tf_tuple t, v;
+    tf_tuple_init(&t);
+    uint8_t blob[100], enc[512];
+    memset(blob, 0xab, sizeof blob);
+    assert_int_equal(tf_tuple_pack(&t, "sibs", "result", (int64_t)7, blob, sizeof blob, "x"), 0);
+    size_t n = tf_tuple_encode(&t, enc);
+    char err[128];
+    assert_int_equal(tf_tuple_view(enc, n, &v, err, sizeof err), 0);
+    assert_true(tf_tuple_equal(&t, &v));
+    assert_true(v.f[2].v.bytes.ptr > enc && v.f[2].v.bytes.ptr + 100 <= enc + n);
+    assert_true(v.f[0].v.bytes.ptr < enc || v.f[0].v.bytes.ptr >= enc + n);
+    tf_tuple_view_clear(&v);
+    assert_int_equal(v.nfields, 0);
+    const uint8_t formal[] = {1, 0x84};
+    assert_int_equal(tf_tuple_view(formal, 2, &v, err, sizeof err), -1);
+    assert_int_equal(tf_tuple_view(enc, n - 1, &v, err, sizeof err), -1);
+    assert_int_equal(v.nfields, 0);
+    tf_tuple_clear(&t);
+}
+
 static void test_frame_parse(void **state)
 {
     (void)state;
@@ -247,6 +273,7 @@ int main(void)
         cmocka_unit_test(test_max_fields),
         cmocka_unit_test(test_match_rules),
         cmocka_unit_test(test_decode_rejects_malformed),
+        cmocka_unit_test(test_view_borrows_blobs),
         cmocka_unit_test(test_frame_parse),
         cmocka_unit_test(test_buf_trim),
         cmocka_unit_test(test_hostport_and_loopback),

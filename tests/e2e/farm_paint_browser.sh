@@ -9,11 +9,10 @@
 . "$(dirname "$0")/lib.sh"
 e2e_init
 . "$(dirname "$0")/lib_farm.sh"
+. "$(dirname "$0")/lib_paint.sh"
 CHROMIUM=$(command -v chromium || command -v chromium-browser) || skip "chromium is not installed (make deps)"
 SIZE=240x136
-say "reference render"
-render -q -j 2 --size $SIZE --http none -o "$T/ref.exr" || fail "reference: $(cat "$T/last.err")"
-[ -s "$T/ref.png" ] || fail "the reference render wrote no preview PNG"
+render_reference $SIZE
 
 say "a farm with alice's paused still and a staying worker"
 farm_init

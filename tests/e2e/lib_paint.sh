@@ -1,5 +1,13 @@
 # lib_paint.sh: starting `terrafarm paint` in the paint tests (sourced after lib.sh).
 #
+# render_reference SIZE: the plain render of $SCENE at SIZE, $T/ref.exr with its PNG preview
+# $T/ref.png (what a fully painted canvas must equal byte for byte).
+render_reference() {
+    say "reference render"
+    render -q -j 2 --size "$1" --http none -o "$T/ref.exr" || fail "reference: $(cat "$T/last.err")"
+    [ -s "$T/ref.png" ] || fail "the reference render wrote no preview PNG"
+}
+#
 # start_paint LOG ARGS...: terrafarm paint $SCENE ARGS in the background, its stderr to LOG;
 # waits for its page and sets PAINT_PID and PAINT_URL (http://127.0.0.1:PORT/), and
 # PAINT_WORKERS (the networked workers' HOST:PORT) when it listens for them.

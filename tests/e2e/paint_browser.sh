@@ -10,9 +10,7 @@
 e2e_init
 CHROMIUM=$(command -v chromium || command -v chromium-browser) || skip "chromium is not installed (make deps)"
 SIZE=320x180
-say "reference render"
-render -q -j 2 --size $SIZE --http none -o "$T/ref.exr" || fail "reference: $(cat "$T/last.err")"
-[ -s "$T/ref.png" ] || fail "the reference render wrote no preview PNG"
+render_reference $SIZE
 
 say "terrafarm paint, paused, watched by Chromium"
 # tasks of ~1000 rays: a 320x180 picture in dozens of tasks, so the order of dealing shows

@@ -460,9 +460,11 @@ static tf_rowwriter *start_frame_writer(render *r, frame_output *fo, tf_exr_writ
     /* Room for two bands of results: handing results to the writer must not block the event
      * loop.  Results are packed chunks, and bands are capped in pixels (tasks.c), so this stays
      * a few MB whatever the image size.  The thread is woken once half of that is queued (or
-     * half an fsync interval after the first of them), not for every result. */
+     * half an fsync interval after the first of them), not for every result; and at least 16
+     * times a render, so that a small render's file still grows in steps, not at its end. */
+    int batch = r->tasks.cols + 4 < r->tasks.count / 16 ? r->tasks.cols + 4 : r->tasks.count / 16;
     tf_rowwriter_config wcfg = {2 * r->tasks.cols + 8, r->o->fsync_interval_ms, fo->preview,
-                                r->o->preview_interval_ms, fo->plan.working, r->tasks.cols + 4};
+                                r->o->preview_interval_ms, fo->plan.working, batch};
     tf_rowwriter *w = tf_rowwriter_start(writer, &r->layout, &wcfg, err, errlen);
     if (!w)
         tf_exr_abandon(writer);

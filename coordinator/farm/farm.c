@@ -6,9 +6,9 @@
 
 #include <assert.h>
 #include <errno.h>
-#include <sodium.h>
 #include <fcntl.h>
 #include <signal.h>
+#include <sodium.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -189,7 +189,7 @@ static void poll_progress(tf_farm *f)
     for (int i = 0; i < f->njobs && n < 64; i++)
         if (f->runs[i].pid && f->runs[i].http_port && !f->runs[i].stopping) {
             q[n] = (progress_probe){.id = f->jobs[i].id, .port = f->runs[i].http_port,
-                                    .paint = !strcmp(f->jobs[i].kind, "paint")};
+                                    .paint = tf_job_is_paint(&f->jobs[i])};
             memcpy(q[n++].token, f->runs[i].token, sizeof q[0].token);
         }
     pthread_mutex_unlock(&f->lock);
@@ -229,7 +229,7 @@ static void start_render(tf_farm *f, int i)
     char err[1024] = "", token[TF_FARM_TOKEN_HEX] = "";
     int port = 0, http_port = 0;
     f->runs[i].want = 0;
-    if (!strcmp(copy.kind, "paint") && tf_farm_token_new(token))
+    if (tf_job_is_paint(&copy) && tf_farm_token_new(token))
         token[0] = 0; /* no token: the page's Submit is refused, the rest works */
     pthread_mutex_unlock(&f->lock);
     pid_t pid = launch(f, &copy, token[0] ? token : NULL, &port, &http_port, err, sizeof err);
@@ -256,7 +256,7 @@ static void start_render(tf_farm *f, int i)
     if (!j->started)
         j->started = unix_now();
     char ev[64];
-    const char *what = !strcmp(j->kind, "paint") ? "paint" : "render";
+    const char *what = tf_job_is_paint(j) ? "paint" : "render";
     snprintf(ev, sizeof ev, "%s started (attempt %d)", what, j->attempts);
     farm_set_state(f, i, j->state, j->reason, ev);
     tf_info("job %lld (%s): %s started on port %d", (long long)j->id, j->name, what, r->port);
@@ -345,7 +345,7 @@ static void start_next_ahead(tf_farm *f)
     for (int i = 0; i < f->njobs; i++) {
         const farm_run *r = &f->runs[i];
         if (r->pid && !r->workers && !r->closing && !r->stopping &&
-            strcmp(f->jobs[i].kind, "paint"))
+            !tf_job_is_paint(&f->jobs[i]))
             return; /* one is waiting already (a paint page waits for its person) */
         if (!r->pid && !strcmp(f->jobs[i].state, "queued") && !farm_after_state(f, &f->jobs[i]) &&
             pool_busy(f, &f->jobs[i]) &&
@@ -361,7 +361,7 @@ static void start_next_ahead(tf_farm *f)
 static void start_paint_pages(tf_farm *f)
 {
     for (int i = 0; i < f->njobs; i++)
-        if (!strcmp(f->jobs[i].kind, "paint") && !f->runs[i].pid &&
+        if (tf_job_is_paint(&f->jobs[i]) && !f->runs[i].pid &&
             !strcmp(f->jobs[i].state, "queued") && !farm_after_state(f, &f->jobs[i]))
             f->runs[i].want = 1;
 }

@@ -241,7 +241,7 @@ json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status
     tf_scene *s = check_scene(text, hm, hm_len, hm_name, &j, err, sizeof err);
     if (!s)
         return farm_error(status, 400, "%s", err);
-    if (!strcmp(j.kind, "paint") && j.frames) {
+    if (tf_job_is_paint(&j) && j.frames) {
         tf_scene_free(s);
         return farm_error(status, 400, "%s: an [animation] cannot be painted; paint a still",
                           j.name);
@@ -252,7 +252,7 @@ json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status
                         .heightmap_name = (char *)(hm_name ? hm_name : "heightmap"),
                         .options = opts ? json_dumps(opts, JSON_COMPACT) : strdup("[]")};
     snprintf(j.state, sizeof j.state, "queued");
-    snprintf(j.output, sizeof j.output, "%s", !strcmp(j.kind, "paint") ? "painted.exr"
+    snprintf(j.output, sizeof j.output, "%s", tf_job_is_paint(&j) ? "painted.exr"
                                               : j.frames ? "frame.####.exr" : "out.exr");
     struct timespec ts;
     clock_gettime(CLOCK_REALTIME, &ts);

@@ -106,7 +106,7 @@ json_t *farm_paint_from_job(tf_farm *f, const farm_caller *who, int i, json_t *r
     tf_job j;
     int priority;
     char err[512] = "out of memory";
-    if (!strcmp(src->kind, "paint"))
+    if (tf_job_is_paint(src))
         return farm_error(status, 409, "job %lld is a paint job already", (long long)src->id);
     if (src->frames)
         return farm_error(status, 409, "job %lld is a sequence: a still is painted, not an "

@@ -15,6 +15,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 typedef struct tf_farmdb tf_farmdb;
 
@@ -40,6 +41,12 @@ typedef struct tf_job {
     int attempts;       /* renders started */
     double created, started, finished; /* Unix seconds; 0: not yet */
 } tf_job;
+
+/* 1 when j is a paint job (Raypaint: its process is terrafarm paint, farm_paint.c). */
+static inline int tf_job_is_paint(const tf_job *j)
+{
+    return !strcmp(j->kind, "paint");
+}
 
 /* A job's content, as submitted (all malloc'd; heightmap may be NULL). */
 typedef struct tf_job_content {

@@ -214,7 +214,7 @@ pid_t tf_jobrun_start(const char *exe, const char *state_dir, const tf_job *j,
     int lock_fd = open(path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
     snprintf(path, sizeof path, "%s/render.log", dir);
     int log_fd = open(path, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0600);
-    char **av = !strcmp(j->kind, "paint") ? paint_argv(exe, at, options, lfd, hfd)
+    char **av = tf_job_is_paint(j) ? paint_argv(exe, at, options, lfd, hfd)
                                            : render_argv(exe, dir, j, options, lfd, hfd);
     pid_t pid = -1, farm = getpid();
     if (lock_fd < 0 || log_fd < 0 || !av)

@@ -33,7 +33,7 @@ program_case() {
 script_want() {
     case $1 in
     affinity_ab) WANT='^affinity on/off wall ratio: [0-9]' ;;
-    coordinator_ab) WANT='^B/A render_cpu_s: median of the pairs [0-9.]* .*images identical' ;;
+    coordinator_ab) WANT='^B/A render_cpu_s: median of the pairs [0-9.]*, .*images identical' ;;
     erosion_farm) WANT="^erosion farm: every run's heights equal the 1-worker run's" ;;
     farm_sim) WANT='^farm_sim: 3 jobs, 2 x 2 simulated workers' ;;
     farm_standing) WANT='^killstorm: .* lost=0 identical=2/2' ;;

@@ -77,7 +77,9 @@ chmod +x "$T/fake-ssh"
 export FAKE_HOMES="$T/homes"
 umask 077
 head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/secret"
-"$TF" render "$ROOT/scenes/default.scene" --size 160x90 -j 0 --listen 127.0.0.1:0 \
+# --wait-workers 2: no task is dealt before both hosts' workers joined, so neither can find the
+# render already finished by the other (a loaded machine may start hostB's seconds after hostA's)
+"$TF" render "$ROOT/scenes/default.scene" --size 160x90 -j 0 --listen 127.0.0.1:0 --wait-workers 2 \
     --secret-file "$T/secret" -o "$T/ssh.exr" --stats "$T/ssh.json" >"$T/coord.log" 2>&1 &
 COORD=$!
 i=0

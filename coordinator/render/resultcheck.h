@@ -4,7 +4,9 @@
  * must never reach the file, or a render could end with exit 0 and an image no OpenEXR reader
  * accepts.  The supervisor hands each such result here after its structural check; a thread
  * of its own inflates every chunk and scans its values (image/exrcheck.h) and posts a verdict,
- * which the supervisor collects on its next step.  Forked workers run this program's own
+ * which the supervisor collects on its next step.  A small result (at most 64 KiB decoded) is
+ * checked at once on the caller's thread instead: cheaper than the hand-off, and its verdict
+ * waits the same way.  Forked workers run this program's own
  * encoder on its own pixels (which the worker loop checks for non-finite values before
  * encoding), so their results skip it unless --verify-chunks asks for everyone's.
  *
@@ -37,7 +39,8 @@ int tf_resultcheck_submit(tf_resultcheck *rc, tf_tuple *result);
 int tf_resultcheck_next(tf_resultcheck *rc, tf_tuple *result, char *why, size_t len);
 /* Results queued or being checked, not yet collected. */
 size_t tf_resultcheck_pending(tf_resultcheck *rc);
-/* CPU seconds the checker threads have spent, and the pixels they checked. */
+/* CPU seconds the checks have taken (the threads' CPU clocks; for a small result checked on the
+ * caller's thread, the check's wall time), and the pixels they checked. */
 void tf_resultcheck_totals(tf_resultcheck *rc, double *cpu_s, uint64_t *pixels);
 
 #endif

@@ -184,6 +184,7 @@ typedef struct sim_task {
 typedef struct sim_shared {
     const tf_sim_config *cfg;
     pthread_cond_t gate;            /* the start line: workers wait here until released */
+    pthread_cond_t arrival;         /* the releasing thread waits here for the workers */
     int arrived, released;          /* guarded by lock */
     int64_t start_ns;               /* set by the releasing thread before it opens the gate */
     _Atomic int64_t first_stop_ns;  /* 0 until a worker sees the stop tuple */
@@ -391,10 +392,12 @@ static void *sim_thread(void *arg)
         sh->joined++;
         pthread_mutex_unlock(&sh->lock);
     }
-    /* Every worker, joined or not, reaches the start line; run_workers opens it. */
+    /* Every worker, joined or not, reaches the start line; run_workers opens it.  An arrival
+     * wakes only the releasing thread: a broadcast on the gate would wake every worker already
+     * waiting, half a million futex calls for 1024 workers. */
     pthread_mutex_lock(&sh->lock);
     sh->arrived++;
-    pthread_cond_broadcast(&sh->gate);
+    pthread_cond_signal(&sh->arrival);
     while (!sh->released)
         pthread_cond_wait(&sh->gate, &sh->lock);
     pthread_mutex_unlock(&sh->lock);
@@ -533,6 +536,7 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
     int started = 0;
     pthread_mutex_init(&sh.lock, NULL);
     pthread_cond_init(&sh.gate, NULL);
+    pthread_cond_init(&sh.arrival, NULL);
     if (connect_all(cfg, ws, err, errlen))
         goto out;
     pthread_attr_t attr;
@@ -550,7 +554,7 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
     /* Open the start line once every started worker has joined (or failed to). */
     pthread_mutex_lock(&sh.lock);
     while (sh.arrived < started)
-        pthread_cond_wait(&sh.gate, &sh.lock);
+        pthread_cond_wait(&sh.arrival, &sh.lock);
     sh.start_ns = tf_now_ns();
     sh.released = 1;
     pthread_cond_broadcast(&sh.gate);
@@ -569,6 +573,7 @@ out:
     free(sh.take_ms);
     free(sh.done);
     pthread_cond_destroy(&sh.gate);
+    pthread_cond_destroy(&sh.arrival);
     pthread_mutex_destroy(&sh.lock);
     return rc;
 }

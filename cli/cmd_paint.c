@@ -31,6 +31,7 @@ static const char usage[] =
     "      --farm-token-file F   the token Submit gives the farm (default $TERRAFARM_TOKEN_FILE)\n"
     "      --until-painted       leave once the view is painted (and written, with -o)\n"
     "      --paused              start paused (the page's Resume starts the dealing)\n"
+    "      --wait-workers N      deal nothing until N workers (forked ones included) have joined\n"
     "      --root N              side of the quad-tree's roots (default 64)\n"
     "      --levels N            quad-tree levels a task descends (default 2)\n"
     "      --leaf N              cells of this side are rendered exactly (default 16)\n"
@@ -52,7 +53,8 @@ static int parse_int(const char *flag, const char *text, int lo, int hi, int *ou
 }
 
 enum { O_LISTEN = 256, O_SECRET, O_HTTP, O_HTTP_TOKEN, O_SIZE, O_PIXEL, O_SAVE, O_FARM,
-       O_UNTIL, O_PAUSED, O_ROOT, O_LEVELS, O_LEAF, O_RAYS, O_FINE, O_FARM_TOKEN };
+       O_UNTIL, O_PAUSED, O_ROOT, O_LEVELS, O_LEAF, O_RAYS, O_FINE, O_FARM_TOKEN,
+       O_WAIT_WORKERS };
 
 static const struct option longopts[] = {
     {"workers", required_argument, NULL, 'j'}, {"listen", required_argument, NULL, O_LISTEN},
@@ -63,7 +65,9 @@ static const struct option longopts[] = {
     {"farm", required_argument, NULL, O_FARM},
     {"farm-token-file", required_argument, NULL, O_FARM_TOKEN},
     {"until-painted", no_argument, NULL, O_UNTIL},
-    {"paused", no_argument, NULL, O_PAUSED}, {"root", required_argument, NULL, O_ROOT},
+    {"paused", no_argument, NULL, O_PAUSED},
+    {"wait-workers", required_argument, NULL, O_WAIT_WORKERS},
+    {"root", required_argument, NULL, O_ROOT},
     {"levels", required_argument, NULL, O_LEVELS}, {"leaf", required_argument, NULL, O_LEAF},
     {"task-rays", required_argument, NULL, O_RAYS}, {"fine", required_argument, NULL, O_FINE}, {"quiet", no_argument, NULL, 'q'},
     {"verbose", no_argument, NULL, 'v'}, {"help", no_argument, NULL, 'h'},
@@ -92,6 +96,7 @@ static int take_option(int ch, tf_paint_opts *o, char **argv)
     case O_FARM_TOKEN: o->farm_token_file = optarg; return 0;
     case O_UNTIL: o->until_painted = 1; return 0;
     case O_PAUSED: o->paused = 1; return 0;
+    case O_WAIT_WORKERS: return parse_int("--wait-workers", optarg, 0, 1 << 20, &o->wait_workers);
     case O_ROOT: return parse_int("--root", optarg, 1, 1024, &p->root);
     case O_LEVELS: return parse_int("--levels", optarg, 1, 10, &p->levels);
     case O_LEAF: return parse_int("--leaf", optarg, 1, 1024, &p->leaf);

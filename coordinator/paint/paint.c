@@ -62,6 +62,7 @@ typedef struct paint {
     float *values;
     size_t values_cap;
     tf_paint_bytes msgs;
+    int gate_open;           /* --wait-workers reached (or not asked for) */
 } paint;
 
 /* ---- 1-2. the scene and its terrain ---- */
@@ -326,6 +327,15 @@ static int painted_and_done(const paint *p)
            (!p->o->output || p->st.output_written);
 }
 
+/* --wait-workers: 1 once that many workers have said hello; it stays open after (a worker
+ * leaving later does not stop the dealing), as terrafarm render's. */
+static int workers_gate_open(paint *p)
+{
+    if (!p->gate_open && p->role.workers >= p->o->wait_workers)
+        p->gate_open = 1;
+    return p->gate_open;
+}
+
 static int paint_run_loop(paint *p)
 {
     int status = 0;
@@ -337,7 +347,7 @@ static int paint_run_loop(paint *p)
         }
         take_results(p);
         take_commands(p);
-        if (!p->st.paused)
+        if (!p->st.paused && workers_gate_open(p))
             tf_paint_role_deal(&p->role, p->tree);
         tf_local_workers_reap(&p->lw, 1);
         note_progress(p);

@@ -23,6 +23,8 @@ typedef struct tf_paint_opts {
     tf_paint_params params;
     int until_painted;            /* leave once the first view is painted (and written) */
     int paused;                   /* start with dealing paused (the page resumes it) */
+    int wait_workers;             /* deal nothing until this many workers (forked ones too) have
+                                   * said hello; once open the gate stays open */
 } tf_paint_opts;
 
 void tf_paint_opts_init(tf_paint_opts *o);

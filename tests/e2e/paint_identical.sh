@@ -18,12 +18,18 @@ say "painted by forked workers"
 same_pixels "$T/ref.exr" "$T/forked.exr" "forked, default granularity"
 
 say "painted by networked workers only, another cut of the tree"
+# --wait-workers 2: nothing is dealt before both have joined, so the first cannot paint it all
+# and leave the second refused at a closed port (a busy machine starts the second late)
 start_paint "$T/paint.err" --size $SIZE -j 0 --listen 127.0.0.1:0 --http 127.0.0.1:0 \
-    --root 32 --levels 1 --leaf 4 --task-rays 700 -o "$T/networked.exr" --until-painted
-for k in 1 2; do
-    "$TF_BIN" worker --connect "$PAINT_WORKERS" -j 1 2>"$T/worker$k.err" &
-    eval "w$k=\$!"; e2e_track $!
-done
+    --root 32 --levels 1 --leaf 4 --task-rays 700 -o "$T/networked.exr" --until-painted \
+    --wait-workers 2
+"$TF_BIN" worker --connect "$PAINT_WORKERS" -j 1 2>"$T/worker1.err" &
+w1=$!; e2e_track $w1
+wait_status workers 1 60 "the first worker's hello"
+sleep 0.5 # a broken gate would deal to it meanwhile
+[ "$(paint_status counts.exact_pixels)" = 0 ] || fail "--wait-workers 2 dealt to one worker: $(paint_status counts.exact_pixels) exact pixels"
+"$TF_BIN" worker --connect "$PAINT_WORKERS" -j 1 2>"$T/worker2.err" &
+w2=$!; e2e_track $w2
 wait_exit $PAINT_PID 120
 [ $rc -eq 0 ] || fail "paint with networked workers exited $rc: $(tail -3 "$T/paint.err")"
 for k in 1 2; do

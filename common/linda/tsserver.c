@@ -11,7 +11,8 @@
  * IN/RD waits (c->waiting), later frames stay in its input buffer unparsed -- except heartbeat
  * PINGs with request id 0, which need no reply and so cannot reorder anything -- and input
  * reading stops once TS_MAX_PIPELINE bytes are buffered.  So replies always leave in request
- * order.
+ * order.  When the blocked request is served, the frames behind it are served before the
+ * next poll (conn_resume, from flush_dirty).
  *
  * Closing never frees a connection while the loop may still hold a pointer to it: it is marked
  * dead (fd closed, waiter cancelled, on_disconnect run) and freed by the sweep at the end of
@@ -986,8 +987,21 @@ static void sync_conn_interest(conn *c)
     }
 }
 
-/* Send what the dirty connections have queued and bring their interest up to date.  Dropping
- * a connection may run hooks that touch others: they join the list and are served here too. */
+/* Serve the frames that waited behind c's blocked request, once it is served (on_waiter_served
+ * touched c): they are in its buffers already, and nothing need come on the socket to wake it
+ * (a client pipelines a take and probes behind it, ts_out_take). */
+static void conn_resume(conn *c)
+{
+    if (c->waiting || c->state == HELD || (c->in.len == 0 && c->raw.len == 0))
+        return;
+    conn_process_input(c);
+    if (!c->dead && c->sealed)
+        unseal_and_serve(c);
+}
+
+/* Serve what waited behind a served request, send what the dirty connections have queued and
+ * bring their interest up to date.  Serving or dropping a connection may run hooks that touch
+ * others: they join the list and are served here too. */
 static void flush_dirty(ts_server *srv)
 {
     assert(assert_dirty_list(srv));
@@ -995,6 +1009,8 @@ static void flush_dirty(ts_server *srv)
         conn *c = srv->dirty;
         srv->dirty = c->dirty_next;
         c->dirty = 0;
+        if (!c->dead)
+            conn_resume(c);
         if (c->dead)
             continue;
         if ((c->out.len > 0 || c->wire.len > 0) && conn_flush(c) != 0) {

@@ -1,6 +1,6 @@
 /* test_tsserver.c: the tuple-space server and client end to end (common/linda/tsserver.c,
  * common/linda/tsclient.c): over a socketpair and loopback TCP; a blocked in woken by another
- * client's out; hooks (on_take, on_out, on_disconnect); garbage, oversized, unknown-op and
+ * client's out, and the requests pipelined behind a blocked in; hooks (on_take, on_out, on_disconnect); garbage, oversized, unknown-op and
  * half frames each dropping only their own connection; authentication with the right and the
  * wrong secret and an op before the handshake; wrong secrets slowed per address without
  * barring the right one from that address.  The server loop runs in a background thread;
@@ -214,6 +214,70 @@ static void test_out_in_one_round_trip(void **state)
     exercise(c); /* and the stream is still in step */
     ts_client_close(c);
     assert_true(wait_counter(fx, &fx->disconnects, 1));
+    stop(fx);
+}
+
+/* Read one frame from fd into *f (its body in buf), waiting at most 10 s: 0, or -1. */
+static int read_raw_frame(int fd, uint8_t *buf, size_t cap, size_t *have, tf_frame *f)
+{
+    for (int64_t until = tf_now_ms() + 10000; tf_now_ms() < until;) {
+        char err[160];
+        long n = tf_frame_parse(buf, *have, f, err, sizeof err);
+        if (n < 0)
+            return -1;
+        if (n > 0) /* the caller reads f before the next call consumes it */
+            return (int)n;
+        struct pollfd p = {.fd = fd, .events = POLLIN};
+        if (poll(&p, 1, 100) > 0) {
+            ssize_t r = recv(fd, buf + *have, cap - *have, 0);
+            if (r <= 0)
+                return -1;
+            *have += (size_t)r;
+        }
+    }
+    return -1;
+}
+
+/* Requests pipelined behind a blocked in (one write: IN, then RDP and PING) are served once
+ * another client's out serves the in, with nothing more coming from their client: before
+ * conn_resume they waited for the next frame on the socket (a heartbeat, 2 s later, or never). */
+static void test_pipelined_behind_blocked_in(void **state)
+{
+    (void)state;
+    int sv[2];
+    assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+    fixture *fx = start(NULL, sv[0]);
+    tf_tuple m;
+    tup(&m, "sI", "wake", 0);
+    tf_buf b;
+    tf_buf_init(&b);
+    assert_int_equal(tf_frame_append_tuple(&b, TF_OP_IN, 1, &m), 0);
+    assert_int_equal(tf_frame_append_tuple(&b, TF_OP_RDP, 2, &m), 0);
+    assert_int_equal(tf_frame_append_raw(&b, TF_OP_PING, 3, NULL, 0), 0);
+    assert_int_equal(send(sv[1], tf_buf_head(&b), b.len, MSG_NOSIGNAL), (ssize_t)b.len);
+    tf_buf_free(&b);
+    tf_tuple_clear(&m);
+    char err[256];
+    ts_client *other = ts_client_connect(fx->addr, NULL, 2000, err, sizeof err);
+    assert_non_null(other);
+    tf_tuple t;
+    tup(&t, "si", "wake", 42);
+    assert_int_equal(ts_out(other, &t), 0);
+    tf_tuple_clear(&t);
+    static uint8_t buf[4096];
+    size_t have = 0;
+    uint8_t want_op[3] = {TF_OP_TUPLE, TF_OP_NONE, TF_OP_PONG}; /* the rdp finds nothing left */
+    for (uint32_t req = 1; req <= 3; req++) {
+        tf_frame f;
+        int n = read_raw_frame(sv[1], buf, sizeof buf, &have, &f);
+        assert_true(n > 0);
+        assert_int_equal(f.request_id, req);
+        assert_int_equal(f.op, want_op[req - 1]);
+        memmove(buf, buf + n, have - (size_t)n);
+        have -= (size_t)n;
+    }
+    ts_client_close(other);
+    close(sv[1]);
     stop(fx);
 }
 
@@ -582,6 +646,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_socketpair_client),
         cmocka_unit_test(test_out_in_one_round_trip),
+        cmocka_unit_test(test_pipelined_behind_blocked_in),
         cmocka_unit_test(test_large_outs),
         cmocka_unit_test(test_tcp_blocked_in_woken_by_other_client),
         cmocka_unit_test(test_bad_traffic_drops_only_that_connection),

@@ -989,7 +989,7 @@ static void sync_conn_interest(conn *c)
 
 /* Serve the frames that waited behind c's blocked request, once it is served (on_waiter_served
  * touched c): they are in its buffers already, and nothing need come on the socket to wake it
- * (a client pipelines a take and probes behind it, ts_out_take). */
+ * (a client may write a blocking take and more requests behind it in one go). */
 static void conn_resume(conn *c)
 {
     if (c->waiting || c->state == HELD || (c->in.len == 0 && c->raw.len == 0))

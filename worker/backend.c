@@ -51,6 +51,19 @@ tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightf
     return NULL;
 }
 
+/* PoCL 3 reads POCL_MAX_PTHREAD_COUNT, PoCL 4 and later POCL_CPU_MAX_CU_COUNT. */
+void tf_backend_share_cores(const char *name, int processes)
+{
+    if (!name || !strcmp(name, "c") || processes < 2 || getenv("POCL_MAX_PTHREAD_COUNT") ||
+        getenv("POCL_CPU_MAX_CU_COUNT"))
+        return;
+    int share = tf_thread_count(0) / processes;
+    char v[16];
+    snprintf(v, sizeof v, "%d", share > 1 ? share : 1);
+    setenv("POCL_MAX_PTHREAD_COUNT", v, 1);
+    setenv("POCL_CPU_MAX_CU_COUNT", v, 1);
+}
+
 int tf_backend_render(tf_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
                       char *err, size_t errlen)
 {

@@ -13,6 +13,7 @@
 #include "clock.h"
 #include "log.h"
 #include "scene.h"
+#include "worker/backend.h"
 #include "worker/erosion_patch.h"
 #include "worker/paint_worker.h"
 #include "worker/payloads.h"
@@ -165,6 +166,7 @@ static int run_processes(int nproc, const char *connect, const uint8_t *key, int
         return 1;
     }
     int status = 0;
+    tf_backend_share_cores(backend, nproc);
     for (int i = 0; i < nproc; i++) {
         pid_t p = fork();
         if (p == 0) {

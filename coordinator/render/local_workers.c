@@ -13,6 +13,7 @@
 
 #include "clock.h"
 #include "log.h"
+#include "worker/backend.h"
 #include "worker/worker.h"
 
 /* In the child: keep stdin/stdout/stderr and our socket, close every other inherited fd (the
@@ -94,6 +95,7 @@ int tf_local_workers_start_loop(tf_local_workers *lw, int n, ts_server *srv, con
     lw->respawns = calloc((size_t)(n > 0 ? n : 1), sizeof *lw->respawns);
     if (!lw->pid || !lw->respawns)
         return tf_seterr(err, errlen, "out of memory");
+    tf_backend_share_cores(backend, n);
     for (int i = 0; i < n; i++) {
         pid_t p = tf_spawn_worker(srv, s, hf, backend, loop, i, err, errlen);
         if (p < 0)

@@ -21,7 +21,9 @@
  *   installed_kernel_dir   the kernels and the C headers they share (make install's flat
  *                       layout, found through TERRAFARM_KERNELS) build and give the C pixels;
  *                       without a shared header the error is one line naming it.
- * Every test skips (cmocka skip()) with a message when no OpenCL platform exists. */
+ *   cores_shared        N OpenCL worker processes share the cores through PoCL's environment.
+ * Every test but cores_shared skips (cmocka skip()) with a message when no OpenCL platform
+ * exists. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <setjmp.h>
@@ -36,6 +38,7 @@
 #define CL_TARGET_OPENCL_VERSION 120
 #include <CL/cl.h>
 
+#include "worker/backend.h"
 #include "worker/backend_opencl.h"
 #include "terrain/heightfield.h"
 #include "render/render.h"
@@ -432,6 +435,37 @@ static void installed_kernel_dir(void **state)
     rmdir(dir);
 }
 
+/* tf_backend_share_cores: N OpenCL processes get cores / N PoCL threads each (at least 1), in
+ * both of PoCL's variables; the C backend and a single process change nothing, nor does a
+ * thread count the user set.  Needs no device. */
+static void cores_shared(void **state)
+{
+    (void)state;
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    tf_backend_share_cores("c", 2);
+    tf_backend_share_cores("opencl", 1);
+    assert_null(getenv("POCL_MAX_PTHREAD_COUNT"));
+    assert_null(getenv("POCL_CPU_MAX_CU_COUNT"));
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    char want[24];
+    snprintf(want, sizeof want, "%ld", cores / 2 > 1 ? cores / 2 : 1);
+    tf_backend_share_cores("auto", 2);
+    assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), want);
+    assert_string_equal(getenv("POCL_CPU_MAX_CU_COUNT"), want);
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    tf_backend_share_cores("opencl", 4096); /* more processes than cores: one thread each */
+    assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), "1");
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    setenv("POCL_CPU_MAX_CU_COUNT", "7", 1); /* the user's choice stands */
+    tf_backend_share_cores("opencl", 2);
+    assert_null(getenv("POCL_MAX_PTHREAD_COUNT"));
+    assert_string_equal(getenv("POCL_CPU_MAX_CU_COUNT"), "7");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+}
+
 static void bad_rect(void **state)
 {
     (void)state;
@@ -453,6 +487,7 @@ int main(void)
         cmocka_unit_test(bad_device),
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
         cmocka_unit_test(installed_kernel_dir), cmocka_unit_test(bad_rect),
+        cmocka_unit_test(cores_shared),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

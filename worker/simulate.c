@@ -1,179 +1,26 @@
-/* simulate.c: see simulate.h.  The cost map (measure, save, load, integrate over a rectangle),
- * then the simulated workers: one thread per worker, each with its own tuple-space connection,
- * all released together from a start line so the measured wall time starts with a full farm. */
+/* simulate.c: see simulate.h.  The simulated workers (their cost model is cost_map.c): one
+ * thread serves every worker's connection from one event loop, all released together from a
+ * start line so the measured wall time starts with a full farm. */
 #include "worker/simulate.h"
 #include "worker/worker.h"
 #include "worker/payloads.h"
 #include "clock.h"
 
 #include <errno.h>
-#include <math.h>
-#include <pthread.h>
-#include <stdatomic.h>
+#include <inttypes.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/epoll.h>
 #include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
 
 #include "farmproto.h"
+#include "image/exrencode.h"
 #include "log.h"
 #include "linda/tsclient.h"
-
-/* ---- the cost map --------------------------------------------------------------------------- */
-
-/* Cell i of n over a side of `size` pixels covers [cell_edge(i), cell_edge(i + 1)). */
-static int cell_edge(int i, int n, int size) { return (int)((int64_t)i * size / n); }
-
-int tf_cost_map_measure(const tf_scene *s, const tf_heightfield *hf, int gw, int gh,
-                        tf_cost_map *m, char *err, size_t errlen)
-{
-    memset(m, 0, sizeof *m);
-    if (gw < 1 || gh < 1 || gw > TF_COST_MAP_MAX || gh > TF_COST_MAP_MAX || gw > s->width ||
-        gh > s->height) {
-        tf_seterr(err, errlen, "cost map grid %dx%d: expected 1..%d cells a side, at most one per "
-                 "pixel of the %dx%d image", gw, gh, TF_COST_MAP_MAX, s->width, s->height);
-        return -1;
-    }
-    tf_renderer *r = tf_renderer_new(s, hf, err, errlen);
-    if (!r)
-        return -1;
-    int maxw = cell_edge(1, gw, s->width) + s->width / gw + 1;
-    int maxh = cell_edge(1, gh, s->height) + s->height / gh + 1;
-    tf_pixel *px = malloc((size_t)maxw * (size_t)maxh * sizeof *px);
-    m->density = calloc((size_t)gw * (size_t)gh, sizeof *m->density);
-    if (!px || !m->density) {
-        tf_seterr(err, errlen, "out of memory measuring the cost map");
-        free(px);
-        tf_renderer_free(r);
-        tf_cost_map_free(m);
-        return -1;
-    }
-    double total_ns = 0;
-    for (int j = 0; j < gh; j++)
-        for (int i = 0; i < gw; i++) {
-            tf_rect c = {cell_edge(i, gw, s->width), cell_edge(j, gh, s->height), 0, 0};
-            c.w = cell_edge(i + 1, gw, s->width) - c.x;
-            c.h = cell_edge(j + 1, gh, s->height) - c.y;
-            int64_t t0 = tf_clock_ns(CLOCK_THREAD_CPUTIME_ID);
-            tf_render_rect(r, c, px, NULL);
-            double ns = (double)(tf_clock_ns(CLOCK_THREAD_CPUTIME_ID) - t0);
-            total_ns += ns;
-            m->density[j * gw + i] = ns / ((double)c.w * c.h); /* ns per pixel, for now */
-        }
-    free(px);
-    tf_renderer_free(r);
-    m->gw = gw;
-    m->gh = gh;
-    m->measured_w = s->width;
-    m->measured_h = s->height;
-    m->pixel_ns = total_ns / ((double)s->width * s->height);
-    /* Normalise: density = (ns per pixel in the cell) / (mean ns per pixel), whose
-     * area-weighted mean is exactly 1 by construction. */
-    for (int k = 0; k < gw * gh; k++)
-        m->density[k] = m->pixel_ns > 0 ? m->density[k] / m->pixel_ns : 1.0;
-    return 0;
-}
-
-int tf_cost_map_save(const char *path, const tf_cost_map *m, char *err, size_t errlen)
-{
-    FILE *f = fopen(path, "w");
-    if (!f) {
-        tf_seterr(err, errlen, "%s: cannot write the cost map: %s", path, strerror(errno));
-        return -1;
-    }
-    fprintf(f, "terrafarm-cost-map 1 %d %d %d %d %.1f\n", m->gw, m->gh, m->measured_w,
-            m->measured_h, m->pixel_ns);
-    for (int j = 0; j < m->gh; j++)
-        for (int i = 0; i < m->gw; i++)
-            fprintf(f, "%.4f%c", m->density[j * m->gw + i], i + 1 == m->gw ? '\n' : ' ');
-    int bad = ferror(f);
-    bad |= fclose(f) != 0;
-    if (bad) {
-        tf_seterr(err, errlen, "%s: cannot write the cost map: %s", path, strerror(errno));
-        return -1;
-    }
-    return 0;
-}
-
-int tf_cost_map_load(const char *path, tf_cost_map *m, char *err, size_t errlen)
-{
-    memset(m, 0, sizeof *m);
-    FILE *f = fopen(path, "r");
-    if (!f) {
-        tf_seterr(err, errlen, "%s: cannot read the cost map: %s", path, strerror(errno));
-        return -1;
-    }
-    int version = 0;
-    if (fscanf(f, "terrafarm-cost-map %d %d %d %d %d %lf", &version, &m->gw, &m->gh,
-               &m->measured_w, &m->measured_h, &m->pixel_ns) != 6 || version != 1) {
-        tf_seterr(err, errlen, "%s: not a terrafarm cost map (expected 'terrafarm-cost-map 1 GW "
-                 "GH W H PIXEL_NS' on the first line)", path);
-        fclose(f);
-        return -1;
-    }
-    if (m->gw < 1 || m->gh < 1 || m->gw > TF_COST_MAP_MAX || m->gh > TF_COST_MAP_MAX) {
-        tf_seterr(err, errlen, "%s: cost map grid %dx%d out of range 1..%d", path, m->gw, m->gh,
-                 TF_COST_MAP_MAX);
-        fclose(f);
-        return -1;
-    }
-    m->density = malloc((size_t)m->gw * (size_t)m->gh * sizeof *m->density);
-    if (!m->density) {
-        tf_seterr(err, errlen, "%s: out of memory", path);
-        fclose(f);
-        return -1;
-    }
-    for (int k = 0; k < m->gw * m->gh; k++) {
-        double d;
-        if (fscanf(f, "%lf", &d) != 1 || !isfinite(d) || d < 0) {
-            tf_seterr(err, errlen, "%s: cost map cell %d: expected a finite non-negative number",
-                     path, k);
-            fclose(f);
-            tf_cost_map_free(m);
-            return -1;
-        }
-        m->density[k] = d;
-    }
-    fclose(f);
-    return 0;
-}
-
-void tf_cost_map_free(tf_cost_map *m)
-{
-    free(m->density);
-    m->density = NULL;
-}
-
-/* Overlap of [a0, a1) and [b0, b1), or 0. */
-static double overlap(double a0, double a1, double b0, double b1)
-{
-    double lo = a0 > b0 ? a0 : b0, hi = a1 < b1 ? a1 : b1;
-    return hi > lo ? hi - lo : 0.0;
-}
-
-double tf_cost_map_rect(const tf_cost_map *m, int image_w, int image_h, tf_rect r)
-{
-    /* Cell i spans [i * image_w / gw, (i + 1) * image_w / gw) in the target image's pixels:
-     * the map is stretched, so its cells need not fall on pixel boundaries. */
-    double sx = (double)image_w / m->gw, sy = (double)image_h / m->gh;
-    int i0 = (int)(r.x / sx), i1 = (int)ceil((r.x + r.w) / sx);
-    int j0 = (int)(r.y / sy), j1 = (int)ceil((r.y + r.h) / sy);
-    if (i1 > m->gw)
-        i1 = m->gw;
-    if (j1 > m->gh)
-        j1 = m->gh;
-    double sum = 0;
-    for (int j = j0 < 0 ? 0 : j0; j < j1; j++) {
-        double oy = overlap(r.y, r.y + r.h, j * sy, (j + 1) * sy);
-        for (int i = i0 < 0 ? 0 : i0; i < i1; i++)
-            sum += m->density[j * m->gw + i] * oy * overlap(r.x, r.x + r.w, i * sx, (i + 1) * sx);
-    }
-    return sum;
-}
-
-/* ---- simulated workers ------------------------------------------------------------------- */
 
 /* A task served: where it is (the dealing order is by y, then x) and its modelled cost. */
 typedef struct sim_task {
@@ -181,230 +28,308 @@ typedef struct sim_task {
     int64_t cost_ns;
 } sim_task;
 
-typedef struct sim_shared {
+/* ---- simulated workers: one event loop, many connections -------------------------------------
+ * Every worker joins first, one after another, with the blocking client; then the start line:
+ * each sends its first take, and one thread serves them all.  A worker is WAITING (its result
+ * and its next take are out: ts_out_in_send, collected by ts_out_in_poll when its socket is
+ * readable), RENDERING (its modelled cost runs out at `due`), PAUSED (it put back a task that
+ * excludes it, and asks again at `due`) or DONE (it saw the stop and put it back, or lost the
+ * coordinator).  The RENDERING and PAUSED workers sit in a min-heap of their `due` times, and
+ * the loop waits in epoll until the earliest (epoll_pwait2: nanoseconds, as a 4 ms task
+ * needs).  A thread per worker, as before, cost the shared cores two wake-ups and four system
+ * calls a task (~80 us, more than the coordinator's) and woke a sleeping thread on every reply
+ * the coordinator sent. */
+
+enum { W_WAITING, W_RENDERING, W_PAUSED, W_DONE };
+
+typedef struct sim_worker {
+    ts_client *client;
+    int64_t id;
+    int state;
+    int64_t due_ns;          /* RENDERING, PAUSED: when its cost (or pause) runs out */
+    int64_t asked_ns;        /* WAITING: when its take left */
+    int64_t task, cost_ns;   /* RENDERING: the task and its modelled cost */
+    tf_rect rect;
+    int bounces;             /* excluded tasks taken in a row */
+} sim_worker;
+
+typedef struct sim_farm {
     const tf_sim_config *cfg;
-    pthread_cond_t gate;            /* the start line: workers wait here until released */
-    pthread_cond_t arrival;         /* the releasing thread waits here for the workers */
-    int arrived, released;          /* guarded by lock */
-    int64_t start_ns;               /* set by the releasing thread before it opens the gate */
-    _Atomic int64_t first_stop_ns;  /* 0 until a worker sees the stop tuple */
-    pthread_mutex_t lock;           /* guards everything below */
+    sim_worker *ws;
+    int n, live;             /* workers; those not DONE */
+    int epfd;
+    int *heap;               /* indexes of RENDERING and PAUSED workers, a min-heap on due_ns */
+    int nheap;
+    tf_tuple tmpl;           /* any task */
+    tf_exr_layout layout;
+    tf_payload_buf buf;      /* the recorded chunks of the task being returned */
+    tf_exr_encoder *enc;     /* without a recording: black pixels, encoded */
+    tf_pixel *px;
+    size_t px_cap;
+    unsigned seed;
+    int64_t start_ns, first_stop_ns;
     int joined, failed;
     int64_t tasks, ops;
     double modelled_ns, oversleep_ns;
-    float *take_ms;                 /* dealing latencies of every worker */
+    float *take_ms;          /* dealing latencies */
     size_t ntake, cap_take;
-    sim_task *done;                 /* every task served, for the schedule bound */
+    sim_task *done;          /* every task served, for the schedule bound */
     size_t ndone, cap_done;
     char error[512];
-} sim_shared;
+} sim_farm;
 
-typedef struct sim_worker {
-    sim_shared *sh;
-    tf_exr_layout layout;
-    tf_payload_buf buf;
-    ts_client *client;
-    pthread_t thread;
-    int64_t id;
-    int64_t tasks, ops;
-    double modelled_ns, oversleep_ns;
-    float *take_ms;
-    size_t ntake, cap_take;
-    sim_task *done;
-    size_t ndone, cap_done;
-} sim_worker;
-
-static void shared_fail(sim_shared *sh, const char *what, const ts_client *c)
+static void farm_fail(sim_farm *f, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void farm_fail(sim_farm *f, const char *fmt, ...)
 {
-    pthread_mutex_lock(&sh->lock);
-    sh->failed++;
-    if (!sh->error[0])
-        snprintf(sh->error, sizeof sh->error, "%s: %s", what, ts_client_error(c));
-    pthread_mutex_unlock(&sh->lock);
-}
-
-static int sim_join(sim_worker *w)
-{
-    return tf_worker_join(w->client, "networked", "simulated", &w->id);
-}
-
-static void note_latency(sim_worker *w, double ms)
-{
-    if (w->ntake == w->cap_take) {
-        size_t cap = w->cap_take ? 2 * w->cap_take : 256;
-        float *n = realloc(w->take_ms, cap * sizeof *n);
-        if (!n)
-            return; /* a lost sample skews nothing but the percentile's sample size */
-        w->take_ms = n;
-        w->cap_take = cap;
-    }
-    w->take_ms[w->ntake++] = (float)ms;
-}
-
-/* Sleep until the modelled cost has elapsed from t0; returns the oversleep in ns. */
-static int64_t sleep_cost(int64_t t0, int64_t cost_ns)
-{
-    int64_t until = t0 + cost_ns;
-    struct timespec ts = {(time_t)(until / 1000000000), (long)(until % 1000000000)};
-    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR)
-        ;
-    return tf_now_ns() - until;
-}
-
-/* The simulated worker's step: sleep the task's modelled cost; its pixels are zero. */
-static int sim_render(void *ctx, int frame, tf_rect rect, tf_pixel *px,
-                      tf_render_counts *counts, int64_t *busy_ns, char *err, size_t errlen)
-{
-    (void)frame; /* the simulation's cost map does not move with a camera */
-    (void)err;
-    (void)errlen;
-    sim_worker *w = ctx;
-    const tf_sim_config *cfg = w->sh->cfg;
-    size_t n = (size_t)rect.w * (size_t)rect.h;
-    memset(px, 0, n * sizeof *px);
-    double cost = cfg->pixel_us * 1000.0 *
-                  tf_cost_map_rect(cfg->map, cfg->image_w, cfg->image_h, rect);
-    int64_t cost_ns = (int64_t)cost;
-    int64_t t0 = tf_now_ns();
-    w->oversleep_ns += (double)sleep_cost(t0, cost_ns);
-    w->modelled_ns += (double)cost_ns;
-    w->tasks++;
-    if (w->ndone == w->cap_done) {
-        size_t cap = w->cap_done ? 2 * w->cap_done : 64;
-        sim_task *d = realloc(w->done, cap * sizeof *d);
-        if (d) {
-            w->done = d;
-            w->cap_done = cap;
-        }
-    }
-    if (w->ndone < w->cap_done) /* a lost record only weakens the bound */
-        w->done[w->ndone++] = (sim_task){rect.y, rect.x, cost_ns};
-    *counts = (tf_render_counts){.pixels = (uint64_t)n};
-    *busy_ns = cost_ns;
-    return 0;
-}
-
-/* With a recording: the recorded chunks that stand in for this task's. */
-static int sim_payload(void *ctx, tf_rect rect, const tf_pixel *px, tf_chunk_payload *out,
-                       int64_t *spp_total, char *err, size_t errlen)
-{
-    (void)px;
-    sim_worker *w = ctx;
-    return tf_payloads_for(w->sh->cfg->payloads, &w->layout, rect, &w->buf, out, spp_total, err,
-                           errlen);
-}
-
-static void sim_on_take(void *ctx, int64_t wait_ns)
-{
-    note_latency(ctx, (double)wait_ns * 1e-6);
-}
-
-static void sim_on_op(void *ctx)
-{
-    ((sim_worker *)ctx)->ops++;
-}
-
-static void sim_on_stop(void *ctx, int64_t t_ns)
-{
-    sim_worker *w = ctx;
-    int64_t zero = 0;
-    atomic_compare_exchange_strong(&w->sh->first_stop_ns, &zero, t_ns);
-}
-
-/* The real worker loop (worker.c) with the simulated step. */
-static void sim_serve(sim_worker *w)
-{
-    char err[512];
-    const tf_payloads *rec = w->sh->cfg->payloads;
-    if (tf_worker_fetch_layout(w->client, &w->layout, err, sizeof err)) {
-        shared_fail(w->sh, "cannot read the output layout", w->client);
+    f->failed++;
+    if (f->error[0])
         return;
-    }
-    if (rec && tf_payloads_fit(rec, &w->layout, err, sizeof err)) {
-        pthread_mutex_lock(&w->sh->lock);
-        w->sh->failed++;
-        if (!w->sh->error[0])
-            snprintf(w->sh->error, sizeof w->sh->error, "%s", err);
-        pthread_mutex_unlock(&w->sh->lock);
-        return;
-    }
-    tf_worker_step step = {w, sim_render, rec ? sim_payload : NULL, sim_on_take, sim_on_op,
-                           sim_on_stop, w->sh->cfg->image_w, w->sh->cfg->image_h};
-    int rc = tf_worker_serve(w->client, w->id, &w->layout, &step);
-    tf_payload_buf_free(&w->buf);
-    /* Once the stop tuple is out the coordinator may finish and close while this worker still
-     * waits, or sleeps on a straggler's duplicate: losing it then is the end of the render,
-     * not a failure. */
-    if (rc != TF_SERVE_STOPPED && atomic_load(&w->sh->first_stop_ns) == 0)
-        shared_fail(w->sh, rc == TF_SERVE_LOST ? "lost the coordinator"
-                                               : "cannot deliver a result",
-                    w->client);
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(f->error, sizeof f->error, fmt, ap);
+    va_end(ap);
 }
 
-/* Append k items of `size` bytes to the growing array *dst (*n used of *cap); if memory runs
- * out they are dropped (a sample lost from a percentile or the bound, nothing else).  k = 0
- * (a worker that took no task: both arrays still NULL) appends nothing, without a memcpy
- * from or to NULL. */
-static void append_all(void **dst, size_t *n, size_t *cap, const void *src, size_t k,
-                       size_t size)
+/* Append one item of `size` bytes to the growing array *dst; if memory runs out it is dropped
+ * (a sample lost from a percentile or the bound, nothing else). */
+static void append(void **dst, size_t *n, size_t *cap, const void *item, size_t size)
 {
-    if (k == 0)
-        return;
-    if (*n + k > *cap) {
-        size_t c = 2 * (*n + k);
+    if (*n == *cap) {
+        size_t c = *cap ? 2 * *cap : 256;
         void *p = realloc(*dst, c * size);
         if (!p)
             return;
         *dst = p;
         *cap = c;
     }
-    memcpy((char *)*dst + *n * size, src, k * size);
-    *n += k;
+    memcpy((char *)*dst + *n * size, item, size);
+    (*n)++;
 }
 
-static void merge(sim_shared *sh, sim_worker *w)
+/* ---- the heap of due times ---- */
+
+static int64_t due_of(const sim_farm *f, int k) { return f->ws[f->heap[k]].due_ns; }
+
+static void heap_swap(sim_farm *f, int a, int b)
 {
-    pthread_mutex_lock(&sh->lock);
-    sh->tasks += w->tasks;
-    sh->ops += w->ops;
-    sh->modelled_ns += w->modelled_ns;
-    sh->oversleep_ns += w->oversleep_ns;
-    append_all((void **)&sh->take_ms, &sh->ntake, &sh->cap_take, w->take_ms, w->ntake,
-               sizeof *w->take_ms);
-    append_all((void **)&sh->done, &sh->ndone, &sh->cap_done, w->done, w->ndone,
-               sizeof *w->done);
-    pthread_mutex_unlock(&sh->lock);
-    free(w->take_ms);
-    w->take_ms = NULL;
-    free(w->done);
-    w->done = NULL;
+    int t = f->heap[a];
+    f->heap[a] = f->heap[b];
+    f->heap[b] = t;
 }
 
-static void *sim_thread(void *arg)
+static void heap_push(sim_farm *f, int w)
 {
-    sim_worker *w = arg;
-    sim_shared *sh = w->sh;
-    int ok = sim_join(w) == 0;
-    if (!ok)
-        shared_fail(sh, "cannot join the render", w->client);
-    else {
-        pthread_mutex_lock(&sh->lock);
-        sh->joined++;
-        pthread_mutex_unlock(&sh->lock);
+    int k = f->nheap++;
+    f->heap[k] = w;
+    while (k > 0 && due_of(f, (k - 1) / 2) > due_of(f, k)) {
+        heap_swap(f, k, (k - 1) / 2);
+        k = (k - 1) / 2;
     }
-    /* Every worker, joined or not, reaches the start line; run_workers opens it.  An arrival
-     * wakes only the releasing thread: a broadcast on the gate would wake every worker already
-     * waiting, half a million futex calls for 1024 workers. */
-    pthread_mutex_lock(&sh->lock);
-    sh->arrived++;
-    pthread_cond_signal(&sh->arrival);
-    while (!sh->released)
-        pthread_cond_wait(&sh->gate, &sh->lock);
-    pthread_mutex_unlock(&sh->lock);
-    if (ok)
-        sim_serve(w);
-    merge(sh, w);
-    return NULL;
+}
+
+static int heap_pop(sim_farm *f)
+{
+    int top = f->heap[0];
+    f->heap[0] = f->heap[--f->nheap];
+    for (int k = 0;;) {
+        int l = 2 * k + 1, r = l + 1, m = k;
+        if (l < f->nheap && due_of(f, l) < due_of(f, m))
+            m = l;
+        if (r < f->nheap && due_of(f, r) < due_of(f, m))
+            m = r;
+        if (m == k)
+            break;
+        heap_swap(f, k, m);
+        k = m;
+    }
+    return top;
+}
+
+/* ---- one worker's steps ---- */
+
+static void worker_done(sim_farm *f, sim_worker *w)
+{
+    w->state = W_DONE;
+    f->live--;
+    epoll_ctl(f->epfd, EPOLL_CTL_DEL, ts_client_fd(w->client), NULL);
+}
+
+/* Its connection failed: once the stop tuple is out the coordinator may finish and close while
+ * a worker still waits, or renders a straggler's duplicate; that is the end, not a failure. */
+static void worker_lost(sim_farm *f, sim_worker *w, const char *what)
+{
+    if (f->first_stop_ns == 0)
+        farm_fail(f, "%s: %s", what, ts_client_error(w->client));
+    worker_done(f, w);
+}
+
+/* Send the result (or NULL) and the next take. */
+static void ask(sim_farm *f, sim_worker *w, const tf_tuple *result)
+{
+    w->asked_ns = tf_now_ns();
+    w->state = W_WAITING;
+    f->ops++;
+    if (ts_out_in_send(w->client, result, &f->tmpl))
+        worker_lost(f, w, result ? "cannot deliver a result" : "lost the coordinator");
+}
+
+/* A blocking out of a task put back, a failure or the stop: rare, so the loop waits for it. */
+static int put(sim_farm *f, sim_worker *w, const tf_tuple *t)
+{
+    f->ops++;
+    if (ts_out(w->client, t) == 0)
+        return 0;
+    worker_lost(f, w, "lost the coordinator");
+    return -1;
+}
+
+/* The result of w's task: the recorded chunks that stand in for it, or its black pixels. */
+static int pack_result(sim_farm *f, sim_worker *w, tf_tuple *result, char *err, size_t errlen)
+{
+    tf_chunk_payload pay;
+    int64_t spp = 0;
+    size_t n = (size_t)w->rect.w * (size_t)w->rect.h;
+    if (f->cfg->payloads) {
+        if (tf_payloads_for(f->cfg->payloads, &f->layout, w->rect, &f->buf, &pay, &spp, err,
+                            errlen))
+            return -1;
+    } else {
+        if (n > f->px_cap) {
+            tf_pixel *p = realloc(f->px, n * sizeof *p);
+            if (!p)
+                return tf_seterr(err, errlen, "out of memory");
+            f->px = p;
+            f->px_cap = n;
+        }
+        memset(f->px, 0, n * sizeof *f->px);
+        if (tf_exr_encode_rect(f->enc, w->rect, f->px, &pay, err, errlen))
+            return -1;
+    }
+    tf_render_counts counts = {.pixels = (uint64_t)n};
+    return tf_result_pack(result, w->task, w->id, &counts, w->cost_ns, spp, &pay);
+}
+
+/* w's modelled cost has run out: count the task and return its result with the next take. */
+static void finish_task(sim_farm *f, sim_worker *w, int64_t now)
+{
+    f->oversleep_ns += (double)(now - w->due_ns);
+    f->modelled_ns += (double)w->cost_ns;
+    f->tasks++;
+    sim_task done = {w->rect.y, w->rect.x, w->cost_ns};
+    append((void **)&f->done, &f->ndone, &f->cap_done, &done, sizeof done);
+    char err[512];
+    tf_tuple result;
+    tf_tuple_init(&result);
+    if (pack_result(f, w, &result, err, sizeof err)) {
+        farm_fail(f, "task %" PRId64 ": %s", w->task, err);
+        worker_done(f, w);
+    } else {
+        ask(f, w, &result);
+    }
+    tf_tuple_clear(&result);
+}
+
+/* A task tuple has come: start on it, put it back, or stop. */
+static void start_task(sim_farm *f, sim_worker *w, tf_tuple *task, int64_t now)
+{
+    float wait_ms = (float)((double)(now - w->asked_ns) * 1e-6);
+    append((void **)&f->take_ms, &f->ntake, &f->cap_take, &wait_ms, sizeof wait_ms);
+    tf_task_msg m;
+    if (tf_task_unpack(task, &m)) {
+        farm_fail(f, "a malformed task tuple");
+        worker_done(f, w);
+    } else if (m.id == TF_TASK_STOP) {
+        if (f->first_stop_ns == 0)
+            f->first_stop_ns = now;
+        if (put(f, w, task) == 0) /* so every other worker sees it too */
+            worker_done(f, w);
+    } else if (tf_task_excludes(&m, w->id)) {
+        /* Let a worker that may render it take it; pause at random, as worker.c does. */
+        if (put(f, w, task) == 0) {
+            w->bounces += w->bounces < 4;
+            w->due_ns = now + (int64_t)(30 + rand_r(&f->seed) % (60u << w->bounces)) * 1000000;
+            w->state = W_PAUSED;
+            heap_push(f, w - f->ws);
+        }
+    } else if (tf_task_rect_problem(m.rect, f->cfg->image_w, f->cfg->image_h)) {
+        farm_fail(f, "task %" PRId64 " (%dx%d at %d,%d): %s", m.id, m.rect.w, m.rect.h, m.rect.x,
+                  m.rect.y, tf_task_rect_problem(m.rect, f->cfg->image_w, f->cfg->image_h));
+        worker_done(f, w);
+    } else {
+        w->bounces = 0;
+        w->task = m.id;
+        w->rect = m.rect;
+        w->cost_ns = (int64_t)(f->cfg->pixel_us * 1000.0 *
+                               tf_cost_map_rect(f->cfg->map, f->cfg->image_w, f->cfg->image_h,
+                                                m.rect));
+        w->due_ns = now + w->cost_ns;
+        w->state = W_RENDERING;
+        heap_push(f, w - f->ws);
+    }
+}
+
+static void on_readable(sim_farm *f, sim_worker *w)
+{
+    if (w->state != W_WAITING)
+        return;
+    tf_tuple task;
+    int rc = ts_out_in_poll(w->client, &task);
+    if (rc < 0)
+        worker_lost(f, w, "lost the coordinator");
+    else if (rc > 0)
+        start_task(f, w, &task, tf_now_ns());
+    tf_tuple_clear(&task);
+}
+
+static void on_due(sim_farm *f, sim_worker *w, int64_t now)
+{
+    if (w->state == W_RENDERING)
+        finish_task(f, w, now);
+    else if (w->state == W_PAUSED)
+        ask(f, w, NULL);
+}
+
+/* ---- the loop ---- */
+
+/* Wait for sockets until the earliest due time (or without end), then serve what is ready. */
+static int serve_once(sim_farm *f, struct epoll_event *ev, int nev)
+{
+    struct timespec ts, *timeout = NULL;
+    if (f->nheap > 0) {
+        int64_t left = due_of(f, 0) - tf_now_ns();
+        if (left < 0)
+            left = 0;
+        ts = (struct timespec){(time_t)(left / 1000000000), (long)(left % 1000000000)};
+        timeout = &ts;
+    }
+    int ready = epoll_pwait2(f->epfd, ev, nev, timeout, NULL);
+    if (ready < 0 && errno != EINTR)
+        return -1;
+    for (int i = 0; i < ready; i++)
+        on_readable(f, &f->ws[ev[i].data.u32]);
+    int64_t now = tf_now_ns();
+    while (f->nheap > 0 && due_of(f, 0) <= now)
+        on_due(f, &f->ws[heap_pop(f)], now);
+    return 0;
+}
+
+static int farm_serve(sim_farm *f, char *err, size_t errlen)
+{
+    struct epoll_event ev[256];
+    f->start_ns = tf_now_ns();
+    for (int i = 0; i < f->n; i++) {
+        sim_worker *w = &f->ws[i];
+        if (w->state == W_DONE)
+            continue;
+        struct epoll_event e = {.events = EPOLLIN, .data.u32 = (uint32_t)i};
+        if (epoll_ctl(f->epfd, EPOLL_CTL_ADD, ts_client_fd(w->client), &e))
+            return tf_seterr(err, errlen, "epoll: %s", strerror(errno));
+        ask(f, w, NULL);
+    }
+    while (f->live > 0)
+        if (serve_once(f, ev, 256))
+            return tf_seterr(err, errlen, "epoll: %s", strerror(errno));
+    return 0;
 }
 
 static int cmp_task(const void *a, const void *b)
@@ -458,36 +383,36 @@ static int cmp_float(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-static void summarise(sim_shared *sh, tf_sim_report *rep)
+static void summarise(sim_farm *f, tf_sim_report *rep)
 {
-    rep->workers = sh->joined;
-    rep->tasks = sh->tasks;
-    rep->ops = sh->ops;
-    int64_t end = atomic_load(&sh->first_stop_ns);
-    rep->wall_s = end > sh->start_ns ? (double)(end - sh->start_ns) * 1e-9 : 0.0;
-    rep->slept_s = sh->modelled_ns * 1e-9;
+    rep->workers = f->joined;
+    rep->tasks = f->tasks;
+    rep->ops = f->ops;
+    int64_t end = f->first_stop_ns;
+    rep->wall_s = end > f->start_ns ? (double)(end - f->start_ns) * 1e-9 : 0.0;
+    rep->slept_s = f->modelled_ns * 1e-9;
     /* Useful work is the whole image's modelled cost, once: a straggler's duplicate is not. */
-    const tf_sim_config *cfg = sh->cfg;
+    const tf_sim_config *cfg = f->cfg;
     tf_rect all = {0, 0, cfg->image_w, cfg->image_h};
     rep->modelled_s = cfg->pixel_us * 1e-6 *
                       tf_cost_map_rect(cfg->map, cfg->image_w, cfg->image_h, all);
     rep->efficiency = rep->wall_s > 0 && rep->workers > 0
                           ? rep->modelled_s / rep->workers / rep->wall_s
                           : 0.0;
-    rep->slept_over_ms = sh->tasks ? sh->oversleep_ns / (double)sh->tasks * 1e-6 : 0.0;
-    rep->bound_s = schedule_bound_s(sh->done, sh->ndone, rep->workers);
+    rep->slept_over_ms = f->tasks ? f->oversleep_ns / (double)f->tasks * 1e-6 : 0.0;
+    rep->bound_s = schedule_bound_s(f->done, f->ndone, rep->workers);
     rep->bound_efficiency = rep->bound_s > 0 ? rep->modelled_s / rep->workers / rep->bound_s
                                              : 0.0;
-    if (sh->ntake == 0)
+    if (f->ntake == 0)
         return;
-    qsort(sh->take_ms, sh->ntake, sizeof *sh->take_ms, cmp_float);
+    qsort(f->take_ms, f->ntake, sizeof *f->take_ms, cmp_float);
     double sum = 0;
-    for (size_t i = 0; i < sh->ntake; i++)
-        sum += sh->take_ms[i];
-    rep->take_mean_ms = sum / (double)sh->ntake;
-    rep->take_p50_ms = sh->take_ms[sh->ntake / 2];
-    rep->take_p99_ms = sh->take_ms[(size_t)((double)(sh->ntake - 1) * 0.99)];
-    rep->take_max_ms = sh->take_ms[sh->ntake - 1];
+    for (size_t i = 0; i < f->ntake; i++)
+        sum += f->take_ms[i];
+    rep->take_mean_ms = sum / (double)f->ntake;
+    rep->take_p50_ms = f->take_ms[f->ntake / 2];
+    rep->take_p99_ms = f->take_ms[(size_t)((double)(f->ntake - 1) * 0.99)];
+    rep->take_max_ms = f->take_ms[f->ntake - 1];
 }
 
 /* Hundreds of connections need hundreds of descriptors: lift the soft limit to the hard one. */
@@ -500,19 +425,62 @@ static void raise_fd_limit(void)
     }
 }
 
-/* Connect every worker from this thread, one after another, before any thread starts: the
- * coordinator's single event loop then sees an orderly queue of handshakes, not a storm. */
-static int connect_all(const tf_sim_config *cfg, sim_worker *ws, char *err, size_t errlen)
+/* ---- the start: connect, join, learn the output's layout ---- */
+
+/* Connect and join every worker, one after another, before the start line: the coordinator's
+ * single event loop then sees an orderly queue of handshakes, not a storm.  A worker that
+ * cannot join is counted as failed and left out (DONE). */
+static int join_all(sim_farm *f, char *err, size_t errlen)
 {
-    for (int i = 0; i < cfg->workers; i++) {
+    const tf_sim_config *cfg = f->cfg;
+    for (int i = 0; i < f->n; i++) {
+        sim_worker *w = &f->ws[i];
         char e[512];
-        ws[i].client = ts_client_connect(cfg->connect, cfg->key, cfg->timeout_ms, e, sizeof e);
-        if (!ws[i].client) {
-            tf_seterr(err, errlen, "simulated worker %d of %d: %s", i + 1, cfg->workers, e);
-            return -1;
+        w->client = ts_client_connect(cfg->connect, cfg->key, cfg->timeout_ms, e, sizeof e);
+        if (!w->client)
+            return tf_seterr(err, errlen, "simulated worker %d of %d: %s", i + 1, f->n, e);
+        if (tf_worker_join(w->client, "networked", "simulated", &w->id)) {
+            farm_fail(f, "cannot join the render: %s", ts_client_error(w->client));
+            w->state = W_DONE;
+            continue;
         }
+        f->joined++;
+        f->live++;
     }
     return 0;
+}
+
+/* The output's layout (what a result's chunks must fit), asked by the first worker that joined;
+ * then the recording checked against it, or the encoder for black pixels made. */
+static int learn_layout(sim_farm *f, char *err, size_t errlen)
+{
+    int i = 0;
+    while (i < f->n && f->ws[i].state == W_DONE)
+        i++;
+    if (i == f->n)
+        return tf_seterr(err, errlen, "no simulated worker could join: %s", f->error);
+    if (tf_worker_fetch_layout(f->ws[i].client, &f->layout, err, errlen))
+        return -1;
+    if (f->cfg->payloads)
+        return tf_payloads_fit(f->cfg->payloads, &f->layout, err, errlen);
+    f->enc = tf_exr_encoder_new(&f->layout, err, errlen);
+    return f->enc ? 0 : -1;
+}
+
+static void farm_free(sim_farm *f)
+{
+    for (int i = 0; i < f->n; i++)
+        ts_client_close(f->ws[i].client);
+    free(f->ws);
+    free(f->heap);
+    if (f->epfd >= 0)
+        close(f->epfd);
+    tf_tuple_clear(&f->tmpl);
+    tf_payload_buf_free(&f->buf);
+    tf_exr_encoder_free(f->enc);
+    free(f->px);
+    free(f->take_ms);
+    free(f->done);
 }
 
 int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, size_t errlen)
@@ -524,56 +492,28 @@ int tf_simulate_run(const tf_sim_config *cfg, tf_sim_report *rep, char *err, siz
         return -1;
     }
     raise_fd_limit();
-    sim_shared sh;
-    memset(&sh, 0, sizeof sh);
-    sh.cfg = cfg;
-    sim_worker *ws = calloc((size_t)cfg->workers, sizeof *ws);
-    if (!ws) {
-        tf_seterr(err, errlen, "out of memory");
-        return -1;
-    }
+    sim_farm f;
+    memset(&f, 0, sizeof f);
+    f.cfg = cfg;
+    f.n = cfg->workers;
+    f.seed = (unsigned)getpid() ^ (unsigned)tf_now_ns();
+    f.ws = calloc((size_t)f.n, sizeof *f.ws);
+    f.heap = calloc((size_t)f.n, sizeof *f.heap);
+    f.epfd = epoll_create1(EPOLL_CLOEXEC);
     int rc = -1;
-    int started = 0;
-    pthread_mutex_init(&sh.lock, NULL);
-    pthread_cond_init(&sh.gate, NULL);
-    pthread_cond_init(&sh.arrival, NULL);
-    if (connect_all(cfg, ws, err, errlen))
+    if (!f.ws || !f.heap || f.epfd < 0 || tf_task_template(&f.tmpl, TF_TASK_ANY)) {
+        tf_seterr(err, errlen, "simulation: cannot start: %s", strerror(errno ? errno : ENOMEM));
         goto out;
-    pthread_attr_t attr;
-    pthread_attr_init(&attr);
-    pthread_attr_setstacksize(&attr, 256 * 1024); /* a worker's frames are small; 1024 fit */
-    for (; started < cfg->workers; started++) {
-        ws[started].sh = &sh;
-        if (pthread_create(&ws[started].thread, &attr, sim_thread, &ws[started])) {
-            tf_seterr(err, errlen, "cannot start simulated worker thread %d of %d", started + 1,
-                     cfg->workers);
-            break;
-        }
     }
-    pthread_attr_destroy(&attr);
-    /* Open the start line once every started worker has joined (or failed to). */
-    pthread_mutex_lock(&sh.lock);
-    while (sh.arrived < started)
-        pthread_cond_wait(&sh.arrival, &sh.lock);
-    sh.start_ns = tf_now_ns();
-    sh.released = 1;
-    pthread_cond_broadcast(&sh.gate);
-    pthread_mutex_unlock(&sh.lock);
-    for (int i = 0; i < started; i++)
-        pthread_join(ws[i].thread, NULL);
-    summarise(&sh, rep);
-    if (started == cfg->workers && sh.failed == 0)
+    if (join_all(&f, err, errlen) || learn_layout(&f, err, errlen) ||
+        farm_serve(&f, err, errlen))
+        goto out;
+    summarise(&f, rep);
+    if (f.failed == 0)
         rc = 0;
-    else if (sh.error[0])
-        tf_seterr(err, errlen, "%s", sh.error);
+    else
+        tf_seterr(err, errlen, "%s", f.error);
 out:
-    for (int i = 0; i < cfg->workers; i++)
-        ts_client_close(ws[i].client);
-    free(ws);
-    free(sh.take_ms);
-    free(sh.done);
-    pthread_cond_destroy(&sh.gate);
-    pthread_cond_destroy(&sh.arrival);
-    pthread_mutex_destroy(&sh.lock);
+    farm_free(&f);
     return rc;
 }

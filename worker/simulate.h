@@ -5,12 +5,13 @@
  * connection, exactly like `terrafarm worker`, but instead of tracing rays it sleeps the
  * *modelled* cost of its task and puts back a result of the right size: with a recording
  * (--payloads, worker/payloads.h) the packed chunks of a real render, sized and compressed as
- * real results are; without one, encoded black pixels.  Many of
- * them run as threads of one process, so a 2-core machine can host a farm of 1024.
+ * real results are; without one, encoded black pixels.  Many of them are served by one
+ * thread (an event loop over their connections, simulate.c), so a 2-core machine can host a
+ * farm of 1024 that costs its cores less than the coordinator does.
  *
- * The model is a cost map: a coarse grid of relative cost densities over the image, measured
- * once on a real render (tf_cost_map_measure), so the horizon stays as expensive as it is in a
- * real scene while the image is rescaled to any size.  Density is normalised so its
+ * The model (cost_map.c) is a cost map: a coarse grid of relative cost densities over the
+ * image, measured once on a real render (tf_cost_map_measure), so the horizon stays as
+ * expensive as it is in a real scene while the image is rescaled to any size.  Density is normalised so its
  * area-weighted mean is 1; a task's modelled cost is
  *     pixel_us * (integral of density over the task's rectangle, in pixels)
  * so pixel_us is the cost of an average pixel and pixel_us * w * h that of an average task.
@@ -53,7 +54,7 @@ typedef struct tf_sim_config {
     const char *connect;     /* HOST:PORT of the coordinator */
     const uint8_t *key;      /* or NULL */
     int timeout_ms;          /* connect timeout */
-    int workers;             /* threads, each with its own connection */
+    int workers;             /* each with its own connection */
     double pixel_us;         /* modelled cost of an average pixel */
     const tf_cost_map *map;
     int image_w, image_h;    /* the render's size (from the scene tuple) */

@@ -56,27 +56,18 @@ int tf_worker_join_take(ts_client *c, const char *kind, const char *backend, int
     return rc ? -1 : 0;
 }
 
-static void note_op(const tf_worker_step *step)
-{
-    if (step->on_op)
-        step->on_op(step->ctx);
-}
-
-static int put_back(ts_client *c, tf_tuple *task, const tf_worker_step *step)
+static int put_back(ts_client *c, tf_tuple *task)
 {
     int rc = ts_out(c, task);
     tf_tuple_clear(task);
-    note_op(step);
     return rc;
 }
 
-static int report_failure(ts_client *c, int64_t task, int64_t worker, const char *msg,
-                          const tf_worker_step *step)
+static int report_failure(ts_client *c, int64_t task, int64_t worker, const char *msg)
 {
     tf_tuple t;
     int rc = tf_failed_pack(&t, task, worker, msg) || ts_out(c, &t) ? -1 : 0;
     tf_tuple_clear(&t);
-    note_op(step);
     return rc;
 }
 
@@ -91,7 +82,7 @@ int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
 {
     char err[1024];
     tf_exr_encoder *enc = NULL;
-    if (!step->payload && !(enc = tf_exr_encoder_new(layout, err, sizeof err))) {
+    if (!(enc = tf_exr_encoder_new(layout, err, sizeof err))) {
         tf_error("%s", err);
         return TF_SERVE_LOST;
     }
@@ -102,11 +93,10 @@ int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
     size_t px_cap = 0;
     unsigned seed = (unsigned)getpid() ^ (unsigned)tf_now_ns() ^ (unsigned)id * 2654435761u;
     int bounces = 0; /* excluded tasks taken in a row */
-    /* The next task, taken with the last result (ts_out_in), and how long that took. */
+    /* The next task, taken with the last result (ts_out_in). */
     tf_tuple next;
     tf_tuple_init(&next);
     int have_next = 0;
-    int64_t next_wait = 0;
     if (first) { /* taken when joining (tf_worker_join_take) */
         next = *first;
         tf_tuple_init(first);
@@ -116,18 +106,13 @@ int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
         tf_tuple task;
         tf_task_msg m;
         tf_tuple_init(&task);
-        int64_t t0 = tf_now_ns(), t1;
         int rc = 0;
         if (have_next) {
             task = next; /* moved */
             tf_tuple_init(&next);
             have_next = 0;
-            t1 = t0;
-            t0 -= next_wait;
         } else {
             rc = ts_in(c, &tmpl, &task);
-            t1 = tf_now_ns();
-            note_op(step);
         }
         if (rc) {
             status = TF_SERVE_LOST;
@@ -140,14 +125,12 @@ int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
             continue;
         }
         if (m.id == TF_TASK_STOP) {
-            if (step->on_stop)
-                step->on_stop(step->ctx, t1);
-            put_back(c, &task, step); /* so every other worker sees it too */
+            put_back(c, &task); /* so every other worker sees it too */
             break;
         }
         if (tf_task_excludes(&m, id)) {
             tf_debug("task %" PRId64 " excludes this worker: put back", m.id);
-            put_back(c, &task, step);
+            put_back(c, &task);
             /* Let a worker that can render it take it.  The pause is random: two workers each
              * holding the other's task and pausing alike would otherwise take the same tuples
              * back in the same order forever (a livelock seen with --verify check copies). */
@@ -158,8 +141,6 @@ int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
         }
         bounces = 0;
         tf_tuple_clear(&task);
-        if (step->on_take)
-            step->on_take(step->ctx, t1 - t0);
         /* Whatever a task tuple says, it can only become a reported failure here, never a
          * crash or an exit: no size, a size no image has, or a rectangle outside the image. */
         const char *bad = tf_task_rect_problem(m.rect, step->image_w, step->image_h);
@@ -167,7 +148,7 @@ int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
             snprintf(err, sizeof err, "task %" PRId64 " (%dx%d at %d,%d): %s", m.id, m.rect.w,
                      m.rect.h, m.rect.x, m.rect.y, bad);
             tf_warn("%s", err);
-            if (report_failure(c, m.id, id, err, step)) {
+            if (report_failure(c, m.id, id, err)) {
                 status = TF_SERVE_UNDELIVERED;
                 break;
             }
@@ -177,7 +158,7 @@ int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
         if (n > px_cap) {
             tf_pixel *np = realloc(px, n * sizeof *px);
             if (!np) {
-                report_failure(c, m.id, id, "out of memory", step);
+                report_failure(c, m.id, id, "out of memory");
                 continue;
             }
             px = np;
@@ -187,51 +168,43 @@ int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
         int64_t busy = 0;
         if (step->render(step->ctx, m.frame, m.rect, px, &counts, &busy, err, sizeof err)) {
             tf_warn("task %" PRId64 ": %s", m.id, err);
-            if (report_failure(c, m.id, id, err, step)) {
+            if (report_failure(c, m.id, id, err)) {
                 status = TF_SERVE_UNDELIVERED;
                 break;
             }
             continue;
         }
-        long nf = step->payload ? -1 : tf_first_non_finite(px, n);
+        long nf = tf_first_non_finite(px, n);
         if (nf >= 0) {
             /* Never emit a NaN or an infinity: the file would carry it forever. */
             snprintf(err, sizeof err, "task %" PRId64 ": the renderer produced a non-finite value "
                      "at pixel (%ld,%ld); not sending it", m.id, m.rect.x + nf % m.rect.w,
                      m.rect.y + nf / m.rect.w);
             tf_warn("%s", err);
-            if (report_failure(c, m.id, id, err, step)) {
+            if (report_failure(c, m.id, id, err)) {
                 status = TF_SERVE_UNDELIVERED;
                 break;
             }
             continue;
         }
         tf_chunk_payload pay;
-        int64_t spp_total = 0;
-        rc = step->payload ? step->payload(step->ctx, m.rect, px, &pay, &spp_total, err, sizeof err)
-                           : tf_exr_encode_rect(enc, m.rect, px, &pay, err, sizeof err);
+        rc = tf_exr_encode_rect(enc, m.rect, px, &pay, err, sizeof err);
         if (rc) {
             tf_warn("task %" PRId64 ": %s", m.id, err);
-            if (report_failure(c, m.id, id, err, step)) {
+            if (report_failure(c, m.id, id, err)) {
                 status = TF_SERVE_UNDELIVERED;
                 break;
             }
             continue;
         }
-        if (!step->payload) {
-            double spp = 0; /* integer-valued floats: exact in a double */
-            for (size_t i = 0; i < n; i++)
-                spp += px[i].spp;
-            spp_total = (int64_t)spp;
-        }
+        double spp = 0; /* integer-valued floats: exact in a double */
+        for (size_t i = 0; i < n; i++)
+            spp += px[i].spp;
         /* The result goes with the request for the next task: one round trip per task. */
         tf_tuple result;
-        int64_t s0 = tf_now_ns();
-        rc = tf_result_pack(&result, m.id, id, &counts, busy, spp_total, &pay) ||
+        rc = tf_result_pack(&result, m.id, id, &counts, busy, (int64_t)spp, &pay) ||
              ts_out_in(c, &result, &tmpl, &next);
-        next_wait = tf_now_ns() - s0;
         tf_tuple_clear(&result);
-        note_op(step);
         if (rc) {
             tf_tuple_clear(&next);
             status = TF_SERVE_UNDELIVERED;
@@ -369,7 +342,7 @@ int tf_worker_loop(ts_client *c, const tf_scene *s, const tf_heightfield *hf, co
     snprintf(tag, sizeof tag, "worker %" PRId64, id);
     tf_log_set_tag(tag);
     backend_ctx bc = {b, s, -1, {{0}}, 0};
-    tf_worker_step step = {&bc, backend_render, NULL, NULL, NULL, NULL, s->width, s->height};
+    tf_worker_step step = {&bc, backend_render, s->width, s->height};
     int rc = tf_worker_serve_from(c, id, &layout, &step, &first);
     backend_ctx_free(&bc);
     if (rc == TF_SERVE_LOST)

@@ -22,9 +22,10 @@
  * networked worker reconnects (worker/networked.c); a forked one is restarted. */
 #define TF_WORKER_EXIT_LOST 4
 
-/* What a worker does with a task, the one thing that differs between the real worker (the C
- * or OpenCL backend traces rays) and the simulated one (worker/simulate.c sleeps a modelled
- * cost).  The loop around it -- take, check, render, put the result back -- is shared. */
+/* What a worker does with a task: the real worker's C or OpenCL backend traces rays; a test
+ * may render anything.  The loop around it -- take, check, render, encode, put the result
+ * back -- is tf_worker_serve's.  (The simulated workers, worker/simulate.c, speak the same
+ * protocol from one event loop, without this loop.) */
 typedef struct tf_worker_step {
     void *ctx;
     /* Render rect of `frame` (-1 for a still scene, else a frame of its animation) into
@@ -32,16 +33,6 @@ typedef struct tf_worker_step {
      * line in err (reported to the coordinator as a task failure). */
     int (*render)(void *ctx, int frame, tf_rect rect, tf_pixel *px, tf_render_counts *counts,
                   int64_t *busy_ns, char *err, size_t errlen);
-    /* Optional: the result's payload (its encoded chunks and preview share) and the sum of its
-     * spp channel, instead of encoding px here (the simulated worker sends recorded chunks).
-     * The payload's buffers belong to ctx and stay valid until the next call. */
-    int (*payload)(void *ctx, tf_rect rect, const tf_pixel *px, tf_chunk_payload *out,
-                   int64_t *spp_total, char *err, size_t errlen);
-    /* Optional observers: a task was taken after waiting wait_ns for it; a tuple operation was
-     * issued (in, out); the stop tuple was seen at monotonic time t_ns. */
-    void (*on_take)(void *ctx, int64_t wait_ns);
-    void (*on_op)(void *ctx);
-    void (*on_stop)(void *ctx, int64_t t_ns);
     /* The image a task's rectangle must lie in (0: not checked beyond its size). */
     int image_w, image_h;
 } tf_worker_step;

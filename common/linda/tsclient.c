@@ -46,6 +46,9 @@ struct ts_client {
     int hb_running, hb_stop, hb_interval_ms;
     pthread_mutex_t hb_lock;
     pthread_cond_t hb_cond;
+    /* ts_out_in_send's exchange in flight: the reply awaited next (the out's, then the in's) */
+    int async_pending;     /* replies still to come: 0, 1 (the in's) or 2 (the out's first) */
+    uint32_t async_out, async_in;
 };
 
 /* Record the first fatal error; the client is dead afterwards. */
@@ -157,25 +160,31 @@ static int send_frame(ts_client *c, uint8_t op, uint32_t req, const tf_tuple *t,
     return send_frames(c, 1, &f);
 }
 
+/* The next whole frame among the bytes read so far (sealed records opened first), without
+ * reading more: its length (> 0) with *f (body in c->in), 0 if none is whole yet, or -1. */
+static long buffered_frame(ts_client *c, tf_frame *f)
+{
+    char err[160];
+    while (c->sealed && c->raw.len > 0) {
+        long k = tf_seal_open(&c->rx, tf_buf_head(&c->raw), c->raw.len, &c->in, err,
+                              sizeof err);
+        if (k < 0)
+            return fail(c, "bad record from the coordinator: %s", err);
+        if (k == 0)
+            break;
+        tf_buf_consume(&c->raw, (size_t)k);
+    }
+    long n = tf_frame_parse(tf_buf_head(&c->in), c->in.len, f, err, sizeof err);
+    return n < 0 ? fail(c, "bad frame from the coordinator: %s", err) : n;
+}
+
 /* Read one frame into *f (body points into c->in, valid until the next read), waiting until
  * deadline (ms since boot; < 0: forever).  The caller consumes it with tf_buf_consume. */
 static long read_frame(ts_client *c, tf_frame *f, int64_t deadline)
 {
-    char err[160];
     for (;;) {
-        while (c->sealed && c->raw.len > 0) {
-            long k = tf_seal_open(&c->rx, tf_buf_head(&c->raw), c->raw.len, &c->in, err,
-                                  sizeof err);
-            if (k < 0)
-                return fail(c, "bad record from the coordinator: %s", err);
-            if (k == 0)
-                break;
-            tf_buf_consume(&c->raw, (size_t)k);
-        }
-        long n = tf_frame_parse(tf_buf_head(&c->in), c->in.len, f, err, sizeof err);
-        if (n < 0)
-            return fail(c, "bad frame from the coordinator: %s", err);
-        if (n > 0)
+        long n = buffered_frame(c, f);
+        if (n != 0)
             return n;
         int wait = -1;
         if (deadline >= 0) {
@@ -248,27 +257,30 @@ static int request(ts_client *c, uint8_t op, const tf_tuple *t, tf_tuple *out)
     return await_reply(c, req, out, NO_DEADLINE);
 }
 
+/* Frame f (n bytes) as the reply to request req: its op (> 0), with a TUPLE's body decoded
+ * into *out; consumed.  -1 if it is not that reply. */
+static int accept_reply(ts_client *c, const tf_frame *f, long n, uint32_t req, tf_tuple *out)
+{
+    if (f->request_id != req || (f->op != TF_OP_TUPLE && f->op != TF_OP_NONE &&
+                                 f->op != TF_OP_OK && f->op != TF_OP_PONG))
+        return fail(c, "unexpected %s (request %u) from the coordinator", tf_op_name(f->op),
+                    f->request_id);
+    int rop = f->op;
+    if (rop == TF_OP_TUPLE) {
+        char err[160];
+        if (tf_tuple_decode(f->body, f->body_len, out, 0, err, sizeof err) != 0)
+            return fail(c, "bad tuple from the coordinator: %s", err);
+    }
+    tf_buf_consume(&c->in, (size_t)n);
+    return rop;
+}
+
 /* Read the reply to request req (replies come in request order). */
 static int await_reply(ts_client *c, uint32_t req, tf_tuple *out, int64_t deadline)
 {
-    for (;;) {
-        tf_frame f;
-        long n = read_reply(c, &f, deadline);
-        if (n < 0)
-            return -1;
-        if (f.request_id != req || (f.op != TF_OP_TUPLE && f.op != TF_OP_NONE &&
-                                    f.op != TF_OP_OK && f.op != TF_OP_PONG))
-            return fail(c, "unexpected %s (request %u) from the coordinator", tf_op_name(f.op),
-                        f.request_id);
-        int rop = f.op;
-        if (rop == TF_OP_TUPLE) {
-            char err[160];
-            if (tf_tuple_decode(f.body, f.body_len, out, 0, err, sizeof err) != 0)
-                return fail(c, "bad tuple from the coordinator: %s", err);
-        }
-        tf_buf_consume(&c->in, (size_t)n);
-        return rop;
-    }
+    tf_frame f;
+    long n = read_reply(c, &f, deadline);
+    return n < 0 ? -1 : accept_reply(c, &f, n, req, out);
 }
 
 /* The expected reply op for each request. */
@@ -332,6 +344,80 @@ int ts_rdp(ts_client *c, const tf_tuple *tmpl, tf_tuple *out) { return probing(c
 int ts_ping(ts_client *c) { return expect(c, request(c, TF_OP_PING, NULL, NULL), TF_OP_PONG, TF_OP_PONG); }
 
 const char *ts_client_error(const ts_client *c) { return c->err; }
+
+/* ---- one thread, many connections: ts_out_in without waiting ---- */
+
+int ts_client_fd(const ts_client *c) { return c->fd; }
+
+int ts_out_in_send(ts_client *c, const tf_tuple *t, const tf_tuple *tmpl)
+{
+    if (c->async_pending) {
+        snprintf(c->err, sizeof c->err, "ts_out_in_send: an exchange is already in flight");
+        return -1;
+    }
+    if (t && tf_tuple_has_formals(t)) {
+        snprintf(c->err, sizeof c->err, "ts_out: a tuple may not contain formals");
+        return -1;
+    }
+    frame_spec f[2];
+    int n = 0;
+    if (t) {
+        c->async_out = next_request_id(c);
+        f[n++] = (frame_spec){TF_OP_OUT, c->async_out, t, NULL, 0};
+    }
+    c->async_in = next_request_id(c);
+    f[n++] = (frame_spec){TF_OP_IN, c->async_in, tmpl, NULL, 0};
+    if (send_frames(c, n, f) != 0)
+        return -1;
+    c->async_pending = n;
+    return 0;
+}
+
+/* One recv of what the socket holds now, never waiting.  0 (perhaps nothing came) or -1. */
+static int read_available(ts_client *c)
+{
+    tf_buf *dst = c->sealed ? &c->raw : &c->in;
+    if (tf_buf_reserve(dst, 65536) != 0)
+        return fail(c, "out of memory reading a reply");
+    ssize_t r = recv(c->fd, dst->data + dst->off + dst->len, 65536, MSG_DONTWAIT);
+    if (r < 0 && (errno == EINTR || errno == EAGAIN || errno == EWOULDBLOCK))
+        return 0;
+    if (r < 0)
+        return fail(c, "lost the coordinator connection: %s", strerror(errno));
+    if (r == 0)
+        return fail(c, "the coordinator closed the connection");
+    dst->len += (size_t)r;
+    return 0;
+}
+
+int ts_out_in_poll(ts_client *c, tf_tuple *out)
+{
+    tf_tuple_init(out);
+    if (c->dead)
+        return -1;
+    if (!c->async_pending) {
+        snprintf(c->err, sizeof c->err, "ts_out_in_poll: no exchange in flight");
+        return -1;
+    }
+    if (read_available(c))
+        return -1;
+    for (;;) {
+        tf_frame f;
+        long n = buffered_frame(c, &f);
+        if (n <= 0)
+            return (int)n;
+        if (f.op == TF_OP_ERROR)
+            return fail_with_server_error(c, &f);
+        int last = c->async_pending == 1;
+        int rop = accept_reply(c, &f, n, last ? c->async_in : c->async_out, out);
+        if (expect(c, rop, last ? TF_OP_TUPLE : TF_OP_OK, last ? TF_OP_TUPLE : TF_OP_OK) != 0) {
+            tf_tuple_clear(out);
+            return -1;
+        }
+        if (--c->async_pending == 0)
+            return 1;
+    }
+}
 
 /* ---- heartbeat ---- */
 static void *heartbeat_main(void *arg)

@@ -52,6 +52,14 @@ int ts_rdp(ts_client *c, const tf_tuple *tmpl, tf_tuple *out);
  * this way: half the wake-ups and system calls per task on both sides.  0 or -1 (after an
  * error nothing says whether the out was stored). */
 int ts_out_in(ts_client *c, const tf_tuple *t, const tf_tuple *tmpl, tf_tuple *out);
+/* The same exchange for one thread serving many connections (worker/simulate.c), in two
+ * halves: ts_out_in_send sends the out (t may be NULL: the in alone) and the in without
+ * waiting; then, whenever the connection's fd is readable, ts_out_in_poll reads what it holds,
+ * never waiting: 1 with the in's tuple in *out (caller-owned), 0 while replies are still to
+ * come, -1 on error.  One exchange in flight at a time; other calls only once it is done. */
+int ts_client_fd(const ts_client *c);
+int ts_out_in_send(ts_client *c, const tf_tuple *t, const tf_tuple *tmpl);
+int ts_out_in_poll(ts_client *c, tf_tuple *out);
 /* Round trip a PING/PONG.  0 or -1. */
 int ts_ping(ts_client *c);
 

@@ -1,6 +1,6 @@
 /* test_tsserver.c: the tuple-space server and client end to end (common/linda/tsserver.c,
  * common/linda/tsclient.c): over a socketpair and loopback TCP; a blocked in woken by another
- * client's out, and the requests pipelined behind a blocked in; hooks (on_take, on_out, on_disconnect); garbage, oversized, unknown-op and
+ * client's out, and the requests pipelined behind a blocked in; ts_out_in in two halves; hooks (on_take, on_out, on_disconnect); garbage, oversized, unknown-op and
  * half frames each dropping only their own connection; authentication with the right and the
  * wrong secret and an op before the handshake; wrong secrets slowed per address without
  * barring the right one from that address.  The server loop runs in a background thread;
@@ -279,6 +279,76 @@ static void test_pipelined_behind_blocked_in(void **state)
     ts_client_close(other);
     close(sv[1]);
     stop(fx);
+}
+
+/* ts_out_in in two halves (one thread, many connections: worker/simulate.c), plain and sealed:
+ * the send does not wait, a poll before the replies come says 0, the replies are collected as
+ * the socket has them; the exchange takes back what it put; a blocked in is served by another
+ * client's out; a second send while one is in flight, or a poll with none, is an error. */
+static int poll_exchange(ts_client *c, tf_tuple *got)
+{
+    for (int i = 0; i < 1000; i++) { /* a failure, never a hang: at most 10 s */
+        int rc = ts_out_in_poll(c, got);
+        if (rc != 0)
+            return rc;
+        struct pollfd p = {.fd = ts_client_fd(c), .events = POLLIN};
+        poll(&p, 1, 10);
+    }
+    return 0;
+}
+
+static void exchange_in_halves(const uint8_t *key)
+{
+    int sv[2];
+    assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+    fixture *fx = start(key, key ? -1 : sv[0]);
+    char err[256];
+    ts_client *c = key ? ts_client_connect(fx->addr, key, 2000, err, sizeof err)
+                       : ts_client_from_fd(sv[1]);
+    assert_non_null(c);
+    tf_tuple t, m, got;
+    int64_t v;
+    tup(&t, "si", "result", 7);
+    tup(&m, "sI", "result", 0);
+    assert_int_equal(ts_out_in_poll(c, &got), -1); /* nothing in flight */
+    assert_int_equal(ts_out_in_send(c, &t, &m), 0);
+    assert_int_equal(ts_out_in_send(c, &t, &m), -1); /* one at a time */
+    assert_int_equal(poll_exchange(c, &got), 1);
+    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
+    assert_int_equal(v, 7); /* took back what it put */
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&m);
+    tup(&m, "sI", "wake", 0);
+    assert_int_equal(ts_out_in_send(c, NULL, &m), 0); /* the in alone: it blocks */
+    assert_int_equal(ts_out_in_poll(c, &got), 0);    /* nothing yet */
+    ts_client *other = ts_client_connect(fx->addr, key, 2000, err, sizeof err);
+    assert_non_null(other);
+    tf_tuple_clear(&t);
+    tup(&t, "si", "wake", 9);
+    assert_int_equal(ts_out(other, &t), 0);
+    assert_int_equal(poll_exchange(c, &got), 1);
+    assert_int_equal(tf_tuple_get_int(&got, 1, &v), 0);
+    assert_int_equal(v, 9);
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&t);
+    tf_tuple_clear(&m);
+    exercise(c); /* and the blocking calls carry on in step */
+    ts_client_close(other);
+    ts_client_close(c);
+    if (key) {
+        close(sv[0]);
+        close(sv[1]);
+    }
+    stop(fx);
+}
+
+static void test_exchange_in_halves(void **state)
+{
+    (void)state;
+    uint8_t key[TF_KEY_BYTES];
+    tf_secret_from_bytes("correct horse", 13, key);
+    exchange_in_halves(NULL); /* a plain socketpair */
+    exchange_in_halves(key);  /* sealed records over TCP */
 }
 
 typedef struct blocked {
@@ -647,6 +717,7 @@ int main(void)
         cmocka_unit_test(test_socketpair_client),
         cmocka_unit_test(test_out_in_one_round_trip),
         cmocka_unit_test(test_pipelined_behind_blocked_in),
+        cmocka_unit_test(test_exchange_in_halves),
         cmocka_unit_test(test_large_outs),
         cmocka_unit_test(test_tcp_blocked_in_woken_by_other_client),
         cmocka_unit_test(test_bad_traffic_drops_only_that_connection),

@@ -50,7 +50,7 @@ static int fake_render(void *ctx, int frame, tf_rect r, tf_pixel *px, tf_render_
 static void *serve_main(void *arg)
 {
     run *rn = arg;
-    tf_worker_step step = {NULL, fake_render, NULL, NULL, NULL, NULL, IMG_W, IMG_H};
+    tf_worker_step step = {NULL, fake_render, IMG_W, IMG_H};
     tf_exr_layout layout = {IMG_W, IMG_H, 0, 0, 0, TF_PIXEL_HALF};
     rn->status = tf_worker_serve(rn->c, 7, &layout, &step);
     rn->done = 1;

@@ -26,7 +26,7 @@ int tf_backend_set_scene(tf_backend *b, const tf_scene *s, char *err, size_t err
 void tf_backend_free(tf_backend *b);
 
 /* Before forking `processes` workers of backend `name` on this machine (render -j N, worker
- * -j N): PoCL runs each kernel on every core, so N OpenCL processes would start N times the
+ * -j N, a farm worker's processes for a job): PoCL runs each kernel on every core, so N OpenCL processes would start N times the
  * cores in threads, contending.  Each gets its share (cores / N, at least 1) through PoCL's
  * environment, inherited by the children, unless the user set PoCL's thread count.  Nothing
  * for the C backend; a GPU device ignores it. */

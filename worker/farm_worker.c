@@ -18,6 +18,7 @@
 #include "linda/tsclient.h"
 #include "log.h"
 #include "scene.h"
+#include "worker/backend.h"
 #include "worker/networked.h"
 #include "worker/paint_worker.h"
 #include "worker/payloads.h"
@@ -225,10 +226,12 @@ static int spawn(const farm_worker *fw, const session *ss, const tf_scene *s,
                  const tf_heightfield *hf, pid_t *pids, int n)
 {
     pid_t me = getpid();
+    const char *backend = fw->o->backend ? fw->o->backend : "c";
+    tf_backend_share_cores(backend, n);
     for (int i = 0; i < n; i++) {
         pids[i] = fork();
         if (pids[i] == 0)
-            serve_in_child(ss, s, hf, fw->o->backend ? fw->o->backend : "c", me);
+            serve_in_child(ss, s, hf, backend, me);
         if (pids[i] < 0) {
             tf_warn("fork: %s; serving with %d processes", strerror(errno), i);
             return i;

@@ -86,7 +86,7 @@ static void farm_fail(sim_farm *f, const char *fmt, ...)
         return;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(f->error, sizeof f->error, fmt, ap);
+    tf_vseterr(f->error, sizeof f->error, fmt, ap);
     va_end(ap);
 }
 
@@ -235,6 +235,7 @@ static void start_task(sim_farm *f, sim_worker *w, tf_tuple *task, int64_t now)
     float wait_ms = (float)((double)(now - w->asked_ns) * 1e-6);
     append((void **)&f->take_ms, &f->ntake, &f->cap_take, &wait_ms, sizeof wait_ms);
     tf_task_msg m;
+    const char *bad = NULL;
     if (tf_task_unpack(task, &m)) {
         farm_fail(f, "a malformed task tuple");
         worker_done(f, w);
@@ -251,9 +252,9 @@ static void start_task(sim_farm *f, sim_worker *w, tf_tuple *task, int64_t now)
             w->state = W_PAUSED;
             heap_push(f, w - f->ws);
         }
-    } else if (tf_task_rect_problem(m.rect, f->cfg->image_w, f->cfg->image_h)) {
+    } else if ((bad = tf_task_rect_problem(m.rect, f->cfg->image_w, f->cfg->image_h))) {
         farm_fail(f, "task %" PRId64 " (%dx%d at %d,%d): %s", m.id, m.rect.w, m.rect.h, m.rect.x,
-                  m.rect.y, tf_task_rect_problem(m.rect, f->cfg->image_w, f->cfg->image_h));
+                  m.rect.y, bad);
         worker_done(f, w);
     } else {
         w->bounces = 0;

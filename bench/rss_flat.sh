@@ -2,8 +2,8 @@
 # rss_flat.sh: the coordinator's peak memory as the image grows (docs/contract.md section 6: "flat
 # as the image grows"), for both output kinds, at 1024^2, 2048^2, 4096^2 and 8192^2, each with
 # fixed task shapes (tiled stamps:64x64, scanline rows:8: a band of tasks -- the watermark's unit
-# -- then grows with the width) and with bands capped at 128 K pixels as the default stamps are
-# (tiled stamps:128xH, scanline rows:K with 128 K pixels a band).  A real coordinator (-j 0) is served by
+# -- then grows with the width) and with bands capped as the default stamps are (tiled
+# stamps:128xH, 512 K pixels a band; scanline rows:K, 128 K pixels a band).  A real coordinator (-j 0) is served by
 # simulated workers (terrafarm worker --simulate ... --payloads) that answer at once with the
 # packed chunks of a real render of the same layout, recorded first, so the coordinator
 # receives, checks and writes real bytes at full speed without rendering 67 Mpixels here.
@@ -42,9 +42,10 @@ echo "kind,tasks,size,coordinator_max_rss_kb,out_bytes,wall_s,coordinator_render
 for kind in $KINDS; do
   for n in $SIZES; do
     cap=$((131072 / n)); [ $cap -gt 128 ] && cap=128
+    tcap=$((524288 / n)); [ $tcap -gt 128 ] && tcap=128
     case $kind in
     tiled) tasks=stamps:64x64 ;;
-    tiled-capped) tasks=stamps:128x$cap ;;
+    tiled-capped) tasks=stamps:128x$tcap ;;
     scanline) tasks=rows:8 ;;
     scanline-capped) tasks=rows:$cap ;;
     esac

@@ -39,8 +39,12 @@ int tf_task_spec_parse(const char *text, tf_task_spec *spec, char *err, size_t e
 }
 
 /* A band (one row of tasks) waits in the tuple space until its last task is done, so its size
- * is the coordinator's memory: keep it under this many pixels whatever the image width. */
-#define BAND_PIXEL_BUDGET (128 * 1024)
+ * is the coordinator's memory: keep it under this many pixels whatever the image width.  Not
+ * smaller: every task costs the coordinator a round trip, a decode and a check whatever its
+ * size, and at 128 K pixels a 3840-wide image got stamps of 128x34 (1140 tasks at 3840x1280)
+ * whose per-task costs were a third of the coordinator's CPU (bench/README.md section 12:
+ * 512 K pixels, stamps 128x128, 0.68x its CPU for ~10-20 MB more memory at 2048^2-8192^2). */
+#define BAND_PIXEL_BUDGET (512 * 1024)
 
 tf_task_spec tf_task_spec_default(int width, int height, int workers)
 {

@@ -167,12 +167,15 @@ static ts_client *connect_job(farm_worker *fw, const session *ss, char *err, siz
     return NULL;
 }
 
-/* The job's scene from its render and its terrain (kept or built): the scene, or NULL. */
+/* The job's scene from its render and its terrain (kept or built): the scene, or NULL with
+ * *gone set when the render refused the connection (it is not there: our session is lost,
+ * not failed, and must not count toward barring us from the job). */
 static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfield **hf,
-                           double *build_s)
+                           double *build_s, int *gone)
 {
     char err[1024], key[TF_FARM_TOKEN_HEX];
     ts_client *c = connect_job(fw, ss, err, sizeof err);
+    *gone = !c && strstr(err, "refused") != NULL;
     int kind = TF_SPACE_RENDER, want = ss->paint ? TF_SPACE_PAINT : TF_SPACE_RENDER;
     tf_scene *s = c ? tf_worker_fetch_scene_ex(c, ss->connect, &kind, err, sizeof err) : NULL;
     if (s && (kind != want || tf_farm_terrain_key(s, key) || strcmp(key, ss->terrain)))
@@ -375,9 +378,10 @@ static void serve(farm_worker *fw, const session *ss)
     }
     const tf_heightfield *hf = NULL;
     double build_s = -1;
-    tf_scene *s = fetch_job(fw, ss, &hf, &build_s);
+    int gone = 0;
+    tf_scene *s = fetch_job(fw, ss, &hf, &build_s, &gone);
     if (!s) {
-        set_last(fw, ss->job, "failed");
+        set_last(fw, ss->job, gone ? "lost" : "failed");
         fw->ended_ms = tf_now_ms();
         return;
     }

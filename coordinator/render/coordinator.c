@@ -433,10 +433,11 @@ static int build_terrain(render *r)
                                  "terrain ([terrain] procedural = yes); use --backend c or auto");
     if (r->nworkers <= 0 && r->scene->terrain.generator == TF_GEN_FILE) {
         /* networked workers build their own, but a height map is decoded here once, so a bad
-         * file is one line now rather than a failure on every worker that joins */
+         * file is one line now rather than a failure on every worker that joins; and a bad
+         * scene (status 2), so that a farm does not start the render again */
         float *h = tf_terrain_heights(&r->scene->terrain, 0, NULL, err, sizeof err);
         if (!h)
-            return step_failed(r, 1, err);
+            return step_failed(r, 2, err);
         free(h);
     }
     if (r->nworkers <= 0)

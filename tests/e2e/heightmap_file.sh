@@ -88,6 +88,13 @@ bad() {
 bad missing "cannot open" nothere.tif
 : >"$T/maps/empty.tif"; bad empty "empty" empty.tif
 echo "this is not a raster" >"$T/maps/text.tif"; bad not_a_raster "not a raster" text.tif
+# A coordinator without local workers (-j 0, a farm's render) decodes the map once before any
+# worker joins: a bad one is a bad scene, status 2, which a farm takes as final (no retries).
+"$TF_BIN" render "$T/bad_not_a_raster.scene" --listen 127.0.0.1:0 -j 0 --size 32x18 -q \
+    -o "$T/bad0.exr" 2>"$T/bad0.err"
+rc=$?
+[ $rc -eq 2 ] || fail "-j 0 with a map that is no raster: status $rc, not 2: $(cat "$T/bad0.err")"
+grep -q "not a raster" "$T/bad0.err" || fail "-j 0: $(cat "$T/bad0.err")"
 python3 -c "import os,sys; sys.stdout.buffer.write(b'II*\x00' + os.urandom(4000))" \
     >"$T/maps/garbage.tif"; bad corrupt "not a raster\|corrupt" garbage.tif
 head -c 3000 "$T/maps/hf.png" >"$T/maps/cut.png"; bad truncated_png "truncated\|not a readable PNG" cut.png

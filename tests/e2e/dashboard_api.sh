@@ -20,6 +20,26 @@ base = os.environ["TERRAFARM_DASHBOARD"]
 for name in ("status", "workers", "events", "tasks", "history"):
     with urllib.request.urlopen(base + "api/" + name, timeout=10) as r:
         open(d + "/final_" + name + ".json", "wb").write(r.read())
+# The event stream, read here because the dashboard is sure to serve until this command ends
+# (read after the polls instead, a busy machine could finish the render and close it first):
+# until it has replayed a join for every worker of the render, or 30 s.
+import socket, time
+nworkers = len(json.load(open(d + "/final_workers.json"))["workers"])
+host, port = base.split("//")[1].rstrip("/").rsplit(":", 1)
+stream = b""
+try:
+    s = socket.create_connection((host, int(port)), timeout=30)
+    s.sendall(b"GET /api/events/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+    t_end = time.time() + 30
+    while stream.count(b"event: join") < nworkers and time.time() < t_end:
+        c = s.recv(65536)
+        if not c:
+            break
+        stream += c
+    s.close()
+except OSError as e:
+    stream += ("error: %s" % e).encode()
+open(d + "/stream.txt", "wb").write(stream)
 PY
 say "render with the dashboard on loopback, polled while it runs"
 "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 --http 127.0.0.1:0 -j 2 --size $SIZE \
@@ -57,25 +77,7 @@ while time.time() < t_end:
     except (urllib.error.URLError, ConnectionError, socket.timeout):
         break
     time.sleep(0.15)
-# the event stream: read it for a moment
-stream = b""
-try:
-    s = socket.create_connection((base.split("//")[1].split(":")[0], int(base.rsplit(":", 1)[1].strip("/"))), timeout=3)
-    s.sendall(b"GET /api/events/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
-    t0 = time.time()
-    while time.time() - t0 < 1.5:
-        try:
-            c = s.recv(65536)
-        except socket.timeout:
-            break
-        if not c:
-            break
-        stream += c
-    s.close()
-except OSError as e:
-    stream = ("error: %s" % e).encode()
 json.dump(polls, open(d + "/polls.json", "w"))
-open(d + "/stream.txt", "wb").write(stream)
 if png is not None:
     open(d + "/preview.png", "wb").write(png)
 print("%d polls" % len(polls))

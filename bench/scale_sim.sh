@@ -13,7 +13,9 @@
 # the average task costs TASK_MS.  MODEL "flat" gives every task the same cost (exactly
 # TASK_MS); a measured map (the default) gives the scene's spread: default.cost's sky rows cost
 # 0.04 of the average, so at "100 ms" a third of the tasks take 4 ms.
-# Watermark = F * W + one band of tasks, for each F.
+# Watermark = F * W + one band of tasks, for each F; F "auto" leaves it to the coordinator (its
+# auto watermark, with --wait-workers W so that it counts every worker from the start), and the
+# CSV gets the watermark it chose.
 #
 # Prints one CSV line per run (and writes them to $OUT/scale_sim.csv), then plots modelled
 # efficiency against workers for each task size (best watermark) to $OUT/scale_sim.svg.
@@ -21,7 +23,7 @@
 # usage: bench/scale_sim.sh [MODEL|flat]   (default: bench/default.cost)
 #        bench/scale_sim.sh --smoke [MODEL|flat]   (2 workers, 2 tasks each of 1 ms, payloads of
 #        a 64x32 render, CSV and plot in a temp directory: for tests/e2e/bench_smoke.sh)
-# env:   WORKERS="16 64 256 1024" TASK_MS="1 10 30 100" WM="1 2 4" TPW=16 OUT=bench/results PIN=0
+# env:   WORKERS="16 64 256 1024" TASK_MS="1 10 30 100" WM="1 2 4" (or auto) TPW=16 OUT=bench/results PIN=0
 #        RENDER_ARGS="--affinity off" (more options for the coordinator)
 set -eu
 cd "$(dirname "$0")/.."
@@ -79,10 +81,11 @@ for ms in $TASK_MS; do
     width=$((cols * 8)); height=$((bands * 8))
     pixel_us=$(awk -v ms="$ms" 'BEGIN { printf "%.4f", ms * 1000 / 64 }')
     for f in $WM; do
-      wm=$((f * w + cols))
+      if [ "$f" = auto ]; then wm=auto wm_args="--wait-workers $w"
+      else wm=$((f * w + cols)) wm_args="--watermark $wm"; fi
       PORT=$((PORT + 1))
       $COORD_PIN "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:$PORT --size ${width}x$height \
-        --tasks stamps:8x8 --watermark $wm -o "$EXR" --overwrite --lease-timeout 600000 -q \
+        --tasks stamps:8x8 $wm_args -o "$EXR" --overwrite --lease-timeout 600000 -q \
         --stats "$LOG.stats" ${RENDER_ARGS:-} &
       coord=$!
       # wait until the coordinator listens (a refused connect is not retried by the client)
@@ -99,6 +102,7 @@ for ms in $TASK_MS; do
       line=$(cat "$LOG")
       get() { echo "$line" | tr ' ' '\n' | sed -n "s/^$1=//p"; }
       js() { sed -n "s/^ *\"$1\": *\([0-9.]*\).*/\1/p" "$LOG.stats" | head -1; }
+      [ "$wm" != auto ] || wm=$(js watermark)
       row="$w,$ms,$wm,$(get tasks),$width,$height,$(get wall_s),$(get modelled_s),$(get efficiency),$(get ops_per_s),$(get take_mean_ms),$(get take_p50_ms),$(get take_p99_ms),$(js tasks_redealt),$(js tasks_duplicated),$(js wall_s),$(js coordinator_render_cpu_s),$sim_cpu,$(wc -c <"$EXR"),$(cut -d' ' -f1 /proc/loadavg),$(get bound_efficiency),${FLAT_MODEL:+flat}${FLAT_MODEL:-$(basename "$MODEL")}"
       echo "$row" | tee -a "$CSV"
     done

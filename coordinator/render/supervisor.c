@@ -334,9 +334,8 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         tf_supervisor_free(s);
         return NULL;
     }
-    s->ring_size = s->auto_watermark
-                       ? s->band_tasks + AUTO_WM_PER_WORKER * AUTO_WM_MAX_WORKERS
-                       : cfg->watermark;
+    int most_ahead = tf_tasks_auto_ahead(&s->jobs[0].tasks, AUTO_WM_MAX_WORKERS);
+    s->ring_size = s->auto_watermark ? s->band_tasks + most_ahead : cfg->watermark;
     s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
     if (sv_start_affinity(s, err, errlen)) {

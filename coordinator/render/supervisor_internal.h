@@ -18,8 +18,7 @@
 
 #define MAX_FAILED_WORKERS 8  /* per task: distinct workers that failed it, remembered */
 #define MAX_TASK_FAILURES 64  /* per task: failures after which it has failed everywhere */
-#define AUTO_WM_PER_WORKER 3   /* auto watermark: tasks dealt ahead per worker, beyond a band */
-#define AUTO_WM_MAX_WORKERS 4096
+#define AUTO_WM_MAX_WORKERS 4096 /* auto watermark: workers counted at most (tasks.h) */
 #define MAX_DUPLICATES_IN_FLIGHT 2
 #define STRAGGLER_FACTOR 3.0   /* a task is a straggler when held this many mean task times */
 #define STRAGGLER_MIN_MS 500.0

@@ -141,7 +141,8 @@ void sv_deal_duplicate(tf_supervisor *s)
     }
 }
 
-/* The auto watermark: one band plus a few tasks per connected (or expected) worker. */
+/* The auto watermark: one band plus tf_tasks_auto_ahead's tasks for the connected (or
+ * expected) workers. */
 void sv_update_watermark(tf_supervisor *s)
 {
     if (!s->auto_watermark)
@@ -151,7 +152,7 @@ void sv_update_watermark(tf_supervisor *s)
         workers = s->cfg.expected_workers;
     if (workers > AUTO_WM_MAX_WORKERS)
         workers = AUTO_WM_MAX_WORKERS;
-    int wm = s->band_tasks + AUTO_WM_PER_WORKER * workers;
+    int wm = s->band_tasks + tf_tasks_auto_ahead(&s->jobs[0].tasks, workers);
     if (wm > s->ring_size)
         wm = s->ring_size;
     s->watermark = wm;

@@ -69,6 +69,23 @@ tf_task_spec tf_task_spec_default(int width, int height, int workers)
     return s;
 }
 
+/* Many workers on small tasks need the deeper pipeline: a worker should find its next task
+ * waiting rather than wait for the write front (bench/README.md section 13: 1024 simulated
+ * workers on 8x8 stamps made 0.890-0.901 of the modelled work at 4 a worker, 0.904-0.914 at
+ * 16, against a bound of 0.946); large tasks keep the floor, their results being large. */
+int tf_tasks_auto_ahead(const tf_tasks *t, int workers)
+{
+    if (workers <= 0)
+        return 0;
+    long task_px = (long)t->tw * t->th;
+    long ahead = TF_AUTO_AHEAD_PIXELS / (task_px > 0 ? task_px : 1);
+    if (ahead > (long)TF_AUTO_AHEAD_MAX * workers)
+        ahead = (long)TF_AUTO_AHEAD_MAX * workers;
+    if (ahead < (long)TF_AUTO_AHEAD_MIN * workers)
+        ahead = (long)TF_AUTO_AHEAD_MIN * workers;
+    return (int)ahead;
+}
+
 void tf_tasks_init(tf_tasks *t, int width, int height, int first_row, tf_task_spec spec)
 {
     memset(t, 0, sizeof *t);

@@ -32,6 +32,14 @@ int tf_task_spec_parse(const char *text, tf_task_spec *spec, char *err, size_t e
 /* Default: near-square stamps sized so each worker gets many tasks (load balance) while the
  * border overhead (external samples) stays small. */
 tf_task_spec tf_task_spec_default(int width, int height, int workers);
+/* The auto watermark's tasks beyond one band for `workers` workers (0 for none): as many as
+ * hold TF_AUTO_AHEAD_PIXELS pixels in all (their results are what the coordinator keeps), but
+ * at least TF_AUTO_AHEAD_MIN and at most TF_AUTO_AHEAD_MAX a worker.  Nondecreasing in
+ * workers, so a ring sized for the most workers holds the watermark of any fewer. */
+#define TF_AUTO_AHEAD_MIN 3
+#define TF_AUTO_AHEAD_MAX 16
+#define TF_AUTO_AHEAD_PIXELS (4L << 20)
+int tf_tasks_auto_ahead(const tf_tasks *t, int workers);
 
 void tf_tasks_init(tf_tasks *t, int width, int height, int first_row, tf_task_spec spec);
 /* A resume of a tiled file that holds the first n tiles of the first band: those tasks are not

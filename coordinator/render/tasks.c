@@ -71,7 +71,7 @@ tf_task_spec tf_task_spec_default(int width, int height, int workers)
 
 /* Many workers on small tasks need the deeper pipeline: a worker should find its next task
  * waiting rather than wait for the write front (bench/README.md section 13: 1024 simulated
- * workers on 8x8 stamps made 0.890-0.901 of the modelled work at 4 a worker, 0.904-0.914 at
+ * workers on 8x8 stamps made 0.890-0.901 of the modelled work at 4 a worker, 0.894-0.914 at
  * 16, against a bound of 0.946); large tasks keep the floor, their results being large. */
 int tf_tasks_auto_ahead(const tf_tasks *t, int workers)
 {

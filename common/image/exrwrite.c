@@ -352,8 +352,9 @@ int tf_exr_holds_references(const tf_exr_writer *w) { return w->sink.held > 0; }
  * Nothing reads the output back while it is written (a resume reads it before), so keeping
  * them only pushes a long render's or a sequence's gigabytes into other programs' cache; and
  * freed pages are reused for the next writes, which on a virtual machine are otherwise fresh
- * guest memory whose first touch traps to the host (bench/README.md section 12: the writer
- * thread's CPU 80 -> 20 ms for 33 MB).  Advice only: its failure changes nothing. */
+ * guest memory whose first touch traps to the host (bench/README.md section 12: 70-88 ->
+ * 18-24 ms of CPU to write 32 MB in a test program; the coordinator's 0.84x on alps.scene at
+ * 3840x1280).  Advice only: its failure changes nothing. */
 static void drop_cached_pages(const tf_exr_writer *w)
 {
     (void)posix_fadvise(w->sink.fd, 0, 0, POSIX_FADV_DONTNEED);

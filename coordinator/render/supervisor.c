@@ -335,6 +335,8 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
         return NULL;
     }
     int most_ahead = tf_tasks_auto_ahead(&s->jobs[0].tasks, AUTO_WM_MAX_WORKERS);
+    if (most_ahead > s->total_tasks) /* no more can be outstanding: the slots stay small */
+        most_ahead = (int)s->total_tasks;
     s->ring_size = s->auto_watermark ? s->band_tasks + most_ahead : cfg->watermark;
     s->watermark = s->auto_watermark ? 0 : cfg->watermark;
     s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);

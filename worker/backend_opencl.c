@@ -59,7 +59,16 @@
 #define PIXELS_PER_ITEM 64   /* TF_PIX: pixels per tf_pixels8 work-item */
 #define EPOCH_LIMIT 0x7fffffffu /* packet_render.cl: epochs stay below TF_QUEUED */
 #define MAX_SOURCE_BYTES (1 << 20)        /* a kernel file larger than this is not ours */
-#define SCRATCH_BUDGET ((size_t)64 << 20) /* bytes of per-pixel sample caches per batch */
+/* Bytes of per-pixel sample caches a batch of pixels may use.  A CPU device with one compute
+ * unit (one PoCL thread: what each of render -j N's processes gets, tf_backend_share_cores)
+ * gets about a core's L2: pixels write their caches sparsely, and a batch spread over 64 MB
+ * left them to memory (default.scene 1920x1080 -j 2 on PoCL: 2.47-2.83 s at 64 MB, 2.33-2.54
+ * at 4, 2.29-2.38 at 2, 2.28-2.46 at 1; alps 1920x640 3.19-3.41 -> 3.02-3.14 s at 2; pixels
+ * identical).  Several units must share each batch's work-items, and the batch waits for its
+ * slowest: small batches starve them (-j 1 with 2 threads: 2.74-2.89 s at 64 MB, 3.29-3.56 at
+ * 2 a unit), so they and a GPU's thousands of lanes get large batches. */
+#define SCRATCH_ONE_CPU_UNIT ((size_t)2 << 20)
+#define SCRATCH_LARGE ((size_t)64 << 20)
 
 struct tf_cl_backend {
     tf_renderer *renderer; /* the C setup the parameters are copied from */
@@ -76,6 +85,7 @@ struct tf_cl_backend {
     cl_uint epoch; /* tf_pixels8's mark for the slots of the launch (packet_render.cl) */
     int lattice;
     size_t local;          /* work-group size: fixed, so PoCL specialises each kernel once */
+    size_t scratch;        /* bytes of sample caches a batch of pixels may use */
     char device_name[256];
     double build_seconds;  /* making the program: from the binary cache, or from source */
     enum tf_clcache_state cache_state;
@@ -572,6 +582,12 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
     b->local = local && atoi(local) > 0 && atoi(local) <= 1024 ? (size_t)atoi(local)
                : (type & CL_DEVICE_TYPE_GPU)                   ? 32
                                                                : 1;
+    cl_uint units = 1;
+    clGetDeviceInfo(dev, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof units, &units, NULL);
+    const char *scratch = getenv("TERRAFARM_CL_SCRATCH"); /* bytes; for tuning and the tests */
+    b->scratch = scratch && atol(scratch) > 0                 ? (size_t)atol(scratch)
+                 : (type & CL_DEVICE_TYPE_CPU) && units == 1 ? SCRATCH_ONE_CPU_UNIT
+                                                             : SCRATCH_LARGE;
     b->ctx = clCreateContext(NULL, 1, &dev, NULL, NULL, &rc);
     if (rc != CL_SUCCESS) {
         tf_seterr(err, errlen, "OpenCL: cannot create a context on '%s' (error %d)",
@@ -731,7 +747,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     const size_t per_pixel = side * side *
                              (TF_CL_SAMPLE_FLOATS * sizeof(float) + 3 * sizeof(double) +
                               sizeof(cl_uint) + sizeof(cl_ushort));
-    size_t batch = SCRATCH_BUDGET / per_pixel / PIXELS_PER_ITEM * PIXELS_PER_ITEM;
+    size_t batch = b->scratch / per_pixel / PIXELS_PER_ITEM * PIXELS_PER_ITEM;
     if (batch < PIXELS_PER_ITEM)
         batch = PIXELS_PER_ITEM;
     if (batch > npixels)

@@ -21,6 +21,9 @@
  *   installed_kernel_dir   the kernels and the C headers they share (make install's flat
  *                       layout, found through TERRAFARM_KERNELS) build and give the C pixels;
  *                       without a shared header the error is one line naming it.
+ *   small_batches       a task's pixels in many launches (TERRAFARM_CL_SCRATCH of 64 KB, as
+ *                       a one-thread CPU device's 2 MB splits a large stamp): the pixels of
+ *                       one launch, memcmp-identical on PoCL.
  *   cores_shared        N OpenCL worker processes share the cores through PoCL's environment.
  * Every test but cores_shared skips (cmocka skip()) with a message when no OpenCL platform
  * exists. */
@@ -466,6 +469,24 @@ static void cores_shared(void **state)
     unsetenv("POCL_CPU_MAX_CU_COUNT");
 }
 
+static void small_batches(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    char err[1024] = "";
+    setenv("TERRAFARM_CL_SCRATCH", "65536", 1); /* ~40 pixels a batch: 64, one work-item */
+    tf_cl_backend *b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    unsetenv("TERRAFARM_CL_SCRATCH");
+    assert_non_null(b);
+    static tf_pixel img[W * H];
+    assert_int_equal(tf_cl_backend_render(b, (tf_rect){0, 0, W, H}, img, NULL, err, sizeof err),
+                     0);
+    assert_close_to_c(img, "64 pixels a launch");
+    if (on_pocl_cpu(b))
+        assert_memory_equal(img, fx.c_img, sizeof img);
+    tf_cl_backend_free(b);
+}
+
 static void bad_rect(void **state)
 {
     (void)state;
@@ -487,7 +508,7 @@ int main(void)
         cmocka_unit_test(bad_device),
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
         cmocka_unit_test(installed_kernel_dir), cmocka_unit_test(bad_rect),
-        cmocka_unit_test(cores_shared),
+        cmocka_unit_test(small_batches), cmocka_unit_test(cores_shared),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -144,6 +144,9 @@ static void set_last(farm_worker *fw, int64_t job, const char *outcome)
 
 /* ---- one session: a job's terrain, processes, and watching them ---- */
 
+/* Did a connection fail because nothing listens there (ECONNREFUSED's message)? */
+static int refused(const char *err) { return strstr(err, "refused") != NULL; }
+
 /* Connect to a job's render.  The farm bound its socket before starting it, so a connection
  * waits in the backlog while the render starts (up to CONNECT_MS for the handshake), and a
  * refused one means the render is gone: no retrying then.  Another failure (the render was
@@ -154,14 +157,14 @@ static void set_last(farm_worker *fw, int64_t job, const char *outcome)
 static ts_client *connect_job(farm_worker *fw, const session *ss, char *err, size_t errlen)
 {
     ts_client *c = ts_client_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
-    if (c || strstr(err, "refused"))
+    if (c || refused(err))
         return c;
     if (!fw)
         return tf_networked_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
     for (int backoff = 250; backoff <= 4000 && heartbeat(fw, ss->job) != 0; backoff *= 2) {
         usleep((useconds_t)backoff * 1000);
         c = ts_client_connect(ss->connect, ss->key, CONNECT_MS, err, errlen);
-        if (c || strstr(err, "refused"))
+        if (c || refused(err))
             return c;
     }
     return NULL;
@@ -175,7 +178,7 @@ static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfi
 {
     char err[1024], key[TF_FARM_TOKEN_HEX];
     ts_client *c = connect_job(fw, ss, err, sizeof err);
-    *gone = !c && strstr(err, "refused") != NULL;
+    *gone = !c && refused(err);
     int kind = TF_SPACE_RENDER, want = ss->paint ? TF_SPACE_PAINT : TF_SPACE_RENDER;
     tf_scene *s = c ? tf_worker_fetch_scene_ex(c, ss->connect, &kind, err, sizeof err) : NULL;
     if (s && (kind != want || tf_farm_terrain_key(s, key) || strcmp(key, ss->terrain)))

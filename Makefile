@@ -16,6 +16,12 @@ BIN     ?= bin
 VERSION := 0.2.0
 
 PKGS      := inih libpng libsodium zlib gdal libmicrohttpd jansson sqlite3
+# GDAL is compiled against but not linked: common/gdal_loader.c dlopen()s it by this soname on
+# first use (its hundred dependencies cost every process ~35 ms to load).  Programs that call
+# GDAL directly (a unit test) link it with GDAL_LIBS.
+GDAL_LIBS   := $(shell pkg-config --libs gdal 2>/dev/null)
+GDAL_SONAME := $(shell readelf -d $$($(CC) -print-file-name=libgdal.so) 2>/dev/null | \
+                 sed -n 's/.*(SONAME).*\[\(.*\)\]/\1/p')
 EXR_CFLAGS := $(shell pkg-config --cflags OpenEXR 2>/dev/null)
 EXR_LIBS   := $(filter -L% -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 CL_LIBS    := $(shell pkg-config --libs OpenCL 2>/dev/null || echo -lOpenCL)
@@ -27,8 +33,9 @@ CFLAGS   ?= -O2 -g -DNDEBUG
 SAN      ?=
 ALL_CFLAGS := $(CFLAGS) $(SAN) -std=c11 -D_GNU_SOURCE -Wall -Wextra -ffp-contract=off -pthread \
             -I. -Icommon -DTF_VERSION='"$(VERSION)"' \
+            $(if $(GDAL_SONAME),-DTF_GDAL_SONAME='"$(GDAL_SONAME)"') \
             $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS)
-LDLIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXR_LIBS) $(CL_LIBS) -lm -pthread
+LDLIBS   := $(shell pkg-config --libs $(filter-out gdal,$(PKGS)) 2>/dev/null) $(EXR_LIBS) $(CL_LIBS) -lm -pthread
 TEST_LIBS := $(shell pkg-config --libs cmocka 2>/dev/null)
 # Embree 3 (libembree-dev), linked into bench/embree_compare alone: from its pkg-config file
 # where there is one, else -lembree3 when the compiler finds its header (Debian's package ships
@@ -37,8 +44,10 @@ EMBREE_CFLAGS := $(shell pkg-config --cflags embree3 2>/dev/null)
 EMBREE_LIBS   := $(shell pkg-config --libs embree3 2>/dev/null || \
                    { $(CC) -E -include embree3/rtcore.h -x c /dev/null >/dev/null 2>&1 && echo -lembree3; })
 
-# 0. base: messages, clocks, vectors; the scene file (parsed, validated, hashed)
-BASE_SRC    := common/log.c common/clock.c common/datadir.c common/cachefile.c common/animation.c common/scene_keys.c \
+# 0. base: messages, clocks, vectors, GDAL loaded on first use; the scene file (parsed,
+#    validated, hashed)
+BASE_SRC    := common/log.c common/clock.c common/datadir.c common/gdal_loader.c common/cachefile.c \
+               common/animation.c common/scene_keys.c \
                common/scene_report.c common/scene_values.c common/scene_ini.c common/scene_check.c \
                common/scene_canonical.c common/scene_frame.c common/scene.c
 # 1. terrain: noise, fractal and grid generators, erosion, the height field and its max/min grids
@@ -117,7 +126,7 @@ $(PROG): $(CLI_OBJ) $(LIB_OBJ)
 
 $(BUILD)/tests/%: tests/unit/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB_OBJ) $(TEST_LIBS) $(LDLIBS)
+	$(CC) $(ALL_CFLAGS) -MMD -MP -o $@ $< $(LIB_OBJ) $(TEST_LIBS) $(LDLIBS) $(GDAL_LIBS)
 
 $(BUILD)/bench/%: bench/%.c $(LIB_OBJ)
 	@mkdir -p $(dir $@)
@@ -131,6 +140,7 @@ $(BUILD)/bench/embree_compare: LDLIBS += $(EMBREE_LIBS)
 # fuzzer-no-link); UB stops a run as it stops `make asan`.
 FUZZ_SAN     := address,undefined -fno-sanitize-recover=undefined
 FUZZ_CFLAGS  := -O1 -g -std=c11 -D_GNU_SOURCE -I. -Icommon -DTF_VERSION='"$(VERSION)"' \
+                $(if $(GDAL_SONAME),-DTF_GDAL_SONAME='"$(GDAL_SONAME)"') \
                 $(shell pkg-config --cflags $(PKGS) 2>/dev/null) $(EXR_CFLAGS)
 FUZZ_LIB_OBJ := $(LIB_SRC:%.c=$(BUILD)/fuzzobj/%.o)
 # Named only by a pattern rule, they would be deleted as intermediates after every link.

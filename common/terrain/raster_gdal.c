@@ -12,12 +12,6 @@
  * differently on a networked worker, which has only the bytes. */
 #include "terrain/raster.h"
 
-#include <gdal.h>
-#include <cpl_conv.h>
-#include <cpl_error.h>
-#include <cpl_vsi.h>
-#include <ogr_srs_api.h>
-
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -25,6 +19,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "gdal_loader.h"
 #include "log.h"
 
 static const char *const ALLOWED_DRIVERS[] = {
@@ -32,22 +27,22 @@ static const char *const ALLOWED_DRIVERS[] = {
     "Terragen", "netCDF", "GPKG", "JP2OpenJPEG", "PNG", "GIF", "BMP", "JPEG", "XYZ",
     "NWT_GRD", "PCIDSK", "RMF", "KEA", "HDF5Image", "ERS", NULL};
 
-static pthread_once_t gdal_once = PTHREAD_ONCE_INIT;
+static pthread_once_t options_once = PTHREAD_ONCE_INIT;
 
-static void gdal_init(void)
+static void set_options(void)
 {
-    GDALAllRegister();
+    const tf_gdal *g = tf_gdal_load(NULL, 0);
     /* never list a directory or look for sidecars in /vsimem, never touch the network */
-    CPLSetConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", "EMPTY_DIR");
-    CPLSetConfigOption("GDAL_HTTP_TIMEOUT", "1");
-    CPLSetConfigOption("CPL_VSIL_CURL_ALLOWED_EXTENSIONS", "none");
+    g->CPLSetConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", "EMPTY_DIR");
+    g->CPLSetConfigOption("GDAL_HTTP_TIMEOUT", "1");
+    g->CPLSetConfigOption("CPL_VSIL_CURL_ALLOWED_EXTENSIONS", "none");
 }
 
 /* Georeferencing of ds into r (has_georef stays 0 without a usable geotransform). */
-static void read_georef(GDALDatasetH ds, tf_raster *r)
+static void read_georef(const tf_gdal *g, GDALDatasetH ds, tf_raster *r)
 {
     double gt[6];
-    if (GDALGetGeoTransform(ds, gt) != CE_None)
+    if (g->GDALGetGeoTransform(ds, gt) != CE_None)
         return;
     /* GDAL's default (0, 1, 0, 0, 0, 1) means "no geotransform" */
     if (gt[0] == 0 && gt[1] == 1 && gt[2] == 0 && gt[3] == 0 && gt[4] == 0 && gt[5] == 1)
@@ -55,30 +50,31 @@ static void read_georef(GDALDatasetH ds, tf_raster *r)
     memcpy(r->gt, gt, sizeof gt);
     r->has_georef = 1;
     r->unit_m = 1.0;
-    OGRSpatialReferenceH srs = GDALGetSpatialRef(ds);
+    OGRSpatialReferenceH srs = g->GDALGetSpatialRef(ds);
     if (!srs)
         return;
-    if (OSRIsGeographic(srs)) {
+    if (g->OSRIsGeographic(srs)) {
         OGRErr e;
         r->geographic = 1;
-        r->semi_major = OSRGetSemiMajor(srs, &e);
+        r->semi_major = g->OSRGetSemiMajor(srs, &e);
         if (e != OGRERR_NONE || !(r->semi_major > 0))
             r->semi_major = 6378137.0;
-    } else if (OSRIsProjected(srs)) {
-        double u = OSRGetLinearUnits(srs, NULL);
+    } else if (g->OSRIsProjected(srs)) {
+        double u = g->OSRGetLinearUnits(srs, NULL);
         if (u > 0)
             r->unit_m = u;
     }
 }
 
 /* The dataset's metadata items TF_RASTER_KEY_* (the GeoTIFF's GDAL_METADATA tag) into r->meta. */
-static int read_meta(GDALDatasetH ds, const char *name, tf_raster *r, char *err, size_t errlen)
+static int read_meta(const tf_gdal *g, GDALDatasetH ds, const char *name, tf_raster *r,
+                     char *err, size_t errlen)
 {
     static const char *const keys[] = {TF_RASTER_KEY_FIRST_ROW, TF_RASTER_KEY_EXTENT,
                                        TF_RASTER_KEY_VERTICAL_SCALE,
                                        TF_RASTER_KEY_VERTICAL_OFFSET};
     for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
-        const char *v = GDALGetMetadataItem(ds, keys[i], NULL);
+        const char *v = g->GDALGetMetadataItem(ds, keys[i], NULL);
         if (v && tf_raster_meta_item(r, keys[i], v, name, err, errlen) != 0)
             return -1;
     }
@@ -86,9 +82,9 @@ static int read_meta(GDALDatasetH ds, const char *name, tf_raster *r, char *err,
 }
 
 /* GDAL's last message, on one line and without our /vsimem/ prefix: ": what", or "". */
-static void last_gdal_message(char *out, size_t outlen, const char *vpath)
+static void last_gdal_message(const tf_gdal *g, char *out, size_t outlen, const char *vpath)
 {
-    const char *m = CPLGetLastErrorMsg();
+    const char *m = g->CPLGetLastErrorMsg();
     out[0] = '\0';
     if (!m || !*m || outlen < 8)
         return;
@@ -110,7 +106,11 @@ int tf_raster_read_gdal(const uint8_t *data, size_t len, const char *name, tf_ra
                         char *err, size_t errlen)
 {
     memset(r, 0, sizeof *r);
-    pthread_once(&gdal_once, gdal_init);
+    char why_not[224];
+    const tf_gdal *g = tf_gdal_load(why_not, sizeof why_not);
+    if (!g)
+        return tf_seterr(err, errlen, "%s: neither PNG nor OpenEXR, and %s", name, why_not);
+    pthread_once(&options_once, set_options);
     /* A private /vsimem name that keeps the file's base name (SRTMHGT reads it) */
     static int counter;
     const char *base = strrchr(name, '/');
@@ -118,52 +118,52 @@ int tf_raster_read_gdal(const uint8_t *data, size_t len, const char *name, tf_ra
     char vpath[256];
     snprintf(vpath, sizeof vpath, "/vsimem/terrafarm-%ld-%d/%.120s", (long)getpid(),
              __atomic_add_fetch(&counter, 1, __ATOMIC_RELAXED), base);
-    VSILFILE *f = VSIFileFromMemBuffer(vpath, (GByte *)data, (vsi_l_offset)len, FALSE);
+    VSILFILE *f = g->VSIFileFromMemBuffer(vpath, (GByte *)data, (vsi_l_offset)len, FALSE);
     if (!f)
         return tf_seterr(err, errlen, "%s: out of memory", name);
-    VSIFCloseL(f);
+    g->VSIFCloseL(f);
 
-    CPLPushErrorHandler(CPLQuietErrorHandler);
-    CPLErrorReset();
-    GDALDatasetH ds = GDALOpenEx(vpath, GDAL_OF_RASTER | GDAL_OF_READONLY,
+    g->CPLPushErrorHandler(g->CPLQuietErrorHandler);
+    g->CPLErrorReset();
+    GDALDatasetH ds = g->GDALOpenEx(vpath, GDAL_OF_RASTER | GDAL_OF_READONLY,
                                  (const char *const *)ALLOWED_DRIVERS, NULL, NULL);
     int rc = -1;
     char why[192];
     if (!ds) {
-        last_gdal_message(why, sizeof why, vpath);
+        last_gdal_message(g, why, sizeof why, vpath);
         tf_seterr(err, errlen, "%s: not a raster image terrafarm can read (PNG, OpenEXR, or a "
                   "single-file format of GDAL's such as GeoTIFF)%s", name, why);
         goto out;
     }
-    if (GDALGetRasterCount(ds) < 1) {
+    if (g->GDALGetRasterCount(ds) < 1) {
         tf_seterr(err, errlen, "%s: raster has no bands", name);
         goto out;
     }
-    int w = GDALGetRasterXSize(ds), h = GDALGetRasterYSize(ds);
+    int w = g->GDALGetRasterXSize(ds), h = g->GDALGetRasterYSize(ds);
     if (tf_raster_check_size(w, h, name, err, errlen) != 0)
         goto out;
-    GDALRasterBandH band = GDALGetRasterBand(ds, 1);
+    GDALRasterBandH band = g->GDALGetRasterBand(ds, 1);
     size_t count = (size_t)w * (size_t)h;
     r->v = malloc(count * sizeof *r->v);
     if (!r->v) {
         tf_seterr(err, errlen, "%s: out of memory for a %dx%d height map", name, w, h);
         goto out;
     }
-    if (GDALRasterIO(band, GF_Read, 0, 0, w, h, r->v, w, h, GDT_Float32, 0, 0) != CE_None) {
-        last_gdal_message(why, sizeof why, vpath);
+    if (g->GDALRasterIO(band, GF_Read, 0, 0, w, h, r->v, w, h, GDT_Float32, 0, 0) != CE_None) {
+        last_gdal_message(g, why, sizeof why, vpath);
         tf_seterr(err, errlen, "%s: pixels do not decode (corrupt or truncated)%s", name, why);
         goto out;
     }
     int has_nodata = 0;
-    double nodata = GDALGetRasterNoDataValue(band, &has_nodata);
+    double nodata = g->GDALGetRasterNoDataValue(band, &has_nodata);
     float nodata_f = (float)nodata;
     for (size_t i = 0; i < count; i++)
         if (!isfinite(r->v[i]) || (has_nodata && r->v[i] == nodata_f))
             r->v[i] = NAN;
     r->width = w;
     r->height = h;
-    read_georef(ds, r);
-    if (read_meta(ds, name, r, err, errlen) != 0)
+    read_georef(g, ds, r);
+    if (read_meta(g, ds, name, r, err, errlen) != 0)
         goto out;
     rc = 0;
 out:
@@ -172,8 +172,8 @@ out:
         r->v = NULL;
     }
     if (ds)
-        GDALClose(ds);
-    CPLPopErrorHandler();
-    VSIUnlink(vpath);
+        g->GDALClose(ds);
+    g->CPLPopErrorHandler();
+    g->VSIUnlink(vpath);
     return rc;
 }

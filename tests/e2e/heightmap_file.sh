@@ -7,7 +7,11 @@
 #  - a relative path is relative to the scene file, not the working directory;
 #  - --resume refuses when the height map file changed under an unchanged scene text;
 #  - missing, empty, not-a-raster, corrupt, truncated, huge-dimension, nodata-only and
-#    non-square height maps each fail with one line naming the file.
+#    non-square height maps each fail with one line naming the file;
+#  - GDAL is loaded only when a GeoTIFF (or another GDAL format) is read or written: the
+#    program does not link it, renders EXR and PNG maps without it, and where it cannot be
+#    loaded (TERRAFARM_GDAL names a library that is not there) a GeoTIFF read or write fails
+#    with one line naming the library, and writes nothing.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 command -v gdal_create >/dev/null 2>&1 || skip "gdal-bin is not installed (make deps)"
@@ -128,4 +132,23 @@ fi
 say "-j 0 (networked workers only): $(cat "$T/bad.err")"
 gdal_create -of GTiff -outsize 65 33 -ot Float32 -burn 5 "$T/maps/wide.tif" >/dev/null
 bad not_square "not a square" wide.tif
+
+# GDAL on demand: not among the program's libraries; without it, EXR still renders, a GeoTIFF
+# fails with one line that names the library.
+readelf -d "$TF_BIN" | grep NEEDED | grep -q libgdal &&
+    fail "bin/terrafarm is linked against libgdal"
+export TERRAFARM_GDAL=$T/no-such-libgdal.so
+render_scene exr
+"$EXRCMP" "$T/ref.exr" "$T/exr.exr" >"$T/cmp" ||
+    fail "EXR map without GDAL: pixels differ: $(cat "$T/cmp")"
+bad no_gdal "no-such-libgdal.so" whole.tif
+grep -q "cannot be loaded" "$T/bad.err" || fail "no GDAL: unexpected message: $(cat "$T/bad.err")"
+if "$TF_BIN" heightfield "$SCENE" -o "$T/maps/nogdal.tif" >/dev/null 2>"$T/nogdal.err"; then
+    fail "a GeoTIFF export without GDAL succeeded"
+fi
+[ "$(grep -c . "$T/nogdal.err")" -eq 1 ] &&
+    grep -q "nogdal.tif: a GeoTIFF is written by GDAL, and GDAL cannot be loaded" "$T/nogdal.err" || fail "export without GDAL: expected one line: $(cat "$T/nogdal.err")"
+[ ! -e "$T/maps/nogdal.tif" ] || fail "export without GDAL left a file behind"
+say "without GDAL: EXR maps render, GeoTIFF export fails: $(cat "$T/nogdal.err")"
+unset TERRAFARM_GDAL
 exit 0

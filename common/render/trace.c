@@ -155,10 +155,13 @@ static int test_cell(const ray_ctx *r, int ci, int cj, double tx, double ty, can
 /* ---- setup -------------------------------------------------------------------------------- */
 
 /* Index of the cell containing coordinate v along one axis, decided by the same products
- * (double)i * cell that place the vertices: i*cell <= v < (i+1)*cell, clamped to the grid. */
-static int cell_of(const tf_heightfield *hf, double v)
+ * (double)i * cell that place the vertices: i*cell <= v < (i+1)*cell, clamped to the grid.
+ * g = v * inv_cell is only the first guess: both loops test monotone predicates, so the
+ * index they settle on does not depend on it (a multiply, not a division: the guess's last
+ * bit does not matter). */
+static int cell_of(const tf_heightfield *hf, double inv_cell, double v)
 {
-    double g = v / hf->cell;
+    double g = v * inv_cell;
     int i = g > 0 ? (g < hf->cells ? (int)g : hf->cells - 1) : 0;
     while (i > 0 && (double)i * hf->cell > v)
         i--;
@@ -196,8 +199,9 @@ static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d,
     r->sy = d.y > 0 ? 1 : d.y < 0 ? -1 : 0;
     r->inv_dx = r->sx ? tf_safe_inverse(d.x) : 0;
     r->inv_dy = r->sy ? tf_safe_inverse(d.y) : 0;
-    r->ci = cell_of(hf, o.x + t0 * d.x);
-    r->cj = cell_of(hf, o.y + t0 * d.y);
+    r->inv_cell = 1.0 / hf->cell;
+    r->ci = cell_of(hf, r->inv_cell, o.x + t0 * d.x);
+    r->cj = cell_of(hf, r->inv_cell, o.y + t0 * d.y);
 
     tf_walk_tolerances(top, hf->cell, hmin, hmax, o, d, r->sx != 0, r->sy != 0, r->inv_dx,
                        r->inv_dy, t0, t1, &r->tie_tol, &r->margin);
@@ -286,7 +290,7 @@ static int fix_stale_axis(const ray_ctx *r, int axis, int stale, int level, doub
     /* entered(j): was the crossing into index j processed before the event? */
 #define ENTRY_T(j) (axis == 0 ? xcross(r, (j) + (s < 0)) : ycross(r, (j) + (s < 0)))
 #define ENTERED(j) (strict ? ENTRY_T(j) < t_event : ENTRY_T(j) <= t_event)
-    double g = (o + t_event * dd) / r->hf->cell;
+    double g = (o + t_event * dd) * r->inv_cell; /* a guess: see cell_of */
     int j = g > lo ? (g < hi ? (int)g : hi) : lo;
     if (s > 0) {
         if (j < stale)

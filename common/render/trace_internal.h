@@ -26,6 +26,7 @@ typedef struct tf_ray_ctx {
     double margin;         /* altitude slack of the culling tests */
     double tie_tol;        /* crossings closer than this pass "through a corner" */
     int ci, cj;            /* the cell containing the point at t0 */
+    double inv_cell;       /* 1 / cell: first guesses of cell indices, never a final one */
     int kx, ky, kz;        /* ray-space axes (kz: the dominant direction) */
     double shx, shy, shz;  /* shear constants */
 } tf_ray_ctx;

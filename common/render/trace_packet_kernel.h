@@ -186,13 +186,13 @@ INLINE vl entered(vd o, vd inv, vd cell, vl back, vl j, vd t_event, vl strict)
 
 INLINE vl fix_stale_v(const tf_heightfield *hf, const lanes *L, vl fix, vl y)
 {
-    const vd cell = splat_d(hf->cell);
+    const vd cell = splat_d(hf->cell), inv_cell = splat_d(1.0 / hf->cell);
     const vl one = splat_l(1), s = sel_l(y, L->sy, L->sx), stale = sel_l(y, L->cj, L->ci);
     const vd o = sel_d(y, L->oy, L->ox), dd = sel_d(y, L->dy, L->dx);
     const vd inv = sel_d(y, L->inv_dy, L->inv_dx), t_event = L->t_event;
     const vl level = L->level, lo = (stale >> level) << level, hi = lo + (one << level) - 1;
     const vl up = s > 0, back = sel_l(up, -one, one), strict = y; /* y crossings: strict */
-    vd g = (o + t_event * dd) / cell;
+    vd g = (o + t_event * dd) * inv_cell; /* a first guess only (trace.c's cell_of) */
     vl j = sel_l(g > to_d(lo), sel_l(g < to_d(hi), __builtin_convertvector(g, vl), hi), lo);
     j = sel_l(fix & sel_l(up, j < stale, j > stale), stale, j);
     vl m = fix & sel_l(up, j > stale, j < stale) & ~entered(o, inv, cell, back, j, t_event, strict);

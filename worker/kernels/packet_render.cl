@@ -76,7 +76,7 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
 }
 
 /* render.c's display_range over the levels of n samples (n <= 5): the largest per-channel
- * range.  render.c takes fmin/fmax; levels are never NaN, so comparisons give the same. */
+ * range, by the same comparisons as render.c's (levels are never NaN). */
 double display_range(__global const double *const lvl[], int n)
 {
     double widest = 0;

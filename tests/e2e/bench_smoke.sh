@@ -44,6 +44,7 @@ script_want() {
     rss_flat) WANT='^scanline,rows:8,64x64,[0-9]' ;;
     scale_sim) WANT='^2,1,4,4,' ;;
     sequence_vs_frames) WANT='^all 2 frames of (a) are byte-identical' ;;
+    startup_ab) WANT='^startup B/A: version [0-9.]*, render [0-9.]*, rss [0-9]' ;;
     tuplespace_vs_redis) WANT='^tuplespace/redis throughput ratio: [0-9]' ;;
     *) return 1 ;;
     esac

@@ -25,8 +25,10 @@
  * skips only cells the flat walk would skip, and at level 0 both walks test the same cells, in
  * the same order, with the same inputs: tf_trace returns exactly tf_trace_flat's hit, bit for
  * bit.  While a block is skipped the cell index on the axis not being stepped is not tracked;
- * before descending it is recomputed from the crossing order (fix_stale_axis), which gives the
- * index the flat walk holds at that moment.
+ * each descent settles one more bit of it from the crossing order (settle_half: which half of
+ * the block the ray is in), so that at level 0 it is the index the flat walk holds at that
+ * moment (fix_stale_axis, which finds every bit at once, is the reference it is asserted
+ * against).
  *
  * Rounding: the DDA can disagree with the triangle tests by a hair about which of two cells
  * meeting at a grid corner the ray passes through.  So a cell whose entry or exit crossings
@@ -34,6 +36,7 @@
  * that corner.  This is part of the cell's test, a pure function of the cell and the ray, so
  * both walks still agree.  Rays that would hit a cell after the DDA has left it are covered by
  * the cull margin, which bounds the altitude error of the crossing parameters. */
+#include <assert.h>
 #include <float.h>
 #include <math.h>
 #include "render/trace.h"
@@ -312,6 +315,29 @@ static int fix_stale_axis(const ray_ctx *r, int axis, int stale, int level, doub
     return j;
 }
 
+/* A descent from level `level` with the index on `axis` stale needs that index only to the
+ * next level's block: which half of the current block the ray is in at t_event.  One
+ * crossing, the line between the halves, decides it, by fix_stale_axis's rule (the index
+ * whose entry crossing came before the event; `strict` as there): the index moves to the
+ * first one of the far half if the ray has entered it, else stays.  Either way it is right to
+ * the next level and still lags behind the true one below, so the axis stays stale until
+ * level 0, where every bit has been settled this way, one a descent.  (fix_stale_axis finds
+ * all the bits at once with two or more crossings; 5 descents a primary ray fixed an axis.) */
+static int settle_half(const ray_ctx *r, int axis, int stale, int level, double t_event,
+                       int strict)
+{
+    const int s = axis == 0 ? r->sx : r->sy;
+    const int mid = ((stale >> level) << level) + (1 << (level - 1));
+    if (s > 0 ? stale >= mid : stale < mid)
+        return stale; /* already in the half it can only move into */
+    double t = axis == 0 ? xcross(r, mid) : ycross(r, mid);
+    int entered = strict ? t < t_event : t <= t_event;
+    int settled = entered ? (s > 0 ? mid : mid - 1) : stale;
+    assert(settled >> (level - 1) == fix_stale_axis(r, axis, stale, level, t_event, strict) >>
+           (level - 1) && "settle_half: the next level's block is fix_stale_axis's");
+    return settled;
+}
+
 /* walk_hier's first level: see "Where to start" in walk_hier. */
 static int start_level(const ray_ctx *r)
 {
@@ -366,11 +392,12 @@ static int walk_hier(const ray_ctx *r, candidate *best)
                     return 1;
             } else {
                 if (stale == STALE_Y)
-                    cj = fix_stale_axis(r, 1, cj, level, t_event, 1);
+                    cj = settle_half(r, 1, cj, level, t_event, 1);
                 else if (stale == STALE_X)
-                    ci = fix_stale_axis(r, 0, ci, level, t_event, 0);
-                stale = STALE_NONE;
+                    ci = settle_half(r, 0, ci, level, t_event, 0);
                 level--;
+                if (level == 0)
+                    stale = STALE_NONE;
                 continue;
             }
         }

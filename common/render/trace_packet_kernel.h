@@ -18,8 +18,8 @@
  * segment's end t_out, the altitudes z(t_cur), z(t_out) and the cull against the block's max
  * and min (gathered: the loads of W independent rays are in flight together, where the single
  * walk waits on each).  Then, each lane taking the branch walk_hier takes for its ray: a
- * descent (and the stale axis's re-entry search, fix_stale_axis, the lanes searching together
- * while some lane still moves), or the block step (the next block, the climb), with masks.
+ * descent (settling one more bit of the stale axis's index, settle_half), or the block step
+ * (the next block, the climb), with masks.
  * These are walk_hier's expressions term for term (tf_grid_cross, tf_span_culled in
  * trace_math.h, spelled here on vectors: the one place the walk's arithmetic is written twice
  * in C), on IEEE vector add, subtract, multiply, divide and compare, never a fused
@@ -174,49 +174,38 @@ INLINE void compute_step(const tf_heightfield *hf, const grids *g, const lanes *
     s->culled = (zlo > hi + L->margin) | (zhi < lo - L->margin);
 }
 
-/* trace.c's fix_stale_axis for the lanes of `fix` (the axis per lane: y where `y`): the
- * index on that axis the flat walk holds at t_event, searched as trace.c searches it, the
- * lanes stepping together while some lane still moves.  The crossings are xcross / ycross,
+/* trace.c's settle_half for the lanes of `fix` (the axis per lane: y where `y`; y crossings
+ * strict): the line between the halves of the lane's block, crossed before t_event or not,
+ * moves the index to the far half's first one or leaves it.  The crossing is xcross / ycross,
  * term for term. */
-INLINE vl entered(vd o, vd inv, vd cell, vl back, vl j, vd t_event, vl strict)
+INLINE vl settle_half_v(const tf_heightfield *hf, const lanes *L, vl fix, vl y)
 {
-    vd t = (to_d(j + ((back > 0) & splat_l(1))) * cell - o) * inv; /* back > 0: s < 0 */
-    return sel_l(strict, t < t_event, t <= t_event);
+    const vd cell = splat_d(hf->cell);
+    const vl zero = splat_l(0), one = splat_l(1);
+    const vl s = sel_l(y, L->sy, L->sx), stale = sel_l(y, L->cj, L->ci), up = s > zero;
+    const vd o = sel_d(y, L->oy, L->ox), inv = sel_d(y, L->inv_dy, L->inv_dx);
+    const vl level = L->level, below = (level - one) & (level > zero); /* 0 where not descending */
+    const vl mid = ((stale >> level) << level) + (one << below);
+    vd t = (to_d(mid) * cell - o) * inv;
+    vl entered = sel_l(y, t < L->t_event, t <= L->t_event);
+    vl beyond = sel_l(up, stale >= mid, stale < mid); /* already in the half it moves into */
+    return sel_l(fix & entered & ~beyond, sel_l(up, mid, mid - one), stale);
 }
 
-INLINE vl fix_stale_v(const tf_heightfield *hf, const lanes *L, vl fix, vl y)
+/* In builds with assertions (make asan): every lane's index is right to the next level's
+ * block, where trace.c's fix_stale_axis puts it, and still behind (or at) that index. */
+static inline int settle_matches(const tf_ray_ctx *ctx, const lanes *L, vl fix, vl y, vl j)
 {
-    const vd cell = splat_d(hf->cell), inv_cell = splat_d(1.0 / hf->cell);
-    const vl one = splat_l(1), s = sel_l(y, L->sy, L->sx), stale = sel_l(y, L->cj, L->ci);
-    const vd o = sel_d(y, L->oy, L->ox), dd = sel_d(y, L->dy, L->dx);
-    const vd inv = sel_d(y, L->inv_dy, L->inv_dx), t_event = L->t_event;
-    const vl level = L->level, lo = (stale >> level) << level, hi = lo + (one << level) - 1;
-    const vl up = s > 0, back = sel_l(up, -one, one), strict = y; /* y crossings: strict */
-    vd g = (o + t_event * dd) * inv_cell; /* a first guess only (trace.c's cell_of) */
-    vl j = sel_l(g > to_d(lo), sel_l(g < to_d(hi), __builtin_convertvector(g, vl), hi), lo);
-    j = sel_l(fix & sel_l(up, j < stale, j > stale), stale, j);
-    vl m = fix & sel_l(up, j > stale, j < stale) & ~entered(o, inv, cell, back, j, t_event, strict);
-    while (any_l(m)) {
-        j = sel_l(m, j + back, j);
-        m &= sel_l(up, j > stale, j < stale) & ~entered(o, inv, cell, back, j, t_event, strict);
-    }
-    m = fix & sel_l(up, j < hi, j > lo) & entered(o, inv, cell, back, j - back, t_event, strict);
-    while (any_l(m)) {
-        j = sel_l(m, j - back, j);
-        m &= sel_l(up, j < hi, j > lo) & entered(o, inv, cell, back, j - back, t_event, strict);
-    }
-    return j;
-}
-
-/* In builds with assertions (make asan): every lane's search found what trace.c's
- * fix_stale_axis finds.  (Hits alone rarely show a wrong index here: the walk catches up.) */
-static inline int fix_matches(const tf_ray_ctx *ctx, const lanes *L, vl fix, vl y, vl j)
-{
-    for (int l = 0; l < W; l++)
-        if (fix[l] && j[l] != tf_trace_fix_stale(&ctx[l], y[l] ? 1 : 0, (int)(y[l] ? L->cj[l]
-                                                 : L->ci[l]), (int)L->level[l], L->t_event[l],
-                                                 y[l] != 0))
+    for (int l = 0; l < W; l++) {
+        if (!fix[l])
+            continue;
+        int level = (int)L->level[l], stale = (int)(y[l] ? L->cj[l] : L->ci[l]);
+        int exact = tf_trace_fix_stale(&ctx[l], y[l] ? 1 : 0, stale, level, L->t_event[l],
+                                       y[l] != 0);
+        int s = y[l] ? ctx[l].sy : ctx[l].sx;
+        if (j[l] >> (level - 1) != exact >> (level - 1) || (s > 0 ? j[l] > exact : j[l] < exact))
             return 0;
+    }
     return 1;
 }
 
@@ -227,14 +216,14 @@ INLINE void descend(const tf_heightfield *hf, const tf_ray_ctx *ctx, lanes *L, v
     vl fix_y = down & (L->stale == TF_STALE_Y), fix_x = down & (L->stale == TF_STALE_X);
     (void)ctx;
     if (any_l(fix_y | fix_x)) {
-        vl j = fix_stale_v(hf, L, fix_y | fix_x, fix_y);
-        assert(fix_matches(ctx, L, fix_y | fix_x, fix_y, j) &&
-               "the vector re-entry search is trace.c's fix_stale_axis");
+        vl j = settle_half_v(hf, L, fix_y | fix_x, fix_y);
+        assert(settle_matches(ctx, L, fix_y | fix_x, fix_y, j) &&
+               "the vector settle is trace.c's settle_half");
         L->cj = sel_l(fix_y, j, L->cj);
         L->ci = sel_l(fix_x, j, L->ci);
     }
-    L->stale = sel_l(down, zero, L->stale);
     L->level = L->level + (down & splat_l(-1));
+    L->stale = sel_l(down & (L->level == zero), zero, L->stale); /* every bit settled */
 }
 
 /* walk_hier's test of the level-0 cells of the lanes of bits `cells`, by trace.c's own

@@ -1,5 +1,5 @@
 /* packet_trace.cl: trace.c's hierarchical grid walk (tf_trace / tf_occluded with walk_hier,
- * setup_ray, test_cell, fix_stale_axis) for eight rays at a time, one per lane, and
+ * setup_ray, test_cell, settle_half) for eight rays at a time, one per lane, and
  * walk_stream, which deals a batch of rays to the eight lanes.  The arithmetic -- box clipping,
  * tolerances, crossings, culling, the triangle test, the hit normal -- is trace.c's own, from
  * common/render/trace_math.h; what is here is the walk's schedule.
@@ -7,7 +7,7 @@
  * Each lane runs its own walk (its own level, cell, stale axis and event time), so the lanes
  * need not agree on anything: a step is computed for all lanes, and each lane takes the branch
  * trace.c would take for its ray, merged with select.  The costly branches -- the triangle
- * tests of a level-0 cell, the re-entry search after a descent (fix_stale8) -- run only when
+ * tests of a level-0 cell, the stale index's settling at a descent (settle8) -- run only when
  * some lane takes them.  Every lane performs trace.c's operations in trace.c's order, so a
  * lane's hit is the C hit to the bit (ties between triangles of neighbouring cells included:
  * the cells are tested in the C order).
@@ -83,7 +83,7 @@ dv ycross8(const world *w, const rayp *r, lv Y)
 /* cell_of per lane; the two correction loops run while some lane still moves. */
 lv cell_of8(const world *w, dv v)
 {
-    dv g = v / w->cell;
+    dv g = v * (1.0 / w->cell); /* a first guess only, as in trace.c's cell_of */
     lv i = select(select((lv)(w->cells - 1), convert_long8_rtz(g), g < (dv)(w->cells)), (lv)(0),
                   !(g > 0));
     lv m = (i > 0) & (to_d(i) * w->cell > v);
@@ -204,45 +204,21 @@ lv test_cell8(const world *w, const rayp *r, lv ci, lv cj, dv tx, dv ty, lv mask
     return mask & (best->t < INFINITY);
 }
 
-/* entered / entry_t of one axis per lane: o, inv, s are that axis's origin, inverse direction
- * and step sign per lane. */
-lv entered8(const world *w, dv o, dv inv, lv s, lv j, dv t_event, lv strict)
-{
-    dv t = tf_grid_cross(to_d(j + select((lv)(0), (lv)(1), s < 0)), w->cell, o, inv);
-    return select(t <= t_event, t < t_event, strict);
-}
-
-/* fix_stale_axis for the lanes of mask; axis per lane (0 x, 1 y), strict as the walk asks. */
-lv fix_stale8(const world *w, const rayp *r, lv axis, lv stale, lv level, dv t_event, lv strict,
-              lv mask)
+/* settle_half (trace.c) for the lanes of mask; axis per lane (0 x, 1 y), strict as the walk
+ * asks: the line between the halves of the lane's block, crossed before t_event or not, moves
+ * the index to the far half's first one or leaves it. */
+lv settle8(const world *w, const rayp *r, lv axis, lv stale, lv level, dv t_event, lv strict,
+           lv mask)
 {
     lv y = axis == 1;
-    lv s = select(r->sx, r->sy, y);
-    dv o = select(r->o.x, r->o.y, y), dd = select(r->d.x, r->d.y, y);
-    dv inv = select(r->inv_dx, r->inv_dy, y);
-    lv lo = (stale >> level) << level, hi = lo + ((lv)(1) << level) - 1;
-    dv g = (o + t_event * dd) / w->cell;
-    lv j = select(lo, select(hi, convert_long8_rtz(g), g < to_d(hi)), g > to_d(lo));
-    lv up = s > 0;
-    /* s > 0: no lower than stale; back off while not entered; then on while the next is.
-     * s < 0: the mirror image. */
-    j = select(j, stale, mask & select(j > stale, j < stale, up));
-    lv back = select((lv)(1), (lv)(-1), up);
-    lv m = mask & select(j < stale, j > stale, up);
-    m &= ~entered8(w, o, inv, s, j, t_event, strict);
-    while (any_lane(m)) {
-        j = select(j, j + back, m);
-        m &= select(j < stale, j > stale, up);
-        m &= ~entered8(w, o, inv, s, j, t_event, strict);
-    }
-    m = mask & select(j > lo, j < hi, up);
-    m &= entered8(w, o, inv, s, j - back, t_event, strict);
-    while (any_lane(m)) {
-        j = select(j, j - back, m);
-        m &= select(j > lo, j < hi, up);
-        m &= entered8(w, o, inv, s, j - back, t_event, strict);
-    }
-    return j;
+    lv s = select(r->sx, r->sy, y), up = s > 0;
+    dv o = select(r->o.x, r->o.y, y), inv = select(r->inv_dx, r->inv_dy, y);
+    lv below = (level - 1) & (level > 0); /* 0 where not descending */
+    lv mid = ((stale >> level) << level) + ((lv)(1) << below);
+    dv t = tf_grid_cross(to_d(mid), w->cell, o, inv);
+    lv entered = select(t <= t_event, t < t_event, strict);
+    lv beyond = select(stale < mid, stale >= mid, up); /* already in the half it moves into */
+    return select(stale, select(mid - 1, mid, up), mask & entered & ~beyond);
 }
 
 lv one_if(lv m) { return -m; } /* a vector comparison's -1 as C's 1 */
@@ -324,13 +300,13 @@ TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, co
     lv down = keep & (level > 0);
     lv fix_y = down & (stale == STALE_Y8), fix_x = down & (stale == STALE_X8);
     if (any_lane(fix_y | fix_x)) {
-        lv j = fix_stale8(w, r, one_if(fix_y), select(ci, cj, fix_y), level, s->t_event, fix_y,
-                          fix_y | fix_x);
+        lv j = settle8(w, r, one_if(fix_y), select(ci, cj, fix_y), level, s->t_event, fix_y,
+                       fix_y | fix_x);
         cj = select(cj, j, fix_y);
         ci = select(ci, j, fix_x);
     }
-    stale = select(stale, (lv)(STALE_NONE8), down);
     level = select(level, level - 1, down);
+    stale = select(stale, (lv)(STALE_NONE8), down & (level == 0)); /* every bit settled */
 
     lv adv = active & ~down;
     lv ends = adv & ~(tc < t1);

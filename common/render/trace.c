@@ -333,8 +333,13 @@ static int settle_half(const ray_ctx *r, int axis, int stale, int level, double 
     double t = axis == 0 ? xcross(r, mid) : ycross(r, mid);
     int entered = strict ? t < t_event : t <= t_event;
     int settled = entered ? (s > 0 ? mid : mid - 1) : stale;
-    assert(settled >> (level - 1) == fix_stale_axis(r, axis, stale, level, t_event, strict) >>
-           (level - 1) && "settle_half: the next level's block is fix_stale_axis's");
+#ifndef NDEBUG
+    const int exact = fix_stale_axis(r, axis, stale, level, t_event, strict);
+    assert(settled >> (level - 1) == exact >> (level - 1) &&
+           "settle_half: the next level's block is fix_stale_axis's");
+    assert((s > 0 ? settled <= exact : settled >= exact) &&
+           "settle_half: the index still lags behind fix_stale_axis's");
+#endif
     return settled;
 }
 

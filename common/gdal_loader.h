@@ -4,10 +4,10 @@
  * loading and relocation took ~35 ms of every terrafarm process's start, a forked worker's and
  * `terrafarm --version`'s alike, though few runs read or write a GeoTIFF.  So bin/terrafarm is
  * not linked against it: tf_gdal_load() dlopen()s the library the build compiled against (its
- * soname, found by the Makefile through pkg-config) on first use, and the callers reach every
- * GDAL function through the table it returns, by its own name: g->GDALOpenEx(...).  A machine
- * without GDAL (a networked worker's, say) runs everything but the GDAL formats, which fail
- * with one line naming the library.
+ * soname, which the Makefile reads with readelf from the libgdal.so the compiler finds) on
+ * first use, and the callers reach every GDAL function through the table it returns, by its
+ * own name: g->GDALOpenEx(...).  A machine without GDAL (a networked worker's, say) runs
+ * everything but the GDAL formats, which fail with one line naming the library.
  *
  * TERRAFARM_GDAL, if set, names the library to load instead (a path or a soname; it must be
  * the same GDAL ABI the build used): for a GDAL installed elsewhere, and for the test that

@@ -42,8 +42,9 @@ int tf_trace_start_level(const tf_ray_ctx *r);
 /* The complete test of level-0 cell (ci, cj) whose exit crossings are tx, ty: 1 on a hit. */
 int tf_trace_test_cell(const tf_ray_ctx *r, int ci, int cj, double tx, double ty,
                        tf_trace_cand *best);
-/* walk_hier's fix_stale_axis (the index on `axis` the flat walk holds at t_event): the packet
- * kernels search it on vectors and assert, in builds with assertions, that they found this. */
+/* trace.c's fix_stale_axis (the index on `axis` the flat walk holds at t_event), the reference
+ * the walks' settle_half is checked against: the packet kernels assert, in builds with
+ * assertions, that each lane's settled index agrees with it. */
 int tf_trace_fix_stale(const tf_ray_ctx *r, int axis, int stale, int level, double t_event,
                        int strict);
 /* Fill *hit from the winning candidate. */

@@ -15,7 +15,7 @@ BUILD   ?= build
 BIN     ?= bin
 VERSION := 0.2.0
 
-PKGS      := inih libpng libsodium zlib gdal libmicrohttpd jansson sqlite3
+PKGS      := inih libpng libsodium zlib libdeflate gdal libmicrohttpd jansson sqlite3
 # GDAL is compiled against but not linked: common/gdal_loader.c dlopen()s it by this soname on
 # first use (its hundred dependencies cost every process ~35 ms to load).  Programs that call
 # GDAL directly (a unit test) link it with GDAL_LIBS.
@@ -188,7 +188,7 @@ bench: $(PROG) $(BENCHES)
 
 # Every Debian package the build, the tests and the benchmarks use.
 DEB_PKGS := build-essential pkg-config clang libinih-dev libpng-dev libsodium-dev libcmocka-dev \
-            libopenexr-dev openexr zlib1g-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
+            libopenexr-dev openexr zlib1g-dev libdeflate-dev ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo \
             iproute2 python3 python3-yaml gnuplot-nox ffmpeg libgdal-dev gdal-bin openssh-server openssh-client \
             slurm-wlm munge libmicrohttpd-dev libjansson-dev libsqlite3-dev sqlite3 chromium povray redis-server \
             libembree-dev

@@ -9,11 +9,13 @@
 #include <string.h>
 
 #include "image/exrpart.h"
+#include "image/exrzip.h"
 #include "image/preview.h"
 #include "log.h"
 
 struct tf_exr_encoder {
     exr_context_t ctx;
+    tf_exr_zip *zip; /* packs the chunks (libdeflate: exrzip.h) */
     tf_exr_layout layout;
     tf_preview_grid grid;
     const tf_exr_channel *channels;
@@ -39,6 +41,13 @@ static int64_t discard_write(exr_const_context_t ctxt, void *userdata, const voi
 {
     (void)ctxt, (void)userdata, (void)buffer, (void)offset, (void)error_cb;
     return (int64_t)sz;
+}
+
+/* The pipeline's compress step: the encoder's own packer. */
+static exr_result_t zip_chunk(exr_encode_pipeline_t *enc)
+{
+    tf_exr_encoder *e = enc->encoding_user_data;
+    return tf_exr_zip_compress(e->zip, enc);
 }
 
 /* The pipeline's last step: instead of writing the chunk to a file, append it to the payload. */
@@ -70,7 +79,10 @@ tf_exr_encoder *tf_exr_encoder_new(const tf_exr_layout *l, char *err, size_t err
     if (tf_exr_layout_check(l, err, errlen))
         return NULL;
     tf_exr_encoder *e = calloc(1, sizeof *e);
-    if (!e) {
+    if (e)
+        e->zip = tf_exr_zip_new(TF_EXR_ZIP_LEVEL);
+    if (!e || !e->zip) {
+        free(e);
         tf_seterr(err, errlen, "out of memory for the chunk encoder");
         return NULL;
     }
@@ -101,6 +113,7 @@ void tf_exr_encoder_free(tf_exr_encoder *e)
         return;
     if (e->ctx)
         exr_finish(&e->ctx); /* its "file" is the discarding sink */
+    tf_exr_zip_free(e->zip);
     free(e->index);
     free(e->chunks);
     free(e->preview);
@@ -119,9 +132,11 @@ static exr_result_t encode_chunk(tf_exr_encoder *e, tf_rect r, const tf_pixel *p
     if (rv == EXR_ERR_SUCCESS) {
         enc.encoding_user_data = e;
         enc.yield_until_ready_fn = NULL; /* no file order to wait for: nothing is written here */
+        enc.compress_fn = zip_chunk;
         enc.write_fn = capture_chunk;
         rv = exr_encoding_run(e->ctx, 0, &enc);
     }
+    tf_exr_zip_release(&enc);
     exr_encoding_destroy(e->ctx, &enc);
     return rv;
 }

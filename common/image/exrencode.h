@@ -1,6 +1,7 @@
 /* exrencode.h: a worker's side of "workers encode, the coordinator moves bytes".  Turns a
  * task's rendered rectangle into the finished OpenEXR chunks of the output file (packed with
- * OpenEXRCore's encode pipeline, the file's compression and zlib level: exrpart.h) and into its
+ * OpenEXRCore's encode pipeline, the file's compression and level: exrpart.h; its compress
+ * step is exrzip.h's, on libdeflate) and into its
  * share of the progress preview, as the result tuple carries them (farmproto.h).
  *
  * The encoder owns an OpenEXRCore write context whose header is the output's part (same

@@ -27,6 +27,7 @@
 
 #include "image/exrpart.h"
 #include "image/exrsink.h"
+#include "image/exrzip.h"
 #include "log.h"
 
 /* Scanlines per chunk of a scanline file: ZIPS, one scanline per chunk, so that any rows:K task
@@ -60,6 +61,7 @@ struct tf_exr_writer {
     int nchannels;
     size_t pixel_bytes;          /* stride of one caller pixel */
     int broken;                  /* a chunk write failed: every later write/sync/finish fails */
+    tf_exr_zip *zip;             /* packs the chunks this writer encodes itself (exrzip.h) */
 };
 
 /* E7 and the sink's E1-E6, one assert per clause; nothing with NDEBUG. */
@@ -112,6 +114,7 @@ static void writer_free(tf_exr_writer *w, int abandon)
     if (w->sink.fd >= 0)
         close(w->sink.fd);
     free(w->sink.buf);
+    tf_exr_zip_free(w->zip);
     free(w->path);
     free(w);
 }
@@ -235,6 +238,12 @@ static void chunk_failed(tf_exr_writer *w, const tf_chunk_ref *c, exr_result_t r
     w->broken = 1; /* OpenEXRCore's chunk state is unknown now: write nothing more */
 }
 
+/* The pipeline's compress step: the writer's packer, lent as the pipeline's user data. */
+static exr_result_t zip_chunk(exr_encode_pipeline_t *enc)
+{
+    return tf_exr_zip_compress(enc->encoding_user_data, enc);
+}
+
 /* Encode and write chunk c from `rows`, which holds the caller rows [y0, ...) as width caller
  * pixels each. */
 static int encode_chunk(tf_exr_writer *w, const tf_chunk_ref *c, const uint8_t *rows, int y0,
@@ -246,8 +255,14 @@ static int encode_chunk(tf_exr_writer *w, const tf_chunk_ref *c, const uint8_t *
                             (size_t)c->rect.x * w->pixel_bytes;
     exr_result_t rv = tf_exr_begin_chunk(w->ctx, &w->layout, c, w->channels, w->nchannels,
                                          origin, w->pixel_bytes, line, &enc);
-    if (rv == EXR_ERR_SUCCESS)
+    if (rv == EXR_ERR_SUCCESS && !w->zip && !(w->zip = tf_exr_zip_new(TF_EXR_ZIP_LEVEL)))
+        rv = EXR_ERR_OUT_OF_MEMORY;
+    if (rv == EXR_ERR_SUCCESS) {
+        enc.encoding_user_data = w->zip; /* OpenEXR's own write step reads the context only */
+        enc.compress_fn = zip_chunk;
         rv = exr_encoding_run(w->ctx, 0, &enc);
+    }
+    tf_exr_zip_release(&enc);
     exr_encoding_destroy(w->ctx, &enc);
     if (rv != EXR_ERR_SUCCESS) {
         chunk_failed(w, c, rv, err, errlen);

@@ -34,6 +34,7 @@ for p in $pkgs OpenEXR OpenCL; do
     libpng) dev=libpng-dev run=libpng16-16 ;;
     libsodium) dev=libsodium-dev run=libsodium23 ;;
     zlib) dev=zlib1g-dev run=zlib1g ;;
+    libdeflate) dev=libdeflate-dev run=libdeflate0 ;;
     libmicrohttpd) dev=libmicrohttpd-dev run=libmicrohttpd12 ;;
     jansson) dev=libjansson-dev run=libjansson4 ;;
     sqlite3) dev=libsqlite3-dev run=libsqlite3-0 ;;

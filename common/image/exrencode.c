@@ -25,6 +25,7 @@ struct tf_exr_encoder {
     size_t index_cap, chunks_cap, preview_cap;
     size_t nchunks, chunks_len;
     int failed;                 /* out of memory in the capture step */
+    int openexr_zlib;           /* tf_exr_encoder_use_openexr_zlib: the benchmark's baseline */
     char last_error[200];
 };
 
@@ -120,6 +121,8 @@ void tf_exr_encoder_free(tf_exr_encoder *e)
     free(e);
 }
 
+void tf_exr_encoder_use_openexr_zlib(tf_exr_encoder *e, int on) { e->openexr_zlib = on; }
+
 /* Encode the chunk c of rectangle r (whose pixels px start at r's top-left). */
 static exr_result_t encode_chunk(tf_exr_encoder *e, tf_rect r, const tf_pixel *px,
                                  const tf_chunk_ref *c)
@@ -132,11 +135,13 @@ static exr_result_t encode_chunk(tf_exr_encoder *e, tf_rect r, const tf_pixel *p
     if (rv == EXR_ERR_SUCCESS) {
         enc.encoding_user_data = e;
         enc.yield_until_ready_fn = NULL; /* no file order to wait for: nothing is written here */
-        enc.compress_fn = zip_chunk;
+        if (!e->openexr_zlib)
+            enc.compress_fn = zip_chunk;
         enc.write_fn = capture_chunk;
         rv = exr_encoding_run(e->ctx, 0, &enc);
     }
-    tf_exr_zip_release(&enc);
+    if (enc.compress_fn == zip_chunk)
+        tf_exr_zip_release(&enc); /* ours; OpenEXRCore frees the buffer of its own step */
     exr_encoding_destroy(e->ctx, &enc);
     return rv;
 }

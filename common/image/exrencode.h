@@ -25,6 +25,9 @@ void tf_exr_encoder_free(tf_exr_encoder *e);
  * of the layout, or OpenEXRCore failed). */
 int tf_exr_encode_rect(tf_exr_encoder *e, tf_rect r, const tf_pixel *px, tf_chunk_payload *out,
                        char *err, size_t errlen);
+/* Pack with OpenEXRCore's own compress step (zlib) instead of exrzip.h's (libdeflate): the
+ * same pixels, other bytes.  Only bench/bench_encode's baseline asks for it. */
+void tf_exr_encoder_use_openexr_zlib(tf_exr_encoder *e, int on);
 /* The preview share of rectangle r alone (tf_preview_span), into buf (grown as needed). */
 int tf_preview_share(const tf_preview_grid *g, int width, int height, tf_rect r,
                      const tf_pixel *px, uint8_t **buf, size_t *cap, size_t *len);

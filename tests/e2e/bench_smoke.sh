@@ -17,6 +17,7 @@ MISSING=""
 program_case() {
     case $1 in
     bench_aa) ARGS="--smoke $SCENE"; WANT='^\* scene threshold: adaptive/uniform16' ;;
+    bench_encode) ARGS="--smoke $SCENE"; WANT='^libdeflate/zlib encode cpu ratio: [0-9]' ;;
     bench_erosion) ARGS="--smoke"; WANT='^portable/best cpu ratio: [0-9]' ;;
     bench_opencl) ARGS="--smoke $SCENE"; WANT='^match ' ;;
     bench_terrain) ARGS="--smoke"; WANT='^subdivide ' ;;

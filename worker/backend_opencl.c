@@ -659,9 +659,15 @@ void tf_cl_backend_kernel_seconds(const tf_cl_backend *b, double *corners, doubl
     *pixels = b->pixel_seconds;
 }
 
-/* Add the device time of a finished kernel's event to *acc, and release the event. */
-static void account(cl_event ev, double *acc)
+/* Add the device time of a finished kernel's event to *acc, and release the event.  Returns
+ * the kernel's execution status: CL_COMPLETE, or the negative error it ended with (a queue
+ * that finished does not say whether its commands succeeded). */
+static cl_int account(cl_event ev, double *acc)
 {
+    cl_int status = CL_INVALID_EVENT;
+    if (clGetEventInfo(ev, CL_EVENT_COMMAND_EXECUTION_STATUS, sizeof status, &status, NULL) !=
+        CL_SUCCESS)
+        status = CL_INVALID_EVENT;
     cl_ulong start = 0, end = 0;
     if (clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_START, sizeof start, &start, NULL) ==
             CL_SUCCESS &&
@@ -670,6 +676,14 @@ static void account(cl_event ev, double *acc)
         end >= start)
         *acc += 1e-9 * (double)(end - start);
     clReleaseEvent(ev);
+    return status;
+}
+
+/* A kernel's execution status (account) into *rc, unless *rc already holds an error. */
+static void keep_first_error(cl_int *rc, cl_int status)
+{
+    if (*rc == CL_SUCCESS && status != CL_COMPLETE)
+        *rc = status < 0 ? status : CL_INVALID_EVENT;
 }
 
 /* Make *buf hold at least `bytes` (read-write, device-side), growing it in place. */
@@ -850,10 +864,10 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     if (rc == CL_SUCCESS)
         rc = finished;
     if (corner_ev)
-        account(corner_ev, &b->corner_seconds);
+        keep_first_error(&rc, account(corner_ev, &b->corner_seconds));
     for (size_t i = 0; pixel_ev && i < nbatches; i++)
         if (pixel_ev[i])
-            account(pixel_ev[i], &b->pixel_seconds);
+            keep_first_error(&rc, account(pixel_ev[i], &b->pixel_seconds));
     free(pixel_ev);
     if (rc != CL_SUCCESS) {
         free(corner_shadow);

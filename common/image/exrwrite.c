@@ -262,7 +262,8 @@ static int encode_chunk(tf_exr_writer *w, const tf_chunk_ref *c, const uint8_t *
         enc.compress_fn = zip_chunk;
         rv = exr_encoding_run(w->ctx, 0, &enc);
     }
-    tf_exr_zip_release(&enc);
+    if (enc.compress_fn == zip_chunk)
+        tf_exr_zip_release(&enc); /* the packed bytes are the packer's, not OpenEXRCore's */
     exr_encoding_destroy(w->ctx, &enc);
     if (rv != EXR_ERR_SUCCESS) {
         chunk_failed(w, c, rv, err, errlen);

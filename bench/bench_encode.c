@@ -95,8 +95,11 @@ static int inflate_all(const tf_chunk_payload *p, uint8_t **out, size_t *len, si
         tf_chunk_rec_get(p->index + i * TF_CHUNK_RECORD_BYTES, &c);
         size_t need = *len + (size_t)c.unpacked;
         if (need > *cap) {
+            uint8_t *grown = realloc(*out, need * 2);
+            if (!grown)
+                return -1;
+            *out = grown;
             *cap = need * 2;
-            *out = realloc(*out, *cap);
         }
         uLongf got = (uLongf)c.unpacked;
         if (c.packed == c.unpacked)

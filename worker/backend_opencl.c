@@ -15,7 +15,8 @@
  *      sources and options) or else built from source and stored there; on failure the build
  *      log goes to stderr and the error is one line.  PoCL also caches compiled programs (and
  *      the work-group functions of the first launches) in POCL_CACHE_DIR, which defaults here
- *      to a per-user cache directory (set_pocl_cache_dir).
+ *      to a per-user cache directory (worker/pocl_cachedir.h, which also sweeps the empty files
+ *      PoCL 3.1 leaves there at every start).
  *   4. The height field, all max/min grid levels (concatenated, offsets in I[]) and the texture
  *      permutation are uploaded once.
  * Each tf_cl_backend_render then runs tf_corners8 over the (w+1) x (h+1) corners (the
@@ -41,8 +42,8 @@
 
 #include "worker/kernels/tf_cl_params.h"
 #include "worker/opencl_cache.h"
+#include "worker/pocl_cachedir.h"
 #include "render/render_internal.h"
-#include "cachefile.h"
 #include "log.h"
 
 #define KERNEL_FILE "terrafarm.cl" /* the file that marks a kernel directory */
@@ -95,29 +96,18 @@ struct tf_cl_backend {
 
 /* ---------------------------------------------------------------- environment */
 
-/* PoCL keeps compiled programs in POCL_CACHE_DIR.  If the user set none, use
- * $XDG_CACHE_HOME/terrafarm/pocl, else $HOME/.cache/terrafarm/pocl, else /tmp/terrafarm-pocl-UID,
- * whichever can be created and written.  Must run before the first OpenCL call. */
-static void set_pocl_cache_dir(void)
+/* Point PoCL at terrafarm's cache directory (unless the user chose one) and sweep from it the
+ * empty files PoCL's start-up leaves there (pocl_cachedir.h).  Must run before the first
+ * OpenCL call. */
+static void prepare_pocl_cache_dir(void)
 {
-    if (getenv("POCL_CACHE_DIR"))
-        return;
     char dir[PATH_MAX];
-    const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
-    if (xdg && *xdg && snprintf(dir, sizeof dir, "%s/terrafarm/pocl", xdg) < (int)sizeof dir &&
-        tf_make_private_dirs(dir) == 0) {
-        setenv("POCL_CACHE_DIR", dir, 0);
+    tf_pocl_cache_dir_choose(dir, sizeof dir);
+    if (!dir[0])
         return;
-    }
-    if (home && *home && snprintf(dir, sizeof dir, "%s/.cache/terrafarm/pocl", home) <
-                             (int)sizeof dir &&
-        tf_make_private_dirs(dir) == 0) {
-        setenv("POCL_CACHE_DIR", dir, 0);
-        return;
-    }
-    snprintf(dir, sizeof dir, "/tmp/terrafarm-pocl-%u", (unsigned)getuid());
-    if (tf_make_private_dirs(dir) == 0)
-        setenv("POCL_CACHE_DIR", dir, 0);
+    int removed = tf_pocl_cache_sweep(dir, time(NULL), TF_POCL_TEMPFILE_MAX_AGE_S);
+    if (removed > 0)
+        tf_debug("PoCL cache %s: removed %d temporary files PoCL left behind", dir, removed);
 }
 
 /* Read a whole file of at most MAX_SOURCE_BYTES.  NULL if absent, unreadable or too big. */
@@ -578,7 +568,7 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
     }
     b->jitter_key = b->renderer->jitter_key;
     b->lattice = b->renderer->lattice;
-    set_pocl_cache_dir();
+    prepare_pocl_cache_dir();
     cl_device_id dev;
     cl_int rc;
     if (choose_device(&dev, b->device_name, sizeof b->device_name, err, errlen))

@@ -7,21 +7,42 @@
 # image, and the rewritten entry hits again.  Then the directory made group-writable: one
 # warning per worker, built from source, the same image, nothing stored.  The unit tests
 # (tests/unit/test_opencl_cache.c) cover each header field, stale keys and the driver refusing
-# a binary.  Skipped (77) without an OpenCL platform.  Nothing here depends on timing.
+# a binary.  First of all, PoCL's own cache directory (worker/pocl_cachedir.h): every render here
+# uses a private XDG_CACHE_HOME, so PoCL's kernels are compiled there once; the empty
+# tempfile_XXXXXX files PoCL 3.1 leaves at every start are swept once older than an hour (three
+# planted two hours old: gone after one render; a fresh one and an old file of another name
+# stay).  Skipped (77) without an OpenCL platform.  Nothing here depends on timing: the ages
+# are set with touch.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 SIZE=160x90
 CACHE=$T/cache
 ENTRY_RE='OpenCL program cache \(hit\|miss\|rebuilt\|off\|refused\)'
 
-say "probe: a tiny OpenCL render, cache off"
-export TF_OPENCL_CACHE=off
+say "probe: a tiny OpenCL render, cache off, PoCL's leftovers in its cache directory swept"
+export TF_OPENCL_CACHE=off XDG_CACHE_HOME="$T/xdg"
+unset POCL_CACHE_DIR
+POCL_DIR=$XDG_CACHE_HOME/terrafarm/pocl
+mkdir -p "$POCL_DIR" && chmod 700 "$XDG_CACHE_HOME/terrafarm" "$POCL_DIR" || fail "mkdir $POCL_DIR"
+for f in tempfile_old001 tempfile_old002 tempfile_old003 tempfile_fresh1 tempfile.notours; do
+    : >"$POCL_DIR/$f" || fail "cannot plant $f"
+done
+touch -d '2 hours ago' "$POCL_DIR"/tempfile_old00? "$POCL_DIR/tempfile.notours"
 render -q -j 1 --size 16x9 --backend opencl -o "$T/probe.exr"; rc=$?
 if [ $rc -ne 0 ]; then
     grep -q 'no OpenCL platform\|no OpenCL device' "$T/last.err" &&
         skip "no usable OpenCL platform: $(head -1 "$T/last.err")"
     fail "tiny OpenCL render exited $rc: $(cat "$T/last.err")"
 fi
+for f in tempfile_old001 tempfile_old002 tempfile_old003; do
+    [ -e "$POCL_DIR/$f" ] && fail "PoCL's leftover $f (two hours old) was not swept: $(ls "$POCL_DIR" | tr "\n" " ")"
+done
+for f in tempfile_fresh1 tempfile.notours; do
+    [ -e "$POCL_DIR/$f" ] || fail "$f was removed: only tempfile_XXXXXX older than an hour may be"
+done
+left=$(ls "$POCL_DIR" | grep -c '^tempfile_......$')
+[ "$left" -le 2 ] || fail "$left tempfile_XXXXXX in $POCL_DIR after one worker: $(ls "$POCL_DIR" | tr "\n" " ")"
+say "PoCL's cache directory: 3 old leftovers swept, $left young tempfile(s) kept"
 
 # cl_render NAME: a 160x90 render by one forked OpenCL worker, -v (the worker says how it made
 # its program); stderr in $T/NAME.err.

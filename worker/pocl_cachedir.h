@@ -1,0 +1,31 @@
+/* pocl_cachedir.h: PoCL's kernel cache directory as terrafarm chooses and keeps it.
+ *
+ * PoCL compiles programs into POCL_CACHE_DIR.  When the user set none, the OpenCL backend points
+ * it at a per-user directory of terrafarm's own (tf_pocl_cache_dir_choose).  PoCL 3.1's start-up
+ * creates an empty file named tempfile_XXXXXX in that directory and never removes it: one a
+ * worker process, thousands on a farm that runs for weeks.  tf_pocl_cache_sweep removes those
+ * left behind: only in terrafarm's own directory, only regular files of that name owned by this
+ * user and older than TF_POCL_TEMPFILE_MAX_AGE_S (a PoCL at work writes and renames its temporary
+ * files within seconds). */
+#ifndef TF_POCL_CACHEDIR_H
+#define TF_POCL_CACHEDIR_H
+
+#include <stddef.h>
+#include <time.h>
+
+#define TF_POCL_TEMPFILE_MAX_AGE_S 3600
+
+/* Set POCL_CACHE_DIR, unless the user did, to $XDG_CACHE_HOME/terrafarm/pocl, else
+ * $HOME/.cache/terrafarm/pocl, else /tmp/terrafarm-pocl-UID, whichever can be created private
+ * and written; the chosen directory goes to dir (empty when the user chose, or none could be
+ * made).  Must run before the first OpenCL call. */
+void tf_pocl_cache_dir_choose(char *dir, size_t len);
+
+/* Remove from dir every regular file named tempfile_ plus six characters, owned by this user,
+ * last modified before now - max_age_s.  Symbolic links, directories, other names and other
+ * users' files are left alone; dir itself is opened without following a link.  Returns how many
+ * were removed, or -1 (errno set) if dir cannot be read; a file that vanished meanwhile (another
+ * worker's sweep) is not an error. */
+int tf_pocl_cache_sweep(const char *dir, time_t now, long max_age_s);
+
+#endif

@@ -55,9 +55,19 @@
     {"tf_cl_params.h", "render/constants.h", "terrafarm.cl", "packet.cl", "common/portable.h",  \
      "terrain/noise_kernel.h", "render/sample_math.h", "render/trace_math.h", "packet_trace.cl", \
      "packet_shade.cl", "packet_render.cl"}
-/* passed to the kernels as -DTF_STREAM and -DTF_PIX, so host and device cannot disagree */
-#define CORNERS_PER_ITEM 128 /* TF_STREAM: the batch of samples, the corners per tf_corners8 item */
-#define PIXELS_PER_ITEM 64   /* TF_PIX: pixels per tf_pixels8 work-item */
+/* How much one work-item does, passed to the kernels as -DTF_STREAM (the batch of samples, the
+ * corners per tf_corners8 item) and -DTF_PIX (pixels per tf_pixels8 item), so that host and
+ * device cannot disagree; both at most 256 (the kernels name rays and pixels with a uchar).  A
+ * CPU device runs few, long work-items, one SIMD job each: the most pixels an item can hold
+ * give its queue the most samples to fill a batch from, and a batch of 256 samples the fewest
+ * part-filled packets (default.scene 1920x1080 -j 2 on PoCL 3.1, Zen 4, 6 alternating rounds:
+ * CPU 3.93 s with 128 / 64, 3.83 with 128 / 128, 3.83 with 128 / 256, 3.76-3.78 with 256 /
+ * 256; 480x270 0.495 -> 0.480 s; pixels identical).  A GPU needs many work-items and little
+ * private memory per item: it keeps the smaller ones (not measured here: no GPU). */
+#define CPU_STREAM 256
+#define CPU_PIX 256
+#define GPU_STREAM 128
+#define GPU_PIX 64
 #define EPOCH_LIMIT 0x7fffffffu /* packet_render.cl: epochs stay below TF_QUEUED */
 #define MAX_SOURCE_BYTES (1 << 20)        /* a kernel file larger than this is not ours */
 /* Bytes of per-pixel sample caches a batch of pixels may use.  A CPU device with one compute
@@ -88,6 +98,7 @@ struct tf_cl_backend {
     int lattice;
     size_t local;          /* work-group size: fixed, so PoCL specialises each kernel once */
     size_t scratch;        /* bytes of sample caches a batch of pixels may use */
+    int stream, pix;       /* TF_STREAM and TF_PIX of the program (CPU_STREAM, GPU_PIX, ...) */
     char device_name[256];
     double build_seconds;  /* making the program: from the binary cache, or from source */
     enum tf_clcache_state cache_state;
@@ -371,8 +382,8 @@ static int build_program(tf_cl_backend *b, cl_device_id dev, char *err, size_t e
     if (find_kernel_dir(dir, sizeof dir, err, errlen) || read_sources(dir, src, len, err, errlen))
         return -1;
     char options[128];
-    snprintf(options, sizeof options, "-cl-std=CL1.2 -DTF_STREAM=%d -DTF_PIX=%d",
-             CORNERS_PER_ITEM, PIXELS_PER_ITEM);
+    snprintf(options, sizeof options, "-cl-std=CL1.2 -DTF_STREAM=%d -DTF_PIX=%d", b->stream,
+             b->pix);
     double t0 = tf_now_s();
     b->program = cached_program(b, dev, src, len, options, dir, err, errlen);
     b->build_seconds = tf_now_s() - t0;
@@ -573,8 +584,8 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
     cl_int rc;
     if (choose_device(&dev, b->device_name, sizeof b->device_name, err, errlen))
         goto fail;
-    /* Work-group size.  On a CPU a work-item is already a long, SIMD job (a batch of 64
-     * samples), and a task has only a few dozen of them: groups of one let PoCL's threads share
+    /* Work-group size.  On a CPU a work-item is already a long, SIMD job (a batch of up to
+     * 256 samples), and a task has only a few dozen of them: groups of one let PoCL's threads share
      * a task's items evenly (bench_opencl default.scene 960x540, stamps: 1.28x C with groups
      * of 1, 1.10x with 8).  On a GPU, a conventional 32. */
     cl_device_type type = 0;
@@ -589,6 +600,9 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
     b->scratch = scratch && atol(scratch) > 0                 ? (size_t)atol(scratch)
                  : (type & CL_DEVICE_TYPE_CPU) && units == 1 ? SCRATCH_ONE_CPU_UNIT
                                                              : SCRATCH_LARGE;
+    const int gpu = (type & CL_DEVICE_TYPE_GPU) != 0;
+    b->stream = gpu ? GPU_STREAM : CPU_STREAM;
+    b->pix = gpu ? GPU_PIX : CPU_PIX;
     b->ctx = clCreateContext(NULL, 1, &dev, NULL, NULL, &rc);
     if (rc != CL_SUCCESS) {
         tf_seterr(err, errlen, "OpenCL: cannot create a context on '%s' (error %d)",
@@ -770,7 +784,8 @@ static cl_int enqueue_pixel_batch(tf_cl_backend *b, tf_rect rect, size_t first, 
     rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_uint), &b->epoch);
     rc |= clSetKernelArg(b->k_pixels, 18, sizeof(cl_mem), &b->out);
     rc |= clSetKernelArg(b->k_pixels, 19, sizeof(cl_mem), &b->pixel_shadow);
-    size_t global = round_up(((size_t)count + PIXELS_PER_ITEM - 1) / PIXELS_PER_ITEM, b->local);
+    const size_t per_item = (size_t)b->pix;
+    size_t global = round_up(((size_t)count + per_item - 1) / per_item, b->local);
     if (rc != CL_SUCCESS)
         return rc;
     return clEnqueueNDRangeKernel(b->queue, b->k_pixels, 1, NULL, &global, &b->local, 0, NULL, ev);
@@ -792,9 +807,10 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     const size_t per_pixel = side * side *
                              (TF_CL_SAMPLE_FLOATS * sizeof(float) + 3 * sizeof(double) +
                               sizeof(cl_uint) + sizeof(cl_ushort));
-    size_t batch = b->scratch / per_pixel / PIXELS_PER_ITEM * PIXELS_PER_ITEM;
-    if (batch < PIXELS_PER_ITEM)
-        batch = PIXELS_PER_ITEM;
+    const size_t per_item = (size_t)b->pix;
+    size_t batch = b->scratch / per_pixel / per_item * per_item;
+    if (batch < per_item)
+        batch = per_item;
     if (batch > npixels)
         batch = npixels;
     cl_uint *corner_shadow = malloc(ncorners * sizeof *corner_shadow);
@@ -829,7 +845,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     rc |= clSetKernelArg(b->k_corners, 10, sizeof(cl_mem), &b->corners);
     rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corner_levels);
     rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_shadow);
-    size_t global = round_up((ncorners + CORNERS_PER_ITEM - 1) / CORNERS_PER_ITEM, b->local);
+    size_t global = round_up((ncorners + (size_t)b->stream - 1) / (size_t)b->stream, b->local);
     cl_event corner_ev = NULL;
     if (rc == CL_SUCCESS)
         rc = clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, &b->local, 0, NULL,

@@ -584,10 +584,10 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
     cl_int rc;
     if (choose_device(&dev, b->device_name, sizeof b->device_name, err, errlen))
         goto fail;
-    /* Work-group size.  On a CPU a work-item is already a long, SIMD job (a batch of up to
-     * 256 samples), and a task has only a few dozen of them: groups of one let PoCL's threads share
-     * a task's items evenly (bench_opencl default.scene 960x540, stamps: 1.28x C with groups
-     * of 1, 1.10x with 8).  On a GPU, a conventional 32. */
+    /* Work-group size.  On a CPU a work-item is already a long, SIMD job (a batch of up to 256
+     * samples), and a task has only a few dozen of them: groups of one let PoCL's threads
+     * share a task's items evenly (bench_opencl default.scene 960x540, stamps: 1.28x C with
+     * groups of 1, 1.10x with 8).  On a GPU, a conventional 32. */
     cl_device_type type = 0;
     clGetDeviceInfo(dev, CL_DEVICE_TYPE, sizeof type, &type, NULL);
     const char *local = getenv("TERRAFARM_CL_LOCAL");

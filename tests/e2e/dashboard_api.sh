@@ -46,6 +46,7 @@ say "render with the dashboard on loopback, polled while it runs"
     --tasks stamps:64x64 --stats "$T/stats.json" -o "$T/out.exr" \
     --on-done "python3 '$T/final.py' '$T'" 2>"$T/coord.err" &
 pid=$!; e2e_track $pid
+freeze_workers_at_birth $pid 2
 i=0
 while ! grep -q 'dashboard at' "$T/coord.err" 2>/dev/null; do
     kill -0 $pid 2>/dev/null || fail "render ended early: $(cat "$T/coord.err")"
@@ -55,25 +56,39 @@ url=$(sed -n 's/.*dashboard at \(http:[^ ]*\).*/\1/p' "$T/coord.err" | head -1)
 hostport=$(echo "$url" | sed 's#http://\([^/]*\)/#\1#')
 "$TF_BIN" status "$hostport" >"$T/status.txt" 2>"$T/status.err" || fail "terrafarm status: $(cat "$T/status.err")"
 "$TF_BIN" status "$hostport" --json >"$T/status.json" 2>>"$T/status.err" || fail "terrafarm status --json: $(cat "$T/status.err")"
-python3 - "$url" "$T" >"$T/poll.out" 2>&1 <<'PY' || { cat "$T/poll.out"; fail "polling the API"; }
-import json, socket, sys, time, urllib.request, urllib.error
-base, d = sys.argv[1], sys.argv[2]
-polls = []
+python3 - "$url" "$T" "$pid" "$(dirname "$0")" >"$T/poll.out" 2>&1 <<'PY' || { thaw_workers $pid; cat "$T/poll.out"; fail "polling the API"; }
+import json, signal, socket, sys, time, urllib.request, urllib.error
+base, d, coordinator = sys.argv[1], sys.argv[2], sys.argv[3]
+sys.path.insert(0, sys.argv[4])
+from worker_slices import run_slices, signal_workers
+# The workers were frozen at birth.  They run in slices until a poll shows the render part
+# done with a preview to fetch; frozen then, it cannot end, so three polls while rendering
+# are certain on a machine of any speed.  Then it runs free, polled until it ends.
+def poll():
+    p = {}
+    for name in ("status", "workers", "events", "tasks", "history"):
+        with urllib.request.urlopen(base + "api/" + name, timeout=30) as r:
+            assert r.headers["Content-Type"] == "application/json", r.headers["Content-Type"]
+            p[name] = json.loads(r.read())
+    return p
+def under_way(p):
+    st = p["status"]
+    return st["state"] == "rendering" and 0 < st["percent"] < 100 and st["preview_stamps"] > 0
 png = None
+try:
+    polls = run_slices(coordinator, poll,
+                       lambda p: under_way(p) or p["status"]["state"] not in ("starting", "rendering"))
+    if under_way(polls[-1]):
+        with urllib.request.urlopen(base + "api/preview.png", timeout=30) as r:
+            png = r.read()
+        for i in range(2):
+            polls.append(poll())
+finally:
+    signal_workers(coordinator, signal.SIGCONT)
 t_end = time.time() + 90
-while time.time() < t_end:
+while time.time() < t_end and polls[-1]["status"]["state"] in ("starting", "rendering"):
     try:
-        p = {}
-        for name in ("status", "workers", "events", "tasks", "history"):
-            with urllib.request.urlopen(base + "api/" + name, timeout=5) as r:
-                assert r.headers["Content-Type"] == "application/json", r.headers["Content-Type"]
-                p[name] = json.loads(r.read())
-        if png is None and p["status"]["preview_stamps"] > 0:
-            with urllib.request.urlopen(base + "api/preview.png", timeout=5) as r:
-                png = r.read()
-        polls.append(p)
-        if p["status"]["state"] != "rendering":
-            break
+        polls.append(poll())
     except (urllib.error.URLError, ConnectionError, socket.timeout):
         break
     time.sleep(0.15)
@@ -89,7 +104,7 @@ same "$T/ref.exr" "$T/out.exr" "render with the dashboard"
 
 say "checking what the API said against --stats"
 python3 - "$T" <<'PY' || fail "the API disagrees with the render (above)"
-import json, sys
+import json, os, sys
 d = sys.argv[1]
 L = lambda n: json.load(open(d + "/" + n))
 stats, polls = L("stats.json"), L("polls.json")
@@ -172,7 +187,7 @@ for b in ev:
     data = [l[6:] for l in b.split("\n") if l.startswith("data: ")]
     check(data and json.loads(data[0])["kind"] == "join", "a stream event is not JSON: %r" % b)
 # the preview
-png = open(d + "/preview.png", "rb").read()
+png = open(d + "/preview.png", "rb").read() if os.path.exists(d + "/preview.png") else b""
 check(png[:8] == b"\x89PNG\r\n\x1a\n", "the preview is not a PNG")
 w, h = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
 check(w == 512 and h == 288, "preview %dx%d, expected 512x288 for 1280x720" % (w, h))
@@ -202,22 +217,25 @@ PY
     --size 320x180 --tasks stamps:32x32 --stats "$T/seq_stats.json" -o "$T/seq/f.####.exr" \
     --on-done "python3 '$T/final_seq.py' '$T'" 2>"$T/seq.err" &
 pid=$!; e2e_track $pid
+freeze_workers_at_birth $pid 2
 url=$(dashboard_url "$T/seq.err" $pid)
-freeze_workers $pid
-python3 - "$url" "$T" <<'PY' || { thaw_workers $pid; fail "polling the sequence's API"; }
-import json, sys, time, urllib.request
-base, d = sys.argv[1], sys.argv[2]
-# The snapshot the API serves is refreshed every 200 ms: wait (up to 30 s, the workers frozen)
-# until it shows the render under way with tasks out, then keep that view.
-for attempt in range(300):
+python3 - "$url" "$T" "$pid" "$(dirname "$0")" <<'PY' || { thaw_workers $pid; fail "polling the sequence's API"; }
+import json, sys, urllib.request
+base, d, coordinator = sys.argv[1], sys.argv[2], sys.argv[3]
+sys.path.insert(0, sys.argv[4])
+from worker_slices import run_slices
+# The workers, frozen at birth, run in slices until the API shows the render under way with
+# tasks out; they stay frozen while that view is kept.
+def poll():
     got = {}
     for name in ("status", "tasks"):
-        with urllib.request.urlopen(base + "api/" + name, timeout=10) as r:
+        with urllib.request.urlopen(base + "api/" + name, timeout=30) as r:
             got[name] = r.read()
+    return got
+def enough(got):
     st, tk = json.loads(got["status"]), json.loads(got["tasks"])
-    if st.get("state") == "rendering" and tk.get("tasks"):
-        break
-    time.sleep(0.1)
+    return st.get("state") != "starting" and (st.get("state") != "rendering" or tk.get("outstanding"))
+got = run_slices(coordinator, poll, enough)[-1]
 for name in ("status", "tasks"):
     open(d + "/seq_frozen_" + name + ".json", "wb").write(got[name])
 PY

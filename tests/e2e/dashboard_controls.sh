@@ -35,11 +35,16 @@ say "1. stop from the dashboard, then --resume"
 "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 --http 127.0.0.1:0 -j 1 --size $SIZE --tasks $TASKS \
     -o "$T/stop.exr" --on-done "sh -c '$ENVDUMP' '$T/stop.env'" 2>"$T/stop.err" &
 pid=$!; e2e_track $pid
+freeze_workers_at_birth $pid 1
 url=$(dashboard_url "$T/stop.err" $pid)
+# the worker, frozen at birth, runs 20 ms at a time until a row is on disk: the render cannot
+# have ended when the stop is posted, however fast this machine
 i=0
 until jget "$url" /api/status 'sys.exit(0 if d["rows_written"] > 0 else 1)' 2>/dev/null; do
-    sleep 0.1; i=$((i + 1)); [ $i -lt 600 ] || fail "no row written in time"
+    thaw_workers $pid; sleep 0.02; freeze_workers $pid; sleep 0.25
+    i=$((i + 1)); [ $i -lt 1200 ] || fail "no row written in time"
 done
+thaw_workers $pid
 out=$(post "$url" /api/stop)
 case "$out" in 202*) ;; *) fail "POST /api/stop: $out" ;; esac
 wait_exit $pid 60
@@ -57,13 +62,15 @@ say "2. drop a busy worker, 3. change the watermark"
 "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 --http 127.0.0.1:0 -j 2 --size $SIZE --tasks $TASKS \
     $LEASE -o "$T/drop.exr" --stats "$T/drop.json" 2>"$T/drop.err" &
 pid=$!; e2e_track $pid
+freeze_workers_at_birth $pid 2
 url=$(dashboard_url "$T/drop.err" $pid)
-# wait until a worker is busy, then freeze the workers (SIGSTOP) so nothing moves meanwhile
+# the workers, frozen at birth (SIGSTOP), run 20 ms at a time until one is busy; frozen then,
+# nothing moves meanwhile
 i=0
 until jget "$url" /api/workers 'sys.exit(0 if any(w["state"]=="busy" for w in d["workers"]) else 1)'; do
-    sleep 0.1; i=$((i + 1)); [ $i -lt 300 ] || fail "no worker became busy"
+    thaw_workers $pid; sleep 0.02; freeze_workers $pid; sleep 0.25
+    i=$((i + 1)); [ $i -lt 1200 ] || fail "no worker became busy"
 done
-freeze_workers $pid
 sleep 0.6   # a snapshot or two after the freeze
 id=$(jget "$url" /api/workers 'b=[w["id"] for w in d["workers"] if w["state"]=="busy"]; print(b[0] if b else "")')
 [ -n "$id" ] || fail "no busy worker once frozen"

@@ -42,6 +42,9 @@ say "2. a dashboard on 0.0.0.0 with the token derived from the farm secret, unde
 "$TF_BIN" render "$SCENE" --listen 127.0.0.1:0 --secret-file "$T/farm.key" --http 0.0.0.0:0 \
     -j 2 --size $SIZE --tasks stamps:64x64 --lease-timeout 120000 -o "$T/out.exr" 2>"$T/coord.err" &
 pid=$!; e2e_track $pid
+# the workers are frozen (SIGSTOP) from birth through the attack, so the render outlasts it on a
+# machine of any speed; they go on after
+freeze_workers_at_birth $pid 2
 i=0
 while ! grep -q 'dashboard at' "$T/coord.err" 2>/dev/null; do
     kill -0 $pid 2>/dev/null || fail "render ended early: $(cat "$T/coord.err")"
@@ -49,9 +52,6 @@ while ! grep -q 'dashboard at' "$T/coord.err" 2>/dev/null; do
 done
 grep 'dashboard at' "$T/coord.err" | grep -q 'token required' || fail "the log does not say a token is required"
 port=$(sed -n 's/.*dashboard at http:\/\/[^ ]*:\([0-9][0-9]*\)\/.*/\1/p' "$T/coord.err" | head -1)
-# the workers are frozen (SIGSTOP) during the attack, so the render outlasts it; they go on after
-sleep 0.5
-freeze_workers $pid
 TOKEN=$("$TF_BIN" status --secret-file "$T/farm.key" --print-token) || fail "status --print-token"
 printf '%s\n' "$TOKEN" >"$T/token"
 "$TF_BIN" status "$ADDR:$port" >"$T/st_no.out" 2>"$T/st_no.err" && fail "terrafarm status without the token succeeded"

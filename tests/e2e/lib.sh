@@ -156,3 +156,25 @@ dashboard_url() {
 # PID, so that a render lasts exactly as long as a test needs (the coordinator keeps serving).
 freeze_workers() { for c in $(pgrep -P "$1"); do kill -STOP "$c" 2>/dev/null; done; }
 thaw_workers() { for c in $(pgrep -P "$1"); do kill -CONT "$c" 2>/dev/null; done; }
+
+# freeze_workers_at_birth PID N: wait (up to 60 s) for coordinator PID's first N forked workers
+# and SIGSTOP each the moment it exists, before it can have rendered much: a render started
+# just before, however fast this machine, is then still under way.  Fails if PID ends first.
+freeze_workers_at_birth() {
+    python3 - "$1" "$2" <<'PY' || fail "could not freeze the workers of $1 at birth"
+import os, signal, subprocess, sys, time
+coordinator, n = sys.argv[1], int(sys.argv[2])
+frozen, t_end = set(), time.time() + 60
+while len(frozen) < n and time.time() < t_end:
+    os.kill(int(coordinator), 0)  # ProcessLookupError: it ended
+    out = subprocess.run(["pgrep", "-P", coordinator], capture_output=True, text=True).stdout
+    for w in map(int, out.split()):
+        if w not in frozen:
+            os.kill(w, signal.SIGSTOP)
+            frozen.add(w)
+sys.exit(0 if len(frozen) == n else 1)
+PY
+}
+
+# worker_slices.py (beside this file, for the scripts' python): run_slices lets frozen workers
+# run a few milliseconds at a time until a poll shows what a test waits for.

@@ -166,7 +166,9 @@ import os, signal, subprocess, sys, time
 coordinator, n = sys.argv[1], int(sys.argv[2])
 frozen, t_end = set(), time.time() + 60
 while len(frozen) < n and time.time() < t_end:
-    os.kill(int(coordinator), 0)  # ProcessLookupError: it ended
+    with open("/proc/%s/stat" % coordinator) as f:  # gone, or a zombie: it ended
+        if f.read().rsplit(")", 1)[1].split()[0] == "Z":
+            sys.exit(1)
     out = subprocess.run(["pgrep", "-P", coordinator], capture_output=True, text=True).stdout
     for w in map(int, out.split()):
         if w not in frozen:

@@ -107,6 +107,23 @@ struct tf_cl_backend {
 
 /* ---------------------------------------------------------------- environment */
 
+/* TF_STREAM and TF_PIX for the device (CPU_STREAM ... above), or TERRAFARM_CL_ITEMS=SxP for
+ * tuning and the tests: S a multiple of 8 from 8 to 256, P from 1 to 256 (anything else is
+ * ignored, as the other TERRAFARM_CL_ settings are). */
+static void choose_item_sizes(tf_cl_backend *b, int gpu)
+{
+    b->stream = gpu ? GPU_STREAM : CPU_STREAM;
+    b->pix = gpu ? GPU_PIX : CPU_PIX;
+    const char *items = getenv("TERRAFARM_CL_ITEMS");
+    int stream, pix;
+    char end;
+    if (items && sscanf(items, "%dx%d%c", &stream, &pix, &end) == 2 && stream >= 8 &&
+        stream <= 256 && stream % 8 == 0 && pix >= 1 && pix <= 256) {
+        b->stream = stream;
+        b->pix = pix;
+    }
+}
+
 /* Point PoCL at terrafarm's cache directory (unless the user chose one) and sweep from it the
  * empty files PoCL's start-up leaves there (pocl_cachedir.h).  Must run before the first
  * OpenCL call. */
@@ -600,9 +617,7 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
     b->scratch = scratch && atol(scratch) > 0                 ? (size_t)atol(scratch)
                  : (type & CL_DEVICE_TYPE_CPU) && units == 1 ? SCRATCH_ONE_CPU_UNIT
                                                              : SCRATCH_LARGE;
-    const int gpu = (type & CL_DEVICE_TYPE_GPU) != 0;
-    b->stream = gpu ? GPU_STREAM : CPU_STREAM;
-    b->pix = gpu ? GPU_PIX : CPU_PIX;
+    choose_item_sizes(b, (type & CL_DEVICE_TYPE_GPU) != 0);
     b->ctx = clCreateContext(NULL, 1, &dev, NULL, NULL, &rc);
     if (rc != CL_SUCCESS) {
         tf_seterr(err, errlen, "OpenCL: cannot create a context on '%s' (error %d)",

@@ -24,6 +24,9 @@
  *   small_batches       a task's pixels in many launches (TERRAFARM_CL_SCRATCH of 64 KB, as
  *                       a one-thread CPU device's 2 MB splits a large stamp): the pixels of
  *                       one launch, memcmp-identical on PoCL.
+ *   item_sizes          the kernels built for other work-item sizes (TERRAFARM_CL_ITEMS): a
+ *                       GPU's 128 samples a batch and 64 pixels an item, and the smallest, 8
+ *                       and 1: the same pixels, memcmp-identical on PoCL.
  *   cores_shared        N OpenCL worker processes share the cores through PoCL's environment.
  * Every test but cores_shared skips (cmocka skip()) with a message when no OpenCL platform
  * exists. */
@@ -474,17 +477,45 @@ static void small_batches(void **state)
     (void)state;
     skip_without_opencl();
     char err[1024] = "";
-    setenv("TERRAFARM_CL_SCRATCH", "65536", 1); /* ~40 pixels a batch: 64, one work-item */
+    setenv("TERRAFARM_CL_SCRATCH", "65536", 1); /* ~40 pixels a batch: one work-item's */
     tf_cl_backend *b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
     unsetenv("TERRAFARM_CL_SCRATCH");
     assert_non_null(b);
     static tf_pixel img[W * H];
     assert_int_equal(tf_cl_backend_render(b, (tf_rect){0, 0, W, H}, img, NULL, err, sizeof err),
                      0);
-    assert_close_to_c(img, "64 pixels a launch");
+    assert_close_to_c(img, "one work-item a launch");
     if (on_pocl_cpu(b))
         assert_memory_equal(img, fx.c_img, sizeof img);
     tf_cl_backend_free(b);
+}
+
+/* A backend built with TERRAFARM_CL_ITEMS=items renders the C pixels. */
+static void check_item_sizes(const char *items)
+{
+    char err[1024] = "", what[64];
+    setenv("TERRAFARM_CL_ITEMS", items, 1);
+    tf_cl_backend *b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    unsetenv("TERRAFARM_CL_ITEMS");
+    if (!b)
+        fprintf(stderr, "TERRAFARM_CL_ITEMS=%s: %s\n", items, err);
+    assert_non_null(b);
+    static tf_pixel img[W * H];
+    assert_int_equal(tf_cl_backend_render(b, (tf_rect){0, 0, W, H}, img, NULL, err, sizeof err),
+                     0);
+    snprintf(what, sizeof what, "items %s", items);
+    assert_close_to_c(img, what);
+    if (on_pocl_cpu(b))
+        assert_memory_equal(img, fx.c_img, sizeof img);
+    tf_cl_backend_free(b);
+}
+
+static void item_sizes(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    check_item_sizes("128x64"); /* a GPU's */
+    check_item_sizes("8x1");
 }
 
 static void bad_rect(void **state)
@@ -508,7 +539,8 @@ int main(void)
         cmocka_unit_test(bad_device),
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
         cmocka_unit_test(installed_kernel_dir), cmocka_unit_test(bad_rect),
-        cmocka_unit_test(small_batches), cmocka_unit_test(cores_shared),
+        cmocka_unit_test(small_batches), cmocka_unit_test(item_sizes),
+        cmocka_unit_test(cores_shared),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -22,6 +22,7 @@
 #include <zlib.h>
 
 #include "bench_cpu.h"
+#include "bench_stats.h"
 #include "image/exrcheck.h"
 #include "image/exrencode.h"
 #include "image/exrlayout.h"
@@ -45,13 +46,6 @@ static void *render_rows(void *p)
     for (int y; (y = atomic_fetch_add(&j->next_row, 1)) < j->height;)
         tf_render_rect(j->r, (tf_rect){0, y, j->width, 1}, &j->img[(size_t)y * j->width], NULL);
     return NULL;
-}
-
-static double cpu_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
 /* The image's pixels, rendered on every core; NULL with a message on failure. */
@@ -140,9 +134,9 @@ static int encode_image(side *sd, const tf_exr_layout *l, const tf_pixel *img, i
                 memcpy(stamp + (size_t)j * r.w, img + (size_t)(y + j) * l->width + x,
                        (size_t)r.w * sizeof *stamp);
             tf_chunk_payload p;
-            double t0 = cpu_s();
+            double t0 = tf_bench_process_cpu_s();
             int rc = tf_exr_encode_rect(sd->enc, r, stamp, &p, err, sizeof err);
-            spent += cpu_s() - t0;
+            spent += tf_bench_process_cpu_s() - t0;
             if (rc) {
                 fprintf(stderr, "bench_encode: %s: %s\n", sd->name, err);
                 free(stamp);
@@ -164,20 +158,6 @@ static int encode_image(side *sd, const tf_exr_layout *l, const tf_pixel *img, i
     free(scratch);
     sd->ns_px[k] = spent * 1e9 / ((double)l->width * l->height);
     return 0;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(const double *v, int n)
-{
-    double s[MAX_ROUNDS];
-    memcpy(s, v, (size_t)n * sizeof *s);
-    qsort(s, (size_t)n, sizeof *s, cmp_double);
-    return n % 2 ? s[n / 2] : 0.5 * (s[n / 2 - 1] + s[n / 2]);
 }
 
 int main(int argc, char **argv)
@@ -233,7 +213,7 @@ int main(int argc, char **argv)
            STAMP, rounds);
     double px = (double)w * h, raw = (double)sides[0].inflated_len;
     for (int i = 0; i < 2; i++) {
-        double ns = median(sides[i].ns_px, rounds);
+        double ns = tf_bench_median(sides[i].ns_px, rounds);
         printf("%-20s %7.1f ns/pixel  %6.0f MB/s  %.2f bytes/pixel  (refused %d)\n",
                sides[i].name, ns, ns > 0 ? raw / (ns * px * 1e-9) / 1e6 : 0.0,
                (double)sides[i].packed / px, sides[i].refused);
@@ -242,7 +222,7 @@ int main(int argc, char **argv)
                !memcmp(sides[0].inflated, sides[1].inflated, sides[0].inflated_len);
     int ok = same && !sides[0].refused && !sides[1].refused;
     printf("chunks inflate to the same bytes: %s\n", same ? "yes" : "NO");
-    double a = median(sides[0].ns_px, rounds), b = median(sides[1].ns_px, rounds);
+    double a = tf_bench_median(sides[0].ns_px, rounds), b = tf_bench_median(sides[1].ns_px, rounds);
     printf("libdeflate/zlib encode cpu ratio: %.3f, bytes ratio %.3f\n", a > 0 ? b / a : 0.0,
            (double)sides[1].packed / (double)sides[0].packed);
     for (int i = 0; i < 2; i++) {

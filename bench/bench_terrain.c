@@ -27,6 +27,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "bench/bench_stats.h"
+
 #include "terrain/heightfield.h"
 #include "terrain/noise.h"
 #include "terrain/noise_row.h"
@@ -43,13 +45,6 @@ static double now_s(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static double cpu_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
     return ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
@@ -116,10 +111,10 @@ static timing time_build(const tf_terrain *t, const what *w, int threads, int re
 {
     timing best = {-1.0, -1.0};
     for (int r = 0; r < reps; r++) {
-        double w0 = now_s(), c0 = cpu_s();
+        double w0 = now_s(), c0 = tf_bench_process_cpu_s();
         if (build_once(t, w, threads) != 0)
             return (timing){-1.0, -1.0};
-        timing now = {now_s() - w0, cpu_s() - c0};
+        timing now = {now_s() - w0, tf_bench_process_cpu_s() - c0};
         if (best.wall < 0 || now.wall < best.wall)
             best = now;
     }

@@ -24,6 +24,7 @@
 #include <embree3/rtcore.h>
 
 #include "bench/bench_cpu.h"
+#include "bench/bench_stats.h"
 #include "log.h"
 #include "render/camera.h"
 #include "render/constants.h"
@@ -92,20 +93,6 @@ static double clock_s(clockid_t id)
     struct timespec ts;
     clock_gettime(id, &ts);
     return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
-static double median(const double *v, int n)
-{
-    double s[MAX_ROUNDS];
-    memcpy(s, v, sizeof *v * (size_t)n);
-    qsort(s, (size_t)n, sizeof *s, cmp_double);
-    return n % 2 ? s[n / 2] : 0.5 * (s[n / 2 - 1] + s[n / 2]);
 }
 
 /* ---- terrafarm's side ------------------------------------------------------------------- */
@@ -311,8 +298,8 @@ static int build_both(bench *b, float *h, double extent, const opts *o, char *er
     }
     free(h);
     b->build_rounds = rounds;
-    b->tf_build_s = r == rounds ? median(tf_s, rounds) : 0;
-    b->e_build_s = r == rounds ? median(e_s, rounds) : 0;
+    b->tf_build_s = r == rounds ? tf_bench_median(tf_s, rounds) : 0;
+    b->e_build_s = r == rounds ? tf_bench_median(e_s, rounds) : 0;
     return r == rounds ? 0 : -1;
 }
 
@@ -649,7 +636,7 @@ static double median_ratio(double rates[M_COUNT][2][MAX_ROUNDS], int m, int shad
     double q[MAX_ROUNDS];
     for (int r = 0; r < rounds; r++)
         q[r] = rates[m][shadow][r] > 0 ? rates[M_TF][shadow][r] / rates[m][shadow][r] : 0;
-    return median(q, rounds);
+    return tf_bench_median(q, rounds);
 }
 
 static void report(const bench *b, double rates[M_COUNT][2][MAX_ROUNDS], int rounds)
@@ -657,8 +644,8 @@ static void report(const bench *b, double rates[M_COUNT][2][MAX_ROUNDS], int rou
     printf("Mrays/s per core (CPU time of the tracing thread), median of %d rounds:\n", rounds);
     printf("  %-22s %10s %10s\n", "", "primary", "shadow");
     for (int m = 0; m < b->modes; m++)
-        printf("  %-22s %10.3f %10.3f\n", mode_name[m], median(rates[m][0], rounds) / 1e6,
-               median(rates[m][1], rounds) / 1e6);
+        printf("  %-22s %10.3f %10.3f\n", mode_name[m], tf_bench_median(rates[m][0], rounds) / 1e6,
+               tf_bench_median(rates[m][1], rounds) / 1e6);
     printf("disagreements with terrafarm (hit vs miss, or distances %g apart relative):\n", T_TOL);
     for (int m = M_E1; m < b->modes; m++)
         print_disagreements(b, m);

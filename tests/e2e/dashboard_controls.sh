@@ -41,7 +41,7 @@ url=$(dashboard_url "$T/stop.err" $pid)
 # have ended when the stop is posted, however fast this machine
 i=0
 until jget "$url" /api/status 'sys.exit(0 if d["rows_written"] > 0 else 1)' 2>/dev/null; do
-    thaw_workers $pid; sleep 0.02; freeze_workers $pid; sleep 0.25
+    run_slice $pid
     i=$((i + 1)); [ $i -lt 1200 ] || fail "no row written in time"
 done
 thaw_workers $pid
@@ -68,7 +68,7 @@ url=$(dashboard_url "$T/drop.err" $pid)
 # nothing moves meanwhile
 i=0
 until jget "$url" /api/workers 'sys.exit(0 if any(w["state"]=="busy" for w in d["workers"]) else 1)'; do
-    thaw_workers $pid; sleep 0.02; freeze_workers $pid; sleep 0.25
+    run_slice $pid
     i=$((i + 1)); [ $i -lt 1200 ] || fail "no worker became busy"
 done
 sleep 0.6   # a snapshot or two after the freeze

@@ -178,5 +178,8 @@ sys.exit(0 if len(frozen) == n else 1)
 PY
 }
 
-# worker_slices.py (beside this file, for the scripts' python): run_slices lets frozen workers
-# run a few milliseconds at a time until a poll shows what a test waits for.
+# run_slice PID: let coordinator PID's frozen workers run 20 ms, freeze them again, and wait
+# past the dashboard's next snapshot (every 200 ms).  A loop of these until a poll shows what a
+# test waits for never races the machine's speed.  worker_slices.py (beside this file) is the
+# same for the scripts' python.
+run_slice() { thaw_workers "$1"; sleep 0.02; freeze_workers "$1"; sleep 0.25; }

@@ -17,7 +17,12 @@
  *   E5  the copies fit the buffer: len <= SINK_BUFFER, len > 0 only with buf, and len <=
  *       run_len (every copied byte is in the run);
  *   E6  references only while the caller keeps them alive: 0 <= held <= niov, held > 0 only
- *       with hold, and referring only with hold. */
+ *       with hold, and referring only with hold.
+ * and, for the direct path (tf_exr_sink_go_direct; bench/README.md section 17):
+ *   D1  staging only with a direct descriptor: stage_len > 0 implies dfd >= 0 and stage;
+ *   D2  the stage starts on a block: stage_off is a multiple of align;
+ *   D3  between calls the stage holds less than a block (every whole block went out);
+ *       stage_pending (those bytes are not in the file yet) only with stage_len > 0. */
 #ifndef TF_EXRSINK_H
 #define TF_EXRSINK_H
 
@@ -49,11 +54,39 @@ typedef struct tf_exr_sink {
     int hold;          /* tf_exr_hold_chunks: the caller keeps its chunks alive to the flush */
     int referring;     /* set only around tf_exr_write_chunk's raw write of the caller's bytes */
     int held;          /* pieces of the run that are references */
+    /* Direct output: with dfd open (the same file, O_DIRECT), a flushed run is copied into
+     * `stage`, an aligned buffer that mirrors the file's bytes [stage_off, stage_off +
+     * stage_len), and goes out in whole blocks that bypass the page cache (the kernel's copy
+     * into it was most of the writer's CPU); the last part block goes out through fd and
+     * stays staged, so the next run continues it.  A run elsewhere in the file drops the stage
+     * and stages afresh from the block it starts in (read back through dfd). */
+    int dfd;           /* the file opened O_DIRECT, or -1: every write goes through fd */
+    size_t align;      /* the direct path's block (SINK_ALIGN; a power of two dividing
+                        * SINK_STAGE): offsets and lengths of direct writes */
+    uint8_t *stage;    /* SINK_STAGE bytes aligned to SINK_ALIGN, or NULL */
+    uint64_t stage_off;
+    size_t stage_len;
+    int stage_pending; /* the staged part block is not in the file yet (tf_exr_sink_flush puts
+                        * it there; a run's internal flush leaves it for the next run) */
 } tf_exr_sink;
+
+#define SINK_ALIGN 4096             /* the direct path's block: a sector of every common disk */
+#define SINK_STAGE (1024 * 1024)    /* bytes staged for one direct write at most */
+
+/* An empty sink on no file (fd and dfd -1). */
+void tf_exr_sink_init(tf_exr_sink *s);
+/* Open the direct path for s->fd, which was opened from `path`: a regular file that can be
+ * opened again O_DIRECT (read-write, for a block's head) and is the same file.  Otherwise, or
+ * without memory, everything stays on fd.  Optimisation only: nothing to report. */
+void tf_exr_sink_go_direct(tf_exr_sink *s, const char *path);
+/* Close both descriptors (fd's close error, if any, is returned as -1 with errno) and free
+ * the buffers. */
+int tf_exr_sink_close(tf_exr_sink *s);
 
 /* Assert E1-E6 (above) on s, one assert per clause; nothing with NDEBUG. */
 void tf_exr_sink_check(const tf_exr_sink *s);
-/* Write the run out (pwritev, resumed after a short write).  0, or -1 with write_errno set. */
+/* Write the run out (pwritev, resumed after a short write; or through the stage), so that
+ * every byte handed over is in the file.  0, or -1 with write_errno set. */
 int tf_exr_sink_flush(tf_exr_sink *s);
 /* OpenEXRCore's write function (its user data is the sink). */
 int64_t tf_exr_sink_write(exr_const_context_t ctxt, void *userdata, const void *buffer,

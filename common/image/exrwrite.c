@@ -111,9 +111,7 @@ static void writer_free(tf_exr_writer *w, int abandon)
     }
     if (w->ctx)
         exr_finish(&w->ctx);
-    if (w->sink.fd >= 0)
-        close(w->sink.fd);
-    free(w->sink.buf);
+    tf_exr_sink_close(&w->sink);
     tf_exr_zip_free(w->zip);
     free(w->path);
     free(w);
@@ -136,7 +134,7 @@ static tf_exr_writer *writer_open(const char *path, const tf_exr_layout *layout,
         tf_seterr(err, errlen, "%s: out of memory", path);
         return NULL;
     }
-    w->sink.fd = -1;
+    tf_exr_sink_init(&w->sink);
     w->layout = *layout;
     w->width = width;
     w->height = height;
@@ -150,6 +148,7 @@ static tf_exr_writer *writer_open(const char *path, const tf_exr_layout *layout,
         writer_free(w, 1);
         return NULL;
     }
+    tf_exr_sink_go_direct(&w->sink, path);
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     init.error_handler_fn = tf_exr_remember_error;
     init.user_data = &w->sink;
@@ -414,11 +413,10 @@ int tf_exr_finish(tf_exr_writer *w, char *err, size_t errlen)
         tf_seterr(err, errlen, "%s: fsync failed: %s", w->path, strerror(errno));
         rc = -1;
     }
-    if (close(w->sink.fd) != 0 && rc == 0) {
+    if (tf_exr_sink_close(&w->sink) != 0 && rc == 0) {
         tf_seterr(err, errlen, "%s: close failed: %s", w->path, strerror(errno));
         rc = -1;
     }
-    w->sink.fd = -1;
     writer_free(w, 1);
     return rc;
 }

@@ -805,9 +805,11 @@ static int sink_check_aborts_naming(const tf_exr_sink *s, const char *clause)
 }
 #endif
 
-/* The sink's invariants (exrsink.h E1-E6) are asserted clause by clause, each failure naming
- * its clause: a run on a closed descriptor fails E1, a run_len that is not its pieces' sum E4,
- * a reference without hold E6; a consistent sink passes.  Asserts are on in `make asan`. */
+/* The sink's invariants (exrsink.h E1-E6, D1-D3) are asserted clause by clause, each failure
+ * naming its clause: a run on a closed descriptor fails E1, a run_len that is not its pieces'
+ * sum E4, a reference without hold E6, staged bytes without a direct descriptor D1, a stage off
+ * its block D2, a whole block left staged D3; a consistent sink passes.  Asserts are on in
+ * `make asan`. */
 static void test_sink_invariants_name_their_clause(void **state)
 {
     (void)state;
@@ -829,6 +831,20 @@ static void test_sink_invariants_name_their_clause(void **state)
     s.run_len = 10;
     s.held = 1;
     assert_true(sink_check_aborts_naming(&s, "E6: references only with hold"));
+    s.held = 0;
+    static uint8_t stage[SINK_ALIGN];
+    s.dfd = -1;
+    s.stage = stage;
+    s.stage_len = 100;
+    assert_true(sink_check_aborts_naming(&s, "D1: staging only with a direct descriptor"));
+    s.dfd = 3;
+    s.align = SINK_ALIGN;
+    assert_int_equal(sink_check_aborts_naming(&s, ""), 0);
+    s.stage_off = 100;
+    assert_true(sink_check_aborts_naming(&s, "D2: the stage starts on a block"));
+    s.stage_off = SINK_ALIGN;
+    s.stage_len = SINK_ALIGN;
+    assert_true(sink_check_aborts_naming(&s, "D3: less than a block staged between calls"));
 #endif
 }
 

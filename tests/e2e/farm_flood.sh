@@ -29,7 +29,13 @@ port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/
 # would from other machines: per-address caps keep them from evicting its handshake.
 python3 "$FLOOD" 127.0.0.1 "$port" 12 127.0.0.2 >"$T/flood.out" 2>&1 &
 flood=$!; e2e_track $flood
-sleep 2
+i=0 # the flood announces itself once its oversized connections stream (no fixed sleep)
+until grep -q "under way" "$T/flood.out" 2>/dev/null; do
+    kill -0 $flood 2>/dev/null || fail "the flood ended before it began: $(cat "$T/flood.out")"
+    i=$((i + 1))
+    [ $i -le 600 ] || fail "the flood did not get under way in 60 s: $(cat "$T/flood.out")"
+    sleep 0.1
+done
 say "wrong-secret handshakes, one after the other, for 4 s"
 TF_ROOT="$TF_ROOT" python3 - "$port" "$T/wrong.key" >"$T/guess.out" 2>&1 <<'PY' || fail "guessing client: $(cat "$T/guess.out")"
 import os, sys, time

@@ -323,19 +323,26 @@ finish "$COORD" "coordinator (render with a cut cable)"
 after=$(($(date +%s) - cut_at))
 finish "$W1" "worker 1 (render with a cut cable)"
 
+# The lost task is dealt again either way: by the lease (re-dealt, logged) when worker 1 still
+# has fresh tasks 2 s after the cut, which is the case here (it needs ~7 s alone), or, on a
+# machine fast enough to finish the rest sooner, as a straggler's second copy to the idle
+# worker 1 (duplicated).  Both are a recovery; which one comes first is the machine's speed.
 redealt=$(json_int "$TMP/cut.json" tasks_redealt)
-if [ "${redealt:-0}" -lt 1 ]; then
+duplicated=$(json_int "$TMP/cut.json" tasks_duplicated)
+if [ "${redealt:-0}" -lt 1 ] && [ "${duplicated:-0}" -lt 1 ]; then
     cat "$TMP/cut.json"
-    [ "$after" -ge 3 ] || fail "the render ended ${after} s after the cut, before the 2 s lease" \
-        "could expire (the machine is faster than expected: raise LARGE)"
-    fail "tasks_redealt is ${redealt:-missing}, expected >= 1"
+    fail "tasks_redealt is ${redealt:-missing} and tasks_duplicated ${duplicated:-missing}" \
+        "${after} s after the cut: the lost task was never dealt again"
 fi
-grep -q "re-dealing task" "$TMP/cut.coord.log" || fail "the coordinator did not log a re-deal"
+if [ "${redealt:-0}" -ge 1 ]; then
+    grep -q "re-dealing task" "$TMP/cut.coord.log" || fail "the coordinator did not log a re-deal"
+fi
 local_reference "$LARGE" --tasks rows:4
 cmp "$TMP/local-$LARGE.exr" "$TMP/cut.exr" ||
     fail "the render with a cut cable differs from the local render at $LARGE"
-note "$LARGE with worker 2 cut off: tasks_redealt=$redealt, identical to the local render"
-note "$(grep -m1 're-dealing task' "$TMP/cut.coord.log")"
+note "$LARGE with worker 2 cut off: tasks_redealt=$redealt tasks_duplicated=$duplicated," \
+    "identical to the local render"
+[ "${redealt:-0}" -lt 1 ] || note "$(grep -m1 're-dealing task' "$TMP/cut.coord.log")"
 
 # ---- 4. pull every cable for longer than the lease: the farm heals by itself ----
 # Worker 2 of part 3 is still cut off (and would come back to this render): end it, replug.

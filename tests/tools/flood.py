@@ -7,8 +7,9 @@ For SECONDS it keeps, at once:
     the coordinator takes them (the server must read no more than a handshake's worth);
   - IDLE connections opened by the thousand that never send a byte;
   - a few clients that send a valid-looking AUTH with a wrong MAC over and over.
-Prints counts of what happened (connections opened, closed by the server, refused) and exits 0;
-the test judges the coordinator (the render completes, its memory stays bounded)."""
+Prints "flood: under way" once OVERSIZED connections were opened and bytes went out on them
+(the caller waits for that line instead of sleeping), then at the end counts of what happened
+(connections opened, closed by the server, refused) and exits 0; the test judges the coordinator (the render completes, its memory stays bounded)."""
 import os
 import resource
 import selectors
@@ -47,7 +48,11 @@ def main():
         sel.register(s, selectors.EVENT_READ | (selectors.EVENT_WRITE if kind == "big" else 0))
 
     end = time.time() + seconds
+    under_way = False
     while time.time() < end:
+        if not under_way and stats["opened"] >= OVERSIZED and stats["bytes_sent"] > 0:
+            print("flood: under way", flush=True)
+            under_way = True
         nbig = sum(1 for k in conns.values() if k == "big")
         nidle = len(conns) - nbig
         for _ in range(min(50, OVERSIZED - nbig)):

@@ -35,8 +35,10 @@ void tf_exr_sink_check(const tf_exr_sink *s)
     assert((!s->referring || s->hold) && "E6: referring only with hold");
     assert((s->stage_len == 0 || (s->dfd >= 0 && s->stage)) &&
            "D1: staging only with a direct descriptor");
-    assert((s->dfd < 0 || s->stage_off % s->align == 0) && "D2: the stage starts on a block");
-    assert((s->stage_len == 0 || s->stage_len < s->align) &&
+    assert((s->dfd < 0 || s->align > 0) && "D2: a direct descriptor has its block size");
+    assert((s->dfd < 0 || s->align == 0 || s->stage_off % s->align == 0) &&
+           "D2: the stage starts on a block");
+    assert((s->stage_len == 0 || s->stage_len < s->align) && /* D1 holds: align was set */
            "D3: less than a block staged between calls");
     assert((!s->stage_pending || s->stage_len > 0) && "D3: pending only with staged bytes");
 #else

@@ -20,7 +20,8 @@
  *       with hold, and referring only with hold.
  * and, for the direct path (tf_exr_sink_go_direct; bench/README.md section 17):
  *   D1  staging only with a direct descriptor: stage_len > 0 implies dfd >= 0 and stage;
- *   D2  the stage starts on a block: stage_off is a multiple of align;
+ *   D2  a direct descriptor has its block size (align > 0), and the stage starts on a block:
+ *       stage_off is a multiple of align;
  *   D3  between calls the stage holds less than a block (every whole block went out);
  *       stage_pending (those bytes are not in the file yet) only with stage_len > 0. */
 #ifndef TF_EXRSINK_H

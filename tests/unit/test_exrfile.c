@@ -817,7 +817,7 @@ static void test_sink_invariants_name_their_clause(void **state)
     skip(); /* release builds define NDEBUG: nothing to check */
 #else
     static tf_exr_sink s; /* large (its iovec array): static, not on the stack */
-    memset(&s, 0, sizeof s);
+    tf_exr_sink_init(&s);
     s.fd = 2;
     s.niov = 1;
     s.iov[0].iov_len = 10;
@@ -838,6 +838,7 @@ static void test_sink_invariants_name_their_clause(void **state)
     s.stage_len = 100;
     assert_true(sink_check_aborts_naming(&s, "D1: staging only with a direct descriptor"));
     s.dfd = 3;
+    assert_true(sink_check_aborts_naming(&s, "D2: a direct descriptor has its block size"));
     s.align = SINK_ALIGN;
     assert_int_equal(sink_check_aborts_naming(&s, ""), 0);
     s.stage_off = 100;

@@ -9,7 +9,8 @@ For SECONDS it keeps, at once:
   - a few clients that send a valid-looking AUTH with a wrong MAC over and over.
 Prints "flood: under way" once OVERSIZED connections were opened and bytes went out on them
 (the caller waits for that line instead of sleeping), then at the end counts of what happened
-(connections opened, closed by the server, refused) and exits 0; the test judges the coordinator (the render completes, its memory stays bounded)."""
+(connections opened, closed by the server, refused) and exits 0; the test judges the
+coordinator (the render completes, its memory stays bounded)."""
 import os
 import resource
 import selectors

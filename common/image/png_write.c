@@ -1,5 +1,7 @@
 /* png_write.c: see png_write.h.  libpng reports errors by longjmp; every libpng call here sits
- * behind the setjmp in the function that makes it. */
+ * behind the setjmp in the function that makes it.  The bytes go out through a tf_directfile
+ * (directfile.h): the preview the coordinator rewrites every few seconds bypasses the page
+ * cache, whose fresh pages cost more than the copy on a virtual machine. */
 #include "image/png_write.h"
 
 #include <png.h>
@@ -9,19 +11,18 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "directfile.h"
 #include "log.h"
 
 struct tf_png_writer {
-    FILE *f;
+    tf_directfile file;
+    int open;           /* file is open */
     png_structp png;
     png_infop info;
     int width, height, depth, channels, rows;
     uint8_t *swap;      /* row in network byte order for 16-bit */
     char *path, *tmp;
-    char *iobuf;        /* the stream's buffer: a preview of 1 MB in 4 writes, not 250 */
 };
-
-#define PNG_IOBUF (256 * 1024)
 
 static void free_writer(tf_png_writer *w, int remove_tmp)
 {
@@ -29,11 +30,10 @@ static void free_writer(tf_png_writer *w, int remove_tmp)
         return;
     if (w->png)
         png_destroy_write_struct(&w->png, &w->info);
-    if (w->f)
-        fclose(w->f);
+    if (w->open)
+        tf_directfile_discard(&w->file);
     if (remove_tmp && w->tmp)
         remove(w->tmp);
-    free(w->iobuf); /* after fclose */
     free(w->swap);
     free(w->path);
     free(w->tmp);
@@ -53,6 +53,16 @@ static void quiet_png_warning(png_structp png, png_const_charp msg)
     (void)png;
     (void)msg;
 }
+
+/* libpng's output: the direct file (its first errno is kept for the caller's message). */
+static void write_bytes(png_structp png, png_bytep data, size_t n)
+{
+    tf_png_writer *w = png_get_io_ptr(png);
+    if (tf_directfile_write(&w->file, data, n) != 0)
+        png_longjmp(png, 1);
+}
+
+static void flush_nothing(png_structp png) { (void)png; }
 
 tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_depth, int channels,
                              char *err, size_t errlen)
@@ -81,15 +91,12 @@ tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_de
         return NULL;
     }
     sprintf(w->tmp, "%s.tmp", path);
-    w->f = fopen(w->tmp, "wb");
-    if (!w->f) {
+    if (tf_directfile_create(&w->file, w->tmp) != 0) {
         tf_seterr(err, errlen, "%s: cannot create: %s", w->tmp, strerror(errno));
         free_writer(w, 0);
         return NULL;
     }
-    w->iobuf = malloc(PNG_IOBUF);
-    if (w->iobuf) /* else stdio's default buffer */
-        setvbuf(w->f, w->iobuf, _IOFBF, PNG_IOBUF);
+    w->open = 1;
     w->png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, quiet_png_error, quiet_png_warning);
     w->info = w->png ? png_create_info_struct(w->png) : NULL;
     if (!w->info) {
@@ -102,7 +109,7 @@ tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_de
         free_writer(w, 1);
         return NULL;
     }
-    png_init_io(w->png, w->f);
+    png_set_write_fn(w->png, w, write_bytes, flush_nothing);
     /* zlib level 3: the coordinator streams the preview of every render it writes; level 6
      * (the default) costs it about twice the CPU for a file a few percent smaller. */
     png_set_compression_level(w->png, 3);
@@ -160,7 +167,10 @@ int tf_png_write_row(tf_png_writer *w, const void *row, char *err, size_t errlen
         src = w->swap;
     }
     if (write_raw_row(w, src) != 0) {
-        tf_seterr(err, errlen, "%s: libpng error writing row %d", w->path, w->rows);
+        if (w->file.err)
+            tf_seterr(err, errlen, "%s: write failed: %s", w->tmp, strerror(w->file.err));
+        else
+            tf_seterr(err, errlen, "%s: libpng error writing row %d", w->path, w->rows);
         return -1;
     }
     w->rows++;
@@ -175,16 +185,18 @@ int tf_png_finish(tf_png_writer *w, char *err, size_t errlen)
         return -1;
     }
     if (setjmp(png_jmpbuf(w->png))) {
-        tf_seterr(err, errlen, "%s: libpng error finishing the file", w->path);
+        if (w->file.err)
+            tf_seterr(err, errlen, "%s: write failed: %s", w->tmp, strerror(w->file.err));
+        else
+            tf_seterr(err, errlen, "%s: libpng error finishing the file", w->path);
         free_writer(w, 1);
         return -1;
     }
     png_write_end(w->png, w->info);
     png_destroy_write_struct(&w->png, &w->info);
     w->png = NULL;
-    int bad = fflush(w->f) != 0 || ferror(w->f);
-    bad |= fclose(w->f) != 0;
-    w->f = NULL;
+    w->open = 0;
+    int bad = tf_directfile_close(&w->file) != 0;
     if (bad) {
         tf_seterr(err, errlen, "%s: write failed: %s", w->tmp, strerror(errno));
         free_writer(w, 1);

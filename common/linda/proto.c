@@ -66,6 +66,14 @@ long tf_frame_parse_max(const uint8_t *buf, size_t len, uint32_t max_length, tf_
     return (long)length + 4;
 }
 
+size_t tf_frame_rest(const uint8_t *buf, size_t len)
+{
+    if (len < 4)
+        return 0;
+    uint64_t whole = 4 + (uint64_t)get_u32(buf);
+    return whole > len ? (size_t)(whole - len) : 0;
+}
+
 void tf_buf_init(tf_buf *b) { memset(b, 0, sizeof *b); }
 
 void tf_buf_free(tf_buf *b)
@@ -74,7 +82,7 @@ void tf_buf_free(tf_buf *b)
     tf_buf_init(b);
 }
 
-int tf_buf_reserve(tf_buf *b, size_t n)
+static int buf_grow(tf_buf *b, size_t n, int exact)
 {
     if (n > SIZE_MAX / 2 - b->len)
         return -1;
@@ -88,6 +96,8 @@ int tf_buf_reserve(tf_buf *b, size_t n)
     size_t cap = b->cap ? b->cap : 4096;
     while (cap < b->len + n)
         cap *= 2;
+    if (exact)
+        cap = b->len + n;
     uint8_t *p = realloc(b->data, cap);
     if (!p)
         return -1;
@@ -95,6 +105,10 @@ int tf_buf_reserve(tf_buf *b, size_t n)
     b->cap = cap;
     return 0;
 }
+
+int tf_buf_reserve(tf_buf *b, size_t n) { return buf_grow(b, n, 0); }
+
+int tf_buf_reserve_exact(tf_buf *b, size_t n) { return buf_grow(b, n, 1); }
 
 void tf_buf_trim(tf_buf *b, size_t keep)
 {

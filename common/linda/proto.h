@@ -107,6 +107,10 @@ long tf_frame_parse(const uint8_t *buf, size_t len, tf_frame *out, char *err, si
  * frames before authentication, and at most its role's largest tuple after). */
 long tf_frame_parse_max(const uint8_t *buf, size_t len, uint32_t max_length, tf_frame *out,
                         char *err, size_t errlen);
+/* Bytes still missing from the frame that starts buf[0..len): 0 while its length field is
+ * incomplete or once the frame is whole.  Only for sizing a buffer: the length is not checked
+ * here (tf_frame_parse_max checks it, and must have seen these bytes first). */
+size_t tf_frame_rest(const uint8_t *buf, size_t len);
 /* Largest length field accepted before authentication: an AUTH frame. */
 #define TF_HANDSHAKE_FRAME_MAX (TF_FRAME_MIN_LENGTH + 128)
 
@@ -122,6 +126,9 @@ void tf_buf_init(tf_buf *b);
 void tf_buf_free(tf_buf *b);
 /* Make room for n more bytes; 0 or -1 (OOM or size overflow). */
 int tf_buf_reserve(tf_buf *b, size_t n);
+/* The same, growing to exactly that room when it must grow (not to a power of two): for a frame
+ * whose length is known, whose buffer may then be kept as it is (tsserver.c detach_frame). */
+int tf_buf_reserve_exact(tf_buf *b, size_t n);
 int tf_buf_append(tf_buf *b, const void *p, size_t n);
 /* Drop n bytes from the front (compacts lazily). */
 void tf_buf_consume(tf_buf *b, size_t n);

@@ -50,11 +50,19 @@
 #include "linda/sock.h"
 
 #define TS_READ_CHUNK 65536
+/* The first read into an empty buffer: a request whole, or a result's length field, so that the
+ * buffer can grow once to the result's size (tf_frame_rest) with little to copy. */
+#define TS_FIRST_READ 4096
 #define TS_MAX_PIPELINE 65536 /* input bytes buffered behind a blocked request */
 /* An idle connection's input buffer keeps at most this much memory: results of up to this size
  * (most tasks' results) reuse it, larger ones (the default 128 K-pixel bands, ~1 MB) give it
  * back once read, or 1024 workers would hold 1 GB between their results. */
 #define TS_BUF_KEEP (256 * 1024)
+/* An OUT frame whose body is at least this large is not copied out of the buffer it was read
+ * into: the buffer becomes the stored tuple's (detach_frame), for its blobs of at least
+ * TS_SHARE_BLOB_MIN bytes (a result's chunks); smaller fields are copied as usual. */
+#define TS_SHARE_MIN (32 * 1024)
+#define TS_SHARE_BLOB_MIN (16 * 1024)
 #define TS_POLL_CAP_MS 250    /* longest poll when timeouts must be enforced */
 #define TS_STALL_MS 1000      /* a gap this long between iterations is a stall (see enforce_timeouts) */
 #define TS_PENALTY_SLOTS 64   /* addresses remembered for failed handshakes */
@@ -628,10 +636,16 @@ static void refuse_request(conn *c, const tf_frame *f, const tf_tuple *t, const 
     conn_check_out(c, tf_frame_append_raw(&c->out, TF_OP_ERROR, f->request_id, msg, strlen(msg)));
 }
 
-static int handle_out(conn *c, const tf_frame *f, char *err, size_t errlen)
+/* OUT: decode (blobs left in `shared` when the frame was detached), check against the role and
+ * the space's cap, store, and show the hook. */
+static int handle_out(conn *c, const tf_frame *f, tf_shared_bytes *shared, char *err,
+                      size_t errlen)
 {
     tf_tuple t, seen;
-    if (tf_tuple_decode(f->body, f->body_len, &t, 0, err, errlen) != 0)
+    int bad = shared ? tf_tuple_decode_shared(f->body, f->body_len, shared, TS_SHARE_BLOB_MIN, &t,
+                                              err, errlen)
+                     : tf_tuple_decode(f->body, f->body_len, &t, 0, err, errlen);
+    if (bad)
         return -1;
     ts_server *srv = c->srv;
     if (srv->role) {
@@ -658,8 +672,8 @@ static int handle_out(conn *c, const tf_frame *f, char *err, size_t errlen)
     }
     /* The hook sees the tuple's value, not the stored tuple, which it (or a waiter) may take
      * meanwhile: a view of the frame, which stays in c->in until this request is served (a
-     * closed connection's buffers outlive the loop's turn), so a result's blobs are not
-     * copied once more. */
+     * closed connection's buffers outlive the loop's turn), or in `shared`, of which the
+     * caller holds a reference until then; so a result's blobs are not copied once more. */
     int want_view = srv->hooks.on_out != NULL;
     if (want_view && tf_tuple_view(f->body, f->body_len, &seen, err, errlen) != 0) {
         tf_tuple_clear(&t);
@@ -793,7 +807,8 @@ static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
 }
 
 /* Serve one frame.  0 ok (c may have been closed), -1 protocol violation (err set). */
-static int handle_frame(conn *c, const tf_frame *f, char *err, size_t errlen)
+static int handle_frame(conn *c, const tf_frame *f, tf_shared_bytes *shared, char *err,
+                        size_t errlen)
 {
     if (c->state == NEED_AUTH && f->op != TF_OP_AUTH) {
         static tf_ratelimit rl;
@@ -802,7 +817,7 @@ static int handle_frame(conn *c, const tf_frame *f, char *err, size_t errlen)
         return 0;
     }
     switch (f->op) {
-    case TF_OP_OUT: return handle_out(c, f, err, errlen);
+    case TF_OP_OUT: return handle_out(c, f, shared, err, errlen);
     case TF_OP_IN:
     case TF_OP_RD:
     case TF_OP_INP:
@@ -835,6 +850,25 @@ static uint32_t conn_max_frame(const conn *c)
 }
 
 /* Parse and serve the complete frames in c's input buffer (see the ordering invariant). */
+/* The frame f (n bytes at the head of c->in) leaves c->in without a copy: c->in's memory becomes
+ * shared bytes (one reference, the caller's) for the tuple's blobs, and c->in starts afresh
+ * with the bytes that followed the frame.  NULL, with nothing changed, without memory. */
+static tf_shared_bytes *detach_frame(conn *c, size_t n)
+{
+    tf_buf fresh;
+    tf_buf_init(&fresh);
+    size_t after = c->in.len - n;
+    if (after > 0 && tf_buf_append(&fresh, tf_buf_head(&c->in) + n, after) != 0)
+        return NULL;
+    tf_shared_bytes *shared = tf_shared_bytes_adopt(c->in.data);
+    if (!shared) {
+        tf_buf_free(&fresh);
+        return NULL;
+    }
+    c->in = fresh;
+    return shared;
+}
+
 static void conn_process_input(conn *c)
 {
     char err[160];
@@ -858,10 +892,15 @@ static void conn_process_input(conn *c)
             tf_buf_consume(&c->in, (size_t)n);
             continue;
         }
-        int rc = handle_frame(c, &f, err, sizeof err);
+        tf_shared_bytes *shared = NULL;
+        if (f.op == TF_OP_OUT && f.body_len >= TS_SHARE_MIN && c->state == READY)
+            shared = detach_frame(c, (size_t)n);
+        int rc = handle_frame(c, &f, shared, err, sizeof err);
+        tf_shared_bytes_release(shared); /* the stored tuple's blobs keep theirs */
         if (c->dead)
             return;
-        tf_buf_consume(&c->in, (size_t)n);
+        if (!shared)
+            tf_buf_consume(&c->in, (size_t)n);
         if (rc != 0) {
             conn_drop(c, err);
             return;
@@ -919,10 +958,17 @@ static void conn_readable(conn *c)
         size_t limit = c->sealed ? (size_t)TF_SEAL_RECORD_MAX + TF_SEAL_ABYTES + 4
                                  : (size_t)conn_max_frame(c) + 4;
         size_t room = dst->len < limit ? limit - dst->len : 0;
-        size_t want = room < TS_READ_CHUNK ? room : TS_READ_CHUNK;
+        size_t chunk = dst->len == 0 && !c->sealed ? TS_FIRST_READ : TS_READ_CHUNK;
+        size_t want = room < chunk ? room : chunk;
+        /* The rest of a frame whose length is in (and passed the parser): read to its end into a
+         * buffer grown once to its size, which detach_frame can then hand over as it is. */
+        size_t rest = c->sealed || c->waiting ? 0 : tf_frame_rest(tf_buf_head(dst), dst->len);
+        int exact = rest > 0 && rest <= room;
+        if (exact)
+            want = rest;
         if (want == 0)
             break;
-        if (tf_buf_reserve(dst, want) != 0) {
+        if ((exact ? tf_buf_reserve_exact(dst, want) : tf_buf_reserve(dst, want)) != 0) {
             conn_drop(c, "out of memory buffering input");
             return;
         }

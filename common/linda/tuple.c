@@ -4,6 +4,7 @@
 
 #include <inttypes.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -35,6 +36,35 @@ static uint64_t get_u64(const uint8_t *p)
     for (int i = 7; i >= 0; i--)
         v = (v << 8) | p[i];
     return v;
+}
+
+/* ---- shared bytes ---- */
+struct tf_shared_bytes {
+    atomic_int refs;
+    void *mem;
+};
+
+tf_shared_bytes *tf_shared_bytes_adopt(void *mem)
+{
+    tf_shared_bytes *s = malloc(sizeof *s);
+    if (!s)
+        return NULL;
+    atomic_init(&s->refs, 1);
+    s->mem = mem;
+    return s;
+}
+
+void tf_shared_bytes_release(tf_shared_bytes *s)
+{
+    if (s && atomic_fetch_sub_explicit(&s->refs, 1, memory_order_acq_rel) == 1) {
+        free(s->mem);
+        free(s);
+    }
+}
+
+static void shared_bytes_retain(tf_shared_bytes *s)
+{
+    atomic_fetch_add_explicit(&s->refs, 1, memory_order_relaxed);
 }
 
 static int is_bytes_type(int type) { return type == TF_FIELD_STRING || type == TF_FIELD_BLOB; }
@@ -156,9 +186,15 @@ int tf_tuple_pack(tf_tuple *t, const char *fmt, ...)
 
 void tf_tuple_clear(tf_tuple *t)
 {
-    for (int i = 0; i < t->nfields && i < TF_TUPLE_MAX_FIELDS; i++)
-        if (is_bytes_type(t->f[i].type) && !t->f[i].formal)
-            free(t->f[i].v.bytes.ptr);
+    for (int i = 0; i < t->nfields && i < TF_TUPLE_MAX_FIELDS; i++) {
+        const tf_field *f = &t->f[i];
+        if (!is_bytes_type(f->type) || f->formal)
+            continue;
+        if (f->v.bytes.shared)
+            tf_shared_bytes_release(f->v.bytes.shared);
+        else
+            free(f->v.bytes.ptr);
+    }
     tf_tuple_init(t);
 }
 
@@ -333,8 +369,17 @@ size_t tf_tuple_encode(const tf_tuple *t, uint8_t *buf)
     return (size_t)(p - buf);
 }
 
-/* A blob field whose bytes stay where they are (tf_tuple_view). */
-static int add_borrowed(tf_tuple *t, const uint8_t *p, size_t len)
+/* Where decode keeps a blob: a copy (the default), borrowed from buf (a view), or, from
+ * min_shared bytes on, left in buf with a reference to its owner. */
+typedef struct blob_rule {
+    int borrow;
+    tf_shared_bytes *owner;
+    size_t min_shared;
+} blob_rule;
+
+/* A blob field whose bytes stay where they are: borrowed (tf_tuple_view) or, with owner, a
+ * reference to owner's memory (tf_tuple_decode_shared). */
+static int add_in_place(tf_tuple *t, const uint8_t *p, size_t len, tf_shared_bytes *owner)
 {
     tf_field *f = next_field(t);
     if (!f || len > UINT32_MAX - 1)
@@ -342,14 +387,26 @@ static int add_borrowed(tf_tuple *t, const uint8_t *p, size_t len)
     f->type = TF_FIELD_BLOB;
     f->v.bytes.ptr = (uint8_t *)p;
     f->v.bytes.len = (uint32_t)len;
+    f->v.bytes.shared = owner;
+    if (owner)
+        shared_bytes_retain(owner);
     t->nfields++;
     return 0;
 }
 
-/* Decode one actual value of `type` at buf[*pos..len) into tuple t, a blob borrowed from buf
- * when `borrow` is set.  0 or -1 with err set. */
-static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type, int borrow,
-                        tf_tuple *t, char *err, size_t errlen)
+static int add_blob_by_rule(tf_tuple *t, const uint8_t *p, size_t n, const blob_rule *rule)
+{
+    if (rule->borrow)
+        return add_in_place(t, p, n, NULL);
+    if (rule->owner && n >= rule->min_shared)
+        return add_in_place(t, p, n, rule->owner);
+    return add_bytes(t, TF_FIELD_BLOB, p, n);
+}
+
+/* Decode one actual value of `type` at buf[*pos..len) into tuple t, a blob kept by `rule`.
+ * 0 or -1 with err set. */
+static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type,
+                        const blob_rule *rule, tf_tuple *t, char *err, size_t errlen)
 {
     size_t rest = len - *pos;
     if (type == TF_FIELD_INT || type == TF_FIELD_DOUBLE) {
@@ -384,7 +441,7 @@ static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type, i
         tf_seterr(err, errlen, "string field contains a NUL byte");
         return -1;
     }
-    if ((borrow && type == TF_FIELD_BLOB ? add_borrowed(t, p, n) : add_bytes(t, type, p, n))) {
+    if ((type == TF_FIELD_BLOB ? add_blob_by_rule(t, p, n, rule) : add_bytes(t, type, p, n))) {
         tf_seterr(err, errlen, "out of memory decoding a %" PRIu32 "-byte field", n);
         return -1;
     }
@@ -399,9 +456,10 @@ void tf_tuple_view_clear(tf_tuple *view)
     tf_tuple_init(view);
 }
 
-/* tf_tuple_decode, or with `borrow` tf_tuple_view (formals are never allowed then). */
-static int decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_formals, int borrow,
-                  char *err, size_t errlen)
+/* tf_tuple_decode, tf_tuple_view (rule->borrow) or tf_tuple_decode_shared (rule->owner);
+ * formals only for the first. */
+static int decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_formals,
+                  const blob_rule *rule, char *err, size_t errlen)
 {
     tf_tuple_init(out);
     if (len < 1) {
@@ -430,7 +488,7 @@ static int decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_forma
                 goto fail;
             }
             tf_tuple_add_formal(out, (enum tf_field_type)type);
-        } else if (decode_value(buf, len, &pos, type, borrow, out, err, errlen) != 0) {
+        } else if (decode_value(buf, len, &pos, type, rule, out, err, errlen) != 0) {
             goto fail;
         }
     }
@@ -440,7 +498,7 @@ static int decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_forma
     }
     return 0;
 fail:
-    if (borrow)
+    if (rule->borrow)
         tf_tuple_view_clear(out);
     else
         tf_tuple_clear(out);
@@ -450,12 +508,21 @@ fail:
 int tf_tuple_decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_formals,
                     char *err, size_t errlen)
 {
-    return decode(buf, len, out, allow_formals, 0, err, errlen);
+    const blob_rule copy = {0, NULL, 0};
+    return decode(buf, len, out, allow_formals, &copy, err, errlen);
+}
+
+int tf_tuple_decode_shared(const uint8_t *buf, size_t len, tf_shared_bytes *owner,
+                           size_t min_shared, tf_tuple *out, char *err, size_t errlen)
+{
+    const blob_rule share = {0, owner, min_shared};
+    return decode(buf, len, out, 0, &share, err, errlen);
 }
 
 int tf_tuple_view(const uint8_t *buf, size_t len, tf_tuple *out, char *err, size_t errlen)
 {
-    return decode(buf, len, out, 0, 1, err, errlen);
+    const blob_rule borrow = {1, NULL, 0};
+    return decode(buf, len, out, 0, &borrow, err, errlen);
 }
 
 size_t tf_tuple_bytes(const tf_tuple *t) { return tf_tuple_encoded_size(t); }

@@ -12,7 +12,10 @@
  * Ownership: a tf_tuple owns the bytes of its string and blob fields (each a separate heap
  * copy, always NUL-terminated so strings can be used as C strings; the length excludes the NUL).
  * tf_tuple_clear() frees them; tf_tuple_move() transfers them.  A zero-initialised tf_tuple
- * (or one after tf_tuple_init) is a valid empty tuple.
+ * (or one after tf_tuple_init) is a valid empty tuple.  The one exception: a large blob that
+ * tf_tuple_decode_shared left where it arrived holds a reference to that memory instead (a
+ * tf_shared_bytes, freed with the last reference, from any thread), and is not NUL-terminated;
+ * tf_tuple_clear() drops the reference, tf_tuple_copy() makes a copy of its own as usual.
  *
  * Encoding (used inside protocol frames, see proto.h; all integers little-endian):
  *   u8  field count N (0..TF_TUPLE_MAX_FIELDS)
@@ -41,6 +44,9 @@ enum tf_field_type {
     TF_FIELD_BLOB = 4    /* arbitrary bytes */
 };
 
+/* Memory holding the bytes of blob fields, shared by reference (tf_tuple_decode_shared). */
+typedef struct tf_shared_bytes tf_shared_bytes;
+
 typedef struct tf_field {
     uint8_t type;   /* enum tf_field_type */
     uint8_t formal; /* 1: template formal (no value); 0: actual */
@@ -50,6 +56,7 @@ typedef struct tf_field {
         struct {
             uint8_t *ptr; /* string/blob bytes + a NUL; NULL only when len == 0 for a blob */
             uint32_t len; /* bytes, excluding the trailing NUL */
+            tf_shared_bytes *shared; /* non-NULL: ptr lies in this memory (a blob, no NUL) */
         } bytes;
     } v;
 } tf_field;
@@ -118,6 +125,17 @@ size_t tf_tuple_encode(const tf_tuple *t, uint8_t *buf);
  * fit in the remaining bytes. */
 int tf_tuple_decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_formals,
                     char *err, size_t errlen);
+/* Wrap mem (from malloc) for sharing: one reference, the caller's.  NULL without memory (mem
+ * is then still the caller's to free). */
+tf_shared_bytes *tf_shared_bytes_adopt(void *mem);
+/* Drop one reference; the last frees the memory.  Thread-safe; NULL does nothing. */
+void tf_shared_bytes_release(tf_shared_bytes *s);
+/* Decode as tf_tuple_decode (no formals), except that every blob of at least min_shared bytes
+ * stays where it is in buf, which must lie in owner's memory: the field takes a reference to
+ * owner instead of a copy (a result's chunks are not copied out of the buffer they were received
+ * into).  The caller keeps its own reference, and drops it when it likes. */
+int tf_tuple_decode_shared(const uint8_t *buf, size_t len, tf_shared_bytes *owner,
+                           size_t min_shared, tf_tuple *out, char *err, size_t errlen);
 /* A view of a tuple's encoding (no formals), checked as tf_tuple_decode checks it, whose blob
  * fields borrow their bytes from buf instead of copying them (not NUL-terminated: only their
  * length bounds them); its strings are copies as usual.  For a look at a large tuple that

@@ -1,10 +1,11 @@
 /* test_tsserver.c: the tuple-space server and client end to end (common/linda/tsserver.c,
  * common/linda/tsclient.c): over a socketpair and loopback TCP; a blocked in woken by another
- * client's out, and the requests pipelined behind a blocked in; ts_out_in in two halves; hooks (on_take, on_out, on_disconnect); garbage, oversized, unknown-op and
- * half frames each dropping only their own connection; authentication with the right and the
- * wrong secret and an op before the handshake; wrong secrets slowed per address without
- * barring the right one from that address.  The server loop runs in a background thread;
- * the hooks record what they saw under a mutex. */
+ * client's out, and the requests pipelined behind a blocked in; ts_out_in in two halves; hooks
+ * (on_take, on_out, on_disconnect); a large OUT stored in the buffer it arrived in; garbage,
+ * oversized, unknown-op and half frames each dropping only their own connection;
+ * authentication with the right and the wrong secret and an op before the handshake; wrong
+ * secrets slowed per address without barring the right one from that address.  The server
+ * loop runs in a background thread; the hooks record what they saw under a mutex. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -36,7 +37,28 @@ typedef struct fixture {
     int takes, outs, disconnects;
     uint64_t blob_sum; /* of every blob byte on_out saw: it reads what it is shown */
     char addr[64];
+    /* on_out takes a ("grab", ?I, ?B) out of the space and frees it before it reads the view,
+     * as the supervisor does with a result (server thread only) */
+    int grabbed, grabbed_shared;
 } fixture;
+
+/* Take the tuple just stored out of the space, note whether its blob stayed in the buffer it
+ * was received into (shared), and free it. */
+static void grab_stored(fixture *fx)
+{
+    tf_tuple tmpl, got;
+    tf_tuple_init(&tmpl);
+    tf_tuple_init(&got);
+    tf_tuple_pack(&tmpl, "sIB", "grab");
+    if (ts_space_inp(fx->space, &tmpl, &got) == 1) {
+        pthread_mutex_lock(&fx->lock);
+        fx->grabbed++;
+        fx->grabbed_shared += got.f[2].v.bytes.shared != NULL;
+        pthread_mutex_unlock(&fx->lock);
+    }
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&tmpl);
+}
 
 static void on_take(void *ctx, uint64_t id, const tf_tuple *t)
 {
@@ -52,6 +74,9 @@ static void on_out(void *ctx, uint64_t id, const tf_tuple *t)
 {
     (void)id;
     fixture *fx = ctx;
+    const char *name = tf_tuple_name(t);
+    if (name && !strcmp(name, "grab"))
+        grab_stored(fx); /* the view below must outlive the stored tuple */
     uint64_t sum = 0;
     for (int i = 0; i < t->nfields; i++)
         if (t->f[i].type == TF_FIELD_BLOB)
@@ -553,6 +578,50 @@ static void test_large_outs(void **state)
     stop(fx);
 }
 
+/* A result-sized OUT is stored without a copy: its blob stays in the buffer the server read it
+ * into (tf_tuple_decode_shared), and the hook's view of it stays valid after the hook took the
+ * stored tuple out and freed it (make asan: no use after free).  A small one is copied. */
+static void test_large_out_stored_in_its_receive_buffer(void **state)
+{
+    (void)state;
+    int sv[2];
+    assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+    fixture *fx = start(NULL, sv[0]);
+    ts_client *c = ts_client_from_fd(sv[1]);
+    tf_tuple big, small;
+    uint8_t *blob = malloc(300 * 1024);
+    for (size_t k = 0; k < 300 * 1024; k++)
+        blob[k] = (uint8_t)(k * 7 + 1);
+    tf_tuple_init(&big);
+    tf_tuple_init(&small);
+    assert_int_equal(tf_tuple_pack(&big, "sib", "grab", (int64_t)1, blob, (size_t)300 * 1024), 0);
+    assert_int_equal(tf_tuple_pack(&small, "sib", "grab", (int64_t)2, blob, (size_t)100), 0);
+    free(blob);
+    pthread_mutex_lock(&fx->lock);
+    uint64_t sum0 = fx->blob_sum;
+    pthread_mutex_unlock(&fx->lock);
+    assert_int_equal(ts_out(c, &big), 0); /* the OK comes after the hook ran */
+    assert_int_equal(ts_out(c, &small), 0);
+    pthread_mutex_lock(&fx->lock);
+    uint64_t seen = fx->blob_sum - sum0;
+    pthread_mutex_unlock(&fx->lock);
+    uint64_t want = 0;
+    for (uint32_t k = 0; k < big.f[2].v.bytes.len; k++)
+        want += big.f[2].v.bytes.ptr[k];
+    for (uint32_t k = 0; k < small.f[2].v.bytes.len; k++)
+        want += small.f[2].v.bytes.ptr[k];
+    assert_true(seen == want);
+    pthread_mutex_lock(&fx->lock);
+    assert_int_equal(fx->grabbed, 2);
+    assert_int_equal(fx->grabbed_shared, 1);
+    pthread_mutex_unlock(&fx->lock);
+    exercise(c); /* the stream is still in step */
+    ts_client_close(c);
+    stop(fx);
+    tf_tuple_clear(&big);
+    tf_tuple_clear(&small);
+}
+
 static void test_bad_traffic_drops_only_that_connection(void **state)
 {
     (void)state;
@@ -719,6 +788,7 @@ int main(void)
         cmocka_unit_test(test_pipelined_behind_blocked_in),
         cmocka_unit_test(test_exchange_in_halves),
         cmocka_unit_test(test_large_outs),
+        cmocka_unit_test(test_large_out_stored_in_its_receive_buffer),
         cmocka_unit_test(test_tcp_blocked_in_woken_by_other_client),
         cmocka_unit_test(test_bad_traffic_drops_only_that_connection),
         cmocka_unit_test(test_auth),

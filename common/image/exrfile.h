@@ -57,9 +57,12 @@ int64_t tf_exr_next_chunk(const tf_exr_writer *w);
  * bytes, untouched (OpenEXRCore's raw chunk write).  0, or -1 with a message. */
 int tf_exr_write_chunk(tf_exr_writer *w, int cx, int cy, const void *packed, size_t len,
                        char *err, size_t errlen);
-/* Hand what the write-behind buffer holds to the file (one pwritev; no fsync).
- * tf_exr_write_chunk buffers: the coordinator flushes when its queue of results runs dry, so
- * results that come together cost one write.  0 or -1. */
+/* Hand what the write-behind buffer holds to the file (one pwritev, or whole blocks O_DIRECT;
+ * no fsync), and let go of every reference to the caller's chunks.  tf_exr_write_chunk buffers:
+ * the coordinator flushes when its queue of results runs dry, so results that come together
+ * cost one write.  On the direct path the last part block (under 4 KB) reaches the file only
+ * with the next tf_exr_sync, tf_exr_finish or tf_exr_abandon (or as part of a later block): a
+ * kill between them tears the last chunk, which a resume renders again.  0 or -1. */
 int tf_exr_flush(tf_exr_writer *w, char *err, size_t errlen);
 /* With hold on, tf_exr_write_chunk keeps a reference to large packed chunks instead of
  * copying them into the buffer, and the caller keeps that memory alive and unchanged until

@@ -278,6 +278,8 @@ static int sink_emit(tf_exr_sink *s, int settle)
 
 int tf_exr_sink_flush(tf_exr_sink *s) { return sink_emit(s, 1); }
 
+int tf_exr_sink_emit(tf_exr_sink *s) { return sink_emit(s, 0); }
+
 /* Add a piece to the run (which has room for it: the caller checked). */
 static void sink_add(tf_exr_sink *s, const void *p, size_t sz, uint64_t offset)
 {

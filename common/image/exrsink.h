@@ -89,6 +89,12 @@ void tf_exr_sink_check(const tf_exr_sink *s);
 /* Write the run out (pwritev, resumed after a short write; or through the stage), so that
  * every byte handed over is in the file.  0, or -1 with write_errno set. */
 int tf_exr_sink_flush(tf_exr_sink *s);
+/* The same, except that on the direct path the stage's last part block (under a block, a copy)
+ * stays staged, not yet in the file, until the next run continues it or a tf_exr_sink_flush puts
+ * it there: the references to the caller's memory end all the same.  Saves a buffered write of
+ * that block and, at the next direct write over it, the kernel's writeback and invalidation of
+ * its page; a kill loses at most those bytes (a torn last chunk, which a resume renders again). */
+int tf_exr_sink_emit(tf_exr_sink *s);
 /* OpenEXRCore's write function (its user data is the sink). */
 int64_t tf_exr_sink_write(exr_const_context_t ctxt, void *userdata, const void *buffer,
                           uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb);

@@ -346,7 +346,7 @@ int tf_exr_flush(tf_exr_writer *w, char *err, size_t errlen)
     /* Even when refusing new chunks (a failed chunk write), the whole chunks handed over
      * before it go out, and no reference to the caller's memory outlives this call. */
     int refused = writer_refuses(w, err, errlen);
-    if (tf_exr_sink_flush(&w->sink) && !refused) {
+    if (tf_exr_sink_emit(&w->sink) && !refused) {
         tf_seterr(err, errlen, "%s: cannot write: %s", w->path, strerror(w->sink.write_errno));
         return -1;
     }

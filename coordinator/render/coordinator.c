@@ -707,9 +707,7 @@ static int supervise(render *r)
     double last_wait_note = tf_now_s(), last_reap = 0;
     while (!interrupted && !tf_supervisor_done(r->sup) && !tf_supervisor_error(r->sup) &&
            !r->finish_error[0]) {
-        /* While results wait for the pixel checker's verdict, come back for it soon. */
-        int wait_ms = tf_supervisor_checks_pending(r->sup) ? 1 : 50;
-        if (ts_server_run_once(r->srv, wait_ms) < 0) {
+        if (ts_server_run_once(r->srv, tf_supervisor_wait_ms(r->sup)) < 0) {
             tf_error("event loop failed: %s", strerror(errno));
             break;
         }

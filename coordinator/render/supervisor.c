@@ -445,6 +445,13 @@ int tf_supervisor_checks_pending(tf_supervisor *s)
     return tf_resultcheck_pending(s->checker) > 0;
 }
 
+int tf_supervisor_wait_ms(tf_supervisor *s)
+{
+    if (tf_supervisor_checks_pending(s))
+        return 1; /* the checker's verdicts come without a message */
+    return sv_stragglers_matter(s) ? SV_WAIT_STRAGGLERS_MS : SV_WAIT_IDLE_MS;
+}
+
 int tf_supervisor_done(const tf_supervisor *s)
 {
     return s->write_job == s->njobs && !s->error[0];

@@ -179,6 +179,10 @@ void tf_supervisor_step(tf_supervisor *sup, double now_ms);
 int tf_supervisor_done(const tf_supervisor *sup);
 /* Results whose pixels are being checked (resultcheck.h): their verdicts come on a later step. */
 int tf_supervisor_checks_pending(tf_supervisor *sup);
+/* How long the caller's event loop may wait for a message before the next step: 1 ms while
+ * verdicts are pending, 50 while a straggler's copy may fall due, else 250 (every wait with
+ * nothing arriving costs a sleep and a wake-up: a tenth of the coordinator's CPU at 50 ms). */
+int tf_supervisor_wait_ms(tf_supervisor *sup);
 /* A fatal farm error (a task failed everywhere, a write error): the message, else NULL. */
 const char *tf_supervisor_error(const tf_supervisor *sup);
 /* Put the stop tuple out so workers leave. */

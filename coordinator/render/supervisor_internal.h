@@ -23,6 +23,11 @@
 #define STRAGGLER_FACTOR 3.0   /* a task is a straggler when held this many mean task times */
 #define STRAGGLER_MIN_MS 500.0
 #define STRAGGLER_SCAN_MS 20.0 /* the straggler scan runs at most this often */
+/* How long the event loop may wait for a message (tf_supervisor_wait_ms): while a straggler's
+ * copy may fall due, a few times within the shortest patience; otherwise only for what nothing
+ * announces (the progress line, the dashboard, reaping children), a few times a second. */
+#define SV_WAIT_STRAGGLERS_MS 50
+#define SV_WAIT_IDLE_MS 250
 #define FAILURES_TO_EXCLUDE 2 /* failures of one task on one worker before it is excluded */
 
 typedef struct task_slot {
@@ -145,6 +150,9 @@ int sv_note_failure(tf_supervisor *s, task_slot *t, int64_t worker);
 void sv_redeal_if_lost(tf_supervisor *s, task_slot *t);
 void sv_withdraw_copies(tf_supervisor *s, task_slot *t);
 void sv_deal_duplicate(tf_supervisor *s);
+/* Could a straggler's second copy fall due: workers wait for work and nothing fresh can be
+ * dealt (the image is all dealt, or the watermark holds dealing back). */
+int sv_stragglers_matter(tf_supervisor *s);
 void sv_update_watermark(tf_supervisor *s);
 
 /* ---- supervisor_results.c: results and the in-order handoff ---- */

@@ -98,6 +98,15 @@ void sv_withdraw_copies(tf_supervisor *s, task_slot *t)
 
 /* ---- stragglers ------------------------------------------------------------------------------- */
 
+int sv_stragglers_matter(tf_supervisor *s)
+{
+    ts_space_stats st;
+    ts_space_get_stats(s->space, &st);
+    if (st.waiters == 0)
+        return 0;
+    return !(s->next_deal < s->total_tasks && s->next_deal - s->write_task < s->watermark);
+}
+
 /* Workers are idle and nothing fresh can be dealt (the image is all dealt, or the watermark
  * holds dealing back behind a slow task): deal a second copy of the oldest task that has been
  * held for several mean task times.  Bounded (MAX_DUPLICATES_IN_FLIGHT), because a worker busy
@@ -112,12 +121,8 @@ void sv_deal_duplicate(tf_supervisor *s)
     if (now - s->last_straggler_scan_ms < STRAGGLER_SCAN_MS)
         return;
     s->last_straggler_scan_ms = now;
-    ts_space_stats st;
-    ts_space_get_stats(s->space, &st);
-    if (st.waiters == 0)
+    if (!sv_stragglers_matter(s))
         return;
-    if (s->next_deal < s->total_tasks && s->next_deal - s->write_task < s->watermark)
-        return; /* fresh work can still be dealt */
     for (int64_t id = s->write_task; id < s->next_deal; id++) {
         task_slot *t = sv_slot_of(s, id);
         if (t && t->in_space > 0 && !t->has_result)

@@ -921,6 +921,12 @@ static int unseal_and_serve(conn *c)
         if (c->in.len >= limit || c->raw.len == 0)
             return 0;
         char err[160];
+        /* a frame whose length is in: its buffer grown once to its size (detach_frame) */
+        size_t rest = tf_frame_rest(tf_buf_head(&c->in), c->in.len);
+        if (rest > 0 && rest <= limit - c->in.len && tf_buf_reserve_exact(&c->in, rest) != 0) {
+            conn_drop(c, "out of memory buffering input");
+            return -1;
+        }
         long n = tf_seal_open(&c->rx, tf_buf_head(&c->raw), c->raw.len, &c->in, err, sizeof err);
         if (n < 0) {
             conn_drop(c, err);

@@ -10,10 +10,10 @@
 
 void tf_directfile_check(const tf_directfile *f)
 {
-    assert(f->len < TF_DIRECTFILE_BUF && "F1: a full buffer went out at once");
+    assert(f->len < TF_DIRECTFILE_BUF && "W1: a full buffer went out at once");
     assert((!f->direct || f->off % TF_DIRECTFILE_ALIGN == 0) &&
-           "F2: the direct path wrote whole blocks only");
-    assert((f->err == 0 || f->len == 0) && "F3: nothing buffered after a failure");
+           "W2: the direct path wrote whole blocks only");
+    assert((f->err == 0 || f->len == 0) && "W3: nothing buffered after a failure");
     (void)f;
 }
 
@@ -94,6 +94,7 @@ int tf_directfile_write(tf_directfile *f, const void *p, size_t n)
         if (f->len == TF_DIRECTFILE_BUF)
             drain(f, f->len);
     }
+    tf_directfile_check(f);
     if (f->err)
         errno = f->err;
     return f->err ? -1 : 0;

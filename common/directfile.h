@@ -11,10 +11,10 @@
  * even in the middle: the file's bytes are the same either way.
  *
  * Invariants between calls (tf_directfile_check asserts them in the `make asan` build):
- *   F1  buf holds less than TF_DIRECTFILE_BUF bytes: a full buffer went out at once;
- *   F2  on the direct path every write so far was whole blocks: off is a multiple of
+ *   W1  buf holds less than TF_DIRECTFILE_BUF bytes: a full buffer went out at once;
+ *   W2  on the direct path every write so far was whole blocks: off is a multiple of
  *       TF_DIRECTFILE_ALIGN;
- *   F3  after the first failure (err != 0) nothing more is buffered (len == 0). */
+ *   W3  after the first failure (err != 0) nothing more is buffered (len == 0). */
 #ifndef TF_DIRECTFILE_H
 #define TF_DIRECTFILE_H
 
@@ -45,7 +45,7 @@ void tf_directfile_discard(tf_directfile *f);
 /* Leave the direct path now (tests: the buffered path from the start). */
 void tf_directfile_buffered(tf_directfile *f);
 
-/* Assert F1-F3 on f, one assert per clause; nothing with NDEBUG. */
+/* Assert W1-W3 on f, one assert per clause; nothing with NDEBUG. */
 void tf_directfile_check(const tf_directfile *f);
 
 #endif

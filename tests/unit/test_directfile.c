@@ -1,5 +1,5 @@
 /* test_directfile.c: files written front to back around the page cache (common/directfile.h).
- * Seeded pieces of 1 byte to 600 KB go through a tf_directfile; after every call F1-F3 hold,
+ * Seeded pieces of 1 byte to 600 KB go through a tf_directfile; after every call W1-W3 hold,
  * and at the end the file is exactly the bytes handed over (no padding of the last block, no
  * piece lost at a buffer's edge).  Then the same when the direct path is left in the middle
  * (what a write refused with EINVAL does), a file shorter than a block, a full disk reported

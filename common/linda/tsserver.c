@@ -63,6 +63,10 @@
  * TS_SHARE_BLOB_MIN bytes (a result's chunks); smaller fields are copied as usual. */
 #define TS_SHARE_MIN (32 * 1024)
 #define TS_SHARE_BLOB_MIN (16 * 1024)
+/* The most a frame's length field makes the server reserve before its bytes come (a longer
+ * frame's buffer grows as they do): a peer's header alone never costs more than a connection
+ * may keep anyway. */
+#define TS_EXACT_MAX TS_BUF_KEEP
 #define TS_POLL_CAP_MS 250    /* longest poll when timeouts must be enforced */
 #define TS_STALL_MS 1000      /* a gap this long between iterations is a stall (see enforce_timeouts) */
 #define TS_PENALTY_SLOTS 64   /* addresses remembered for failed handshakes */
@@ -849,7 +853,6 @@ static uint32_t conn_max_frame(const conn *c)
     return TF_MAX_FRAME;
 }
 
-/* Parse and serve the complete frames in c's input buffer (see the ordering invariant). */
 /* The frame f (n bytes at the head of c->in) leaves c->in without a copy: c->in's memory becomes
  * shared bytes (one reference, the caller's) for the tuple's blobs, and c->in starts afresh
  * with the bytes that followed the frame.  NULL, with nothing changed, without memory. */
@@ -869,6 +872,7 @@ static tf_shared_bytes *detach_frame(conn *c, size_t n)
     return shared;
 }
 
+/* Parse and serve the complete frames in c's input buffer (see the ordering invariant). */
 static void conn_process_input(conn *c)
 {
     char err[160];
@@ -923,7 +927,8 @@ static int unseal_and_serve(conn *c)
         char err[160];
         /* a frame whose length is in: its buffer grown once to its size (detach_frame) */
         size_t rest = tf_frame_rest(tf_buf_head(&c->in), c->in.len);
-        if (rest > 0 && rest <= limit - c->in.len && tf_buf_reserve_exact(&c->in, rest) != 0) {
+        if (rest > 0 && rest <= TS_EXACT_MAX && rest <= limit - c->in.len &&
+            tf_buf_reserve_exact(&c->in, rest) != 0) {
             conn_drop(c, "out of memory buffering input");
             return -1;
         }
@@ -969,7 +974,7 @@ static void conn_readable(conn *c)
         /* The rest of a frame whose length is in (and passed the parser): read to its end into a
          * buffer grown once to its size, which detach_frame can then hand over as it is. */
         size_t rest = c->sealed || c->waiting ? 0 : tf_frame_rest(tf_buf_head(dst), dst->len);
-        int exact = rest > 0 && rest <= room;
+        int exact = rest > 0 && rest <= TS_EXACT_MAX && rest <= room;
         if (exact)
             want = rest;
         if (want == 0)

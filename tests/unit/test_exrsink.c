@@ -69,33 +69,13 @@ static void put(tf_exr_sink *s, size_t off, size_t len)
         model_len = off + len;
 }
 
-/* The file holds exactly model[0, model_len). */
-static void file_matches_model(const char *path, const char *when)
-{
-    struct stat st;
-    assert_int_equal(stat(path, &st), 0);
-    if ((size_t)st.st_size != model_len)
-        fail_msg("%s: file has %lld bytes, the model %zu", when, (long long)st.st_size,
-                 model_len);
-    uint8_t *got = malloc(model_len + 1);
-    int fd = open(path, O_RDONLY);
-    assert_true(fd >= 0);
-    assert_int_equal(pread(fd, got, model_len, 0), (ssize_t)model_len);
-    close(fd);
-    for (size_t i = 0; i < model_len; i++)
-        if (got[i] != model[i])
-            fail_msg("%s: byte %zu of %zu is %u, not %u", when, i, model_len, got[i], model[i]);
-    free(got);
-}
-
-/* After tf_exr_sink_emit: the file is the model but for at most its last part block (under
- * s->align bytes), still staged. */
-static void file_matches_model_but_tail(const tf_exr_sink *s, const char *path, const char *when)
+/* The file has between model_len - short_by_under and model_len bytes, each the model's. */
+static void file_is_model_prefix(const char *path, size_t short_by_under, const char *when)
 {
     struct stat st;
     assert_int_equal(stat(path, &st), 0);
     size_t have = (size_t)st.st_size;
-    if (have > model_len || model_len - have >= (s->dfd >= 0 ? s->align : 1))
+    if (have > model_len || model_len - have >= short_by_under)
         fail_msg("%s: file has %zu bytes, the model %zu", when, have, model_len);
     uint8_t *got = malloc(have + 1);
     int fd = open(path, O_RDONLY);
@@ -106,6 +86,19 @@ static void file_matches_model_but_tail(const tf_exr_sink *s, const char *path, 
         if (got[i] != model[i])
             fail_msg("%s: byte %zu of %zu is %u, not %u", when, i, have, got[i], model[i]);
     free(got);
+}
+
+/* The file holds exactly model[0, model_len). */
+static void file_matches_model(const char *path, const char *when)
+{
+    file_is_model_prefix(path, 1, when);
+}
+
+/* After tf_exr_sink_emit: the file is the model but for at most its last part block (under
+ * s->align bytes), still staged. */
+static void file_matches_model_but_tail(const tf_exr_sink *s, const char *path, const char *when)
+{
+    file_is_model_prefix(path, s->dfd >= 0 ? s->align : 1, when);
 }
 
 /* A render's shape of writes: header, a gap for the table, chunks of a small header and large

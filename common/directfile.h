@@ -40,7 +40,8 @@ int tf_directfile_create(tf_directfile *f, const char *path);
 int tf_directfile_write(tf_directfile *f, const void *p, size_t n);
 /* Write what is buffered and close.  0, or -1 with errno (the first failure, or close's). */
 int tf_directfile_close(tf_directfile *f);
-/* Close without writing what is buffered (the caller removes the file). */
+/* Close without writing what is buffered (the caller removes the file); nothing on a file
+ * already closed or never created (fd -1). */
 void tf_directfile_discard(tf_directfile *f);
 /* Leave the direct path now (tests: the buffered path from the start). */
 void tf_directfile_buffered(tf_directfile *f);

@@ -15,8 +15,7 @@
 #include "log.h"
 
 struct tf_png_writer {
-    tf_directfile file;
-    int open;           /* file is open */
+    tf_directfile file; /* fd -1 when not open */
     png_structp png;
     png_infop info;
     int width, height, depth, channels, rows;
@@ -30,8 +29,7 @@ static void free_writer(tf_png_writer *w, int remove_tmp)
         return;
     if (w->png)
         png_destroy_write_struct(&w->png, &w->info);
-    if (w->open)
-        tf_directfile_discard(&w->file);
+    tf_directfile_discard(&w->file);
     if (remove_tmp && w->tmp)
         remove(w->tmp);
     free(w->swap);
@@ -64,6 +62,16 @@ static void write_bytes(png_structp png, png_bytep data, size_t n)
 
 static void flush_nothing(png_structp png) { (void)png; }
 
+/* One line for a failed libpng call: the file's errno when a write failed under it, else what
+ * libpng was doing. */
+static void png_failure(const tf_png_writer *w, const char *what, char *err, size_t errlen)
+{
+    if (w->file.err)
+        tf_seterr(err, errlen, "%s: write failed: %s", w->tmp, strerror(w->file.err));
+    else
+        tf_seterr(err, errlen, "%s: %s", w->path, what);
+}
+
 tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_depth, int channels,
                              char *err, size_t errlen)
 {
@@ -78,6 +86,7 @@ tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_de
         tf_seterr(err, errlen, "%s: out of memory", path);
         return NULL;
     }
+    w->file.fd = -1;
     w->width = width;
     w->height = height;
     w->depth = bit_depth;
@@ -96,7 +105,6 @@ tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_de
         free_writer(w, 0);
         return NULL;
     }
-    w->open = 1;
     w->png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, quiet_png_error, quiet_png_warning);
     w->info = w->png ? png_create_info_struct(w->png) : NULL;
     if (!w->info) {
@@ -167,10 +175,9 @@ int tf_png_write_row(tf_png_writer *w, const void *row, char *err, size_t errlen
         src = w->swap;
     }
     if (write_raw_row(w, src) != 0) {
-        if (w->file.err)
-            tf_seterr(err, errlen, "%s: write failed: %s", w->tmp, strerror(w->file.err));
-        else
-            tf_seterr(err, errlen, "%s: libpng error writing row %d", w->path, w->rows);
+        char what[64];
+        snprintf(what, sizeof what, "libpng error writing row %d", w->rows);
+        png_failure(w, what, err, errlen);
         return -1;
     }
     w->rows++;
@@ -185,17 +192,13 @@ int tf_png_finish(tf_png_writer *w, char *err, size_t errlen)
         return -1;
     }
     if (setjmp(png_jmpbuf(w->png))) {
-        if (w->file.err)
-            tf_seterr(err, errlen, "%s: write failed: %s", w->tmp, strerror(w->file.err));
-        else
-            tf_seterr(err, errlen, "%s: libpng error finishing the file", w->path);
+        png_failure(w, "libpng error finishing the file", err, errlen);
         free_writer(w, 1);
         return -1;
     }
     png_write_end(w->png, w->info);
     png_destroy_write_struct(&w->png, &w->info);
     w->png = NULL;
-    w->open = 0;
     int bad = tf_directfile_close(&w->file) != 0;
     if (bad) {
         tf_seterr(err, errlen, "%s: write failed: %s", w->tmp, strerror(errno));

@@ -26,7 +26,7 @@ const char *tf_op_name(int op)
 {
     static const char *names[] = {"?",    "OUT",  "IN",   "RD",    "INP",  "RDP",     "TUPLE",
                                   "NONE", "OK",   "PING", "PONG",  "HELLO", "AUTH", "AUTH_OK",
-                                  "ERROR"};
+                                  "ERROR", "OUT_SHARED"};
     return op >= 1 && op <= TF_OP_MAX ? names[op] : "?";
 }
 

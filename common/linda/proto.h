@@ -35,6 +35,12 @@
  *                       after sending it; with the id of a request, that one request was
  *                       refused by the connection's role (capability.h), nothing changed in
  *                       the space, and the connection stays open.
+ *   OUT_SHARED 15 c->s  u32 length L: an OUT whose tuple encoding (L bytes, as an OUT body) is
+ *                       the first L bytes of the connection's outbox, memory shared with the
+ *                       forked worker at its other end (outbox.h).  The server copies them
+ *                       before it answers; the worker leaves the outbox alone until the OK.
+ *                       On a connection without an outbox, or with L larger than the outbox or
+ *                       than a frame may be, it closes the connection.            reply OK
  *
  * When the HELLO says authentication is required, any frame but AUTH (even a PING) before a
  * successful AUTH closes the connection.  A wrong MAC gets an ERROR and a close, and the server
@@ -75,9 +81,10 @@ enum tf_op {
     TF_OP_HELLO = 11,
     TF_OP_AUTH = 12,
     TF_OP_AUTH_OK = 13,
-    TF_OP_ERROR = 14
+    TF_OP_ERROR = 14,
+    TF_OP_OUT_SHARED = 15
 };
-#define TF_OP_MAX TF_OP_ERROR
+#define TF_OP_MAX TF_OP_OUT_SHARED
 
 #define TF_HELLO_AUTH_REQUIRED 0x01
 #define TF_HELLO_SEALED 0x02 /* after AUTH_OK every byte is in sealed records (seal.h) */

@@ -95,6 +95,7 @@ typedef struct conn {
     int sealed;            /* after AUTH_OK with a key: records on the wire (seal.h) */
     tf_seal tx, rx;
     tf_buf raw, wire;      /* sealed: records read but not opened yet, records not yet sent */
+    tf_outbox outbox;      /* a forked worker's shared memory for OUT_SHARED (outbox.h) */
     int64_t created_ms, last_rx_ms;
     int64_t verdict_ms;    /* HELD: when "authentication failed" is sent and c closed */
     int waiting;           /* a blocked IN/RD is queued in the space */
@@ -207,6 +208,8 @@ int ts_server_port(const ts_server *srv) { return srv->port; }
 static void conn_touch(conn *c);
 static void addr_of(const char *peer, char *addr, size_t len);
 
+static conn *find_conn(const ts_server *srv, uint64_t id);
+
 static conn *conn_new(ts_server *srv, int fd, const char *peer, int trusted)
 {
     conn *c = calloc(1, sizeof *c);
@@ -294,6 +297,7 @@ static void conn_destroy(conn *c)
     tf_buf_free(&c->out);
     tf_buf_free(&c->raw);
     tf_buf_free(&c->wire);
+    tf_outbox_release(&c->outbox);
     sodium_memzero(&c->tx, sizeof c->tx);
     sodium_memzero(&c->rx, sizeof c->rx);
     free(c);
@@ -423,6 +427,18 @@ uint64_t ts_server_add_fd(ts_server *srv, int fd, const char *peer)
         return 0;
     }
     return c->id;
+}
+
+int ts_server_adopt_outbox(ts_server *srv, uint64_t conn_id, tf_outbox *ob)
+{
+    conn *c = find_conn(srv, conn_id);
+    if (!c)
+        return -1;
+    tf_outbox_release(&c->outbox);
+    c->outbox = *ob;
+    ob->base = NULL;
+    ob->size = 0;
+    return 0;
 }
 
 /* ---- admission: caps per address and for strangers, failed-handshake penalties ---- */
@@ -810,6 +826,34 @@ static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
     return 0;
 }
 
+static uint32_t conn_max_frame(const conn *c);
+
+/* OUT_SHARED: the tuple's encoding is at the start of c's outbox; it is copied out (the worker
+ * may write the outbox again once answered) into memory the stored tuple's blobs then keep. */
+static int handle_out_shared(conn *c, const tf_frame *f, char *err, size_t errlen)
+{
+    if (!c->outbox.base)
+        return tf_seterr(err, errlen, "OUT_SHARED on a connection without an outbox");
+    if (f->body_len != 4)
+        return tf_seterr(err, errlen, "OUT_SHARED body of %u bytes", f->body_len);
+    size_t len = (size_t)f->body[0] | (size_t)f->body[1] << 8 | (size_t)f->body[2] << 16 |
+                 (size_t)f->body[3] << 24;
+    if (len > c->outbox.size || len > conn_max_frame(c) - TF_FRAME_MIN_LENGTH)
+        return tf_seterr(err, errlen, "OUT_SHARED of %zu bytes, more than its outbox or a "
+                         "frame holds", len);
+    uint8_t *copy = malloc(len ? len : 1);
+    tf_shared_bytes *shared = copy ? tf_shared_bytes_adopt(copy) : NULL;
+    if (!shared) {
+        free(copy);
+        return tf_seterr(err, errlen, "out of memory");
+    }
+    memcpy(copy, c->outbox.base, len);
+    tf_frame out = {f->version, TF_OP_OUT, f->request_id, copy, (uint32_t)len};
+    int rc = handle_out(c, &out, shared, err, errlen);
+    tf_shared_bytes_release(shared); /* the stored tuple's blobs keep theirs */
+    return rc;
+}
+
 /* Serve one frame.  0 ok (c may have been closed), -1 protocol violation (err set). */
 static int handle_frame(conn *c, const tf_frame *f, tf_shared_bytes *shared, char *err,
                         size_t errlen)
@@ -822,6 +866,7 @@ static int handle_frame(conn *c, const tf_frame *f, tf_shared_bytes *shared, cha
     }
     switch (f->op) {
     case TF_OP_OUT: return handle_out(c, f, shared, err, errlen);
+    case TF_OP_OUT_SHARED: return handle_out_shared(c, f, err, errlen);
     case TF_OP_IN:
     case TF_OP_RD:
     case TF_OP_INP:

@@ -45,6 +45,7 @@
 
 #include "linda/auth.h"
 #include "linda/capability.h"
+#include "linda/outbox.h"
 #include "linda/tuple.h"
 #include "linda/tuplespace.h"
 
@@ -105,6 +106,10 @@ int ts_server_port(const ts_server *srv);
  * peer labels it in logs and ts_server_peer (e.g. "worker 3"; NULL: "fd N").  Returns the
  * connection id (> 0), or 0 on failure (fd closed). */
 uint64_t ts_server_add_fd(ts_server *srv, int fd, const char *peer);
+/* Give such a connection the outbox its forked worker shares (outbox.h): from now on it may send
+ * OUT_SHARED.  The connection takes the mapping (*ob is left empty) and releases it when it is
+ * freed.  0, or -1 (no such live connection; *ob is unchanged). */
+int ts_server_adopt_outbox(ts_server *srv, uint64_t conn_id, tf_outbox *ob);
 
 /* One event-loop iteration: wait up to timeout_ms (0: poll only, < 0: until something
  * happens) for socket events, accept, read, serve, write, enforce timeouts.  Returns the number

@@ -20,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -125,7 +126,8 @@ static void *server_main(void *arg)
     return NULL;
 }
 
-static fixture *start(const uint8_t *key, int extra_fd)
+/* A server on 127.0.0.1 (with key, or none), not yet running: connections may be added by fd. */
+static fixture *setup(const uint8_t *key)
 {
     fixture *fx = calloc(1, sizeof *fx);
     pthread_mutex_init(&fx->lock, NULL);
@@ -137,9 +139,19 @@ static fixture *start(const uint8_t *key, int extra_fd)
     assert_non_null(fx->srv);
     assert_true(ts_server_port(fx->srv) > 0);
     snprintf(fx->addr, sizeof fx->addr, "127.0.0.1:%d", ts_server_port(fx->srv));
+    return fx;
+}
+
+/* Run its loop in a background thread. */
+static void launch(fixture *fx) { pthread_create(&fx->thread, NULL, server_main, fx); }
+
+/* setup, the socketpair end extra_fd (if >= 0) added as a forked worker's, and launch. */
+static fixture *start(const uint8_t *key, int extra_fd)
+{
+    fixture *fx = setup(key);
     if (extra_fd >= 0)
         assert_true(ts_server_add_fd(fx->srv, extra_fd, "worker 1") > 0);
-    pthread_create(&fx->thread, NULL, server_main, fx);
+    launch(fx);
     return fx;
 }
 
@@ -622,6 +634,153 @@ static void test_large_out_stored_in_its_receive_buffer(void **state)
     tf_tuple_clear(&small);
 }
 
+/* A second view of ob's pages at another address (what a forked worker sees of its outbox),
+ * which the caller unmaps itself. */
+static tf_outbox second_view(const tf_outbox *ob)
+{
+    void *p = mremap(ob->base, 0, ob->size, MREMAP_MAYMOVE);
+    assert_true(p != MAP_FAILED);
+    assert_true(p != ob->base);
+    return (tf_outbox){p, ob->size};
+}
+
+/* A forked worker's connection: a socketpair whose server end (added to fx, not yet launched)
+ * has an outbox when with_outbox; *view gets the worker's view of it.  Returns the worker end. */
+static int worker_conn(fixture *fx, int with_outbox, tf_outbox *view)
+{
+    int sv[2];
+    assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+    uint64_t id = ts_server_add_fd(fx->srv, sv[0], "worker");
+    assert_true(id > 0);
+    *view = (tf_outbox){NULL, 0};
+    if (with_outbox) {
+        tf_outbox ob;
+        char err[160];
+        assert_int_equal(tf_outbox_create(&ob, err, sizeof err), 0);
+        *view = second_view(&ob);
+        assert_int_equal(ts_server_adopt_outbox(fx->srv, id, &ob), 0);
+        assert_null(ob.base); /* the connection has it now */
+    }
+    return sv[1];
+}
+
+/* An OUT_SHARED frame (request 1) whose body is the 4 bytes of len, or only `body` of them. */
+static void send_out_shared(int fd, uint32_t len, int body)
+{
+    uint8_t f[TF_FRAME_HEADER + 4] = {(uint8_t)(TF_FRAME_MIN_LENGTH + body), 0, 0, 0,
+                                      TF_PROTO_VERSION, TF_OP_OUT_SHARED, 1, 0, 0, 0,
+                                      (uint8_t)len, (uint8_t)(len >> 8), (uint8_t)(len >> 16),
+                                      (uint8_t)(len >> 24)};
+    size_t n = TF_FRAME_HEADER + (size_t)body;
+    assert_int_equal(send(fd, f, n, MSG_NOSIGNAL), (ssize_t)n);
+}
+
+/* A forked worker's large OUTs go through its outbox (OUT_SHARED): the tuples arrive whole and
+ * equal, the worker's view of the outbox holds the last one's encoding, and the server copied
+ * it before answering (the worker scribbling on its outbox after the OK changes nothing). */
+static void test_large_outs_through_the_outbox(void **state)
+{
+    (void)state;
+    fixture *fx = setup(NULL);
+    tf_outbox view;
+    int fd = worker_conn(fx, 1, &view);
+    launch(fx);
+    ts_client *c = ts_client_from_fd(fd);
+    tf_outbox client_view = view; /* the client unmaps it when closed */
+    ts_client_adopt_outbox(c, &client_view);
+    check_large_outs(fx, c, NULL);
+
+    tf_tuple t, m, got;
+    big_tuple(&t, 9, 100 * 1024);
+    assert_int_equal(ts_out(c, &t), 0);
+    size_t n = tf_tuple_encoded_size(&t);
+    uint8_t *enc = malloc(n);
+    tf_tuple_encode(&t, enc);
+    assert_memory_equal(view.base, enc, n);
+    memset(view.base, 0xAA, n);
+    tf_tuple_init(&m);
+    tf_tuple_pack(&m, "siB", "big", (int64_t)9);
+    assert_int_equal(ts_inp(c, &m, &got), 1);
+    assert_true(tf_tuple_equal(&t, &got));
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&m);
+    tf_tuple_clear(&t);
+    free(enc);
+    exercise(c);
+    ts_client_close(c);
+    stop(fx);
+}
+
+/* Workers that speak OUT_SHARED and lie about it: each lie drops its own connection, and only
+ * that one; the same frame telling the truth is stored (the control). */
+static void test_out_shared_lies_drop_only_their_connection(void **state)
+{
+    (void)state;
+    enum { TRUTH, SHORT_BODY, TOO_LONG, EMPTY, GARBAGE, FORMAL, NO_OUTBOX, NCASES };
+    fixture *fx = setup(NULL);
+    int fd[NCASES];
+    tf_outbox view[NCASES];
+    for (int i = 0; i < NCASES; i++)
+        fd[i] = worker_conn(fx, i != NO_OUTBOX, &view[i]);
+    launch(fx);
+    char err[256];
+    ts_client *good = ts_client_connect(fx->addr, NULL, 2000, err, sizeof err);
+    assert_non_null(good);
+    tf_tuple t, formal;
+    big_tuple(&t, 5, 40 * 1024);
+    tf_tuple_init(&formal);
+    assert_int_equal(tf_tuple_pack(&formal, "sI", "big"), 0);
+    size_t n = tf_tuple_encoded_size(&t), nf = tf_tuple_encoded_size(&formal);
+    for (int i = 0; i < NCASES; i++) {
+        if (view[i].base)
+            tf_tuple_encode(&t, view[i].base);
+        int before = counter(fx, &fx->disconnects);
+        switch (i) {
+        case TRUTH: send_out_shared(fd[i], (uint32_t)n, 4); break;
+        case SHORT_BODY: send_out_shared(fd[i], (uint32_t)n, 3); break;
+        case TOO_LONG: send_out_shared(fd[i], (uint32_t)view[i].size + 1, 4); break;
+        case EMPTY: send_out_shared(fd[i], 0, 4); break;
+        case GARBAGE:
+            memset(view[i].base, 0xff, 64);
+            send_out_shared(fd[i], 64, 4);
+            break;
+        case FORMAL:
+            tf_tuple_encode(&formal, view[i].base);
+            send_out_shared(fd[i], (uint32_t)nf, 4);
+            break;
+        case NO_OUTBOX: send_out_shared(fd[i], (uint32_t)n, 4); break;
+        }
+        if (i == TRUTH) {
+            uint8_t buf[256];
+            size_t have = 0;
+            tf_frame f;
+            assert_true(read_raw_frame(fd[i], buf, sizeof buf, &have, &f) > 0);
+            assert_int_equal(f.op, TF_OP_OK);
+            tf_tuple m, got;
+            tf_tuple_init(&m);
+            tf_tuple_pack(&m, "siB", "big", (int64_t)5);
+            assert_int_equal(ts_inp(good, &m, &got), 1);
+            assert_true(tf_tuple_equal(&t, &got));
+            tf_tuple_clear(&got);
+            tf_tuple_clear(&m);
+        } else {
+            assert_true(closed_by_server(fd[i]));
+            assert_true(wait_counter(fx, &fx->disconnects, before + 1));
+        }
+        exercise(good); /* the other client is undisturbed */
+    }
+    assert_int_equal(counter(fx, &fx->disconnects), NCASES - 1);
+    for (int i = 0; i < NCASES; i++) {
+        close(fd[i]);
+        if (view[i].base)
+            munmap(view[i].base, view[i].size);
+    }
+    tf_tuple_clear(&t);
+    tf_tuple_clear(&formal);
+    ts_client_close(good);
+    stop(fx);
+}
+
 static void test_bad_traffic_drops_only_that_connection(void **state)
 {
     (void)state;
@@ -789,6 +948,8 @@ int main(void)
         cmocka_unit_test(test_exchange_in_halves),
         cmocka_unit_test(test_large_outs),
         cmocka_unit_test(test_large_out_stored_in_its_receive_buffer),
+        cmocka_unit_test(test_large_outs_through_the_outbox),
+        cmocka_unit_test(test_out_shared_lies_drop_only_their_connection),
         cmocka_unit_test(test_tcp_blocked_in_woken_by_other_client),
         cmocka_unit_test(test_bad_traffic_drops_only_that_connection),
         cmocka_unit_test(test_auth),

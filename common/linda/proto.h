@@ -35,12 +35,13 @@
  *                       after sending it; with the id of a request, that one request was
  *                       refused by the connection's role (capability.h), nothing changed in
  *                       the space, and the connection stays open.
- *   OUT_SHARED 15 c->s  u32 length L: an OUT whose tuple encoding (L bytes, as an OUT body) is
- *                       the first L bytes of the connection's outbox, memory shared with the
- *                       forked worker at its other end (outbox.h).  The server copies them
- *                       before it answers; the worker leaves the outbox alone until the OK.
- *                       On a connection without an outbox, or with L larger than the outbox or
- *                       than a frame may be, it closes the connection.            reply OK
+ *   OUT_SHARED 15 c->s  u32 offset, u32 length L: an OUT whose tuple encoding (L bytes, as an OUT
+ *                       body) is the payload at that offset of a record of the connection's
+ *                       outbox, memory shared with the forked worker at its other end
+ *                       (outbox.h).  The stored tuple keeps its large blobs there until they
+ *                       are freed.  On a connection without an outbox, or with a payload no
+ *                       record could hold, or larger than a frame may be, it closes the
+ *                       connection.                                             reply OK
  *
  * When the HELLO says authentication is required, any frame but AUTH (even a PING) before a
  * successful AUTH closes the connection.  A wrong MAC gets an ERROR and a close, and the server

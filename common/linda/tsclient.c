@@ -38,7 +38,7 @@ struct ts_client {
     uint32_t next_req;
     tf_buf in, out;
     int sealed;            /* records on the wire after AUTH_OK (seal.h) */
-    tf_outbox outbox;      /* a forked worker's: large OUTs go as OUT_SHARED (outbox.h) */
+    tf_outbox *outbox;     /* a forked worker's: large OUTs go as OUT_SHARED (outbox.h) */
     tf_seal tx, rx;        /* tx under send_lock */
     tf_buf raw, wire;      /* records read but not opened; records being sent */
     char err[256];
@@ -94,10 +94,8 @@ ts_client *ts_client_from_fd(int fd)
 
 void ts_client_adopt_outbox(ts_client *c, tf_outbox *ob)
 {
-    tf_outbox_release(&c->outbox);
-    c->outbox = *ob;
-    ob->base = NULL;
-    ob->size = 0;
+    tf_outbox_unref(c->outbox);
+    c->outbox = ob;
 }
 
 /* Send every byte of buf; the caller holds send_lock.  0 or -1 with errno. */
@@ -139,23 +137,37 @@ typedef struct frame_spec {
     size_t rawlen;
 } frame_spec;
 
-/* Append frame f to c->out: a large OUT (at most one a write: the outbox holds one tuple, and
- * every caller awaits its OK before it sends again) as OUT_SHARED, its tuple encoded in the
- * outbox; any other frame with its body.  0 or -1. */
-static int append_frame(ts_client *c, const frame_spec *f, int *outbox_used)
+static void put_u32(uint8_t *p, uint64_t v)
+{
+    for (int i = 0; i < 4; i++)
+        p[i] = (uint8_t)(v >> (8 * i));
+}
+
+/* A large OUT as OUT_SHARED, its tuple encoded in a record of the outbox: 0 done, 1 not this
+ * way (no outbox, a small or oversized tuple, or no room now), -1 out of memory. */
+static int append_shared_out(ts_client *c, const frame_spec *f)
 {
     size_t size = f->t && f->op == TF_OP_OUT ? tf_tuple_encoded_size(f->t) : 0;
-    size_t most = TF_MAX_FRAME - TF_FRAME_MIN_LENGTH;
-    if (c->outbox.size < most)
-        most = c->outbox.size;
-    if (*outbox_used || size < TF_OUTBOX_MIN || size > most)
-        return f->t ? tf_frame_append_tuple(&c->out, f->op, f->req, f->t)
-                    : tf_frame_append_raw(&c->out, f->op, f->req, f->raw, f->rawlen);
-    tf_tuple_encode(f->t, c->outbox.base);
-    *outbox_used = 1;
-    uint8_t body[4] = {(uint8_t)size, (uint8_t)(size >> 8), (uint8_t)(size >> 16),
-                       (uint8_t)(size >> 24)};
+    if (!c->outbox || size < TF_OUTBOX_MIN || size > TF_MAX_FRAME - TF_FRAME_MIN_LENGTH)
+        return 1;
+    int64_t off = tf_outbox_reserve(c->outbox, size);
+    if (off < 0)
+        return 1;
+    tf_tuple_encode(f->t, tf_outbox_base(c->outbox) + off);
+    uint8_t body[8];
+    put_u32(body, (uint64_t)off);
+    put_u32(body + 4, size);
     return tf_frame_append_raw(&c->out, TF_OP_OUT_SHARED, f->req, body, sizeof body);
+}
+
+/* Append frame f to c->out (a large OUT through the outbox when it can).  0 or -1. */
+static int append_frame(ts_client *c, const frame_spec *f)
+{
+    int rc = append_shared_out(c, f);
+    if (rc <= 0)
+        return rc;
+    return f->t ? tf_frame_append_tuple(&c->out, f->op, f->req, f->t)
+                : tf_frame_append_raw(&c->out, f->op, f->req, f->raw, f->rawlen);
 }
 
 /* Send n frames in one write (under send_lock, so a heartbeat cannot come between them). */
@@ -165,9 +177,9 @@ static int send_frames(ts_client *c, int n, const frame_spec *f)
         return -1;
     pthread_mutex_lock(&c->send_lock);
     c->out.len = c->out.off = 0;
-    int rc = 0, outbox_used = 0;
+    int rc = 0;
     for (int i = 0; i < n && rc == 0; i++)
-        rc = append_frame(c, &f[i], &outbox_used);
+        rc = append_frame(c, &f[i]);
     if (rc != 0) {
         pthread_mutex_unlock(&c->send_lock);
         return fail(c, "request too large for one frame (%u bytes at most)", TF_MAX_FRAME);
@@ -508,7 +520,7 @@ void ts_client_close(ts_client *c)
     tf_buf_free(&c->out);
     tf_buf_free(&c->raw);
     tf_buf_free(&c->wire);
-    tf_outbox_release(&c->outbox);
+    tf_outbox_unref(c->outbox);
     sodium_memzero(&c->tx, sizeof c->tx);
     sodium_memzero(&c->rx, sizeof c->rx);
     pthread_mutex_destroy(&c->send_lock);

@@ -36,9 +36,9 @@ ts_client *ts_client_connect(const char *hostport, const uint8_t *key, int timeo
  * only on OOM. */
 ts_client *ts_client_from_fd(int fd);
 /* Such a client's outbox, shared with the server's end (outbox.h; the server adopted the same
- * one with ts_server_adopt_outbox): from now on a large OUT (TF_OUTBOX_MIN) is encoded there
- * and sent as OUT_SHARED.  c takes the mapping (*ob is left empty) and releases it when
- * closed; an empty *ob takes c's away (OUTs travel whole again). */
+ * one with ts_server_adopt_outbox): from now on a large OUT (TF_OUTBOX_MIN) is encoded in a
+ * record of it and sent as OUT_SHARED, or as before when it has no room.  c takes the
+ * caller's reference (NULL: none; OUTs travel whole again). */
 void ts_client_adopt_outbox(ts_client *c, tf_outbox *ob);
 /* Stop the heartbeat, close the socket, free. NULL is fine. */
 void ts_client_close(ts_client *c);

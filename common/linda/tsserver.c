@@ -95,7 +95,7 @@ typedef struct conn {
     int sealed;            /* after AUTH_OK with a key: records on the wire (seal.h) */
     tf_seal tx, rx;
     tf_buf raw, wire;      /* sealed: records read but not opened yet, records not yet sent */
-    tf_outbox outbox;      /* a forked worker's shared memory for OUT_SHARED (outbox.h) */
+    tf_outbox *outbox;     /* a forked worker's shared records for OUT_SHARED (outbox.h) */
     int64_t created_ms, last_rx_ms;
     int64_t verdict_ms;    /* HELD: when "authentication failed" is sent and c closed */
     int waiting;           /* a blocked IN/RD is queued in the space */
@@ -297,7 +297,7 @@ static void conn_destroy(conn *c)
     tf_buf_free(&c->out);
     tf_buf_free(&c->raw);
     tf_buf_free(&c->wire);
-    tf_outbox_release(&c->outbox);
+    tf_outbox_unref(c->outbox);
     sodium_memzero(&c->tx, sizeof c->tx);
     sodium_memzero(&c->rx, sizeof c->rx);
     free(c);
@@ -434,10 +434,8 @@ int ts_server_adopt_outbox(ts_server *srv, uint64_t conn_id, tf_outbox *ob)
     conn *c = find_conn(srv, conn_id);
     if (!c)
         return -1;
-    tf_outbox_release(&c->outbox);
-    c->outbox = *ob;
-    ob->base = NULL;
-    ob->size = 0;
+    tf_outbox_unref(c->outbox);
+    c->outbox = ob;
     return 0;
 }
 
@@ -828,27 +826,30 @@ static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
 
 static uint32_t conn_max_frame(const conn *c);
 
-/* OUT_SHARED: the tuple's encoding is at the start of c's outbox; it is copied out (the worker
- * may write the outbox again once answered) into memory the stored tuple's blobs then keep. */
+static uint32_t get_u32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+/* OUT_SHARED: the tuple's encoding is the payload of a record of c's outbox, decoded where it
+ * lies; the stored tuple's large blobs keep the record (tf_outbox_lend) until they are freed. */
 static int handle_out_shared(conn *c, const tf_frame *f, char *err, size_t errlen)
 {
-    if (!c->outbox.base)
+    if (!c->outbox)
         return tf_seterr(err, errlen, "OUT_SHARED on a connection without an outbox");
-    if (f->body_len != 4)
+    if (f->body_len != 8)
         return tf_seterr(err, errlen, "OUT_SHARED body of %u bytes", f->body_len);
-    size_t len = (size_t)f->body[0] | (size_t)f->body[1] << 8 | (size_t)f->body[2] << 16 |
-                 (size_t)f->body[3] << 24;
-    if (len > c->outbox.size || len > conn_max_frame(c) - TF_FRAME_MIN_LENGTH)
-        return tf_seterr(err, errlen, "OUT_SHARED of %zu bytes, more than its outbox or a "
-                         "frame holds", len);
-    uint8_t *copy = malloc(len ? len : 1);
-    tf_shared_bytes *shared = copy ? tf_shared_bytes_adopt(copy) : NULL;
-    if (!shared) {
-        free(copy);
+    uint64_t off = get_u32(f->body), len = get_u32(f->body + 4);
+    if (tf_outbox_payload_ok(c->outbox, off, len, err, errlen) != 0)
+        return -1;
+    if (len > conn_max_frame(c) - TF_FRAME_MIN_LENGTH)
+        return tf_seterr(err, errlen, "OUT_SHARED of %llu bytes, more than a frame holds",
+                         (unsigned long long)len);
+    tf_shared_bytes *shared = tf_outbox_lend(c->outbox, off);
+    if (!shared)
         return tf_seterr(err, errlen, "out of memory");
-    }
-    memcpy(copy, c->outbox.base, len);
-    tf_frame out = {f->version, TF_OP_OUT, f->request_id, copy, (uint32_t)len};
+    tf_frame out = {f->version, TF_OP_OUT, f->request_id, tf_outbox_base(c->outbox) + off,
+                    (uint32_t)len};
     int rc = handle_out(c, &out, shared, err, errlen);
     tf_shared_bytes_release(shared); /* the stored tuple's blobs keep theirs */
     return rc;

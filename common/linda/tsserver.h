@@ -107,8 +107,9 @@ int ts_server_port(const ts_server *srv);
  * connection id (> 0), or 0 on failure (fd closed). */
 uint64_t ts_server_add_fd(ts_server *srv, int fd, const char *peer);
 /* Give such a connection the outbox its forked worker shares (outbox.h): from now on it may send
- * OUT_SHARED.  The connection takes the mapping (*ob is left empty) and releases it when it is
- * freed.  0, or -1 (no such live connection; *ob is unchanged). */
+ * OUT_SHARED.  The connection takes the caller's reference and drops it when it is freed (the
+ * tuples it stored there hold their own).  0, or -1 (no such live connection; the reference
+ * stays the caller's). */
 int ts_server_adopt_outbox(ts_server *srv, uint64_t conn_id, tf_outbox *ob);
 
 /* One event-loop iteration: wait up to timeout_ms (0: poll only, < 0: until something

@@ -41,23 +41,27 @@ static uint64_t get_u64(const uint8_t *p)
 /* ---- shared bytes ---- */
 struct tf_shared_bytes {
     atomic_int refs;
-    void *mem;
+    void (*release)(void *ctx);
+    void *ctx;
 };
 
-tf_shared_bytes *tf_shared_bytes_adopt(void *mem)
+tf_shared_bytes *tf_shared_bytes_wrap(void (*release)(void *ctx), void *ctx)
 {
     tf_shared_bytes *s = malloc(sizeof *s);
     if (!s)
         return NULL;
     atomic_init(&s->refs, 1);
-    s->mem = mem;
+    s->release = release;
+    s->ctx = ctx;
     return s;
 }
+
+tf_shared_bytes *tf_shared_bytes_adopt(void *mem) { return tf_shared_bytes_wrap(free, mem); }
 
 void tf_shared_bytes_release(tf_shared_bytes *s)
 {
     if (s && atomic_fetch_sub_explicit(&s->refs, 1, memory_order_acq_rel) == 1) {
-        free(s->mem);
+        s->release(s->ctx);
         free(s);
     }
 }

@@ -128,6 +128,9 @@ int tf_tuple_decode(const uint8_t *buf, size_t len, tf_tuple *out, int allow_for
 /* Wrap mem (from malloc) for sharing: one reference, the caller's.  NULL without memory (mem
  * is then still the caller's to free). */
 tf_shared_bytes *tf_shared_bytes_adopt(void *mem);
+/* The same for memory owned elsewhere: release(ctx) runs with the last reference (on whichever
+ * thread drops it).  NULL without memory (release is then not called). */
+tf_shared_bytes *tf_shared_bytes_wrap(void (*release)(void *ctx), void *ctx);
 /* Drop one reference; the last frees the memory.  Thread-safe; NULL does nothing. */
 void tf_shared_bytes_release(tf_shared_bytes *s);
 /* Decode as tf_tuple_decode (no formals), except that every blob of at least min_shared bytes

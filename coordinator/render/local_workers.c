@@ -35,16 +35,16 @@ pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *h
         return -1;
     }
     /* Its results come through shared memory (outbox.h); without one, through the socket. */
-    tf_outbox outbox;
     char why[160];
-    if (tf_outbox_create(&outbox, why, sizeof why) != 0)
+    tf_outbox *outbox = tf_outbox_create(why, sizeof why);
+    if (!outbox)
         tf_warn("local worker %d: %s; its results come through its socket", index, why);
     pid_t pid = fork();
     if (pid < 0) {
         tf_seterr(err, errlen, "fork: %s", strerror(errno));
         close(sv[0]);
         close(sv[1]);
-        tf_outbox_release(&outbox);
+        tf_outbox_unref(outbox);
         return -1;
     }
     if (pid == 0) {
@@ -61,23 +61,24 @@ pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *h
         ts_client *c = ts_client_from_fd(sv[1]);
         if (!c)
             _exit(1);
-        ts_client_adopt_outbox(c, &outbox);
+        ts_client_adopt_outbox(c, outbox);
         int status = (loop ? loop : tf_worker_loop)(c, s, hf, "forked", backend);
         ts_client_close(c);
         _exit(status);
     }
     close(sv[1]);
-    tf_outbox_keep_from_later_forks(&outbox);
+    tf_outbox_keep_from_later_forks(outbox);
     char peer[32];
     snprintf(peer, sizeof peer, "local worker %d", index);
     uint64_t id = ts_server_add_fd(srv, sv[0], peer);
     if (!id) {
         tf_seterr(err, errlen, "cannot serve local worker %d", index);
         kill(pid, SIGKILL);
-        tf_outbox_release(&outbox);
+        tf_outbox_unref(outbox);
         return -1;
     }
-    ts_server_adopt_outbox(srv, id, &outbox);
+    if (outbox && ts_server_adopt_outbox(srv, id, outbox) != 0)
+        tf_outbox_unref(outbox);
     return pid;
 }
 

@@ -198,6 +198,10 @@ static int write_result(tf_rowwriter *rw, const tf_tuple *t, char *err, size_t e
     for (size_t i = 0; i < m.nchunks; i++) {
         tf_chunk_rec c;
         tf_chunk_rec_get(m.index + i * TF_CHUNK_RECORD_BYTES, &c);
+        /* The supervisor checked the index; a forked worker's chunks may lie in memory it
+         * shares (linda/outbox.h), so the bytes taken stay inside the blob whatever it holds. */
+        if (c.packed < 0 || (uint64_t)c.packed > m.chunks_len - off)
+            return tf_seterr(err, errlen, "internal error: a queued result's chunks are short");
         int64_t index = tf_layout_chunk_index(&rw->layout, c.cx, c.cy);
         tf_chunk_ref ref = tf_layout_chunk(&rw->layout, index < 0 ? 0 : index);
         if (i == 0)

@@ -20,8 +20,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
+#include <signal.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include "clock.h"
@@ -634,94 +636,148 @@ static void test_large_out_stored_in_its_receive_buffer(void **state)
     tf_tuple_clear(&small);
 }
 
-/* A second view of ob's pages at another address (what a forked worker sees of its outbox),
- * which the caller unmaps itself. */
-static tf_outbox second_view(const tf_outbox *ob)
-{
-    void *p = mremap(ob->base, 0, ob->size, MREMAP_MAYMOVE);
-    assert_true(p != MAP_FAILED);
-    assert_true(p != ob->base);
-    return (tf_outbox){p, ob->size};
-}
-
 /* A forked worker's connection: a socketpair whose server end (added to fx, not yet launched)
- * has an outbox when with_outbox; *view gets the worker's view of it.  Returns the worker end. */
-static int worker_conn(fixture *fx, int with_outbox, tf_outbox *view)
+ * has an outbox when with_outbox; *ob gets it (the server's reference), or NULL.  Returns the
+ * worker's end. */
+static int worker_conn(fixture *fx, int with_outbox, tf_outbox **ob)
 {
     int sv[2];
     assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
     uint64_t id = ts_server_add_fd(fx->srv, sv[0], "worker");
     assert_true(id > 0);
-    *view = (tf_outbox){NULL, 0};
+    *ob = NULL;
     if (with_outbox) {
-        tf_outbox ob;
         char err[160];
-        assert_int_equal(tf_outbox_create(&ob, err, sizeof err), 0);
-        *view = second_view(&ob);
-        assert_int_equal(ts_server_adopt_outbox(fx->srv, id, &ob), 0);
-        assert_null(ob.base); /* the connection has it now */
+        *ob = tf_outbox_create(err, sizeof err);
+        assert_non_null(*ob);
+        assert_int_equal(ts_server_adopt_outbox(fx->srv, id, *ob), 0);
     }
     return sv[1];
 }
 
-/* An OUT_SHARED frame (request 1) whose body is the 4 bytes of len, or only `body` of them. */
-static void send_out_shared(int fd, uint32_t len, int body)
+/* The state word of the outbox's first record: 1 while the coordinator holds it, 0 once free. */
+static uint32_t first_record_state(const tf_outbox *ob)
 {
-    uint8_t f[TF_FRAME_HEADER + 4] = {(uint8_t)(TF_FRAME_MIN_LENGTH + body), 0, 0, 0,
-                                      TF_PROTO_VERSION, TF_OP_OUT_SHARED, 1, 0, 0, 0,
-                                      (uint8_t)len, (uint8_t)(len >> 8), (uint8_t)(len >> 16),
-                                      (uint8_t)(len >> 24)};
-    size_t n = TF_FRAME_HEADER + (size_t)body;
-    assert_int_equal(send(fd, f, n, MSG_NOSIGNAL), (ssize_t)n);
+    return __atomic_load_n((const uint32_t *)(const void *)tf_outbox_base(ob), __ATOMIC_ACQUIRE);
 }
 
-/* A forked worker's large OUTs go through its outbox (OUT_SHARED): the tuples arrive whole and
- * equal, the worker's view of the outbox holds the last one's encoding, and the server copied
- * it before answering (the worker scribbling on its outbox after the OK changes nothing). */
-static void test_large_outs_through_the_outbox(void **state)
+/* The forked worker of test_results_kept_in_the_outbox: two large outs, then (once told) a
+ * third; its exit status says whether each was answered. */
+static int outbox_child(int fd, tf_outbox *ob)
+{
+    ts_client *c = ts_client_from_fd(fd);
+    ts_client_adopt_outbox(c, ob);
+    tf_tuple t, m, got;
+    int bad = 0;
+    for (int64_t id = 1; id <= 2; id++) {
+        big_tuple(&t, id, 100 * 1024);
+        bad |= ts_out(c, &t) != 0;
+        tf_tuple_clear(&t);
+    }
+    tf_tuple_init(&m);
+    tf_tuple_pack(&m, "s", "go");
+    bad |= ts_in(c, &m, &got) != 0;
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&m);
+    big_tuple(&t, 3, 50 * 1024);
+    bad |= ts_out(c, &t) != 0;
+    tf_tuple_clear(&t);
+    ts_client_close(c);
+    return bad;
+}
+
+/* Take ("big", id, ?B) over c: it must equal big_tuple(id, n). */
+static void take_big_equal(ts_client *c, int64_t id, size_t n)
+{
+    tf_tuple want, m, got;
+    big_tuple(&want, id, n);
+    tf_tuple_init(&m);
+    tf_tuple_pack(&m, "siB", "big", id);
+    assert_int_equal(ts_inp(c, &m, &got), 1);
+    assert_true(tf_tuple_equal(&want, &got));
+    tf_tuple_clear(&got);
+    tf_tuple_clear(&m);
+    tf_tuple_clear(&want);
+}
+
+/* A real forked worker's large outs are stored where it encoded them, in its outbox: the first
+ * record stays held while its tuple is stored and is freed once the tuple is taken; with both
+ * taken, the worker's next out reuses the ring's start; every tuple arrives equal. */
+static void test_results_kept_in_the_outbox(void **state)
 {
     (void)state;
     fixture *fx = setup(NULL);
-    tf_outbox view;
-    int fd = worker_conn(fx, 1, &view);
+    tf_outbox *ob;
+    int fd = worker_conn(fx, 1, &ob);
+    pid_t pid = fork(); /* before the server thread starts: the child runs one thread */
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        prctl(PR_SET_PDEATHSIG, SIGKILL); /* a failed test must not leave it waiting */
+        _exit(outbox_child(fd, ob));
+    }
+    close(fd);
     launch(fx);
-    ts_client *c = ts_client_from_fd(fd);
-    tf_outbox client_view = view; /* the client unmaps it when closed */
-    ts_client_adopt_outbox(c, &client_view);
-    check_large_outs(fx, c, NULL);
-
-    tf_tuple t, m, got;
-    big_tuple(&t, 9, 100 * 1024);
-    assert_int_equal(ts_out(c, &t), 0);
-    size_t n = tf_tuple_encoded_size(&t);
-    uint8_t *enc = malloc(n);
-    tf_tuple_encode(&t, enc);
-    assert_memory_equal(view.base, enc, n);
-    memset(view.base, 0xAA, n);
+    char err[256];
+    ts_client *c = ts_client_connect(fx->addr, NULL, 2000, err, sizeof err);
+    assert_non_null(c);
+    tf_tuple m, got; /* the worker's outs are answered in order: with the second, both are in */
     tf_tuple_init(&m);
-    tf_tuple_pack(&m, "siB", "big", (int64_t)9);
-    assert_int_equal(ts_inp(c, &m, &got), 1);
-    assert_true(tf_tuple_equal(&t, &got));
+    tf_tuple_pack(&m, "siB", "big", (int64_t)2);
+    assert_int_equal(ts_rd(c, &m, &got), 0);
     tf_tuple_clear(&got);
     tf_tuple_clear(&m);
-    tf_tuple_clear(&t);
+    assert_int_equal(first_record_state(ob), 1);
+    take_big_equal(c, 1, 100 * 1024);
+    assert_int_equal(first_record_state(ob), 0);
+    take_big_equal(c, 2, 100 * 1024);
+    tf_tuple go;
+    tup(&go, "s", "go", 0);
+    assert_int_equal(ts_out(c, &go), 0);
+    tf_tuple_clear(&go);
+    int status;
+    assert_int_equal(waitpid(pid, &status, 0), pid);
+    assert_true(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+    tf_tuple third;
+    big_tuple(&third, 3, 50 * 1024);
+    size_t n = tf_tuple_encoded_size(&third);
+    uint8_t *enc = malloc(n);
+    tf_tuple_encode(&third, enc);
+    assert_memory_equal(tf_outbox_base(ob) + TF_OUTBOX_HEADER, enc, n); /* the ring's start */
+    assert_int_equal(first_record_state(ob), 1);
     free(enc);
+    tf_tuple_clear(&third);
+    take_big_equal(c, 3, 50 * 1024);
     exercise(c);
     ts_client_close(c);
     stop(fx);
 }
 
-/* Workers that speak OUT_SHARED and lie about it: each lie drops its own connection, and only
- * that one; the same frame telling the truth is stored (the control). */
+/* An OUT_SHARED frame (request 1) naming a payload at off of len bytes; only `body` bytes of
+ * its 8-byte body are sent. */
+static void send_out_shared(int fd, uint32_t off, uint32_t len, int body)
+{
+    uint8_t f[TF_FRAME_HEADER + 8] = {(uint8_t)(TF_FRAME_MIN_LENGTH + body), 0, 0, 0,
+                                      TF_PROTO_VERSION, TF_OP_OUT_SHARED, 1, 0, 0, 0};
+    for (int i = 0; i < 4; i++) {
+        f[TF_FRAME_HEADER + i] = (uint8_t)(off >> (8 * i));
+        f[TF_FRAME_HEADER + 4 + i] = (uint8_t)(len >> (8 * i));
+    }
+    size_t n = TF_FRAME_HEADER + (size_t)body;
+    assert_int_equal(send(fd, f, n, MSG_NOSIGNAL), (ssize_t)n);
+}
+
+/* Workers that speak OUT_SHARED and lie: each lie drops its own connection, and only that one;
+ * the same frame telling the truth is stored (the control). */
 static void test_out_shared_lies_drop_only_their_connection(void **state)
 {
     (void)state;
-    enum { TRUTH, SHORT_BODY, TOO_LONG, EMPTY, GARBAGE, FORMAL, NO_OUTBOX, NCASES };
+    enum { TRUTH, SHORT_BODY, PAST_END, EMPTY, ON_HEADER, UNALIGNED, GARBAGE, FORMAL,
+           NO_OUTBOX, NCASES };
     fixture *fx = setup(NULL);
     int fd[NCASES];
-    tf_outbox view[NCASES];
+    tf_outbox *ob[NCASES];
     for (int i = 0; i < NCASES; i++)
-        fd[i] = worker_conn(fx, i != NO_OUTBOX, &view[i]);
+        fd[i] = worker_conn(fx, i != NO_OUTBOX, &ob[i]);
     launch(fx);
     char err[256];
     ts_client *good = ts_client_connect(fx->addr, NULL, 2000, err, sizeof err);
@@ -730,25 +786,29 @@ static void test_out_shared_lies_drop_only_their_connection(void **state)
     big_tuple(&t, 5, 40 * 1024);
     tf_tuple_init(&formal);
     assert_int_equal(tf_tuple_pack(&formal, "sI", "big"), 0);
-    size_t n = tf_tuple_encoded_size(&t), nf = tf_tuple_encoded_size(&formal);
+    uint32_t at = TF_OUTBOX_HEADER, n = (uint32_t)tf_tuple_encoded_size(&t);
+    uint32_t size = (uint32_t)TF_OUTBOX_BYTES;
     for (int i = 0; i < NCASES; i++) {
-        if (view[i].base)
-            tf_tuple_encode(&t, view[i].base);
+        uint8_t *base = ob[i] ? tf_outbox_base(ob[i]) : NULL;
+        if (base)
+            tf_tuple_encode(&t, base + at);
         int before = counter(fx, &fx->disconnects);
         switch (i) {
-        case TRUTH: send_out_shared(fd[i], (uint32_t)n, 4); break;
-        case SHORT_BODY: send_out_shared(fd[i], (uint32_t)n, 3); break;
-        case TOO_LONG: send_out_shared(fd[i], (uint32_t)view[i].size + 1, 4); break;
-        case EMPTY: send_out_shared(fd[i], 0, 4); break;
+        case TRUTH: send_out_shared(fd[i], at, n, 8); break;
+        case SHORT_BODY: send_out_shared(fd[i], at, n, 7); break;
+        case PAST_END: send_out_shared(fd[i], at, size - at + 1, 8); break;
+        case EMPTY: send_out_shared(fd[i], at, 0, 8); break;
+        case ON_HEADER: send_out_shared(fd[i], 0, n, 8); break;
+        case UNALIGNED: send_out_shared(fd[i], at + 1, n, 8); break;
         case GARBAGE:
-            memset(view[i].base, 0xff, 64);
-            send_out_shared(fd[i], 64, 4);
+            memset(base + at, 0xff, 64);
+            send_out_shared(fd[i], at, 64, 8);
             break;
         case FORMAL:
-            tf_tuple_encode(&formal, view[i].base);
-            send_out_shared(fd[i], (uint32_t)nf, 4);
+            tf_tuple_encode(&formal, base + at);
+            send_out_shared(fd[i], at, (uint32_t)tf_tuple_encoded_size(&formal), 8);
             break;
-        case NO_OUTBOX: send_out_shared(fd[i], (uint32_t)n, 4); break;
+        case NO_OUTBOX: send_out_shared(fd[i], at, n, 8); break;
         }
         if (i == TRUTH) {
             uint8_t buf[256];
@@ -756,13 +816,7 @@ static void test_out_shared_lies_drop_only_their_connection(void **state)
             tf_frame f;
             assert_true(read_raw_frame(fd[i], buf, sizeof buf, &have, &f) > 0);
             assert_int_equal(f.op, TF_OP_OK);
-            tf_tuple m, got;
-            tf_tuple_init(&m);
-            tf_tuple_pack(&m, "siB", "big", (int64_t)5);
-            assert_int_equal(ts_inp(good, &m, &got), 1);
-            assert_true(tf_tuple_equal(&t, &got));
-            tf_tuple_clear(&got);
-            tf_tuple_clear(&m);
+            take_big_equal(good, 5, 40 * 1024);
         } else {
             assert_true(closed_by_server(fd[i]));
             assert_true(wait_counter(fx, &fx->disconnects, before + 1));
@@ -770,11 +824,8 @@ static void test_out_shared_lies_drop_only_their_connection(void **state)
         exercise(good); /* the other client is undisturbed */
     }
     assert_int_equal(counter(fx, &fx->disconnects), NCASES - 1);
-    for (int i = 0; i < NCASES; i++) {
+    for (int i = 0; i < NCASES; i++)
         close(fd[i]);
-        if (view[i].base)
-            munmap(view[i].base, view[i].size);
-    }
     tf_tuple_clear(&t);
     tf_tuple_clear(&formal);
     ts_client_close(good);
@@ -948,7 +999,7 @@ int main(void)
         cmocka_unit_test(test_exchange_in_halves),
         cmocka_unit_test(test_large_outs),
         cmocka_unit_test(test_large_out_stored_in_its_receive_buffer),
-        cmocka_unit_test(test_large_outs_through_the_outbox),
+        cmocka_unit_test(test_results_kept_in_the_outbox),
         cmocka_unit_test(test_out_shared_lies_drop_only_their_connection),
         cmocka_unit_test(test_tcp_blocked_in_woken_by_other_client),
         cmocka_unit_test(test_bad_traffic_drops_only_that_connection),

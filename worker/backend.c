@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "worker/backend_opencl.h"
+#include "worker/opencl_ahead.h"
 #include "log.h"
 
 enum backend_kind { BACKEND_C, BACKEND_OPENCL };
@@ -17,6 +18,23 @@ struct tf_backend {
     tf_cl_backend *cl;       /* BACKEND_OPENCL */
     const tf_heightfield *hf;
 };
+
+/* The OpenCL backend: on the device started ahead (opencl_ahead.h) if there is one, else on
+ * one opened now. */
+static tf_cl_backend *opencl_backend(const tf_scene *s, const tf_heightfield *hf, char *err,
+                                     size_t errlen)
+{
+    if (!tf_opencl_ahead_pending())
+        return tf_cl_backend_new(s, hf, err, errlen);
+    tf_cl_backend *cl = tf_opencl_ahead_take(err, errlen);
+    if (cl && tf_cl_backend_attach(cl, s, hf, err, errlen)) {
+        tf_cl_backend_free(cl);
+        return NULL;
+    }
+    if (cl)
+        tf_debug("OpenCL: the device started while the terrain was built");
+    return cl;
+}
 
 tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightfield *hf,
                            char *err, size_t errlen)
@@ -34,7 +52,7 @@ tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightf
             return b;
     } else if (!strcmp(name, "opencl") || !strcmp(name, "auto")) {
         b->kind = BACKEND_OPENCL;
-        b->cl = tf_cl_backend_new(s, hf, err, errlen);
+        b->cl = opencl_backend(s, hf, err, errlen);
         if (b->cl)
             return b;
         if (!strcmp(name, "auto")) { /* asked for: fall back to C, and say so */

@@ -571,36 +571,21 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
 
 /* ---------------------------------------------------------------- public */
 
-tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, char *err,
-                                 size_t errlen)
+/* Why the kernels cannot render this terrain, or NULL. */
+static const char *unsupported(const tf_heightfield *hf)
 {
-    if (hf->proc) { /* the kernels walk a grid's max/min mipmap; a procedural terrain has none */
-        tf_seterr(err, errlen, "the OpenCL backend cannot trace procedural terrain "
-                  "([terrain] procedural = yes); use --backend c");
-        return NULL;
-    }
-    if (hf->silt) { /* the kernels do not read erosion's maps: they would shade it dry */
-        tf_seterr(err, errlen, "the OpenCL backend cannot shade an eroded terrain's water and "
-                  "silt ([erosion]); use --backend c");
-        return NULL;
-    }
-    tf_cl_backend *b = calloc(1, sizeof *b);
-    if (!b) {
-        tf_seterr(err, errlen, "out of memory");
-        return NULL;
-    }
-    b->renderer = tf_renderer_new(s, hf, err, errlen);
-    if (!b->renderer) {
-        free(b);
-        return NULL;
-    }
-    b->jitter_key = b->renderer->jitter_key;
-    b->lattice = b->renderer->lattice;
-    prepare_pocl_cache_dir();
-    cl_device_id dev;
-    cl_int rc;
-    if (choose_device(&dev, b->device_name, sizeof b->device_name, err, errlen))
-        goto fail;
+    if (hf->proc) /* the kernels walk a grid's max/min mipmap; a procedural terrain has none */
+        return "the OpenCL backend cannot trace procedural terrain ([terrain] procedural = yes); "
+               "use --backend c";
+    if (hf->silt) /* the kernels do not read erosion's maps: they would shade it dry */
+        return "the OpenCL backend cannot shade an eroded terrain's water and silt ([erosion]); "
+               "use --backend c";
+    return NULL;
+}
+
+/* The device's sizes: work-group, sample-cache scratch, items (see the comments inside). */
+static void choose_sizes(tf_cl_backend *b, cl_device_id dev)
+{
     /* Work-group size.  On a CPU a work-item is already a long, SIMD job (a batch of up to 256
      * samples), and a task has only a few dozen of them: groups of one let PoCL's threads
      * share a task's items evenly (bench_opencl default.scene 960x540, stamps: 1.28x C with
@@ -618,6 +603,21 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
                  : (type & CL_DEVICE_TYPE_CPU) && units == 1 ? SCRATCH_ONE_CPU_UNIT
                                                              : SCRATCH_LARGE;
     choose_item_sizes(b, (type & CL_DEVICE_TYPE_GPU) != 0);
+}
+
+tf_cl_backend *tf_cl_backend_open(char *err, size_t errlen)
+{
+    tf_cl_backend *b = calloc(1, sizeof *b);
+    if (!b) {
+        tf_seterr(err, errlen, "out of memory");
+        return NULL;
+    }
+    prepare_pocl_cache_dir();
+    cl_device_id dev;
+    cl_int rc;
+    if (choose_device(&dev, b->device_name, sizeof b->device_name, err, errlen))
+        goto fail;
+    choose_sizes(b, dev);
     b->ctx = clCreateContext(NULL, 1, &dev, NULL, NULL, &rc);
     if (rc != CL_SUCCESS) {
         tf_seterr(err, errlen, "OpenCL: cannot create a context on '%s' (error %d)",
@@ -630,7 +630,7 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
                  rc);
         goto fail;
     }
-    if (build_program(b, dev, err, errlen) || upload_world(b, err, errlen))
+    if (build_program(b, dev, err, errlen))
         goto fail;
     return b;
 fail:
@@ -638,8 +638,42 @@ fail:
     return NULL;
 }
 
+int tf_cl_backend_attach(tf_cl_backend *b, const tf_scene *s, const tf_heightfield *hf, char *err,
+                         size_t errlen)
+{
+    const char *why = unsupported(hf);
+    if (why)
+        return tf_seterr(err, errlen, "%s", why);
+    if (b->renderer)
+        return tf_seterr(err, errlen, "OpenCL: the backend already renders a scene");
+    b->renderer = tf_renderer_new(s, hf, err, errlen);
+    if (!b->renderer)
+        return -1;
+    b->jitter_key = b->renderer->jitter_key;
+    b->lattice = b->renderer->lattice;
+    return upload_world(b, err, errlen);
+}
+
+tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, char *err,
+                                 size_t errlen)
+{
+    const char *why = unsupported(hf); /* before the device's start, which costs 0.1 s */
+    if (why) {
+        tf_seterr(err, errlen, "%s", why);
+        return NULL;
+    }
+    tf_cl_backend *b = tf_cl_backend_open(err, errlen);
+    if (b && tf_cl_backend_attach(b, s, hf, err, errlen)) {
+        tf_cl_backend_free(b);
+        return NULL;
+    }
+    return b;
+}
+
 int tf_cl_backend_set_scene(tf_cl_backend *b, const tf_scene *s, char *err, size_t errlen)
 {
+    if (!b->renderer)
+        return tf_seterr(err, errlen, "OpenCL: no scene attached to the backend");
     const tf_heightfield *hf = b->renderer->hf;
     tf_renderer *r = tf_renderer_new(s, hf, err, errlen);
     if (!r)
@@ -809,6 +843,8 @@ static cl_int enqueue_pixel_batch(tf_cl_backend *b, tf_rect rect, size_t first, 
 int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
                          char *err, size_t errlen)
 {
+    if (!b->renderer)
+        return tf_seterr(err, errlen, "OpenCL: no scene attached to the backend");
     const tf_scene *s = b->renderer->scene;
     if (rect.w <= 0 || rect.h <= 0 || rect.x < 0 || rect.y < 0 || rect.x > s->width - rect.w ||
         rect.y > s->height - rect.h) {

@@ -15,6 +15,7 @@
 #include "scene.h"
 #include "worker/backend.h"
 #include "worker/erosion_patch.h"
+#include "worker/opencl_ahead.h"
 #include "worker/paint_worker.h"
 #include "worker/payloads.h"
 #include "linda/auth.h"
@@ -187,6 +188,19 @@ static int run_processes(int nproc, const char *connect, const uint8_t *key, int
     return status;
 }
 
+/* Start the OpenCL device on a thread while the terrain is built (opencl_ahead.h), when this
+ * process will render with it itself: one process (more are forked, and OpenCL state must not
+ * cross a fork), a render (painting uses the C renderer), and a terrain the kernels trace.
+ * 1 if started. */
+static int open_device_ahead(const tf_scene *s, const char *backend, int paint, int nproc)
+{
+    if (paint || nproc != 1 || !backend || (strcmp(backend, "opencl") && strcmp(backend, "auto")))
+        return 0;
+    if (s->terrain.procedural || s->terrain.erosion.fluvial_steps > 0)
+        return 0;
+    return tf_opencl_ahead_start() == 0;
+}
+
 int tf_networked_worker_run(const tf_networked_opts *o)
 {
     const char *connect = o->connect, *backend = o->backend, *model = o->simulate_model;
@@ -254,9 +268,12 @@ int tf_networked_worker_run(const tf_networked_opts *o)
     tf_info("joining %s: %dx%d render of a %s terrain; building the height field", connect,
             s->width, s->height, tf_generator_name(s->terrain.generator));
     ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS); /* stay alive while the terrain builds */
+    if (open_device_ahead(s, backend, paint, nproc))
+        tf_debug("OpenCL: starting the device while the terrain is built");
     tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
     if (!hf) {
         tf_error("%s", err);
+        tf_opencl_ahead_drop();
         tf_scene_free(s);
         ts_client_close(c);
         return 1;
@@ -272,6 +289,7 @@ int tf_networked_worker_run(const tf_networked_opts *o)
     }
     if (status == 0)
         tf_info("%s finished; worker leaving", paint ? "painting" : "render");
+    tf_opencl_ahead_drop(); /* not taken: the worker ended before making its backend */
     tf_heightfield_free(hf);
     tf_scene_free(s);
     return status;

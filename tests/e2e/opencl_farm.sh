@@ -4,7 +4,8 @@
 # (both must take tasks), against the C backend's image.  The contract is a tolerance (PSNR
 # >= 45 dB, sample counts equal for nearly all pixels: tests/unit/test_opencl.c measures it per
 # pixel); here the images are compared byte for byte when they can be (PoCL gives identical
-# bits), else by the statistics' ray and sample counts within 1%.  A scene with [terrain]
+# bits), else by the statistics' ray and sample counts within 1%; the networked OpenCL worker
+# (one process) starts its device on a thread while it builds the terrain.  A scene with [terrain]
 # smooth = yes, rendered by a networked OpenCL worker (which parses the scene's text and checks
 # its hash, that of the canonical form, which names the key when on), against the C
 # backend's smooth image, which must differ from the flat one.  A bad --cl-device gives a
@@ -59,7 +60,7 @@ say "mixed backends: a networked OpenCL worker and a networked C worker, one tas
     -o "$T/mixed.exr" --stats "$T/mixed.json" 2>"$T/coord.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/coord.err") || fail "coordinator printed no port: $(cat "$T/coord.err")"
-"$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --backend opencl -q 2>"$T/worker.err" &
+"$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --backend opencl -v 2>"$T/worker.err" &
 wk=$!; e2e_track $wk
 "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --backend c -q 2>"$T/cworker.err" &
 cwk=$!; e2e_track $cwk
@@ -70,6 +71,10 @@ wait_exit $wk 30
 wait_exit $cwk 30
 [ $rc -eq 0 ] || fail "C worker exited $rc: $(cat "$T/cworker.err")"
 close "$T/ref.json" "$T/mixed.exr" "C + OpenCL workers" "$T/mixed.json"
+# one process: its device was started on a thread while it built the terrain, and rendered
+grep -q 'starting the device while the terrain is built' "$T/worker.err" &&
+    grep -q 'the device started while the terrain was built' "$T/worker.err" ||
+    fail "the networked OpenCL worker did not start its device during the terrain build: $(grep -i opencl "$T/worker.err" | head -3)"
 by=$(python3 -c 'import json,sys; w=json.load(open(sys.argv[1]))["workers"]; print(" ".join("%s:%d" % (b, sum(x["tasks"] for x in w if x["backend"]==b)) for b in ("c","opencl")))' "$T/mixed.json")
 say "tasks by backend: $by"
 case "$by" in *"c:0"*|*"opencl:0"*) fail "one backend rendered no task ($by): not a mixed render" ;; esac

@@ -18,6 +18,12 @@
  *   C order, so match_c_backend and other_scenes also demand memcmp-identical pixels there (a
  *   wrong lane mask that touched a few pixels would still pass the tolerance).
  *   bad_device / bad_kernel_dir / bad_rect   one-line errors, no crash.
+ *   opened_ahead        a device started on a thread before the terrain exists
+ *                       (worker/opencl_ahead.h), then attached: the C pixels, memcmp-identical
+ *                       on PoCL; tf_backend_new takes it once (the next backend opens its own);
+ *                       a second start while one is pending is refused; an unattached backend
+ *                       refuses to render, and attach refuses a procedural terrain and a second
+ *                       scene, each in one line.
  *   installed_kernel_dir   the kernels and the C headers they share (make install's flat
  *                       layout, found through TERRAFARM_KERNELS) build and give the C pixels;
  *                       without a shared header the error is one line naming it.
@@ -46,6 +52,7 @@
 
 #include "worker/backend.h"
 #include "worker/backend_opencl.h"
+#include "worker/opencl_ahead.h"
 #include "terrain/heightfield.h"
 #include "render/render.h"
 #include "scene.h"
@@ -529,6 +536,49 @@ static void bad_rect(void **state)
     assert_non_null(strstr(err, "outside"));
 }
 
+static void opened_ahead(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    static tf_pixel img[W * H];
+    char err[1024] = "";
+    /* started with no scene or terrain in sight, then attached */
+    assert_int_equal(tf_opencl_ahead_start(), 0);
+    assert_int_equal(tf_opencl_ahead_start(), -1); /* one at a time */
+    assert_true(tf_opencl_ahead_pending());
+    tf_backend *b = tf_backend_new("opencl", fx.scene, fx.hf, err, sizeof err);
+    assert_non_null(b);
+    assert_false(tf_opencl_ahead_pending()); /* taken */
+    assert_int_equal(tf_backend_render(b, (tf_rect){0, 0, W, H}, img, NULL, err, sizeof err), 0);
+    assert_close_to_c(img, "a device opened ahead");
+    if (on_pocl_cpu(fx.cl))
+        assert_memory_equal(img, fx.c_img, sizeof img);
+    tf_backend *again = tf_backend_new("opencl", fx.scene, fx.hf, err, sizeof err);
+    assert_non_null(again); /* opened its own */
+    tf_backend_free(again);
+    tf_backend_free(b);
+
+    /* an opened backend renders nothing until attached, and is attached once */
+    tf_cl_backend *cl = tf_cl_backend_open(err, sizeof err);
+    assert_non_null(cl);
+    assert_int_equal(tf_cl_backend_render(cl, (tf_rect){0, 0, 1, 1}, img, NULL, err, sizeof err),
+                     -1);
+    assert_non_null(strstr(err, "no scene attached"));
+    tf_heightfield proc = *fx.hf;
+    proc.proc = (struct tf_procedural *)fx.hf; /* any non-NULL: attach must refuse it unread */
+    assert_int_equal(tf_cl_backend_attach(cl, fx.scene, &proc, err, sizeof err), -1);
+    assert_non_null(strstr(err, "procedural"));
+    assert_int_equal(tf_cl_backend_attach(cl, fx.scene, fx.hf, err, sizeof err), 0);
+    assert_int_equal(tf_cl_backend_attach(cl, fx.scene, fx.hf, err, sizeof err), -1);
+    assert_non_null(strstr(err, "already"));
+    tf_cl_backend_free(cl);
+
+    /* dropped untaken: nothing pending, nothing leaked (make asan) */
+    assert_int_equal(tf_opencl_ahead_start(), 0);
+    tf_opencl_ahead_drop();
+    assert_false(tf_opencl_ahead_pending());
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -540,7 +590,7 @@ int main(void)
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
         cmocka_unit_test(installed_kernel_dir), cmocka_unit_test(bad_rect),
         cmocka_unit_test(small_batches), cmocka_unit_test(item_sizes),
-        cmocka_unit_test(cores_shared),
+        cmocka_unit_test(cores_shared),     cmocka_unit_test(opened_ahead),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

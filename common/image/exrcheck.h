@@ -27,4 +27,8 @@ int tf_exr_chunk_check(const tf_exr_layout *l, const tf_chunk_ref *c, const uint
                        size_t packed_len, uint8_t **scratch, size_t *cap, char *err,
                        size_t errlen);
 
+/* OpenEXR's delta predictor undone in place (p[i] += p[i - 1] - 128, in order): what
+ * tf_exr_chunk_check does after inflating, exposed for its test against the plain loop. */
+void tf_exr_undo_delta(uint8_t *p, size_t n);
+
 #endif

@@ -5,7 +5,8 @@
  * tests undo a packed chunk here with zlib and OpenEXR's inverse filter, written out again so
  * that a mistake in exrzip.c is not mirrored, and ask exrcheck (the coordinator's check of a
  * worker's chunk) whether it decodes.  Whole files written through the packer are read back by
- * OpenEXRCore in test_exrfile and by exrcmp in every end-to-end render. */
+ * OpenEXRCore in test_exrfile and by exrcmp in every end-to-end render.  exrcheck's vector undo
+ * of the predictor is checked against the plain loop. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <setjmp.h>
@@ -135,6 +136,33 @@ static void test_packing_is_deterministic(void **state)
     tf_exr_zip_free(b);
 }
 
+/* exrcheck's vector undo of the predictor is the plain loop, byte for byte: every length from
+ * 0 to 200 (whole blocks of 16, tails, the block boundary after the first byte), every byte
+ * value, and a long run whose sums wrap many times. */
+static void test_undo_delta_matches_the_loop(void **state)
+{
+    (void)state;
+    enum { MAX = 4096 };
+    static uint8_t a[MAX], b[MAX];
+    uint32_t x = 12345;
+    for (size_t n = 0; n <= MAX; n = n < 200 ? n + 1 : n * 2 + 7) {
+        size_t len = n < MAX ? n : MAX;
+        for (size_t i = 0; i < len; i++)
+            a[i] = b[i] = (uint8_t)((x = x * 1103515245u + 12345u) >> 16);
+        tf_exr_undo_delta(a, len);
+        for (size_t i = 1; i < len; i++)
+            b[i] = (uint8_t)(b[i - 1] + b[i] - 128);
+        assert_memory_equal(a, b, len ? len : 1);
+    }
+    for (int v = 0; v < 256; v++) {
+        memset(a, v, 64), memset(b, v, 64);
+        tf_exr_undo_delta(a, 64);
+        for (size_t i = 1; i < 64; i++)
+            b[i] = (uint8_t)(b[i - 1] + b[i] - 128);
+        assert_memory_equal(a, b, 64);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -142,6 +170,7 @@ int main(void)
         cmocka_unit_test(test_incompressible_is_stored_raw),
         cmocka_unit_test(test_exrcheck_accepts_packed_chunks),
         cmocka_unit_test(test_packing_is_deterministic),
+        cmocka_unit_test(test_undo_delta_matches_the_loop),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -44,10 +44,10 @@ EMBREE_CFLAGS := $(shell pkg-config --cflags embree3 2>/dev/null)
 EMBREE_LIBS   := $(shell pkg-config --libs embree3 2>/dev/null || \
                    { $(CC) -E -include embree3/rtcore.h -x c /dev/null >/dev/null 2>&1 && echo -lembree3; })
 
-# 0. base: messages, clocks, vectors, GDAL loaded on first use, files written around the page
-#    cache; the scene file (parsed, validated, hashed)
+# 0. base: messages, clocks, vectors, the SIMD kernels' ISA choice, GDAL loaded on first use,
+#    files written around the page cache; the scene file (parsed, validated, hashed)
 BASE_SRC    := common/log.c common/clock.c common/datadir.c common/gdal_loader.c common/cachefile.c \
-               common/directfile.c common/animation.c common/scene_keys.c \
+               common/directfile.c common/animation.c common/isa.c common/scene_keys.c \
                common/scene_report.c common/scene_values.c common/scene_ini.c common/scene_check.c \
                common/scene_canonical.c common/scene_frame.c common/scene.c
 # 1. terrain: noise, fractal and grid generators, erosion, the height field and its max/min grids

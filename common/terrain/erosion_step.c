@@ -7,10 +7,11 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "isa.h"
 #include "terrain/erosion_kernel.h"
 
 static const struct {
-    const char *name;
+    const char *name; /* first: a kernel table of isa.h */
     tf_erosion_kernel *fn;
 } kernels[] = {
 #ifdef TF_EROSION_X86
@@ -21,46 +22,20 @@ static const struct {
 };
 enum { KERNELS = sizeof kernels / sizeof kernels[0] };
 
-/* Whether this CPU runs kernel i. */
-static int kernel_runs(int i)
-{
-#ifdef TF_EROSION_X86
-    if (!strcmp(kernels[i].name, "avx512"))
-        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
-               __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq");
-    if (!strcmp(kernels[i].name, "avx2"))
-        return __builtin_cpu_supports("avx2");
-#endif
-    return 1;
-}
-
 static const char *forced = NULL; /* NULL: TF_EROSION_ISA decides */
 static int forced_set = 0;
 
-/* The kernel named isa, or KERNELS. */
-static int kernel_named(const char *isa)
-{
-    int i = 0;
-    while (i < KERNELS && strcmp(kernels[i].name, isa))
-        i++;
-    return i;
-}
-
-/* The best kernel this CPU runs, no better than the one forced (an unknown name: none). */
+/* The best kernel this CPU runs, no better than the one forced (isa.h). */
 static int chosen(void)
 {
     const char *cap = forced_set ? forced : getenv("TF_EROSION_ISA");
-    int i = cap ? kernel_named(cap) : 0;
-    if (i == KERNELS)
-        i = 0;
-    while (!kernel_runs(i))
-        i++;
-    return i;
+    return tf_isa_choose(kernels, sizeof kernels[0], KERNELS, cap);
 }
 
 int tf_erosion_force_isa(const char *isa)
 {
-    if (isa && (kernel_named(isa) == KERNELS || !kernel_runs(kernel_named(isa))))
+    if (isa && (tf_isa_find(kernels, sizeof kernels[0], KERNELS, isa) == KERNELS ||
+                !tf_isa_runs(isa)))
         return -1;
     forced = isa;
     forced_set = isa != NULL;

@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "cachefile.h"
+#include "le_bytes.h"
 #include "log.h"
 
 #define MAGIC "TFCLPRG\0"        /* 8 bytes */
@@ -69,18 +70,6 @@ static int open_checked_dir(const char *dir, char *err, size_t errlen)
 
 /* ---------------------------------------------------------------- the key */
 
-static void put_u32(unsigned char *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
-}
-
-static void put_u64(unsigned char *p, uint64_t v)
-{
-    for (int i = 0; i < 8; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
-}
-
 static uint64_t get_le(const unsigned char *p, int bytes)
 {
     uint64_t v = 0;
@@ -93,7 +82,7 @@ static uint64_t get_le(const unsigned char *p, int bytes)
 static void hash_field(crypto_generichash_state *st, const void *p, size_t n)
 {
     unsigned char len8[8];
-    put_u64(len8, n);
+    tf_le_put64(len8, n);
     crypto_generichash_update(st, len8, sizeof len8);
     crypto_generichash_update(st, p, n);
 }
@@ -281,9 +270,9 @@ static void make_header(unsigned char *h, const tf_clcache *c, const unsigned ch
 {
     memset(h, 0, TF_CLCACHE_HEADER_BYTES);
     memcpy(h, MAGIC, 8);
-    put_u32(h + OFF_FORMAT, FORMAT);
+    tf_le_put32(h + OFF_FORMAT, FORMAT);
     memcpy(h + OFF_KEY, c->key, sizeof c->key);
-    put_u64(h + OFF_LENGTH, len);
+    tf_le_put64(h + OFF_LENGTH, len);
     crypto_generichash(h + OFF_SUM, crypto_generichash_BYTES, bin, len, NULL, 0);
 }
 

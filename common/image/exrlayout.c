@@ -1,11 +1,11 @@
 /* exrlayout.c: see exrlayout.h. */
 #include "image/exrlayout.h"
 
-#include <endian.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "le_bytes.h"
 #include "log.h"
 
 #define MAX_DIM 65536
@@ -171,44 +171,18 @@ void tf_preview_span(const tf_preview_grid *g, int width, int height, tf_rect r,
     *j1 = first_source_at(g, r.y + r.h, height, g->ph);
 }
 
-static void put_le32(uint8_t *p, uint32_t v)
-{
-    v = htole32(v);
-    memcpy(p, &v, 4);
-}
-
-static void put_le64(uint8_t *p, uint64_t v)
-{
-    v = htole64(v);
-    memcpy(p, &v, 8);
-}
-
-static uint32_t get_le32(const uint8_t *p)
-{
-    uint32_t v;
-    memcpy(&v, p, 4);
-    return le32toh(v);
-}
-
-static uint64_t get_le64(const uint8_t *p)
-{
-    uint64_t v;
-    memcpy(&v, p, 8);
-    return le64toh(v);
-}
-
 void tf_chunk_rec_put(uint8_t *rec, const tf_chunk_rec *c)
 {
-    put_le32(rec, (uint32_t)c->cx);
-    put_le32(rec + 4, (uint32_t)c->cy);
-    put_le64(rec + 8, (uint64_t)c->packed);
-    put_le64(rec + 16, (uint64_t)c->unpacked);
+    tf_le_put32(rec, (uint32_t)c->cx);
+    tf_le_put32(rec + 4, (uint32_t)c->cy);
+    tf_le_put64(rec + 8, (uint64_t)c->packed);
+    tf_le_put64(rec + 16, (uint64_t)c->unpacked);
 }
 
 void tf_chunk_rec_get(const uint8_t *rec, tf_chunk_rec *c)
 {
-    c->cx = (int32_t)get_le32(rec);
-    c->cy = (int32_t)get_le32(rec + 4);
-    c->packed = (int64_t)get_le64(rec + 8);
-    c->unpacked = (int64_t)get_le64(rec + 16);
+    c->cx = (int32_t)tf_le_get32(rec);
+    c->cy = (int32_t)tf_le_get32(rec + 4);
+    c->packed = (int64_t)tf_le_get64(rec + 8);
+    c->unpacked = (int64_t)tf_le_get64(rec + 16);
 }

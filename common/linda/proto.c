@@ -7,20 +7,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "le_bytes.h"
 #include "log.h"
-
-static uint32_t get_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
-static void put_u32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
 
 const char *tf_op_name(int op)
 {
@@ -40,7 +28,7 @@ long tf_frame_parse_max(const uint8_t *buf, size_t len, uint32_t max_length, tf_
 {
     if (len < 4)
         return 0;
-    uint32_t length = get_u32(buf);
+    uint32_t length = tf_le_get32(buf);
     if (max_length > TF_MAX_FRAME)
         max_length = TF_MAX_FRAME;
     if (length < TF_FRAME_MIN_LENGTH || length > max_length) {
@@ -60,7 +48,7 @@ long tf_frame_parse_max(const uint8_t *buf, size_t len, uint32_t max_length, tf_
         return 0;
     out->version = buf[4];
     out->op = buf[5];
-    out->request_id = get_u32(buf + 6);
+    out->request_id = tf_le_get32(buf + 6);
     out->body = buf + TF_FRAME_HEADER;
     out->body_len = length - TF_FRAME_MIN_LENGTH;
     return (long)length + 4;
@@ -70,7 +58,7 @@ size_t tf_frame_rest(const uint8_t *buf, size_t len)
 {
     if (len < 4)
         return 0;
-    uint64_t whole = 4 + (uint64_t)get_u32(buf);
+    uint64_t whole = 4 + (uint64_t)tf_le_get32(buf);
     return whole > len ? (size_t)(whole - len) : 0;
 }
 
@@ -149,10 +137,10 @@ static uint8_t *begin_frame(tf_buf *b, uint8_t op, uint32_t request_id, size_t b
     if (tf_buf_reserve(b, TF_FRAME_HEADER + body_len) != 0)
         return NULL;
     uint8_t *h = b->data + b->off + b->len;
-    put_u32(h, (uint32_t)(body_len + TF_FRAME_MIN_LENGTH));
+    tf_le_put32(h, (uint32_t)(body_len + TF_FRAME_MIN_LENGTH));
     h[4] = TF_PROTO_VERSION;
     h[5] = op;
-    put_u32(h + 6, request_id);
+    tf_le_put32(h + 6, request_id);
     b->len += TF_FRAME_HEADER + body_len;
     return h + TF_FRAME_HEADER;
 }

@@ -4,6 +4,7 @@
 #include <sodium.h>
 #include <string.h>
 
+#include "le_bytes.h"
 #include "log.h"
 
 static void derive(const uint8_t key[TF_KEY_BYTES], const char *label,
@@ -38,14 +39,6 @@ static void nonce_of(uint64_t n, uint8_t nonce[crypto_aead_xchacha20poly1305_iet
         nonce[i] = (uint8_t)(n >> (8 * i));
 }
 
-static void put_le32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
-
 int tf_seal_append(tf_seal *tx, tf_buf *out, const uint8_t *plain, size_t len)
 {
     while (len > 0) {
@@ -53,7 +46,7 @@ int tf_seal_append(tf_seal *tx, tf_buf *out, const uint8_t *plain, size_t len)
         if (tf_buf_reserve(out, 4 + n + TF_SEAL_ABYTES) != 0)
             return -1;
         uint8_t *p = out->data + out->off + out->len;
-        put_le32(p, (uint32_t)(n + TF_SEAL_ABYTES));
+        tf_le_put32(p, (uint32_t)(n + TF_SEAL_ABYTES));
         uint8_t nonce[crypto_aead_xchacha20poly1305_ietf_NPUBBYTES];
         nonce_of(tx->counter++, nonce);
         unsigned long long clen = 0;

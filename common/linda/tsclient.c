@@ -26,6 +26,7 @@
 #include <unistd.h>
 #include <sodium.h>
 
+#include "le_bytes.h"
 #include "linda/outbox.h"
 #include "linda/proto.h"
 #include "linda/seal.h"
@@ -137,12 +138,6 @@ typedef struct frame_spec {
     size_t rawlen;
 } frame_spec;
 
-static void put_u32(uint8_t *p, uint64_t v)
-{
-    for (int i = 0; i < 4; i++)
-        p[i] = (uint8_t)(v >> (8 * i));
-}
-
 /* A large OUT as OUT_SHARED, its tuple encoded in a record of the outbox: 0 done, 1 not this
  * way (no outbox, a small or oversized tuple, or no room now), -1 out of memory. */
 static int append_shared_out(ts_client *c, const frame_spec *f)
@@ -155,8 +150,8 @@ static int append_shared_out(ts_client *c, const frame_spec *f)
         return 1;
     tf_tuple_encode(f->t, tf_outbox_base(c->outbox) + off);
     uint8_t body[8];
-    put_u32(body, (uint64_t)off);
-    put_u32(body + 4, size);
+    tf_le_put32(body, (uint64_t)off);
+    tf_le_put32(body + 4, size);
     return tf_frame_append_raw(&c->out, TF_OP_OUT_SHARED, f->req, body, sizeof body);
 }
 

@@ -44,6 +44,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "le_bytes.h"
 #include "log.h"
 #include "linda/proto.h"
 #include "linda/seal.h"
@@ -826,11 +827,6 @@ static int handle_auth(conn *c, const tf_frame *f, char *err, size_t errlen)
 
 static uint32_t conn_max_frame(const conn *c);
 
-static uint32_t get_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
 /* OUT_SHARED: the tuple's encoding is the payload of a record of c's outbox, decoded where it
  * lies; the stored tuple's large blobs keep the record (tf_outbox_lend) until they are freed. */
 static int handle_out_shared(conn *c, const tf_frame *f, char *err, size_t errlen)
@@ -839,7 +835,7 @@ static int handle_out_shared(conn *c, const tf_frame *f, char *err, size_t errle
         return tf_seterr(err, errlen, "OUT_SHARED on a connection without an outbox");
     if (f->body_len != 8)
         return tf_seterr(err, errlen, "OUT_SHARED body of %u bytes", f->body_len);
-    uint64_t off = get_u32(f->body), len = get_u32(f->body + 4);
+    uint64_t off = tf_le_get32(f->body), len = tf_le_get32(f->body + 4);
     if (tf_outbox_payload_ok(c->outbox, off, len, err, errlen) != 0)
         return -1;
     if (len > conn_max_frame(c) - TF_FRAME_MIN_LENGTH)

@@ -8,35 +8,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "le_bytes.h"
 #include "log.h"
 
 #define TAG_FORMAL 0x80
-
-/* ---- little-endian helpers (shared shape with proto.c) ---- */
-static void put_u32(uint8_t *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++)
-        p[i] = (uint8_t)(v >> (8 * i));
-}
-static void put_u64(uint8_t *p, uint64_t v)
-{
-    for (int i = 0; i < 8; i++)
-        p[i] = (uint8_t)(v >> (8 * i));
-}
-static uint32_t get_u32(const uint8_t *p)
-{
-    uint32_t v = 0;
-    for (int i = 3; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
-}
-static uint64_t get_u64(const uint8_t *p)
-{
-    uint64_t v = 0;
-    for (int i = 7; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
-}
 
 /* ---- shared bytes ---- */
 struct tf_shared_bytes {
@@ -355,15 +330,15 @@ size_t tf_tuple_encode(const tf_tuple *t, uint8_t *buf)
         if (f->formal)
             continue;
         if (f->type == TF_FIELD_INT) {
-            put_u64(p, (uint64_t)f->v.i);
+            tf_le_put64(p, (uint64_t)f->v.i);
             p += 8;
         } else if (f->type == TF_FIELD_DOUBLE) {
             uint64_t bits;
             memcpy(&bits, &f->v.d, 8);
-            put_u64(p, bits);
+            tf_le_put64(p, bits);
             p += 8;
         } else {
-            put_u32(p, f->v.bytes.len);
+            tf_le_put32(p, f->v.bytes.len);
             p += 4;
             if (f->v.bytes.len)
                 memcpy(p, f->v.bytes.ptr, f->v.bytes.len);
@@ -419,7 +394,7 @@ static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type,
                      type == TF_FIELD_INT ? "int" : "double");
             return -1;
         }
-        uint64_t bits = get_u64(buf + *pos);
+        uint64_t bits = tf_le_get64(buf + *pos);
         *pos += 8;
         if (type == TF_FIELD_INT)
             return tf_tuple_add_int(t, (int64_t)bits);
@@ -431,7 +406,7 @@ static int decode_value(const uint8_t *buf, size_t len, size_t *pos, int type,
         tf_seterr(err, errlen, "tuple truncated in a length");
         return -1;
     }
-    uint32_t n = get_u32(buf + *pos);
+    uint32_t n = tf_le_get32(buf + *pos);
     *pos += 4;
     /* The length is checked against the bytes that remain before anything is allocated. */
     if (n > len - *pos) {

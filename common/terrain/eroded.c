@@ -17,6 +17,7 @@
 #include "terrain/erosion_state.h"
 #include "terrain/heightfield.h"
 #include "clock.h"
+#include "le_bytes.h"
 #include "log.h"
 
 #define MAGIC "TFERODE1"
@@ -86,16 +87,6 @@ static size_t blob_bytes(int n)
     return HEADER_BYTES + (size_t)MAPS * (size_t)n * (size_t)n * 4 + 32;
 }
 
-static void put_u32(uint8_t *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++)
-        p[i] = (uint8_t)(v >> (8 * i));
-}
-static uint32_t get_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
 /* The blob of an eroded state (floats are stored as the machine's IEEE single, little-endian
  * on every machine terrafarm builds for). */
 uint8_t *tf_eroded_encode(const tf_terrain *t, const tf_erosion_state *st,
@@ -112,9 +103,9 @@ uint8_t *tf_eroded_encode(const tf_terrain *t, const tf_erosion_state *st,
     }
     memcpy(b, MAGIC, 8);
     tf_eroded_key(t, b + 8);
-    put_u32(b + 40, (uint32_t)n);
+    tf_le_put32(b + 40, (uint32_t)n);
     memcpy(b + 44, &extent, 8);
-    put_u32(b + 52, (uint32_t)m->steps);
+    tf_le_put32(b + 52, (uint32_t)m->steps);
     uint8_t *at = b + HEADER_BYTES;
     tf_erosion_heights(st, m, row);
     memcpy(at, row, count * 4);
@@ -137,7 +128,7 @@ int tf_eroded_parse(const tf_terrain *t, int n, const uint8_t *bytes, size_t len
                     const char *from, float *h, tf_eroded_maps *maps, char *err, size_t errlen)
 {
     uint8_t key[32], sum[32];
-    if (len != blob_bytes(n) || memcmp(bytes, MAGIC, 8) || get_u32(bytes + 40) != (uint32_t)n)
+    if (len != blob_bytes(n) || memcmp(bytes, MAGIC, 8) || tf_le_get32(bytes + 40) != (uint32_t)n)
         return tf_seterr(err, errlen, "%s: not an eroded %dx%d terrain (%zu bytes)", from, n, n,
                          len);
     crypto_hash_sha256(sum, bytes, len - 32);

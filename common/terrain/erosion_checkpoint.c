@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "cachefile.h"
+#include "le_bytes.h"
 #include "log.h"
 
 #define MAGIC "TFESTAT1"
@@ -50,16 +51,6 @@ static void lineage_hex(const tf_terrain *t, uint8_t key[32], char hex[65])
 
 static size_t file_bytes(int n) { return HEADER + (size_t)ARRAYS * (size_t)n * n * 4 + 32; }
 
-static void put_u32(uint8_t *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++)
-        p[i] = (uint8_t)(v >> (8 * i));
-}
-static uint32_t get_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
 static void arrays(const tf_erosion_state *st, void *out[ARRAYS])
 {
     out[0] = st->b;
@@ -82,8 +73,8 @@ void tf_erosion_checkpoint_save(const tf_terrain *t, const char *dir, const tf_e
     memcpy(b, MAGIC, 8);
     lineage_hex(t, key, hex);
     memcpy(b + 8, key, 32);
-    put_u32(b + 40, (uint32_t)n);
-    put_u32(b + 44, (uint32_t)steps);
+    tf_le_put32(b + 40, (uint32_t)n);
+    tf_le_put32(b + 44, (uint32_t)steps);
     void *a[ARRAYS];
     arrays(st, a);
     for (int k = 0; k < ARRAYS; k++)
@@ -104,7 +95,7 @@ static int load(const char *path, const uint8_t key[32], int n, int steps, tf_er
     if (f)
         fclose(f);
     int ok = b && got == len && !memcmp(b, MAGIC, 8) && !memcmp(b + 8, key, 32) &&
-             get_u32(b + 40) == (uint32_t)n && get_u32(b + 44) == (uint32_t)steps;
+             tf_le_get32(b + 40) == (uint32_t)n && tf_le_get32(b + 44) == (uint32_t)steps;
     if (ok) {
         crypto_hash_sha256(sum, b, len - 32);
         ok = !sodium_memcmp(sum, b + len - 32, 32);

@@ -4,12 +4,8 @@
 #include <math.h>
 #include <string.h>
 
+#include "le_bytes.h"
 #include "paintproto.h"
-
-static uint32_t get_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
 
 /* Shade one cell [x0, x1] x [y0, y1] from its corners' colours. */
 static void shade_cell(uint8_t *rgb, int w, int x0, int x1, int y0, int y1, const uint8_t *c00,
@@ -67,9 +63,9 @@ int tf_paint_raster_apply(uint8_t *rgb, int w, int h, const uint8_t *msgs, size_
         if (len - at < TF_PAINT_MSG_HEADER)
             return -1;
         const uint8_t *m = msgs + at;
-        uint32_t kind = get_u32(m);
-        tf_paint_node n = {(int)get_u32(m + 4), (int)get_u32(m + 8), (int)get_u32(m + 12),
-                           (int)get_u32(m + 16), 0};
+        uint32_t kind = tf_le_get32(m);
+        tf_paint_node n = {(int)tf_le_get32(m + 4), (int)tf_le_get32(m + 8), (int)tf_le_get32(m + 12),
+                           (int)tf_le_get32(m + 16), 0};
         if ((kind != TF_PAINT_MSG_LATTICE && kind != TF_PAINT_MSG_EXACT) ||
             (kind == TF_PAINT_MSG_LATTICE) != (n.d > 0) || tf_paint_node_problem(&n, w, h))
             return -1;

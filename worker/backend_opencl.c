@@ -124,11 +124,13 @@ static void choose_item_sizes(tf_cl_backend *b, int gpu)
     }
 }
 
-/* Point PoCL at terrafarm's cache directory (unless the user chose one) and sweep from it the
- * empty files PoCL's start-up leaves there (pocl_cachedir.h).  Must run before the first
- * OpenCL call. */
-static void prepare_pocl_cache_dir(void)
+/* See backend_opencl.h. */
+void tf_cl_prepare_environment(void)
 {
+    static int done; /* once a process: the first call is made before any thread opens a device */
+    if (done)
+        return;
+    done = 1;
     char dir[PATH_MAX];
     tf_pocl_cache_dir_choose(dir, sizeof dir);
     if (!dir[0])
@@ -612,7 +614,7 @@ tf_cl_backend *tf_cl_backend_open(char *err, size_t errlen)
         tf_seterr(err, errlen, "out of memory");
         return NULL;
     }
-    prepare_pocl_cache_dir();
+    tf_cl_prepare_environment();
     cl_device_id dev;
     cl_int rc;
     if (choose_device(&dev, b->device_name, sizeof b->device_name, err, errlen))

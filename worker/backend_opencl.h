@@ -21,6 +21,12 @@ tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, ch
  * the scene and the height field (0, or -1 with a message: the backend may then only be
  * freed).  A backend is attached once; until then render and set_scene refuse. */
 tf_cl_backend *tf_cl_backend_open(char *err, size_t errlen);
+/* Point PoCL at terrafarm's cache directory (unless the user chose one: POCL_CACHE_DIR, set
+ * with setenv) and sweep from it the empty files PoCL's start-up leaves there
+ * (pocl_cachedir.h).  Once a process, before the first OpenCL call; open calls it, and whoever
+ * opens on a thread calls it first on its own, since setenv must not run beside other threads'
+ * getenv. */
+void tf_cl_prepare_environment(void);
 int tf_cl_backend_attach(tf_cl_backend *b, const tf_scene *s, const tf_heightfield *hf, char *err,
                          size_t errlen);
 int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,

@@ -23,6 +23,7 @@ int tf_opencl_ahead_start(void)
 {
     if (ahead.started)
         return -1;
+    tf_cl_prepare_environment(); /* its setenv here, not beside the terrain build's getenv */
     ahead.cl = NULL;
     ahead.err[0] = 0;
     if (pthread_create(&ahead.thread, NULL, open_device, NULL) != 0)

@@ -3,6 +3,7 @@
 #include "worker/opencl_ahead.h"
 
 #include <pthread.h>
+#include <signal.h>
 #include <stdio.h>
 
 static struct {
@@ -12,10 +13,18 @@ static struct {
     char err[512];
 } ahead;
 
+/* The thread.  The first OpenCL start of a process may have LLVM (PoCL's compiler) install its
+ * signal handlers and, on this thread, an alternate signal stack of its own, which the thread's
+ * exit would then hand back to whoever set the one before (under ASan: an munmap of LLVM's
+ * malloc'd block, a fatal CHECK).  The thread leaves the alternate stack as it found it. */
 static void *open_device(void *unused)
 {
     (void)unused;
+    stack_t before;
+    int saved = sigaltstack(NULL, &before) == 0;
     ahead.cl = tf_cl_backend_open(ahead.err, sizeof ahead.err);
+    if (saved)
+        sigaltstack(&before, NULL);
     return NULL;
 }
 

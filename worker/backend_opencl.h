@@ -15,20 +15,20 @@ typedef struct tf_cl_backend tf_cl_backend;
  * upload the height field and its max grids.  NULL with a one-line message on failure. */
 tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, char *err,
                                  size_t errlen);
-/* tf_cl_backend_new in two parts, so that the first can run while the terrain is built (a
- * thread of worker/backend.c's tf_backend_open_ahead): open starts the device (platform,
- * context, queue, the program through the binary cache), which needs no scene; attach gives it
- * the scene and the height field (0, or -1 with a message: the backend may then only be
- * freed).  A backend is attached once; until then render and set_scene refuse. */
+/* tf_cl_backend_new in two parts, so that the first can run while the terrain is built (on
+ * the thread of worker/opencl_ahead.h): open starts the device (platform, context, queue, the
+ * program through the binary cache), which needs no scene; attach gives it the scene and the
+ * height field (0, or -1 with a message: the backend may then only be freed).  A backend is
+ * attached once; until then render and set_scene refuse. */
 tf_cl_backend *tf_cl_backend_open(char *err, size_t errlen);
+int tf_cl_backend_attach(tf_cl_backend *b, const tf_scene *s, const tf_heightfield *hf, char *err,
+                         size_t errlen);
 /* Point PoCL at terrafarm's cache directory (unless the user chose one: POCL_CACHE_DIR, set
  * with setenv) and sweep from it the empty files PoCL's start-up leaves there
  * (pocl_cachedir.h).  Once a process, before the first OpenCL call; open calls it, and whoever
  * opens on a thread calls it first on its own, since setenv must not run beside other threads'
  * getenv. */
 void tf_cl_prepare_environment(void);
-int tf_cl_backend_attach(tf_cl_backend *b, const tf_scene *s, const tf_heightfield *hf, char *err,
-                         size_t errlen);
 int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
                          char *err, size_t errlen);
 void tf_cl_backend_free(tf_cl_backend *b);

@@ -20,7 +20,7 @@ int tf_exr_chunk_decodes(const uint8_t *packed, size_t packed_len, size_t unpack
         return -1;
     if (packed_len == unpacked)
         return 0; /* stored raw */
-    if (tf_growbuf(scratch, cap, 2 * unpacked + 1))
+    if (tf_growbuf(scratch, cap, unpacked))
         return -1;
     /* libdeflate inflates ~2x as fast as zlib (bench/README.md section 15); with no room for
      * more, a stream of another length, or a bad checksum, is refused */

@@ -22,7 +22,7 @@ int tf_exr_chunk_decodes(const uint8_t *packed, size_t packed_len, size_t unpack
 
 /* Does chunk c of layout l, packed in packed_len bytes, decode, and hold only finite values in
  * every channel?  0, or -1 with a one-line reason ("does not decode", "channel R holds a NaN
- * at (x, y)").  *scratch as above (twice the unpacked size). */
+ * at (x, y)").  *scratch as above: the check reads the inflated bytes where they lie. */
 int tf_exr_chunk_check(const tf_exr_layout *l, const tf_chunk_ref *c, const uint8_t *packed,
                        size_t packed_len, uint8_t **scratch, size_t *cap, char *err,
                        size_t errlen);

@@ -1,7 +1,10 @@
 /* render.c: tf_render_rect, adaptive antialiasing over a rectangle of the image.
  *
- * A rectangle walks its pixel rows top to bottom, keeping two rows of pixel-corner samples (the
- * row above and the row below the current pixel row, w+1 samples each).  The last corner row
+ * A rectangle walks its pixel rows bottom to top, keeping two rows of pixel-corner samples (the
+ * row above and the row below the current pixel row, w+1 samples each).  Bottom to top because
+ * a camera ray climbs above the ray below it: traced after it, it starts its walk where that one
+ * hit (tf_trace_coherent, trace.h), if the terrain's slope allows; each sample's ray record is
+ * kept beside it, and each lattice column's highest record is handed up to the next pixel row.  The last corner row
  * and column lie outside the rectangle ("external samples", counted in external_rays): they are
  * computed here rather than borrowed from a neighbour, so tasks never wait on each other.
  *
@@ -21,8 +24,9 @@
  * rectangle: THE DECOMPOSITION INVARIANT.  No recursion and no function pointers, so the same
  * loop ports to OpenCL C.
  *
- * A corner row's samples are coherent camera rays: on a grid terrain they are traced together
- * in SIMD packets (trace_packet.h), then shaded up to their shadow rays, which are traced
+ * A corner row's samples are coherent camera rays: on a grid terrain with coherence off
+ * (tf_render_coherence_force, TF_COHERENCE=0) they are traced together in SIMD packets
+ * (trace_packet.h), then shaded up to their shadow rays, which are traced
  * together too, then finished (tf_shade_begin / tf_shade_end): the same bits as one
  * tf_shade_ray a sample.  Whether packets are used is tf_trace_packets_enabled's choice
  * (TF_TRACE_PACKETS; unset, the AVX-512 kernel only); a procedural terrain is always traced one
@@ -80,6 +84,33 @@ tf_renderer *tf_renderer_new(const tf_scene *s, const tf_heightfield *hf, char *
 
 void tf_renderer_free(tf_renderer *r) { free(r); }
 
+static int coherence_forced = -1;
+
+void tf_render_coherence_force(int on) { coherence_forced = on < 0 ? -1 : on != 0; }
+
+/* Camera rays helped by the ones below them (trace.h, tf_trace_coherent): on a grid terrain,
+ * unless forced off or TF_COHERENCE=0.  Never changes a bit, only the time. */
+static int coherence_on(const tf_renderer *r)
+{
+    if (r->hf->proc)
+        return 0;
+    if (coherence_forced >= 0)
+        return coherence_forced;
+    const char *v = getenv("TF_COHERENCE");
+    return !(v && !strcmp(v, "0"));
+}
+
+/* tf_render_lattice_sample with the camera ray traced by tf_trace_coherent. */
+static void lattice_sample_coherent(const tf_renderer *r, int64_t X, int64_t Y,
+                                    const tf_ray_clear *lower, tf_ray_clear *mine, tf_sample *out,
+                                    uint64_t *shadow_rays)
+{
+    double x, y;
+    tf_lattice_position(r->jitter_key, (double)r->lattice, X, Y, &x, &y);
+    tf_shade_ray_coherent(&r->shader, r->camera.position, tf_camera_dir(&r->camera, x, y), lower,
+                          mine, out, shadow_rays);
+}
+
 void tf_render_point(const tf_renderer *r, double x, double y, tf_sample *out,
                      uint64_t *shadow_rays)
 {
@@ -134,12 +165,38 @@ static double display_range(const tf_sample *const s[], int n)
     return widest;
 }
 
-/* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice. */
+/* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice.  With coherence, each sample's
+ * ray record too, and `column`: the rectangle's record for each of the pixel's N+1 lattice
+ * columns of the highest ray traced in it below this pixel row (NULL: no coherence). */
 typedef struct pixel_cache {
     int side;           /* N + 1 */
     tf_sample *sample;  /* side * side */
     unsigned char *have;
+    tf_ray_clear *clear; /* side * side */
+    tf_ray_clear *column;
 } pixel_cache;
+
+/* The record of the nearest ray traced below local lattice point (i, j) in its column: in
+ * the pixel, else from the pixel rows below.  (Any lower ray would do; the nearest vouches for
+ * the most.) */
+static const tf_ray_clear *ray_below(const pixel_cache *pc, int i, int j)
+{
+    for (int b = j + 1; b < pc->side; b++)
+        if (pc->have[(size_t)b * (size_t)pc->side + (size_t)i])
+            return &pc->clear[(size_t)b * (size_t)pc->side + (size_t)i];
+    return &pc->column[i];
+}
+
+/* After a pixel: each of its columns' highest ray is the one the pixel above wants below it. */
+static void note_columns(const pixel_cache *pc)
+{
+    for (int i = 0; i < pc->side; i++)
+        for (int j = 0; j < pc->side; j++)
+            if (pc->have[(size_t)j * (size_t)pc->side + (size_t)i]) {
+                pc->column[i] = pc->clear[(size_t)j * (size_t)pc->side + (size_t)i];
+                break;
+            }
+}
 
 typedef struct quad { int i, j, size; } quad;
 
@@ -150,7 +207,11 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
     size_t k = (size_t)j * (size_t)pc->side + (size_t)i;
     if (!pc->have[k]) {
         int64_t X = (int64_t)px * r->lattice + i, Y = (int64_t)py * r->lattice + j;
-        tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
+        if (pc->column)
+            lattice_sample_coherent(r, X, Y, ray_below(pc, i, j), &pc->clear[k], &pc->sample[k],
+                                    &tally->shadow_rays);
+        else
+            tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
         pc->have[k] = 1;
         tally->primary_rays++;
         (*spp)++;
@@ -159,16 +220,25 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
 }
 
 /* Refine pixel (px, py) whose four corner samples are given; write its value to *out. */
+/* A pixel's corners: samples c[0..3] (top left, top right, bottom left, bottom right) and,
+ * with coherence, their rays' records k[0..3]. */
+typedef struct corners {
+    const tf_sample *c[4];
+    const tf_ray_clear *k[4];
+} corners;
+
 static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
-                         const tf_sample *c00, const tf_sample *c10, const tf_sample *c01,
-                         const tf_sample *c11, tf_pixel *out, tf_render_counts *tally)
+                         const corners *cs, tf_pixel *out, tf_render_counts *tally)
 {
     const int N = r->lattice;
+    const size_t at[4] = {0, (size_t)N, (size_t)N * (size_t)pc->side,
+                          (size_t)N * (size_t)pc->side + (size_t)N};
     memset(pc->have, 0, (size_t)pc->side * (size_t)pc->side);
-    pc->sample[0] = *c00;
-    pc->sample[N] = *c10;
-    pc->sample[(size_t)N * (size_t)pc->side] = *c01;
-    pc->sample[(size_t)N * (size_t)pc->side + (size_t)N] = *c11;
+    for (int q = 0; q < 4; q++) {
+        pc->sample[at[q]] = *cs->c[q];
+        if (pc->column)
+            pc->clear[at[q]] = *cs->k[q];
+    }
     pc->have[0] = pc->have[N] = 1;
     pc->have[(size_t)N * (size_t)pc->side] = pc->have[(size_t)N * (size_t)pc->side + (size_t)N] = 1;
     int spp = 4;
@@ -220,6 +290,8 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
     double area = (double)N * (double)N;
     *out = (tf_pixel){(float)(sum_r / area), (float)(sum_g / area), (float)(sum_b / area),
                       (float)(sum_a / area), zmin, (float)spp};
+    if (pc->column)
+        note_columns(pc);
 }
 
 /* Corner sample c's lattice point on corner row cy. */
@@ -319,18 +391,113 @@ static void corner_row_packets(const tf_renderer *r, tf_rect rect, int cy, row_r
     tally->shadow_rays += (uint64_t)shadows;
 }
 
-/* Corner samples of one corner row: in packets when q is not NULL. */
-static void corner_row(const tf_renderer *r, tf_rect rect, int cy, int external_row,
-                       row_rays *q, tf_sample *row, tf_render_counts *tally)
+/* The same samples as corner_row_single, each camera ray helped by the one traced below it in
+ * its lattice column (column[c * N], NULL-free: a record that vouches for nothing at first);
+ * the rays' records go to clear[]. */
+static void corner_row_coherent(const tf_renderer *r, tf_rect rect, int cy,
+                                const tf_ray_clear *column, tf_sample *row, tf_ray_clear *clear,
+                                tf_render_counts *tally)
 {
-    if (q)
-        corner_row_packets(r, rect, cy, q, row, tally);
+    for (int c = 0; c <= rect.w; c++) {
+        int64_t X, Y;
+        corner_point(r, rect, cy, c, &X, &Y);
+        lattice_sample_coherent(r, X, Y, &column[(size_t)c * (size_t)r->lattice], &clear[c],
+                                &row[c], &tally->shadow_rays);
+    }
+}
+
+/* How a rectangle traces its corner rows: coherent rays (column not NULL: the rectangle's
+ * records, one a lattice column), packets (q not NULL), or one ray at a time. */
+typedef struct row_tracer {
+    row_rays *q;
+    tf_ray_clear *column;
+} row_tracer;
+
+/* Corner samples of one corner row (their rays' records to clear[] when coherent). */
+static void corner_row(const tf_renderer *r, tf_rect rect, int cy, int external_row,
+                       const row_tracer *how, tf_sample *row, tf_ray_clear *clear,
+                       tf_render_counts *tally)
+{
+    if (how->column)
+        corner_row_coherent(r, rect, cy, how->column, row, clear, tally);
+    else if (how->q)
+        corner_row_packets(r, rect, cy, how->q, row, tally);
     else
         corner_row_single(r, rect, cy, row, tally);
     tally->primary_rays += (uint64_t)rect.w + 1;
     tally->external_rays += external_row ? (uint64_t)rect.w + 1 : 1;
 }
 
+/* A rectangle's buffers: two corner rows of samples (and of ray records), the pixel cache,
+ * and how corner rows are traced. */
+typedef struct rect_state {
+    tf_sample *above, *below;
+    tf_ray_clear *clear_above, *clear_below;
+    pixel_cache pc;
+    row_rays rays;
+    row_tracer how;
+} rect_state;
+
+static void rect_state_free(rect_state *st)
+{
+    free(st->above), free(st->below), free(st->clear_above), free(st->clear_below);
+    free(st->pc.sample), free(st->pc.have), free(st->pc.clear), free(st->how.column);
+    if (st->how.q)
+        row_rays_free(st->how.q);
+}
+
+static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
+{
+    const size_t w1 = (size_t)rect.w + 1, side = (size_t)r->lattice + 1;
+    *st = (rect_state){0};
+    st->above = malloc(sizeof *st->above * w1);
+    st->below = malloc(sizeof *st->below * w1);
+    st->pc = (pixel_cache){(int)side, malloc(sizeof(tf_sample) * side * side),
+                           malloc(side * side), NULL, NULL};
+    int ok = st->above && st->below && st->pc.sample && st->pc.have;
+    if (coherence_on(r)) {
+        /* calloc: records that vouch for nothing until a ray below is traced */
+        st->how.column = calloc((size_t)rect.w * (size_t)r->lattice + 1, sizeof *st->how.column);
+        st->clear_above = calloc(w1, sizeof *st->clear_above);
+        st->clear_below = calloc(w1, sizeof *st->clear_below);
+        st->pc.clear = malloc(sizeof *st->pc.clear * side * side);
+        ok = ok && st->how.column && st->clear_above && st->clear_below && st->pc.clear;
+    } else if (!r->hf->proc && tf_trace_packets_enabled()) {
+        st->how.q = &st->rays;
+        ok = ok && row_rays_alloc(&st->rays, w1);
+    }
+    if (!ok)
+        tf_die(71, "tf_render_rect: out of memory for a %d-pixel row", rect.w);
+}
+
+/* Swap the corner rows: the row just rendered above becomes the next one's below. */
+static void rect_state_step(rect_state *st)
+{
+    tf_sample *t = st->above;
+    st->above = st->below, st->below = t;
+    tf_ray_clear *k = st->clear_above;
+    st->clear_above = st->clear_below, st->clear_below = k;
+}
+
+/* The pixel row `row` of the rectangle, its corner rows traced (st->above, st->below). */
+static void render_pixel_row(const tf_renderer *r, tf_rect rect, int row, rect_state *st,
+                             tf_pixel *out, tf_render_counts *tally)
+{
+    for (int c = 0; c < rect.w; c++) {
+        corners cs = {{&st->above[c], &st->above[c + 1], &st->below[c], &st->below[c + 1]},
+                      {NULL, NULL, NULL, NULL}};
+        if (st->how.column) {
+            cs.k[0] = &st->clear_above[c], cs.k[1] = &st->clear_above[c + 1];
+            cs.k[2] = &st->clear_below[c], cs.k[3] = &st->clear_below[c + 1];
+            st->pc.column = &st->how.column[(size_t)c * (size_t)r->lattice];
+        }
+        render_pixel(r, &st->pc, rect.x + c, rect.y + row, &cs,
+                     &out[(size_t)row * (size_t)rect.w + (size_t)c], tally);
+    }
+}
+
+/* Pixel rows go bottom to top, so that each camera ray has the ray below it traced already
+ * (coherence); a pixel's bits do not depend on the order. */
 void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render_counts *counts)
 {
     const tf_scene *s = r->scene;
@@ -339,43 +506,22 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
         tf_die(70, "tf_render_rect: rectangle %dx%d+%d+%d outside the %dx%d image", rect.w,
                rect.h, rect.x, rect.y, s->width, s->height);
 
-    size_t side = (size_t)r->lattice + 1;
-    tf_sample *above = malloc(sizeof *above * ((size_t)rect.w + 1));
-    tf_sample *below = malloc(sizeof *below * ((size_t)rect.w + 1));
-    pixel_cache pc = {(int)side, malloc(sizeof(tf_sample) * side * side), malloc(side * side)};
-    if (!above || !below || !pc.sample || !pc.have)
-        tf_die(71, "tf_render_rect: out of memory for a %d-pixel row", rect.w);
-
-    row_rays rays, *q = NULL;
-    if (!r->hf->proc && tf_trace_packets_enabled()) {
-        if (!row_rays_alloc(&rays, (size_t)rect.w + 1))
-            tf_die(71, "tf_render_rect: out of memory for a %d-pixel row", rect.w);
-        q = &rays;
-    }
-
+    rect_state st;
+    rect_state_alloc(r, rect, &st);
     tf_render_counts tally = {0};
     tf_tile_counts cache_before = tf_tilecache_thread_counts();
-    corner_row(r, rect, rect.y, 0, q, above, &tally);
-    for (int row = 0; row < rect.h; row++) {
-        corner_row(r, rect, rect.y + row + 1, row + 1 == rect.h, q, below, &tally);
-        for (int c = 0; c < rect.w; c++)
-            render_pixel(r, &pc, rect.x + c, rect.y + row, &above[c], &above[c + 1], &below[c],
-                         &below[c + 1], &out[(size_t)row * (size_t)rect.w + (size_t)c], &tally);
-        tf_sample *t = above;
-        above = below;
-        below = t;
+    corner_row(r, rect, rect.y + rect.h, 1, &st.how, st.below, st.clear_below, &tally);
+    for (int row = rect.h - 1; row >= 0; row--) {
+        corner_row(r, rect, rect.y + row, 0, &st.how, st.above, st.clear_above, &tally);
+        render_pixel_row(r, rect, row, &st, out, &tally);
+        rect_state_step(&st);
     }
     tally.pixels = (uint64_t)rect.w * (uint64_t)rect.h;
     tf_tile_counts cache_after = tf_tilecache_thread_counts(); /* this thread's: exact */
     tally.terrain_samples = cache_after.samples_evaluated - cache_before.samples_evaluated;
     tally.terrain_hits = cache_after.hits - cache_before.hits;
     tally.terrain_evictions = cache_after.evictions - cache_before.evictions;
-    free(above);
-    free(below);
-    free(pc.sample);
-    free(pc.have);
-    if (q)
-        row_rays_free(q);
+    rect_state_free(&st);
     if (counts) {
         counts->primary_rays += tally.primary_rays;
         counts->shadow_rays += tally.shadow_rays;

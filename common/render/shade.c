@@ -540,6 +540,23 @@ void tf_shade_end(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, const tf_sha
     *out = (tf_sample){(float)c.x, (float)c.y, (float)c.z, 1.0f, (float)p->dist};
 }
 
+void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
+                           const tf_ray_clear *lower, tf_ray_clear *mine, tf_sample *out,
+                           uint64_t *shadow_rays)
+{
+    if (sh->hf->proc) {
+        mine->s_free = 0;
+        tf_shade_ray(sh, origin, dir, out, shadow_rays);
+        return;
+    }
+    double t_water = tf_shade_t_water(sh, origin, dir);
+    tf_hit hit;
+    tf_shade_pending p;
+    int found = tf_trace_coherent(sh->hf, origin, dir, t_water, lower, &hit, mine);
+    tf_shade_begin(sh, origin, dir, t_water, found ? &hit : NULL, &p);
+    tf_shade_end(sh, origin, dir, &p, resolve_shadow(sh, &p, shadow_rays), out);
+}
+
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,
                   uint64_t *shadow_rays)
 {

@@ -74,6 +74,13 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,
                   uint64_t *shadow_rays);
 
+/* tf_shade_ray, its camera ray traced with tf_trace_coherent (render/trace.h): the same bits,
+ * helped by `lower` (NULL or a record of a ray from this origin); *mine gets this ray's record
+ * (one that vouches for nothing on a procedural terrain). */
+void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
+                           const tf_ray_clear *lower, tf_ray_clear *mine, tf_sample *out,
+                           uint64_t *shadow_rays);
+
 /* tf_shade_ray in three steps, split at the shadow ray, so that a caller can trace many
  * samples' rays together (render.c's corner rows, trace_packet.h) with the same bits:
  *   t_water = tf_shade_t_water(sh, o, d);

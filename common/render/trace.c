@@ -191,8 +191,10 @@ static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d,
     const double hmin = hf->hmin, hmax = hf->hmax;
     const double zpad = tf_box_zpad(hmin, hmax, o.z);
     double t0 = tmin, t1 = tmax;
-    if (!tf_clip_slab(o.x, d.x, 0, top, &t0, &t1) || !tf_clip_slab(o.y, d.y, 0, top, &t0, &t1) ||
-        !tf_clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1) || !isfinite(t0) ||
+    if (!tf_clip_slab(o.x, d.x, 0, top, &t0, &t1) || !tf_clip_slab(o.y, d.y, 0, top, &t0, &t1))
+        return 0;
+    r->t_square = t0;
+    if (!tf_clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1) || !isfinite(t0) ||
         !isfinite(t1))
         return 0;
     r->t0 = t0;
@@ -447,6 +449,177 @@ static int walk_hier(const ray_ctx *r, candidate *best)
             !inside_block(hf, level + 1, ci, cj, oz + t_cur * dz, margin))
             level++;
     }
+}
+
+/* ---- coherence: a camera ray helped by the one below it --------------------------------------
+
+   Two rays from one origin O, headings u1, u2 (unit, horizontal) and climbs k1, k2 (height per
+   unit of horizontal run s): at run s they are at O + s (u_i, k_i), a horizontal distance
+   s |u2 - u1| apart.  Let the surface f have slope at most L (hf->slope_max) and ray 1 be above
+   it, z1(s) >= f(p1(s)), over the run [s_in1, s_free1) in which p1(s) is inside the square.
+   Where p2(s) is inside the square too, the segment p1 p2 is (the square is convex), so
+       z2(s) - f(p2(s)) >= z1(s) - f(p1(s)) + s (k2 - k1) - L s |u2 - u1| >= s D,
+   D = k2 - k1 - L |u2 - u1|; where p2(s) is outside, there is no surface under it at all.
+   With D > 0 ray 2 is above the surface over [s_in1, s_free1): the same cells as ever, culled
+   or tested, find no hit there.  Margins, so that this holds in floating point too:
+     C1. D is computed, then lowered by 1e-9 (1 + |k1| + |k2| + L), far above the few
+         roundings in k, u and L (L itself is rounded up: heightfield.c's steepest_slope).
+     C2. Ray 1 may be below the surface by a rounding where its tests missed a graze; ray 2 is
+         vouched for only from the run s_eps = eps / D on, where its clearance s D >= eps =
+         1e-7 times the scene's size, orders above the error of a triangle test.
+     C3. The run from ray 2's own entry into the square up to max(s_in1, s_eps) is not vouched
+         for: it is walked as usual (the prefix), then the walk resumes at s_free1 (times
+         1 - 1e-9).
+   Why the hit stays tf_trace's, bit for bit: the prefix walk is the usual walk with its end
+   t1 moved in, so it meets the same cells with the same tests until then; a cell it culls on
+   the shortened span has no hit up to the new end, and past it lies the vouched-for run.  The
+   main walk starts at t_skip with the cell indices the flat walk holds there (index_at: every
+   exit crossing before t_skip processed), which is a state the flat walk passes through; from
+   there both walks are one.  Its first cell is culled on a shorter span than the flat walk's,
+   which matters only for a hit before t_skip, and there is none.  Ray 1 "above the surface":
+   its first hit comes from above (d . n < 0), or it misses and starts (at t0) above its
+   cell's maximum; either way no crossing comes before the end of its walk. */
+
+/* The exit crossing of index c on axis 0 (x) or 1 (y). */
+static inline double exit_on(const ray_ctx *r, int axis, int c)
+{
+    return axis ? exit_y(r, c) : exit_x(r, c);
+}
+
+/* The index on `axis` the flat walk holds at parameter t: its first index c0 moved over every
+ * exit crossing before t (those are monotone in the index); -1 if the walk leaves the grid
+ * first. */
+static int index_at(const ray_ctx *r, int axis, int c0, double t)
+{
+    const int s = axis ? r->sy : r->sx;
+    if (!s)
+        return c0;
+    int c = cell_of(r->hf, r->inv_cell, r->o[axis] + t * r->d[axis]); /* a guess */
+    if (s > 0 ? c < c0 : c > c0)
+        c = c0;
+    while (c != c0 && !(exit_on(r, axis, c - s) < t))
+        c -= s;
+    while (exit_on(r, axis, c) < t) {
+        c += s;
+        if ((unsigned)c >= (unsigned)r->hf->cells)
+            return -1;
+    }
+    return c;
+}
+
+/* Move the walk's start to t (> t0): 0 if the walk has ended by then. */
+static int skip_to(ray_ctx *r, double t)
+{
+    if (!(t < r->t1))
+        return 0;
+    int ci = index_at(r, 0, r->ci, t), cj = index_at(r, 1, r->cj, t);
+    if (ci < 0 || cj < 0)
+        return 0;
+    r->t0 = t, r->ci = ci, r->cj = cj;
+    return 1;
+}
+
+/* A ray's heading and climb (tf_ray_clear's ux, uy, k) and its run per unit of t; 0 for a
+ * vertical ray or one whose run overflows. */
+typedef struct heading {
+    double run, ux, uy, k;
+} heading;
+
+static int heading_of(const ray_ctx *r, heading *h)
+{
+    h->run = sqrt(r->d[0] * r->d[0] + r->d[1] * r->d[1]);
+    if (!(h->run > 0) || !isfinite(h->run))
+        return 0;
+    h->ux = r->d[0] / h->run, h->uy = r->d[1] / h->run, h->k = r->d[2] / h->run;
+    return 1;
+}
+
+/* Does `lower` vouch for part of this ray (C1-C3)?  Then *t_pre is where the prefix walk ends
+ * (t0 or less: no prefix) and *t_skip where the main walk starts. */
+static int vouched(const ray_ctx *r, const heading *h, const tf_ray_clear *lower, double *t_pre,
+                   double *t_skip)
+{
+    const tf_heightfield *hf = r->hf;
+    if (!(lower->s_free > 0) || lower->o[0] != r->o[0] || lower->o[1] != r->o[1] ||
+        lower->o[2] != r->o[2])
+        return 0;
+    const double L = hf->slope_max, dx = h->ux - lower->ux, dy = h->uy - lower->uy;
+    const double D = (h->k - lower->k) - L * sqrt(dx * dx + dy * dy) -
+                     1e-9 * (1 + fabs(h->k) + fabs(lower->k) + L);
+    if (!(D > 0))
+        return 0;
+    const double eps = 1e-7 * (hf->extent + fabs(hf->hmin) + fabs(hf->hmax) + fabs(r->o[0]) +
+                               fabs(r->o[1]) + fabs(r->o[2]));
+    const double s_lo = eps / D > lower->s_in ? eps / D : lower->s_in;
+    const double s_hi = lower->s_free * (1 - 1e-9);
+    if (!(s_hi > s_lo))
+        return 0;
+    *t_pre = r->t_square * h->run < s_lo ? s_lo / h->run : 0;
+    *t_skip = s_hi / h->run;
+    return *t_skip > r->t0;
+}
+
+/* walk_hier, skipping what `lower` vouches for. */
+static int walk_coherent(ray_ctx *r, const heading *h, const tf_ray_clear *lower,
+                         candidate *best)
+{
+    double t_pre, t_skip;
+    if (!lower || !vouched(r, h, lower, &t_pre, &t_skip))
+        return walk_hier(r, best);
+    if (t_pre > r->t0) {
+        ray_ctx prefix = *r;
+        prefix.t1 = t_pre < r->t1 ? t_pre : r->t1;
+        if (walk_hier(&prefix, best))
+            return 1;
+    }
+    return skip_to(r, t_skip) && walk_hier(r, best);
+}
+
+/* Was hit c made from above (d . n < 0, n the triangle's upward normal, unnormalised)? */
+static int from_above(const ray_ctx *r, const candidate *c)
+{
+    const tf_heightfield *hf = r->hf;
+    const float *p = hf->h + (size_t)c->cj * hf->n + c->ci;
+    const double ha = p[0], hb = p[1], hd = p[hf->n], hc = p[hf->n + 1];
+    const double gx = c->tri == 0 ? hb - ha : hc - hd, gy = c->tri == 0 ? hc - hb : hd - ha;
+    return -r->d[0] * gx - r->d[1] * gy + r->d[2] * hf->cell < 0;
+}
+
+/* This ray's record (r as set up, before any skip; c its hit or NULL). */
+static void note_clear(const ray_ctx *r, const heading *h, const candidate *c, tf_ray_clear *mine)
+{
+    const tf_heightfield *hf = r->hf;
+    mine->ux = h->ux, mine->uy = h->uy, mine->k = h->k;
+    mine->s_in = r->t_square * h->run;
+    if (c) {
+        if (from_above(r, c))
+            mine->s_free = c->t * h->run;
+    } else {
+        const size_t idx = (size_t)r->cj * (size_t)hf->cells + (size_t)r->ci;
+        if (r->o[2] + r->t0 * r->d[2] > hf->maxgrid[0][idx] + r->margin)
+            mine->s_free = r->t1 * h->run;
+    }
+}
+
+int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+                      const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine)
+{
+    ray_ctx r, as_set_up;
+    heading h;
+    candidate best = {INFINITY, 0, 0, 0};
+    if (mine)
+        *mine = (tf_ray_clear){{origin.x, origin.y, origin.z}, 0, 0, 0, INFINITY, 0};
+    if (!setup_ray(&r, hf, origin, dir, 0.0, tmax))
+        return 0;
+    if (hf->proc || !heading_of(&r, &h)) /* no slope_max, or no heading: the plain walk */
+        lower = NULL, mine = NULL;
+    as_set_up = r;
+    int found = walk_coherent(&r, &h, lower, &best);
+    if (mine)
+        note_clear(&as_set_up, &h, found ? &best : NULL, mine);
+    if (found && hit)
+        finish_hit(&as_set_up, &best, hit);
+    return found;
 }
 
 /* ---- public entry points ---------------------------------------------------------------------- */

@@ -29,4 +29,23 @@ int tf_trace_flat(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double 
 /* Any hit in (tmin, tmax)? (shadow rays; may stop at the first hit found) */
 int tf_occluded(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax);
 
+/* Coherence of camera rays: what a traced ray vouches for about the rays just above it.
+ * A ray that stays above the surface out to horizontal distance s_free keeps any ray from the
+ * same origin that climbs faster than it by more than the terrain's steepest slope
+ * (hf->slope_max) times the angle between their headings above the surface that far too
+ * (trace.c, "Coherence", proves it and the margins).  So a camera ray traced after the one
+ * below it starts its walk where that one hit.  Only speed depends on this: the hit is
+ * tf_trace's, bit for bit, whatever record is passed. */
+typedef struct tf_ray_clear {
+    double o[3];        /* the origin (a record helps rays from this very origin only) */
+    double ux, uy, k;   /* heading (unit, horizontal) and climb (dz per unit of horizontal run) */
+    double s_in;        /* horizontal distance where the ray enters the terrain's square */
+    double s_free;      /* above the surface over [s_in, s_free); 0: the ray vouches for nothing */
+} tf_ray_clear;
+
+/* tf_trace with tmin = 0, helped by `lower` (a record of another ray, or NULL); fills *mine
+ * (if not NULL) with this ray's record.  The same return and hit as tf_trace. */
+int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+                      const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine);
+
 #endif

@@ -23,6 +23,7 @@ typedef struct tf_ray_ctx {
     int sx, sy;            /* -1, 0, +1: direction of travel across columns / rows */
     double tmin, tmax;     /* the caller's open interval for hits */
     double t0, t1;         /* the part of [tmin, tmax] inside the terrain box (widened a hair) */
+    double t_square;       /* where the ray enters the terrain's square (x and y only) */
     double margin;         /* altitude slack of the culling tests */
     double tie_tol;        /* crossings closer than this pass "through a corner" */
     int ci, cj;            /* the cell containing the point at t0 */

@@ -11,6 +11,7 @@
  * Grids are filled by `threads` pthreads claiming chunks of rows.  Max and min are exact and
  * each entry is computed alone, so the result is bit-identical whatever the thread count. */
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdint.h>
@@ -46,7 +47,8 @@ typedef struct grid_job {
     tf_heightfield *hf;
     int level;
     int rows;
-    int *next_chunk; /* the first chunk no thread has claimed (atomic) */
+    int *next_chunk;   /* the first chunk no thread has claimed (atomic) */
+    double *row_slope; /* level 0: each row's steepest squared triangle gradient (x cell^2) */
 } grid_job;
 
 static inline float max4(float a, float b, float c, float d)
@@ -63,8 +65,18 @@ static inline float min4(float a, float b, float c, float d)
     return m < m2 ? m : m2;
 }
 
-/* Level 0: a cell's four corner samples. */
-static void build_level0_rows(tf_heightfield *hf, int row_begin, int row_end)
+/* The larger squared gradient (times cell^2) of the cell with corners a = (i, j), b = (i+1, j),
+ * c = (i+1, j+1), d = (i, j+1): T1 = (a, b, c) rises b - a along x and c - b along y, T2 =
+ * (a, c, d) rises c - d and d - a.  Differences of floats are exact in double. */
+static inline double cell_slope2(float a, float b, float c, float d)
+{
+    double t1x = (double)b - a, t1y = (double)c - b, t2x = (double)c - d, t2y = (double)d - a;
+    double t1 = t1x * t1x + t1y * t1y, t2 = t2x * t2x + t2y * t2y;
+    return t1 > t2 ? t1 : t2;
+}
+
+/* Level 0: a cell's four corner samples; and the row's steepest triangle. */
+static void build_level0_rows(tf_heightfield *hf, double *row_slope, int row_begin, int row_end)
 {
     const int n = hf->n, cells = hf->cells;
     float *mx = hf->maxgrid[0], *mn = hf->mingrid[0];
@@ -72,10 +84,14 @@ static void build_level0_rows(tf_heightfield *hf, int row_begin, int row_end)
         const float *lo = hf->h + (size_t)cj * n;
         const float *hi = lo + n;
         float *mxrow = mx + (size_t)cj * cells, *mnrow = mn + (size_t)cj * cells;
+        double steepest = 0;
         for (int ci = 0; ci < cells; ci++) {
             mxrow[ci] = max4(lo[ci], lo[ci + 1], hi[ci], hi[ci + 1]);
             mnrow[ci] = min4(lo[ci], lo[ci + 1], hi[ci], hi[ci + 1]);
+            double g = cell_slope2(lo[ci], lo[ci + 1], hi[ci + 1], hi[ci]);
+            steepest = g > steepest ? g : steepest;
         }
+        row_slope[cj] = steepest;
     }
 }
 
@@ -95,10 +111,12 @@ static void build_level_rows(tf_heightfield *hf, int level, int row_begin, int r
     }
 }
 
-static void build_rows(tf_heightfield *hf, int level, int row_begin, int row_end)
+static void build_rows(const grid_job *job, int row_begin, int row_end)
 {
+    tf_heightfield *hf = job->hf;
+    const int level = job->level;
     if (level == 0)
-        build_level0_rows(hf, row_begin, row_end);
+        build_level0_rows(hf, job->row_slope, row_begin, row_end);
     else
         build_level_rows(hf, level, row_begin, row_end);
 }
@@ -110,7 +128,7 @@ static void *run_job(void *arg)
     while ((c = __atomic_fetch_add(job->next_chunk, 1, __ATOMIC_RELAXED)) <
            (job->rows + TF_HF_CHUNK_ROWS - 1) / TF_HF_CHUNK_ROWS) {
         int begin = c * TF_HF_CHUNK_ROWS, end = begin + TF_HF_CHUNK_ROWS;
-        build_rows(job->hf, job->level, begin, end < job->rows ? end : job->rows);
+        build_rows(job, begin, end < job->rows ? end : job->rows);
     }
     return NULL;
 }
@@ -119,19 +137,19 @@ static void *run_job(void *arg)
  * of rows as they go, so one that the machine's other load slows down holds up no band of its
  * own; one that cannot be created only leaves more chunks to the others.  Every entry is the
  * same max/min whoever computes it. */
-static void build_level(tf_heightfield *hf, int level, int threads)
+static void build_level(tf_heightfield *hf, int level, double *row_slope, int threads)
 {
     const int rows = hf->cells >> level;
     const size_t entries = (size_t)rows * rows;
     const int chunks = (rows + TF_HF_CHUNK_ROWS - 1) / TF_HF_CHUNK_ROWS;
+    int next_chunk = 0;
+    grid_job job = {hf, level, rows, &next_chunk, row_slope};
     if (threads > chunks)
         threads = chunks;
     if (threads <= 1 || entries < TF_HF_PARALLEL_MIN) {
-        build_rows(hf, level, 0, rows);
+        build_rows(&job, 0, rows);
         return;
     }
-    int next_chunk = 0;
-    grid_job job = {hf, level, rows, &next_chunk};
     pthread_t tids[threads];
     int started[threads];
     for (int t = 1; t < threads; t++)
@@ -140,6 +158,16 @@ static void build_level(tf_heightfield *hf, int level, int threads)
     for (int t = 1; t < threads; t++)
         if (started[t])
             pthread_join(tids[t], NULL);
+}
+
+/* slope_max from the rows' squared gradients (times cell^2): rounded up by far more than the
+ * few roundings of sqrt and the division, so it bounds the true gradients. */
+static double steepest_slope(const double *row_slope, int rows, double cell)
+{
+    double g2 = 0;
+    for (int r = 0; r < rows; r++)
+        g2 = row_slope[r] > g2 ? row_slope[r] : g2;
+    return sqrt(g2) / cell * (1 + 1e-9) + DBL_MIN;
 }
 
 /* ---- construction and destruction ---------------------------------------------------------- */
@@ -233,9 +261,16 @@ tf_heightfield *tf_heightfield_wrap(float *h, int k, double extent, int threads)
         tf_heightfield_free(hf);
         return NULL;
     }
+    double *row_slope = malloc((size_t)hf->cells * sizeof *row_slope);
+    if (!row_slope) {
+        tf_heightfield_free(hf);
+        return NULL;
+    }
     threads = tf_thread_count(threads);
     for (int L = 0; L < hf->levels; L++)
-        build_level(hf, L, threads);
+        build_level(hf, L, row_slope, threads);
+    hf->slope_max = steepest_slope(row_slope, hf->cells, hf->cell);
+    free(row_slope);
     /* The top level is 1x1: the range of every sample. */
     hf->hmax = hf->maxgrid[hf->levels - 1][0];
     hf->hmin = hf->mingrid[hf->levels - 1][0];

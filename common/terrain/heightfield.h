@@ -28,6 +28,10 @@ typedef struct tf_heightfield {
     int levels;        /* number of max-grid levels: k + 1 (cells, cells/2, ..., 1) */
     float **maxgrid;   /* maxgrid[L]: (cells >> L)^2 entries */
     float **mingrid;   /* mingrid[L]: same shape, minima */
+    /* The steepest slope of the surface (the largest gradient norm of its triangles, rise per
+     * unit of horizontal run), rounded up: no two points of the surface differ in height by
+     * more than slope_max times their horizontal distance (render/trace.h's coherence). */
+    double slope_max;
     /* [terrain] procedural = yes: the terrain is this function, evaluated where rays need it.
      * With a noise generator there are no samples and no grids (h, maxgrid, mingrid NULL, n =
      * k = 0); extent, hmin and hmax are its square and its bound, cell nominal (the grid of

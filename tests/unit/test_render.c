@@ -128,6 +128,20 @@ static void test_columns_identical_to_whole(void **state) { assert_decomposition
 static void test_stamps_7x5_identical_to_whole(void **state) { assert_decomposition_identical(*state, 7, 5); }
 static void test_stamps_13x11_identical_to_whole(void **state) { assert_decomposition_identical(*state, 13, 11); }
 
+/* Camera rays helped by the ray below (tf_trace_coherent) or not, the pixels are the same bits:
+ * the fixture's image was rendered with coherence on (the default), this one without. */
+static void test_coherence_changes_no_bit(void **state)
+{
+    fixture *f = *state;
+    tf_pixel *img = calloc(W * H, sizeof *img);
+    tf_render_counts c = {0};
+    tf_render_coherence_force(0);
+    render_tiled(f->r, 7, 5, img, &c);
+    tf_render_coherence_force(-1);
+    assert_memory_equal(img, f->whole, sizeof f->whole);
+    free(img);
+}
+
 typedef struct thread_job { const tf_renderer *r; tf_pixel *img; int first_row; } thread_job;
 
 static void *render_alternate_rows(void *arg)
@@ -316,6 +330,7 @@ int main(void)
         cmocka_unit_test(test_columns_identical_to_whole),
         cmocka_unit_test(test_stamps_7x5_identical_to_whole),
         cmocka_unit_test(test_stamps_13x11_identical_to_whole),
+        cmocka_unit_test(test_coherence_changes_no_bit),
         cmocka_unit_test(test_two_threads_identical_to_whole),
         cmocka_unit_test(test_sky_not_subdivided_edges_are),
         cmocka_unit_test(test_counts_add_up),

@@ -5,7 +5,9 @@
  * (cell split along (ci, cj)-(ci+1, cj+1), render/trace.c), or with --grid as a grid whose
  * columns are mirrored (Embree splits grid quads along the other diagonal).  The rays: the
  * scene camera's primary rays, one per pixel, and from each hit facing the sun a shadow ray as
- * shade.c starts it.  Rounds alternate the tracers (terrafarm, Embree single rays, packets of
+ * shade.c starts it.  Rounds alternate the tracers (terrafarm as the renderer traces camera
+ * rays, bottom row first and each ray helped by the one below it; terrafarm one ray at a time;
+ * Embree single rays, packets of
  * 8, of 16 with AVX-512); rates per CPU-second of the tracing thread, medians.  Also printed:
  * build times, memory, and the rays on which the two disagree, sorted.
  *
@@ -69,10 +71,14 @@ typedef struct embree {
 } embree;
 
 /* The tracers: terrafarm, then Embree with this many rays a call. */
-enum { M_TF, M_E1, M_E8, M_E16, M_COUNT };
-static const int mode_width[M_COUNT] = {0, 1, 8, 16};
-static const char *const mode_name[M_COUNT] = {"terrafarm tf_trace", "embree single ray",
-                                               "embree packets of 8", "embree packets of 16"};
+/* terrafarm as the renderer traces camera rays (bottom row first, each helped by the ray
+ * below it: tf_trace_coherent) and one ray at a time (tf_trace); shadow rays are tf_occluded
+ * in both. */
+enum { M_TF, M_TF1, M_E1, M_E8, M_E16, M_COUNT };
+static const int mode_width[M_COUNT] = {0, 0, 1, 8, 16};
+static const char *const mode_name[M_COUNT] = {"terrafarm coherent", "terrafarm ray by ray",
+                                               "embree single ray", "embree packets of 8",
+                                               "embree packets of 16"};
 
 typedef struct bench {
     tf_heightfield *hf;
@@ -380,15 +386,43 @@ static int shadow_rays(bench *b, const tf_scene *s, char *err, size_t errlen)
 
 /* ---- tracing: terrafarm, Embree single rays, Embree packets ------------------------------- */
 
+static void note_hit(found *out, int i, int h, const tf_hit *hit)
+{
+    out->t[i] = h ? (float)hit->t : INFINITY;
+    float *n = out->n + 3 * (size_t)i;
+    if (h)
+        n[0] = (float)hit->n.x, n[1] = (float)hit->n.y, n[2] = (float)hit->n.z;
+    else
+        n[0] = n[1] = n[2] = 0;
+}
+
 static void tf_primary(const bench *b, found *out)
 {
     for (int i = 0; i < b->prim.count; i++) {
         tf_hit hit;
-        int h = tf_trace(b->hf, b->prim.o[i], b->prim.d[i], 0.0, TF_FAR_AWAY, &hit);
-        out->t[i] = h ? (float)hit.t : INFINITY;
-        float *n = out->n + 3 * (size_t)i;
-        n[0] = (float)hit.n.x, n[1] = (float)hit.n.y, n[2] = (float)hit.n.z;
+        note_hit(out, i, tf_trace(b->hf, b->prim.o[i], b->prim.d[i], 0.0, TF_FAR_AWAY, &hit), &hit);
     }
+}
+
+/* The rows bottom to top, each ray helped by the record of the one below it (the records'
+ * array is part of the timed work). */
+static void tf_primary_coherent(const bench *b, found *out)
+{
+    const int w = b->prim.count / b->prim_height;
+    tf_ray_clear *below = calloc((size_t)w, sizeof *below);
+    if (!below)
+        tf_die(71, "embree_compare: out of memory for a row of ray records");
+    for (int y = b->prim_height - 1; y >= 0; y--)
+        for (int x = 0; x < w; x++) {
+            const int i = y * w + x;
+            tf_hit hit;
+            tf_ray_clear mine;
+            int h = tf_trace_coherent(b->hf, b->prim.o[i], b->prim.d[i], TF_FAR_AWAY, &below[x],
+                                      &hit, &mine);
+            below[x] = mine;
+            note_hit(out, i, h, &hit);
+        }
+    free(below);
 }
 
 static void tf_shadow(const bench *b, found *out)
@@ -501,6 +535,8 @@ static double trace_all(const bench *b, int m, int shadow, found *out)
 {
     double t0 = clock_s(CLOCK_THREAD_CPUTIME_ID);
     if (m == M_TF)
+        shadow ? tf_shadow(b, out) : tf_primary_coherent(b, out);
+    else if (m == M_TF1)
         shadow ? tf_shadow(b, out) : tf_primary(b, out);
     else if (m == M_E1)
         shadow ? embree_shadow1(b, out) : embree_primary1(b, out);
@@ -630,12 +666,13 @@ static void run_rounds(bench *b, int rounds, double rates[M_COUNT][2][MAX_ROUNDS
             }
 }
 
-/* The median of each round's ratio terrafarm / tracer m. */
-static double median_ratio(double rates[M_COUNT][2][MAX_ROUNDS], int m, int shadow, int rounds)
+/* The median of each round's ratio tracer a / tracer m. */
+static double median_ratio(double rates[M_COUNT][2][MAX_ROUNDS], int a, int m, int shadow,
+                           int rounds)
 {
     double q[MAX_ROUNDS];
     for (int r = 0; r < rounds; r++)
-        q[r] = rates[m][shadow][r] > 0 ? rates[M_TF][shadow][r] / rates[m][shadow][r] : 0;
+        q[r] = rates[m][shadow][r] > 0 ? rates[a][shadow][r] / rates[m][shadow][r] : 0;
     return tf_bench_median(q, rounds);
 }
 
@@ -649,9 +686,17 @@ static void report(const bench *b, double rates[M_COUNT][2][MAX_ROUNDS], int rou
     printf("disagreements with terrafarm (hit vs miss, or distances %g apart relative):\n", T_TOL);
     for (int m = M_E1; m < b->modes; m++)
         print_disagreements(b, m);
+    const found *c = &b->prim_found[M_TF], *one = &b->prim_found[M_TF1];
+    long differ = 0;
+    for (int i = 0; i < b->prim.count; i++)
+        differ += memcmp(&c->t[i], &one->t[i], sizeof *c->t) != 0 ||
+                  memcmp(&c->n[3 * (size_t)i], &one->n[3 * (size_t)i], 3 * sizeof *c->n) != 0;
+    printf("terrafarm coherent vs ray by ray: %ld of %d primary hits differ\n", differ, b->prim.count);
     for (int m = b->modes - 1; m >= M_E8; m--)
-        printf("terrafarm/embree%d ratio: primary %.3f shadow %.3f (median of the rounds' ratios)\n",
-               mode_width[m], median_ratio(rates, m, 0, rounds), median_ratio(rates, m, 1, rounds));
+        printf("terrafarm/embree%d ratio: primary %.3f shadow %.3f; ray by ray: primary %.3f "
+               "(medians of the rounds' ratios)\n", mode_width[m],
+               median_ratio(rates, M_TF, m, 0, rounds), median_ratio(rates, M_TF, m, 1, rounds),
+               median_ratio(rates, M_TF1, m, 0, rounds));
 }
 
 /* ---- setup and main --------------------------------------------------------------------- */

@@ -71,9 +71,9 @@ typedef struct embree {
 } embree;
 
 /* The tracers: terrafarm, then Embree with this many rays a call. */
-/* terrafarm as the renderer traces camera rays (bottom row first, each helped by the ray
- * below it: tf_trace_coherent) and one ray at a time (tf_trace); shadow rays are tf_occluded
- * in both. */
+/* terrafarm as the renderer traces (camera rays bottom row first, each helped by the ray
+ * below it: tf_trace_coherent; shadow rays each helped by the one before it:
+ * tf_occluded_coherent) and one ray at a time (tf_trace, tf_occluded). */
 enum { M_TF, M_TF1, M_E1, M_E8, M_E16, M_COUNT };
 static const int mode_width[M_COUNT] = {0, 0, 1, 8, 16};
 static const char *const mode_name[M_COUNT] = {"terrafarm coherent", "terrafarm ray by ray",
@@ -431,6 +431,15 @@ static void tf_shadow(const bench *b, found *out)
         out->t[i] = tf_occluded(b->hf, b->shad.o[i], b->shad.d[i], 0.0, TF_FAR_AWAY) ? 0 : INFINITY;
 }
 
+/* In the list's order (the image's, row by row), each with the record of the one before. */
+static void tf_shadow_coherent(const bench *b, found *out)
+{
+    tf_shadow_clear prev = {{0}, 0};
+    for (int i = 0; i < b->shad.count; i++)
+        out->t[i] = tf_occluded_coherent(b->hf, b->shad.o[i], b->shad.d[i], TF_FAR_AWAY, &prev,
+                                         &prev) ? 0 : INFINITY;
+}
+
 static void ray1(struct RTCRay *ray, const float *f)
 {
     ray->org_x = f[0], ray->org_y = f[1], ray->org_z = f[2], ray->tnear = 0;
@@ -535,7 +544,7 @@ static double trace_all(const bench *b, int m, int shadow, found *out)
 {
     double t0 = clock_s(CLOCK_THREAD_CPUTIME_ID);
     if (m == M_TF)
-        shadow ? tf_shadow(b, out) : tf_primary_coherent(b, out);
+        shadow ? tf_shadow_coherent(b, out) : tf_primary_coherent(b, out);
     else if (m == M_TF1)
         shadow ? tf_shadow(b, out) : tf_primary(b, out);
     else if (m == M_E1)
@@ -691,12 +700,16 @@ static void report(const bench *b, double rates[M_COUNT][2][MAX_ROUNDS], int rou
     for (int i = 0; i < b->prim.count; i++)
         differ += memcmp(&c->t[i], &one->t[i], sizeof *c->t) != 0 ||
                   memcmp(&c->n[3 * (size_t)i], &one->n[3 * (size_t)i], 3 * sizeof *c->n) != 0;
-    printf("terrafarm coherent vs ray by ray: %ld of %d primary hits differ\n", differ, b->prim.count);
+    long shadow_differ = 0;
+    for (int i = 0; i < b->shad.count; i++)
+        shadow_differ += b->shad_found[M_TF].t[i] != b->shad_found[M_TF1].t[i];
+    printf("terrafarm coherent vs ray by ray: %ld of %d primary hits and %ld of %d shadow rays "
+           "differ\n", differ, b->prim.count, shadow_differ, b->shad.count);
     for (int m = b->modes - 1; m >= M_E8; m--)
         printf("terrafarm/embree%d ratio: primary %.3f shadow %.3f; ray by ray: primary %.3f "
-               "(medians of the rounds' ratios)\n", mode_width[m],
+               "shadow %.3f (medians of the rounds' ratios)\n", mode_width[m],
                median_ratio(rates, M_TF, m, 0, rounds), median_ratio(rates, M_TF, m, 1, rounds),
-               median_ratio(rates, M_TF1, m, 0, rounds));
+               median_ratio(rates, M_TF1, m, 0, rounds), median_ratio(rates, M_TF1, m, 1, rounds));
 }
 
 /* ---- setup and main --------------------------------------------------------------------- */

@@ -545,7 +545,7 @@ void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
                            uint64_t *shadow_rays)
 {
     if (sh->hf->proc) {
-        mine->s_free = 0;
+        mine->s_free = 0, mine->shadow.t_under = 0;
         tf_shade_ray(sh, origin, dir, out, shadow_rays);
         return;
     }
@@ -554,7 +554,13 @@ void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
     tf_shade_pending p;
     int found = tf_trace_coherent(sh->hf, origin, dir, t_water, lower, &hit, mine);
     tf_shade_begin(sh, origin, dir, t_water, found ? &hit : NULL, &p);
-    tf_shade_end(sh, origin, dir, &p, resolve_shadow(sh, &p, shadow_rays), out);
+    int occluded = 0;
+    if (p.shadow) {
+        (*shadow_rays)++;
+        occluded = tf_occluded_coherent(sh->hf, p.start, sh->sun_dir, TF_FAR_AWAY,
+                                        lower ? &lower->shadow : NULL, &mine->shadow);
+    }
+    tf_shade_end(sh, origin, dir, &p, occluded, out);
 }
 
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,

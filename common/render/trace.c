@@ -608,7 +608,7 @@ int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, dou
     heading h;
     candidate best = {INFINITY, 0, 0, 0};
     if (mine)
-        *mine = (tf_ray_clear){{origin.x, origin.y, origin.z}, 0, 0, 0, INFINITY, 0};
+        *mine = (tf_ray_clear){{origin.x, origin.y, origin.z}, 0, 0, 0, INFINITY, 0, {{0}, 0}};
     if (!setup_ray(&r, hf, origin, dir, 0.0, tmax))
         return 0;
     if (hf->proc || !heading_of(&r, &h)) /* no slope_max, or no heading: the plain walk */
@@ -620,6 +620,64 @@ int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, dou
     if (found && hit)
         finish_hit(&as_set_up, &best, hit);
     return found;
+}
+
+/* ---- coherence of shadow rays: under the surface where the neighbour was ----------------------
+
+   A ray that starts inside the terrain's square above the surface (by eps) and is under it (by
+   eps) at a parameter t in (0, tmax), inside the square, crosses the surface in between: the
+   square is convex, so the segment stays over the surface's domain, and the surface is
+   continuous there.  The walk finds that crossing -- its triangle tests are watertight and it
+   tests every cell where the ray may dip below the cell's maximum (the top of the file) -- so
+   tf_occluded says 1, and so may we, after a lookup or two of the height under the ray instead
+   of the walk.  Where to look: where a parallel neighbour was found under the surface, and a
+   cell or three further on.  eps is 1e-7 times the scene's size, orders above the rounding of
+   tf_heightfield_height_at, which interpolates the very triangles the walk tests. */
+
+/* The altitude of p over the surface (< 0: under it); NAN outside the terrain's square. */
+static double over_surface(const tf_heightfield *hf, tf_vec3 p)
+{
+    const double top = (double)hf->cells * hf->cell;
+    if (!(p.x >= 0 && p.x <= top && p.y >= 0 && p.y <= top))
+        return NAN;
+    return p.z - tf_heightfield_height_at(hf, p.x, p.y);
+}
+
+/* A parameter in (0, tmax) at which the ray is provably under the surface, found from the
+ * neighbour's; 0 if none. */
+static double under_like_near(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmax,
+                              const tf_shadow_clear *near)
+{
+    if (!near || !(near->t_under > 0) || near->d[0] != d.x || near->d[1] != d.y ||
+        near->d[2] != d.z || hf->proc)
+        return 0;
+    const double eps = 1e-7 * (hf->extent + fabs(hf->hmin) + fabs(hf->hmax) + fabs(o.x) +
+                               fabs(o.y) + fabs(o.z));
+    if (!(over_surface(hf, o) > eps))
+        return 0;
+    const double run = sqrt(d.x * d.x + d.y * d.y), step = run > 0 ? hf->cell / run : 0;
+    const double probes[3] = {near->t_under, near->t_under + step, near->t_under + 3 * step};
+    for (int k = 0; k < 3; k++) {
+        const double t = probes[k];
+        if (t > 0 && t < tmax && over_surface(hf, v3_add(o, v3_scale(d, t))) < -eps)
+            return t;
+    }
+    return 0;
+}
+
+int tf_occluded_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+                         const tf_shadow_clear *near, tf_shadow_clear *mine)
+{
+    double t = under_like_near(hf, origin, dir, tmax, near);
+    if (!(t > 0)) {
+        ray_ctx r;
+        candidate best = {INFINITY, 0, 0, 0};
+        if (setup_ray(&r, hf, origin, dir, 0.0, tmax) && walk_hier(&r, &best))
+            t = best.t;
+    }
+    if (mine)
+        *mine = (tf_shadow_clear){{dir.x, dir.y, dir.z}, t > 0 ? t : 0};
+    return t > 0;
 }
 
 /* ---- public entry points ---------------------------------------------------------------------- */

@@ -36,16 +36,30 @@ int tf_occluded(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tm
  * (trace.c, "Coherence", proves it and the margins).  So a camera ray traced after the one
  * below it starts its walk where that one hit.  Only speed depends on this: the hit is
  * tf_trace's, bit for bit, whatever record is passed. */
+/* Shadow rays toward one sun are parallel: where one went under the surface, its neighbour,
+ * started a little aside, most likely does too, and one height lookup there proves it
+ * (tf_occluded_coherent). */
+typedef struct tf_shadow_clear {
+    double d[3];        /* the direction (a record helps rays of this very direction only) */
+    double t_under;     /* a parameter at which the ray was under the surface; 0: none known */
+} tf_shadow_clear;
+
 typedef struct tf_ray_clear {
     double o[3];        /* the origin (a record helps rays from this very origin only) */
     double ux, uy, k;   /* heading (unit, horizontal) and climb (dz per unit of horizontal run) */
     double s_in;        /* horizontal distance where the ray enters the terrain's square */
     double s_free;      /* above the surface over [s_in, s_free); 0: the ray vouches for nothing */
+    tf_shadow_clear shadow; /* the sample's shadow ray, if it cast one (shade.h) */
 } tf_ray_clear;
 
 /* tf_trace with tmin = 0, helped by `lower` (a record of another ray, or NULL); fills *mine
- * (if not NULL) with this ray's record.  The same return and hit as tf_trace. */
+ * (if not NULL) with this ray's record, its shadow part empty.  The same return and hit as
+ * tf_trace. */
 int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
                       const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine);
+/* tf_occluded with tmin = 0, helped by `near` (a record of a parallel ray, or NULL): the same
+ * answer.  Fills *mine (if not NULL) with this ray's record. */
+int tf_occluded_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+                         const tf_shadow_clear *near, tf_shadow_clear *mine);
 
 #endif

@@ -3,7 +3,9 @@
  * triangle; fans of rays from one origin (above the hills, outside the square, low and grazing,
  * under the surface, with a water plane's tmax) traced bottom-up, each with the record of the
  * one below (or of any other ray of the fan, or of another origin), give tf_trace's hit bit for
- * bit; and the walk does skip what a record vouches for: a record that lies hides a hit. */
+ * bit; and the walk does skip what a record vouches for: a record that lies hides a hit.
+ * Shadow rays in rows (tf_occluded_coherent) give tf_occluded's answer with any record, and the
+ * neighbour's record settles most occluded rays without a walk. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -149,13 +151,58 @@ static void test_a_false_record_hides_a_hit(void **state)
     tf_vec3 o = v3(500, 100, hf->hmax + 50), d = v3(0, 1, -0.3);
     tf_hit hit;
     assert_true(tf_trace(hf, o, d, 0.0, INFINITY, &hit));
-    tf_ray_clear lie = {{o.x, o.y, o.z}, 0, 1, -0.31, 0, 2 * hit.t};
+    tf_ray_clear lie = {{o.x, o.y, o.z}, 0, 1, -0.31, 0, 2 * hit.t, {{0}, 0}};
     assert_int_equal(tf_trace_coherent(hf, o, d, INFINITY, &lie, NULL, NULL), 0);
     /* the same record from another origin is ignored */
     lie.o[2] += 1;
     assert_int_equal(tf_trace_coherent(hf, o, d, INFINITY, &lie, NULL, NULL), 1);
     tf_heightfield_free(hf);
 }
+
+/* ---- shadow rays ------------------------------------------------------------------------------ */
+
+/* Parallel rays toward a sun from points on (or, some, a hair under, or beside) the surface,
+ * in rows, each with the record of the one before it, or a record that points anywhere: always
+ * tf_occluded's answer; and the neighbour's record does the work for most occluded rays (their
+ * record then holds one of the probed parameters rather than a walk's hit). */
+static void shadow_rows(height_fn f, int k, double extent, uint64_t seed)
+{
+    tf_heightfield *hf = make_field(f, k, extent);
+    rng r = {seed};
+    const double e = hf->cells * hf->cell;
+    int occluded = 0, by_probe = 0, rays = 0;
+    for (int n = 0; n < 300; n++) {
+        double az = range(&r, 0, 2 * M_PI), el = range(&r, 0.05, 0.8);
+        tf_vec3 sun = v3(cos(az) * cos(el), sin(az) * cos(el), sin(el));
+        double x = range(&r, -0.05, 1.05) * e, y = range(&r, 0, e), lift = range(&r, -0.002, 0.02);
+        double dx = range(&r, -1, 1) * 0.5 * hf->cell, dy = range(&r, -1, 1) * 0.5 * hf->cell;
+        tf_shadow_clear prev = {{0}, 0};
+        for (int i = 0; i < 40; i++, x += dx, y += dy) {
+            double z = tf_heightfield_height_at(hf, x, y) + lift * (hf->hmax - hf->hmin + 1);
+            tf_vec3 o = v3(x, y, z);
+            tf_shadow_clear mine, any = {{sun.x, sun.y, sun.z}, range(&r, -1, 2) * e};
+            int want = tf_occluded(hf, o, sun, 0.0, INFINITY);
+            assert_int_equal(tf_occluded_coherent(hf, o, sun, INFINITY, &prev, &mine), want);
+            assert_int_equal(tf_occluded_coherent(hf, o, sun, INFINITY, &any, NULL), want);
+            assert_int_equal(tf_occluded_coherent(hf, o, sun, INFINITY, NULL, NULL), want);
+            double step = hf->cell / hypot(sun.x, sun.y);
+            if (want && prev.t_under > 0)
+                by_probe += mine.t_under == prev.t_under || mine.t_under == prev.t_under + step ||
+                            mine.t_under == prev.t_under + 3 * step;
+            occluded += want;
+            rays++;
+            assert_true(want ? mine.t_under > 0 : mine.t_under == 0);
+            prev = mine;
+        }
+    }
+    assert_true(occluded > rays / 10);
+    assert_true(by_probe > occluded / 5);
+    tf_heightfield_free(hf);
+}
+
+static void test_shadow_rows_hills(void **state) { (void)state; shadow_rows(hills, 7, 150, 5); }
+static void test_shadow_rows_rough(void **state) { (void)state; shadow_rows(rough, 5, 100, 6); }
+static void test_shadow_rows_terraces(void **state) { (void)state; shadow_rows(terraces, 6, 300, 7); }
 
 int main(void)
 {
@@ -167,6 +214,9 @@ int main(void)
         cmocka_unit_test(test_fans_hills),
         cmocka_unit_test(test_fans_terraces),
         cmocka_unit_test(test_a_false_record_hides_a_hit),
+        cmocka_unit_test(test_shadow_rows_hills),
+        cmocka_unit_test(test_shadow_rows_rough),
+        cmocka_unit_test(test_shadow_rows_terraces),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

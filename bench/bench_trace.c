@@ -26,6 +26,7 @@
 #include "render/trace.h"
 #include "render/trace_packet.h"
 #include "render/render.h"
+#include "render/render_internal.h"
 #include "scene.h"
 
 static int rounds = 3; /* -r: A/B rounds of the packet comparisons */
@@ -238,11 +239,13 @@ static int bench_k(int k, int w, int h)
 /* One whole tf_render_rect of the image, packets on or off; its time. */
 static double render_once(const tf_renderer *r, int w, int h, int packets, tf_pixel *out)
 {
+    tf_render_coherence_force(0); /* coherent samples are traced one at a time, not in packets */
     tf_trace_packets_force(packets);
     double t0 = now_s();
     tf_render_rect(r, (tf_rect){0, 0, w, h}, out, NULL);
     double t = now_s() - t0;
     tf_trace_packets_force(-1);
+    tf_render_coherence_force(-1);
     return t;
 }
 

@@ -1,12 +1,15 @@
 /* render.c: tf_render_rect, adaptive antialiasing over a rectangle of the image.
  *
  * A rectangle walks its pixel rows bottom to top, keeping two rows of pixel-corner samples (the
- * row above and the row below the current pixel row, w+1 samples each).  Bottom to top because
- * a camera ray climbs above the ray below it: traced after it, it starts its walk where that one
- * hit (tf_trace_coherent, trace.h), if the terrain's slope allows; each sample's ray record is
- * kept beside it, and each lattice column's highest record is handed up to the next pixel row.  The last corner row
+ * row above and the row below the current pixel row, w+1 samples each).  The last corner row
  * and column lie outside the rectangle ("external samples", counted in external_rays): they are
  * computed here rather than borrowed from a neighbour, so tasks never wait on each other.
+ *
+ * Bottom to top for coherence (trace.h): a camera ray climbs above the ray below it, so traced
+ * after it, it starts its walk where that one hit (tf_trace_coherent), if the terrain's slope
+ * allows; and its shadow ray is first looked for under the surface where that one's went under
+ * (tf_occluded_coherent).  Each sample's record is kept beside it, and each lattice column's
+ * highest record is handed up to the next pixel row.
  *
  * Each pixel then refines itself (render_pixel): starting from its 4 corners it pops quads off a
  * small explicit stack.  A quad's contrast is the widest per-channel range of its samples'
@@ -88,8 +91,8 @@ static int coherence_forced = -1;
 
 void tf_render_coherence_force(int on) { coherence_forced = on < 0 ? -1 : on != 0; }
 
-/* Camera rays helped by the ones below them (trace.h, tf_trace_coherent): on a grid terrain,
- * unless forced off or TF_COHERENCE=0.  Never changes a bit, only the time. */
+/* Samples helped by the ones below them (trace.h's coherence, the top of this file): on a grid
+ * terrain, unless forced off or TF_COHERENCE=0.  Never changes a bit, only the time. */
 static int coherence_on(const tf_renderer *r)
 {
     if (r->hf->proc)
@@ -100,7 +103,7 @@ static int coherence_on(const tf_renderer *r)
     return !(v && !strcmp(v, "0"));
 }
 
-/* tf_render_lattice_sample with the camera ray traced by tf_trace_coherent. */
+/* tf_render_lattice_sample with its rays traced coherently (tf_shade_ray_coherent). */
 static void lattice_sample_coherent(const tf_renderer *r, int64_t X, int64_t Y,
                                     const tf_ray_clear *lower, tf_ray_clear *mine, tf_sample *out,
                                     uint64_t *shadow_rays)
@@ -219,7 +222,6 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
     return &pc->sample[k];
 }
 
-/* Refine pixel (px, py) whose four corner samples are given; write its value to *out. */
 /* A pixel's corners: samples c[0..3] (top left, top right, bottom left, bottom right) and,
  * with coherence, their rays' records k[0..3]. */
 typedef struct corners {
@@ -227,6 +229,7 @@ typedef struct corners {
     const tf_ray_clear *k[4];
 } corners;
 
+/* Refine pixel (px, py) whose four corner samples are given; write its value to *out. */
 static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
                          const corners *cs, tf_pixel *out, tf_render_counts *tally)
 {

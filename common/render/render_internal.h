@@ -30,7 +30,7 @@ struct tf_renderer {
     uint64_t jitter_key;/* hash of the scene seed, start of every jitter hash */
 };
 
-/* Camera rays helped by the rays below them (trace.h's coherence) in tf_render_rect, whose
+/* Samples helped by the samples below them (trace.h's coherence) in tf_render_rect, whose
  * pixel rows go bottom to top for it: 1 on, 0 off, -1 the default (on for a grid terrain
  * unless TF_COHERENCE=0).  Only the time changes; the tests compare the bits both ways. */
 void tf_render_coherence_force(int on);

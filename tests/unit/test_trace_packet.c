@@ -21,6 +21,7 @@
 #include "render/trace.h"
 #include "render/trace_packet.h"
 #include "render/render.h"
+#include "render/render_internal.h"
 #include "test_terrains.h"
 
 static const char *const isas[] = {"portable", "avx2", "avx512"};
@@ -342,12 +343,14 @@ static tf_heightfield *image_terrain(void)
 static void render_image(const tf_renderer *r, int packets, const char *isa, tf_pixel *out,
                          tf_render_counts *counts)
 {
+    tf_render_coherence_force(0); /* coherent samples are traced one at a time, not in packets */
     tf_trace_packets_force(packets);
     if (isa)
         assert_int_equal(tf_trace_packet_force_isa(isa), 0);
     tf_render_rect(r, (tf_rect){0, 0, IW, IH}, out, counts);
     tf_render_rect(r, (tf_rect){3, 5, 17, 9}, out + IW * IH, counts); /* an odd stamp too */
     tf_trace_packets_force(-1);
+    tf_render_coherence_force(-1);
     tf_trace_packet_force_isa(NULL);
 }
 

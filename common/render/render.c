@@ -105,8 +105,8 @@ static int coherence_on(const tf_renderer *r)
 
 /* tf_render_lattice_sample with its rays traced coherently (tf_shade_ray_coherent). */
 static void lattice_sample_coherent(const tf_renderer *r, int64_t X, int64_t Y,
-                                    const tf_ray_clear *lower, tf_ray_clear *mine, tf_sample *out,
-                                    uint64_t *shadow_rays)
+                                    const tf_sample_record *lower, tf_sample_record *mine,
+                                    tf_sample *out, uint64_t *shadow_rays)
 {
     double x, y;
     tf_lattice_position(r->jitter_key, (double)r->lattice, X, Y, &x, &y);
@@ -175,18 +175,18 @@ typedef struct pixel_cache {
     int side;           /* N + 1 */
     tf_sample *sample;  /* side * side */
     unsigned char *have;
-    tf_ray_clear *clear; /* side * side */
-    tf_ray_clear *column;
+    tf_sample_record *record; /* side * side */
+    tf_sample_record *column;
 } pixel_cache;
 
 /* The record of the nearest ray traced below local lattice point (i, j) in its column: in
  * the pixel, else from the pixel rows below.  (Any lower ray would do; the nearest vouches for
  * the most.) */
-static const tf_ray_clear *ray_below(const pixel_cache *pc, int i, int j)
+static const tf_sample_record *ray_below(const pixel_cache *pc, int i, int j)
 {
     for (int b = j + 1; b < pc->side; b++)
         if (pc->have[(size_t)b * (size_t)pc->side + (size_t)i])
-            return &pc->clear[(size_t)b * (size_t)pc->side + (size_t)i];
+            return &pc->record[(size_t)b * (size_t)pc->side + (size_t)i];
     return &pc->column[i];
 }
 
@@ -196,7 +196,7 @@ static void note_columns(const pixel_cache *pc)
     for (int i = 0; i < pc->side; i++)
         for (int j = 0; j < pc->side; j++)
             if (pc->have[(size_t)j * (size_t)pc->side + (size_t)i]) {
-                pc->column[i] = pc->clear[(size_t)j * (size_t)pc->side + (size_t)i];
+                pc->column[i] = pc->record[(size_t)j * (size_t)pc->side + (size_t)i];
                 break;
             }
 }
@@ -211,7 +211,7 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
     if (!pc->have[k]) {
         int64_t X = (int64_t)px * r->lattice + i, Y = (int64_t)py * r->lattice + j;
         if (pc->column)
-            lattice_sample_coherent(r, X, Y, ray_below(pc, i, j), &pc->clear[k], &pc->sample[k],
+            lattice_sample_coherent(r, X, Y, ray_below(pc, i, j), &pc->record[k], &pc->sample[k],
                                     &tally->shadow_rays);
         else
             tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
@@ -226,7 +226,7 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
  * with coherence, their rays' records k[0..3]. */
 typedef struct corners {
     const tf_sample *c[4];
-    const tf_ray_clear *k[4];
+    const tf_sample_record *k[4];
 } corners;
 
 /* Refine pixel (px, py) whose four corner samples are given; write its value to *out. */
@@ -240,7 +240,7 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
     for (int q = 0; q < 4; q++) {
         pc->sample[at[q]] = *cs->c[q];
         if (pc->column)
-            pc->clear[at[q]] = *cs->k[q];
+            pc->record[at[q]] = *cs->k[q];
     }
     pc->have[0] = pc->have[N] = 1;
     pc->have[(size_t)N * (size_t)pc->side] = pc->have[(size_t)N * (size_t)pc->side + (size_t)N] = 1;
@@ -396,15 +396,16 @@ static void corner_row_packets(const tf_renderer *r, tf_rect rect, int cy, row_r
 
 /* The same samples as corner_row_single, each camera ray helped by the one traced below it in
  * its lattice column (column[c * N], NULL-free: a record that vouches for nothing at first);
- * the rays' records go to clear[]. */
+ * the samples' records go to records[]. */
 static void corner_row_coherent(const tf_renderer *r, tf_rect rect, int cy,
-                                const tf_ray_clear *column, tf_sample *row, tf_ray_clear *clear,
+                                const tf_sample_record *column, tf_sample *row,
+                                tf_sample_record *records,
                                 tf_render_counts *tally)
 {
     for (int c = 0; c <= rect.w; c++) {
         int64_t X, Y;
         corner_point(r, rect, cy, c, &X, &Y);
-        lattice_sample_coherent(r, X, Y, &column[(size_t)c * (size_t)r->lattice], &clear[c],
+        lattice_sample_coherent(r, X, Y, &column[(size_t)c * (size_t)r->lattice], &records[c],
                                 &row[c], &tally->shadow_rays);
     }
 }
@@ -413,16 +414,16 @@ static void corner_row_coherent(const tf_renderer *r, tf_rect rect, int cy,
  * records, one a lattice column), packets (q not NULL), or one ray at a time. */
 typedef struct row_tracer {
     row_rays *q;
-    tf_ray_clear *column;
+    tf_sample_record *column;
 } row_tracer;
 
-/* Corner samples of one corner row (their rays' records to clear[] when coherent). */
+/* Corner samples of one corner row (their records to records[] when coherent). */
 static void corner_row(const tf_renderer *r, tf_rect rect, int cy, int external_row,
-                       const row_tracer *how, tf_sample *row, tf_ray_clear *clear,
+                       const row_tracer *how, tf_sample *row, tf_sample_record *records,
                        tf_render_counts *tally)
 {
     if (how->column)
-        corner_row_coherent(r, rect, cy, how->column, row, clear, tally);
+        corner_row_coherent(r, rect, cy, how->column, row, records, tally);
     else if (how->q)
         corner_row_packets(r, rect, cy, how->q, row, tally);
     else
@@ -435,7 +436,7 @@ static void corner_row(const tf_renderer *r, tf_rect rect, int cy, int external_
  * and how corner rows are traced. */
 typedef struct rect_state {
     tf_sample *above, *below;
-    tf_ray_clear *clear_above, *clear_below;
+    tf_sample_record *record_above, *record_below;
     pixel_cache pc;
     row_rays rays;
     row_tracer how;
@@ -443,8 +444,8 @@ typedef struct rect_state {
 
 static void rect_state_free(rect_state *st)
 {
-    free(st->above), free(st->below), free(st->clear_above), free(st->clear_below);
-    free(st->pc.sample), free(st->pc.have), free(st->pc.clear), free(st->how.column);
+    free(st->above), free(st->below), free(st->record_above), free(st->record_below);
+    free(st->pc.sample), free(st->pc.have), free(st->pc.record), free(st->how.column);
     if (st->how.q)
         row_rays_free(st->how.q);
 }
@@ -461,10 +462,10 @@ static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
     if (coherence_on(r)) {
         /* calloc: records that vouch for nothing until a ray below is traced */
         st->how.column = calloc((size_t)rect.w * (size_t)r->lattice + 1, sizeof *st->how.column);
-        st->clear_above = calloc(w1, sizeof *st->clear_above);
-        st->clear_below = calloc(w1, sizeof *st->clear_below);
-        st->pc.clear = malloc(sizeof *st->pc.clear * side * side);
-        ok = ok && st->how.column && st->clear_above && st->clear_below && st->pc.clear;
+        st->record_above = calloc(w1, sizeof *st->record_above);
+        st->record_below = calloc(w1, sizeof *st->record_below);
+        st->pc.record = malloc(sizeof *st->pc.record * side * side);
+        ok = ok && st->how.column && st->record_above && st->record_below && st->pc.record;
     } else if (!r->hf->proc && tf_trace_packets_enabled()) {
         st->how.q = &st->rays;
         ok = ok && row_rays_alloc(&st->rays, w1);
@@ -478,8 +479,8 @@ static void rect_state_step(rect_state *st)
 {
     tf_sample *t = st->above;
     st->above = st->below, st->below = t;
-    tf_ray_clear *k = st->clear_above;
-    st->clear_above = st->clear_below, st->clear_below = k;
+    tf_sample_record *k = st->record_above;
+    st->record_above = st->record_below, st->record_below = k;
 }
 
 /* The pixel row `row` of the rectangle, its corner rows traced (st->above, st->below). */
@@ -490,8 +491,8 @@ static void render_pixel_row(const tf_renderer *r, tf_rect rect, int row, rect_s
         corners cs = {{&st->above[c], &st->above[c + 1], &st->below[c], &st->below[c + 1]},
                       {NULL, NULL, NULL, NULL}};
         if (st->how.column) {
-            cs.k[0] = &st->clear_above[c], cs.k[1] = &st->clear_above[c + 1];
-            cs.k[2] = &st->clear_below[c], cs.k[3] = &st->clear_below[c + 1];
+            cs.k[0] = &st->record_above[c], cs.k[1] = &st->record_above[c + 1];
+            cs.k[2] = &st->record_below[c], cs.k[3] = &st->record_below[c + 1];
             st->pc.column = &st->how.column[(size_t)c * (size_t)r->lattice];
         }
         render_pixel(r, &st->pc, rect.x + c, rect.y + row, &cs,
@@ -513,9 +514,9 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
     rect_state_alloc(r, rect, &st);
     tf_render_counts tally = {0};
     tf_tile_counts cache_before = tf_tilecache_thread_counts();
-    corner_row(r, rect, rect.y + rect.h, 1, &st.how, st.below, st.clear_below, &tally);
+    corner_row(r, rect, rect.y + rect.h, 1, &st.how, st.below, st.record_below, &tally);
     for (int row = rect.h - 1; row >= 0; row--) {
-        corner_row(r, rect, rect.y + row, 0, &st.how, st.above, st.clear_above, &tally);
+        corner_row(r, rect, rect.y + row, 0, &st.how, st.above, st.record_above, &tally);
         render_pixel_row(r, rect, row, &st, out, &tally);
         rect_state_step(&st);
     }

@@ -541,18 +541,19 @@ void tf_shade_end(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, const tf_sha
 }
 
 void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
-                           const tf_ray_clear *lower, tf_ray_clear *mine, tf_sample *out,
+                           const tf_sample_record *lower, tf_sample_record *mine, tf_sample *out,
                            uint64_t *shadow_rays)
 {
+    mine->camera.s_free = 0, mine->shadow.t_under = 0;
     if (sh->hf->proc) {
-        mine->s_free = 0, mine->shadow.t_under = 0;
         tf_shade_ray(sh, origin, dir, out, shadow_rays);
         return;
     }
     double t_water = tf_shade_t_water(sh, origin, dir);
     tf_hit hit;
     tf_shade_pending p;
-    int found = tf_trace_coherent(sh->hf, origin, dir, t_water, lower, &hit, mine);
+    int found = tf_trace_coherent(sh->hf, origin, dir, t_water, lower ? &lower->camera : NULL,
+                                  &hit, &mine->camera);
     tf_shade_begin(sh, origin, dir, t_water, found ? &hit : NULL, &p);
     int occluded = 0;
     if (p.shadow) {

@@ -74,12 +74,18 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,
                   uint64_t *shadow_rays);
 
+/* What a sample's rays vouch for about a neighbour's (render/trace.h's coherence): its camera
+ * ray's record and its shadow ray's. */
+typedef struct tf_sample_record {
+    tf_ray_clear camera;
+    tf_shadow_clear shadow;
+} tf_sample_record;
+
 /* tf_shade_ray, its camera ray traced with tf_trace_coherent and its shadow ray with
- * tf_occluded_coherent (render/trace.h): the same bits, helped by `lower` (NULL or the record
- * of another sample's rays); *mine gets this sample's record (one that vouches for nothing on a
- * procedural terrain). */
+ * tf_occluded_coherent: the same bits, helped by `lower` (NULL or another sample's record);
+ * *mine gets this sample's (one that vouches for nothing on a procedural terrain). */
 void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
-                           const tf_ray_clear *lower, tf_ray_clear *mine, tf_sample *out,
+                           const tf_sample_record *lower, tf_sample_record *mine, tf_sample *out,
                            uint64_t *shadow_rays);
 
 /* tf_shade_ray in three steps, split at the shadow ray, so that a caller can trace many

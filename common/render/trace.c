@@ -530,7 +530,8 @@ static int heading_of(const ray_ctx *r, heading *h)
     h->run = sqrt(r->d[0] * r->d[0] + r->d[1] * r->d[1]);
     if (!(h->run > 0) || !isfinite(h->run))
         return 0;
-    h->ux = r->d[0] / h->run, h->uy = r->d[1] / h->run, h->k = r->d[2] / h->run;
+    const double inv = 1 / h->run; /* C1's margin covers the roundings of the products */
+    h->ux = r->d[0] * inv, h->uy = r->d[1] * inv, h->k = r->d[2] * inv;
     return 1;
 }
 
@@ -555,7 +556,7 @@ static int vouched(const ray_ctx *r, const heading *h, const tf_ray_clear *lower
     if (!(s_hi > s_lo))
         return 0;
     *t_pre = r->t_square * h->run < s_lo ? s_lo / h->run : 0;
-    *t_skip = s_hi / h->run;
+    *t_skip = s_hi * (1 / h->run);
     return *t_skip > r->t0;
 }
 
@@ -566,10 +567,12 @@ static int walk_coherent(ray_ctx *r, const heading *h, const tf_ray_clear *lower
     double t_pre, t_skip;
     if (!lower || !vouched(r, h, lower, &t_pre, &t_skip))
         return walk_hier(r, best);
-    if (t_pre > r->t0) {
-        ray_ctx prefix = *r;
-        prefix.t1 = t_pre < r->t1 ? t_pre : r->t1;
-        if (walk_hier(&prefix, best))
+    if (t_pre > r->t0) { /* the prefix: the walk with its end moved in */
+        const double t1 = r->t1;
+        r->t1 = t_pre < t1 ? t_pre : t1;
+        int found = walk_hier(r, best);
+        r->t1 = t1;
+        if (found)
             return 1;
     }
     return skip_to(r, t_skip) && walk_hier(r, best);
@@ -585,40 +588,41 @@ static int from_above(const ray_ctx *r, const candidate *c)
     return -r->d[0] * gx - r->d[1] * gy + r->d[2] * hf->cell < 0;
 }
 
-/* This ray's record (r as set up, before any skip; c its hit or NULL). */
-static void note_clear(const ray_ctx *r, const heading *h, const candidate *c, tf_ray_clear *mine)
+/* Does the ray start (at t0, as set up) above its cell's maximum? */
+static int starts_above(const ray_ctx *r)
 {
-    const tf_heightfield *hf = r->hf;
+    const size_t idx = (size_t)r->cj * (size_t)r->hf->cells + (size_t)r->ci;
+    return r->o[2] + r->t0 * r->d[2] > r->hf->maxgrid[0][idx] + r->margin;
+}
+
+/* This ray's record (c its hit or NULL; above: starts_above before the walk). */
+static void note_clear(const ray_ctx *r, const heading *h, const candidate *c, int above,
+                       tf_ray_clear *mine)
+{
     mine->ux = h->ux, mine->uy = h->uy, mine->k = h->k;
     mine->s_in = r->t_square * h->run;
-    if (c) {
-        if (from_above(r, c))
-            mine->s_free = c->t * h->run;
-    } else {
-        const size_t idx = (size_t)r->cj * (size_t)hf->cells + (size_t)r->ci;
-        if (r->o[2] + r->t0 * r->d[2] > hf->maxgrid[0][idx] + r->margin)
-            mine->s_free = r->t1 * h->run;
-    }
+    if (c ? from_above(r, c) : above)
+        mine->s_free = (c ? c->t : r->t1) * h->run;
 }
 
 int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
                       const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine)
 {
-    ray_ctx r, as_set_up;
+    ray_ctx r;
     heading h;
     candidate best = {INFINITY, 0, 0, 0};
     if (mine)
-        *mine = (tf_ray_clear){{origin.x, origin.y, origin.z}, 0, 0, 0, INFINITY, 0, {{0}, 0}};
+        *mine = (tf_ray_clear){{origin.x, origin.y, origin.z}, 0, 0, 0, INFINITY, 0};
     if (!setup_ray(&r, hf, origin, dir, 0.0, tmax))
         return 0;
     if (hf->proc || !heading_of(&r, &h)) /* no slope_max, or no heading: the plain walk */
         lower = NULL, mine = NULL;
-    as_set_up = r;
-    int found = walk_coherent(&r, &h, lower, &best);
+    const int above = mine && starts_above(&r);
+    int found = walk_coherent(&r, &h, lower, &best); /* may move r's start, never o, d, t1 */
     if (mine)
-        note_clear(&as_set_up, &h, found ? &best : NULL, mine);
+        note_clear(&r, &h, found ? &best : NULL, above, mine);
     if (found && hit)
-        finish_hit(&as_set_up, &best, hit);
+        finish_hit(&r, &best, hit);
     return found;
 }
 

@@ -49,12 +49,10 @@ typedef struct tf_ray_clear {
     double ux, uy, k;   /* heading (unit, horizontal) and climb (dz per unit of horizontal run) */
     double s_in;        /* horizontal distance where the ray enters the terrain's square */
     double s_free;      /* above the surface over [s_in, s_free); 0: the ray vouches for nothing */
-    tf_shadow_clear shadow; /* the sample's shadow ray, if it cast one (shade.h) */
 } tf_ray_clear;
 
 /* tf_trace with tmin = 0, helped by `lower` (a record of another ray, or NULL); fills *mine
- * (if not NULL) with this ray's record, its shadow part empty.  The same return and hit as
- * tf_trace. */
+ * (if not NULL) with this ray's record.  The same return and hit as tf_trace. */
 int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
                       const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine);
 /* tf_occluded with tmin = 0, helped by `near` (a record of a parallel ray, or NULL): the same

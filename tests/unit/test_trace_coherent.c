@@ -47,7 +47,8 @@ static void check_slope(height_fn f, int k, double extent)
         double x1 = range(&r, 0, e), y1 = range(&r, 0, e);
         double x2 = x1 + range(&r, -3, 3) * hf->cell, y2 = y1 + range(&r, -3, 3) * hf->cell;
         x2 = fmin(fmax(x2, 0), e), y2 = fmin(fmax(y2, 0), e);
-        double dh = fabs(tf_heightfield_height_at(hf, x1, y1) - tf_heightfield_height_at(hf, x2, y2));
+        double dh = fabs(tf_heightfield_height_at(hf, x1, y1) -
+                         tf_heightfield_height_at(hf, x2, y2));
         assert_true(dh <= hf->slope_max * hypot(x2 - x1, y2 - y1) + 1e-9);
     }
     tf_heightfield_free(hf);
@@ -139,7 +140,7 @@ static void test_fans_rough(void **state) { (void)state; fans_over(rough, 5, 100
 static void test_fans_hills(void **state) { (void)state; fans_over(hills, 7, 1000, 2); }
 static void test_fans_terraces(void **state) { (void)state; fans_over(terraces, 6, 300, 3); }
 
-/* ---- the skip is real -------------------------------------------------------------------------- */
+/* ---- the skip is real ------------------------------------------------------------------------ */
 
 /* A record that claims the ray below stayed clear far beyond where this ray hits makes the walk
  * start past the hit: the coherent trace then misses what tf_trace finds.  (The renderer never
@@ -151,7 +152,7 @@ static void test_a_false_record_hides_a_hit(void **state)
     tf_vec3 o = v3(500, 100, hf->hmax + 50), d = v3(0, 1, -0.3);
     tf_hit hit;
     assert_true(tf_trace(hf, o, d, 0.0, INFINITY, &hit));
-    tf_ray_clear lie = {{o.x, o.y, o.z}, 0, 1, -0.31, 0, 2 * hit.t, {{0}, 0}};
+    tf_ray_clear lie = {{o.x, o.y, o.z}, 0, 1, -0.31, 0, 2 * hit.t};
     assert_int_equal(tf_trace_coherent(hf, o, d, INFINITY, &lie, NULL, NULL), 0);
     /* the same record from another origin is ignored */
     lie.o[2] += 1;
@@ -159,7 +160,7 @@ static void test_a_false_record_hides_a_hit(void **state)
     tf_heightfield_free(hf);
 }
 
-/* ---- shadow rays ------------------------------------------------------------------------------ */
+/* ---- shadow rays ----------------------------------------------------------------------------- */
 
 /* Parallel rays toward a sun from points on (or, some, a hair under, or beside) the surface,
  * in rows, each with the record of the one before it, or a record that points anywhere: always
@@ -202,7 +203,11 @@ static void shadow_rows(height_fn f, int k, double extent, uint64_t seed)
 
 static void test_shadow_rows_hills(void **state) { (void)state; shadow_rows(hills, 7, 150, 5); }
 static void test_shadow_rows_rough(void **state) { (void)state; shadow_rows(rough, 5, 100, 6); }
-static void test_shadow_rows_terraces(void **state) { (void)state; shadow_rows(terraces, 6, 300, 7); }
+static void test_shadow_rows_terraces(void **state)
+{
+    (void)state;
+    shadow_rows(terraces, 6, 300, 7);
+}
 
 int main(void)
 {

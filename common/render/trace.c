@@ -578,14 +578,16 @@ static int walk_coherent(ray_ctx *r, const heading *h, const tf_ray_clear *lower
     return skip_to(r, t_skip) && walk_hier(r, best);
 }
 
-/* Was hit c made from above (d . n < 0, n the triangle's upward normal, unnormalised)? */
+/* Was hit c made from above (d . n < 0, n the triangle's upward normal, unnormalised), by more
+ * than the dot product's rounding? */
 static int from_above(const ray_ctx *r, const candidate *c)
 {
     const tf_heightfield *hf = r->hf;
     const float *p = hf->h + (size_t)c->cj * hf->n + c->ci;
     const double ha = p[0], hb = p[1], hd = p[hf->n], hc = p[hf->n + 1];
     const double gx = c->tri == 0 ? hb - ha : hc - hd, gy = c->tri == 0 ? hc - hb : hd - ha;
-    return -r->d[0] * gx - r->d[1] * gy + r->d[2] * hf->cell < 0;
+    const double a = -r->d[0] * gx, b = -r->d[1] * gy, z = r->d[2] * hf->cell;
+    return a + b + z < -1e-12 * (fabs(a) + fabs(b) + fabs(z));
 }
 
 /* Does the ray start (at t0, as set up) above its cell's maximum? */

@@ -35,7 +35,12 @@
  * nearly tie (the ray passes within tie_tol of a corner) also tests the two neighbours sharing
  * that corner.  This is part of the cell's test, a pure function of the cell and the ray, so
  * both walks still agree.  Rays that would hit a cell after the DDA has left it are covered by
- * the cull margin, which bounds the altitude error of the crossing parameters. */
+ * the cull margin, which bounds the altitude error of the crossing parameters.
+ *
+ * Coherence (tf_trace_coherent, tf_occluded_coherent; the two sections before the entry
+ * points): a camera ray may skip the stretch the ray below it proves clear, and a shadow ray
+ * may be proved occluded where its neighbour's went under the surface; the answers stay those
+ * of tf_trace and tf_occluded. */
 #include <assert.h>
 #include <float.h>
 #include <math.h>
@@ -472,7 +477,8 @@ static int walk_hier(const ray_ctx *r, candidate *best)
          1 - 1e-9).
    Why the hit stays tf_trace's, bit for bit: the prefix walk is the usual walk with its end
    t1 moved in, so it meets the same cells with the same tests until then; a cell it culls on
-   the shortened span has no hit up to the new end, and past it lies the vouched-for run.  The
+   the shortened span has no hit up to the new end, and past it lies the vouched-for run (a hit
+   beyond that, in the same cell, the main walk meets in that cell again).  The
    main walk starts at t_skip with the cell indices the flat walk holds there (index_at: every
    exit crossing before t_skip processed), which is a state the flat walk passes through; from
    there both walks are one.  Its first cell is culled on a shorter span than the flat walk's,

@@ -551,6 +551,8 @@ static int vouched(const ray_ctx *r, const heading *h, const tf_ray_clear *lower
         lower->o[2] != r->o[2])
         return 0;
     const double L = hf->slope_max, dx = h->ux - lower->ux, dy = h->uy - lower->uy;
+    if (!(L >= 0 && L < INFINITY)) /* no bound (heights that overflow a float) */
+        return 0;
     const double D = (h->k - lower->k) - L * sqrt(dx * dx + dy * dy) -
                      1e-9 * (1 + fabs(h->k) + fabs(lower->k) + L);
     if (!(D > 0))

@@ -399,8 +399,7 @@ static void corner_row_packets(const tf_renderer *r, tf_rect rect, int cy, row_r
  * the samples' records go to records[]. */
 static void corner_row_coherent(const tf_renderer *r, tf_rect rect, int cy,
                                 const tf_sample_record *column, tf_sample *row,
-                                tf_sample_record *records,
-                                tf_render_counts *tally)
+                                tf_sample_record *records, tf_render_counts *tally)
 {
     for (int c = 0; c <= rect.w; c++) {
         int64_t X, Y;

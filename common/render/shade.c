@@ -396,6 +396,17 @@ static int resolve_shadow(const tf_shader *sh, const tf_shade_pending *p, uint64
     return terrain_occludes(sh, p->start, sh->sun_dir);
 }
 
+/* resolve_shadow on a grid terrain, helped by a neighbour's shadow record (trace.h). */
+static int resolve_shadow_coherent(const tf_shader *sh, const tf_shade_pending *p,
+                                   const tf_shadow_clear *near, tf_shadow_clear *mine,
+                                   uint64_t *shadow_rays)
+{
+    if (!p->shadow)
+        return 0;
+    (*shadow_rays)++;
+    return tf_occluded_coherent(sh->hf, p->start, sh->sun_dir, TF_FAR_AWAY, near, mine);
+}
+
 /* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */
 static int snow_line_matters(const tf_shader *sh, double z)
 {
@@ -555,13 +566,10 @@ void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
     int found = tf_trace_coherent(sh->hf, origin, dir, t_water, lower ? &lower->camera : NULL,
                                   &hit, &mine->camera);
     tf_shade_begin(sh, origin, dir, t_water, found ? &hit : NULL, &p);
-    int occluded = 0;
-    if (p.shadow) {
-        (*shadow_rays)++;
-        occluded = tf_occluded_coherent(sh->hf, p.start, sh->sun_dir, TF_FAR_AWAY,
-                                        lower ? &lower->shadow : NULL, &mine->shadow);
-    }
-    tf_shade_end(sh, origin, dir, &p, occluded, out);
+    tf_shade_end(sh, origin, dir, &p,
+                 resolve_shadow_coherent(sh, &p, lower ? &lower->shadow : NULL, &mine->shadow,
+                                         shadow_rays),
+                 out);
 }
 
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,

@@ -486,6 +486,13 @@ static int walk_hier(const ray_ctx *r, candidate *best)
    its first hit comes from above (d . n < 0), or it misses and starts (at t0) above its
    cell's maximum; either way no crossing comes before the end of its walk. */
 
+/* The clearance both coherence proofs ask of a ray from (ox, oy, oz): 1e-7 times the scene's
+ * size, orders above the rounding of a triangle test or of tf_heightfield_height_at. */
+static double clearance_eps(const tf_heightfield *hf, double ox, double oy, double oz)
+{
+    return 1e-7 * (hf->extent + fabs(hf->hmin) + fabs(hf->hmax) + fabs(ox) + fabs(oy) + fabs(oz));
+}
+
 /* The exit crossing of index c on axis 0 (x) or 1 (y). */
 static inline double exit_on(const ray_ctx *r, int axis, int c)
 {
@@ -557,8 +564,7 @@ static int vouched(const ray_ctx *r, const heading *h, const tf_ray_clear *lower
                      1e-9 * (1 + fabs(h->k) + fabs(lower->k) + L);
     if (!(D > 0))
         return 0;
-    const double eps = 1e-7 * (hf->extent + fabs(hf->hmin) + fabs(hf->hmax) + fabs(r->o[0]) +
-                               fabs(r->o[1]) + fabs(r->o[2]));
+    const double eps = clearance_eps(hf, r->o[0], r->o[1], r->o[2]);
     const double s_lo = eps / D > lower->s_in ? eps / D : lower->s_in;
     const double s_hi = lower->s_free * (1 - 1e-9);
     if (!(s_hi > s_lo))
@@ -665,8 +671,7 @@ static double under_like_near(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, do
     if (!near || !(near->t_under > 0) || near->d[0] != d.x || near->d[1] != d.y ||
         near->d[2] != d.z || hf->proc)
         return 0;
-    const double eps = 1e-7 * (hf->extent + fabs(hf->hmin) + fabs(hf->hmax) + fabs(o.x) +
-                               fabs(o.y) + fabs(o.z));
+    const double eps = clearance_eps(hf, o.x, o.y, o.z);
     if (!(over_surface(hf, o) > eps))
         return 0;
     const double run = sqrt(d.x * d.x + d.y * d.y), step = run > 0 ? hf->cell / run : 0;

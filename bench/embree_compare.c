@@ -31,6 +31,7 @@
 #include "render/camera.h"
 #include "render/constants.h"
 #include "render/shade.h"
+#include "render/sun_strips.h"
 #include "render/trace.h"
 #include "terrain/heightfield.h"
 #include "terrain/terrain_build.h"
@@ -92,6 +93,8 @@ typedef struct bench {
     int prim_height; /* rows of primary rays */
     int list;        /* --list: print every disagreeing primary ray */
     double tf_build_s, e_build_s; /* medians */
+    tf_sun_strips *strips;        /* the coherent mode's shadow rays end where these prove */
+    double strips_build_s;
 } bench;
 
 static double clock_s(clockid_t id)
@@ -381,6 +384,10 @@ static int shadow_rays(bench *b, const tf_scene *s, char *err, size_t errlen)
         if (b->ref_hit[i] && v3_dot(b->ref[i].n, sh.sun_dir) > 0)
             set_ray(&b->shad, k++, v3_add(b->ref[i].p, v3_scale(b->ref[i].n, sh.shadow_lift)),
                     sh.sun_dir, i);
+    /* the sun's strips, as tf_renderer_new builds them (one thread) */
+    double t0 = clock_s(CLOCK_MONOTONIC);
+    b->strips = tf_sun_strips_build(b->hf, sh.sun_dir);
+    b->strips_build_s = clock_s(CLOCK_MONOTONIC) - t0;
     return 0;
 }
 
@@ -431,13 +438,17 @@ static void tf_shadow(const bench *b, found *out)
         out->t[i] = tf_occluded(b->hf, b->shad.o[i], b->shad.d[i], 0.0, TF_FAR_AWAY) ? 0 : INFINITY;
 }
 
-/* In the list's order (the image's, row by row), each with the record of the one before. */
+/* In the list's order (the image's, row by row), each with the record of the one before and
+ * its walk ending where the sun's strips prove it clear (shade.c's tf_shadow_tmax). */
 static void tf_shadow_coherent(const bench *b, found *out)
 {
     tf_shadow_clear prev = {{0}, 0};
-    for (int i = 0; i < b->shad.count; i++)
-        out->t[i] = tf_occluded_coherent(b->hf, b->shad.o[i], b->shad.d[i], TF_FAR_AWAY, &prev,
-                                         &prev) ? 0 : INFINITY;
+    for (int i = 0; i < b->shad.count; i++) {
+        const double tmax = tf_sun_strips_tmax(b->strips, b->shad.o[i]);
+        out->t[i] = tf_occluded_coherent(b->hf, b->shad.o[i], b->shad.d[i], tmax, &prev, &prev)
+                        ? 0
+                        : INFINITY;
+    }
 }
 
 static void ray1(struct RTCRay *ray, const float *f)
@@ -731,6 +742,11 @@ static void print_header(const bench *b, const opts *o, const tf_scene *s)
         hits += b->ref_hit[i];
     printf("rays: %dx%d primary (%d hit the terrain), %d shadow toward the sun (from the hits facing it)\n",
            s->width, s->height, hits, b->shad.count);
+    size_t grids, all = tf_bytes(b->hf, &grids), strips = tf_sun_strips_bytes(b->strips);
+    printf("terrafarm's sun strips (the coherent mode's shadow rays): build %.3f s on one thread, "
+           "%.1f MB; with them terrafarm holds %.1f MB (%.3f of Embree's)\n",
+           b->strips_build_s, strips / 1e6, (all + strips) / 1e6,
+           (double)(all + strips) / (double)(b->e.buffer_bytes + b->e.bvh_bytes));
 }
 
 /* Terrain, builds, rays and result arrays.  0, or -1 with one line in err. */
@@ -772,6 +788,7 @@ static void teardown(bench *b)
     embree_drop_scene(&b->e);
     if (b->e.dev)
         rtcReleaseDevice(b->e.dev);
+    tf_sun_strips_free(b->strips);
     if (b->hf)
         tf_heightfield_free(b->hf);
 }

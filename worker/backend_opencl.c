@@ -44,6 +44,7 @@
 #include "worker/opencl_cache.h"
 #include "worker/pocl_cachedir.h"
 #include "render/render_internal.h"
+#include "render/sun_strips.h"
 #include "log.h"
 
 #define KERNEL_FILE "terrafarm.cl" /* the file that marks a kernel directory */
@@ -53,8 +54,8 @@
  * common/ (kernel directory/../../common/NAME). */
 #define SOURCE_FILES                                                                            \
     {"tf_cl_params.h", "render/constants.h", "terrafarm.cl", "packet.cl", "common/portable.h",  \
-     "terrain/noise_kernel.h", "render/sample_math.h", "render/trace_math.h", "packet_trace.cl", \
-     "packet_shade.cl", "packet_render.cl"}
+     "terrain/noise_kernel.h", "render/sample_math.h", "render/trace_math.h",                  \
+     "render/sun_math.h", "packet_trace.cl", "packet_shade.cl", "packet_render.cl"}
 /* How much one work-item does, passed to the kernels as -DTF_STREAM (the batch of samples, the
  * corners per tf_corners8 item) and -DTF_PIX (pixels per tf_pixels8 item), so that host and
  * device cannot disagree; both at most 256 (the kernels name rays and pixels with a uchar).  A
@@ -87,7 +88,7 @@ struct tf_cl_backend {
     cl_command_queue queue;
     cl_program program;
     cl_kernel k_corners, k_pixels;
-    cl_mem P, I, h, minmax, perm;
+    cl_mem P, I, h, minmax, perm, reach; /* reach: the sun's strips (render/sun_strips.h) */
     float *minmax_host; /* what b->minmax reads in place (lent_to_device); freed after it */
     /* per-render buffers, grown as needed */
     cl_mem corners, corner_levels, corner_shadow, cache, levels, have, where, out, pixel_shadow;
@@ -431,6 +432,21 @@ static void put3(double *P, int k, tf_vec3 v)
     P[k + 2] = v.z;
 }
 
+/* The sun's strips' frame (no strips: strips 0, which proves nothing). */
+static void fill_sun_frame(const tf_sun_strips *st, double *P, int *I)
+{
+    if (!st)
+        return;
+    const tf_sun_frame *f = &st->frame;
+    const double v[12] = {f->a_s,    f->b_s, f->a_p,  f->b_p,  f->along0,     f->across0,
+                          f->inv_w, f->inv_ds, f->ds, f->climb, f->t_per_cell, f->eps};
+    for (int i = 0; i < 12; i++)
+        P[TFP_SUN_FRAME + i] = v[i];
+    I[TFI_SUN_STRIPS] = f->strips;
+    I[TFI_SUN_BINS] = f->bins;
+    I[TFI_SUN_LOOK] = f->look;
+}
+
 /* Copy what tf_renderer_new derived into the P[] / I[] blocks. */
 static void fill_params(const tf_renderer *r, double *P, int *I)
 {
@@ -492,12 +508,24 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     I[TFI_MIST_HOMOG] = s->mist.homogeneous;
     I[TFI_LATTICE] = r->lattice;
     I[TFI_DEPTH] = r->depth;
+    fill_sun_frame(r->sun_strips, P, I);
 }
 
 static cl_mem upload(tf_cl_backend *b, const void *data, size_t bytes, cl_int *rc)
 {
     return clCreateBuffer(b->ctx, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, (void *)data,
                           rc);
+}
+
+/* The sun's strips' table of renderer r, or one unread float where it has none. */
+static cl_mem upload_reach(tf_cl_backend *b, const tf_renderer *r, cl_int *rc)
+{
+    static const float none = 0;
+    const tf_sun_strips *st = r->sun_strips;
+    if (!st)
+        return upload(b, &none, sizeof none, rc);
+    return upload(b, st->reach,
+                  (size_t)st->frame.strips * (size_t)st->frame.bins * sizeof *st->reach, rc);
 }
 
 /* A read-only buffer over host memory that outlives it and never changes (the height field, the
@@ -555,7 +583,7 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
             mm[2 * (at + k) + 1] = hf->mingrid[L][k];
         }
     }
-    cl_int rc[5];
+    cl_int rc[6];
     b->P = upload(b, P, sizeof P, &rc[0]);
     b->I = upload(b, I, sizeof I, &rc[1]);
     b->h = lent_to_device(b, hf->h, (size_t)hf->n * (size_t)hf->n * sizeof(float), &rc[2]);
@@ -563,7 +591,8 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
     b->minmax = lent_to_device(b, mm, total * 2 * sizeof *mm, &rc[3]);
     b->perm = upload(b, b->renderer->shader.noise.perm, sizeof b->renderer->shader.noise.perm,
                      &rc[4]);
-    for (int i = 0; i < 5; i++)
+    b->reach = upload_reach(b, b->renderer, &rc[5]);
+    for (int i = 0; i < 6; i++)
         if (rc[i] != CL_SUCCESS) {
             tf_seterr(err, errlen, "OpenCL: cannot upload the height field (error %d)", rc[i]);
             return -1;
@@ -692,10 +721,14 @@ int tf_cl_backend_set_scene(tf_cl_backend *b, const tf_scene *s, char *err, size
     cl_int rc = clEnqueueWriteBuffer(b->queue, b->P, CL_TRUE, 0, sizeof P, P, 0, NULL, NULL);
     if (rc == CL_SUCCESS)
         rc = clEnqueueWriteBuffer(b->queue, b->I, CL_TRUE, 0, sizeof I, I, 0, NULL, NULL);
+    /* the sun may have moved: the new strips (kernels already queued keep the old buffer) */
+    cl_mem reach = rc == CL_SUCCESS ? upload_reach(b, r, &rc) : NULL;
     if (rc != CL_SUCCESS) {
         tf_renderer_free(r);
         return tf_seterr(err, errlen, "OpenCL: cannot upload the new camera (error %d)", rc);
     }
+    clReleaseMemObject(b->reach);
+    b->reach = reach;
     tf_renderer_free(b->renderer);
     b->renderer = r;
     return 0;
@@ -798,8 +831,9 @@ static cl_int set_common_args(tf_cl_backend *b, cl_kernel k, tf_rect rect)
     rc |= clSetKernelArg(k, 3, sizeof(cl_mem), &b->h);
     rc |= clSetKernelArg(k, 4, sizeof(cl_mem), &b->minmax);
     rc |= clSetKernelArg(k, 5, sizeof(cl_mem), &b->perm);
-    rc |= clSetKernelArg(k, 6, sizeof(cl_int), &rect.x);
-    rc |= clSetKernelArg(k, 7, sizeof(cl_int), &rect.y);
+    rc |= clSetKernelArg(k, 6, sizeof(cl_mem), &b->reach);
+    rc |= clSetKernelArg(k, 7, sizeof(cl_int), &rect.x);
+    rc |= clSetKernelArg(k, 8, sizeof(cl_int), &rect.y);
     return rc;
 }
 
@@ -822,19 +856,19 @@ static cl_int enqueue_pixel_batch(tf_cl_backend *b, tf_rect rect, size_t first, 
     cl_int rw = rect.w, f = (cl_int)first;
     cl_int count = (cl_int)(npixels - first < batch ? npixels - first : batch);
     cl_int rc = set_common_args(b, b->k_pixels, rect);
-    rc |= clSetKernelArg(b->k_pixels, 8, sizeof rw, &rw);
-    rc |= clSetKernelArg(b->k_pixels, 9, sizeof f, &f);
-    rc |= clSetKernelArg(b->k_pixels, 10, sizeof count, &count);
-    rc |= clSetKernelArg(b->k_pixels, 11, sizeof(cl_mem), &b->corners);
-    rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->corner_levels);
-    rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->cache);
-    rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->levels);
-    rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->have);
-    rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->where);
+    rc |= clSetKernelArg(b->k_pixels, 9, sizeof rw, &rw);
+    rc |= clSetKernelArg(b->k_pixels, 10, sizeof f, &f);
+    rc |= clSetKernelArg(b->k_pixels, 11, sizeof count, &count);
+    rc |= clSetKernelArg(b->k_pixels, 12, sizeof(cl_mem), &b->corners);
+    rc |= clSetKernelArg(b->k_pixels, 13, sizeof(cl_mem), &b->corner_levels);
+    rc |= clSetKernelArg(b->k_pixels, 14, sizeof(cl_mem), &b->cache);
+    rc |= clSetKernelArg(b->k_pixels, 15, sizeof(cl_mem), &b->levels);
+    rc |= clSetKernelArg(b->k_pixels, 16, sizeof(cl_mem), &b->have);
+    rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_mem), &b->where);
     rc |= next_epoch(b);
-    rc |= clSetKernelArg(b->k_pixels, 17, sizeof(cl_uint), &b->epoch);
-    rc |= clSetKernelArg(b->k_pixels, 18, sizeof(cl_mem), &b->out);
-    rc |= clSetKernelArg(b->k_pixels, 19, sizeof(cl_mem), &b->pixel_shadow);
+    rc |= clSetKernelArg(b->k_pixels, 18, sizeof(cl_uint), &b->epoch);
+    rc |= clSetKernelArg(b->k_pixels, 19, sizeof(cl_mem), &b->out);
+    rc |= clSetKernelArg(b->k_pixels, 20, sizeof(cl_mem), &b->pixel_shadow);
     const size_t per_item = (size_t)b->pix;
     size_t global = round_up(((size_t)count + per_item - 1) / per_item, b->local);
     if (rc != CL_SUCCESS)
@@ -893,11 +927,11 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     cl_int rc;
     cl_int cw = rect.w + 1, ch = rect.h + 1;
     rc = set_common_args(b, b->k_corners, rect);
-    rc |= clSetKernelArg(b->k_corners, 8, sizeof cw, &cw);
-    rc |= clSetKernelArg(b->k_corners, 9, sizeof ch, &ch);
-    rc |= clSetKernelArg(b->k_corners, 10, sizeof(cl_mem), &b->corners);
-    rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corner_levels);
-    rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_shadow);
+    rc |= clSetKernelArg(b->k_corners, 9, sizeof cw, &cw);
+    rc |= clSetKernelArg(b->k_corners, 10, sizeof ch, &ch);
+    rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corners);
+    rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_levels);
+    rc |= clSetKernelArg(b->k_corners, 13, sizeof(cl_mem), &b->corner_shadow);
     size_t global = round_up((ncorners + (size_t)b->stream - 1) / (size_t)b->stream, b->local);
     cl_event corner_ev = NULL;
     if (rc == CL_SUCCESS)
@@ -958,7 +992,7 @@ void tf_cl_backend_free(tf_cl_backend *b)
 {
     if (!b)
         return;
-    cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm,
+    cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm, b->reach,
                      b->corners, b->corner_levels, b->corner_shadow, b->cache, b->levels,
                      b->have, b->where, b->out, b->pixel_shadow};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)

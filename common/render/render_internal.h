@@ -28,6 +28,7 @@ struct tf_renderer {
     int lattice;        /* N = 2^depth lattice steps per pixel */
     double threshold;   /* antialias.threshold */
     uint64_t jitter_key;/* hash of the scene seed, start of every jitter hash */
+    struct tf_sun_strips *sun_strips; /* the shader's (NULL: none), owned here */
 };
 
 /* Samples helped by the samples below them (trace.h's coherence) in tf_render_rect, whose

@@ -4,6 +4,7 @@
  * Constants below set the default look (greens, greys, white snow, blue water); the scene
  * chooses lines, slopes, sun, sky and mist. */
 #include "render/shade.h"
+#include "render/sun_strips.h"
 #include "render/trace_procedural.h"
 
 #include <math.h>
@@ -92,11 +93,17 @@ static int trace_terrain(const tf_shader *sh, tf_vec3 o, tf_vec3 d, double tmax,
     return tf_trace(sh->hf, o, d, 0.0, tmax, hit);
 }
 
-static int terrain_occludes(const tf_shader *sh, tf_vec3 o, tf_vec3 d)
+double tf_shadow_tmax(const tf_shader *sh, tf_vec3 o)
+{
+    return tf_sun_strips_tmax(sh->sun_strips, o);
+}
+
+/* Whether the shadow ray from o toward the sun meets the terrain. */
+static int terrain_occludes(const tf_shader *sh, tf_vec3 o)
 {
     if (sh->hf->proc)
-        return tf_proc_occluded(sh->hf->proc, &sh->view, o, d, 0.0, TF_FAR_AWAY);
-    return tf_occluded(sh->hf, o, d, 0.0, TF_FAR_AWAY);
+        return tf_proc_occluded(sh->hf->proc, &sh->view, o, sh->sun_dir, 0.0, TF_FAR_AWAY);
+    return tf_occluded(sh->hf, o, sh->sun_dir, 0.0, tf_shadow_tmax(sh, o));
 }
 
 /* Shadow rays start this far along the normal from a terrain hit. */
@@ -393,7 +400,7 @@ static int resolve_shadow(const tf_shader *sh, const tf_shade_pending *p, uint64
     if (!p->shadow)
         return 0;
     (*shadow_rays)++;
-    return terrain_occludes(sh, p->start, sh->sun_dir);
+    return terrain_occludes(sh, p->start);
 }
 
 /* resolve_shadow on a grid terrain, helped by a neighbour's shadow record (trace.h). */
@@ -404,7 +411,8 @@ static int resolve_shadow_coherent(const tf_shader *sh, const tf_shade_pending *
     if (!p->shadow)
         return 0;
     (*shadow_rays)++;
-    return tf_occluded_coherent(sh->hf, p->start, sh->sun_dir, TF_FAR_AWAY, near, mine);
+    return tf_occluded_coherent(sh->hf, p->start, sh->sun_dir, tf_shadow_tmax(sh, p->start), near,
+                                mine);
 }
 
 /* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */

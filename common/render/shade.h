@@ -57,6 +57,9 @@ typedef struct tf_shader {
     double pixel_angle;      /* angle one pixel subtends at the image centre, radians */
     tf_proc_view view;       /* a procedural terrain's levels of detail for this camera */
     double flow_ref;         /* [erosion]: flow at which a bed looks fully wet (mean * 8) */
+    /* NULL, or the sun's strips (sun_strips.h, owned by the renderer): where a shadow ray's
+     * walk may end, the same answer from a shorter walk */
+    const struct tf_sun_strips *sun_strips;
 } tf_shader;
 
 /* One camera sample: linear RGB, alpha (1 = terrain or water), distance to the hit (or
@@ -67,6 +70,10 @@ typedef struct tf_sample {
 } tf_sample;
 
 /* TF_SKY_DIST: render/constants.h */
+
+/* The tmax for tf_occluded of a shadow ray from o toward sh->sun_dir: where the sun's strips
+ * prove it clear for good, else TF_FAR_AWAY. */
+double tf_shadow_tmax(const tf_shader *sh, tf_vec3 o);
 
 void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
 

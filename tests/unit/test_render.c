@@ -142,6 +142,27 @@ static void test_coherence_changes_no_bit(void **state)
     free(img);
 }
 
+/* Shadow rays whose walks end where the sun's strips prove them clear (render/sun_strips.h) or
+ * that walk out of the terrain's box, the pixels are the same bits: the fixture's renderer has
+ * the strips (its image is big enough for them), this one does without. */
+static void test_sun_strips_change_no_bit(void **state)
+{
+    fixture *f = *state;
+    assert_non_null(f->r->sun_strips);
+    assert_ptr_equal(f->r->shader.sun_strips, f->r->sun_strips);
+    char err[256];
+    tf_renderer *plain = tf_renderer_new(&f->scene, f->hf, err, sizeof err);
+    assert_non_null(plain);
+    plain->shader.sun_strips = NULL;
+    tf_pixel *img = calloc(W * H, sizeof *img);
+    tf_render_counts c = {0};
+    tf_render_rect(plain, (tf_rect){0, 0, W, H}, img, &c);
+    assert_memory_equal(img, f->whole, sizeof f->whole);
+    assert_memory_equal(&c, &f->whole_counts, sizeof c);
+    free(img);
+    tf_renderer_free(plain);
+}
+
 typedef struct thread_job { const tf_renderer *r; tf_pixel *img; int first_row; } thread_job;
 
 static void *render_alternate_rows(void *arg)
@@ -331,6 +352,7 @@ int main(void)
         cmocka_unit_test(test_stamps_7x5_identical_to_whole),
         cmocka_unit_test(test_stamps_13x11_identical_to_whole),
         cmocka_unit_test(test_coherence_changes_no_bit),
+        cmocka_unit_test(test_sun_strips_change_no_bit),
         cmocka_unit_test(test_two_threads_identical_to_whole),
         cmocka_unit_test(test_sky_not_subdivided_edges_are),
         cmocka_unit_test(test_counts_add_up),

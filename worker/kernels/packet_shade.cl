@@ -492,6 +492,16 @@ v3p lattice_dir8(const world *w, ulong jitter_key, lv X, lv Y)
     return tf_camera_ray(&w->cam, x, y);
 }
 
+/* The sun's strips' frame, as the host put it in P[] / I[] (tf_cl_params.h). */
+tf_sun_frame sun_frame(const world *w)
+{
+    __global const double *v = w->P + TFP_SUN_FRAME;
+    tf_sun_frame f = {v[0], v[1], v[2],  v[3],  v[4],  v[5],
+                      v[6], v[7], v[8], v[9], v[10], v[11],
+                      w->I[TFI_SUN_STRIPS], w->I[TFI_SUN_BINS], w->I[TFI_SUN_LOOK]};
+    return f;
+}
+
 /* The samples at n <= TF_STREAM lattice points: sample k is lane k % 8 of packet k / 8 of
  * X[], Y[], out[][0..4] (r, g, b, a, distance) and shadow_rays[] (which grows by the shadow
  * rays each sample cast).  lattice_sample + shade_ray per sample, with all the camera rays
@@ -503,6 +513,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
     const v3p origin = v3p_splat(pvec(w, TFP_CAM_POS));
     const double sea = w->P[TFP_SEA_LEVEL];
     const vec3 sun = pvec(w, TFP_SUN_DIR);
+    const tf_sun_frame strips = sun_frame(w);
     const v3p zero = v3p_splat(v3(0, 0, 0));
     lv mask[TF_STREAM_PACKETS];
     ray_stream cam; /* d: the directions, tmax: the water distances (TF_FAR_AWAY: none) */
@@ -556,7 +567,9 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
             shadow.o[q].z[r] = s->start.z[l];
             shadow.d[q] = v3p_splat(sun);
             shadow.tmin[q][r] = 0.0;
-            shadow.tmax[q][r] = TF_FAR_AWAY;
+            /* where the strips prove the ray clear for good (shade.c tf_shadow_tmax) */
+            shadow.tmax[q][r] = tf_sun_clear_after(&strips, w->reach, s->start.x[l],
+                                                   s->start.y[l], s->start.z[l]);
         }
     }
     lv blocked[TF_STREAM_PACKETS], lit[TF_STREAM_PACKETS];

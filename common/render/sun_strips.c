@@ -1,0 +1,151 @@
+/* sun_strips.c: building the sun's strips (render/sun_strips.h; the bound and its query are in
+ * render/sun_math.h).
+ *
+ * Coordinates are in cells: grid vertex (i, j) is at along = ux i + uy j, across = -uy i + ux j
+ * (u the sun's unit heading).  The build goes once over the blocks of `TF_SUN_BLOCK_LEVEL` of
+ * the max grids (2x2 cells): a block's top is the max of the triangles over it, and the block
+ * lies, by its corners, within an along and an across interval, widened by a margin far above
+ * their rounding; every bin those intervals meet takes the block's top as a candidate.  So a
+ * bin's value bounds the surface over it from above (the bins a block only seems to meet make
+ * it larger, never smaller).  Then each strip, from its far end back, turns tops into reach:
+ *     reach[b] = max(reach[b + 1], top[b] - climb (along0 + b ds)),
+ * rounded up (a relative 1e-9 on the double, then up to the next float).  One pass over 1/4 of
+ * the cells and one over the bins: ~25 ms and 3 MB for 2049^2 samples.  Bins of 3 cells cost a
+ * lit ray 1-2% more than bins of 1 or 2 (it walks further before a bin proves it clear) and
+ * need a ninth of the memory of 1 (bench/README.md section 22). */
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include "render/sun_strips.h"
+
+#define TF_SUN_STRIP_CELLS 3.0
+#define TF_SUN_BLOCK_LEVEL 1
+#define TF_SUN_LOOK 16         /* bins ahead a ray tries before walking as before */
+
+/* The frame: the sun's heading in cells, the strips' extent over the square. */
+static int frame_of(const tf_heightfield *hf, tf_vec3 sun, tf_sun_frame *f, double *ux,
+                    double *uy)
+{
+    const double run = sqrt(sun.x * sun.x + sun.y * sun.y);
+    if (!(run > 1e-6) || !(sun.z > 0) || !isfinite(run) || !isfinite(sun.z))
+        return 0; /* overhead, at or below the horizon: every ray is its own case */
+    *ux = sun.x / run, *uy = sun.y / run;
+    const double C = hf->cells, w = TF_SUN_STRIP_CELLS;
+    double al_lo = INFINITY, al_hi = -INFINITY, ac_lo = INFINITY, ac_hi = -INFINITY;
+    for (int c = 0; c < 4; c++) {
+        const double x = (c & 1) ? C : 0, y = (c & 2) ? C : 0;
+        const double al = *ux * x + *uy * y, ac = -*uy * x + *ux * y;
+        al_lo = fmin(al_lo, al), al_hi = fmax(al_hi, al);
+        ac_lo = fmin(ac_lo, ac), ac_hi = fmax(ac_hi, ac);
+    }
+    *f = (tf_sun_frame){0};
+    f->a_s = *ux / hf->cell, f->b_s = *uy / hf->cell;
+    f->a_p = -*uy / hf->cell, f->b_p = *ux / hf->cell;
+    /* a strip of margin on either side: the query wants a ray a strip from the edge */
+    f->along0 = al_lo - w, f->across0 = ac_lo - w;
+    f->ds = w, f->inv_ds = 1 / w, f->inv_w = 1 / w;
+    f->strips = (int)((ac_hi - ac_lo) / w) + 4;
+    f->bins = (int)((al_hi - al_lo) / w) + 4;
+    f->climb = sun.z * hf->cell / run;
+    f->t_per_cell = hf->cell / run;
+    f->eps = 1e-7 * (3 * hf->extent + 3 * (fabs(hf->hmin) + fabs(hf->hmax)));
+    f->look = TF_SUN_LOOK;
+    return 1;
+}
+
+/* Every block of level L raises the tops of the bins it meets. */
+static void scatter_tops(const tf_heightfield *hf, const tf_sun_frame *f, double ux, double uy,
+                         float *top)
+{
+    const int L = TF_SUN_BLOCK_LEVEL < hf->levels ? TF_SUN_BLOCK_LEVEL : hf->levels - 1;
+    const int side = hf->cells >> L;
+    const double B = (double)(1 << L), mu = 1e-9 * hf->cells + 1e-9;
+    /* a block's along and across spans from its corner (i, j): the corners' offsets */
+    const double al_off[4] = {0, ux * B, uy * B, (ux + uy) * B};
+    const double ac_off[4] = {0, -uy * B, ux * B, (ux - uy) * B};
+    double al_min = 0, al_max = 0, ac_min = 0, ac_max = 0;
+    for (int c = 1; c < 4; c++) {
+        al_min = fmin(al_min, al_off[c]), al_max = fmax(al_max, al_off[c]);
+        ac_min = fmin(ac_min, ac_off[c]), ac_max = fmax(ac_max, ac_off[c]);
+    }
+    const float *mx = hf->maxgrid[L];
+    for (int bj = 0; bj < side; bj++)
+        for (int bi = 0; bi < side; bi++) {
+            const double i = bi * B, j = bj * B;
+            const double al = ux * i + uy * j, ac = -uy * i + ux * j;
+            const int b0 = (int)((al + al_min - mu - f->along0) * f->inv_ds);
+            const int b1 = (int)((al + al_max + mu - f->along0) * f->inv_ds);
+            const int k0 = (int)((ac + ac_min - mu - f->across0) * f->inv_w);
+            const int k1 = (int)((ac + ac_max + mu - f->across0) * f->inv_w);
+            const float v = mx[(size_t)bj * (size_t)side + (size_t)bi];
+            for (int k = k0; k <= k1; k++)
+                for (int b = b0; b <= b1; b++) {
+                    float *t = &top[(size_t)k * (size_t)f->bins + (size_t)b];
+                    if (v > *t)
+                        *t = v;
+                }
+        }
+}
+
+/* A double rounded up to a float. */
+static float float_up(double v)
+{
+    float r = (float)v;
+    return r < v ? nextafterf(r, INFINITY) : r;
+}
+
+/* Tops into reach, strip by strip, in place. */
+static void tops_to_reach(const tf_sun_frame *f, float *a)
+{
+    for (int k = 0; k < f->strips; k++) {
+        float *row = a + (size_t)k * (size_t)f->bins;
+        double reach = -INFINITY;
+        for (int b = f->bins - 1; b >= 0; b--) {
+            if (row[b] > -INFINITY) {
+                const double top = row[b], rise = f->climb * (f->along0 + b * f->ds);
+                const double v = (top - rise) + 1e-9 * (fabs(top) + fabs(rise));
+                reach = v > reach ? v : reach;
+            }
+            row[b] = float_up(reach);
+        }
+    }
+}
+
+tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
+{
+    tf_sun_frame f;
+    double ux, uy;
+    if (!hf || hf->proc || !hf->maxgrid || hf->cells < 2 || !frame_of(hf, sun, &f, &ux, &uy))
+        return NULL;
+    const size_t n = (size_t)f.strips * (size_t)f.bins;
+    tf_sun_strips *s = malloc(sizeof *s);
+    float *a = malloc(n * sizeof *a);
+    if (!s || !a) {
+        free(s), free(a);
+        return NULL;
+    }
+    for (size_t i = 0; i < n; i++)
+        a[i] = -INFINITY;
+    scatter_tops(hf, &f, ux, uy, a);
+    tops_to_reach(&f, a);
+    s->frame = f;
+    s->reach = a;
+    return s;
+}
+
+void tf_sun_strips_free(tf_sun_strips *s)
+{
+    if (s)
+        free(s->reach);
+    free(s);
+}
+
+double tf_sun_strips_tmax(const tf_sun_strips *s, tf_vec3 o)
+{
+    return s ? tf_sun_clear_after(&s->frame, s->reach, o.x, o.y, o.z) : TF_FAR_AWAY;
+}
+
+size_t tf_sun_strips_bytes(const tf_sun_strips *s)
+{
+    return s ? sizeof *s + (size_t)s->frame.strips * (size_t)s->frame.bins * sizeof(float) : 0;
+}

@@ -247,7 +247,7 @@ static const char *const kernel_files[] = {
     "worker/kernels/packet.cl",      "worker/kernels/packet_trace.cl",
     "worker/kernels/packet_shade.cl", "worker/kernels/packet_render.cl",
     "common/portable.h",             "common/render/constants.h",
-    "common/render/sample_math.h",   "common/render/trace_math.h",
+    "common/render/sample_math.h",   "common/render/trace_math.h", "common/render/sun_math.h",
     "common/terrain/noise_kernel.h",
 };
 

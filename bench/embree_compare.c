@@ -438,13 +438,21 @@ static void tf_shadow(const bench *b, found *out)
         out->t[i] = tf_occluded(b->hf, b->shad.o[i], b->shad.d[i], 0.0, TF_FAR_AWAY) ? 0 : INFINITY;
 }
 
-/* In the list's order (the image's, row by row), each with the record of the one before and
- * its walk ending where the sun's strips prove it clear (shade.c's tf_shadow_tmax). */
+/* In the list's order (the image's, row by row), as shade.c's resolve_shadow_coherent traces
+ * them: what the sun's strips prove first (occluded, or clear past some point, where the walk
+ * then ends), then each with the record of the one before. */
 static void tf_shadow_coherent(const bench *b, found *out)
 {
     tf_shadow_clear prev = {{0}, 0};
     for (int i = 0; i < b->shad.count; i++) {
-        const double tmax = tf_sun_strips_tmax(b->strips, b->shad.o[i]);
+        double t;
+        const int said = tf_sun_strips_shadow(b->strips, b->shad.o[i], &t);
+        if (said == TF_SUN_UNDER) {
+            prev = (tf_shadow_clear){{b->shad.d[i].x, b->shad.d[i].y, b->shad.d[i].z}, t};
+            out->t[i] = 0;
+            continue;
+        }
+        const double tmax = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
         out->t[i] = tf_occluded_coherent(b->hf, b->shad.o[i], b->shad.d[i], tmax, &prev, &prev)
                         ? 0
                         : INFINITY;

@@ -88,7 +88,7 @@ struct tf_cl_backend {
     cl_command_queue queue;
     cl_program program;
     cl_kernel k_corners, k_pixels;
-    cl_mem P, I, h, minmax, perm, reach; /* reach: the sun's strips (render/sun_strips.h) */
+    cl_mem P, I, h, minmax, perm, strips; /* strips: the sun's (render/sun_strips.h) */
     float *minmax_host; /* what b->minmax reads in place (lent_to_device); freed after it */
     /* per-render buffers, grown as needed */
     cl_mem corners, corner_levels, corner_shadow, cache, levels, have, where, out, pixel_shadow;
@@ -438,13 +438,15 @@ static void fill_sun_frame(const tf_sun_strips *st, double *P, int *I)
     if (!st)
         return;
     const tf_sun_frame *f = &st->frame;
-    const double v[12] = {f->a_s,    f->b_s, f->a_p,  f->b_p,  f->along0,     f->across0,
-                          f->inv_w, f->inv_ds, f->ds, f->climb, f->t_per_cell, f->eps};
-    for (int i = 0; i < 12; i++)
+    const double v[TF_CL_SUN_DOUBLES] = {
+        f->a_s,    f->b_s,  f->a_p,        f->b_p,  f->along0, f->across0, f->inv_w, f->inv_ds,
+        f->ds,     f->climb, f->t_per_cell, f->eps, f->dx,     f->dy,      f->cell};
+    for (int i = 0; i < TF_CL_SUN_DOUBLES; i++)
         P[TFP_SUN_FRAME + i] = v[i];
     I[TFI_SUN_STRIPS] = f->strips;
     I[TFI_SUN_BINS] = f->bins;
     I[TFI_SUN_LOOK] = f->look;
+    I[TFI_SUN_N] = f->n;
 }
 
 /* Copy what tf_renderer_new derived into the P[] / I[] blocks. */
@@ -517,15 +519,14 @@ static cl_mem upload(tf_cl_backend *b, const void *data, size_t bytes, cl_int *r
                           rc);
 }
 
-/* The sun's strips' table of renderer r, or one unread float where it has none. */
-static cl_mem upload_reach(tf_cl_backend *b, const tf_renderer *r, cl_int *rc)
+/* The sun's strips' table of renderer r, or two unread floats where it has none. */
+static cl_mem upload_strips(tf_cl_backend *b, const tf_renderer *r, cl_int *rc)
 {
-    static const float none = 0;
+    static const float none[2] = {0, 0};
     const tf_sun_strips *st = r->sun_strips;
     if (!st)
-        return upload(b, &none, sizeof none, rc);
-    return upload(b, st->reach,
-                  (size_t)st->frame.strips * (size_t)st->frame.bins * sizeof *st->reach, rc);
+        return upload(b, none, sizeof none, rc);
+    return upload(b, st->table, tf_sun_strips_table_bytes(st), rc);
 }
 
 /* A read-only buffer over host memory that outlives it and never changes (the height field, the
@@ -591,7 +592,7 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
     b->minmax = lent_to_device(b, mm, total * 2 * sizeof *mm, &rc[3]);
     b->perm = upload(b, b->renderer->shader.noise.perm, sizeof b->renderer->shader.noise.perm,
                      &rc[4]);
-    b->reach = upload_reach(b, b->renderer, &rc[5]);
+    b->strips = upload_strips(b, b->renderer, &rc[5]);
     for (int i = 0; i < 6; i++)
         if (rc[i] != CL_SUCCESS) {
             tf_seterr(err, errlen, "OpenCL: cannot upload the height field (error %d)", rc[i]);
@@ -722,13 +723,13 @@ int tf_cl_backend_set_scene(tf_cl_backend *b, const tf_scene *s, char *err, size
     if (rc == CL_SUCCESS)
         rc = clEnqueueWriteBuffer(b->queue, b->I, CL_TRUE, 0, sizeof I, I, 0, NULL, NULL);
     /* the sun may have moved: the new strips (kernels already queued keep the old buffer) */
-    cl_mem reach = rc == CL_SUCCESS ? upload_reach(b, r, &rc) : NULL;
+    cl_mem strips = rc == CL_SUCCESS ? upload_strips(b, r, &rc) : NULL;
     if (rc != CL_SUCCESS) {
         tf_renderer_free(r);
         return tf_seterr(err, errlen, "OpenCL: cannot upload the new camera (error %d)", rc);
     }
-    clReleaseMemObject(b->reach);
-    b->reach = reach;
+    clReleaseMemObject(b->strips);
+    b->strips = strips;
     tf_renderer_free(b->renderer);
     b->renderer = r;
     return 0;
@@ -831,7 +832,7 @@ static cl_int set_common_args(tf_cl_backend *b, cl_kernel k, tf_rect rect)
     rc |= clSetKernelArg(k, 3, sizeof(cl_mem), &b->h);
     rc |= clSetKernelArg(k, 4, sizeof(cl_mem), &b->minmax);
     rc |= clSetKernelArg(k, 5, sizeof(cl_mem), &b->perm);
-    rc |= clSetKernelArg(k, 6, sizeof(cl_mem), &b->reach);
+    rc |= clSetKernelArg(k, 6, sizeof(cl_mem), &b->strips);
     rc |= clSetKernelArg(k, 7, sizeof(cl_int), &rect.x);
     rc |= clSetKernelArg(k, 8, sizeof(cl_int), &rect.y);
     return rc;
@@ -992,7 +993,7 @@ void tf_cl_backend_free(tf_cl_backend *b)
 {
     if (!b)
         return;
-    cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm, b->reach,
+    cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm, b->strips,
                      b->corners, b->corner_levels, b->corner_shadow, b->cache, b->levels,
                      b->have, b->where, b->out, b->pixel_shadow};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)

@@ -399,7 +399,8 @@ static int shade_begin_row(const tf_renderer *r, int n, row_rays *q)
         if (!p->shadow)
             continue;
         q->so[k] = p->start, q->sd[k] = r->shader.sun_dir;
-        q->stmin[k] = 0.0, q->stmax[k] = tf_shadow_tmax(&r->shader, p->start);
+        q->stmin[k] = 0.0;
+        tf_shadow_strips(&r->shader, p->start, &q->stmax[k]); /* proved under: the packet finds it */
         k++;
     }
     return k;

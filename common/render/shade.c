@@ -93,9 +93,12 @@ static int trace_terrain(const tf_shader *sh, tf_vec3 o, tf_vec3 d, double tmax,
     return tf_trace(sh->hf, o, d, 0.0, tmax, hit);
 }
 
-double tf_shadow_tmax(const tf_shader *sh, tf_vec3 o)
+int tf_shadow_strips(const tf_shader *sh, tf_vec3 o, double *tmax)
 {
-    return tf_sun_strips_tmax(sh->sun_strips, o);
+    double t;
+    const int said = tf_sun_strips_shadow(sh->sun_strips, o, &t);
+    *tmax = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
+    return said == TF_SUN_UNDER;
 }
 
 /* Whether the shadow ray from o toward the sun meets the terrain. */
@@ -103,7 +106,8 @@ static int terrain_occludes(const tf_shader *sh, tf_vec3 o)
 {
     if (sh->hf->proc)
         return tf_proc_occluded(sh->hf->proc, &sh->view, o, sh->sun_dir, 0.0, TF_FAR_AWAY);
-    return tf_occluded(sh->hf, o, sh->sun_dir, 0.0, tf_shadow_tmax(sh, o));
+    double tmax;
+    return tf_shadow_strips(sh, o, &tmax) || tf_occluded(sh->hf, o, sh->sun_dir, 0.0, tmax);
 }
 
 /* Shadow rays start this far along the normal from a terrain hit. */
@@ -411,8 +415,15 @@ static int resolve_shadow_coherent(const tf_shader *sh, const tf_shade_pending *
     if (!p->shadow)
         return 0;
     (*shadow_rays)++;
-    return tf_occluded_coherent(sh->hf, p->start, sh->sun_dir, tf_shadow_tmax(sh, p->start), near,
-                                mine);
+    double t;
+    const int said = tf_sun_strips_shadow(sh->sun_strips, p->start, &t);
+    if (said == TF_SUN_UNDER) { /* occluded: under the surface at t, the neighbours' probe */
+        if (mine)
+            *mine = (tf_shadow_clear){{sh->sun_dir.x, sh->sun_dir.y, sh->sun_dir.z}, t};
+        return 1;
+    }
+    return tf_occluded_coherent(sh->hf, p->start, sh->sun_dir,
+                                said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY, near, mine);
 }
 
 /* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */

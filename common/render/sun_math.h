@@ -1,25 +1,34 @@
-/* sun_math.h: where a shadow ray is proved to stay above the terrain for good -- the query of
- * the sun's strips (render/sun_strips.h), written once for C and OpenCL C (common/portable.h),
- * one ray at a time in both.
+/* sun_math.h: what the sun's strips (render/sun_strips.h) prove about a shadow ray -- clear of
+ * the terrain for good past some point, or under it somewhere -- written once for C and OpenCL
+ * C (common/portable.h), one ray at a time in both.
  *
  * The strips: the terrain's square cut along the sun's heading u into strips `w` cells wide,
  * each cut into bins `ds` cells long.  Across and along are, in cells,
  *     across(x, y) = a_p x + b_p y,   along(x, y) = a_s x + b_s y      (x, y world)
  * (a_s, b_s) = u / cell.  A shadow ray (the sun's direction d) from o keeps its `across`, so it
  * stays in one strip, and gains climb = d.z cell / |d.xy| of height per cell of run:
- *     z(along) = o.z + climb (along - along(o)).
- * Bin b of a strip begins at along_0 + b ds, and reach[strip][b] is an upper bound, rounded up,
- * of   max over bins b' >= b of the strip of  (surface's top over bin b') - climb (its start).
- * So where  o.z - climb along(o) - eps > reach[strip][b],  the ray is above the surface by more
- * than eps at every point of run along >= along_0 + b ds: it is lowest in a bin where it
- * enters it.  A walk of the ray over the run before that point answers the shadow question:
- * past it no triangle test can hit (eps, 1e-7 of the scene's size, is orders above a test's
- * rounding), and tf_occluded over (0, tmax) says 1 exactly when some hit lies inside (0, tmax).
+ *     z(along) = o.z + climb (along - along(o)),
+ * lowest in a bin where it enters it, highest where it leaves.  Bin b of a strip begins at
+ * along0 + b ds; the table holds two floats a bin:
+ *   reach  an upper bound, rounded up, of  max over bins b' >= b of the strip of
+ *          (the surface's top over bin b') - climb (along0 + b' ds);
+ *   floor  a lower bound of the surface over the bin (the least of the max/min grid's blocks
+ *          that meet it; +inf where none does).
+ * Clear: where  o.z - climb along(o) - eps > reach[b],  the ray is above the surface by more
+ *   than eps at every point of run along >= along0 + b ds.  A walk over the run before that
+ *   point answers the shadow question: past it no triangle test can hit (eps, 1e-7 of the
+ *   scene's size, is orders above a test's rounding), and tf_occluded over (0, tmax) says 1
+ *   exactly when some hit lies inside (0, tmax).
+ * Under: where the ray leaves bin c below floor[c] by eps, it is under the surface by eps all
+ *   through the bin; at the bin's middle, if that is inside the square, and if the ray starts
+ *   inside the square above the surface by eps, it crosses the surface in between (the square
+ *   is convex, the surface continuous over it), and the watertight walk finds that crossing
+ *   (trace.c "coherence of shadow rays"): tf_occluded says 1 without walking.
  *
- * tf_sun_clear_after gives that ray parameter (a little more: rounding), or TF_FAR_AWAY where
- * the first `look` bins ahead prove nothing.  Its rounding: along(o) and the products carry
- * relative errors of ~1e-16, far inside eps and the 1e-6 strip margin (a ray within it of a strip's
- * edge must be proved in both strips). */
+ * tf_sun_strips_say tries bins b0+1 .. b0+look after the start's bin b0 and stops at the first
+ * that proves either.  Its rounding: along(o) and the products carry relative errors of ~1e-16,
+ * far inside eps and the 1e-6 strip margin (a ray within it of a strip's edge must be proved in
+ * both strips); the height under the start interpolates the very triangles the walk tests. */
 #ifndef TF_SUN_MATH_H
 #define TF_SUN_MATH_H
 
@@ -40,30 +49,86 @@ typedef struct tf_sun_frame {
     double climb;                /* height gained per cell of run */
     double t_per_cell;           /* ray parameter per cell of run: cell / |d.xy| */
     double eps;                  /* the clearance asked */
+    double dx, dy;               /* the sun's direction's x and y */
+    double cell;                 /* the height field's cell, world units */
     int strips, bins, look;      /* look: bins ahead tried */
+    int n;                       /* the height field's samples a side (cells + 1) */
 } tf_sun_frame;
 
-/* The ray parameter past which a shadow ray from (ox, oy, oz) is proved clear of the surface,
- * or TF_FAR_AWAY. */
-TF_SHARED double tf_sun_clear_after(const tf_sun_frame *f, TF_GLOBAL const float *reach,
-                                    double ox, double oy, double oz)
+enum { TF_SUN_UNKNOWN = 0, TF_SUN_CLEAR_AFTER = 1, TF_SUN_UNDER = 2 };
+
+/* The height of the surface at (x, y), inside the square: the triangle of trace.c's split that
+ * holds the point, as tf_heightfield_grid_height_at interpolates it. */
+TF_SHARED double tf_sun_surface_at(const tf_sun_frame *f, TF_GLOBAL const float *h, double x,
+                                   double y)
+{
+    const int cells = f->n - 1;
+    int ci = (int)(x / f->cell), cj = (int)(y / f->cell);
+    ci = ci < 0 ? 0 : ci > cells - 1 ? cells - 1 : ci;
+    cj = cj < 0 ? 0 : cj > cells - 1 ? cells - 1 : cj;
+    while (ci > 0 && (double)ci * f->cell > x)
+        ci--;
+    while (ci < cells - 1 && (double)(ci + 1) * f->cell <= x)
+        ci++;
+    while (cj > 0 && (double)cj * f->cell > y)
+        cj--;
+    while (cj < cells - 1 && (double)(cj + 1) * f->cell <= y)
+        cj++;
+    const double u = (x - (double)ci * f->cell) / f->cell, v = (y - (double)cj * f->cell) / f->cell;
+    TF_GLOBAL const float *row = h + (size_t)cj * (size_t)f->n + (size_t)ci;
+    const double ha = row[0], hb = row[1], hd = row[f->n], hc = row[f->n + 1];
+    if (u >= v)
+        return ha + (hb - ha) * u + (hc - hb) * v;
+    return ha + (hc - hd) * u + (hd - ha) * v;
+}
+
+/* Is (x, y) inside the terrain's square? */
+TF_SHARED int tf_sun_in_square(const tf_sun_frame *f, double x, double y)
+{
+    const double top = (double)(f->n - 1) * f->cell;
+    return x >= 0 && x <= top && y >= 0 && y <= top; /* a NaN is not */
+}
+
+/* What the strips prove of the shadow ray from (ox, oy, oz): TF_SUN_CLEAR_AFTER with *t the
+ * parameter past which it is clear for good (a little more: rounding), TF_SUN_UNDER with *t a
+ * parameter where it is under the surface (it is occluded), or TF_SUN_UNKNOWN. */
+TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f, TF_GLOBAL const float *table,
+                                TF_GLOBAL const float *h, double ox, double oy, double oz,
+                                double *t)
 {
     const double along = f->a_s * ox + f->b_s * oy, across = f->a_p * ox + f->b_p * oy;
     const double k = (across - f->across0) * f->inv_w, b = (along - f->along0) * f->inv_ds;
     /* inside the strips, a margin from their edge (a NaN fails too) */
     if (!(k >= 1.0 && k < f->strips - 1.0 && b >= 0.0 && b < f->bins - 1.0))
-        return TF_FAR_AWAY;
+        return TF_SUN_UNKNOWN;
     const int ka = (int)(k - 1e-6), kb = (int)(k + 1e-6), b0 = (int)b;
-    const double level = oz - f->climb * along - f->eps;
-    TF_GLOBAL const float *ra = reach + (size_t)ka * (size_t)f->bins;
-    TF_GLOBAL const float *rb = reach + (size_t)kb * (size_t)f->bins;
+    const double base = oz - f->climb * along; /* the ray's z at run `along`: base + climb along */
+    /* the under proof needs the start above the surface; asked only when a bin offers it */
+    int start_above = -1;
+    TF_GLOBAL const float *ra = table + 2 * (size_t)ka * (size_t)f->bins;
+    TF_GLOBAL const float *rb = table + 2 * (size_t)kb * (size_t)f->bins;
     const int end = b0 + f->look < f->bins - 1 ? b0 + f->look : f->bins - 1;
-    for (int c = b0 + 1; c <= end; c++)
-        if (level > ra[c] && level > rb[c]) {
-            const double run = f->along0 + c * f->ds - along; /* > 0: c > b */
-            return run * f->t_per_cell * (1 + 1e-9) + 1e-9 * f->t_per_cell;
+    for (int c = b0 + 1; c <= end; c++) {
+        const double start = f->along0 + c * f->ds; /* > along: c > b */
+        if (base - f->eps > ra[2 * c] && base - f->eps > rb[2 * c]) {
+            *t = (start - along) * f->t_per_cell * (1 + 1e-9) + 1e-9 * f->t_per_cell;
+            return TF_SUN_CLEAR_AFTER;
         }
-    return TF_FAR_AWAY;
+        const double top = base + f->climb * (start + f->ds) + f->eps;
+        if (top < ra[2 * c + 1] && top < rb[2 * c + 1]) {
+            const double tm = (start + 0.5 * f->ds - along) * f->t_per_cell;
+            if (!tf_sun_in_square(f, ox + tm * f->dx, oy + tm * f->dy))
+                continue;
+            if (start_above < 0)
+                start_above = tf_sun_in_square(f, ox, oy) &&
+                              oz - tf_sun_surface_at(f, h, ox, oy) > f->eps;
+            if (!start_above)
+                return TF_SUN_UNKNOWN;
+            *t = tm;
+            return TF_SUN_UNDER;
+        }
+    }
+    return TF_SUN_UNKNOWN;
 }
 
 #endif

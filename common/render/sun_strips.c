@@ -1,25 +1,26 @@
-/* sun_strips.c: building the sun's strips (render/sun_strips.h; the bound and its query are in
- * render/sun_math.h).
+/* sun_strips.c: building the sun's strips (render/sun_strips.h; the bounds and their query are
+ * in render/sun_math.h).
  *
  * Coordinates are in cells: grid vertex (i, j) is at along = ux i + uy j, across = -uy i + ux j
  * (u the sun's unit heading).  The build goes once over the blocks of `TF_SUN_BLOCK_LEVEL` of
- * the max grids (2x2 cells): a block's top is the max of the triangles over it, and the block
- * lies, by its corners, within an along and an across interval, widened by a margin far above
- * their rounding; every bin those intervals meet takes the block's top as a candidate.  So a
- * bin's value bounds the surface over it from above (the bins a block only seems to meet make
- * it larger, never smaller).  Then each strip, from its far end back, turns tops into reach:
+ * the max/min grids (2x2 cells): a block's top and bottom bound the triangles over it, and the
+ * block lies, by its corners, within an along and an across interval, widened by a margin far
+ * above their rounding; every bin those intervals meet takes the block's top and bottom as
+ * candidates.  So a bin's top bounds the surface over it from above and its floor from below
+ * (a bin a block only seems to meet gets a larger top and a lower floor, never the wrong way).
+ * Then each strip, from its far end back, turns tops into reach:
  *     reach[b] = max(reach[b + 1], top[b] - climb (along0 + b ds)),
  * rounded up (a relative 1e-9 on the double, then up to the next float).  One pass over 1/4 of
- * the cells and one over the bins: ~25 ms and 3 MB for 2049^2 samples.  Bins of 3 cells cost a
- * lit ray 1-2% more than bins of 1 or 2 (it walks further before a bin proves it clear) and
- * need a ninth of the memory of 1 (bench/README.md section 22). */
+ * the cells and one over the bins: ~20 ms and 3.5 MB for 2049^2 samples.  Bins of 1-3 cells
+ * prove a lit ray clear a little sooner, but hold up to 16x the memory for no measurable gain
+ * (bench/README.md section 22), and the memory counts against Embree's (issue 23: 1/10). */
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include "render/sun_strips.h"
 
-#define TF_SUN_STRIP_CELLS 3.0
-#define TF_SUN_BLOCK_LEVEL 1
+#define TF_SUN_STRIP_CELLS 4.0 /* strip width and bin length, cells */
+#define TF_SUN_BLOCK_LEVEL 1   /* the max/min-grid level scattered into the bins */
 #define TF_SUN_LOOK 16         /* bins ahead a ray tries before walking as before */
 
 /* The frame: the sun's heading in cells, the strips' extent over the square. */
@@ -48,14 +49,16 @@ static int frame_of(const tf_heightfield *hf, tf_vec3 sun, tf_sun_frame *f, doub
     f->bins = (int)((al_hi - al_lo) / w) + 4;
     f->climb = sun.z * hf->cell / run;
     f->t_per_cell = hf->cell / run;
+    f->dx = sun.x, f->dy = sun.y, f->cell = hf->cell, f->n = hf->n;
     f->eps = 1e-7 * (3 * hf->extent + 3 * (fabs(hf->hmin) + fabs(hf->hmax)));
     f->look = TF_SUN_LOOK;
     return 1;
 }
 
-/* Every block of level L raises the tops of the bins it meets. */
-static void scatter_tops(const tf_heightfield *hf, const tf_sun_frame *f, double ux, double uy,
-                         float *top)
+/* Every block of level L raises the tops and lowers the floors of the bins it meets (table:
+ * top, floor per bin). */
+static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, double ux, double uy,
+                           float *table)
 {
     const int L = TF_SUN_BLOCK_LEVEL < hf->levels ? TF_SUN_BLOCK_LEVEL : hf->levels - 1;
     const int side = hf->cells >> L;
@@ -68,7 +71,7 @@ static void scatter_tops(const tf_heightfield *hf, const tf_sun_frame *f, double
         al_min = fmin(al_min, al_off[c]), al_max = fmax(al_max, al_off[c]);
         ac_min = fmin(ac_min, ac_off[c]), ac_max = fmax(ac_max, ac_off[c]);
     }
-    const float *mx = hf->maxgrid[L];
+    const float *mx = hf->maxgrid[L], *mn = hf->mingrid[L];
     for (int bj = 0; bj < side; bj++)
         for (int bi = 0; bi < side; bi++) {
             const double i = bi * B, j = bj * B;
@@ -77,12 +80,13 @@ static void scatter_tops(const tf_heightfield *hf, const tf_sun_frame *f, double
             const int b1 = (int)((al + al_max + mu - f->along0) * f->inv_ds);
             const int k0 = (int)((ac + ac_min - mu - f->across0) * f->inv_w);
             const int k1 = (int)((ac + ac_max + mu - f->across0) * f->inv_w);
-            const float v = mx[(size_t)bj * (size_t)side + (size_t)bi];
+            const size_t at = (size_t)bj * (size_t)side + (size_t)bi;
+            const float hi = mx[at], lo = mn[at];
             for (int k = k0; k <= k1; k++)
                 for (int b = b0; b <= b1; b++) {
-                    float *t = &top[(size_t)k * (size_t)f->bins + (size_t)b];
-                    if (v > *t)
-                        *t = v;
+                    float *t = &table[2 * ((size_t)k * (size_t)f->bins + (size_t)b)];
+                    t[0] = hi > t[0] ? hi : t[0];
+                    t[1] = lo < t[1] ? lo : t[1];
                 }
         }
 }
@@ -94,19 +98,19 @@ static float float_up(double v)
     return r < v ? nextafterf(r, INFINITY) : r;
 }
 
-/* Tops into reach, strip by strip, in place. */
-static void tops_to_reach(const tf_sun_frame *f, float *a)
+/* Tops into reach, strip by strip, in place (the floors stay). */
+static void tops_to_reach(const tf_sun_frame *f, float *table)
 {
     for (int k = 0; k < f->strips; k++) {
-        float *row = a + (size_t)k * (size_t)f->bins;
+        float *row = table + 2 * (size_t)k * (size_t)f->bins;
         double reach = -INFINITY;
         for (int b = f->bins - 1; b >= 0; b--) {
-            if (row[b] > -INFINITY) {
-                const double top = row[b], rise = f->climb * (f->along0 + b * f->ds);
+            if (row[2 * b] > -INFINITY) {
+                const double top = row[2 * b], rise = f->climb * (f->along0 + b * f->ds);
                 const double v = (top - rise) + 1e-9 * (fabs(top) + fabs(rise));
                 reach = v > reach ? v : reach;
             }
-            row[b] = float_up(reach);
+            row[2 * b] = float_up(reach);
         }
     }
 }
@@ -119,33 +123,39 @@ tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
         return NULL;
     const size_t n = (size_t)f.strips * (size_t)f.bins;
     tf_sun_strips *s = malloc(sizeof *s);
-    float *a = malloc(n * sizeof *a);
+    float *a = malloc(2 * n * sizeof *a);
     if (!s || !a) {
         free(s), free(a);
         return NULL;
     }
     for (size_t i = 0; i < n; i++)
-        a[i] = -INFINITY;
-    scatter_tops(hf, &f, ux, uy, a);
+        a[2 * i] = -INFINITY, a[2 * i + 1] = INFINITY;
+    scatter_blocks(hf, &f, ux, uy, a);
     tops_to_reach(&f, a);
     s->frame = f;
-    s->reach = a;
+    s->table = a;
+    s->h = hf->h;
     return s;
 }
 
 void tf_sun_strips_free(tf_sun_strips *s)
 {
     if (s)
-        free(s->reach);
+        free(s->table);
     free(s);
 }
 
-double tf_sun_strips_tmax(const tf_sun_strips *s, tf_vec3 o)
+int tf_sun_strips_shadow(const tf_sun_strips *s, tf_vec3 o, double *t)
 {
-    return s ? tf_sun_clear_after(&s->frame, s->reach, o.x, o.y, o.z) : TF_FAR_AWAY;
+    return s ? tf_sun_strips_say(&s->frame, s->table, s->h, o.x, o.y, o.z, t) : TF_SUN_UNKNOWN;
+}
+
+size_t tf_sun_strips_table_bytes(const tf_sun_strips *s)
+{
+    return 2 * (size_t)s->frame.strips * (size_t)s->frame.bins * sizeof(float);
 }
 
 size_t tf_sun_strips_bytes(const tf_sun_strips *s)
 {
-    return s ? sizeof *s + (size_t)s->frame.strips * (size_t)s->frame.bins * sizeof(float) : 0;
+    return s ? sizeof *s + tf_sun_strips_table_bytes(s) : 0;
 }

@@ -8,7 +8,8 @@
  * it, how high the surface reaches from there on, less what a ray climbs meanwhile.  A shadow
  * ray reads a few entries ahead of its start and then walks only up to the first bin it is
  * proved to clear, with tf_occluded's tmax moved in: the same answer from a short walk (a
- * lit ray: 220 -> ~135 ns). */
+ * lit ray: 220 -> ~135 ns).  Each bin also keeps the lowest the surface gets over it: a ray
+ * that leaves a bin under that is occluded, no walk at all (half the occluded rays). */
 #ifndef TF_SUN_STRIPS_H
 #define TF_SUN_STRIPS_H
 
@@ -18,7 +19,8 @@
 
 typedef struct tf_sun_strips {
     tf_sun_frame frame;
-    float *reach; /* frame.strips * frame.bins */
+    float *table;    /* frame.strips * frame.bins pairs (reach, floor) */
+    const float *h;  /* the height field's heights (the under proof's start) */
 } tf_sun_strips;
 
 /* The strips of height field hf for shadow rays of direction sun (the shader's sun_dir), or
@@ -27,11 +29,14 @@ typedef struct tf_sun_strips {
 tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun);
 void tf_sun_strips_free(tf_sun_strips *s);
 
-/* tf_sun_clear_after for a shadow ray of the strips' sun from o: a tmax for tf_occluded that
- * gives its answer over (0, TF_FAR_AWAY); TF_FAR_AWAY when nothing is proved (or s is NULL). */
-double tf_sun_strips_tmax(const tf_sun_strips *s, tf_vec3 o);
+/* tf_sun_strips_say for a shadow ray of the strips' sun from o (TF_SUN_UNKNOWN where s is
+ * NULL): TF_SUN_CLEAR_AFTER, *t a tmax for tf_occluded that gives its answer over
+ * (0, TF_FAR_AWAY); TF_SUN_UNDER, the ray is occluded (under the surface at *t). */
+int tf_sun_strips_shadow(const tf_sun_strips *s, tf_vec3 o, double *t);
 
-/* Bytes held (for the memory comparisons). */
+/* Bytes of the table (what the OpenCL kernels get), and all bytes held (the memory
+ * comparisons). */
+size_t tf_sun_strips_table_bytes(const tf_sun_strips *s);
 size_t tf_sun_strips_bytes(const tf_sun_strips *s);
 
 #endif

@@ -1,10 +1,11 @@
 /* test_sun_strips.c: the sun's strips (render/sun_strips.h, render/sun_math.h).  Their table
- * bounds the surface as the query assumes (checked against the surface itself at random points
- * of every bin); a shadow ray whose walk ends where the strips say gives tf_occluded's answer
- * over the whole ray, for suns from every heading (the axes and the diagonals too) and
- * elevation, from points on, over, under and beside the surface; the strips do prove most lit
- * rays clear; a table that lies changes answers (so the comparison can fail); and no strips are
- * made where they cannot help. */
+ * bounds the surface from above and below as the query assumes (checked against the surface
+ * itself at random points); a shadow ray the strips prove occluded is, and one whose walk ends
+ * where they prove it clear gives tf_occluded's answer over the whole ray, for suns from every
+ * heading (the axes and the diagonals too) and elevation, from points on, over, under and
+ * beside the surface; the strips do prove most lit rays clear and many occluded ones occluded;
+ * a table that lies changes answers (so the comparison can fail); and no strips are made where
+ * they cannot help. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -31,9 +32,10 @@ static tf_vec3 sun_at(double az, double el)
 
 /* ---- the table ------------------------------------------------------------------------------ */
 
-/* At random points q of the square: in q's strip, the entry of q's bin b is at least
- * f(q) - climb * (bin b's start), and the entries never grow toward the sun -- what the
- * query's proof reads off the table (a ray is lowest in a bin where it enters it). */
+/* At random points q of the square: in q's strip, the reach of q's bin b is at least
+ * f(q) - climb * (bin b's start) and never grows toward the sun, and the floor of q's bin is
+ * at most f(q) -- what the query's proofs read off the table (a ray is lowest in a bin where it
+ * enters it, highest where it leaves). */
 static void check_bound(height_fn fn, int k, double extent, tf_vec3 sun, uint64_t seed)
 {
     tf_heightfield *hf = make_field(fn, k, extent);
@@ -48,12 +50,16 @@ static void check_bound(height_fn fn, int k, double extent, tf_vec3 sun, uint64_
         const int kq = (int)floor((across - f->across0) * f->inv_w);
         const int bq = (int)floor((along - f->along0) * f->inv_ds);
         assert_true(kq >= 0 && kq < f->strips && bq >= 1 && bq < f->bins);
-        const float *row = s->reach + (size_t)kq * f->bins;
-        const double need = tf_heightfield_height_at(hf, x, y) - f->climb * (f->along0 + bq * f->ds);
-        if (!(row[bq] >= need))
+        const float *row = s->table + 2 * (size_t)kq * f->bins;
+        const double h = tf_heightfield_height_at(hf, x, y);
+        const double need = h - f->climb * (f->along0 + bq * f->ds);
+        if (!(row[2 * bq] >= need))
             fail_msg("reach[%d][%d] = %.9g under the surface's %.9g at (%.9g, %.9g)", kq, bq,
-                     (double)row[bq], need, x, y);
-        assert_true(row[bq - 1] >= row[bq]);
+                     (double)row[2 * bq], need, x, y);
+        assert_true(row[2 * (bq - 1)] >= row[2 * bq]);
+        if (!(row[2 * bq + 1] <= h))
+            fail_msg("floor[%d][%d] = %.9g over the surface's %.9g at (%.9g, %.9g)", kq, bq,
+                     (double)row[2 * bq + 1], h, x, y);
     }
     tf_sun_strips_free(s);
     tf_heightfield_free(hf);
@@ -75,22 +81,31 @@ static void test_bound_rough(void **state)
 
 /* ---- shadow rays ------------------------------------------------------------------------------ */
 
-typedef struct tally { int rays, lit, proved_lit; } tally;
+typedef struct tally { int rays, lit, proved_lit, occluded, proved_under; } tally;
 
-/* One shadow ray: the walk ended where the strips say answers as the whole ray. */
+/* One shadow ray: occluded where the strips prove it, and the walk ended where they prove it
+ * clear answers as the whole ray. */
 static void check_ray(const tf_heightfield *hf, const tf_sun_strips *s, tf_vec3 o, tf_vec3 sun,
                       tally *t)
 {
     const int want = tf_occluded(hf, o, sun, 0.0, TF_FAR_AWAY);
-    const double tmax = tf_sun_strips_tmax(s, o);
-    const int got = tf_occluded(hf, o, sun, 0.0, tmax);
+    double at = -1;
+    const int said = tf_sun_strips_shadow(s, o, &at);
+    const int got = said == TF_SUN_UNDER ? 1
+                    : tf_occluded(hf, o, sun, 0.0, said == TF_SUN_CLEAR_AFTER ? at : TF_FAR_AWAY);
     if (got != want)
         fail_msg("strips change the answer: o=(%.17g,%.17g,%.17g) sun=(%.17g,%.17g,%.17g) "
-                 "tmax %.17g: %d, the whole ray %d", o.x, o.y, o.z, sun.x, sun.y, sun.z, tmax,
-                 got, want);
+                 "said %d at %.17g: %d, the whole ray %d", o.x, o.y, o.z, sun.x, sun.y, sun.z,
+                 said, at, got, want);
+    if (said == TF_SUN_UNDER) { /* the point it names is under the surface */
+        const tf_vec3 p = v3_add(o, v3_scale(sun, at));
+        assert_true(p.z < tf_heightfield_height_at(hf, p.x, p.y));
+    }
     t->rays++;
     t->lit += !want;
-    t->proved_lit += !want && tmax < TF_FAR_AWAY;
+    t->proved_lit += !want && said == TF_SUN_CLEAR_AFTER;
+    t->occluded += want;
+    t->proved_under += said == TF_SUN_UNDER;
 }
 
 /* Many suns; for each, rays from points on the surface (lifted as a shadow ray is, or a hair
@@ -100,7 +115,7 @@ static tally shadow_rays(height_fn fn, int k, double extent, uint64_t seed)
     tf_heightfield *hf = make_field(fn, k, extent);
     const double e = hf->cells * hf->cell, relief = hf->hmax - hf->hmin + 1;
     rng r = {seed};
-    tally t = {0, 0, 0};
+    tally t = {0, 0, 0, 0, 0};
     const double headings[] = {0, M_PI / 2, M_PI, -M_PI / 2, M_PI / 4, 3 * M_PI / 4, -1.0, 2.5};
     for (int n = 0; n < 24; n++) {
         const double az = n < 8 ? headings[n] : range(&r, -M_PI, M_PI);
@@ -125,8 +140,11 @@ static void test_rays_hills(void **state)
 {
     (void)state;
     tally t = shadow_rays(hills, 7, 150, 5);
+    print_message("hills: %d rays, %d lit (%d proved), %d occluded (%d proved)\n", t.rays,
+                  t.lit, t.proved_lit, t.occluded, t.proved_under);
     assert_true(t.lit > t.rays / 4);
     assert_true(t.proved_lit > t.lit / 2); /* the strips do the work for most lit rays */
+    assert_true(t.proved_under > t.occluded / 10); /* and for many occluded ones */
 }
 
 static void test_rays_rough(void **state)
@@ -141,10 +159,31 @@ static void test_rays_terraces(void **state)
 {
     (void)state;
     tally t = shadow_rays(terraces, 6, 300, 7);
+    print_message("terraces: %d rays, %d lit (%d proved), %d occluded (%d proved)\n", t.rays,
+                  t.lit, t.proved_lit, t.occluded, t.proved_under);
     assert_true(t.proved_lit > t.lit / 2);
+    assert_true(t.proved_under > t.occluded / 20); /* 4 cells a bin on a 64-cell field: coarse */
 }
 
-/* A table lowered by a little proves rays clear that are not: the answers change. */
+/* Tables that lie change answers: reaches lowered prove occluded rays clear, floors raised
+ * prove lit rays occluded. */
+static int answers_changed(const tf_heightfield *hf, const tf_sun_strips *s, tf_vec3 sun)
+{
+    const double e = hf->cells * hf->cell;
+    rng r = {9};
+    int changed = 0;
+    for (int i = 0; i < 3000; i++) {
+        const double x = range(&r, 0, e), y = range(&r, 0, e);
+        const tf_vec3 o = v3(x, y, tf_heightfield_height_at(hf, x, y) + 0.01);
+        double t;
+        const int said = tf_sun_strips_shadow(s, o, &t);
+        const int got = said == TF_SUN_UNDER ? 1
+                        : tf_occluded(hf, o, sun, 0.0, said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY);
+        changed += got != tf_occluded(hf, o, sun, 0.0, TF_FAR_AWAY);
+    }
+    return changed;
+}
+
 static void test_a_lying_table_changes_answers(void **state)
 {
     (void)state;
@@ -152,19 +191,14 @@ static void test_a_lying_table_changes_answers(void **state)
     const tf_vec3 sun = sun_at(0.4, 0.15);
     tf_sun_strips *s = tf_sun_strips_build(hf, sun);
     assert_non_null(s);
+    assert_int_equal(answers_changed(hf, s, sun), 0);
     const size_t n = (size_t)s->frame.strips * s->frame.bins;
     for (size_t i = 0; i < n; i++)
-        s->reach[i] -= 2.0f;
-    const double e = hf->cells * hf->cell;
-    rng r = {9};
-    int changed = 0;
-    for (int i = 0; i < 3000; i++) {
-        const double x = range(&r, 0, e), y = range(&r, 0, e);
-        const tf_vec3 o = v3(x, y, tf_heightfield_height_at(hf, x, y) + 0.01);
-        changed += tf_occluded(hf, o, sun, 0.0, tf_sun_strips_tmax(s, o)) !=
-                   tf_occluded(hf, o, sun, 0.0, TF_FAR_AWAY);
-    }
-    assert_true(changed > 0);
+        s->table[2 * i] -= 2.0f;
+    assert_true(answers_changed(hf, s, sun) > 0);
+    for (size_t i = 0; i < n; i++)
+        s->table[2 * i] += 2.0f, s->table[2 * i + 1] += 2.0f;
+    assert_true(answers_changed(hf, s, sun) > 0);
     tf_sun_strips_free(s);
     tf_heightfield_free(hf);
 }
@@ -178,11 +212,13 @@ static void test_no_strips(void **state)
     assert_null(tf_sun_strips_build(hf, sun_at(1.0, 0.0)));    /* on the horizon */
     assert_null(tf_sun_strips_build(hf, sun_at(1.0, -0.2)));   /* below it */
     assert_null(tf_sun_strips_build(hf, v3(NAN, 0.5, 0.5)));
-    assert_true(tf_sun_strips_tmax(NULL, v3(1, 1, 1)) == TF_FAR_AWAY);
+    double t;
+    assert_int_equal(tf_sun_strips_shadow(NULL, v3(1, 1, 1), &t), TF_SUN_UNKNOWN);
     tf_sun_strips *s = tf_sun_strips_build(hf, sun_at(1.0, 0.3));
     assert_non_null(s);
-    assert_true(tf_sun_strips_tmax(s, v3(NAN, 1, 1)) == TF_FAR_AWAY);
-    assert_true(tf_sun_strips_tmax(s, v3(1e12, 1, 1)) == TF_FAR_AWAY); /* far outside */
+    assert_int_equal(tf_sun_strips_shadow(s, v3(NAN, 1, 1), &t), TF_SUN_UNKNOWN);
+    assert_int_equal(tf_sun_strips_shadow(s, v3(1e12, 1, 1), &t), TF_SUN_UNKNOWN); /* far off */
+    assert_int_equal(tf_sun_strips_shadow(s, v3(50, 50, NAN), &t), TF_SUN_UNKNOWN);
     assert_true(tf_sun_strips_bytes(s) > 0);
     tf_sun_strips_free(s);
     tf_sun_strips_free(NULL);

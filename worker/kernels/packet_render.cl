@@ -41,7 +41,7 @@
 
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
                           __global const float *h, __global const float2 *mm,
-                          __global const ushort *perm, __global const float *reach,
+                          __global const ushort *perm, __global const float *strips,
                           int rx, int ry, int cw, int ch,
                           __global float *out, __global double *out_levels,
                           __global uint *shadow)
@@ -49,7 +49,7 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
     const int base = (int)get_global_id(0) * TF_STREAM, total = cw * ch;
     if (base >= total)
         return;
-    world w = make_world(P, I, h, mm, perm, reach);
+    world w = make_world(P, I, h, mm, perm, strips);
     const long N = I[TFI_LATTICE];
     const int n = total - base < TF_STREAM ? total - base : TF_STREAM;
     lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
@@ -236,7 +236,7 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
  * with TF_QUEUED set). */
 __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong jitter_key,
                          __global const float *h, __global const float2 *mm,
-                         __global const ushort *perm, __global const float *reach,
+                         __global const ushort *perm, __global const float *strips,
                           int rx, int ry,
                          int rw, int first, int count, __global const float *corners,
                          __global const double *corner_levels, __global float *cache, __global double *levels,
@@ -247,7 +247,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
     if (m0 >= count)
         return;
     const int np = count - m0 < TF_PIX ? count - m0 : TF_PIX;
-    world w = make_world(P, I, h, mm, perm, reach);
+    world w = make_world(P, I, h, mm, perm, strips);
     const int N = I[TFI_LATTICE], side = N + 1, cw = rw + 1;
     const long LN = N;
     const double threshold = P[TFP_THRESHOLD];

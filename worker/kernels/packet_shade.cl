@@ -496,9 +496,10 @@ v3p lattice_dir8(const world *w, ulong jitter_key, lv X, lv Y)
 tf_sun_frame sun_frame(const world *w)
 {
     __global const double *v = w->P + TFP_SUN_FRAME;
-    tf_sun_frame f = {v[0], v[1], v[2],  v[3],  v[4],  v[5],
-                      v[6], v[7], v[8], v[9], v[10], v[11],
-                      w->I[TFI_SUN_STRIPS], w->I[TFI_SUN_BINS], w->I[TFI_SUN_LOOK]};
+    tf_sun_frame f = {v[0], v[1], v[2],  v[3],  v[4],  v[5],  v[6],  v[7],
+                      v[8], v[9], v[10], v[11], v[12], v[13], v[14],
+                      w->I[TFI_SUN_STRIPS], w->I[TFI_SUN_BINS], w->I[TFI_SUN_LOOK],
+                      w->I[TFI_SUN_N]};
     return f;
 }
 
@@ -515,7 +516,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
     const vec3 sun = pvec(w, TFP_SUN_DIR);
     const tf_sun_frame strips = sun_frame(w);
     const v3p zero = v3p_splat(v3(0, 0, 0));
-    lv mask[TF_STREAM_PACKETS];
+    lv mask[TF_STREAM_PACKETS], lit[TF_STREAM_PACKETS];
     ray_stream cam; /* d: the directions, tmax: the water distances (TF_FAR_AWAY: none) */
     cam.n = n;
     for (int p = 0; p < np; p++) {
@@ -557,8 +558,16 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
             water_before8(w, pw, cam.d[p], cam.tmax[p], water[p], s);
         }
         shadow_rays[p] -= mask_i(s->cast);
+        lit[p] = (lv)(0);
         for (int l = 0; l < TF_LANES; l++) {
             if (!s->cast[l])
+                continue;
+            /* what the sun's strips prove (shade.c tf_shadow_strips): occluded, no walk; or
+             * clear past t, the walk ends there */
+            double t;
+            const int said = tf_sun_strips_say(&strips, w->strips, w->h, s->start.x[l],
+                                               s->start.y[l], s->start.z[l], &t);
+            if (said == TF_SUN_UNDER)
                 continue;
             int m = shadow.n++, q = m / TF_LANES, r = m % TF_LANES;
             shadow_of[m] = (uchar)(p * TF_LANES + l);
@@ -567,14 +576,10 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
             shadow.o[q].z[r] = s->start.z[l];
             shadow.d[q] = v3p_splat(sun);
             shadow.tmin[q][r] = 0.0;
-            /* where the strips prove the ray clear for good (shade.c tf_shadow_tmax) */
-            shadow.tmax[q][r] = tf_sun_clear_after(&strips, w->reach, s->start.x[l],
-                                                   s->start.y[l], s->start.z[l]);
+            shadow.tmax[q][r] = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
         }
     }
-    lv blocked[TF_STREAM_PACKETS], lit[TF_STREAM_PACKETS];
-    for (int p = 0; p < np; p++)
-        lit[p] = (lv)(0);
+    lv blocked[TF_STREAM_PACKETS];
     if (shadow.n > 0) {
         walk_stream(w, &shadow, blocked, NULL);
         for (int m = 0; m < shadow.n; m++) {

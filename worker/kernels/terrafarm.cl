@@ -39,8 +39,8 @@ typedef struct world {
     __global const float2 *mm;    /* (max, min) of every cell of every grid level, levels
                                    * concatenated (level L starts at I[TFI_LEVEL_OFFSET+L]) */
     __global const ushort *perm;  /* texture noise permutation, 512 entries */
-    __global const float *reach;  /* the sun's strips (render/sun_math.h; I[TFI_SUN_STRIPS]
-                                   * 0: none, one unread float) */
+    __global const float *strips; /* the sun's strips' table (render/sun_math.h;
+                                   * I[TFI_SUN_STRIPS] 0: none, two unread floats) */
     int n, cells, levels;
     double cell;
     /* I[TFI_LEVEL_OFFSET + L] for L < 16 in two vectors: the walk looks a level's offset up with
@@ -53,7 +53,7 @@ vec3 pvec(const world *w, int k) { return v3(w->P[k], w->P[k + 1], w->P[k + 2]);
 
 world make_world(__global const double *P, __global const int *I, __global const float *h,
                  __global const float2 *mm, __global const ushort *perm,
-                 __global const float *reach)
+                 __global const float *strips)
 {
     world w;
     w.P = P;
@@ -61,7 +61,7 @@ world make_world(__global const double *P, __global const int *I, __global const
     w.h = h;
     w.mm = mm;
     w.perm = perm;
-    w.reach = reach;
+    w.strips = strips;
     w.n = I[TFI_N];
     w.cells = I[TFI_CELLS];
     w.levels = I[TFI_LEVELS];

@@ -55,10 +55,11 @@
 #define TFP_AMP_H05      73   /* H = 0.5: snow line, water ripples */
 #define TFP_SNOW_BOUND   81   /* strict bound on |snow fBm| (shade.c snow_fbm_bound) */
 /* The sun's strips (render/sun_math.h's tf_sun_frame, its doubles in its order; the table
- * itself is the kernels' `reach` buffer): a_s, b_s, a_p, b_p, along0, across0, inv_w, inv_ds,
- * ds, climb, t_per_cell, eps */
-#define TFP_SUN_FRAME    82   /* 12 */
-#define TFP_COUNT        94
+ * itself is the kernels' `strips` buffer): a_s, b_s, a_p, b_p, along0, across0, inv_w, inv_ds,
+ * ds, climb, t_per_cell, eps, dx, dy, cell */
+#define TFP_SUN_FRAME    82   /* 15 */
+#define TF_CL_SUN_DOUBLES 15
+#define TFP_COUNT        97
 
 /* ints */
 #define TFI_N             0   /* samples per side */
@@ -73,10 +74,11 @@
 #define TFI_LATTICE       9   /* N = 2^depth */
 #define TFI_DEPTH        10
 #define TFI_SMOOTH       11   /* terrain.smooth (shade.h) */
-#define TFI_SUN_STRIPS   12   /* tf_sun_frame's strips (0: no strips), bins and look */
+#define TFI_SUN_STRIPS   12   /* tf_sun_frame's strips (0: no strips), bins, look and n */
 #define TFI_SUN_BINS     13
 #define TFI_SUN_LOOK     14
-#define TFI_LEVEL_OFFSET 15   /* up to TF_CL_MAX_LEVELS entries */
+#define TFI_SUN_N        15
+#define TFI_LEVEL_OFFSET 16   /* up to TF_CL_MAX_LEVELS entries */
 #define TF_CL_MAX_LEVELS 18
 #define TFI_COUNT        (TFI_LEVEL_OFFSET + TF_CL_MAX_LEVELS)
 

@@ -136,33 +136,28 @@ static tally shadow_rays(height_fn fn, int k, double extent, uint64_t seed)
     return t;
 }
 
-static void test_rays_hills(void **state)
+/* The rays of shadow_rays on field fn: answers checked; the strips must have proved at least
+ * lit_share of the lit rays clear and under_share of the occluded ones occluded. */
+static void rays_over(const char *name, height_fn fn, int k, double extent, uint64_t seed,
+                      double lit_share, double under_share)
 {
-    (void)state;
-    tally t = shadow_rays(hills, 7, 150, 5);
-    print_message("hills: %d rays, %d lit (%d proved), %d occluded (%d proved)\n", t.rays,
+    tally t = shadow_rays(fn, k, extent, seed);
+    print_message("%s: %d rays, %d lit (%d proved), %d occluded (%d proved)\n", name, t.rays,
                   t.lit, t.proved_lit, t.occluded, t.proved_under);
-    assert_true(t.lit > t.rays / 4);
-    assert_true(t.proved_lit > t.lit / 2); /* the strips do the work for most lit rays */
-    assert_true(t.proved_under > t.occluded / 10); /* and for many occluded ones */
+    assert_true(t.lit > t.rays / 10 && t.occluded > t.rays / 20);
+    assert_true(t.proved_lit >= lit_share * t.lit);
+    assert_true(t.proved_under >= under_share * t.occluded);
 }
 
-static void test_rays_rough(void **state)
-{
-    (void)state;
-    tally t = shadow_rays(rough, 6, 100, 6);
-    assert_true(t.lit > t.rays / 10);
-    assert_true(t.proved_lit > t.lit / 4);
-}
-
+/* The strips do the work for most lit rays and for many occluded ones; with 4-cell bins on a
+ * 64-cell field they are coarse, and fewer occluded rays are proved there; white noise's bins
+ * reach far below the surface, and none. */
+static void test_rays_hills(void **state) { (void)state; rays_over("hills", hills, 7, 150, 5, 0.5, 0.1); }
+static void test_rays_rough(void **state) { (void)state; rays_over("rough", rough, 6, 100, 6, 0.25, 0.0); }
 static void test_rays_terraces(void **state)
 {
     (void)state;
-    tally t = shadow_rays(terraces, 6, 300, 7);
-    print_message("terraces: %d rays, %d lit (%d proved), %d occluded (%d proved)\n", t.rays,
-                  t.lit, t.proved_lit, t.occluded, t.proved_under);
-    assert_true(t.proved_lit > t.lit / 2);
-    assert_true(t.proved_under > t.occluded / 20); /* 4 cells a bin on a 64-cell field: coarse */
+    rays_over("terraces", terraces, 6, 300, 7, 0.5, 0.05);
 }
 
 /* Tables that lie change answers: reaches lowered prove occluded rays clear, floors raised

@@ -81,7 +81,10 @@ static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, doub
             const int k0 = (int)((ac + ac_min - mu - f->across0) * f->inv_w);
             const int k1 = (int)((ac + ac_max + mu - f->across0) * f->inv_w);
             const size_t at = (size_t)bj * (size_t)side + (size_t)bi;
-            const float hi = mx[at], lo = mn[at];
+            /* a block the grids could not bound (a NaN height) bounds its bins by nothing:
+             * they then prove neither clear nor under */
+            const float hi = isnan(mx[at]) ? INFINITY : mx[at];
+            const float lo = isnan(mn[at]) ? -INFINITY : mn[at];
             for (int k = k0; k <= k1; k++)
                 for (int b = b0; b <= b1; b++) {
                     float *t = &table[2 * ((size_t)k * (size_t)f->bins + (size_t)b)];

@@ -198,6 +198,41 @@ static void test_a_lying_table_changes_answers(void **state)
     tf_heightfield_free(hf);
 }
 
+/* A height field with a NaN sample (a hole no loader lets through, but the grids take what
+ * they are given): the strips prove nothing about the bins over it, so every answer is still
+ * the walk's. */
+static void test_a_nan_height_proves_nothing_there(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(hills, 6, 150);
+    const int mid = hf->n / 2;
+    for (int j = mid - 3; j <= mid + 3; j++)
+        for (int i = mid - 3; i <= mid + 3; i++)
+            hf->h[(size_t)j * hf->n + i] = NAN;
+    tf_heightfield *holed = tf_heightfield_wrap(hf->h, 6, 150, 1); /* grids over the hole */
+    assert_non_null(holed);
+    hf->h = NULL;
+    tf_heightfield_free(hf);
+    rng r = {11};
+    tally t = {0, 0, 0, 0, 0};
+    const double e = holed->cells * holed->cell;
+    for (int n = 0; n < 12; n++) {
+        const tf_vec3 sun = sun_at(range(&r, -M_PI, M_PI), range(&r, 0.05, 0.6));
+        tf_sun_strips *s = tf_sun_strips_build(holed, sun);
+        assert_non_null(s);
+        for (int i = 0; i < 800; i++) {
+            const double x = range(&r, 0, e), y = range(&r, 0, e);
+            const double z = tf_heightfield_height_at(holed, x, y);
+            if (isnan(z))
+                continue;
+            check_ray(holed, s, v3(x, y, z + range(&r, 1e-3, 3)), sun, &t);
+        }
+        tf_sun_strips_free(s);
+    }
+    assert_true(t.rays > 5000);
+    tf_heightfield_free(holed);
+}
+
 /* No strips where they cannot help; NULL strips prove nothing. */
 static void test_no_strips(void **state)
 {
@@ -229,6 +264,7 @@ int main(void)
         cmocka_unit_test(test_rays_rough),
         cmocka_unit_test(test_rays_terraces),
         cmocka_unit_test(test_a_lying_table_changes_answers),
+        cmocka_unit_test(test_a_nan_height_proves_nothing_there),
         cmocka_unit_test(test_no_strips),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

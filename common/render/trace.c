@@ -486,11 +486,10 @@ static int walk_hier(const ray_ctx *r, candidate *best)
    its first hit comes from above (d . n < 0), or it misses and starts (at t0) above its
    cell's maximum; either way no crossing comes before the end of its walk. */
 
-/* The clearance both coherence proofs ask of a ray from (ox, oy, oz): 1e-7 times the scene's
- * size, orders above the rounding of a triangle test or of tf_heightfield_height_at. */
+/* The clearance both coherence proofs ask of a ray from (ox, oy, oz) (trace_math.h). */
 static double clearance_eps(const tf_heightfield *hf, double ox, double oy, double oz)
 {
-    return 1e-7 * (hf->extent + fabs(hf->hmin) + fabs(hf->hmax) + fabs(ox) + fabs(oy) + fabs(oz));
+    return tf_clearance_eps(hf->extent, hf->hmin, hf->hmax, ox, oy, oz);
 }
 
 /* The exit crossing of index c on axis 0 (x) or 1 (y). */
@@ -540,12 +539,7 @@ typedef struct heading {
 
 static int heading_of(const ray_ctx *r, heading *h)
 {
-    h->run = sqrt(r->d[0] * r->d[0] + r->d[1] * r->d[1]);
-    if (!(h->run > 0) || !isfinite(h->run))
-        return 0;
-    const double inv = 1 / h->run; /* C1's margin covers the roundings of the products */
-    h->ux = r->d[0] * inv, h->uy = r->d[1] * inv, h->k = r->d[2] * inv;
-    return 1;
+    return tf_heading(r->d[0], r->d[1], r->d[2], &h->run, &h->ux, &h->uy, &h->k);
 }
 
 /* Does `lower` vouch for part of this ray (C1-C3)?  Then *t_pre is where the prefix walk ends
@@ -554,24 +548,13 @@ static int vouched(const ray_ctx *r, const heading *h, const tf_ray_clear *lower
                    double *t_skip)
 {
     const tf_heightfield *hf = r->hf;
-    if (!(lower->s_free > 0) || lower->o[0] != r->o[0] || lower->o[1] != r->o[1] ||
-        lower->o[2] != r->o[2])
+    if (lower->o[0] != r->o[0] || lower->o[1] != r->o[1] || lower->o[2] != r->o[2])
         return 0;
-    const double L = hf->slope_max, dx = h->ux - lower->ux, dy = h->uy - lower->uy;
-    if (!(L >= 0 && L < INFINITY)) /* no bound (heights that overflow a float) */
-        return 0;
-    const double D = (h->k - lower->k) - L * sqrt(dx * dx + dy * dy) -
-                     1e-9 * (1 + fabs(h->k) + fabs(lower->k) + L);
-    if (!(D > 0))
+    if (!(hf->slope_max >= 0 && hf->slope_max < INFINITY)) /* no bound (heights that overflow) */
         return 0;
     const double eps = clearance_eps(hf, r->o[0], r->o[1], r->o[2]);
-    const double s_lo = eps / D > lower->s_in ? eps / D : lower->s_in;
-    const double s_hi = lower->s_free * (1 - 1e-9);
-    if (!(s_hi > s_lo))
-        return 0;
-    *t_pre = r->t_square * h->run < s_lo ? s_lo / h->run : 0;
-    *t_skip = s_hi * (1 / h->run);
-    return *t_skip > r->t0;
+    return tf_vouched(h->ux, h->uy, h->k, h->run, r->t_square, r->t0, lower->ux, lower->uy,
+                      lower->k, lower->s_in, lower->s_free, hf->slope_max, eps, t_pre, t_skip);
 }
 
 /* walk_hier, skipping what `lower` vouches for. */
@@ -598,10 +581,8 @@ static int from_above(const ray_ctx *r, const candidate *c)
 {
     const tf_heightfield *hf = r->hf;
     const float *p = hf->h + (size_t)c->cj * hf->n + c->ci;
-    const double ha = p[0], hb = p[1], hd = p[hf->n], hc = p[hf->n + 1];
-    const double gx = c->tri == 0 ? hb - ha : hc - hd, gy = c->tri == 0 ? hc - hb : hd - ha;
-    const double a = -r->d[0] * gx, b = -r->d[1] * gy, z = r->d[2] * hf->cell;
-    return a + b + z < -1e-12 * (fabs(a) + fabs(b) + fabs(z));
+    const tf_vec3 d = {r->d[0], r->d[1], r->d[2]};
+    return tf_hit_from_above(p[0], p[1], p[hf->n + 1], p[hf->n], hf->cell, c->tri == 0, d);
 }
 
 /* Does the ray start (at t0, as set up) above its cell's maximum? */

@@ -150,4 +150,62 @@ TF_SHARED tf_lane3 tf_hit_normal(tf_lane ha, tf_lane hb, tf_lane hc, tf_lane hd,
                             TF_SEL(-(hd - ha), -(hc - hb), first), TF_LANE(cell)));
 }
 
+/* ---------------------------------------------------------------- coherence (trace.c)
+ *
+ * trace.c's "coherence" section proves when a camera ray may skip the part of its walk that a
+ * lower ray from the same origin vouches for; these are its formulas, for C's one ray and the
+ * kernels' eight. */
+
+/* The clearance both coherence proofs ask of a ray from (ox, oy, oz) over a terrain `extent`
+ * wide with heights in [hmin, hmax]: 1e-7 times the scene's size, orders above the rounding of
+ * a triangle test or of an interpolated height. */
+TF_SHARED tf_lane tf_clearance_eps(double extent, double hmin, double hmax, tf_lane ox,
+                                   tf_lane oy, tf_lane oz)
+{
+    return 1e-7 * (extent + fabs(hmin) + fabs(hmax) + fabs(ox) + fabs(oy) + fabs(oz));
+}
+
+/* A direction's heading (ux, uy: unit, horizontal), climb k (dz per unit of horizontal run) and
+ * run per unit of t; false where the run is 0 or overflows (the outputs are then not used). */
+TF_SHARED tf_mask tf_heading(tf_lane dx, tf_lane dy, tf_lane dz, tf_lane *run, tf_lane *ux,
+                             tf_lane *uy, tf_lane *k)
+{
+    *run = sqrt(dx * dx + dy * dy);
+    const tf_lane inv = 1 / *run; /* C1's margin covers the roundings of the products */
+    *ux = dx * inv, *uy = dy * inv, *k = dz * inv;
+    return TF_AND(*run > 0, TF_ISFINITE(*run));
+}
+
+/* Does a lower ray's record (heading lux, luy, climb lk; above the surface over the runs
+ * [ls_in, ls_free)) vouch for part of this ray (heading ux, uy, climb k, `run` per unit of t,
+ * entering the square at t_square, its walk starting at t0), from the same origin, over a
+ * surface of slope at most L (finite, >= 0), with clearance eps (C1-C3 of trace.c)?  Where it
+ * does, *t_pre is where the prefix walk ends (<= t0: no prefix) and *t_skip where the main
+ * walk starts. */
+TF_SHARED tf_mask tf_vouched(tf_lane ux, tf_lane uy, tf_lane k, tf_lane run, tf_lane t_square,
+                             tf_lane t0, tf_lane lux, tf_lane luy, tf_lane lk, tf_lane ls_in,
+                             tf_lane ls_free, double L, tf_lane eps, tf_lane *t_pre,
+                             tf_lane *t_skip)
+{
+    const tf_lane dx = ux - lux, dy = uy - luy;
+    const tf_lane D = (k - lk) - L * sqrt(dx * dx + dy * dy) -
+                      1e-9 * (1 + fabs(k) + fabs(lk) + L);
+    const tf_lane q = eps / D, s_lo = TF_SEL(ls_in, q, q > ls_in);
+    const tf_lane s_hi = ls_free * (1 - 1e-9);
+    *t_pre = TF_SEL(TF_LANE(0.0), s_lo / run, t_square * run < s_lo);
+    *t_skip = s_hi * (1 / run);
+    return TF_AND(TF_AND(ls_free > 0, D > 0), TF_AND(s_hi > s_lo, *t_skip > t0));
+}
+
+/* Was a hit on triangle `first` ? (A, B, C) : (A, C, D) of a cell `cell` wide with corner
+ * heights ha = A, hb = B, hc = C, hd = D made from above (d . n < 0, n the triangle's upward
+ * normal, unnormalised), by more than the dot product's rounding? */
+TF_SHARED tf_mask tf_hit_from_above(tf_lane ha, tf_lane hb, tf_lane hc, tf_lane hd, double cell,
+                                    tf_mask first, tf_lane3 d)
+{
+    const tf_lane gx = TF_SEL(hc - hd, hb - ha, first), gy = TF_SEL(hd - ha, hc - hb, first);
+    const tf_lane a = -d.x * gx, b = -d.y * gy, z = d.z * cell;
+    return a + b + z < -1e-12 * (fabs(a) + fabs(b) + fabs(z));
+}
+
 #endif

@@ -91,9 +91,10 @@ struct tf_cl_backend {
     cl_mem P, I, h, minmax, perm, strips; /* strips: the sun's (render/sun_strips.h) */
     float *minmax_host; /* what b->minmax reads in place (lent_to_device); freed after it */
     /* per-render buffers, grown as needed */
-    cl_mem corners, corner_levels, corner_shadow, cache, levels, have, where, out, pixel_shadow;
-    size_t corners_cap, corner_levels_cap, corner_shadow_cap, cache_cap, levels_cap, have_cap,
-        where_cap, out_cap, pixel_shadow_cap;
+    cl_mem corners, corner_levels, corner_shadow, corner_records, cache, levels, have, where, out,
+        pixel_shadow;
+    size_t corners_cap, corner_levels_cap, corner_shadow_cap, corner_records_cap, cache_cap,
+        levels_cap, have_cap, where_cap, out_cap, pixel_shadow_cap;
     cl_ulong jitter_key;
     cl_uint epoch; /* tf_pixels8's mark for the slots of the launch (packet_render.cl) */
     int lattice;
@@ -460,6 +461,8 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     P[TFP_EXTENT] = hf->extent;
     P[TFP_HMIN] = hf->hmin;
     P[TFP_HMAX] = hf->hmax;
+    /* trace.c's vouched asks a finite bound; NAN makes every kernel vouch fail */
+    P[TFP_SLOPE_MAX] = hf->slope_max >= 0 && hf->slope_max < INFINITY ? hf->slope_max : NAN;
     put3(P, TFP_CAM_POS, cam->position);
     put3(P, TFP_CAM_FORWARD, cam->forward);
     put3(P, TFP_CAM_RIGHT, cam->right);
@@ -854,7 +857,7 @@ static uint64_t sum_u32(const cl_uint *v, size_t n)
 static cl_int enqueue_pixel_batch(tf_cl_backend *b, tf_rect rect, size_t first, size_t npixels,
                                   size_t batch, cl_event *ev)
 {
-    cl_int rw = rect.w, f = (cl_int)first;
+    cl_int rw = rect.w, rh = rect.h, f = (cl_int)first;
     cl_int count = (cl_int)(npixels - first < batch ? npixels - first : batch);
     cl_int rc = set_common_args(b, b->k_pixels, rect);
     rc |= clSetKernelArg(b->k_pixels, 9, sizeof rw, &rw);
@@ -870,6 +873,8 @@ static cl_int enqueue_pixel_batch(tf_cl_backend *b, tf_rect rect, size_t first, 
     rc |= clSetKernelArg(b->k_pixels, 18, sizeof(cl_uint), &b->epoch);
     rc |= clSetKernelArg(b->k_pixels, 19, sizeof(cl_mem), &b->out);
     rc |= clSetKernelArg(b->k_pixels, 20, sizeof(cl_mem), &b->pixel_shadow);
+    rc |= clSetKernelArg(b->k_pixels, 21, sizeof(cl_mem), &b->corner_records);
+    rc |= clSetKernelArg(b->k_pixels, 22, sizeof rh, &rh);
     const size_t per_item = (size_t)b->pix;
     size_t global = round_up(((size_t)count + per_item - 1) / per_item, b->local);
     if (rc != CL_SUCCESS)
@@ -910,6 +915,8 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
                  ensure(b, &b->corner_levels, &b->corner_levels_cap,
                         ncorners * 3 * sizeof(double)) ||
                  ensure(b, &b->corner_shadow, &b->corner_shadow_cap, ncorners * sizeof(cl_uint)) ||
+                 ensure(b, &b->corner_records, &b->corner_records_cap,
+                        ncorners * TF_CL_RECORD_DOUBLES * sizeof(double)) ||
                  ensure(b, &b->cache, &b->cache_cap,
                         batch * side * side * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
                  ensure(b, &b->levels, &b->levels_cap, batch * side * side * 3 * sizeof(double)) ||
@@ -933,6 +940,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corners);
     rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_levels);
     rc |= clSetKernelArg(b->k_corners, 13, sizeof(cl_mem), &b->corner_shadow);
+    rc |= clSetKernelArg(b->k_corners, 14, sizeof(cl_mem), &b->corner_records);
     size_t global = round_up((ncorners + (size_t)b->stream - 1) / (size_t)b->stream, b->local);
     cl_event corner_ev = NULL;
     if (rc == CL_SUCCESS)
@@ -994,7 +1002,8 @@ void tf_cl_backend_free(tf_cl_backend *b)
     if (!b)
         return;
     cl_mem bufs[] = {b->P,      b->I,     b->h,     b->minmax, b->perm, b->strips,
-                     b->corners, b->corner_levels, b->corner_shadow, b->cache, b->levels,
+                     b->corners, b->corner_levels, b->corner_shadow, b->corner_records,
+                     b->cache, b->levels,
                      b->have, b->where, b->out, b->pixel_shadow};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         if (bufs[i])

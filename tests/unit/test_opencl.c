@@ -305,6 +305,16 @@ static void other_scenes(void **state)
     check_scene("alps", 120, 40, -1);
 }
 
+/* Camera rays helped by the records of corner rays below them (packet_render.cl's
+ * lower_corner, trace.c's coherence): the same bits where the camera stands low in a valley, its
+ * rays meeting slopes near it (the prefix walk before the lower ray vouches) and far off. */
+static void coherent_near_terrain(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    check_scene("valley", 160, 90, -1);
+}
+
 /* terrain smooth = yes (the sun test and the shadow ray's start by the interpolated normal):
  * the same bits on PoCL.  Each image must differ from its flat one, or the smooth path was
  * not exercised. */
@@ -584,6 +594,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(match_c_backend), cmocka_unit_test(rect_invariance),
         cmocka_unit_test(mixed_backends),  cmocka_unit_test(other_scenes),
+        cmocka_unit_test(coherent_near_terrain),
         cmocka_unit_test(smooth_scenes),
         cmocka_unit_test(aa_depths_and_tiny_images),
         cmocka_unit_test(bad_device),

@@ -37,6 +37,7 @@
 #endif
 #define TF_QUEUE TF_STREAM /* queued samples per work-item: one stream */
 #define TF_QUEUED 0x80000000u
+#define TF_LOWER_ROWS 5     /* lower_corner: pixel rows down to the corner that helps a sample */
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
 
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
@@ -44,7 +45,7 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
                           __global const ushort *perm, __global const float *strips,
                           int rx, int ry, int cw, int ch,
                           __global float *out, __global double *out_levels,
-                          __global uint *shadow)
+                          __global uint *shadow, __global double *out_records)
 {
     const int base = (int)get_global_id(0) * TF_STREAM, total = cw * ch;
     if (base >= total)
@@ -62,7 +63,8 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
     iv rays[TF_STREAM_PACKETS];
     for (int p = 0; p < TF_STREAM_PACKETS; p++)
         rays[p] = (iv)(0);
-    lattice_samples(&w, jitter_key, X, Y, n, s, rays);
+    ray_clears rec;
+    lattice_samples(&w, jitter_key, X, Y, n, NULL, s, rays, &rec);
     dv lvl[TF_STREAM_PACKETS][3];
     for (int p = 0; p * TF_LANES < n; p++)
         for (int ch = 0; ch < 3; ch++)
@@ -73,7 +75,33 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
         for (int ch = 0; ch < 3; ch++)
             out_levels[(size_t)(base + e) * 3 + ch] = lvl[e / TF_LANES][ch][e % TF_LANES];
         shadow[base + e] = (uint)rays[e / TF_LANES][e % TF_LANES];
+        __global double *rc = out_records + (size_t)(base + e) * TF_CL_RECORD_DOUBLES;
+        const int p = e / TF_LANES, l = e % TF_LANES;
+        rc[0] = rec.ux[p][l], rc[1] = rec.uy[p][l], rc[2] = rec.k[p][l];
+        rc[3] = rec.s_in[p][l], rc[4] = rec.s_free[p][l];
     }
+}
+
+/* The record of the corner that helps the camera ray of lattice point (X, Y) (trace.c's
+ * coherence), into lane e of *lows: the corner TF_LOWER_ROWS pixel rows below the point's
+ * pixel row (or the rectangle's last corner row), in the corner column nearest the point.  Any
+ * lower ray from the camera may help; this one is below by enough to outclimb the terrain's
+ * slope across a half pixel's heading (render.c's ray_below takes the nearest in the column,
+ * which only the C renderer's bottom-to-top order has at hand). */
+void lower_corner(__global const double *records, long X, long Y, long N, int rx, int ry, int rw,
+                  int rh, int e, ray_clears *lows)
+{
+    const int p = e / TF_LANES, l = e % TF_LANES;
+    long cy = Y / N + TF_LOWER_ROWS - ry, cx = (X + N / 2) / N - rx;
+    cy = cy < rh ? cy : rh;
+    cx = cx < 0 ? 0 : cx > rw ? rw : cx;
+    if ((cy + ry) * N <= Y) { /* no corner row below the point */
+        lows->s_free[p][l] = 0;
+        return;
+    }
+    __global const double *rc = records + (size_t)(cy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES;
+    lows->ux[p][l] = rc[0], lows->uy[p][l] = rc[1], lows->k[p][l] = rc[2];
+    lows->s_in[p][l] = rc[3], lows->s_free[p][l] = rc[4];
 }
 
 /* render.c's display_range over the levels of n samples (n <= 5): the largest per-channel
@@ -241,7 +269,8 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
                          int rw, int first, int count, __global const float *corners,
                          __global const double *corner_levels, __global float *cache, __global double *levels,
                          __global uint *have, __global ushort *where, uint epoch,
-                         __global float *out, __global uint *shadow)
+                         __global float *out, __global uint *shadow,
+                         __global const double *corner_records, int rh)
 {
     const int m0 = (int)get_global_id(0) * TF_PIX;
     if (m0 >= count)
@@ -296,11 +325,14 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
             break;
         /* every pixel still active waits on a queued sample, so q.n > 0 here */
         lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
+        ray_clears lows;
         for (int e = 0; e < q.n; e++) {
             const pixel_state *s = &ps[q.pixel[e]];
             int k = q.slot[e];
-            X[e / TF_LANES][e % TF_LANES] = (long)s->px * LN + k % side;
-            Y[e / TF_LANES][e % TF_LANES] = (long)s->py * LN + k / side;
+            long x = (long)s->px * LN + k % side, y = (long)s->py * LN + k / side;
+            X[e / TF_LANES][e % TF_LANES] = x;
+            Y[e / TF_LANES][e % TF_LANES] = y;
+            lower_corner(corner_records, x, y, LN, rx, ry, rw, rh, e, &lows);
         }
         for (int e = q.n; e < (q.n + TF_LANES - 1) / TF_LANES * TF_LANES; e++) {
             X[e / TF_LANES][e % TF_LANES] = X[0][0];
@@ -310,7 +342,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         iv rays[TF_STREAM_PACKETS];
         for (int b = 0; b < TF_STREAM_PACKETS; b++)
             rays[b] = (iv)(0);
-        lattice_samples(&w, jitter_key, X, Y, q.n, smp, rays);
+        lattice_samples(&w, jitter_key, X, Y, q.n, &lows, smp, rays, NULL);
         for (int b = 0; b * TF_LANES < q.n; b++) {
             dv lvl[3];
             for (int ch = 0; ch < 3; ch++)

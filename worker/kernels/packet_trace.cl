@@ -23,6 +23,7 @@
 typedef struct rayp {
     v3p o, d;
     dv inv_dx, inv_dy, tmin, tmax, t0, t1, margin, tie_tol;
+    dv t_square;        /* where the ray enters the terrain's square (x and y only) */
     lv sx, sy, ci, cj;
     lv kx, ky, kz;      /* the watertight test's axis permutation */
     dv shx, shy, shz;
@@ -117,6 +118,7 @@ lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
     dv t0 = tmin, t1 = tmax;
     mask &= tf_clip_slab(o.x, d.x, (dv)(0), (dv)(top), &t0, &t1);
     mask &= tf_clip_slab(o.y, d.y, (dv)(0), (dv)(top), &t0, &t1);
+    r->t_square = t0;
     mask &= tf_clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1);
     mask &= isfinite(t0) & isfinite(t1);
     r->t0 = t0;
@@ -253,6 +255,59 @@ TF_INLINE void walk_start8(const world *w, const rayp *r, lv mask, walkp *s)
     s->t_event = select(s->t_event, r->t0, mask);
 }
 
+/* ---------------------------------------------------------------- coherence (trace.c)
+ *
+ * A camera ray helped by a lower ray's record: trace.c's walk_coherent per lane.  Where the
+ * record vouches (tf_vouched, trace_math.h), the lane first walks the prefix (its t1 moved in to
+ * t_pre), then, if that found nothing, starts again at t_skip with the cell indices the flat
+ * walk holds there; trace.c's comment proves the hit is tf_trace's, bit for bit. */
+
+/* The exit crossing of index c on the axis whose origin, inverse direction and step are o,
+ * inv, s (s != 0). */
+dv exit_cross8(const world *w, lv c, lv s, dv o, dv inv)
+{
+    return tf_grid_cross(to_d(c + one_if(s > 0)), w->cell, o, inv);
+}
+
+/* trace.c's index_at per lane of m, on axis 0 (x) or 1 (y): the index the flat walk holds at
+ * t, its first index c0 moved over every exit crossing before t; -1 where it leaves the grid
+ * first.  Lanes outside m keep c0. */
+lv index_at8(const world *w, const rayp *r, int axis, lv c0, dv t, lv m)
+{
+    const lv s = axis ? r->sy : r->sx;
+    const dv o = axis ? r->o.y : r->o.x, dd = axis ? r->d.y : r->d.x;
+    const dv inv = axis ? r->inv_dy : r->inv_dx;
+    m &= s != 0;
+    lv c = cell_of8(w, select((dv)(0), o + t * dd, m)); /* a guess */
+    c = select(c, c0, ~m | select(c > c0, c < c0, s > 0));
+    lv back = m & (c != c0) & ~(exit_cross8(w, c - s, s, o, inv) < t);
+    while (any_lane(back)) {
+        c = select(c, c - s, back);
+        back &= (c != c0) & ~(exit_cross8(w, c - s, s, o, inv) < t);
+    }
+    lv fwd = m & (exit_cross8(w, c, s, o, inv) < t), out = (lv)(0);
+    while (any_lane(fwd)) {
+        c = select(c, c + s, fwd);
+        lv left = fwd & ((c < 0) | (c >= w->cells));
+        out |= left;
+        fwd &= ~left & (exit_cross8(w, c, s, o, inv) < t);
+    }
+    return select(c, (lv)(-1), out);
+}
+
+/* trace.c's skip_to for the lanes of m: their walks start at t instead; returns the lanes whose
+ * walks have not ended by then. */
+lv skip8(const world *w, rayp *r, lv m, dv t)
+{
+    m &= t < r->t1;
+    lv ci = index_at8(w, r, 0, r->ci, t, m), cj = index_at8(w, r, 1, r->cj, t, m);
+    m &= (ci >= 0) & (cj >= 0);
+    r->t0 = select(r->t0, t, m);
+    r->ci = select(r->ci, ci, m);
+    r->cj = select(r->cj, cj, m);
+    return m;
+}
+
 /* The first half of a walk_hier step: where each lane's block ends (tx, ty) and the block's
  * max and min, loaded.  Split from the second half so that a caller with two packets can
  * start both packets' loads before it waits on either. */
@@ -371,6 +426,13 @@ typedef struct ray_stream {
     dv tmin[TF_STREAM_PACKETS], tmax[TF_STREAM_PACKETS];
 } ray_stream;
 
+/* Rays' coherence records (trace.h's tf_ray_clear, the origin left out): ray k's is lane k % 8
+ * of packet k / 8.  s_free 0: the record vouches for nothing. */
+typedef struct ray_clears {
+    dv ux[TF_STREAM_PACKETS], uy[TF_STREAM_PACKETS], k[TF_STREAM_PACKETS];
+    dv s_in[TF_STREAM_PACKETS], s_free[TF_STREAM_PACKETS];
+} ray_clears;
+
 /* One packet walking a stream: its rays (rayp), where their walks stand, their best hits, the
  * lanes at work and which ray of the stream each lane holds. */
 typedef struct walker {
@@ -378,6 +440,9 @@ typedef struct walker {
     walkp s;
     candp best;
     lv active, ray;
+    lv prefix;          /* lanes walking the prefix of a vouched-for ray (t1 moved in) */
+    dv t_skip, t1_full; /* their restart, and their own t1 */
+    lv above;           /* lanes whose ray starts above its cell's maximum (for records) */
 } walker;
 
 #ifndef TF_WALKERS
@@ -390,18 +455,90 @@ void walker_init(walker *k)
     candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
     k->s = s;
     k->best = best;
-    k->active = k->ray = (lv)(0);
+    k->active = k->ray = k->prefix = k->above = (lv)(0);
+    k->t_skip = k->t1_full = (dv)(0);
+}
+
+/* The lanes of the walker just dealt whose lower records (lux .. ls_free) vouch for part of
+ * their rays: walk_coherent's start.  A lane with a prefix gets its t1 moved in; one without
+ * starts at t_skip at once (or is done, if its walk has ended by then). */
+TF_INLINE void vouch8(const world *w, walker *k, dv lux, dv luy, dv lk, dv ls_in, dv ls_free)
+{
+    rayp *r = &k->r;
+    dv run, ux, uy, kk, t_pre, t_skip;
+    lv v = k->active & tf_heading(r->d.x, r->d.y, r->d.z, &run, &ux, &uy, &kk) & (ls_free > 0);
+    if (!any_lane(v))
+        return;
+    const dv eps = tf_clearance_eps(w->P[TFP_EXTENT], w->P[TFP_HMIN], w->P[TFP_HMAX], r->o.x,
+                                    r->o.y, r->o.z);
+    v &= tf_vouched(ux, uy, kk, run, r->t_square, r->t0, lux, luy, lk, ls_in, ls_free,
+                    w->P[TFP_SLOPE_MAX], eps, &t_pre, &t_skip);
+    const lv pre = v & (t_pre > r->t0), now = v & ~pre;
+    k->prefix = pre;
+    k->t_skip = t_skip;
+    k->t1_full = r->t1;
+    r->t1 = select(r->t1, select(r->t1, t_pre, t_pre < r->t1), pre);
+    if (any_lane(now))
+        k->active &= ~(now & ~skip8(w, r, now, t_skip));
+}
+
+/* The lanes of `missed` that were walking a prefix start again at their t_skip (trace.c's
+ * walk_coherent after a prefix that found nothing); returns the lanes done for good. */
+TF_INLINE lv resume8(const world *w, walker *k, lv missed)
+{
+    const lv again = missed & k->prefix;
+    k->prefix &= ~missed;
+    if (!any_lane(again))
+        return missed;
+    k->r.t1 = select(k->r.t1, k->t1_full, again);
+    const lv go = skip8(w, &k->r, again, k->t_skip);
+    walk_start8(w, &k->r, go, &k->s);
+    return missed & ~go;
+}
+
+/* trace.c's starts_above per lane: z(t0) above the maximum of the ray's start cell. */
+lv starts_above8(const world *w, const rayp *r, lv mask)
+{
+    lv idx = (lv)(w->I[TFI_LEVEL_OFFSET]) + r->cj * (lv)(w->cells) + r->ci;
+    dv hi, lo;
+    minmax_split8(gather_minmax(w->mm, idx, mask), &hi, &lo);
+    return mask & (r->o.z + r->t0 * r->d.z > hi + r->margin);
+}
+
+/* trace.c's note_clear for the lanes of `ended` (hit: the ones that hit, best holding it):
+ * their records go to rays k->ray of *out. */
+void note_clears8(const world *w, const walker *k, lv ended, lv hit, ray_clears *out)
+{
+    const rayp *r = &k->r;
+    dv run, ux, uy, kk;
+    lv ok = ended & tf_heading(r->d.x, r->d.y, r->d.z, &run, &ux, &uy, &kk);
+    lv base = k->best.cj * w->n + k->best.ci, h_at = hit & ok;
+    dv ha = gather_f(w->h, base, h_at), hb = gather_f(w->h, base + 1, h_at);
+    dv hd = gather_f(w->h, base + w->n, h_at), hc = gather_f(w->h, base + w->n + 1, h_at);
+    lv free = select(k->above, tf_hit_from_above(ha, hb, hc, hd, w->cell, k->best.tri == 0, r->d),
+                     hit);
+    dv s_free = select((dv)(0), select(r->t1, k->best.t, hit) * run, ok & free);
+    for (int l = 0; l < TF_LANES; l++) {
+        if (!ok[l])
+            continue;
+        int y = (int)k->ray[l], p = y / TF_LANES, q = y % TF_LANES;
+        out->ux[p][q] = ux[l], out->uy[p][q] = uy[l], out->k[p][q] = kk[l];
+        out->s_in[p][q] = r->t_square[l] * run[l];
+        out->s_free[p][q] = s_free[l];
+    }
 }
 
 /* Once all the walker's lanes are done, deal it rays *next, *next + 1, ... of the stream (up
  * to eight).  k->r is read only after a deal has set it. */
-TF_INLINE void walker_deal(const world *w, const ray_stream *in, int *next, walker *k)
+TF_INLINE void walker_deal(const world *w, const ray_stream *in, const ray_clears *lows,
+                           int out_records, int *next, walker *k)
 {
     if (*next >= in->n || any_lane(k->active))
         return;
     const v3p zero = v3p_splat(v3(0, 0, 0));
     v3p o = zero, d = zero;
     dv tmin = (dv)(0), tmax = (dv)(0);
+    dv lux = (dv)(0), luy = (dv)(0), lk = (dv)(0), ls_in = (dv)(0), ls_free = (dv)(0);
     lv fresh = (lv)(0);
     for (int l = 0; l < TF_LANES && *next < in->n; l++) {
         int r = (*next)++, p = r / TF_LANES, q = r % TF_LANES;
@@ -411,18 +548,32 @@ TF_INLINE void walker_deal(const world *w, const ray_stream *in, int *next, walk
         d.x[l] = in->d[p].x[q], d.y[l] = in->d[p].y[q], d.z[l] = in->d[p].z[q];
         tmin[l] = in->tmin[p][q];
         tmax[l] = in->tmax[p][q];
+        if (lows) {
+            lux[l] = lows->ux[p][q], luy[l] = lows->uy[p][q], lk[l] = lows->k[p][q];
+            ls_in[l] = lows->s_in[p][q], ls_free[l] = lows->s_free[p][q];
+        }
     }
     k->active = setup_ray8(&k->r, w, o, d, tmin, tmax, fresh);
+    k->above = out_records ? starts_above8(w, &k->r, k->active) : (lv)(0);
+    k->prefix = (lv)(0);
+    if (lows)
+        vouch8(w, k, lux, luy, lk, ls_in, ls_free);
     walk_start8(w, &k->r, k->active, &k->s);
     k->best.t = (dv)(INFINITY);
 }
 
 /* One step of the walker's lanes, its fetch done; the rays that end are reported in found /
  * hits. */
-TF_INLINE void walker_step(const world *w, walker *k, const fetchp *f, lv found[], hitp *hits)
+TF_INLINE void walker_step(const world *w, walker *k, const fetchp *f, lv found[], hitp *hits,
+                          ray_clears *records)
 {
     lv hit, missed;
     walk_step8(w, &k->r, &k->s, k->active, f, &k->best, &hit, &missed);
+    k->prefix &= ~hit;
+    if (any_lane(missed & k->prefix))
+        missed = resume8(w, k, missed);
+    if (records && any_lane(hit | missed))
+        note_clears8(w, k, hit | missed, hit, records);
     if (any_lane(hit)) {
         hitp h;
         if (hits)
@@ -445,13 +596,20 @@ TF_INLINE void walker_step(const world *w, walker *k, const fetchp *f, lv found[
 }
 
 /* Walk every ray of the stream: found[k / 8] lane k % 8 says whether ray k hit; if hits is
- * not NULL, hits[k / 8] lane k % 8 holds that hit (finish_hit8's record).  TF_WALKERS packets
+ * not NULL, hits[k / 8] lane k % 8 holds that hit (finish_hit8's record).  If lows is not
+ * NULL, ray k is helped by record k of it (the coherence section above: every ray of the stream
+ * starts at the origin the records' rays started at); if records is not NULL, ray k's own record
+ * goes to record k of it (trace.c's note_clear).  TF_WALKERS packets
  * walk side by side: a step waits on its grid loads (a gather the next step depends on), so
  * every packet's loads are started (walk_fetch8) before any packet's step goes on with them. */
-void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
+void walk_stream(const world *w, const ray_stream *in, const ray_clears *lows, lv found[],
+                 hitp *hits, ray_clears *records)
 {
-    for (int p = 0; p < TF_STREAM_PACKETS; p++)
+    for (int p = 0; p < TF_STREAM_PACKETS; p++) {
         found[p] = (lv)(0);
+        if (records) /* a ray that never starts a walk vouches for nothing */
+            records->s_free[p] = (dv)(0);
+    }
     walker k[TF_WALKERS];
     for (int g = 0; g < TF_WALKERS; g++)
         walker_init(&k[g]);
@@ -459,7 +617,7 @@ void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
     for (;;) {
         int busy = 0;
         for (int g = 0; g < TF_WALKERS; g++) {
-            walker_deal(w, in, &next, &k[g]);
+            walker_deal(w, in, lows, records != NULL, &next, &k[g]);
             busy |= any_lane(k[g].active);
         }
         if (!busy) {
@@ -473,6 +631,6 @@ void walk_stream(const world *w, const ray_stream *in, lv found[], hitp *hits)
                 walk_fetch8(w, &k[g].r, &k[g].s, k[g].active, &f[g]);
         for (int g = 0; g < TF_WALKERS; g++)
             if (any_lane(k[g].active))
-                walker_step(w, &k[g], &f[g], found, hits);
+                walker_step(w, &k[g], &f[g], found, hits, records);
     }
 }

@@ -59,7 +59,8 @@
  * ds, climb, t_per_cell, eps, dx, dy, cell */
 #define TFP_SUN_FRAME    82   /* 15 */
 #define TF_CL_SUN_DOUBLES 15
-#define TFP_COUNT        97
+#define TFP_SLOPE_MAX    97   /* hf->slope_max, NAN where it bounds nothing (coherence) */
+#define TFP_COUNT        98
 
 /* ints */
 #define TFI_N             0   /* samples per side */
@@ -84,6 +85,7 @@
 
 /* Floats per stored sample (r, g, b, a, dist) and per output pixel (r, g, b, a, z, spp). */
 #define TF_CL_SAMPLE_FLOATS 5
+#define TF_CL_RECORD_DOUBLES 5 /* a corner's coherence record: ux, uy, k, s_in, s_free */
 #define TF_CL_PIXEL_FLOATS  6
 
 #endif

@@ -8,8 +8,11 @@
  * Bottom to top for coherence (trace.h): a camera ray climbs above the ray below it, so traced
  * after it, it starts its walk where that one hit (tf_trace_coherent), if the terrain's slope
  * allows; and its shadow ray is first looked for under the surface where that one's went under
- * (tf_occluded_coherent).  Each sample's record is kept beside it, and each lattice column's
- * highest record is handed up to the next pixel row.
+ * (tf_occluded_coherent).  Each sample's record is kept beside it.  A corner row's ray is helped
+ * by the highest ray traced below it in its lattice column (each column's highest record is
+ * handed up to the next pixel row); a sample inside a pixel by the corner ray TF_LOWER_ROWS
+ * corner rows down in the nearest corner column (ray_below), the corner rows' records being
+ * kept that long (rect_state's ring).
  *
  * Each pixel then refines itself (render_pixel): starting from its 4 corners it pops quads off a
  * small explicit stack.  A quad's contrast is the widest per-channel range of its samples'
@@ -197,25 +200,28 @@ static double display_range(const tf_sample *const s[], int n)
 }
 
 /* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice.  With coherence, each sample's
- * ray record too, and `column`: the rectangle's record for each of the pixel's N+1 lattice
- * columns of the highest ray traced in it below this pixel row (NULL: no coherence). */
+ * ray record too, `column`: the rectangle's record for each of the pixel's N+1 lattice
+ * columns of the highest ray traced in it below this pixel row (NULL: no coherence), and
+ * `lower`. */
 typedef struct pixel_cache {
     int side;           /* N + 1 */
     tf_sample *sample;  /* side * side */
     unsigned char *have;
     tf_sample_record *record; /* side * side */
     tf_sample_record *column;
+    const tf_sample_record *lower; /* the records of the pixel's two corner columns
+                                    * TF_LOWER_ROWS corner rows down (ray_below) */
 } pixel_cache;
 
-/* The record of the nearest ray traced below local lattice point (i, j) in its column: in
- * the pixel, else from the pixel rows below.  (Any lower ray would do; the nearest vouches for
- * the most.) */
-static const tf_sample_record *ray_below(const pixel_cache *pc, int i, int j)
+/* The record of a ray traced below local lattice point (i, j) of the pixel, j < N (any lower
+ * ray from the camera may help; trace.c's D decides how much): the corner TF_LOWER_ROWS
+ * corner rows down in the nearest corner column.  The rays just below in the point's own
+ * lattice column are too close to outclimb the terrain's slope across their jitter's offset in
+ * heading; that corner's ray is low enough to (constants.h).  The OpenCL kernels take the same
+ * one (packet_render.cl's lower_corner). */
+static const tf_sample_record *ray_below(const pixel_cache *pc, int i)
 {
-    for (int b = j + 1; b < pc->side; b++)
-        if (pc->have[(size_t)b * (size_t)pc->side + (size_t)i])
-            return &pc->record[(size_t)b * (size_t)pc->side + (size_t)i];
-    return &pc->column[i];
+    return &pc->lower[2 * i >= pc->side - 1];
 }
 
 /* After a pixel: each of its columns' highest ray is the one the pixel above wants below it. */
@@ -239,7 +245,7 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
     if (!pc->have[k]) {
         int64_t X = (int64_t)px * r->lattice + i, Y = (int64_t)py * r->lattice + j;
         if (pc->column)
-            lattice_sample_coherent(r, X, Y, ray_below(pc, i, j), &pc->record[k], &pc->sample[k],
+            lattice_sample_coherent(r, X, Y, ray_below(pc, i), &pc->record[k], &pc->sample[k],
                                     &tally->shadow_rays);
         else
             tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
@@ -464,15 +470,24 @@ static void corner_row(const tf_renderer *r, tf_rect rect, int cy, int external_
  * and how corner rows are traced. */
 typedef struct rect_state {
     tf_sample *above, *below;
-    tf_sample_record *record_above, *record_below;
+    tf_sample_record *ring; /* the records of the last TF_CORNER_RING corner rows traced */
     pixel_cache pc;
     row_rays rays;
     row_tracer how;
 } rect_state;
 
+#define TF_CORNER_RING (TF_LOWER_ROWS + 1) /* a pixel row's lower corner row and those above */
+
+/* The records of the rectangle's corner row y (0 at its top; y > 0 rows kept only while they
+ * are among the TF_CORNER_RING lowest not yet left behind). */
+static tf_sample_record *corner_records(const rect_state *st, tf_rect rect, int y)
+{
+    return st->ring + (size_t)(y % TF_CORNER_RING) * ((size_t)rect.w + 1);
+}
+
 static void rect_state_free(rect_state *st)
 {
-    free(st->above), free(st->below), free(st->record_above), free(st->record_below);
+    free(st->above), free(st->below), free(st->ring);
     free(st->pc.sample), free(st->pc.have), free(st->pc.record), free(st->how.column);
     if (st->how.q)
         row_rays_free(st->how.q);
@@ -485,15 +500,14 @@ static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
     st->above = malloc(sizeof *st->above * w1);
     st->below = malloc(sizeof *st->below * w1);
     st->pc = (pixel_cache){(int)side, malloc(sizeof(tf_sample) * side * side),
-                           malloc(side * side), NULL, NULL};
+                           malloc(side * side), NULL, NULL, NULL};
     int ok = st->above && st->below && st->pc.sample && st->pc.have;
     if (coherence_on(r)) {
         /* calloc: records that vouch for nothing until a ray below is traced */
         st->how.column = calloc((size_t)rect.w * (size_t)r->lattice + 1, sizeof *st->how.column);
-        st->record_above = calloc(w1, sizeof *st->record_above);
-        st->record_below = calloc(w1, sizeof *st->record_below);
+        st->ring = calloc(w1 * TF_CORNER_RING, sizeof *st->ring);
         st->pc.record = malloc(sizeof *st->pc.record * side * side);
-        ok = ok && st->how.column && st->record_above && st->record_below && st->pc.record;
+        ok = ok && st->how.column && st->ring && st->pc.record;
     } else if (!r->hf->proc && tf_trace_packets_enabled()) {
         st->how.q = &st->rays;
         ok = ok && row_rays_alloc(&st->rays, w1);
@@ -507,21 +521,24 @@ static void rect_state_step(rect_state *st)
 {
     tf_sample *t = st->above;
     st->above = st->below, st->below = t;
-    tf_sample_record *k = st->record_above;
-    st->record_above = st->record_below, st->record_below = k;
 }
 
 /* The pixel row `row` of the rectangle, its corner rows traced (st->above, st->below). */
 static void render_pixel_row(const tf_renderer *r, tf_rect rect, int row, rect_state *st,
                              tf_pixel *out, tf_render_counts *tally)
 {
+    const int down = row + TF_LOWER_ROWS < rect.h ? row + TF_LOWER_ROWS : rect.h;
+    const tf_sample_record *above = corner_records(st, rect, row),
+                           *below = corner_records(st, rect, row + 1),
+                           *lower = corner_records(st, rect, down);
     for (int c = 0; c < rect.w; c++) {
         corners cs = {{&st->above[c], &st->above[c + 1], &st->below[c], &st->below[c + 1]},
                       {NULL, NULL, NULL, NULL}};
         if (st->how.column) {
-            cs.k[0] = &st->record_above[c], cs.k[1] = &st->record_above[c + 1];
-            cs.k[2] = &st->record_below[c], cs.k[3] = &st->record_below[c + 1];
+            cs.k[0] = &above[c], cs.k[1] = &above[c + 1];
+            cs.k[2] = &below[c], cs.k[3] = &below[c + 1];
             st->pc.column = &st->how.column[(size_t)c * (size_t)r->lattice];
+            st->pc.lower = &lower[c];
         }
         render_pixel(r, &st->pc, rect.x + c, rect.y + row, &cs,
                      &out[(size_t)row * (size_t)rect.w + (size_t)c], tally);
@@ -542,9 +559,11 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
     rect_state_alloc(r, rect, &st);
     tf_render_counts tally = {0};
     tf_tile_counts cache_before = tf_tilecache_thread_counts();
-    corner_row(r, rect, rect.y + rect.h, 1, &st.how, st.below, st.record_below, &tally);
+    corner_row(r, rect, rect.y + rect.h, 1, &st.how, st.below,
+               st.ring ? corner_records(&st, rect, rect.h) : NULL, &tally);
     for (int row = rect.h - 1; row >= 0; row--) {
-        corner_row(r, rect, rect.y + row, 0, &st.how, st.above, st.record_above, &tally);
+        corner_row(r, rect, rect.y + row, 0, &st.how, st.above,
+                   st.ring ? corner_records(&st, rect, row) : NULL, &tally);
         render_pixel_row(r, rect, row, &st, out, &tally);
         rect_state_step(&st);
     }

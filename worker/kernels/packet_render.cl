@@ -37,7 +37,6 @@
 #endif
 #define TF_QUEUE TF_STREAM /* queued samples per work-item: one stream */
 #define TF_QUEUED 0x80000000u
-#define TF_LOWER_ROWS 5     /* lower_corner: pixel rows down to the corner that helps a sample */
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
 
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,

@@ -941,7 +941,8 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     rc |= clSetKernelArg(b->k_corners, 12, sizeof(cl_mem), &b->corner_levels);
     rc |= clSetKernelArg(b->k_corners, 13, sizeof(cl_mem), &b->corner_shadow);
     rc |= clSetKernelArg(b->k_corners, 14, sizeof(cl_mem), &b->corner_records);
-    size_t global = round_up((ncorners + (size_t)b->stream - 1) / (size_t)b->stream, b->local);
+    const size_t strip = TF_CL_CORNER_STRIP((size_t)b->stream);
+    size_t global = round_up(((size_t)cw + strip - 1) / strip, b->local);
     cl_event corner_ev = NULL;
     if (rc == CL_SUCCESS)
         rc = clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, &b->local, 0, NULL,

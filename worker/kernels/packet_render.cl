@@ -1,9 +1,12 @@
 /* packet_render.cl: the two kernels the host runs per rectangle, feeding lattice_samples
  * (packet_shade.cl) batches of up to TF_STREAM samples, traced eight at a time.
  *
- *   tf_corners8  work-item g samples corners 128g .. 128g+127 of the (w+1) x (h+1) pixel-corner
- *                lattice points (row-major, external row and column included: the
- *                external-sample rule of render.h).  Neighbouring corners, coherent rays.
+ *   tf_corners8  work-item g samples the corner columns TF_CL_CORNER_STRIP g .. of the
+ *                (w+1) x (h+1) pixel-corner lattice points (external row and column included:
+ *                the external-sample rule of render.h), in bands of TF_LOWER_ROWS rows from the
+ *                bottom up, a band a batch: each camera ray is helped by the one TF_LOWER_ROWS
+ *                rows down in its column (trace.c's coherence), and leaves its own record in
+ *                corner_records for the band above and for tf_pixels8.
  *   tf_pixels8   work-item g runs the adaptive subdivision of render.c's render_pixel for
  *                TF_PIX neighbouring pixels at once.  Each pixel is a small state machine over
  *                its own quad stack (render_pixel's, popped in the same order); whenever a
@@ -46,38 +49,52 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
                           __global float *out, __global double *out_levels,
                           __global uint *shadow, __global double *out_records)
 {
-    const int base = (int)get_global_id(0) * TF_STREAM, total = cw * ch;
-    if (base >= total)
+    const int strip = TF_CL_CORNER_STRIP(TF_STREAM), c0 = (int)get_global_id(0) * strip;
+    if (c0 >= cw)
         return;
+    const int cols = cw - c0 < strip ? cw - c0 : strip;
     world w = make_world(P, I, h, mm, perm, strips);
     const long N = I[TFI_LATTICE];
-    const int n = total - base < TF_STREAM ? total - base : TF_STREAM;
-    lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
-    for (int e = 0; e < TF_STREAM; e++) {
-        int k = base + (e < n ? e : n - 1);
-        X[e / TF_LANES][e % TF_LANES] = (long)(rx + k % cw) * N;
-        Y[e / TF_LANES][e % TF_LANES] = (long)(ry + k / cw) * N;
-    }
-    float8 s[TF_STREAM_PACKETS][5];
-    iv rays[TF_STREAM_PACKETS];
-    for (int p = 0; p < TF_STREAM_PACKETS; p++)
-        rays[p] = (iv)(0);
-    ray_clears rec;
-    lattice_samples(&w, jitter_key, X, Y, n, NULL, s, rays, &rec);
-    dv lvl[TF_STREAM_PACKETS][3];
-    for (int p = 0; p * TF_LANES < n; p++)
-        for (int ch = 0; ch < 3; ch++)
-            lvl[p][ch] = tf_display_level_of(convert_double8(s[p][ch]));
-    for (int e = 0; e < n; e++) {
-        for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
-            out[(size_t)(base + e) * TF_CL_SAMPLE_FLOATS + m] = s[e / TF_LANES][m][e % TF_LANES];
-        for (int ch = 0; ch < 3; ch++)
-            out_levels[(size_t)(base + e) * 3 + ch] = lvl[e / TF_LANES][ch][e % TF_LANES];
-        shadow[base + e] = (uint)rays[e / TF_LANES][e % TF_LANES];
-        __global double *rc = out_records + (size_t)(base + e) * TF_CL_RECORD_DOUBLES;
-        const int p = e / TF_LANES, l = e % TF_LANES;
-        rc[0] = rec.ux[p][l], rc[1] = rec.uy[p][l], rc[2] = rec.k[p][l];
-        rc[3] = rec.s_in[p][l], rc[4] = rec.s_free[p][l];
+    /* bands of TF_LOWER_ROWS corner rows, bottom first: each ray is helped by the record of the
+     * corner TF_LOWER_ROWS rows down in its column, which the band before left in out_records */
+    for (int y1 = ch; y1 > 0; y1 -= TF_LOWER_ROWS) {
+        const int y0 = y1 > TF_LOWER_ROWS ? y1 - TF_LOWER_ROWS : 0, n = (y1 - y0) * cols;
+        lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
+        ray_clears lows, rec;
+        for (int e = 0; e < TF_STREAM; e++) {
+            const int k = e < n ? e : n - 1, p = e / TF_LANES, l = e % TF_LANES;
+            const int y = y0 + k / cols, c = c0 + k % cols;
+            X[p][l] = (long)(rx + c) * N;
+            Y[p][l] = (long)(ry + y) * N;
+            lows.s_free[p][l] = 0;
+            if (e < n && y + TF_LOWER_ROWS < ch) {
+                __global const double *rc =
+                    out_records + ((size_t)(y + TF_LOWER_ROWS) * cw + c) * TF_CL_RECORD_DOUBLES;
+                lows.ux[p][l] = rc[0], lows.uy[p][l] = rc[1], lows.k[p][l] = rc[2];
+                lows.s_in[p][l] = rc[3], lows.s_free[p][l] = rc[4];
+            }
+        }
+        float8 s[TF_STREAM_PACKETS][5];
+        iv rays[TF_STREAM_PACKETS];
+        for (int p = 0; p < TF_STREAM_PACKETS; p++)
+            rays[p] = (iv)(0);
+        lattice_samples(&w, jitter_key, X, Y, n, &lows, s, rays, &rec);
+        dv lvl[TF_STREAM_PACKETS][3];
+        for (int p = 0; p * TF_LANES < n; p++)
+            for (int chn = 0; chn < 3; chn++)
+                lvl[p][chn] = tf_display_level_of(convert_double8(s[p][chn]));
+        for (int e = 0; e < n; e++) {
+            const int p = e / TF_LANES, l = e % TF_LANES;
+            const size_t at = (size_t)(y0 + e / cols) * cw + (size_t)(c0 + e % cols);
+            for (int m = 0; m < TF_CL_SAMPLE_FLOATS; m++)
+                out[at * TF_CL_SAMPLE_FLOATS + m] = s[p][m][l];
+            for (int chn = 0; chn < 3; chn++)
+                out_levels[at * 3 + chn] = lvl[p][chn][l];
+            shadow[at] = (uint)rays[p][l];
+            __global double *rc = out_records + at * TF_CL_RECORD_DOUBLES;
+            rc[0] = rec.ux[p][l], rc[1] = rec.uy[p][l], rc[2] = rec.k[p][l];
+            rc[3] = rec.s_in[p][l], rc[4] = rec.s_free[p][l];
+        }
     }
 }
 

@@ -86,6 +86,9 @@
 /* Floats per stored sample (r, g, b, a, dist) and per output pixel (r, g, b, a, z, spp). */
 #define TF_CL_SAMPLE_FLOATS 5
 #define TF_CL_RECORD_DOUBLES 5 /* a corner's coherence record: ux, uy, k, s_in, s_free */
+/* tf_corners8's corner columns per work-item for batches of `stream` samples: a band of
+ * TF_LOWER_ROWS (render/constants.h) rows of them fills a batch */
+#define TF_CL_CORNER_STRIP(stream) ((stream) / TF_LOWER_ROWS)
 #define TF_CL_PIXEL_FLOATS  6
 
 #endif

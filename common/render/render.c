@@ -407,7 +407,8 @@ static int shade_begin_row(const tf_renderer *r, int n, row_rays *q)
             continue;
         q->so[k] = p->start, q->sd[k] = r->shader.sun_dir;
         q->stmin[k] = 0.0;
-        tf_shadow_strips(&r->shader, p->start, &q->stmax[k]); /* proved under: the packet finds it */
+        /* proved under: the packet finds it */
+        tf_shadow_strips(&r->shader, p->start, &q->stmax[k], NULL);
         k++;
     }
     return k;

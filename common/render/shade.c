@@ -93,11 +93,13 @@ static int trace_terrain(const tf_shader *sh, tf_vec3 o, tf_vec3 d, double tmax,
     return tf_trace(sh->hf, o, d, 0.0, tmax, hit);
 }
 
-int tf_shadow_strips(const tf_shader *sh, tf_vec3 o, double *tmax)
+int tf_shadow_strips(const tf_shader *sh, tf_vec3 o, double *tmax, double *t_under)
 {
     double t;
     const int said = tf_sun_strips_shadow(sh->sun_strips, o, &t);
     *tmax = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
+    if (t_under)
+        *t_under = said == TF_SUN_UNDER ? t : 0;
     return said == TF_SUN_UNDER;
 }
 
@@ -107,7 +109,7 @@ static int terrain_occludes(const tf_shader *sh, tf_vec3 o)
     if (sh->hf->proc)
         return tf_proc_occluded(sh->hf->proc, &sh->view, o, sh->sun_dir, 0.0, TF_FAR_AWAY);
     double tmax;
-    return tf_shadow_strips(sh, o, &tmax) || tf_occluded(sh->hf, o, sh->sun_dir, 0.0, tmax);
+    return tf_shadow_strips(sh, o, &tmax, NULL) || tf_occluded(sh->hf, o, sh->sun_dir, 0.0, tmax);
 }
 
 /* Shadow rays start this far along the normal from a terrain hit. */
@@ -415,15 +417,13 @@ static int resolve_shadow_coherent(const tf_shader *sh, const tf_shade_pending *
     if (!p->shadow)
         return 0;
     (*shadow_rays)++;
-    double t;
-    const int said = tf_sun_strips_shadow(sh->sun_strips, p->start, &t);
-    if (said == TF_SUN_UNDER) { /* occluded: under the surface at t, the neighbours' probe */
+    double tmax, t_under;
+    if (tf_shadow_strips(sh, p->start, &tmax, &t_under)) { /* the neighbours' probe: t_under */
         if (mine)
-            *mine = (tf_shadow_clear){{sh->sun_dir.x, sh->sun_dir.y, sh->sun_dir.z}, t};
+            *mine = (tf_shadow_clear){{sh->sun_dir.x, sh->sun_dir.y, sh->sun_dir.z}, t_under};
         return 1;
     }
-    return tf_occluded_coherent(sh->hf, p->start, sh->sun_dir,
-                                said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY, near, mine);
+    return tf_occluded_coherent(sh->hf, p->start, sh->sun_dir, tmax, near, mine);
 }
 
 /* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */

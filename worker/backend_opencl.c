@@ -653,6 +653,7 @@ tf_cl_backend *tf_cl_backend_open(char *err, size_t errlen)
     if (choose_device(&dev, b->device_name, sizeof b->device_name, err, errlen))
         goto fail;
     choose_sizes(b, dev);
+    tf_debug("OpenCL device: %s", b->device_name);
     b->ctx = clCreateContext(NULL, 1, &dev, NULL, NULL, &rc);
     if (rc != CL_SUCCESS) {
         tf_seterr(err, errlen, "OpenCL: cannot create a context on '%s' (error %d)",

@@ -137,7 +137,8 @@ static tally shadow_rays(height_fn fn, int k, double extent, uint64_t seed)
 }
 
 /* The rays of shadow_rays on field fn: answers checked; the strips must have proved at least
- * lit_share of the lit rays clear and under_share of the occluded ones occluded. */
+ * lit_share of the lit rays clear and, unless under_share is 0 (nothing asked), under_share of
+ * the occluded ones occluded. */
 static void rays_over(const char *name, height_fn fn, int k, double extent, uint64_t seed,
                       double lit_share, double under_share)
 {
@@ -146,12 +147,14 @@ static void rays_over(const char *name, height_fn fn, int k, double extent, uint
                   t.lit, t.proved_lit, t.occluded, t.proved_under);
     assert_true(t.lit > t.rays / 10 && t.occluded > t.rays / 20);
     assert_true(t.proved_lit >= lit_share * t.lit);
-    assert_true(t.proved_under >= under_share * t.occluded);
+    if (under_share > 0)
+        assert_true(t.proved_under >= under_share * t.occluded);
 }
 
 /* The strips do the work for most lit rays and for many occluded ones; with 4-cell bins on a
- * 64-cell field they are coarse, and fewer occluded rays are proved there; white noise's bins
- * reach far below the surface, and none. */
+ * 64-cell field they are coarse, and fewer occluded rays are proved there.  Over white noise a
+ * bin's floor lies far below the surface between its peaks, so no occluded ray is expected to
+ * be proved there (and none is asked): that field checks the answers and the lit rays. */
 static void test_rays_hills(void **state) { (void)state; rays_over("hills", hills, 7, 150, 5, 0.5, 0.1); }
 static void test_rays_rough(void **state) { (void)state; rays_over("rough", rough, 6, 100, 6, 0.25, 0.0); }
 static void test_rays_terraces(void **state)

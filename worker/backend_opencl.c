@@ -827,8 +827,8 @@ static cl_int next_epoch(tf_cl_backend *b)
 /* n rounded up to a multiple of the work-group size (kernels ignore the surplus items). */
 static size_t round_up(size_t n, size_t local) { return (n + local - 1) / local * local; }
 
-/* The arguments both kernels share, in the order they take them. */
-static cl_int set_common_args(tf_cl_backend *b, cl_kernel k, tf_rect rect)
+/* The world's arguments every kernel starts with (make_world's), in their order. */
+static cl_int set_world_args(tf_cl_backend *b, cl_kernel k)
 {
     cl_int rc = clSetKernelArg(k, 0, sizeof(cl_mem), &b->P);
     rc |= clSetKernelArg(k, 1, sizeof(cl_mem), &b->I);
@@ -837,6 +837,13 @@ static cl_int set_common_args(tf_cl_backend *b, cl_kernel k, tf_rect rect)
     rc |= clSetKernelArg(k, 4, sizeof(cl_mem), &b->minmax);
     rc |= clSetKernelArg(k, 5, sizeof(cl_mem), &b->perm);
     rc |= clSetKernelArg(k, 6, sizeof(cl_mem), &b->strips);
+    return rc;
+}
+
+/* The arguments both rendering kernels share, in the order they take them. */
+static cl_int set_common_args(tf_cl_backend *b, cl_kernel k, tf_rect rect)
+{
+    cl_int rc = set_world_args(b, k);
     rc |= clSetKernelArg(k, 7, sizeof(cl_int), &rect.x);
     rc |= clSetKernelArg(k, 8, sizeof(cl_int), &rect.y);
     return rc;
@@ -996,6 +1003,59 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     free(corner_shadow);
     free(pixel_shadow);
     free(pix);
+    return 0;
+}
+
+/* A read-only buffer holding a copy of `bytes` of host memory (one byte if none, so a kernel
+ * argument always has a buffer). */
+static cl_mem buffer_of(tf_cl_backend *b, const void *host, size_t bytes, cl_int *rc)
+{
+    static const double none = 0;
+    return clCreateBuffer(b->ctx, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, host ? bytes : 1,
+                          host ? (void *)host : (void *)&none, rc);
+}
+
+int tf_cl_backend_walk(tf_cl_backend *b, int n, const double *rays, const double *lows,
+                       double *t, double *records, char *err, size_t errlen)
+{
+    if (!b->renderer)
+        return tf_seterr(err, errlen, "OpenCL: no scene attached to the backend");
+    if (n <= 0)
+        return 0;
+    cl_int rc = CL_SUCCESS, has_lows = lows != NULL;
+    cl_kernel k = clCreateKernel(b->program, "tf_walk_rays8", &rc);
+    const size_t nr = (size_t)n * TF_CL_RECORD_DOUBLES * sizeof(double);
+    cl_mem in = buffer_of(b, rays, (size_t)n * 7 * sizeof(double), &rc);
+    cl_mem lo = buffer_of(b, lows, nr, &rc);
+    cl_mem tb = clCreateBuffer(b->ctx, CL_MEM_WRITE_ONLY, (size_t)n * sizeof(double), NULL, &rc);
+    cl_mem rb = clCreateBuffer(b->ctx, CL_MEM_WRITE_ONLY, nr, NULL, &rc);
+    if (k && in && lo && tb && rb) {
+        rc = set_world_args(b, k);
+        rc |= clSetKernelArg(k, 7, sizeof(cl_int), &n);
+        rc |= clSetKernelArg(k, 8, sizeof(cl_mem), &in);
+        rc |= clSetKernelArg(k, 9, sizeof(cl_mem), &lo);
+        rc |= clSetKernelArg(k, 10, sizeof(cl_int), &has_lows);
+        rc |= clSetKernelArg(k, 11, sizeof(cl_mem), &tb);
+        rc |= clSetKernelArg(k, 12, sizeof(cl_mem), &rb);
+        size_t global = round_up(((size_t)n + (size_t)b->stream - 1) / (size_t)b->stream, b->local);
+        if (rc == CL_SUCCESS)
+            rc = clEnqueueNDRangeKernel(b->queue, k, 1, NULL, &global, &b->local, 0, NULL, NULL);
+        if (rc == CL_SUCCESS)
+            rc = clEnqueueReadBuffer(b->queue, tb, CL_TRUE, 0, (size_t)n * sizeof(double), t, 0,
+                                     NULL, NULL);
+        if (rc == CL_SUCCESS)
+            rc = clEnqueueReadBuffer(b->queue, rb, CL_TRUE, 0, nr, records, 0, NULL, NULL);
+    } else if (rc == CL_SUCCESS) {
+        rc = CL_OUT_OF_RESOURCES;
+    }
+    cl_mem bufs[] = {in, lo, tb, rb};
+    for (int i = 0; i < 4; i++)
+        if (bufs[i])
+            clReleaseMemObject(bufs[i]);
+    if (k)
+        clReleaseKernel(k);
+    if (rc != CL_SUCCESS)
+        return tf_seterr(err, errlen, "OpenCL: walking %d rays failed (error %d)", n, rc);
     return 0;
 }
 

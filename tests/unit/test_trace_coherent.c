@@ -19,10 +19,7 @@
 #include "terrain/noise.h"
 #include "render/trace.h"
 #include "test_terrains.h"
-
-typedef struct rng { uint64_t s; } rng;
-static double uni(rng *r) { return tf_hash_unit(r->s++); }
-static double range(rng *r, double lo, double hi) { return lo + (hi - lo) * uni(r); }
+#include "test_fans.h"
 
 /* ---- slope_max ------------------------------------------------------------------------------ */
 
@@ -77,59 +74,34 @@ static int check_one(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmax
     return ha;
 }
 
-/* A fan of `rows` rays from o, climbing from d0 by `up` a step, each drifting sideways by a
- * random fraction of `side`: traced bottom-up, each with the record of the one below; then
+/* A fan (test_fans.h) traced bottom-up, each ray with the record of the one below; then
  * again, each with the record of a random other ray of the fan (higher ones vouch for nothing,
  * which must not matter either), and with a record from another origin. */
-static void fan(const tf_heightfield *hf, rng *r, tf_vec3 o, tf_vec3 d0, tf_vec3 up, tf_vec3 side,
-                double tmax, int rows, fan_tally *t)
+static void fan(const tf_heightfield *hf, rng *r, const ray_fan *f, fan_tally *t)
 {
-    tf_vec3 d[64];
-    tf_ray_clear rec[64];
-    assert_true(rows <= 64);
-    for (int i = 0; i < rows; i++)
-        d[i] = v3_add(v3_add(d0, v3_scale(up, i)), v3_scale(side, range(r, -1, 1)));
-    for (int i = 0; i < rows; i++) {
-        t->hits += check_one(hf, o, d[i], tmax, i ? &rec[i - 1] : NULL, &rec[i]);
+    tf_ray_clear rec[FAN_ROWS];
+    for (int i = 0; i < FAN_ROWS; i++) {
+        t->hits += check_one(hf, f->o, f->d[i], f->tmax, i ? &rec[i - 1] : NULL, &rec[i]);
         t->vouching += rec[i].s_free > 0;
         t->rays++;
     }
-    tf_vec3 elsewhere = v3_add(o, v3(hf->cell * 0.37, 0, 0));
-    for (int i = 0; i < rows; i++) {
+    tf_vec3 elsewhere = v3_add(f->o, v3(hf->cell * 0.37, 0, 0));
+    for (int i = 0; i < FAN_ROWS; i++) {
         tf_ray_clear mine, other;
-        check_one(hf, o, d[i], tmax, &rec[(int)(uni(r) * rows) % rows], &mine);
-        check_one(hf, elsewhere, d[(i + 1) % rows], tmax, &rec[i], &other);
+        check_one(hf, f->o, f->d[i], f->tmax, &rec[(int)(uni(r) * FAN_ROWS) % FAN_ROWS], &mine);
+        check_one(hf, elsewhere, f->d[(i + 1) % FAN_ROWS], f->tmax, &rec[i], &other);
     }
 }
-
-enum origin_kind { HIGH, OUTSIDE, LOW, UNDER, KINDS };
 
 static void fans_over(height_fn f, int k, double extent, uint64_t seed)
 {
     tf_heightfield *hf = make_field(f, k, extent);
     rng r = {seed};
-    double e = hf->cells * hf->cell, lo = hf->hmin, hi = hf->hmax, span = hi - lo + 1;
     fan_tally t = {0, 0, 0};
     for (int n = 0; n < 600; n++) {
-        int kind = n % KINDS;
-        tf_vec3 o;
-        if (kind == HIGH)
-            o = v3(range(&r, 0, e), range(&r, 0, e), hi + range(&r, 0.1, 1) * span);
-        else if (kind == OUTSIDE)
-            o = v3(range(&r, -0.3, 1.3) * e, -range(&r, 0.01, 0.3) * e, range(&r, lo, hi + span));
-        else if (kind == LOW) /* inside the height range: grazing the near hills */
-            o = v3(range(&r, 0, e), range(&r, 0, e), range(&r, lo, hi));
-        else
-            o = v3(range(&r, 0, e), range(&r, 0, e), lo - range(&r, 0, span));
-        double az = range(&r, 0, 2 * M_PI), pitch = range(&r, -0.6, 0.0);
-        tf_vec3 d0 = v3(cos(az), sin(az), pitch);
-        double step = range(&r, 1e-4, 5e-3);
-        tf_vec3 up = v3(0, 0, step);
-        /* sideways drift from none (a vertical fan) to far more than slope_max allows */
-        double drift = uni(&r) < 0.3 ? 0 : step * pow(10, range(&r, -3, 1));
-        tf_vec3 side = v3(-sin(az) * drift, cos(az) * drift, 0);
-        double tmax = uni(&r) < 0.3 ? range(&r, 0.2, 2) * e : INFINITY; /* a water plane */
-        fan(hf, &r, o, d0, up, side, tmax, 48, &t);
+        ray_fan rays;
+        make_fan(hf, &r, n, &rays);
+        fan(hf, &r, &rays, &t);
     }
     assert_true(t.hits > t.rays / 5);
     assert_true(t.vouching > t.rays / 5); /* plenty of records that vouch for something */
@@ -157,6 +129,25 @@ static void test_a_false_record_hides_a_hit(void **state)
     /* the same record from another origin is ignored */
     lie.o[2] += 1;
     assert_int_equal(tf_trace_coherent(hf, o, d, INFINITY, &lie, NULL, NULL), 1);
+    tf_heightfield_free(hf);
+}
+
+/* A hit before the lower ray even enters the square is found by the prefix walk: without it
+ * the walk would start where the lower ray vouches, past the hill (test_fans.h). */
+static void test_the_prefix_finds_a_hit_before_the_lower_ray_enters(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(edge_hill, 7, 1000);
+    tf_vec3 o, lower, upper;
+    prefix_rays(&o, &lower, &upper);
+    tf_hit below, plain, helped;
+    tf_ray_clear rec;
+    assert_true(tf_trace_coherent(hf, o, lower, INFINITY, NULL, &below, &rec));
+    assert_true(rec.s_free > rec.s_in);
+    assert_true(tf_trace(hf, o, upper, 0.0, INFINITY, &plain));
+    assert_true(plain.t * hypot(upper.x, upper.y) < rec.s_in); /* before the lower one enters */
+    assert_true(tf_trace_coherent(hf, o, upper, INFINITY, &rec, &helped, NULL));
+    assert_memory_equal(&helped, &plain, sizeof plain);
     tf_heightfield_free(hf);
 }
 
@@ -219,6 +210,7 @@ int main(void)
         cmocka_unit_test(test_fans_hills),
         cmocka_unit_test(test_fans_terraces),
         cmocka_unit_test(test_a_false_record_hides_a_hit),
+        cmocka_unit_test(test_the_prefix_finds_a_hit_before_the_lower_ray_enters),
         cmocka_unit_test(test_shadow_rows_hills),
         cmocka_unit_test(test_shadow_rows_rough),
         cmocka_unit_test(test_shadow_rows_terraces),

@@ -1,5 +1,6 @@
 /* packet_render.cl: the two kernels the host runs per rectangle, feeding lattice_samples
- * (packet_shade.cl) batches of up to TF_STREAM samples, traced eight at a time.
+ * (packet_shade.cl) batches of up to TF_STREAM samples, traced eight at a time; and, at the
+ * end, tf_walk_rays8: walk_stream on rays of the caller's, for the tests.
  *
  *   tf_corners8  work-item g samples the corner columns TF_CL_CORNER_STRIP g .. of the
  *                (w+1) x (h+1) pixel-corner lattice points (external row and column included:
@@ -394,5 +395,53 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         o[4] = s->zmin;
         o[5] = (float)s->spp;
         shadow[k] = s->rays;
+    }
+}
+
+/* The rays' walk on its own, for the tests and benchmarks (tf_cl_backend_walk): rays
+ * TF_STREAM g .. of n through walk_stream.  Ray k: rays[7k ..] = its origin, direction and tmax
+ * (tmin 0); with has_lows, the record that helps it at lows[TF_CL_RECORD_DOUBLES k ..] (a record
+ * of a ray from its own origin: walk_stream compares none); out: t[k], its hit's parameter
+ * (INFINITY: none), and its own record at records[TF_CL_RECORD_DOUBLES k ..]. */
+__kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulong jitter_key,
+                            __global const float *h, __global const float2 *mm,
+                            __global const ushort *perm, __global const float *strips, int n,
+                            __global const double *rays, __global const double *lows,
+                            int has_lows, __global double *t, __global double *records)
+{
+    (void)jitter_key;
+    const int base = (int)get_global_id(0) * TF_STREAM;
+    if (base >= n)
+        return;
+    world w = make_world(P, I, h, mm, perm, strips);
+    ray_stream in;
+    ray_clears low, rec;
+    in.n = n - base < TF_STREAM ? n - base : TF_STREAM;
+    for (int e = 0; e < in.n; e++) {
+        const int p = e / TF_LANES, l = e % TF_LANES;
+        __global const double *r = rays + (size_t)(base + e) * 7;
+        in.o[p].x[l] = r[0], in.o[p].y[l] = r[1], in.o[p].z[l] = r[2];
+        in.d[p].x[l] = r[3], in.d[p].y[l] = r[4], in.d[p].z[l] = r[5];
+        in.tmin[p][l] = 0.0, in.tmax[p][l] = r[6];
+        __global const double *lo = lows + (size_t)(base + e) * TF_CL_RECORD_DOUBLES;
+        low.ux[p][l] = has_lows ? lo[0] : 0, low.uy[p][l] = has_lows ? lo[1] : 0;
+        low.k[p][l] = has_lows ? lo[2] : 0, low.s_in[p][l] = has_lows ? lo[3] : 0;
+        low.s_free[p][l] = has_lows ? lo[4] : 0;
+    }
+    lv found[TF_STREAM_PACKETS];
+    hitp hit[TF_STREAM_PACKETS];
+    const v3p zero = v3p_splat(v3(0, 0, 0));
+    for (int p = 0; p < TF_STREAM_PACKETS; p++) {
+        hit[p].t = (dv)(0.0);
+        hit[p].p = hit[p].n = zero;
+        hit[p].ci = hit[p].cj = (iv)(0);
+    }
+    walk_stream(&w, &in, &low, found, hit, &rec);
+    for (int e = 0; e < in.n; e++) {
+        const int p = e / TF_LANES, l = e % TF_LANES;
+        t[base + e] = found[p][l] ? hit[p].t[l] : INFINITY;
+        __global double *rc = records + (size_t)(base + e) * TF_CL_RECORD_DOUBLES;
+        rc[0] = rec.ux[p][l], rc[1] = rec.uy[p][l], rc[2] = rec.k[p][l];
+        rc[3] = rec.s_in[p][l], rc[4] = rec.s_free[p][l];
     }
 }

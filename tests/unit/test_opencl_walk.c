@@ -1,0 +1,232 @@
+/* test_opencl_walk.c: the kernels' ray walk (packet_trace.cl's walk_stream, through
+ * tf_cl_backend_walk) against trace.c's, on the adversarial fans of test_fans.h: origins above
+ * the hills, outside the square, low and grazing, under the surface; fans drifting sideways
+ * past what slope_max allows; water planes.  The rendering tests (test_opencl.c) only meet the
+ * rays a camera makes; these attack the coherence the kernels took from trace.c.
+ *
+ *   walk_matches_trace  every ray's hit parameter is tf_trace's to the bit, and its record
+ *                       (heading, climb, the run it is above the surface) tf_trace_coherent's:
+ *                       walked alone, helped by the record of the ray below it, and helped by a
+ *                       random other ray's of its fan (which vouches for nothing when higher).
+ *   a_false_record_hides_a_hit   a record that claims the ray below stayed clear beyond this
+ *                       ray's hit makes the kernel's walk start past it: the records are what
+ *                       the walk goes by (so walk_matches_trace can fail).
+ *   the_prefix_finds_a_hit_before_the_lower_ray_enters   a ray helped by a lower one's record
+ *                       still hits a hill before the lower ray enters the square: the prefix
+ *                       walk (trace.c's C3), which no fan happens to need.
+ * On PoCL's CPU device the bits are demanded; elsewhere the test says so and asks nothing (a
+ * GPU's division may round differently).  Skipped without an OpenCL platform. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define CL_TARGET_OPENCL_VERSION 120
+#include <CL/cl.h>
+
+#include "worker/backend_opencl.h"
+#include "render/trace.h"
+#include "scene.h"
+#include "test_terrains.h"
+#include "test_fans.h"
+
+enum { FANS = 400, RAYS = FANS * FAN_ROWS, REC = 5 };
+
+static int have_platform(void)
+{
+    cl_uint n = 0;
+    return clGetPlatformIDs(0, NULL, &n) == CL_SUCCESS && n > 0;
+}
+
+/* A backend over hf: default.scene's parameters, hf's heights. */
+static tf_cl_backend *backend_over(const tf_heightfield *hf, tf_scene **s)
+{
+    char err[1024], path[4096];
+    const char *root = getenv("TF_ROOT");
+    snprintf(path, sizeof path, "%s/scenes/default.scene", root ? root : ".");
+    *s = tf_scene_load(path, err, sizeof err);
+    assert_non_null(*s);
+    tf_scene_set_size(*s, 16, 9);
+    tf_cl_backend *b = tf_cl_backend_new(*s, hf, err, sizeof err);
+    if (!b)
+        fail_msg("OpenCL backend: %s", err);
+    return b;
+}
+
+static int on_pocl_cpu(const tf_cl_backend *b)
+{
+    return strncmp(tf_cl_backend_device(b), "pthread", 7) == 0;
+}
+
+static void put_record(double *r, const tf_ray_clear *c)
+{
+    r[0] = c->ux, r[1] = c->uy, r[2] = c->k, r[3] = c->s_in, r[4] = c->s_free;
+}
+
+/* Ray k of the kernel's walk against trace.c: its hit parameter, and (if rec) its record. */
+static void check_ray(const tf_heightfield *hf, const ray_fan *f, int row, double t,
+                      const double *rec, const char *how)
+{
+    tf_hit hit;
+    tf_ray_clear mine;
+    const int found = tf_trace_coherent(hf, f->o, f->d[row], f->tmax, NULL, &hit, &mine);
+    const double want = found ? hit.t : INFINITY;
+    if (memcmp(&want, &t, sizeof t) != 0)
+        fail_msg("%s: o=(%.17g,%.17g,%.17g) d=(%.17g,%.17g,%.17g) t %.17g, C %.17g", how,
+                 f->o.x, f->o.y, f->o.z, f->d[row].x, f->d[row].y, f->d[row].z, t, want);
+    if (!rec)
+        return;
+    double c[REC];
+    put_record(c, &mine);
+    if (memcmp(&c[4], &rec[4], sizeof c[4]) != 0 ||
+        (mine.s_free > 0 && memcmp(c, rec, sizeof c) != 0))
+        fail_msg("%s: record (%.17g %.17g %.17g %.17g %.17g), C (%.17g %.17g %.17g %.17g %.17g)",
+                 how, rec[0], rec[1], rec[2], rec[3], rec[4], c[0], c[1], c[2], c[3], c[4]);
+}
+
+static void walk(tf_cl_backend *b, const double *rays, const double *lows, double *t,
+                 double *rec)
+{
+    char err[1024];
+    if (tf_cl_backend_walk(b, RAYS, rays, lows, t, rec, err, sizeof err))
+        fail_msg("%s", err);
+}
+
+static void fans_over(height_fn fn, int k, double extent, uint64_t seed)
+{
+    if (!have_platform()) {
+        print_message("no OpenCL platform: skipping\n");
+        skip();
+    }
+    tf_heightfield *hf = make_field(fn, k, extent);
+    tf_scene *s;
+    tf_cl_backend *b = backend_over(hf, &s);
+    if (!on_pocl_cpu(b)) {
+        print_message("device %s is not PoCL's CPU: its bits are not asked\n",
+                      tf_cl_backend_device(b));
+        tf_cl_backend_free(b), tf_scene_free(s), tf_heightfield_free(hf);
+        skip();
+    }
+    ray_fan *fans = malloc(sizeof *fans * FANS);
+    double *rays = malloc(sizeof *rays * RAYS * 7), *t = malloc(sizeof *t * RAYS);
+    double *rec = malloc(sizeof *rec * RAYS * REC), *lows = malloc(sizeof *lows * RAYS * REC);
+    double *rec2 = malloc(sizeof *rec2 * RAYS * REC);
+    assert_true(fans && rays && t && rec && lows && rec2);
+    rng r = {seed};
+    for (int n = 0; n < FANS; n++) {
+        make_fan(hf, &r, n, &fans[n]);
+        for (int i = 0; i < FAN_ROWS; i++) {
+            double *y = rays + (size_t)(n * FAN_ROWS + i) * 7;
+            const tf_vec3 o = fans[n].o, d = fans[n].d[i];
+            y[0] = o.x, y[1] = o.y, y[2] = o.z, y[3] = d.x, y[4] = d.y, y[5] = d.z;
+            y[6] = fans[n].tmax;
+        }
+    }
+    walk(b, rays, NULL, t, rec); /* alone: the hits, and the records that help below */
+    int hits = 0, vouching = 0;
+    for (int m = 0; m < RAYS; m++) {
+        check_ray(hf, &fans[m / FAN_ROWS], m % FAN_ROWS, t[m], rec + (size_t)m * REC, "alone");
+        hits += t[m] < INFINITY;
+        vouching += rec[(size_t)m * REC + 4] > 0;
+    }
+    for (int pass = 0; pass < 2; pass++) { /* the ray below's record; a random one's */
+        for (int m = 0; m < RAYS; m++) {
+            const int row = m % FAN_ROWS, base = m - row;
+            const int from = pass == 0 ? row - 1 : (int)(uni(&r) * FAN_ROWS) % FAN_ROWS;
+            if (from < 0)
+                memset(lows + (size_t)m * REC, 0, sizeof(double) * REC);
+            else
+                memcpy(lows + (size_t)m * REC, rec + (size_t)(base + from) * REC,
+                       sizeof(double) * REC);
+        }
+        walk(b, rays, lows, t, rec2);
+        for (int m = 0; m < RAYS; m++)
+            check_ray(hf, &fans[m / FAN_ROWS], m % FAN_ROWS, t[m], NULL,
+                      pass == 0 ? "helped by the ray below" : "helped by another ray");
+    }
+    print_message("%d rays, %d hits, %d records vouching\n", RAYS, hits, vouching);
+    assert_true(hits > RAYS / 5);
+    assert_true(vouching > RAYS / 5);
+    free(fans), free(rays), free(t), free(rec), free(lows), free(rec2);
+    tf_cl_backend_free(b);
+    tf_scene_free(s);
+    tf_heightfield_free(hf);
+}
+
+static void walk_matches_trace_hills(void **state) { (void)state; fans_over(hills, 7, 1000, 2); }
+static void walk_matches_trace_rough(void **state) { (void)state; fans_over(rough, 5, 100, 1); }
+static void walk_matches_trace_terraces(void **state)
+{
+    (void)state;
+    fans_over(terraces, 6, 300, 3);
+}
+
+/* trace.c's test of the same name, on the kernels: the lying record's ray misses. */
+static void a_false_record_hides_a_hit(void **state)
+{
+    (void)state;
+    if (!have_platform())
+        skip();
+    tf_heightfield *hf = make_field(hills, 6, 1000);
+    tf_scene *s;
+    tf_cl_backend *b = backend_over(hf, &s);
+    const tf_vec3 o = v3(500, 100, hf->hmax + 50), d = v3(0, 1, -0.3);
+    tf_hit hit;
+    assert_true(tf_trace(hf, o, d, 0.0, INFINITY, &hit));
+    const double ray[7] = {o.x, o.y, o.z, d.x, d.y, d.z, INFINITY};
+    const double lie[REC] = {0, 1, -0.31, 0, 2 * hit.t}, none[REC] = {0};
+    double t, rec[REC];
+    char err[1024];
+    assert_int_equal(tf_cl_backend_walk(b, 1, ray, none, &t, rec, err, sizeof err), 0);
+    assert_true(t == hit.t);
+    assert_int_equal(tf_cl_backend_walk(b, 1, ray, lie, &t, rec, err, sizeof err), 0);
+    assert_true(isinf(t));
+    tf_cl_backend_free(b);
+    tf_scene_free(s);
+    tf_heightfield_free(hf);
+}
+
+/* test_trace_coherent's prefix case on the kernels (test_fans.h): the upper ray, helped by the
+ * lower one's record, still hits the hill before the lower ray enters the square. */
+static void the_prefix_finds_a_hit_before_the_lower_ray_enters(void **state)
+{
+    (void)state;
+    if (!have_platform())
+        skip();
+    tf_heightfield *hf = make_field(edge_hill, 7, 1000);
+    tf_scene *s;
+    tf_cl_backend *b = backend_over(hf, &s);
+    tf_vec3 o, lower, upper;
+    prefix_rays(&o, &lower, &upper);
+    tf_hit plain;
+    assert_true(tf_trace(hf, o, upper, 0.0, INFINITY, &plain));
+    const double rays[14] = {o.x, o.y, o.z, lower.x, lower.y, lower.z, INFINITY,
+                             o.x, o.y, o.z, upper.x, upper.y, upper.z, INFINITY};
+    double t[2], rec[2 * REC], lows[2 * REC] = {0};
+    char err[1024];
+    assert_int_equal(tf_cl_backend_walk(b, 1, rays, NULL, t, rec, err, sizeof err), 0);
+    assert_true(rec[4] > rec[3]); /* the lower ray vouches */
+    memcpy(lows + REC, rec, sizeof(double) * REC);
+    assert_int_equal(tf_cl_backend_walk(b, 2, rays, lows, t, rec, err, sizeof err), 0);
+    assert_true(t[1] == plain.t);
+    tf_cl_backend_free(b);
+    tf_scene_free(s);
+    tf_heightfield_free(hf);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(walk_matches_trace_hills),
+        cmocka_unit_test(walk_matches_trace_rough),
+        cmocka_unit_test(walk_matches_trace_terraces),
+        cmocka_unit_test(a_false_record_hides_a_hit),
+        cmocka_unit_test(the_prefix_finds_a_hit_before_the_lower_ray_enters),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

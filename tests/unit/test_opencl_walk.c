@@ -43,24 +43,45 @@ static int have_platform(void)
     return clGetPlatformIDs(0, NULL, &n) == CL_SUCCESS && n > 0;
 }
 
-/* A backend over hf: default.scene's parameters, hf's heights. */
-static tf_cl_backend *backend_over(const tf_heightfield *hf, tf_scene **s)
+/* A field and a backend over it (default.scene's parameters, the field's heights), on PoCL's
+ * CPU device: the test is skipped without an OpenCL platform, or on another device (whose
+ * bits are not asked). */
+typedef struct walk_env {
+    tf_heightfield *hf;
+    tf_scene *s;
+    tf_cl_backend *b;
+} walk_env;
+
+static void env_free(walk_env *e)
 {
+    tf_cl_backend_free(e->b);
+    tf_scene_free(e->s);
+    tf_heightfield_free(e->hf);
+}
+
+static walk_env env_over(height_fn fn, int k, double extent)
+{
+    if (!have_platform()) {
+        print_message("no OpenCL platform: skipping\n");
+        skip();
+    }
+    walk_env e = {make_field(fn, k, extent), NULL, NULL};
     char err[1024], path[4096];
     const char *root = getenv("TF_ROOT");
     snprintf(path, sizeof path, "%s/scenes/default.scene", root ? root : ".");
-    *s = tf_scene_load(path, err, sizeof err);
-    assert_non_null(*s);
-    tf_scene_set_size(*s, 16, 9);
-    tf_cl_backend *b = tf_cl_backend_new(*s, hf, err, sizeof err);
-    if (!b)
+    e.s = tf_scene_load(path, err, sizeof err);
+    assert_non_null(e.s);
+    tf_scene_set_size(e.s, 16, 9);
+    e.b = tf_cl_backend_new(e.s, e.hf, err, sizeof err);
+    if (!e.b)
         fail_msg("OpenCL backend: %s", err);
-    return b;
-}
-
-static int on_pocl_cpu(const tf_cl_backend *b)
-{
-    return strncmp(tf_cl_backend_device(b), "pthread", 7) == 0;
+    if (strncmp(tf_cl_backend_device(e.b), "pthread", 7) != 0) {
+        print_message("device %s is not PoCL's CPU: its bits are not asked\n",
+                      tf_cl_backend_device(e.b));
+        env_free(&e);
+        skip();
+    }
+    return e;
 }
 
 static void put_record(double *r, const tf_ray_clear *c)
@@ -99,19 +120,9 @@ static void walk(tf_cl_backend *b, const double *rays, const double *lows, doubl
 
 static void fans_over(height_fn fn, int k, double extent, uint64_t seed)
 {
-    if (!have_platform()) {
-        print_message("no OpenCL platform: skipping\n");
-        skip();
-    }
-    tf_heightfield *hf = make_field(fn, k, extent);
-    tf_scene *s;
-    tf_cl_backend *b = backend_over(hf, &s);
-    if (!on_pocl_cpu(b)) {
-        print_message("device %s is not PoCL's CPU: its bits are not asked\n",
-                      tf_cl_backend_device(b));
-        tf_cl_backend_free(b), tf_scene_free(s), tf_heightfield_free(hf);
-        skip();
-    }
+    walk_env env = env_over(fn, k, extent);
+    const tf_heightfield *hf = env.hf;
+    tf_cl_backend *b = env.b;
     ray_fan *fans = malloc(sizeof *fans * FANS);
     double *rays = malloc(sizeof *rays * RAYS * 7), *t = malloc(sizeof *t * RAYS);
     double *rec = malloc(sizeof *rec * RAYS * REC), *lows = malloc(sizeof *lows * RAYS * REC);
@@ -153,9 +164,7 @@ static void fans_over(height_fn fn, int k, double extent, uint64_t seed)
     assert_true(hits > RAYS / 5);
     assert_true(vouching > RAYS / 5);
     free(fans), free(rays), free(t), free(rec), free(lows), free(rec2);
-    tf_cl_backend_free(b);
-    tf_scene_free(s);
-    tf_heightfield_free(hf);
+    env_free(&env);
 }
 
 static void walk_matches_trace_hills(void **state) { (void)state; fans_over(hills, 7, 1000, 2); }
@@ -170,11 +179,9 @@ static void walk_matches_trace_terraces(void **state)
 static void a_false_record_hides_a_hit(void **state)
 {
     (void)state;
-    if (!have_platform())
-        skip();
-    tf_heightfield *hf = make_field(hills, 6, 1000);
-    tf_scene *s;
-    tf_cl_backend *b = backend_over(hf, &s);
+    walk_env env = env_over(hills, 6, 1000);
+    const tf_heightfield *hf = env.hf;
+    tf_cl_backend *b = env.b;
     const tf_vec3 o = v3(500, 100, hf->hmax + 50), d = v3(0, 1, -0.3);
     tf_hit hit;
     assert_true(tf_trace(hf, o, d, 0.0, INFINITY, &hit));
@@ -186,9 +193,7 @@ static void a_false_record_hides_a_hit(void **state)
     assert_true(t == hit.t);
     assert_int_equal(tf_cl_backend_walk(b, 1, ray, lie, &t, rec, err, sizeof err), 0);
     assert_true(isinf(t));
-    tf_cl_backend_free(b);
-    tf_scene_free(s);
-    tf_heightfield_free(hf);
+    env_free(&env);
 }
 
 /* test_trace_coherent's prefix case on the kernels (test_fans.h): the upper ray, helped by the
@@ -196,11 +201,9 @@ static void a_false_record_hides_a_hit(void **state)
 static void the_prefix_finds_a_hit_before_the_lower_ray_enters(void **state)
 {
     (void)state;
-    if (!have_platform())
-        skip();
-    tf_heightfield *hf = make_field(edge_hill, 7, 1000);
-    tf_scene *s;
-    tf_cl_backend *b = backend_over(hf, &s);
+    walk_env env = env_over(edge_hill, 7, 1000);
+    const tf_heightfield *hf = env.hf;
+    tf_cl_backend *b = env.b;
     tf_vec3 o, lower, upper;
     prefix_rays(&o, &lower, &upper);
     tf_hit plain;
@@ -214,9 +217,7 @@ static void the_prefix_finds_a_hit_before_the_lower_ray_enters(void **state)
     memcpy(lows + REC, rec, sizeof(double) * REC);
     assert_int_equal(tf_cl_backend_walk(b, 2, rays, lows, t, rec, err, sizeof err), 0);
     assert_true(t[1] == plain.t);
-    tf_cl_backend_free(b);
-    tf_scene_free(s);
-    tf_heightfield_free(hf);
+    env_free(&env);
 }
 
 int main(void)

@@ -606,16 +606,26 @@ static int upload_world(tf_cl_backend *b, char *err, size_t errlen)
 
 /* ---------------------------------------------------------------- public */
 
-/* Why the kernels cannot render this terrain, or NULL. */
-static const char *unsupported(const tf_heightfield *hf)
+const char *tf_cl_terrain_unsupported(int procedural, int eroded)
 {
-    if (hf->proc) /* the kernels walk a grid's max/min mipmap; a procedural terrain has none */
-        return "the OpenCL backend cannot trace procedural terrain ([terrain] procedural = yes); "
-               "use --backend c";
-    if (hf->silt) /* the kernels do not read erosion's maps: they would shade it dry */
-        return "the OpenCL backend cannot shade an eroded terrain's water and silt ([erosion]); "
-               "use --backend c";
+    if (procedural)
+        return "the OpenCL backend cannot trace procedural terrain ([terrain] procedural = yes)";
+    if (eroded)
+        return "the OpenCL backend cannot shade an eroded terrain's water and silt ([erosion])";
     return NULL;
+}
+
+const char *tf_cl_scene_unsupported(const tf_scene *s)
+{
+    return tf_cl_terrain_unsupported(s->terrain.procedural, s->terrain.erosion.fluvial_steps > 0);
+}
+
+/* The height field the backend was given, refused in one line if the kernels cannot render it
+ * (-1), else 0. */
+static int refuse_unsupported(const tf_heightfield *hf, char *err, size_t errlen)
+{
+    const char *why = tf_cl_terrain_unsupported(hf->proc != NULL, hf->silt != NULL);
+    return why ? tf_seterr(err, errlen, "%s; use --backend c", why) : 0;
 }
 
 /* The device's sizes: work-group, sample-cache scratch, items (see the comments inside). */
@@ -677,9 +687,8 @@ fail:
 int tf_cl_backend_attach(tf_cl_backend *b, const tf_scene *s, const tf_heightfield *hf, char *err,
                          size_t errlen)
 {
-    const char *why = unsupported(hf);
-    if (why)
-        return tf_seterr(err, errlen, "%s", why);
+    if (refuse_unsupported(hf, err, errlen))
+        return -1;
     if (b->renderer)
         return tf_seterr(err, errlen, "OpenCL: the backend already renders a scene");
     b->renderer = tf_renderer_new(s, hf, err, errlen);
@@ -693,11 +702,8 @@ int tf_cl_backend_attach(tf_cl_backend *b, const tf_scene *s, const tf_heightfie
 tf_cl_backend *tf_cl_backend_new(const tf_scene *s, const tf_heightfield *hf, char *err,
                                  size_t errlen)
 {
-    const char *why = unsupported(hf); /* before the device's start, which costs 0.1 s */
-    if (why) {
-        tf_seterr(err, errlen, "%s", why);
+    if (refuse_unsupported(hf, err, errlen)) /* before the device's start, which costs 0.1 s */
         return NULL;
-    }
     tf_cl_backend *b = tf_cl_backend_open(err, errlen);
     if (b && tf_cl_backend_attach(b, s, hf, err, errlen)) {
         tf_cl_backend_free(b);

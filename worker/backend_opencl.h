@@ -10,6 +10,14 @@
 
 typedef struct tf_cl_backend tf_cl_backend;
 
+/* What the kernels cannot render, said in one place, or NULL: a procedural terrain (they walk
+ * a grid's max/min mipmap, of which it has none) or an eroded one (they do not read its water
+ * and silt maps, and would shade it dry).  The backend asks it of the height field it is given;
+ * tf_cl_scene_unsupported of a scene: the coordinator, before it builds the terrain, and a
+ * networked worker, before it starts a device ahead. */
+const char *tf_cl_terrain_unsupported(int procedural, int eroded);
+const char *tf_cl_scene_unsupported(const tf_scene *s);
+
 /* Choose a platform and device (TERRAFARM_CL_DEVICE overrides: "platform:device" indices or a
  * substring of the device name), build the kernels (showing the build log on failure),
  * upload the height field and its max grids.  NULL with a one-line message on failure. */

@@ -14,6 +14,7 @@
 #include "log.h"
 #include "scene.h"
 #include "worker/backend.h"
+#include "worker/backend_opencl.h"
 #include "worker/erosion_patch.h"
 #include "worker/opencl_ahead.h"
 #include "worker/paint_worker.h"
@@ -196,7 +197,7 @@ static int open_device_ahead(const tf_scene *s, const char *backend, int paint, 
 {
     if (paint || nproc != 1 || !backend || (strcmp(backend, "opencl") && strcmp(backend, "auto")))
         return 0;
-    if (s->terrain.procedural || s->terrain.erosion.fluvial_steps > 0)
+    if (tf_cl_scene_unsupported(s))
         return 0;
     return tf_opencl_ahead_start() == 0;
 }

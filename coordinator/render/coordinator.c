@@ -42,6 +42,7 @@
 #include "coordinator/render/supervisor.h"
 #include "coordinator/render/verify.h"
 #include "coordinator/render/worker_role.h"
+#include "worker/backend_opencl.h"
 #include "linda/tsserver.h"
 #include "linda/tuplespace.h"
 #include "worker/worker.h"
@@ -421,16 +422,13 @@ static int erode_once(render *r, char *err, size_t errlen)
 static int build_terrain(render *r)
 {
     char err[1024];
-    if (r->nworkers > 0 && r->scene->terrain.erosion.fluvial_steps > 0 && r->o->backend &&
-        !strcmp(r->o->backend, "opencl"))
-        return step_failed(r, 2, "--backend opencl: the OpenCL backend cannot shade an eroded "
-                                 "terrain's water and silt ([erosion]); use --backend c or auto");
+    const char *why = tf_cl_scene_unsupported(r->scene);
+    if (r->nworkers > 0 && why && r->o->backend && !strcmp(r->o->backend, "opencl")) {
+        snprintf(err, sizeof err, "--backend opencl: %s; use --backend c or auto", why);
+        return step_failed(r, 2, err);
+    }
     if (r->scene->terrain.erosion.fluvial_steps > 0 && erode_once(r, err, sizeof err) != 0)
         return step_failed(r, 1, err);
-    if (r->nworkers > 0 && r->scene->terrain.procedural && r->o->backend &&
-        !strcmp(r->o->backend, "opencl"))
-        return step_failed(r, 2, "--backend opencl: the OpenCL backend cannot trace procedural "
-                                 "terrain ([terrain] procedural = yes); use --backend c or auto");
     if (r->nworkers <= 0 && r->scene->terrain.generator == TF_GEN_FILE) {
         /* networked workers build their own, but a height map is decoded here once, so a bad
          * file is one line now rather than a failure on every worker that joins; and a bad

@@ -68,12 +68,10 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
             X[p][l] = (long)(rx + c) * N;
             Y[p][l] = (long)(ry + y) * N;
             lows.s_free[p][l] = 0;
-            if (e < n && y + TF_LOWER_ROWS < ch) {
-                __global const double *rc =
-                    out_records + ((size_t)(y + TF_LOWER_ROWS) * cw + c) * TF_CL_RECORD_DOUBLES;
-                lows.ux[p][l] = rc[0], lows.uy[p][l] = rc[1], lows.k[p][l] = rc[2];
-                lows.s_in[p][l] = rc[3], lows.s_free[p][l] = rc[4];
-            }
+            if (e < n && y + TF_LOWER_ROWS < ch)
+                record_get(out_records +
+                               ((size_t)(y + TF_LOWER_ROWS) * cw + c) * TF_CL_RECORD_DOUBLES,
+                           e, &lows);
         }
         float8 s[TF_STREAM_PACKETS][5];
         iv rays[TF_STREAM_PACKETS];
@@ -92,9 +90,7 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
             for (int chn = 0; chn < 3; chn++)
                 out_levels[at * 3 + chn] = lvl[p][chn][l];
             shadow[at] = (uint)rays[p][l];
-            __global double *rc = out_records + at * TF_CL_RECORD_DOUBLES;
-            rc[0] = rec.ux[p][l], rc[1] = rec.uy[p][l], rc[2] = rec.k[p][l];
-            rc[3] = rec.s_in[p][l], rc[4] = rec.s_free[p][l];
+            record_put(out_records + at * TF_CL_RECORD_DOUBLES, &rec, e);
         }
     }
 }
@@ -116,9 +112,7 @@ void lower_corner(__global const double *records, long X, long Y, long N, int rx
         lows->s_free[p][l] = 0;
         return;
     }
-    __global const double *rc = records + (size_t)(cy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES;
-    lows->ux[p][l] = rc[0], lows->uy[p][l] = rc[1], lows->k[p][l] = rc[2];
-    lows->s_in[p][l] = rc[3], lows->s_free[p][l] = rc[4];
+    record_get(records + (size_t)(cy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES, e, lows);
 }
 
 /* render.c's display_range over the levels of n samples (n <= 5): the largest per-channel
@@ -423,10 +417,8 @@ __kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulo
         in.o[p].x[l] = r[0], in.o[p].y[l] = r[1], in.o[p].z[l] = r[2];
         in.d[p].x[l] = r[3], in.d[p].y[l] = r[4], in.d[p].z[l] = r[5];
         in.tmin[p][l] = 0.0, in.tmax[p][l] = r[6];
-        __global const double *lo = lows + (size_t)(base + e) * TF_CL_RECORD_DOUBLES;
-        low.ux[p][l] = has_lows ? lo[0] : 0, low.uy[p][l] = has_lows ? lo[1] : 0;
-        low.k[p][l] = has_lows ? lo[2] : 0, low.s_in[p][l] = has_lows ? lo[3] : 0;
-        low.s_free[p][l] = has_lows ? lo[4] : 0;
+        if (has_lows)
+            record_get(lows + (size_t)(base + e) * TF_CL_RECORD_DOUBLES, e, &low);
     }
     lv found[TF_STREAM_PACKETS];
     hitp hit[TF_STREAM_PACKETS];
@@ -436,12 +428,10 @@ __kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulo
         hit[p].p = hit[p].n = zero;
         hit[p].ci = hit[p].cj = (iv)(0);
     }
-    walk_stream(&w, &in, &low, found, hit, &rec);
+    walk_stream(&w, &in, has_lows ? &low : NULL, found, hit, &rec);
     for (int e = 0; e < in.n; e++) {
         const int p = e / TF_LANES, l = e % TF_LANES;
         t[base + e] = found[p][l] ? hit[p].t[l] : INFINITY;
-        __global double *rc = records + (size_t)(base + e) * TF_CL_RECORD_DOUBLES;
-        rc[0] = rec.ux[p][l], rc[1] = rec.uy[p][l], rc[2] = rec.k[p][l];
-        rc[3] = rec.s_in[p][l], rc[4] = rec.s_free[p][l];
+        record_put(records + (size_t)(base + e) * TF_CL_RECORD_DOUBLES, &rec, e);
     }
 }

@@ -433,6 +433,22 @@ typedef struct ray_clears {
     dv s_in[TF_STREAM_PACKETS], s_free[TF_STREAM_PACKETS];
 } ray_clears;
 
+/* Record k of *c from / to its TF_CL_RECORD_DOUBLES doubles in a buffer (ux, uy, k, s_in,
+ * s_free; tf_cl_params.h). */
+void record_get(__global const double *from, int k, ray_clears *c)
+{
+    const int p = k / TF_LANES, l = k % TF_LANES;
+    c->ux[p][l] = from[0], c->uy[p][l] = from[1], c->k[p][l] = from[2];
+    c->s_in[p][l] = from[3], c->s_free[p][l] = from[4];
+}
+
+void record_put(__global double *to, const ray_clears *c, int k)
+{
+    const int p = k / TF_LANES, l = k % TF_LANES;
+    to[0] = c->ux[p][l], to[1] = c->uy[p][l], to[2] = c->k[p][l];
+    to[3] = c->s_in[p][l], to[4] = c->s_free[p][l];
+}
+
 /* One packet walking a stream: its rays (rayp), where their walks stand, their best hits, the
  * lanes at work and which ray of the stream each lane holds. */
 typedef struct walker {

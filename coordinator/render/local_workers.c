@@ -2,10 +2,12 @@
 #include "coordinator/render/local_workers.h"
 
 #include <errno.h>
+#include <poll.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/pidfd.h>
 #include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
@@ -26,8 +28,8 @@ static void close_inherited_fds(int keep)
 }
 
 pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *hf,
-                      const char *backend, tf_local_worker_fn loop, int index, char *err,
-                      size_t errlen)
+                      const char *backend, tf_local_worker_fn loop, int index, uint64_t *conn,
+                      char *err, size_t errlen)
 {
     int sv[2];
     if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv)) {
@@ -71,6 +73,7 @@ pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *h
     char peer[32];
     snprintf(peer, sizeof peer, "local worker %d", index);
     uint64_t id = ts_server_add_fd(srv, sv[0], peer);
+    *conn = id;
     if (!id) {
         tf_seterr(err, errlen, "cannot serve local worker %d", index);
         kill(pid, SIGKILL);
@@ -85,6 +88,27 @@ pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *h
 /* ---- the pool ---- */
 
 #define MAX_RESPAWNS_PER_WORKER 3
+
+/* Fork worker i into its slot, with a pidfd to wait on (none where the kernel has none). */
+static int spawn_into(tf_local_workers *lw, int i, char *err, size_t errlen)
+{
+    pid_t p = tf_spawn_worker(lw->srv, lw->scene, lw->hf, lw->backend, lw->loop, i, &lw->conn[i],
+                              err, errlen);
+    if (p < 0)
+        return -1;
+    lw->pid[i] = p;
+    lw->pidfd[i] = pidfd_open(p, 0);
+    return 0;
+}
+
+/* Slot i's worker is gone (reaped or killed). */
+static void forget(tf_local_workers *lw, int i)
+{
+    lw->pid[i] = 0;
+    if (lw->pidfd[i] >= 0)
+        close(lw->pidfd[i]);
+    lw->pidfd[i] = -1;
+}
 
 int tf_local_workers_start(tf_local_workers *lw, int n, ts_server *srv, const tf_scene *s,
                            const tf_heightfield *hf, const char *backend, char *err,
@@ -103,16 +127,19 @@ int tf_local_workers_start_loop(tf_local_workers *lw, int n, ts_server *srv, con
     lw->hf = hf;
     lw->backend = backend;
     lw->loop = loop;
-    lw->pid = calloc((size_t)(n > 0 ? n : 1), sizeof *lw->pid);
-    lw->respawns = calloc((size_t)(n > 0 ? n : 1), sizeof *lw->respawns);
-    if (!lw->pid || !lw->respawns)
+    size_t slots = (size_t)(n > 0 ? n : 1);
+    lw->pid = calloc(slots, sizeof *lw->pid);
+    lw->conn = calloc(slots, sizeof *lw->conn);
+    lw->pidfd = malloc(slots * sizeof *lw->pidfd);
+    lw->respawns = calloc(slots, sizeof *lw->respawns);
+    if (!lw->pid || !lw->conn || !lw->pidfd || !lw->respawns)
         return tf_seterr(err, errlen, "out of memory");
+    for (size_t i = 0; i < slots; i++)
+        lw->pidfd[i] = -1;
     tf_backend_share_cores(backend, n);
     for (int i = 0; i < n; i++) {
-        pid_t p = tf_spawn_worker(srv, s, hf, backend, loop, i, err, errlen);
-        if (p < 0)
+        if (spawn_into(lw, i, err, errlen))
             return -1;
-        lw->pid[i] = p;
         lw->n = i + 1;
     }
     return 0;
@@ -138,7 +165,7 @@ void tf_local_workers_reap(tf_local_workers *lw, int respawn)
         pid_t r = waitpid(lw->pid[i], &status, WNOHANG);
         if (r != lw->pid[i])
             continue;
-        lw->pid[i] = 0;
+        forget(lw, i);
         int clean = WIFEXITED(status) && WEXITSTATUS(status) == 0;
         if (clean || !respawn)
             continue;
@@ -156,10 +183,7 @@ void tf_local_workers_reap(tf_local_workers *lw, int respawn)
         }
         lw->respawns[i]++;
         char err[512];
-        pid_t p = tf_spawn_worker(lw->srv, lw->scene, lw->hf, lw->backend, lw->loop, i, err,
-                                  sizeof err);
-        if (p > 0) {
-            lw->pid[i] = p;
+        if (spawn_into(lw, i, err, sizeof err) == 0) {
             tf_info("restarted local worker %d", i);
         } else {
             tf_warn("cannot restart local worker %d: %s", i, err);
@@ -175,26 +199,64 @@ int tf_local_workers_alive(const tf_local_workers *lw)
     return n;
 }
 
+static int any_connected(const tf_local_workers *lw)
+{
+    for (int i = 0; i < lw->n; i++)
+        if (lw->pid[i] > 0 && ts_server_peer(lw->srv, lw->conn[i]))
+            return 1;
+    return 0;
+}
+
+/* Wait up to ms for a running worker to exit: on the pidfds, or 1 ms without them. */
+static void wait_for_an_exit(const tf_local_workers *lw, int ms)
+{
+    struct pollfd fds[64];
+    nfds_t n = 0;
+    int blind = 0;  /* running without a pidfd */
+    for (int i = 0; i < lw->n; i++) {
+        if (lw->pid[i] <= 0)
+            continue;
+        if (lw->pidfd[i] < 0 || n == sizeof fds / sizeof fds[0])
+            blind = 1;
+        else
+            fds[n++] = (struct pollfd){.fd = lw->pidfd[i], .events = POLLIN};
+    }
+    poll(fds, n, blind && ms > 1 ? 1 : ms);
+}
+
 void tf_local_workers_drain(tf_local_workers *lw, double grace_s)
 {
     double until = tf_now_s() + grace_s;
-    while (tf_local_workers_alive(lw) && tf_now_s() < until) {
-        ts_server_run_once(lw->srv, 20);
+    for (double now = tf_now_s(); tf_local_workers_alive(lw) && now < until; now = tf_now_s()) {
+        int ms = (int)((until - now) * 1000) + 1;
+        if (any_connected(lw)) {
+            ts_server_run_once(lw->srv, ms < 20 ? ms : 20);
+        } else { /* the socket closes before the exit can be reaped: wait for the exit */
+            ts_server_run_once(lw->srv, 0);
+            wait_for_an_exit(lw, ms < 20 ? ms : 20);
+        }
         tf_local_workers_reap(lw, 0);
     }
     for (int i = 0; i < lw->n; i++)
         if (lw->pid[i] > 0) {
             kill(lw->pid[i], SIGKILL);
             waitpid(lw->pid[i], NULL, 0);
-            lw->pid[i] = 0;
+            forget(lw, i);
         }
 }
 
 void tf_local_workers_free(tf_local_workers *lw)
 {
+    for (int i = 0; lw->pidfd && i < lw->n; i++)
+        if (lw->pidfd[i] >= 0)
+            close(lw->pidfd[i]);
     free(lw->pid);
+    free(lw->conn);
+    free(lw->pidfd);
     free(lw->respawns);
     lw->pid = NULL;
+    lw->conn = NULL;
+    lw->pidfd = NULL;
     lw->respawns = NULL;
     lw->n = 0;
 }

@@ -6,6 +6,7 @@
 #ifndef TF_LOCAL_WORKERS_H
 #define TF_LOCAL_WORKERS_H
 
+#include <stdint.h>
 #include <sys/types.h>
 
 #include "terrain/heightfield.h"
@@ -19,15 +20,17 @@ typedef int (*tf_local_worker_fn)(ts_client *c, const tf_scene *s, const tf_heig
                                   const char *kind, const char *backend);
 
 /* Fork worker number `index` running loop (NULL: tf_worker_loop); the parent's end of the
- * socketpair is added to srv as a trusted connection.  Returns the child's pid, or -1 with a
- * message in err. */
+ * socketpair is added to srv as a trusted connection, whose id goes to *conn.  Returns the
+ * child's pid, or -1 with a message in err. */
 pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *hf,
-                      const char *backend, tf_local_worker_fn loop, int index, char *err,
-                      size_t errlen);
+                      const char *backend, tf_local_worker_fn loop, int index, uint64_t *conn,
+                      char *err, size_t errlen);
 
 typedef struct tf_local_workers {
     int n;
     pid_t *pid;        /* 0: not running */
+    uint64_t *conn;    /* its connection in srv (gone once it closed its end) */
+    int *pidfd;        /* readable once it has exited; -1: none (the kernel has no pidfds) */
     int *respawns;
     int gave_up;       /* workers that could not start or kept dying: not restarted */
     /* what a restart needs */
@@ -51,7 +54,8 @@ void tf_local_workers_reap(tf_local_workers *lw, int respawn);
 /* How many are running. */
 int tf_local_workers_alive(const tf_local_workers *lw);
 /* After the stop tuple: serve the space for up to grace_s until the workers have left (they
- * need it to read the stop tuple), then kill any left behind. */
+ * need it to read the stop tuple), then kill any left behind.  A worker closes its socket just
+ * before it exits, so once none is connected the drain waits for the exits themselves. */
 void tf_local_workers_drain(tf_local_workers *lw, double grace_s);
 void tf_local_workers_free(tf_local_workers *lw);
 

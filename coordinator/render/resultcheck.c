@@ -222,15 +222,43 @@ static void check_inline(tf_resultcheck *rc, item *it)
     pthread_mutex_unlock(&rc->mu);
 }
 
+/* Does the tuple reference bytes it does not own (tf_tuple_decode_shared)? */
+static int holds_shared(const tf_tuple *t)
+{
+    for (int i = 0; i < t->nfields; i++)
+        if ((t->f[i].type == TF_FIELD_BLOB || t->f[i].type == TF_FIELD_STRING) &&
+            !t->f[i].formal && t->f[i].v.bytes.shared)
+            return 1;
+    return 0;
+}
+
+/* Move result into the item, its shared bytes copied: they may lie in a forked worker's
+ * outbox, which that process can still write, and the verdict must be about the very bytes
+ * the writer will write.  (A networked worker's lie in a receive buffer nobody else writes;
+ * copying them too costs a memcpy of the packed bytes, far below their check.)  0, or -1
+ * without memory (result left as it was). */
+static int take_own_copy(item *it, tf_tuple *result)
+{
+    if (!holds_shared(result)) {
+        tf_tuple_move(&it->result, result);
+        return 0;
+    }
+    if (tf_tuple_copy(&it->result, result))
+        return -1;
+    tf_tuple_clear(result);
+    return 0;
+}
+
 int tf_resultcheck_submit(tf_resultcheck *rc, tf_tuple *result)
 {
     int small = unpacked_bytes(result) <= INLINE_CHECK_BYTES;
     if (!small && start_threads(rc))
         return -1;
     item *it = calloc(1, sizeof *it);
-    if (!it)
+    if (!it || take_own_copy(it, result)) {
+        free(it);
         return -1;
-    tf_tuple_move(&it->result, result);
+    }
     if (small) {
         check_inline(rc, it);
         return 0;

@@ -31,8 +31,11 @@ tf_resultcheck *tf_resultcheck_new(const tf_exr_layout *l, int threads, char *er
 /* Stop the threads and drop whatever is queued or decided.  NULL is fine. */
 void tf_resultcheck_free(tf_resultcheck *rc);
 /* Queue a result tuple for checking; its contents move into the queue (the caller's tuple is
- * left empty).  0, or -1 when out of memory or no thread could start (the tuple is then left
- * to the caller). */
+ * left empty), except bytes it only references (tf_tuple_decode_shared), which are copied
+ * first: a forked worker's outbox stays writable by that worker, and the tuple a verdict hands
+ * back must hold the very bytes that were checked (--verify-chunks against a lying child).
+ * 0, or -1 when out of memory or no thread could start (the tuple is then left to the
+ * caller). */
 int tf_resultcheck_submit(tf_resultcheck *rc, tf_tuple *result);
 /* A decided result: 0 (it passed) or 1 (refused, *why says why), its tuple moved into
  * *result; -1 when nothing is decided yet. */

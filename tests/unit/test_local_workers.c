@@ -103,6 +103,7 @@ static void test_drain_serves_the_stop_tuple(void **state)
     tf_tuple_init(&stop);
     tf_tuple_add_string(&stop, "stop");
     assert_int_equal(ts_space_count(p.space, &stop), 0); /* each read its own */
+    tf_tuple_clear(&stop);
     pool_close(&p);
 }
 

@@ -212,7 +212,8 @@ bench-deps:
 # common/, or installed flat beside the kernels.
 PREFIX ?= /usr/local
 KERNEL_SHARED := common/portable.h common/render/constants.h common/render/sample_math.h \
-                 common/render/trace_math.h common/render/sun_math.h common/terrain/noise_kernel.h
+                 common/render/trace_math.h common/render/sun_math.h common/terrain/noise_kernel.h \
+                 common/terrain/grid_height.h
 WEB_FILES := web/index.html web/dashboard.js web/dashboard.css web/farm.html web/farm.js web/farm.css \
              web/paint.html web/paint.js web/paint.css
 install: $(PROG)

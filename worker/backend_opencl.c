@@ -55,7 +55,8 @@
 #define SOURCE_FILES                                                                            \
     {"tf_cl_params.h", "render/constants.h", "terrafarm.cl", "packet.cl", "common/portable.h",  \
      "terrain/noise_kernel.h", "render/sample_math.h", "render/trace_math.h",                  \
-     "render/sun_math.h", "packet_trace.cl", "packet_shade.cl", "packet_render.cl"}
+     "terrain/grid_height.h", "render/sun_math.h", "packet_trace.cl", "packet_shade.cl",       \
+     "packet_render.cl"}
 /* How much one work-item does, passed to the kernels as -DTF_STREAM (the batch of samples, the
  * corners per tf_corners8 item) and -DTF_PIX (pixels per tf_pixels8 item), so that host and
  * device cannot disagree; both at most 256 (the kernels name rays and pixels with a uchar).  A

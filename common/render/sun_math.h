@@ -36,9 +36,7 @@
 #include <stddef.h>
 #include "portable.h"
 #include "render/constants.h"
-#define TF_GLOBAL
-#else
-#define TF_GLOBAL __global
+#include "terrain/grid_height.h" /* TF_GLOBAL, tf_grid_height */
 #endif
 
 /* The numbers of one set of strips (what the kernels get in P[] / I[]). */
@@ -58,28 +56,12 @@ typedef struct tf_sun_frame {
 enum { TF_SUN_UNKNOWN = 0, TF_SUN_CLEAR_AFTER = 1, TF_SUN_UNDER = 2 };
 
 /* The height of the surface at (x, y), inside the square: the triangle of trace.c's split that
- * holds the point, as tf_heightfield_grid_height_at interpolates it. */
+ * holds the point, interpolated as tf_heightfield_grid_height_at interpolates it (both are
+ * terrain/grid_height.h's tf_grid_height). */
 TF_SHARED double tf_sun_surface_at(const tf_sun_frame *f, TF_GLOBAL const float *h, double x,
                                    double y)
 {
-    const int cells = f->n - 1;
-    int ci = (int)(x / f->cell), cj = (int)(y / f->cell);
-    ci = ci < 0 ? 0 : ci > cells - 1 ? cells - 1 : ci;
-    cj = cj < 0 ? 0 : cj > cells - 1 ? cells - 1 : cj;
-    while (ci > 0 && (double)ci * f->cell > x)
-        ci--;
-    while (ci < cells - 1 && (double)(ci + 1) * f->cell <= x)
-        ci++;
-    while (cj > 0 && (double)cj * f->cell > y)
-        cj--;
-    while (cj < cells - 1 && (double)(cj + 1) * f->cell <= y)
-        cj++;
-    const double u = (x - (double)ci * f->cell) / f->cell, v = (y - (double)cj * f->cell) / f->cell;
-    TF_GLOBAL const float *row = h + (size_t)cj * (size_t)f->n + (size_t)ci;
-    const double ha = row[0], hb = row[1], hd = row[f->n], hc = row[f->n + 1];
-    if (u >= v)
-        return ha + (hb - ha) * u + (hc - hb) * v;
-    return ha + (hc - hd) * u + (hd - ha) * v;
+    return tf_grid_height(h, f->n, f->cell, x, y);
 }
 
 /* Is (x, y) inside the terrain's square? */

@@ -20,6 +20,7 @@
 #include <string.h>
 #include <unistd.h>
 #include "terrain/heightfield.h"
+#include "terrain/grid_height.h"
 #include "terrain/procedural.h"
 
 /* Largest supported k: (2^16 + 1)^2 floats is already 16 GiB of heights. */
@@ -341,14 +342,8 @@ void tf_heightfield_range(const tf_heightfield *hf, double x0, double x1, double
 
 double tf_heightfield_grid_height_at(const tf_heightfield *hf, double x, double y)
 {
-    double u, v;
-    int ci = split_coord(hf, x, &u), cj = split_coord(hf, y, &v);
-    const float *row = hf->h + (size_t)cj * hf->n + ci;
-    const double ha = row[0], hb = row[1];             /* (ci, cj), (ci+1, cj) */
-    const double hd = row[hf->n], hc = row[hf->n + 1]; /* (ci, cj+1), (ci+1, cj+1) */
-    /* Lower-right triangle (A, B, C) where u >= v; upper-left (A, C, D) where u < v.  On the
-     * diagonal both formulas agree. */
-    if (u >= v)
-        return ha + (hb - ha) * u + (hc - hb) * v;
-    return ha + (hc - hd) * u + (hd - ha) * v;
+    const double top = (double)hf->cells * hf->cell;
+    x = x > 0 ? (x < top ? x : top) : 0; /* into the square; a NaN to 0 */
+    y = y > 0 ? (y < top ? y : top) : 0;
+    return tf_grid_height(hf->h, hf->n, hf->cell, x, y);
 }

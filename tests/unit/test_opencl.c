@@ -53,6 +53,7 @@
 #include "worker/backend.h"
 #include "worker/backend_opencl.h"
 #include "worker/opencl_ahead.h"
+#include "installed_kernels.h"
 #include "terrain/heightfield.h"
 #include "render/render.h"
 #include "scene.h"
@@ -402,16 +403,6 @@ static int copy_into(const char *from, const char *dir)
     return ok ? 0 : -1;
 }
 
-/* What `make install` puts in PREFIX/share/terrafarm/kernels: the kernel files and the C
- * renderer's headers they share (the Makefile's KERNEL_SHARED), all in one directory. */
-static const char *const installed_files[] = {
-    "worker/kernels/tf_cl_params.h", "worker/kernels/terrafarm.cl",
-    "worker/kernels/packet.cl",      "worker/kernels/packet_trace.cl",
-    "worker/kernels/packet_shade.cl", "worker/kernels/packet_render.cl",
-    "common/portable.h",             "common/render/constants.h",
-    "common/render/sample_math.h",   "common/render/trace_math.h", "common/render/sun_math.h",
-    "common/terrain/noise_kernel.h",
-};
 
 static void installed_kernel_dir(void **state)
 {
@@ -420,9 +411,9 @@ static void installed_kernel_dir(void **state)
     const char *root = getenv("TF_ROOT");
     char dir[] = "/tmp/tf-test-kernels-XXXXXX", from[4096], err[1024] = "";
     assert_non_null(mkdtemp(dir));
-    size_t nfiles = sizeof installed_files / sizeof installed_files[0];
+    size_t nfiles = INSTALLED_KERNEL_FILES;
     for (size_t i = 0; i < nfiles; i++) {
-        snprintf(from, sizeof from, "%s/%s", root ? root : ".", installed_files[i]);
+        snprintf(from, sizeof from, "%s/%s", root ? root : ".", installed_kernel_files[i]);
         assert_int_equal(copy_into(from, dir), 0);
     }
     setenv("TERRAFARM_KERNELS", dir, 1);
@@ -451,7 +442,7 @@ static void installed_kernel_dir(void **state)
     assert_non_null(strstr(err, "render/sample_math.h"));
     assert_null(strchr(err, '\n'));
     for (size_t i = 0; i < nfiles; i++) {
-        const char *base = strrchr(installed_files[i], '/') + 1;
+        const char *base = strrchr(installed_kernel_files[i], '/') + 1;
         snprintf(gone, sizeof gone, "%s/%s", dir, base);
         unlink(gone);
     }

@@ -35,6 +35,7 @@
 #include <unistd.h>
 
 #include "worker/opencl_cache.h"
+#include "installed_kernels.h"
 #include "worker/backend_opencl.h"
 #include "terrain/heightfield.h"
 #include "render/render.h"
@@ -241,23 +242,14 @@ static void stale_keys_differ(void **state)
     tf_clcache_close(&src);
 }
 
-/* make install's flat kernel directory (tests/unit/test_opencl.c installed_kernel_dir). */
-static const char *const kernel_files[] = {
-    "worker/kernels/tf_cl_params.h", "worker/kernels/terrafarm.cl",
-    "worker/kernels/packet.cl",      "worker/kernels/packet_trace.cl",
-    "worker/kernels/packet_shade.cl", "worker/kernels/packet_render.cl",
-    "common/portable.h",             "common/render/constants.h",
-    "common/render/sample_math.h",   "common/render/trace_math.h", "common/render/sun_math.h",
-    "common/terrain/noise_kernel.h",
-};
 
 static void copy_kernels(const char *dir)
 {
     const char *root = getenv("TF_ROOT");
     char cmd[8192];
     int n = snprintf(cmd, sizeof cmd, "mkdir -p '%s' && cd '%s' && cp", dir, root ? root : ".");
-    for (size_t i = 0; i < sizeof kernel_files / sizeof kernel_files[0]; i++)
-        n += snprintf(cmd + n, sizeof cmd - (size_t)n, " %s", kernel_files[i]);
+    for (size_t i = 0; i < INSTALLED_KERNEL_FILES; i++)
+        n += snprintf(cmd + n, sizeof cmd - (size_t)n, " %s", installed_kernel_files[i]);
     snprintf(cmd + n, sizeof cmd - (size_t)n, " '%s'/ && echo '/* changed */' >>'%s/terrafarm.cl'",
              dir, dir);
     assert_int_equal(system(cmd), 0);

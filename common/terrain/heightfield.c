@@ -302,15 +302,7 @@ static int split_coord(const tf_heightfield *hf, double v, double *frac)
         v = 0; /* also catches NaN */
     if (v > top)
         v = top;
-    int i = (int)(v / hf->cell);
-    if (i > hf->cells - 1)
-        i = hf->cells - 1;
-    while (i > 0 && (double)i * hf->cell > v)
-        i--;
-    while (i < hf->cells - 1 && (double)(i + 1) * hf->cell <= v)
-        i++;
-    *frac = (v - (double)i * hf->cell) / hf->cell;
-    return i;
+    return tf_grid_cell_of(v, hf->cell, hf->cells, frac);
 }
 
 double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y)
@@ -343,7 +335,7 @@ void tf_heightfield_range(const tf_heightfield *hf, double x0, double x1, double
 double tf_heightfield_grid_height_at(const tf_heightfield *hf, double x, double y)
 {
     const double top = (double)hf->cells * hf->cell;
-    x = x > 0 ? (x < top ? x : top) : 0; /* into the square; a NaN to 0 */
+    x = x > 0 ? (x < top ? x : top) : 0; /* into the square, as split_coord; a NaN to 0 */
     y = y > 0 ? (y < top ? y : top) : 0;
     return tf_grid_height(hf->h, hf->n, hf->cell, x, y);
 }

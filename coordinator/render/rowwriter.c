@@ -62,10 +62,12 @@ struct tf_rowwriter {
 /* Paste the preview share of rectangle r (tf_preview_span, row-major RGB) into the preview. */
 static void paste_share(tf_rowwriter *rw, tf_rect r, const uint8_t *share, size_t len)
 {
+    if (!rw->preview)
+        return; /* no preview (its grid is not set up either) */
     int i0, i1, j0, j1;
     tf_preview_span(&rw->grid, rw->layout.width, rw->layout.height, r, &i0, &i1, &j0, &j1);
     size_t line = (size_t)(i1 - i0) * 3;
-    if (!rw->preview || len != line * (size_t)(j1 - j0))
+    if (len != line * (size_t)(j1 - j0))
         return; /* checked by the supervisor; never trusted further */
     for (int j = j0; j < j1; j++)
         memcpy(rw->preview + ((size_t)j * (size_t)rw->grid.pw + (size_t)i0) * 3,

@@ -83,7 +83,8 @@ static void farm_close(farm *f)
     ts_space_free(f->space);
 }
 
-/* Take every task tuple now in the space, as workers' in() would (the hook sees each take). */
+/* Take every task tuple now in the space, one a connection from `conn` on, as workers' in()
+ * would (the hook sees each take; a worker holds one lease at a time). */
 static int take_all_tasks(farm *f, uint64_t conn)
 {
     int n = 0;
@@ -95,7 +96,7 @@ static int take_all_tasks(farm *f, uint64_t conn)
         tf_tuple_clear(&tmpl);
         if (rc != 1)
             return n;
-        f->hooks.on_take(f->hooks.ctx, conn, &got);
+        f->hooks.on_take(f->hooks.ctx, conn + (uint64_t)n, &got);
         tf_tuple_clear(&got);
         n++;
     }
@@ -129,7 +130,7 @@ static void test_wait_follows_what_the_loop_waits_for(void **state)
     (void)state;
     farm f;
     farm_open(&f);
-    const uint64_t conn = 7; /* a networked worker's connection: its pixels are checked */
+    const uint64_t conn = 7; /* networked workers' connections (7, 8): their pixels are checked */
     assert_int_equal(tf_supervisor_wait_ms(f.sup), 250); /* nothing dealt, nobody waiting */
 
     tf_supervisor_step(f.sup, 1000.0); /* deals both tasks */

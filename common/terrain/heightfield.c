@@ -292,17 +292,19 @@ tf_heightfield *tf_heightfield_from_heights(const float *h, int k, double extent
 
 /* ---- the surface ----------------------------------------------------------------------------- */
 
-/* Clamp world coordinate v to [0, cells * cell] and split it into a cell index in [0, cells-1]
- * and a fraction in [0, 1].  The cell satisfies i*cell <= v <= (i+1)*cell, the same test the
- * tracer uses to pick a ray's first cell. */
-static int split_coord(const tf_heightfield *hf, double v, double *frac)
+/* World coordinate v clamped into [0, cells * cell] (a NaN to 0). */
+static double into_square(const tf_heightfield *hf, double v)
 {
     const double top = (double)hf->cells * hf->cell;
-    if (!(v > 0))
-        v = 0; /* also catches NaN */
-    if (v > top)
-        v = top;
-    return tf_grid_cell_of(v, hf->cell, hf->cells, frac);
+    return v > 0 ? (v < top ? v : top) : 0;
+}
+
+/* Clamp world coordinate v into the square and split it into a cell index in [0, cells-1] and
+ * a fraction in [0, 1].  The cell satisfies i*cell <= v <= (i+1)*cell, the same test the tracer
+ * uses to pick a ray's first cell. */
+static int split_coord(const tf_heightfield *hf, double v, double *frac)
+{
+    return tf_grid_cell_of(into_square(hf, v), hf->cell, hf->cells, frac);
 }
 
 double tf_heightfield_height_at(const tf_heightfield *hf, double x, double y)
@@ -334,8 +336,5 @@ void tf_heightfield_range(const tf_heightfield *hf, double x0, double x1, double
 
 double tf_heightfield_grid_height_at(const tf_heightfield *hf, double x, double y)
 {
-    const double top = (double)hf->cells * hf->cell;
-    x = x > 0 ? (x < top ? x : top) : 0; /* into the square, as split_coord; a NaN to 0 */
-    y = y > 0 ? (y < top ? y : top) : 0;
-    return tf_grid_height(hf->h, hf->n, hf->cell, x, y);
+    return tf_grid_height(hf->h, hf->n, hf->cell, into_square(hf, x), into_square(hf, y));
 }

@@ -226,8 +226,7 @@ static void check_inline(tf_resultcheck *rc, item *it)
 static int holds_shared(const tf_tuple *t)
 {
     for (int i = 0; i < t->nfields; i++)
-        if ((t->f[i].type == TF_FIELD_BLOB || t->f[i].type == TF_FIELD_STRING) &&
-            !t->f[i].formal && t->f[i].v.bytes.shared)
+        if (t->f[i].type == TF_FIELD_BLOB && !t->f[i].formal && t->f[i].v.bytes.shared)
             return 1;
     return 0;
 }

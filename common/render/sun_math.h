@@ -9,26 +9,32 @@
  * stays in one strip, and gains climb = d.z cell / |d.xy| of height per cell of run:
  *     z(along) = o.z + climb (along - along(o)),
  * lowest in a bin where it enters it, highest where it leaves.  Bin b of a strip begins at
- * along0 + b ds; the table holds two floats a bin:
+ * along0 + b ds; the table holds TF_SUN_BIN floats a bin:
  *   reach  an upper bound, rounded up, of  max over bins b' >= b of the strip of
  *          (the surface's top over bin b') - climb (along0 + b' ds);
- *   floor  a lower bound of the surface over the bin (the least of the max/min grid's blocks
- *          that meet it; +inf where none does).
+ *   sink   a lower bound, rounded down, of  max over bins c >= b of the strip that lie wholly
+ *          inside the square of  (the surface's bottom over bin c) - climb (along0 + (c+1) ds)
+ *          (-inf where there is no such bin);
+ *   at     the bin c that gives sink (a float: bins < 2^24), or -1.
  * Clear: where  o.z - climb along(o) - eps > reach[b],  the ray is above the surface by more
  *   than eps at every point of run along >= along0 + b ds.  A walk over the run before that
  *   point answers the shadow question: past it no triangle test can hit (eps, 1e-7 of the
  *   scene's size, is orders above a test's rounding), and tf_occluded over (0, tmax) says 1
  *   exactly when some hit lies inside (0, tmax).
- * Under: where the ray leaves bin c below floor[c] by eps, it is under the surface by eps all
- *   through the bin; at the bin's middle, if that is inside the square, and if the ray starts
+ * Under: where  o.z - climb along(o) + eps < sink[b0 + 1]  (b0 the start's bin), the ray leaves
+ *   bin c = at[b0 + 1] > b0 under the least of the surface over that bin by eps, so it is under
+ *   the surface by eps all through the bin, which lies inside the square.  If the ray starts
  *   inside the square above the surface by eps, it crosses the surface in between (the square
  *   is convex, the surface continuous over it), and the watertight walk finds that crossing
- *   (trace.c "coherence of shadow rays"): tf_occluded says 1 without walking.
+ *   (trace.c "coherence of shadow rays"): tf_occluded says 1 without walking.  The suffix
+ *   maximum makes this one comparison for bins at any distance: an occluder 100 cells off is
+ *   proved as cheaply as one in the next bin (bench/README.md section 25).
  *
- * tf_sun_strips_say tries bins b0+1 .. b0+look after the start's bin b0 and stops at the first
- * that proves either.  Its rounding: along(o) and the products carry relative errors of ~1e-16,
- * far inside eps and the 1e-6 strip margin (a ray within it of a strip's edge must be proved in
- * both strips); the height under the start interpolates the very triangles the walk tests. */
+ * tf_sun_strips_say asks the under bound first, then tries bins b0+1 .. b0+look for the first
+ * that proves the ray clear.  Its rounding: along(o) and the products carry relative errors of
+ * ~1e-16, far inside eps and the 1e-6 strip margin (a ray within it of a strip's edge must be
+ * proved in both strips); the height under the start interpolates the very triangles the walk
+ * tests. */
 #ifndef TF_SUN_MATH_H
 #define TF_SUN_MATH_H
 
@@ -54,6 +60,9 @@ typedef struct tf_sun_frame {
 } tf_sun_frame;
 
 enum { TF_SUN_UNKNOWN = 0, TF_SUN_CLEAR_AFTER = 1, TF_SUN_UNDER = 2 };
+
+/* Floats a bin in the table: reach, sink, at (above). */
+#define TF_SUN_BIN 3
 
 /* The height of the surface at (x, y), inside the square: the triangle of trace.c's split that
  * holds the point, interpolated as tf_heightfield_grid_height_at interpolates it (both are
@@ -85,31 +94,27 @@ TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f, TF_GLOBAL const float *ta
         return TF_SUN_UNKNOWN;
     const int ka = (int)(k - 1e-6), kb = (int)(k + 1e-6), b0 = (int)b;
     const double base = oz - f->climb * along; /* the ray's z at run `along`: base + climb along */
-    /* the under proof needs the start above the surface; asked only when a bin offers it */
-    int start_above = -1;
-    TF_GLOBAL const float *ra = table + 2 * (size_t)ka * (size_t)f->bins;
-    TF_GLOBAL const float *rb = table + 2 * (size_t)kb * (size_t)f->bins;
-    const int end = b0 + f->look < f->bins - 1 ? b0 + f->look : f->bins - 1;
-    for (int c = b0 + 1; c <= end; c++) {
-        const double start = f->along0 + c * f->ds; /* > along: c > b */
-        if (base - f->eps > ra[2 * c] && base - f->eps > rb[2 * c]) {
-            *t = (start - along) * f->t_per_cell * (1 + 1e-9) + 1e-9 * f->t_per_cell;
-            return TF_SUN_CLEAR_AFTER;
-        }
-        const double top = base + f->climb * (start + f->ds) + f->eps;
-        if (top < ra[2 * c + 1] && top < rb[2 * c + 1]) {
-            const double tm = (start + 0.5 * f->ds - along) * f->t_per_cell;
-            if (!tf_sun_in_square(f, ox + tm * f->dx, oy + tm * f->dy))
-                continue;
-            if (start_above < 0)
-                start_above = tf_sun_in_square(f, ox, oy) &&
-                              oz - tf_sun_surface_at(f, h, ox, oy) > f->eps;
-            if (!start_above)
-                return TF_SUN_UNKNOWN;
+    TF_GLOBAL const float *ra = table + TF_SUN_BIN * (size_t)ka * (size_t)f->bins;
+    TF_GLOBAL const float *rb = table + TF_SUN_BIN * (size_t)kb * (size_t)f->bins;
+    const int b1 = b0 + 1; /* < bins: b < bins - 1 */
+    if (base + f->eps < ra[TF_SUN_BIN * b1 + 1] && base + f->eps < rb[TF_SUN_BIN * b1 + 1]) {
+        /* under in some bin past the start's; the point named is the middle of ka's (where the
+         * ray lies in kb instead, it is under in kb's bin: occluded either way) */
+        const double c = ra[TF_SUN_BIN * b1 + 2];
+        const double tm = (f->along0 + (c + 0.5) * f->ds - along) * f->t_per_cell;
+        if (c >= b1 && tf_sun_in_square(f, ox, oy) &&
+            oz - tf_sun_surface_at(f, h, ox, oy) > f->eps) {
             *t = tm;
             return TF_SUN_UNDER;
         }
     }
+    const int end = b0 + f->look < f->bins - 1 ? b0 + f->look : f->bins - 1;
+    for (int c = b1; c <= end; c++)
+        if (base - f->eps > ra[TF_SUN_BIN * c] && base - f->eps > rb[TF_SUN_BIN * c]) {
+            const double start = f->along0 + c * f->ds; /* > along: c > b */
+            *t = (start - along) * f->t_per_cell * (1 + 1e-9) + 1e-9 * f->t_per_cell;
+            return TF_SUN_CLEAR_AFTER;
+        }
     return TF_SUN_UNKNOWN;
 }
 

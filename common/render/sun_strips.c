@@ -8,12 +8,16 @@
  * above their rounding; every bin those intervals meet takes the block's top and bottom as
  * candidates.  So a bin's top bounds the surface over it from above and its floor from below
  * (a bin a block only seems to meet gets a larger top and a lower floor, never the wrong way).
- * Then each strip, from its far end back, turns tops into reach:
+ * Then each strip, from its far end back, turns tops into reach and floors into sink:
  *     reach[b] = max(reach[b + 1], top[b] - climb (along0 + b ds)),
- * rounded up (a relative 1e-9 on the double, then up to the next float).  One pass over 1/4 of
- * the cells and one over the bins: ~20 ms and 3.5 MB for 2049^2 samples.  Bins of 1-3 cells
+ *     sink[b]  = max(sink[b + 1], floor[b] - climb (along0 + (b + 1) ds))  over bins wholly
+ *                inside the square (at[b]: the bin that gives it),
+ * reach rounded up and sink down (a relative 1e-9 on the double, then to the next float).  A
+ * height field with a NaN anywhere gets no sinks: the under proof needs a surface without
+ * holes.  One pass over 1/4 of the cells and one over the bins: ~20 ms and 5.2 MB for 2049^2
+ * samples (3 floats a bin; a sun on a diagonal, the most bins: 6.4 MB).  Bins of 1-3 cells
  * prove a lit ray clear a little sooner, but hold up to 16x the memory for no measurable gain
- * (bench/README.md section 22), and the memory counts against Embree's (issue 23: 1/10). */
+ * (bench/README.md section 22), and the memory counts against Embree's (issue 23: 1/10).  */
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>
@@ -56,7 +60,7 @@ static int frame_of(const tf_heightfield *hf, tf_vec3 sun, tf_sun_frame *f, doub
 }
 
 /* Every block of level L raises the tops and lowers the floors of the bins it meets (table:
- * top, floor per bin). */
+ * top, floor in a bin's first two floats, until strip_bounds makes them reach and sink). */
 static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, double ux, double uy,
                            float *table)
 {
@@ -87,34 +91,73 @@ static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, doub
             const float lo = isnan(mn[at]) ? -INFINITY : mn[at];
             for (int k = k0; k <= k1; k++)
                 for (int b = b0; b <= b1; b++) {
-                    float *t = &table[2 * ((size_t)k * (size_t)f->bins + (size_t)b)];
+                    float *t = &table[TF_SUN_BIN * ((size_t)k * (size_t)f->bins + (size_t)b)];
                     t[0] = hi > t[0] ? hi : t[0];
                     t[1] = lo < t[1] ? lo : t[1];
                 }
         }
 }
 
-/* A double rounded up to a float. */
+/* A double rounded up (down) to a float. */
 static float float_up(double v)
 {
     float r = (float)v;
     return r < v ? nextafterf(r, INFINITY) : r;
 }
 
-/* Tops into reach, strip by strip, in place (the floors stay). */
-static void tops_to_reach(const tf_sun_frame *f, float *table)
+static float float_down(double v)
 {
-    for (int k = 0; k < f->strips; k++) {
-        float *row = table + 2 * (size_t)k * (size_t)f->bins;
-        double reach = -INFINITY;
-        for (int b = f->bins - 1; b >= 0; b--) {
-            if (row[2 * b] > -INFINITY) {
-                const double top = row[2 * b], rise = f->climb * (f->along0 + b * f->ds);
-                const double v = (top - rise) + 1e-9 * (fabs(top) + fabs(rise));
-                reach = v > reach ? v : reach;
-            }
-            row[2 * b] = float_up(reach);
+    float r = (float)v;
+    return r > v ? nextafterf(r, -INFINITY) : r;
+}
+
+/* Does bin b of strip k lie wholly inside the square (its corners do, by a margin far above
+ * their rounding; the square is convex)? */
+static int bin_inside(const tf_sun_frame *f, int cells, double ux, double uy, int k, int b)
+{
+    const double m = 1e-6 * cells + 1e-9, top = cells - m;
+    for (int c = 0; c < 4; c++) {
+        const double al = f->along0 + (b + (c & 1)) * f->ds;
+        const double ac = f->across0 + (k + (c >> 1)) / f->inv_w;
+        const double i = ux * al - uy * ac, j = uy * al + ux * ac;
+        if (!(i >= m && i <= top && j >= m && j <= top))
+            return 0;
+    }
+    return 1;
+}
+
+/* Whether any height is NaN.  The under proof needs a surface without holes, and the grids
+ * cannot say: their min and max of four samples keep or drop a NaN depending on its place. */
+static int any_nan(const tf_heightfield *hf)
+{
+    const size_t n = (size_t)hf->n * (size_t)hf->n;
+    int bad = 0;
+    for (size_t i = 0; i < n; i++)
+        bad |= hf->h[i] != hf->h[i];
+    return bad;
+}
+
+/* One strip's bins, from its far end back: tops into reach (rounded up), floors into sink and
+ * at (rounded down; only bins inside the square count, and none where `holes`). */
+static void strip_bounds(const tf_sun_frame *f, int cells, double ux, double uy, int holes,
+                         int k, float *row)
+{
+    double reach = -INFINITY;
+    float sink = -INFINITY, at = -1;
+    for (int b = f->bins - 1; b >= 0; b--) {
+        float *bin = row + TF_SUN_BIN * (size_t)b;
+        if (bin[0] > -INFINITY) {
+            const double top = bin[0], rise = f->climb * (f->along0 + b * f->ds);
+            const double v = (top - rise) + 1e-9 * (fabs(top) + fabs(rise));
+            reach = v > reach ? v : reach;
         }
+        const double bottom = bin[1], rise = f->climb * (f->along0 + (b + 1) * f->ds);
+        if (!holes && isfinite(bottom) && bin_inside(f, cells, ux, uy, k, b)) {
+            const float g = float_down((bottom - rise) - 1e-9 * (fabs(bottom) + fabs(rise)));
+            if (g > sink)
+                sink = g, at = (float)b;
+        }
+        bin[0] = float_up(reach), bin[1] = sink, bin[2] = at;
     }
 }
 
@@ -126,15 +169,17 @@ tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
         return NULL;
     const size_t n = (size_t)f.strips * (size_t)f.bins;
     tf_sun_strips *s = malloc(sizeof *s);
-    float *a = malloc(2 * n * sizeof *a);
+    float *a = malloc(TF_SUN_BIN * n * sizeof *a);
     if (!s || !a) {
         free(s), free(a);
         return NULL;
     }
     for (size_t i = 0; i < n; i++)
-        a[2 * i] = -INFINITY, a[2 * i + 1] = INFINITY;
+        a[TF_SUN_BIN * i] = -INFINITY, a[TF_SUN_BIN * i + 1] = INFINITY, a[TF_SUN_BIN * i + 2] = -1;
     scatter_blocks(hf, &f, ux, uy, a);
-    tops_to_reach(&f, a);
+    const int holes = any_nan(hf);
+    for (int k = 0; k < f.strips; k++)
+        strip_bounds(&f, hf->cells, ux, uy, holes, k, a + TF_SUN_BIN * (size_t)k * (size_t)f.bins);
     s->frame = f;
     s->table = a;
     s->h = hf->h;
@@ -155,7 +200,7 @@ int tf_sun_strips_shadow(const tf_sun_strips *s, tf_vec3 o, double *t)
 
 size_t tf_sun_strips_table_bytes(const tf_sun_strips *s)
 {
-    return 2 * (size_t)s->frame.strips * (size_t)s->frame.bins * sizeof(float);
+    return TF_SUN_BIN * (size_t)s->frame.strips * (size_t)s->frame.bins * sizeof(float);
 }
 
 size_t tf_sun_strips_bytes(const tf_sun_strips *s)

@@ -5,7 +5,7 @@
  * heading (the axes and the diagonals too) and elevation, from points on, over, under and
  * beside the surface; the strips do prove most lit rays clear and many occluded ones occluded;
  * a table that lies changes answers (so the comparison can fail); and no strips are made where
- * they cannot help. */
+ * they cannot help.  An occluder far down the strip is proved as cheaply as a near one. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -33,9 +33,24 @@ static tf_vec3 sun_at(double az, double el)
 /* ---- the table ------------------------------------------------------------------------------ */
 
 /* At random points q of the square: in q's strip, the reach of q's bin b is at least
- * f(q) - climb * (bin b's start) and never grows toward the sun, and the floor of q's bin is
- * at most f(q) -- what the query's proofs read off the table (a ray is lowest in a bin where it
- * enters it, highest where it leaves). */
+ * f(q) - climb * (bin b's start) and never grows toward the sun; and wherever the sink of a bin
+ * b' <= b names bin b, it is at most f(q) - climb * (bin b's end), and bin b lies inside the
+ * square -- what the query's proofs read off the table (a ray is lowest in a bin where it
+ * enters it, highest where it leaves).  Sinks never grow toward the sun either. */
+static void check_sinks(const tf_sun_frame *f, const float *row, int bq, double x, double y,
+                        double h)
+{
+    const double e = (f->n - 1) * f->cell;
+    assert_true(row[TF_SUN_BIN * (bq - 1) + 1] >= row[TF_SUN_BIN * bq + 1]);
+    for (int b = bq; b >= 0 && row[TF_SUN_BIN * b + 2] == (float)bq; b--) {
+        const double most = h - f->climb * (f->along0 + (bq + 1) * f->ds);
+        if (!(row[TF_SUN_BIN * b + 1] <= most))
+            fail_msg("sink[%d] = %.9g (bin %d) over the surface's %.9g at (%.9g, %.9g)", b,
+                     (double)row[TF_SUN_BIN * b + 1], bq, most, x, y);
+    }
+    (void)e;
+}
+
 static void check_bound(height_fn fn, int k, double extent, tf_vec3 sun, uint64_t seed)
 {
     tf_heightfield *hf = make_field(fn, k, extent);
@@ -44,23 +59,38 @@ static void check_bound(height_fn fn, int k, double extent, tf_vec3 sun, uint64_
     const tf_sun_frame *f = &s->frame;
     const double e = hf->cells * hf->cell;
     rng r = {seed};
+    int sinks = 0;
     for (int i = 0; i < 20000; i++) {
         const double x = range(&r, 0, e), y = range(&r, 0, e);
         const double along = f->a_s * x + f->b_s * y, across = f->a_p * x + f->b_p * y;
         const int kq = (int)floor((across - f->across0) * f->inv_w);
         const int bq = (int)floor((along - f->along0) * f->inv_ds);
         assert_true(kq >= 0 && kq < f->strips && bq >= 1 && bq < f->bins);
-        const float *row = s->table + 2 * (size_t)kq * f->bins;
+        const float *row = s->table + TF_SUN_BIN * (size_t)kq * f->bins;
         const double h = tf_heightfield_height_at(hf, x, y);
         const double need = h - f->climb * (f->along0 + bq * f->ds);
-        if (!(row[2 * bq] >= need))
+        if (!(row[TF_SUN_BIN * bq] >= need))
             fail_msg("reach[%d][%d] = %.9g under the surface's %.9g at (%.9g, %.9g)", kq, bq,
-                     (double)row[2 * bq], need, x, y);
-        assert_true(row[2 * (bq - 1)] >= row[2 * bq]);
-        if (!(row[2 * bq + 1] <= h))
-            fail_msg("floor[%d][%d] = %.9g over the surface's %.9g at (%.9g, %.9g)", kq, bq,
-                     (double)row[2 * bq + 1], h, x, y);
+                     (double)row[TF_SUN_BIN * bq], need, x, y);
+        assert_true(row[TF_SUN_BIN * (bq - 1)] >= row[TF_SUN_BIN * bq]);
+        check_sinks(f, row, bq, x, y, h);
+        sinks += row[TF_SUN_BIN * bq + 2] == (float)bq;
     }
+    assert_true(sinks > 100); /* the sink bound was checked, not skipped */
+    /* a named bin lies inside the square: its corners do */
+    for (int kk = 0; kk < f->strips; kk++)
+        for (int b = 0; b < f->bins; b++) {
+            const float at = s->table[TF_SUN_BIN * ((size_t)kk * f->bins + b) + 2];
+            if (at < 0)
+                continue;
+            for (int c = 0; c < 4; c++) {
+                const double al = (f->along0 + (at + (c & 1)) * f->ds) * hf->cell;
+                const double ac = (f->across0 + (kk + (c >> 1)) / f->inv_w) * hf->cell;
+                const double ux = f->a_s * hf->cell, uy = f->b_s * hf->cell;
+                const double cx = ux * al - uy * ac, cy = uy * al + ux * ac;
+                assert_true(cx >= 0 && cx <= e && cy >= 0 && cy <= e);
+            }
+        }
     tf_sun_strips_free(s);
     tf_heightfield_free(hf);
 }
@@ -163,6 +193,36 @@ static void test_rays_terraces(void **state)
     rays_over("terraces", terraces, 6, 300, 7, 0.5, 0.05);
 }
 
+/* A wall across the far side of a flat field (rows j >= 200 of 256 cells raised by 100, the
+ * sun low over it, heading +y): a ray from the flat ground 150+ cells short of the wall is
+ * under the surface only there, 37 bins past its start, and the strips prove it with no walk
+ * (the sink's suffix maximum reaches any distance). */
+static double far_wall(int i, int j, int n)
+{
+    (void)i, (void)n;
+    return j >= 200 ? 100.0 : 0.0;
+}
+
+static void test_a_far_wall_is_proved_without_a_walk(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(far_wall, 8, 256); /* cell 1 */
+    const tf_vec3 sun = sun_at(M_PI / 2, 0.1);
+    tf_sun_strips *s = tf_sun_strips_build(hf, sun);
+    assert_non_null(s);
+    rng r = {12};
+    for (int i = 0; i < 200; i++) {
+        const tf_vec3 o = v3(range(&r, 20, 236), range(&r, 10, 50), 0.01);
+        assert_true(tf_occluded(hf, o, sun, 0.0, TF_FAR_AWAY));
+        double t = -1;
+        assert_int_equal(tf_sun_strips_shadow(s, o, &t), TF_SUN_UNDER);
+        const tf_vec3 p = v3_add(o, v3_scale(sun, t));
+        assert_true(p.y >= 200 && p.z < tf_heightfield_height_at(hf, p.x, p.y));
+    }
+    tf_sun_strips_free(s);
+    tf_heightfield_free(hf);
+}
+
 /* Tables that lie change answers: reaches lowered prove occluded rays clear, floors raised
  * prove lit rays occluded. */
 static int answers_changed(const tf_heightfield *hf, const tf_sun_strips *s, tf_vec3 sun)
@@ -192,10 +252,10 @@ static void test_a_lying_table_changes_answers(void **state)
     assert_int_equal(answers_changed(hf, s, sun), 0);
     const size_t n = (size_t)s->frame.strips * s->frame.bins;
     for (size_t i = 0; i < n; i++)
-        s->table[2 * i] -= 2.0f;
+        s->table[TF_SUN_BIN * i] -= 2.0f;
     assert_true(answers_changed(hf, s, sun) > 0);
     for (size_t i = 0; i < n; i++)
-        s->table[2 * i] += 2.0f, s->table[2 * i + 1] += 2.0f;
+        s->table[TF_SUN_BIN * i] += 2.0f, s->table[TF_SUN_BIN * i + 1] += 2.0f;
     assert_true(answers_changed(hf, s, sun) > 0);
     tf_sun_strips_free(s);
     tf_heightfield_free(hf);
@@ -266,6 +326,7 @@ int main(void)
         cmocka_unit_test(test_rays_hills),
         cmocka_unit_test(test_rays_rough),
         cmocka_unit_test(test_rays_terraces),
+        cmocka_unit_test(test_a_far_wall_is_proved_without_a_walk),
         cmocka_unit_test(test_a_lying_table_changes_answers),
         cmocka_unit_test(test_a_nan_height_proves_nothing_there),
         cmocka_unit_test(test_no_strips),

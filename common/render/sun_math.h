@@ -14,15 +14,15 @@
  *          (the surface's top over bin b') - climb (along0 + b' ds);
  *   sink   a lower bound, rounded down, of  max over bins c >= b of the strip that lie wholly
  *          inside the square of  (the surface's bottom over bin c) - climb (along0 + (c+1) ds)
- *          (-inf where there is no such bin);
- *   at     the bin c that gives sink (a float: bins < 2^24), or -1.
+ *          (-inf where there is no such bin).  Sinks never grow toward the sun, so the bin c
+ *          that gives sink[b] is the last one whose sink is still sink[b]: a binary search.
  * Clear: where  o.z - climb along(o) - eps > reach[b],  the ray is above the surface by more
  *   than eps at every point of run along >= along0 + b ds.  A walk over the run before that
  *   point answers the shadow question: past it no triangle test can hit (eps, 1e-7 of the
  *   scene's size, is orders above a test's rounding), and tf_occluded over (0, tmax) says 1
  *   exactly when some hit lies inside (0, tmax).
  * Under: where  o.z - climb along(o) + eps < sink[b0 + 1]  (b0 the start's bin), the ray leaves
- *   bin c = at[b0 + 1] > b0 under the least of the surface over that bin by eps, so it is under
+ *   the bin c > b0 that gives that sink under the least of the surface over that bin by eps, so it is under
  *   the surface by eps all through the bin, which lies inside the square.  If the ray starts
  *   inside the square above the surface by eps, it crosses the surface in between (the square
  *   is convex, the surface continuous over it), and the watertight walk finds that crossing
@@ -61,8 +61,8 @@ typedef struct tf_sun_frame {
 
 enum { TF_SUN_UNKNOWN = 0, TF_SUN_CLEAR_AFTER = 1, TF_SUN_UNDER = 2 };
 
-/* Floats a bin in the table: reach, sink, at (above). */
-#define TF_SUN_BIN 3
+/* Floats a bin in the table: reach, sink (above). */
+#define TF_SUN_BIN 2
 
 /* The height of the surface at (x, y), inside the square: the triangle of trace.c's split that
  * holds the point, interpolated as tf_heightfield_grid_height_at interpolates it (both are
@@ -97,16 +97,21 @@ TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f, TF_GLOBAL const float *ta
     TF_GLOBAL const float *ra = table + TF_SUN_BIN * (size_t)ka * (size_t)f->bins;
     TF_GLOBAL const float *rb = table + TF_SUN_BIN * (size_t)kb * (size_t)f->bins;
     const int b1 = b0 + 1; /* < bins: b < bins - 1 */
-    if (base + f->eps < ra[TF_SUN_BIN * b1 + 1] && base + f->eps < rb[TF_SUN_BIN * b1 + 1]) {
-        /* under in some bin past the start's; the point named is the middle of ka's (where the
-         * ray lies in kb instead, it is under in kb's bin: occluded either way) */
-        const double c = ra[TF_SUN_BIN * b1 + 2];
-        const double tm = (f->along0 + (c + 0.5) * f->ds - along) * f->t_per_cell;
-        if (c >= b1 && tf_sun_in_square(f, ox, oy) &&
-            oz - tf_sun_surface_at(f, h, ox, oy) > f->eps) {
-            *t = tm;
-            return TF_SUN_UNDER;
+    const float sink = ra[TF_SUN_BIN * b1 + 1];
+    if (base + f->eps < sink && base + f->eps < rb[TF_SUN_BIN * b1 + 1] &&
+        tf_sun_in_square(f, ox, oy) && oz - tf_sun_surface_at(f, h, ox, oy) > f->eps) {
+        /* under in the bin that gives ka's sink (where the ray lies in kb instead, it is under
+         * in the one that gives kb's: occluded either way); *t names the middle of ka's */
+        int lo = b1, hi = f->bins - 1;
+        while (lo < hi) {
+            const int mid = (lo + hi + 1) / 2;
+            if (ra[TF_SUN_BIN * mid + 1] >= sink)
+                lo = mid;
+            else
+                hi = mid - 1;
         }
+        *t = (f->along0 + (lo + 0.5) * f->ds - along) * f->t_per_cell;
+        return TF_SUN_UNDER;
     }
     const int end = b0 + f->look < f->bins - 1 ? b0 + f->look : f->bins - 1;
     for (int c = b1; c <= end; c++)

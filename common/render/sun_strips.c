@@ -11,16 +11,18 @@
  * Then each strip, from its far end back, turns tops into reach and floors into sink:
  *     reach[b] = max(reach[b + 1], top[b] - climb (along0 + b ds)),
  *     sink[b]  = max(sink[b + 1], floor[b] - climb (along0 + (b + 1) ds))  over bins wholly
- *                inside the square (at[b]: the bin that gives it),
+ *                inside the square,
  * reach rounded up and sink down (a relative 1e-9 on the double, then to the next float).  A
  * height field with a NaN anywhere gets no sinks: the under proof needs a surface without
- * holes.  One pass over 1/4 of the cells and one over the bins: ~20 ms and 5.2 MB for 2049^2
- * samples (3 floats a bin; a sun on a diagonal, the most bins: 6.4 MB).  Bins of 1-3 cells
+ * holes.  One pass over 1/4 of the cells and one over the bins: ~12 ms and 3.5 MB for 2049^2
+ * samples.  Bins of 1-3 cells
  * prove a lit ray clear a little sooner, but hold up to 16x the memory for no measurable gain
  * (bench/README.md section 22), and the memory counts against Embree's (issue 23: 1/10).  */
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 #include "render/sun_strips.h"
 
 #define TF_SUN_STRIP_CELLS 4.0 /* strip width and bin length, cells */
@@ -98,29 +100,58 @@ static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, doub
         }
 }
 
-/* A double rounded up (down) to a float. */
+/* A double rounded up (down) to a float: the nearest float, stepped one ulp where it lies on
+ * the wrong side (nextafterf, spelled on the bits: this runs for every bin). */
+static float float_step(float r, int up)
+{
+    uint32_t bits;
+    memcpy(&bits, &r, sizeof bits);
+    if (r == 0)
+        bits = up ? 0x00000001u : 0x80000001u; /* the least denormal, either sign */
+    else
+        bits = (r > 0) == (up != 0) ? bits + 1 : bits - 1; /* away from or toward zero */
+    memcpy(&r, &bits, sizeof r);
+    return r;
+}
+
 static float float_up(double v)
 {
-    float r = (float)v;
-    return r < v ? nextafterf(r, INFINITY) : r;
+    const float r = (float)v;
+    return r < v ? float_step(r, 1) : r;
 }
 
 static float float_down(double v)
 {
-    float r = (float)v;
-    return r > v ? nextafterf(r, -INFINITY) : r;
+    const float r = (float)v;
+    return r > v ? float_step(r, 0) : r;
 }
 
-/* Does bin b of strip k lie wholly inside the square (its corners do, by a margin far above
- * their rounding; the square is convex)? */
-static int bin_inside(const tf_sun_frame *f, int cells, double ux, double uy, int k, int b)
+/* A strip's two edges in the square's cell coordinates: a point at run `al` along edge e is
+ * (x0[e] + ux al, y0[e] + uy al). */
+typedef struct strip_edges {
+    double x0[2], y0[2], ux, uy, lo, hi; /* lo, hi: the square shrunk by a margin */
+} strip_edges;
+
+static strip_edges edges_of(const tf_sun_frame *f, int cells, double ux, double uy, int k)
 {
-    const double m = 1e-6 * cells + 1e-9, top = cells - m;
+    strip_edges e = {.ux = ux, .uy = uy};
+    const double w = 1 / f->inv_w, m = 1e-6 * cells + 1e-9;
+    for (int c = 0; c < 2; c++) {
+        const double ac = f->across0 + (k + c) * w;
+        e.x0[c] = -uy * ac, e.y0[c] = ux * ac;
+    }
+    e.lo = m, e.hi = cells - m;
+    return e;
+}
+
+/* Does bin b of the strip lie wholly inside the square (its corners do, by a margin far above
+ * their rounding; the square is convex)? */
+static int bin_inside(const tf_sun_frame *f, const strip_edges *e, int b)
+{
     for (int c = 0; c < 4; c++) {
         const double al = f->along0 + (b + (c & 1)) * f->ds;
-        const double ac = f->across0 + (k + (c >> 1)) / f->inv_w;
-        const double i = ux * al - uy * ac, j = uy * al + ux * ac;
-        if (!(i >= m && i <= top && j >= m && j <= top))
+        const double i = e->x0[c >> 1] + e->ux * al, j = e->y0[c >> 1] + e->uy * al;
+        if (!(i >= e->lo && i <= e->hi && j >= e->lo && j <= e->hi))
             return 0;
     }
     return 1;
@@ -137,13 +168,31 @@ static int any_nan(const tf_heightfield *hf)
     return bad;
 }
 
-/* One strip's bins, from its far end back: tops into reach (rounded up), floors into sink and
- * at (rounded down; only bins inside the square count, and none where `holes`). */
+/* The strip's bins that lie inside the square: [*first, *last], empty where *first > *last.
+ * Along each edge of the strip the points inside the square form one interval (it is convex),
+ * so the bins inside do too: found from either end, the ones between are not asked. */
+static void bins_inside(const tf_sun_frame *f, const strip_edges *e, int *first, int *last)
+{
+    int b = 0, c = f->bins - 1;
+    while (b <= c && !bin_inside(f, e, b))
+        b++;
+    while (c >= b && !bin_inside(f, e, c))
+        c--;
+    *first = b, *last = c;
+}
+
+/* One strip's bins, from its far end back: tops into reach (rounded up), floors into sink
+ * (rounded down; only bins inside the square count, and none where `holes`). */
 static void strip_bounds(const tf_sun_frame *f, int cells, double ux, double uy, int holes,
                          int k, float *row)
 {
+    const strip_edges e = edges_of(f, cells, ux, uy, k);
+    int first, last;
+    bins_inside(f, &e, &first, &last);
+    if (holes)
+        first = last + 1;
     double reach = -INFINITY;
-    float sink = -INFINITY, at = -1;
+    float sink = -INFINITY;
     for (int b = f->bins - 1; b >= 0; b--) {
         float *bin = row + TF_SUN_BIN * (size_t)b;
         if (bin[0] > -INFINITY) {
@@ -152,12 +201,11 @@ static void strip_bounds(const tf_sun_frame *f, int cells, double ux, double uy,
             reach = v > reach ? v : reach;
         }
         const double bottom = bin[1], rise = f->climb * (f->along0 + (b + 1) * f->ds);
-        if (!holes && isfinite(bottom) && bin_inside(f, cells, ux, uy, k, b)) {
+        if (b >= first && b <= last && isfinite(bottom)) {
             const float g = float_down((bottom - rise) - 1e-9 * (fabs(bottom) + fabs(rise)));
-            if (g > sink)
-                sink = g, at = (float)b;
+            sink = g > sink ? g : sink;
         }
-        bin[0] = float_up(reach), bin[1] = sink, bin[2] = at;
+        bin[0] = float_up(reach), bin[1] = sink;
     }
 }
 
@@ -175,7 +223,7 @@ tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
         return NULL;
     }
     for (size_t i = 0; i < n; i++)
-        a[TF_SUN_BIN * i] = -INFINITY, a[TF_SUN_BIN * i + 1] = INFINITY, a[TF_SUN_BIN * i + 2] = -1;
+        a[TF_SUN_BIN * i] = -INFINITY, a[TF_SUN_BIN * i + 1] = INFINITY;
     scatter_blocks(hf, &f, ux, uy, a);
     const int holes = any_nan(hf);
     for (int k = 0; k < f.strips; k++)

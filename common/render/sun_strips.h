@@ -21,7 +21,7 @@
 
 typedef struct tf_sun_strips {
     tf_sun_frame frame;
-    float *table;    /* frame.strips * frame.bins bins of TF_SUN_BIN floats (reach, sink, at) */
+    float *table;    /* frame.strips * frame.bins bins of TF_SUN_BIN floats (reach, sink) */
     const float *h;  /* the height field's heights (the under proof's start) */
 } tf_sun_strips;
 

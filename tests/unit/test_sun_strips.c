@@ -32,23 +32,52 @@ static tf_vec3 sun_at(double az, double el)
 
 /* ---- the table ------------------------------------------------------------------------------ */
 
+/* The bin that gives sink[b]: the last one whose sink is still sink[b] (-1: none). */
+static int named_bin(const tf_sun_frame *f, const float *row, int b)
+{
+    if (!(row[TF_SUN_BIN * b + 1] > -INFINITY))
+        return -1;
+    int c = b;
+    while (c + 1 < f->bins && row[TF_SUN_BIN * (c + 1) + 1] >= row[TF_SUN_BIN * b + 1])
+        c++;
+    return c;
+}
+
 /* At random points q of the square: in q's strip, the reach of q's bin b is at least
  * f(q) - climb * (bin b's start) and never grows toward the sun; and wherever the sink of a bin
- * b' <= b names bin b, it is at most f(q) - climb * (bin b's end), and bin b lies inside the
- * square -- what the query's proofs read off the table (a ray is lowest in a bin where it
- * enters it, highest where it leaves).  Sinks never grow toward the sun either. */
-static void check_sinks(const tf_sun_frame *f, const float *row, int bq, double x, double y,
-                        double h)
+ * b' <= b is given by bin b, it is at most f(q) - climb * (bin b's end) -- what the query's
+ * proofs read off the table (a ray is lowest in a bin where it enters it, highest where it
+ * leaves).  Sinks never grow toward the sun either, and the bin giving one lies inside the
+ * square. */
+static int check_sinks(const tf_sun_frame *f, const float *row, int bq, double x, double y,
+                       double h)
 {
-    const double e = (f->n - 1) * f->cell;
+    int checked = 0;
     assert_true(row[TF_SUN_BIN * (bq - 1) + 1] >= row[TF_SUN_BIN * bq + 1]);
-    for (int b = bq; b >= 0 && row[TF_SUN_BIN * b + 2] == (float)bq; b--) {
+    for (int b = bq; b >= 0 && named_bin(f, row, b) == bq; b--, checked++) {
         const double most = h - f->climb * (f->along0 + (bq + 1) * f->ds);
         if (!(row[TF_SUN_BIN * b + 1] <= most))
             fail_msg("sink[%d] = %.9g (bin %d) over the surface's %.9g at (%.9g, %.9g)", b,
                      (double)row[TF_SUN_BIN * b + 1], bq, most, x, y);
     }
-    (void)e;
+    return checked;
+}
+
+/* Every bin that gives a sink lies inside the square: its corners do. */
+static void check_named_inside(const tf_sun_strips *s, const tf_heightfield *hf)
+{
+    const tf_sun_frame *f = &s->frame;
+    const double e = hf->cells * hf->cell, ux = f->a_s * hf->cell, uy = f->b_s * hf->cell;
+    for (int k = 0; k < f->strips; k++)
+        for (int b = 0; b < f->bins; b++) {
+            const int at = named_bin(f, s->table + TF_SUN_BIN * (size_t)k * f->bins, b);
+            for (int c = 0; at >= 0 && c < 4; c++) {
+                const double al = (f->along0 + (at + (c & 1)) * f->ds) * hf->cell;
+                const double ac = (f->across0 + (k + (c >> 1)) / f->inv_w) * hf->cell;
+                const double cx = ux * al - uy * ac, cy = uy * al + ux * ac;
+                assert_true(cx >= 0 && cx <= e && cy >= 0 && cy <= e);
+            }
+        }
 }
 
 static void check_bound(height_fn fn, int k, double extent, tf_vec3 sun, uint64_t seed)
@@ -73,24 +102,10 @@ static void check_bound(height_fn fn, int k, double extent, tf_vec3 sun, uint64_
             fail_msg("reach[%d][%d] = %.9g under the surface's %.9g at (%.9g, %.9g)", kq, bq,
                      (double)row[TF_SUN_BIN * bq], need, x, y);
         assert_true(row[TF_SUN_BIN * (bq - 1)] >= row[TF_SUN_BIN * bq]);
-        check_sinks(f, row, bq, x, y, h);
-        sinks += row[TF_SUN_BIN * bq + 2] == (float)bq;
+        sinks += check_sinks(f, row, bq, x, y, h);
     }
     assert_true(sinks > 100); /* the sink bound was checked, not skipped */
-    /* a named bin lies inside the square: its corners do */
-    for (int kk = 0; kk < f->strips; kk++)
-        for (int b = 0; b < f->bins; b++) {
-            const float at = s->table[TF_SUN_BIN * ((size_t)kk * f->bins + b) + 2];
-            if (at < 0)
-                continue;
-            for (int c = 0; c < 4; c++) {
-                const double al = (f->along0 + (at + (c & 1)) * f->ds) * hf->cell;
-                const double ac = (f->across0 + (kk + (c >> 1)) / f->inv_w) * hf->cell;
-                const double ux = f->a_s * hf->cell, uy = f->b_s * hf->cell;
-                const double cx = ux * al - uy * ac, cy = uy * al + ux * ac;
-                assert_true(cx >= 0 && cx <= e && cy >= 0 && cy <= e);
-            }
-        }
+    check_named_inside(s, hf);
     tf_sun_strips_free(s);
     tf_heightfield_free(hf);
 }

@@ -13,8 +13,8 @@
  *     sink[b]  = max(sink[b + 1], floor[b] - climb (along0 + (b + 1) ds))  over bins wholly
  *                inside the square,
  * reach rounded up and sink down (a relative 1e-9 on the double, then to the next float).  A
- * height field with a NaN anywhere gets no sinks: the under proof needs a surface without
- * holes.  One pass over 1/4 of the cells and one over the bins: ~12 ms and 3.5 MB for 2049^2
+ * height field with a NaN anywhere (a hole, slope_max NaN) gets no sinks: the under proof needs
+ * a continuous surface.  One pass over 1/4 of the cells and one over the bins: ~12 ms and 3.5 MB for 2049^2
  * samples.  Bins of 1-3 cells
  * prove a lit ray clear a little sooner, but hold up to 16x the memory for no measurable gain
  * (bench/README.md section 22), and the memory counts against Embree's (issue 23: 1/10).  */
@@ -157,17 +157,6 @@ static int bin_inside(const tf_sun_frame *f, const strip_edges *e, int b)
     return 1;
 }
 
-/* Whether any height is NaN.  The under proof needs a surface without holes, and the grids
- * cannot say: their min and max of four samples keep or drop a NaN depending on its place. */
-static int any_nan(const tf_heightfield *hf)
-{
-    const size_t n = (size_t)hf->n * (size_t)hf->n;
-    int bad = 0;
-    for (size_t i = 0; i < n; i++)
-        bad |= hf->h[i] != hf->h[i];
-    return bad;
-}
-
 /* The strip's bins that lie inside the square: [*first, *last], empty where *first > *last.
  * Along each edge of the strip the points inside the square form one interval (it is convex),
  * so the bins inside do too: found from either end, the ones between are not asked. */
@@ -225,7 +214,9 @@ tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
     for (size_t i = 0; i < n; i++)
         a[TF_SUN_BIN * i] = -INFINITY, a[TF_SUN_BIN * i + 1] = INFINITY;
     scatter_blocks(hf, &f, ux, uy, a);
-    const int holes = any_nan(hf);
+    /* a hole (slope_max NaN: heightfield.h) breaks the under proof's continuous surface; the
+     * grids cannot say, their min of four samples keeps or drops a NaN by its place */
+    const int holes = !(hf->slope_max >= 0 && hf->slope_max < INFINITY);
     for (int k = 0; k < f.strips; k++)
         strip_bounds(&f, hf->cells, ux, uy, holes, k, a + TF_SUN_BIN * (size_t)k * (size_t)f.bins);
     s->frame = f;

@@ -66,14 +66,21 @@ static inline float min4(float a, float b, float c, float d)
     return m < m2 ? m : m2;
 }
 
-/* The larger squared gradient (times cell^2) of the cell with corners a = (i, j), b = (i+1, j),
- * c = (i+1, j+1), d = (i, j+1): T1 = (a, b, c) rises b - a along x and c - b along y, T2 =
- * (a, c, d) rises c - d and d - a.  Differences of floats are exact in double. */
-static inline double cell_slope2(float a, float b, float c, float d)
+/* The larger of two squared gradients, NaN if either is: a NaN sample is a hole in the surface,
+ * and the slope bound across a hole is none (render/trace.h's coherence, the sun's strips). */
+static inline double steeper(double g1, double g2)
+{
+    return g1 > g2 || g1 != g1 ? g1 : g2;
+}
+
+/* The squared gradients (times cell^2) of the two triangles of the cell with corners
+ * a = (i, j), b = (i+1, j), c = (i+1, j+1), d = (i, j+1): T1 = (a, b, c) rises b - a along x
+ * and c - b along y, T2 = (a, c, d) rises c - d and d - a.  Differences of floats are exact in
+ * double; a NaN corner makes one of them NaN. */
+static inline void cell_slopes2(float a, float b, float c, float d, double *t1, double *t2)
 {
     double t1x = (double)b - a, t1y = (double)c - b, t2x = (double)c - d, t2y = (double)d - a;
-    double t1 = t1x * t1x + t1y * t1y, t2 = t2x * t2x + t2y * t2y;
-    return t1 > t2 ? t1 : t2;
+    *t1 = t1x * t1x + t1y * t1y, *t2 = t2x * t2x + t2y * t2y;
 }
 
 /* Level 0: a cell's four corner samples; and the row's steepest triangle. */
@@ -86,13 +93,17 @@ static void build_level0_rows(tf_heightfield *hf, double *row_slope, int row_beg
         const float *hi = lo + n;
         float *mxrow = mx + (size_t)cj * cells, *mnrow = mn + (size_t)cj * cells;
         double steepest = 0;
+        int holes = 0; /* a NaN slope seen (branch-free: the loop is hot, 8193^2 cells) */
         for (int ci = 0; ci < cells; ci++) {
             mxrow[ci] = max4(lo[ci], lo[ci + 1], hi[ci], hi[ci + 1]);
             mnrow[ci] = min4(lo[ci], lo[ci + 1], hi[ci], hi[ci + 1]);
-            double g = cell_slope2(lo[ci], lo[ci + 1], hi[ci + 1], hi[ci]);
+            double t1, t2;
+            cell_slopes2(lo[ci], lo[ci + 1], hi[ci + 1], hi[ci], &t1, &t2);
+            const double g = t1 > t2 ? t1 : t2;
             steepest = g > steepest ? g : steepest;
+            holes |= t1 + t2 != t1 + t2;
         }
-        row_slope[cj] = steepest;
+        row_slope[cj] = holes ? NAN : steepest;
     }
 }
 
@@ -162,12 +173,13 @@ static void build_level(tf_heightfield *hf, int level, double *row_slope, int th
 }
 
 /* slope_max from the rows' squared gradients (times cell^2): rounded up by far more than the
- * few roundings of sqrt and the division, so it bounds the true gradients. */
+ * few roundings of sqrt and the division, so it bounds the true gradients; NaN where a row
+ * holds a hole. */
 static double steepest_slope(const double *row_slope, int rows, double cell)
 {
     double g2 = 0;
     for (int r = 0; r < rows; r++)
-        g2 = row_slope[r] > g2 ? row_slope[r] : g2;
+        g2 = steeper(row_slope[r], g2);
     return sqrt(g2) / cell * (1 + 1e-9) + DBL_MIN;
 }
 

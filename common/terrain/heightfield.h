@@ -30,7 +30,9 @@ typedef struct tf_heightfield {
     float **mingrid;   /* mingrid[L]: same shape, minima */
     /* The steepest slope of the surface (the largest gradient norm of its triangles, rise per
      * unit of horizontal run), rounded up: no two points of the surface differ in height by
-     * more than slope_max times their horizontal distance (render/trace.h's coherence). */
+     * more than slope_max times their horizontal distance (render/trace.h's coherence).  NaN
+     * where a sample is NaN (a hole: the surface is not continuous, nothing is bounded), +inf
+     * where the gradients overflow; users ask for 0 <= slope_max < inf. */
     double slope_max;
     /* [terrain] procedural = yes: the terrain is this function, evaluated where rays need it.
      * With a noise generator there are no samples and no grids (h, maxgrid, mingrid NULL, n =

@@ -132,6 +132,33 @@ static void test_a_false_record_hides_a_hit(void **state)
     tf_heightfield_free(hf);
 }
 
+/* A height field with a hole (a column of NaN samples, which no loader lets through, but the
+ * grids take what they are given) between a plain at 0 and a plateau at 100: every finite
+ * triangle is flat, so a slope bound taken over those alone would be ~0, and the surface is not
+ * continuous across the hole.  A ray passing through the hole goes under the plateau without
+ * crossing it and misses; its record must not vouch for a steeper ray that meets the
+ * plateau's underside.  slope_max bounds nothing there, and the coherent trace is tf_trace. */
+static double plain_hole_plateau(int i, int j, int n)
+{
+    (void)j, (void)n;
+    return i == 31 ? NAN : i < 31 ? 0.0 : 100.0;
+}
+
+static void test_a_hole_in_the_field_vouches_for_nothing(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(plain_hole_plateau, 6, 64); /* cell 1 */
+    assert_false(hf->slope_max < INFINITY);
+    const tf_vec3 o = v3(5, 32.5, 99.5), low = v3(1, 0, -0.001), high = v3(1, 0, 0.01);
+    tf_ray_clear below;
+    tf_hit hit, want;
+    assert_false(tf_trace_coherent(hf, o, low, INFINITY, NULL, &hit, &below));
+    assert_true(tf_trace(hf, o, high, 0.0, INFINITY, &want)); /* the underside, at x = 55 */
+    assert_true(tf_trace_coherent(hf, o, high, INFINITY, &below, &hit, NULL));
+    assert_memory_equal(&hit.t, &want.t, sizeof hit.t);
+    tf_heightfield_free(hf);
+}
+
 /* A hit before the lower ray even enters the square is found by the prefix walk: without it
  * the walk would start where the lower ray vouches, past the hill (test_fans.h). */
 static void test_the_prefix_finds_a_hit_before_the_lower_ray_enters(void **state)
@@ -211,6 +238,7 @@ int main(void)
         cmocka_unit_test(test_fans_terraces),
         cmocka_unit_test(test_a_false_record_hides_a_hit),
         cmocka_unit_test(test_the_prefix_finds_a_hit_before_the_lower_ray_enters),
+        cmocka_unit_test(test_a_hole_in_the_field_vouches_for_nothing),
         cmocka_unit_test(test_shadow_rows_hills),
         cmocka_unit_test(test_shadow_rows_rough),
         cmocka_unit_test(test_shadow_rows_terraces),

@@ -27,9 +27,12 @@ static void close_inherited_fds(int keep)
     close_range((unsigned)keep + 1, ~0U, 0);
 }
 
-pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *hf,
-                      const char *backend, tf_local_worker_fn loop, int index, uint64_t *conn,
-                      char *err, size_t errlen)
+/* Fork worker number `index` running loop (NULL: tf_worker_loop); the parent's end of the
+ * socketpair is added to srv as a trusted connection, whose id goes to *conn.  Returns the
+ * child's pid, or -1 with a message in err. */
+static pid_t spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *hf,
+                          const char *backend, tf_local_worker_fn loop, int index,
+                          uint64_t *conn, char *err, size_t errlen)
 {
     int sv[2];
     if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv)) {
@@ -92,8 +95,8 @@ pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *h
 /* Fork worker i into its slot, with a pidfd to wait on (none where the kernel has none). */
 static int spawn_into(tf_local_workers *lw, int i, char *err, size_t errlen)
 {
-    pid_t p = tf_spawn_worker(lw->srv, lw->scene, lw->hf, lw->backend, lw->loop, i, &lw->conn[i],
-                              err, errlen);
+    pid_t p = spawn_worker(lw->srv, lw->scene, lw->hf, lw->backend, lw->loop, i, &lw->conn[i],
+                           err, errlen);
     if (p < 0)
         return -1;
     lw->pid[i] = p;

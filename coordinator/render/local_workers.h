@@ -19,13 +19,6 @@
 typedef int (*tf_local_worker_fn)(ts_client *c, const tf_scene *s, const tf_heightfield *hf,
                                   const char *kind, const char *backend);
 
-/* Fork worker number `index` running loop (NULL: tf_worker_loop); the parent's end of the
- * socketpair is added to srv as a trusted connection, whose id goes to *conn.  Returns the
- * child's pid, or -1 with a message in err. */
-pid_t tf_spawn_worker(ts_server *srv, const tf_scene *s, const tf_heightfield *hf,
-                      const char *backend, tf_local_worker_fn loop, int index, uint64_t *conn,
-                      char *err, size_t errlen);
-
 typedef struct tf_local_workers {
     int n;
     pid_t *pid;        /* 0: not running */

@@ -21,14 +21,15 @@
  *   point answers the shadow question: past it no triangle test can hit (eps, 1e-7 of the
  *   scene's size, is orders above a test's rounding), and tf_occluded over (0, tmax) says 1
  *   exactly when some hit lies inside (0, tmax).
- * Under: where  o.z - climb along(o) + eps < sink[b0 + 1]  (b0 the start's bin), the ray leaves
- *   the bin c > b0 that gives that sink under the least of the surface over that bin by eps, so it is under
- *   the surface by eps all through the bin, which lies inside the square.  If the ray starts
- *   inside the square above the surface by eps, it crosses the surface in between (the square
- *   is convex, the surface continuous over it), and the watertight walk finds that crossing
- *   (trace.c "coherence of shadow rays"): tf_occluded says 1 without walking.  The suffix
- *   maximum makes this one comparison for bins at any distance: an occluder 100 cells off is
- *   proved as cheaply as one in the next bin (bench/README.md section 25).
+ * Under: where  o.z - climb along(o) + eps < sink[b0 + 1]  (b0 the start's bin), the ray
+ *   leaves the bin c > b0 that gives that sink under the least of the surface over that bin
+ *   by eps, so it is under the surface by eps all through the bin, which lies inside the
+ *   square.  If the ray starts inside the square above the surface by eps, it crosses the
+ *   surface in between (the square is convex, the surface continuous over it), and the
+ *   watertight walk finds that crossing (trace.c "coherence of shadow rays"): tf_occluded says
+ *   1 without walking.  The suffix maximum makes this one comparison for bins at any
+ *   distance: an occluder 100 cells off is proved as cheaply as one in the next bin
+ *   (bench/README.md section 25).
  *
  * tf_sun_strips_say asks the under bound first, then tries bins b0+1 .. b0+look for the first
  * that proves the ray clear.  Its rounding: along(o) and the products carry relative errors of

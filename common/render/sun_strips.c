@@ -14,10 +14,10 @@
  *                inside the square,
  * reach rounded up and sink down (a relative 1e-9 on the double, then to the next float).  A
  * height field with a NaN anywhere (a hole, slope_max NaN) gets no sinks: the under proof needs
- * a continuous surface.  One pass over 1/4 of the cells and one over the bins: ~12 ms and 3.5 MB for 2049^2
- * samples.  Bins of 1-3 cells
- * prove a lit ray clear a little sooner, but hold up to 16x the memory for no measurable gain
- * (bench/README.md section 22), and the memory counts against Embree's (issue 23: 1/10).  */
+ * a continuous surface.  One pass over 1/4 of the cells and one over the bins: ~15-20 ms and
+ * 3.5 MB for 2049^2 samples.  Bins of 1-3 cells prove a lit ray clear a little sooner, but
+ * hold up to 16x the memory for no measurable gain (bench/README.md sections 22, 25), and the
+ * memory counts against Embree's (issue 23: 1/10). */
 #include <float.h>
 #include <math.h>
 #include <stdint.h>

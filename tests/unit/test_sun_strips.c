@@ -210,8 +210,8 @@ static void test_rays_terraces(void **state)
 
 /* A wall across the far side of a flat field (rows j >= 200 of 256 cells raised by 100, the
  * sun low over it, heading +y): a ray from the flat ground 150+ cells short of the wall is
- * under the surface only there, 37 bins past its start, and the strips prove it with no walk
- * (the sink's suffix maximum reaches any distance). */
+ * under the surface only there, 37 or more bins past its start, and the strips prove it with
+ * no walk (the sink's suffix maximum reaches any distance; the old look ahead was 16 bins). */
 static double far_wall(int i, int j, int n)
 {
     (void)i, (void)n;
@@ -238,7 +238,7 @@ static void test_a_far_wall_is_proved_without_a_walk(void **state)
     tf_heightfield_free(hf);
 }
 
-/* Tables that lie change answers: reaches lowered prove occluded rays clear, floors raised
+/* Tables that lie change answers: reaches lowered prove occluded rays clear, sinks raised
  * prove lit rays occluded. */
 static int answers_changed(const tf_heightfield *hf, const tf_sun_strips *s, tf_vec3 sun)
 {

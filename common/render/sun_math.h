@@ -31,8 +31,8 @@
  *   distance: an occluder 100 cells off is proved as cheaply as one in the next bin
  *   (bench/README.md section 25).
  *
- * tf_sun_strips_say asks the under bound first, then tries bins b0+1 .. b0+look for the first
- * that proves the ray clear.  Its rounding: along(o) and the products carry relative errors of
+ * tf_sun_strips_say asks the under bound first (not for a ray within the strip margin below),
+ * then tries bins b0+1 .. b0+look for the first that proves the ray clear.  Its rounding: along(o) and the products carry relative errors of
  * ~1e-16, far inside eps and the 1e-6 strip margin (a ray within it of a strip's edge must be
  * proved in both strips); the height under the start interpolates the very triangles the walk
  * tests. */
@@ -98,11 +98,11 @@ TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f, TF_GLOBAL const float *ta
     TF_GLOBAL const float *ra = table + TF_SUN_BIN * (size_t)ka * (size_t)f->bins;
     TF_GLOBAL const float *rb = table + TF_SUN_BIN * (size_t)kb * (size_t)f->bins;
     const int b1 = b0 + 1; /* < bins: b < bins - 1 */
+    /* under in the bin that gives the sink; *t names its middle.  Not asked within the margin
+     * of a strip's edge (ka != kb): the bin, and so the point, would depend on the strip. */
     const float sink = ra[TF_SUN_BIN * b1 + 1];
-    if (base + f->eps < sink && base + f->eps < rb[TF_SUN_BIN * b1 + 1] &&
-        tf_sun_in_square(f, ox, oy) && oz - tf_sun_surface_at(f, h, ox, oy) > f->eps) {
-        /* under in the bin that gives ka's sink (where the ray lies in kb instead, it is under
-         * in the one that gives kb's: occluded either way); *t names the middle of ka's */
+    if (ka == kb && base + f->eps < sink && tf_sun_in_square(f, ox, oy) &&
+        oz - tf_sun_surface_at(f, h, ox, oy) > f->eps) {
         int lo = b1, hi = f->bins - 1;
         while (lo < hi) {
             const int mid = (lo + hi + 1) / 2;

@@ -94,6 +94,7 @@ typedef struct bench {
     int list;        /* --list: print every disagreeing primary ray */
     double tf_build_s, e_build_s; /* medians */
     tf_sun_strips *strips;        /* the coherent mode's shadow rays end where these prove */
+    tf_ray_dir sun_ray;           /* and share their direction's setup (as shade.c's do) */
     double strips_build_s;
 } bench;
 
@@ -387,6 +388,7 @@ static int shadow_rays(bench *b, const tf_scene *s, char *err, size_t errlen)
     /* the sun's strips, as tf_renderer_new builds them (one thread) */
     double t0 = clock_s(CLOCK_MONOTONIC);
     b->strips = tf_sun_strips_build(b->hf, sh.sun_dir);
+    tf_ray_dir_init(&b->sun_ray, b->hf, sh.sun_dir);
     b->strips_build_s = clock_s(CLOCK_MONOTONIC) - t0;
     return 0;
 }
@@ -453,7 +455,7 @@ static void tf_shadow_coherent(const bench *b, found *out)
             continue;
         }
         const double tmax = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
-        out->t[i] = tf_occluded_coherent(b->hf, b->shad.o[i], b->shad.d[i], tmax, &prev, &prev)
+        out->t[i] = tf_occluded_coherent(&b->sun_ray, b->shad.o[i], tmax, &prev, &prev)
                         ? 0
                         : INFINITY;
     }

@@ -33,6 +33,7 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
         tf_noise_init(&sh->noise, s->terrain.seed ^ 0x7465787475726573ULL); /* "textures" */
     double az = s->sun.azimuth_deg * TF_DEG2RAD, el = s->sun.elevation_deg * TF_DEG2RAD;
     sh->sun_dir = v3(sin(az) * cos(el), cos(az) * cos(el), sin(el));
+    tf_ray_dir_init(&sh->sun_ray, hf, sh->sun_dir);
     sh->sun_light = v3_scale(s->sun.color, s->sun.intensity);
     sh->sky_light = v3_scale(v3_lerp(s->sky.horizon, s->sky.zenith, 0.5), s->sky.intensity);
     sh->mist_k = s->mist.falloff > 0 ? log(2.0) / s->mist.falloff : 0.0;
@@ -423,7 +424,7 @@ static int resolve_shadow_coherent(const tf_shader *sh, const tf_shade_pending *
             *mine = (tf_shadow_clear){{sh->sun_dir.x, sh->sun_dir.y, sh->sun_dir.z}, t_under};
         return 1;
     }
-    return tf_occluded_coherent(sh->hf, p->start, sh->sun_dir, tmax, near, mine);
+    return tf_occluded_coherent(&sh->sun_ray, p->start, tmax, near, mine);
 }
 
 /* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */

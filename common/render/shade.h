@@ -47,6 +47,7 @@ typedef struct tf_shader {
     int smooth;              /* terrain.smooth: the sun test and the shadow ray by the
                               * interpolated normal (tf_shade_terrain) */
     tf_vec3 sun_dir;         /* unit vector towards the sun */
+    tf_ray_dir sun_ray;      /* sun_dir's part of a shadow ray's setup, made once (trace.h) */
     tf_vec3 sun_light;       /* sun colour * intensity */
     tf_vec3 sky_light;       /* ambient sky radiance on an upward-facing surface */
     double mist_k;           /* exponential mist: density(z) = density * exp(-mist_k * z) */

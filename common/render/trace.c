@@ -178,52 +178,152 @@ static int cell_of(const tf_heightfield *hf, double inv_cell, double v)
     return i;
 }
 
-/* Prepare a walk.  Returns 0 if the ray cannot meet the terrain in (tmin, tmax). */
-static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmin,
-                     double tmax)
+/* A walk's setup, in steps (the order keeps the box's divisions, which the start cell waits
+ * for, ahead of the others):
+ *   setup_direction  the direction's checks and steps
+ *   setup_box        the part of (tmin, tmax) inside the terrain's box
+ *   setup_inverses   the direction's inverses
+ *   setup_start      the start cell and the walk's tolerances
+ *   setup_shear      the direction's ray space for the triangle tests
+ * setup_ray runs them all; a tf_ray_dir keeps the direction's three for many rays. */
+
+static inline int setup_direction(ray_ctx *r, const tf_heightfield *hf, tf_vec3 d)
 {
-    if (!hf || !isfinite(o.x) || !isfinite(o.y) || !isfinite(o.z) || !isfinite(d.x) ||
-        !isfinite(d.y) || !isfinite(d.z) || (d.x == 0 && d.y == 0 && d.z == 0) || !(tmin < tmax))
+    if (!hf || !isfinite(d.x) || !isfinite(d.y) || !isfinite(d.z) ||
+        (d.x == 0 && d.y == 0 && d.z == 0))
         return 0;
     r->hf = hf;
-    r->o[0] = o.x, r->o[1] = o.y, r->o[2] = o.z;
     r->d[0] = d.x, r->d[1] = d.y, r->d[2] = d.z;
+    r->sx = d.x > 0 ? 1 : d.x < 0 ? -1 : 0;
+    r->sy = d.y > 0 ? 1 : d.y < 0 ? -1 : 0;
+    return 1;
+}
+
+/* tf_clip_slab, skipping its divisions where they cannot matter (inv: NULL, never).  For an
+ * origin inside the slab and *t0 >= 0 the slab's entry parameter is <= 0 <= *t0, so
+ * tf_clip_slab keeps *t0; it keeps *t1 too where the exit (gap / d, gap the distance to the
+ * far side) lies beyond it.  A product with *inv (1 / d rounded, a normal double; 0: never)
+ * proves that: gap * *inv is within 2.3e-16 of gap / d, relative, so exceeding *t1 (normal)
+ * by 1e-12 of it puts gap / d, and so its rounded quotient, beyond *t1.  Everywhere else the
+ * exact clip: the bits are tf_clip_slab's always. */
+static inline int clip_slab(double o, double d, const double *inv, double lo, double hi,
+                            double *t0, double *t1)
+{
+    if (inv && d != 0 && o >= lo && o <= hi && *t0 >= 0 && *t1 >= DBL_MIN &&
+        (d > 0 ? hi - o : lo - o) * *inv > *t1 * (1 + 1e-12))
+        return 1;
+    return tf_clip_slab(o, d, lo, hi, t0, t1);
+}
+
+/* exit_inv: NULL, or the direction's exit inverses (tf_ray_dir, clip_slab).  0 if the ray
+ * cannot meet the terrain in (tmin, tmax). */
+static inline __attribute__((always_inline)) int setup_box(ray_ctx *r, tf_vec3 o, double tmin,
+                                                           double tmax, const double *exit_inv)
+{
+    if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(o.z) || !(tmin < tmax))
+        return 0;
+    const tf_heightfield *hf = r->hf;
+    r->o[0] = o.x, r->o[1] = o.y, r->o[2] = o.z;
     r->tmin = tmin;
     r->tmax = tmax;
-
     /* The box, its top widened so hits at exactly hmin or hmax stay inside after rounding. */
     const double top = (double)hf->cells * hf->cell;
-    const double hmin = hf->hmin, hmax = hf->hmax;
-    const double zpad = tf_box_zpad(hmin, hmax, o.z);
+    const double zpad = tf_box_zpad(hf->hmin, hf->hmax, o.z);
+    const double *ix = exit_inv, *iy = exit_inv ? exit_inv + 1 : NULL;
+    const double *iz = exit_inv ? exit_inv + 2 : NULL;
     double t0 = tmin, t1 = tmax;
-    if (!tf_clip_slab(o.x, d.x, 0, top, &t0, &t1) || !tf_clip_slab(o.y, d.y, 0, top, &t0, &t1))
+    if (!clip_slab(o.x, r->d[0], ix, 0, top, &t0, &t1) ||
+        !clip_slab(o.y, r->d[1], iy, 0, top, &t0, &t1))
         return 0;
     r->t_square = t0;
-    if (!tf_clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1) || !isfinite(t0) ||
-        !isfinite(t1))
+    if (!clip_slab(o.z, r->d[2], iz, hf->hmin - zpad, hf->hmax + zpad, &t0, &t1) ||
+        !isfinite(t0) || !isfinite(t1))
         return 0;
     r->t0 = t0;
     r->t1 = t1;
+    return 1;
+}
 
-    r->sx = d.x > 0 ? 1 : d.x < 0 ? -1 : 0;
-    r->sy = d.y > 0 ? 1 : d.y < 0 ? -1 : 0;
-    r->inv_dx = r->sx ? tf_safe_inverse(d.x) : 0;
-    r->inv_dy = r->sy ? tf_safe_inverse(d.y) : 0;
-    r->inv_cell = 1.0 / hf->cell;
-    r->ci = cell_of(hf, r->inv_cell, o.x + t0 * d.x);
-    r->cj = cell_of(hf, r->inv_cell, o.y + t0 * d.y);
+static inline void setup_inverses(ray_ctx *r)
+{
+    r->inv_dx = r->sx ? tf_safe_inverse(r->d[0]) : 0;
+    r->inv_dy = r->sy ? tf_safe_inverse(r->d[1]) : 0;
+    r->inv_cell = 1.0 / r->hf->cell;
+}
 
-    tf_walk_tolerances(top, hf->cell, hmin, hmax, o, d, r->sx != 0, r->sy != 0, r->inv_dx,
-                       r->inv_dy, t0, t1, &r->tie_tol, &r->margin);
+/* (o and d: the ray's, as r holds them) */
+static inline void setup_start(ray_ctx *r, tf_vec3 o, tf_vec3 d)
+{
+    const tf_heightfield *hf = r->hf;
+    r->ci = cell_of(hf, r->inv_cell, o.x + r->t0 * d.x);
+    r->cj = cell_of(hf, r->inv_cell, o.y + r->t0 * d.y);
+    tf_walk_tolerances((double)hf->cells * hf->cell, hf->cell, hf->hmin, hf->hmax, o, d,
+                       r->sx != 0, r->sy != 0, r->inv_dx, r->inv_dy, r->t0, r->t1, &r->tie_tol,
+                       &r->margin);
+}
 
-    /* Ray space: kz is the dominant axis of d. */
-    double ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
+/* Ray space: kz is the dominant axis of d. */
+static inline void setup_shear(ray_ctx *r)
+{
+    const double ax = fabs(r->d[0]), ay = fabs(r->d[1]), az = fabs(r->d[2]);
     r->kz = ax >= ay ? (ax >= az ? 0 : 2) : (ay >= az ? 1 : 2);
     r->kx = (r->kz + 1) % 3;
     r->ky = (r->kx + 1) % 3;
     r->shx = r->d[r->kx] / r->d[r->kz];
     r->shy = r->d[r->ky] / r->d[r->kz];
     r->shz = 1.0 / r->d[r->kz];
+}
+
+/* Prepare a walk.  Returns 0 if the ray cannot meet the terrain in (tmin, tmax). */
+static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmin,
+                     double tmax)
+{
+    if (!setup_direction(r, hf, d) || !setup_box(r, o, tmin, tmax, NULL))
+        return 0;
+    setup_inverses(r);
+    setup_start(r, o, d);
+    setup_shear(r);
+    return 1;
+}
+
+/* 1 / v rounded where that is a normal double, else 0 (clip_slab). */
+static double exit_inverse(double v)
+{
+    const double inv = 1.0 / v;
+    return fabs(inv) >= DBL_MIN && fabs(inv) <= DBL_MAX ? inv : 0.0;
+}
+
+/* tf_ray_dir_init (trace.h): the direction's steps, inverses and shear, kept. */
+static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
+{
+    ray_ctx r;
+    *k = (tf_ray_dir){.hf = hf, .d = {d.x, d.y, d.z}};
+    if (!setup_direction(&r, hf, d))
+        return 0;
+    setup_inverses(&r);
+    setup_shear(&r);
+    k->sx = r.sx, k->sy = r.sy, k->inv_dx = r.inv_dx, k->inv_dy = r.inv_dy;
+    k->inv_cell = r.inv_cell;
+    k->kx = r.kx, k->ky = r.ky, k->kz = r.kz, k->shx = r.shx, k->shy = r.shy, k->shz = r.shz;
+    k->exit_inv[0] = exit_inverse(d.x);
+    k->exit_inv[1] = exit_inverse(d.y);
+    k->exit_inv[2] = exit_inverse(d.z);
+    return k->ok = 1;
+}
+
+/* setup_ray for a ray of direction k (tf_ray_dir): the same context, bit for bit. */
+static int setup_ray_dir(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o, double tmin, double tmax)
+{
+    if (!k->ok)
+        return 0;
+    r->hf = k->hf;
+    r->d[0] = k->d[0], r->d[1] = k->d[1], r->d[2] = k->d[2];
+    r->sx = k->sx, r->sy = k->sy;
+    if (!setup_box(r, o, tmin, tmax, k->exit_inv))
+        return 0;
+    r->inv_dx = k->inv_dx, r->inv_dy = k->inv_dy, r->inv_cell = k->inv_cell;
+    setup_start(r, o, v3(k->d[0], k->d[1], k->d[2]));
+    r->kx = k->kx, r->ky = k->ky, r->kz = k->kz, r->shx = k->shx, r->shy = k->shy, r->shz = k->shz;
     return 1;
 }
 
@@ -665,19 +765,25 @@ static double under_like_near(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, do
     return 0;
 }
 
-int tf_occluded_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+int tf_occluded_coherent(const tf_ray_dir *dir, tf_vec3 origin, double tmax,
                          const tf_shadow_clear *near, tf_shadow_clear *mine)
 {
-    double t = under_like_near(hf, origin, dir, tmax, near);
+    const tf_vec3 d = {dir->d[0], dir->d[1], dir->d[2]};
+    double t = dir->ok ? under_like_near(dir->hf, origin, d, tmax, near) : 0;
     if (!(t > 0)) {
         ray_ctx r;
         candidate best = {INFINITY, 0, 0, 0};
-        if (setup_ray(&r, hf, origin, dir, 0.0, tmax) && walk_hier(&r, &best))
+        if (setup_ray_dir(&r, dir, origin, 0.0, tmax) && walk_hier(&r, &best))
             t = best.t;
     }
     if (mine)
-        *mine = (tf_shadow_clear){{dir.x, dir.y, dir.z}, t > 0 ? t : 0};
+        *mine = (tf_shadow_clear){{d.x, d.y, d.z}, t > 0 ? t : 0};
     return t > 0;
+}
+
+int tf_ray_dir_init(tf_ray_dir *dir, const tf_heightfield *hf, tf_vec3 d)
+{
+    return dir_of(dir, hf, d);
 }
 
 /* ---- public entry points ---------------------------------------------------------------------- */
@@ -722,6 +828,12 @@ int tf_trace_setup(tf_ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d
                    double tmax)
 {
     return setup_ray(r, hf, o, d, tmin, tmax);
+}
+
+int tf_trace_setup_dir(tf_ray_ctx *r, const tf_ray_dir *dir, tf_vec3 o, double tmin,
+                       double tmax)
+{
+    return setup_ray_dir(r, dir, o, tmin, tmax);
 }
 
 int tf_trace_start_level(const tf_ray_ctx *r) { return start_level(r); }

@@ -55,9 +55,29 @@ typedef struct tf_ray_clear {
  * (if not NULL) with this ray's record.  The same return and hit as tf_trace. */
 int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
                       const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine);
-/* tf_occluded with tmin = 0, helped by `near` (a record of a parallel ray, or NULL): the same
- * answer.  Fills *mine (if not NULL) with this ray's record. */
-int tf_occluded_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+/* What a walk's setup computes from a direction alone: its steps, inverses and shear (a dozen
+ * divisions), made once by tf_ray_dir_init for every ray of that direction over `hf` -- the
+ * sun's shadow rays.  Fields are trace.c's; callers only hold it. */
+typedef struct tf_ray_dir {
+    const tf_heightfield *hf;
+    double d[3];
+    int ok;                /* 0: no walk (d zero or not finite, or hf NULL) */
+    int sx, sy;            /* -1, 0, +1: direction of travel across columns / rows */
+    double inv_dx, inv_dy; /* the walk's inverses (tf_safe_inverse) on axes with a step */
+    double exit_inv[3];    /* 1 / d per axis where that is a normal double, else 0: the
+                            * box's exit proved beyond tmax by a product (trace.c) */
+    double inv_cell;
+    int kx, ky, kz;        /* ray-space axes and shear (trace.c's triangle test) */
+    double shx, shy, shz;
+} tf_ray_dir;
+
+/* Fill *dir for rays of direction d over hf; returns dir->ok. */
+int tf_ray_dir_init(tf_ray_dir *dir, const tf_heightfield *hf, tf_vec3 d);
+
+/* tf_occluded over dir->hf with tmin = 0 and direction dir->d, helped by `near` (a record of a
+ * parallel ray, or NULL): the same answer, bit for bit.  Fills *mine (if not NULL) with this
+ * ray's record. */
+int tf_occluded_coherent(const tf_ray_dir *dir, tf_vec3 origin, double tmax,
                          const tf_shadow_clear *near, tf_shadow_clear *mine);
 
 #endif

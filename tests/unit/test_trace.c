@@ -11,10 +11,13 @@
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
+#include <float.h>
 #include <cmocka.h>
 #include "terrain/heightfield.h"
 #include "terrain/noise.h"
 #include "render/trace.h"
+#include "render/constants.h"
+#include "render/trace_internal.h"
 #include "test_terrains.h"
 
 #define assert_near(a, b, tol) assert_near_at((a), (b), (tol), __FILE__, __LINE__)
@@ -459,6 +462,70 @@ static void test_tmin_tmax_windows(void **state)
     tf_heightfield_free(hf);
 }
 
+/* Two walk contexts alike bit for bit (every field a walk reads). */
+static void assert_same_ctx(const tf_ray_ctx *a, const tf_ray_ctx *b)
+{
+    const double da[] = {a->o[0], a->o[1], a->o[2], a->d[0], a->d[1], a->d[2], a->inv_dx,
+                         a->inv_dy, a->tmin, a->tmax, a->t0, a->t1, a->t_square, a->margin,
+                         a->tie_tol, a->inv_cell, a->shx, a->shy, a->shz};
+    const double db[] = {b->o[0], b->o[1], b->o[2], b->d[0], b->d[1], b->d[2], b->inv_dx,
+                         b->inv_dy, b->tmin, b->tmax, b->t0, b->t1, b->t_square, b->margin,
+                         b->tie_tol, b->inv_cell, b->shx, b->shy, b->shz};
+    for (size_t i = 0; i < sizeof da / sizeof da[0]; i++)
+        if (memcmp(&da[i], &db[i], sizeof da[i]) != 0)
+            fail_msg("field %zu: %.17g != %.17g", i, da[i], db[i]);
+    const int ia[] = {a->sx, a->sy, a->ci, a->cj, a->kx, a->ky, a->kz};
+    const int ib[] = {b->sx, b->sy, b->ci, b->cj, b->kx, b->ky, b->kz};
+    assert_memory_equal(ia, ib, sizeof ia);
+    assert_ptr_equal(a->hf, b->hf);
+}
+
+/* A shared direction's setup (tf_ray_dir: the box's exits proved beyond tmax by products, not
+ * divisions) is tf_trace_setup's, field for field: rays of every kind, windows starting below,
+ * at and above 0, and tmax at each exit of the box, an ulp either side of it, and a hair
+ * beyond it, where a loose proof would keep tmax in place of the exit. */
+static void test_shared_direction_setup_is_the_rays_own(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(hills, 5, 320.0);
+    const double top = hf->cells * hf->cell;
+    rng r = {21};
+    int compared = 0, beyond = 0;
+    for (int s = 0; s < 3000; s++) {
+        tf_vec3 o, d;
+        make_ray(hf, &r, s % KINDS, &o, &d);
+        if (s % 3 == 0) /* from inside the box, where the shortcut applies */
+            o = v3(range(&r, 0, top), range(&r, 0, top), range(&r, hf->hmin, hf->hmax));
+        tf_ray_dir dir;
+        assert_true(tf_ray_dir_init(&dir, hf, d));
+        const double pad = 1e-9 * (fabs(hf->hmin) + fabs(hf->hmax) + fabs(o.z) +
+                                   (hf->hmax - hf->hmin)) + DBL_MIN; /* tf_box_zpad */
+        const double ov[3] = {o.x, o.y, o.z}, dv[3] = {d.x, d.y, d.z};
+        const double lo[3] = {0, 0, hf->hmin - pad}, hi[3] = {top, top, hf->hmax + pad};
+        for (int a = 0; a < 3; a++) {
+            if (dv[a] == 0)
+                continue;
+            const double exit = ((dv[a] > 0 ? hi[a] : lo[a]) - ov[a]) / dv[a];
+            const double tmaxes[] = {exit, nextafter(exit, INFINITY), nextafter(exit, 0),
+                                     exit * (1 + 1e-13), exit * (1 + 1e-10), exit * 0.5,
+                                     exit * 2, TF_FAR_AWAY, INFINITY};
+            const double tmins[] = {0, -1, 0.25 * exit};
+            for (size_t i = 0; i < sizeof tmaxes / sizeof tmaxes[0]; i++)
+                for (size_t j = 0; j < sizeof tmins / sizeof tmins[0]; j++) {
+                    tf_ray_ctx want, got;
+                    const int w = tf_trace_setup(&want, hf, o, d, tmins[j], tmaxes[i]);
+                    assert_int_equal(tf_trace_setup_dir(&got, &dir, o, tmins[j], tmaxes[i]), w);
+                    if (w)
+                        assert_same_ctx(&got, &want), compared++;
+                    beyond += w && exit > 0 && tmaxes[i] > exit && tmaxes[i] < exit * 1.01;
+                }
+        }
+    }
+    assert_true(compared > 20000);
+    assert_true(beyond > 2000);
+    tf_heightfield_free(hf);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -469,6 +536,7 @@ int main(void)
         cmocka_unit_test(test_watertight_at_edges_and_vertices),
         cmocka_unit_test(test_no_leak_along_grid_lines),
         cmocka_unit_test(test_tmin_tmax_windows),
+        cmocka_unit_test(test_shared_direction_setup_is_the_rays_own),
         cmocka_unit_test(test_random_rays_rough),
         cmocka_unit_test(test_random_rays_hills),
         cmocka_unit_test(test_random_rays_terraces),

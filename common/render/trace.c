@@ -37,6 +37,10 @@
  * both walks still agree.  Rays that would hit a cell after the DDA has left it are covered by
  * the cull margin, which bounds the altitude error of the crossing parameters.
  *
+ * Occlusion walks (tf_occluded, tf_occluded_coherent) ask one more test before a cell's
+ * triangles: whether the ray is above both their planes (above_planes), which spares a shadow
+ * ray skimming the surface most of its triangle tests and cannot skip a hit.
+ *
  * Coherence (tf_trace_coherent, tf_occluded_coherent; the two sections before the entry
  * points): a camera ray may skip the stretch the ray below it proves clear, and a shadow ray
  * may be proved occluded where its neighbour's went under the surface; the answers stay those
@@ -140,12 +144,46 @@ static inline void test_if_inside(const ray_ctx *r, int ci, int cj, candidate *b
         test_triangles(r, ci, cj, best);
 }
 
-/* The complete test of cell (ci, cj), whose exit crossings are tx, ty: its own triangles, plus
- * the neighbours sharing its entry or exit corner when the ray passes that corner within
- * tie_tol (see the top of the file).  Returns 1 if anything was hit. */
-static int test_cell(const ray_ctx *r, int ci, int cj, double tx, double ty, candidate *best)
+/* The plane test: is the ray, from t_in to t_out, above both triangles' planes of cell
+ * (ci, cj) by more than the margin?  Then neither triangle can report a hit there.  Each plane
+ * minus the ray is linear along the ray, so it is below -margin all along if it is at the two
+ * ends; the surface over the cell lies on one plane or the other at every point; and the
+ * margin, which already covers the cull by the cell's maximum (a weaker test: the corners'
+ * maximum bounds both planes over the cell), covers the rounding here too, of the points
+ * o + t d and of the planes' values (tiny beside it), and the ray's motion within tie_tol of a
+ * crossing.  [t_in, t_out] holds the ray's part over the cell's square (the walk's span: the
+ * cell's, or a block's around it after a descent) but for hits no walk may report anyway:
+ * before t0 or after t1, outside the box or (tmin, tmax).  So a skipped cell held no hit, and
+ * the hit found is the same, bit for bit.  A shadow ray just above the surface skips ~80% of
+ * its cells' triangle tests this way; a camera ray, arriving where it hits, ~20%, which does
+ * not pay for the test (bench/README.md section 26): only occlusion walks ask it. */
+static int above_planes(const ray_ctx *r, int ci, int cj, double t_in, double t_out)
 {
-    test_triangles(r, ci, cj, best);
+    const tf_heightfield *hf = r->hf;
+    const float *h = hf->h + (size_t)cj * hf->n + ci;
+    const double ha = h[0], hb = h[1], hd = h[hf->n], hc = h[hf->n + 1];
+    const double x0 = (double)ci * hf->cell, y0 = (double)cj * hf->cell, ic = r->inv_cell;
+    /* (u, v): the ends' offsets from corner A, in cells */
+    const double ui = (r->o[0] + t_in * r->d[0] - x0) * ic;
+    const double vi = (r->o[1] + t_in * r->d[1] - y0) * ic;
+    const double uo = (r->o[0] + t_out * r->d[0] - x0) * ic;
+    const double vo = (r->o[1] + t_out * r->d[1] - y0) * ic;
+    const double zi = r->o[2] + t_in * r->d[2], zo = r->o[2] + t_out * r->d[2];
+    /* T1 = (A, B, C): ha + (hb - ha) u + (hc - hb) v;  T2 = (A, C, D): ha + (hc - hd) u + (hd - ha) v */
+    const double g1u = hb - ha, g1v = hc - hb, g2u = hc - hd, g2v = hd - ha, m = r->margin;
+    return zi - (ha + g1u * ui + g1v * vi) > m && zi - (ha + g2u * ui + g2v * vi) > m &&
+           zo - (ha + g1u * uo + g1v * vo) > m && zo - (ha + g2u * uo + g2v * vo) > m;
+}
+
+/* The complete test of cell (ci, cj), whose exit crossings are tx, ty, met by the walk over
+ * [t_in, t_out]: its own triangles (unless the plane test clears them), plus the neighbours
+ * sharing its entry or exit corner when the ray passes that corner within tie_tol (see the top
+ * of the file).  Returns 1 if anything was hit. */
+static int test_cell(const ray_ctx *r, int ci, int cj, double tx, double ty, double t_in,
+                     double t_out, candidate *best)
+{
+    if (!(r->planes && above_planes(r, ci, cj, t_in, t_out)))
+        test_triangles(r, ci, cj, best);
     if (r->sx && r->sy) {
         if (fabs(tx - ty) <= r->tie_tol) {
             test_if_inside(r, ci + r->sx, cj, best);
@@ -280,6 +318,7 @@ static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d,
 {
     if (!setup_direction(r, hf, d) || !setup_box(r, o, tmin, tmax, NULL))
         return 0;
+    r->planes = 0;
     setup_inverses(r);
     setup_start(r, o, d);
     setup_shear(r);
@@ -324,6 +363,7 @@ static int setup_ray_dir(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o, double tmin
     r->inv_dx = k->inv_dx, r->inv_dy = k->inv_dy, r->inv_cell = k->inv_cell;
     setup_start(r, o, v3(k->d[0], k->d[1], k->d[2]));
     r->kx = k->kx, r->ky = k->ky, r->kz = k->kz, r->shx = k->shx, r->shy = k->shy, r->shz = k->shz;
+    r->planes = 0;
     return 1;
 }
 
@@ -364,7 +404,8 @@ static int walk_flat(const ray_ctx *r, candidate *best)
             t_out = t_cur;
         double z_out = oz + t_out * dz;
         size_t idx = (size_t)cj * cells + (unsigned)ci;
-        if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) && test_cell(r, ci, cj, tx, ty, best))
+        if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) &&
+            test_cell(r, ci, cj, tx, ty, t_cur, t_out, best))
             return 1;
         if (!(tc < t1))
             return 0;
@@ -513,7 +554,7 @@ static int walk_hier(const ray_ctx *r, candidate *best)
         if (!culled(oz + t_cur * dz, oz + t_out * dz, hf->maxgrid[level][idx],
                     hf->mingrid[level][idx], margin)) {
             if (level == 0) {
-                if (test_cell(r, ci, cj, tx, ty, best))
+                if (test_cell(r, ci, cj, tx, ty, t_cur, t_out, best))
                     return 1;
             } else {
                 if (stale == STALE_Y)
@@ -773,7 +814,7 @@ int tf_occluded_coherent(const tf_ray_dir *dir, tf_vec3 origin, double tmax,
     if (!(t > 0)) {
         ray_ctx r;
         candidate best = {INFINITY, 0, 0, 0};
-        if (setup_ray_dir(&r, dir, origin, 0.0, tmax) && walk_hier(&r, &best))
+        if (setup_ray_dir(&r, dir, origin, 0.0, tmax) && (r.planes = 1, walk_hier(&r, &best)))
             t = best.t;
     }
     if (mine)
@@ -816,10 +857,16 @@ int tf_trace(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin,
     return trace_ray(hf, origin, dir, tmin, tmax, 0, hit);
 }
 
-/* The first cell whose test hits ends the walk, so this is already an early exit. */
+/* The first cell whose test hits ends the walk, so this is already an early exit; the plane
+ * test spares most of the cells a ray skimming the surface meets their triangle tests. */
 int tf_occluded(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmin, double tmax)
 {
-    return trace_ray(hf, origin, dir, tmin, tmax, 0, NULL);
+    ray_ctx r;
+    candidate best = {INFINITY, 0, 0, 0};
+    if (!setup_ray(&r, hf, origin, dir, tmin, tmax))
+        return 0;
+    r.planes = 1;
+    return walk_hier(&r, &best);
 }
 
 /* ---- the pieces the packet tracer calls per lane (trace_internal.h) -------------------------- */
@@ -841,7 +888,7 @@ int tf_trace_start_level(const tf_ray_ctx *r) { return start_level(r); }
 int tf_trace_test_cell(const tf_ray_ctx *r, int ci, int cj, double tx, double ty,
                        tf_trace_cand *best)
 {
-    return test_cell(r, ci, cj, tx, ty, best);
+    return test_cell(r, ci, cj, tx, ty, 0, 0, best); /* planes is 0 in a packet's lanes */
 }
 
 int tf_trace_fix_stale(const tf_ray_ctx *r, int axis, int stale, int level, double t_event,

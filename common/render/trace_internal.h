@@ -30,6 +30,8 @@ typedef struct tf_ray_ctx {
     double inv_cell;       /* 1 / cell: first guesses of cell indices, never a final one */
     int kx, ky, kz;        /* ray-space axes (kz: the dominant direction) */
     double shx, shy, shz;  /* shear constants */
+    int planes;            /* a cell's triangles tested only where the ray may dip below their
+                            * planes (trace.c, "The plane test"): occlusion walks */
 } tf_ray_ctx;
 
 /* walk_hier's stale axis after a block step. */

@@ -462,6 +462,38 @@ static void test_tmin_tmax_windows(void **state)
     tf_heightfield_free(hf);
 }
 
+/* Occlusion walks skip a cell's triangle tests where the ray is above both their planes by the
+ * margin (trace.c, "The plane test"): rays that skim a surface -- down a tilted plane at a
+ * hair's slope into it, and over rough ground from points on it, the way shadow rays leave --
+ * are occluded exactly where tf_trace (which tests every cell) finds a hit. */
+static void test_occlusion_skims_a_surface_like_a_trace(void **state)
+{
+    (void)state;
+    tf_heightfield *plane = make_field(tilted, 5, 32.0), *ground = make_field(rough, 5, 320.0);
+    rng r = {33};
+    int hits = 0, rays = 0;
+    for (int s = 0; s < 4000; s++) {
+        tf_heightfield *hf = s % 2 ? plane : ground;
+        const double e = hf->cells * hf->cell, span = hf->hmax - hf->hmin + 1;
+        const double x = range(&r, 0.05, 0.95) * e, y = range(&r, 0.05, 0.95) * e;
+        const double az = range(&r, 0, 2 * M_PI), dx = cos(az), dy = sin(az);
+        /* the surface's slope along the heading, from two nearby heights */
+        const double step = 1e-3 * hf->cell;
+        const double slope = (tf_heightfield_height_at(hf, x + step * dx, y + step * dy) -
+                              tf_heightfield_height_at(hf, x, y)) / step;
+        const double lift = (s % 5) * 1e-9 * span * range(&r, 0, 1);
+        const double skim = slope + (s % 3 - 1) * range(&r, 0, 1) * pow(10, -range(&r, 2, 9));
+        const tf_vec3 o = v3(x, y, tf_heightfield_height_at(hf, x, y) + lift);
+        const tf_vec3 d = v3(dx, dy, skim);
+        const int want = tf_trace(hf, o, d, 0, INFINITY, NULL);
+        assert_int_equal(tf_occluded(hf, o, d, 0, INFINITY), want);
+        hits += want, rays++;
+    }
+    assert_true(hits > rays / 5 && hits < rays * 4 / 5);
+    tf_heightfield_free(plane);
+    tf_heightfield_free(ground);
+}
+
 /* Two walk contexts alike bit for bit (every field a walk reads). */
 static void assert_same_ctx(const tf_ray_ctx *a, const tf_ray_ctx *b)
 {
@@ -537,6 +569,7 @@ int main(void)
         cmocka_unit_test(test_no_leak_along_grid_lines),
         cmocka_unit_test(test_tmin_tmax_windows),
         cmocka_unit_test(test_shared_direction_setup_is_the_rays_own),
+        cmocka_unit_test(test_occlusion_skims_a_surface_like_a_trace),
         cmocka_unit_test(test_random_rays_rough),
         cmocka_unit_test(test_random_rays_hills),
         cmocka_unit_test(test_random_rays_terraces),

@@ -175,15 +175,11 @@ static int above_planes(const ray_ctx *r, int ci, int cj, double t_in, double t_
            zo - (ha + g1u * uo + g1v * vo) > m && zo - (ha + g2u * uo + g2v * vo) > m;
 }
 
-/* The complete test of cell (ci, cj), whose exit crossings are tx, ty, met by the walk over
- * [t_in, t_out]: its own triangles (unless the plane test clears them), plus the neighbours
- * sharing its entry or exit corner when the ray passes that corner within tie_tol (see the top
- * of the file).  Returns 1 if anything was hit. */
-static int test_cell(const ray_ctx *r, int ci, int cj, double tx, double ty, double t_in,
-                     double t_out, candidate *best)
+/* The neighbours of cell (ci, cj), whose exit crossings are tx, ty, that share its entry or
+ * exit corner, tested when the ray passes that corner within tie_tol (see the top of the
+ * file).  Returns 1 if anything has been hit. */
+static int test_ties(const ray_ctx *r, int ci, int cj, double tx, double ty, candidate *best)
 {
-    if (!(r->planes && above_planes(r, ci, cj, t_in, t_out)))
-        test_triangles(r, ci, cj, best);
     if (r->sx && r->sy) {
         if (fabs(tx - ty) <= r->tie_tol) {
             test_if_inside(r, ci + r->sx, cj, best);
@@ -196,6 +192,24 @@ static int test_cell(const ray_ctx *r, int ci, int cj, double tx, double ty, dou
         }
     }
     return best->t < INFINITY;
+}
+
+/* The complete test of cell (ci, cj): its own triangles and test_ties.  Returns 1 if anything
+ * was hit. */
+static int test_cell(const ray_ctx *r, int ci, int cj, double tx, double ty, candidate *best)
+{
+    test_triangles(r, ci, cj, best);
+    return test_ties(r, ci, cj, tx, ty, best);
+}
+
+/* test_cell for a walk that meets the cell over [t_in, t_out]: its own triangles spared where
+ * the plane test clears them (occlusion walks only, r->planes). */
+static inline int test_cell_over(const ray_ctx *r, int ci, int cj, double tx, double ty,
+                                 double t_in, double t_out, candidate *best)
+{
+    if (r->planes && above_planes(r, ci, cj, t_in, t_out))
+        return test_ties(r, ci, cj, tx, ty, best);
+    return test_cell(r, ci, cj, tx, ty, best);
 }
 
 /* ---- setup -------------------------------------------------------------------------------- */
@@ -216,26 +230,11 @@ static int cell_of(const tf_heightfield *hf, double inv_cell, double v)
     return i;
 }
 
-/* A walk's setup, in steps (the order keeps the box's divisions, which the start cell waits
- * for, ahead of the others):
- *   setup_direction  the direction's checks and steps
- *   setup_box        the part of (tmin, tmax) inside the terrain's box
- *   setup_inverses   the direction's inverses
- *   setup_start      the start cell and the walk's tolerances
- *   setup_shear      the direction's ray space for the triangle tests
- * setup_ray runs them all; a tf_ray_dir keeps the direction's three for many rays. */
-
-static inline int setup_direction(ray_ctx *r, const tf_heightfield *hf, tf_vec3 d)
-{
-    if (!hf || !isfinite(d.x) || !isfinite(d.y) || !isfinite(d.z) ||
-        (d.x == 0 && d.y == 0 && d.z == 0))
-        return 0;
-    r->hf = hf;
-    r->d[0] = d.x, r->d[1] = d.y, r->d[2] = d.z;
-    r->sx = d.x > 0 ? 1 : d.x < 0 ? -1 : 0;
-    r->sy = d.y > 0 ? 1 : d.y < 0 ? -1 : 0;
-    return 1;
-}
+/* A walk's setup, in steps: the box (the part of (tmin, tmax) inside the terrain's box), the
+ * direction's steps and inverses, the start cell and the walk's tolerances, the direction's
+ * ray space for the triangle tests.  setup_ray runs them all, in that order (the box's
+ * divisions first: the start cell waits for them); a tf_ray_dir keeps the direction's parts
+ * for many rays. */
 
 /* tf_clip_slab, skipping its divisions where they cannot matter (inv: NULL, never).  For an
  * origin inside the slab and *t0 >= 0 the slab's entry parameter is <= 0 <= *t0, so
@@ -253,46 +252,43 @@ static inline int clip_slab(double o, double d, const double *inv, double lo, do
     return tf_clip_slab(o, d, lo, hi, t0, t1);
 }
 
-/* exit_inv: NULL, or the direction's exit inverses (tf_ray_dir, clip_slab).  0 if the ray
- * cannot meet the terrain in (tmin, tmax). */
-static inline __attribute__((always_inline)) int setup_box(ray_ctx *r, tf_vec3 o, double tmin,
+/* The box: r->t_square, t0, t1 for the ray from o along d over (tmin, tmax); exit_inv NULL or
+ * the direction's (tf_ray_dir).  0 if the ray misses it. */
+static inline __attribute__((always_inline)) int setup_box(ray_ctx *r, const tf_heightfield *hf,
+                                                           tf_vec3 o, tf_vec3 d, double tmin,
                                                            double tmax, const double *exit_inv)
 {
-    if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(o.z) || !(tmin < tmax))
-        return 0;
-    const tf_heightfield *hf = r->hf;
-    r->o[0] = o.x, r->o[1] = o.y, r->o[2] = o.z;
-    r->tmin = tmin;
-    r->tmax = tmax;
     /* The box, its top widened so hits at exactly hmin or hmax stay inside after rounding. */
     const double top = (double)hf->cells * hf->cell;
-    const double zpad = tf_box_zpad(hf->hmin, hf->hmax, o.z);
+    const double hmin = hf->hmin, hmax = hf->hmax;
+    const double zpad = tf_box_zpad(hmin, hmax, o.z);
     const double *ix = exit_inv, *iy = exit_inv ? exit_inv + 1 : NULL;
     const double *iz = exit_inv ? exit_inv + 2 : NULL;
     double t0 = tmin, t1 = tmax;
-    if (!clip_slab(o.x, r->d[0], ix, 0, top, &t0, &t1) ||
-        !clip_slab(o.y, r->d[1], iy, 0, top, &t0, &t1))
+    if (!clip_slab(o.x, d.x, ix, 0, top, &t0, &t1) || !clip_slab(o.y, d.y, iy, 0, top, &t0, &t1))
         return 0;
     r->t_square = t0;
-    if (!clip_slab(o.z, r->d[2], iz, hf->hmin - zpad, hf->hmax + zpad, &t0, &t1) ||
-        !isfinite(t0) || !isfinite(t1))
+    if (!clip_slab(o.z, d.z, iz, hmin - zpad, hmax + zpad, &t0, &t1) || !isfinite(t0) ||
+        !isfinite(t1))
         return 0;
     r->t0 = t0;
     r->t1 = t1;
     return 1;
 }
 
-static inline void setup_inverses(ray_ctx *r)
+/* The direction's steps across the grid and their inverses. */
+static inline void setup_steps(ray_ctx *r, const tf_heightfield *hf, tf_vec3 d)
 {
-    r->inv_dx = r->sx ? tf_safe_inverse(r->d[0]) : 0;
-    r->inv_dy = r->sy ? tf_safe_inverse(r->d[1]) : 0;
-    r->inv_cell = 1.0 / r->hf->cell;
+    r->sx = d.x > 0 ? 1 : d.x < 0 ? -1 : 0;
+    r->sy = d.y > 0 ? 1 : d.y < 0 ? -1 : 0;
+    r->inv_dx = r->sx ? tf_safe_inverse(d.x) : 0;
+    r->inv_dy = r->sy ? tf_safe_inverse(d.y) : 0;
+    r->inv_cell = 1.0 / hf->cell;
 }
 
-/* (o and d: the ray's, as r holds them) */
-static inline void setup_start(ray_ctx *r, tf_vec3 o, tf_vec3 d)
+/* The start cell and the walk's tolerances, after setup_box and setup_steps. */
+static inline void setup_start(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d)
 {
-    const tf_heightfield *hf = r->hf;
     r->ci = cell_of(hf, r->inv_cell, o.x + r->t0 * d.x);
     r->cj = cell_of(hf, r->inv_cell, o.y + r->t0 * d.y);
     tf_walk_tolerances((double)hf->cells * hf->cell, hf->cell, hf->hmin, hf->hmax, o, d,
@@ -312,15 +308,30 @@ static inline void setup_shear(ray_ctx *r)
     r->shz = 1.0 / r->d[r->kz];
 }
 
+/* The ray's fields as given, for a walk over hf. */
+static inline void setup_fields(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d,
+                                double tmin, double tmax)
+{
+    r->hf = hf;
+    r->o[0] = o.x, r->o[1] = o.y, r->o[2] = o.z;
+    r->d[0] = d.x, r->d[1] = d.y, r->d[2] = d.z;
+    r->tmin = tmin;
+    r->tmax = tmax;
+    r->planes = 0;
+}
+
 /* Prepare a walk.  Returns 0 if the ray cannot meet the terrain in (tmin, tmax). */
 static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmin,
                      double tmax)
 {
-    if (!setup_direction(r, hf, d) || !setup_box(r, o, tmin, tmax, NULL))
+    if (!hf || !isfinite(o.x) || !isfinite(o.y) || !isfinite(o.z) || !isfinite(d.x) ||
+        !isfinite(d.y) || !isfinite(d.z) || (d.x == 0 && d.y == 0 && d.z == 0) || !(tmin < tmax))
         return 0;
-    r->planes = 0;
-    setup_inverses(r);
-    setup_start(r, o, d);
+    setup_fields(r, hf, o, d, tmin, tmax);
+    if (!setup_box(r, hf, o, d, tmin, tmax, NULL))
+        return 0;
+    setup_steps(r, hf, d);
+    setup_start(r, hf, o, d);
     setup_shear(r);
     return 1;
 }
@@ -337,9 +348,11 @@ static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
 {
     ray_ctx r;
     *k = (tf_ray_dir){.hf = hf, .d = {d.x, d.y, d.z}};
-    if (!setup_direction(&r, hf, d))
+    if (!hf || !isfinite(d.x) || !isfinite(d.y) || !isfinite(d.z) ||
+        (d.x == 0 && d.y == 0 && d.z == 0))
         return 0;
-    setup_inverses(&r);
+    setup_fields(&r, hf, v3(0, 0, 0), d, 0, 0);
+    setup_steps(&r, hf, d);
     setup_shear(&r);
     k->sx = r.sx, k->sy = r.sy, k->inv_dx = r.inv_dx, k->inv_dy = r.inv_dy;
     k->inv_cell = r.inv_cell;
@@ -353,17 +366,16 @@ static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
 /* setup_ray for a ray of direction k (tf_ray_dir): the same context, bit for bit. */
 static int setup_ray_dir(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o, double tmin, double tmax)
 {
-    if (!k->ok)
+    if (!k->ok || !isfinite(o.x) || !isfinite(o.y) || !isfinite(o.z) || !(tmin < tmax))
         return 0;
-    r->hf = k->hf;
-    r->d[0] = k->d[0], r->d[1] = k->d[1], r->d[2] = k->d[2];
-    r->sx = k->sx, r->sy = k->sy;
-    if (!setup_box(r, o, tmin, tmax, k->exit_inv))
+    const tf_vec3 d = {k->d[0], k->d[1], k->d[2]};
+    setup_fields(r, k->hf, o, d, tmin, tmax);
+    if (!setup_box(r, k->hf, o, d, tmin, tmax, k->exit_inv))
         return 0;
-    r->inv_dx = k->inv_dx, r->inv_dy = k->inv_dy, r->inv_cell = k->inv_cell;
-    setup_start(r, o, v3(k->d[0], k->d[1], k->d[2]));
+    r->sx = k->sx, r->sy = k->sy, r->inv_dx = k->inv_dx, r->inv_dy = k->inv_dy;
+    r->inv_cell = k->inv_cell;
+    setup_start(r, k->hf, o, d);
     r->kx = k->kx, r->ky = k->ky, r->kz = k->kz, r->shx = k->shx, r->shy = k->shy, r->shz = k->shz;
-    r->planes = 0;
     return 1;
 }
 
@@ -404,8 +416,7 @@ static int walk_flat(const ray_ctx *r, candidate *best)
             t_out = t_cur;
         double z_out = oz + t_out * dz;
         size_t idx = (size_t)cj * cells + (unsigned)ci;
-        if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) &&
-            test_cell(r, ci, cj, tx, ty, t_cur, t_out, best))
+        if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) && test_cell(r, ci, cj, tx, ty, best))
             return 1;
         if (!(tc < t1))
             return 0;
@@ -554,7 +565,7 @@ static int walk_hier(const ray_ctx *r, candidate *best)
         if (!culled(oz + t_cur * dz, oz + t_out * dz, hf->maxgrid[level][idx],
                     hf->mingrid[level][idx], margin)) {
             if (level == 0) {
-                if (test_cell(r, ci, cj, tx, ty, t_cur, t_out, best))
+                if (test_cell_over(r, ci, cj, tx, ty, t_cur, t_out, best))
                     return 1;
             } else {
                 if (stale == STALE_Y)
@@ -888,7 +899,7 @@ int tf_trace_start_level(const tf_ray_ctx *r) { return start_level(r); }
 int tf_trace_test_cell(const tf_ray_ctx *r, int ci, int cj, double tx, double ty,
                        tf_trace_cand *best)
 {
-    return test_cell(r, ci, cj, tx, ty, 0, 0, best); /* planes is 0 in a packet's lanes */
+    return test_cell(r, ci, cj, tx, ty, best);
 }
 
 int tf_trace_fix_stale(const tf_ray_ctx *r, int axis, int stale, int level, double t_event,

@@ -178,6 +178,36 @@ static void test_the_prefix_finds_a_hit_before_the_lower_ray_enters(void **state
     tf_heightfield_free(hf);
 }
 
+/* A plain beside a ramp of slope 1 (slope_max 1), rising from the row y = 59.  The lower ray
+ * runs along the plain, over it to the square's edge; the upper one, from the same origin,
+ * turns 0.05 rad toward the ramp and climbs 0.0375 per unit of run faster: less than the ramp
+ * can rise under it for that turn (slope_max |u - lu| ~ 0.05), so it meets the ramp at a run of
+ * ~89, well inside what the lower ray went clear over.  The proof must not vouch for it (C1's
+ * D < 0); a slope term half as large would (D > 0), and the walk would skip the hit. */
+static double plain_then_ramp(int i, int j, int n)
+{
+    (void)i, (void)n;
+    return j > 59 ? j - 59.0 : 0.0;
+}
+
+static void test_a_steep_side_keeps_a_diverging_ray_unvouched(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(plain_then_ramp, 7, 128); /* cell 1 */
+    const tf_vec3 o = v3(2, 58, 0.2), lower = v3(1, 0, -0.001);
+    const double turn = 0.05, climb = -0.001 + 0.0375;
+    const tf_vec3 upper = v3(cos(turn), sin(turn), climb);
+    tf_ray_clear rec;
+    tf_hit want, got;
+    assert_false(tf_trace_coherent(hf, o, lower, INFINITY, NULL, &got, &rec));
+    assert_true(rec.s_free > 120); /* clear to the square's edge */
+    assert_true(tf_trace(hf, o, upper, 0.0, INFINITY, &want));
+    assert_true(want.t * hypot(upper.x, upper.y) < 100); /* on the ramp, inside that run */
+    assert_true(tf_trace_coherent(hf, o, upper, INFINITY, &rec, &got, NULL));
+    assert_memory_equal(&got, &want, sizeof want);
+    tf_heightfield_free(hf);
+}
+
 /* ---- shadow rays ----------------------------------------------------------------------------- */
 
 /* Parallel rays toward a sun from points on (or, some, a hair under, or beside) the surface,
@@ -240,6 +270,7 @@ int main(void)
         cmocka_unit_test(test_fans_terraces),
         cmocka_unit_test(test_a_false_record_hides_a_hit),
         cmocka_unit_test(test_the_prefix_finds_a_hit_before_the_lower_ray_enters),
+        cmocka_unit_test(test_a_steep_side_keeps_a_diverging_ray_unvouched),
         cmocka_unit_test(test_a_hole_in_the_field_vouches_for_nothing),
         cmocka_unit_test(test_shadow_rows_hills),
         cmocka_unit_test(test_shadow_rows_rough),

@@ -619,14 +619,15 @@ static int walk_hier(const ray_ctx *r, candidate *best)
    D = k2 - k1 - L |u2 - u1|; where p2(s) is outside, there is no surface under it at all.
    With D > 0 ray 2 is above the surface over [s_in1, s_free1): the same cells as ever, culled
    or tested, find no hit there.  Margins, so that this holds in floating point too:
-     C1. D is computed, then lowered by 1e-9 (1 + |k1| + |k2| + L), far above the few
-         roundings in k, u and L (L itself is rounded up: heightfield.c's steepest_slope).
+     C1. D is computed with |u2 - u1| <= |dx| + |dy| (no square root), then lowered by
+         1e-9 (1 + |k1| + |k2| + L), far above the few roundings in k, u and L (L itself is
+         rounded up: heightfield.c's steepest_slope).
      C2. Ray 1 may be below the surface by a rounding where its tests missed a graze; ray 2 is
          vouched for only from the run s_eps = eps / D on, where its clearance s D >= eps =
          1e-7 times the scene's size, orders above the error of a triangle test.
      C3. The run from ray 2's own entry into the square up to max(s_in1, s_eps) is not vouched
-         for: it is walked as usual (the prefix), then the walk resumes at s_free1 (times
-         1 - 1e-9).
+         for: it is walked as usual (the prefix, its end rounded up by 1e-14: walking a hair
+         more is always safe), then the walk resumes at s_free1 (times 1 - 1e-9).
    Why the hit stays tf_trace's, bit for bit: the prefix walk is the usual walk with its end
    t1 moved in, so it meets the same cells with the same tests until then; a cell it culls on
    the shortened span has no hit up to the new end, and past it lies the vouched-for run (a hit

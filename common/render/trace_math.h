@@ -187,13 +187,14 @@ TF_SHARED tf_mask tf_vouched(tf_lane ux, tf_lane uy, tf_lane k, tf_lane run, tf_
                              tf_lane ls_free, double L, tf_lane eps, tf_lane *t_pre,
                              tf_lane *t_skip)
 {
-    const tf_lane dx = ux - lux, dy = uy - luy;
-    const tf_lane D = (k - lk) - L * sqrt(dx * dx + dy * dy) -
-                      1e-9 * (1 + fabs(k) + fabs(lk) + L);
+    /* |u - lu| <= |dx| + |dy|: a looser bound, but no square root on the chain every camera
+     * ray's walk waits for (nor a division: s_lo / run is rounded up by a product) */
+    const tf_lane dx = ux - lux, dy = uy - luy, inv_run = 1 / run;
+    const tf_lane D = (k - lk) - L * (fabs(dx) + fabs(dy)) - 1e-9 * (1 + fabs(k) + fabs(lk) + L);
     const tf_lane q = eps / D, s_lo = TF_SEL(ls_in, q, q > ls_in);
     const tf_lane s_hi = ls_free * (1 - 1e-9);
-    *t_pre = TF_SEL(TF_LANE(0.0), s_lo / run, t_square * run < s_lo);
-    *t_skip = s_hi * (1 / run);
+    *t_pre = TF_SEL(TF_LANE(0.0), s_lo * inv_run * (1 + 1e-14), t_square * run < s_lo);
+    *t_skip = s_hi * inv_run;
     return TF_AND(TF_AND(ls_free > 0, D > 0), TF_AND(s_hi > s_lo, *t_skip > t0));
 }
 

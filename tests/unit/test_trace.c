@@ -18,6 +18,7 @@
 #include "render/trace.h"
 #include "render/constants.h"
 #include "render/trace_internal.h"
+#include "render/trace_math.h"
 #include "test_terrains.h"
 
 #define assert_near(a, b, tol) assert_near_at((a), (b), (tol), __FILE__, __LINE__)
@@ -494,6 +495,21 @@ static void test_occlusion_skims_a_surface_like_a_trace(void **state)
     tf_heightfield_free(ground);
 }
 
+/* The box as tf_clip_slab (trace_math.h) gives it, slab by slab as setup_ray clips: 0 where
+ * the ray misses it (or the window is empty). */
+static int box_by_clip_slab(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmin,
+                            double tmax, double *t_square, double *t0, double *t1)
+{
+    const double top = hf->cells * hf->cell;
+    const double zpad = tf_box_zpad(hf->hmin, hf->hmax, o.z);
+    *t0 = tmin, *t1 = tmax;
+    if (!(tmin < tmax) || !tf_clip_slab(o.x, d.x, 0, top, t0, t1) || !tf_clip_slab(o.y, d.y, 0, top, t0, t1))
+        return 0;
+    *t_square = *t0;
+    return tf_clip_slab(o.z, d.z, hf->hmin - zpad, hf->hmax + zpad, t0, t1) && isfinite(*t0) &&
+           isfinite(*t1);
+}
+
 /* Two walk contexts alike bit for bit (every field a walk reads). */
 static void assert_same_ctx(const tf_ray_ctx *a, const tf_ray_ctx *b)
 {
@@ -512,10 +528,11 @@ static void assert_same_ctx(const tf_ray_ctx *a, const tf_ray_ctx *b)
     assert_ptr_equal(a->hf, b->hf);
 }
 
-/* A shared direction's setup (tf_ray_dir: the box's exits proved beyond tmax by products, not
- * divisions) is tf_trace_setup's, field for field: rays of every kind, windows starting below,
- * at and above 0, and tmax at each exit of the box, an ulp either side of it, and a hair
- * beyond it, where a loose proof would keep tmax in place of the exit. */
+/* The setup's box is tf_clip_slab's, bit for bit, and a shared direction's setup (tf_ray_dir:
+ * no division where a product proves the box's exit beyond tmax) is tf_trace_setup's, field
+ * for field: rays of every kind, windows starting below, at and above
+ * 0, and tmax at each exit of the box, an ulp either side of it, and a hair beyond it, where a
+ * loose proof would keep tmax in place of the exit. */
 static void test_shared_direction_setup_is_the_rays_own(void **state)
 {
     (void)state;
@@ -545,10 +562,17 @@ static void test_shared_direction_setup_is_the_rays_own(void **state)
             for (size_t i = 0; i < sizeof tmaxes / sizeof tmaxes[0]; i++)
                 for (size_t j = 0; j < sizeof tmins / sizeof tmins[0]; j++) {
                     tf_ray_ctx want, got;
+                    double ts, t0, t1;
                     const int w = tf_trace_setup(&want, hf, o, d, tmins[j], tmaxes[i]);
+                    assert_int_equal(box_by_clip_slab(hf, o, d, tmins[j], tmaxes[i], &ts, &t0,
+                                                      &t1), w);
                     assert_int_equal(tf_trace_setup_dir(&got, &dir, o, tmins[j], tmaxes[i]), w);
-                    if (w)
+                    if (w) {
+                        assert_memory_equal(&want.t_square, &ts, sizeof ts);
+                        assert_memory_equal(&want.t0, &t0, sizeof t0);
+                        assert_memory_equal(&want.t1, &t1, sizeof t1);
                         assert_same_ctx(&got, &want), compared++;
+                    }
                     beyond += w && exit > 0 && tmaxes[i] > exit && tmaxes[i] < exit * 1.01;
                 }
         }

@@ -823,10 +823,11 @@ int tf_occluded_coherent(const tf_ray_dir *dir, tf_vec3 origin, double tmax,
 {
     const tf_vec3 d = {dir->d[0], dir->d[1], dir->d[2]};
     double t = dir->ok ? under_like_near(dir->hf, origin, d, tmax, near) : 0;
-    if (!(t > 0)) {
-        ray_ctx r;
+    ray_ctx r;
+    if (!(t > 0) && setup_ray_dir(&r, dir, origin, 0.0, tmax)) {
         candidate best = {INFINITY, 0, 0, 0};
-        if (setup_ray_dir(&r, dir, origin, 0.0, tmax) && (r.planes = 1, walk_hier(&r, &best)))
+        r.planes = 1; /* an occlusion walk: the plane test */
+        if (walk_hier(&r, &best))
             t = best.t;
     }
     if (mine)

@@ -320,12 +320,24 @@ static inline void setup_fields(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o,
     r->planes = 0;
 }
 
+/* Can a walk over hf follow direction d (finite, not zero)? */
+static inline int walkable(const tf_heightfield *hf, tf_vec3 d)
+{
+    return hf && isfinite(d.x) && isfinite(d.y) && isfinite(d.z) &&
+           !(d.x == 0 && d.y == 0 && d.z == 0);
+}
+
+/* Can a walk start at o over the window (tmin, tmax)? */
+static inline int startable(tf_vec3 o, double tmin, double tmax)
+{
+    return isfinite(o.x) && isfinite(o.y) && isfinite(o.z) && tmin < tmax;
+}
+
 /* Prepare a walk.  Returns 0 if the ray cannot meet the terrain in (tmin, tmax). */
 static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmin,
                      double tmax)
 {
-    if (!hf || !isfinite(o.x) || !isfinite(o.y) || !isfinite(o.z) || !isfinite(d.x) ||
-        !isfinite(d.y) || !isfinite(d.z) || (d.x == 0 && d.y == 0 && d.z == 0) || !(tmin < tmax))
+    if (!walkable(hf, d) || !startable(o, tmin, tmax))
         return 0;
     setup_fields(r, hf, o, d, tmin, tmax);
     if (!setup_box(r, hf, o, d, tmin, tmax, NULL))
@@ -348,8 +360,7 @@ static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
 {
     ray_ctx r;
     *k = (tf_ray_dir){.hf = hf, .d = {d.x, d.y, d.z}};
-    if (!hf || !isfinite(d.x) || !isfinite(d.y) || !isfinite(d.z) ||
-        (d.x == 0 && d.y == 0 && d.z == 0))
+    if (!walkable(hf, d))
         return 0;
     setup_fields(&r, hf, v3(0, 0, 0), d, 0, 0);
     setup_steps(&r, hf, d);
@@ -366,7 +377,7 @@ static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
 /* setup_ray for a ray of direction k (tf_ray_dir): the same context, bit for bit. */
 static int setup_ray_dir(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o, double tmin, double tmax)
 {
-    if (!k->ok || !isfinite(o.x) || !isfinite(o.y) || !isfinite(o.z) || !(tmin < tmax))
+    if (!k->ok || !startable(o, tmin, tmax))
         return 0;
     const tf_vec3 d = {k->d[0], k->d[1], k->d[2]};
     setup_fields(r, k->hf, o, d, tmin, tmax);

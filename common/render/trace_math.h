@@ -188,7 +188,8 @@ TF_SHARED tf_mask tf_vouched(tf_lane ux, tf_lane uy, tf_lane k, tf_lane run, tf_
                              tf_lane *t_skip)
 {
     /* |u - lu| <= |dx| + |dy|: a looser bound, but no square root on the chain every camera
-     * ray's walk waits for (nor a division: s_lo / run is rounded up by a product) */
+     * ray's walk waits for; nor a second division on it: s_lo / run is s_lo times 1 / run
+     * (known before D), rounded up */
     const tf_lane dx = ux - lux, dy = uy - luy, inv_run = 1 / run;
     const tf_lane D = (k - lk) - L * (fabs(dx) + fabs(dy)) - 1e-9 * (1 + fabs(k) + fabs(lk) + L);
     const tf_lane q = eps / D, s_lo = TF_SEL(ls_in, q, q > ls_in);

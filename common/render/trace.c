@@ -55,6 +55,9 @@
  * (packet_trace.cl); what is here is the walk itself. */
 #include "render/trace_math.h"
 
+/* An occlusion walk over a span crossing fewer cells than this walks flat (walk_occlusion). */
+#define TF_FLAT_OCCLUSION_CELLS 64.0
+
 /* The candidate hit and the ray's context are shared with the packet tracer (trace_internal.h). */
 typedef tf_trace_cand candidate;
 typedef tf_ray_ctx ray_ctx;
@@ -419,15 +422,16 @@ static int walk_flat(const ray_ctx *r, candidate *best)
     const double oz = r->o[2], dz = r->d[2], t1 = r->t1;
     int ci = r->ci, cj = r->cj;
     double t_cur = r->t0, z_cur = oz + t_cur * dz;
+    double tx = exit_x(r, ci), ty = exit_y(r, cj);
     for (;;) {
-        double tx = exit_x(r, ci), ty = exit_y(r, cj);
         double tc = tx <= ty ? tx : ty;
         double t_out = tc < t1 ? tc : t1;
         if (t_out < t_cur)
             t_out = t_cur;
         double z_out = oz + t_out * dz;
         size_t idx = (size_t)cj * cells + (unsigned)ci;
-        if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) && test_cell(r, ci, cj, tx, ty, best))
+        if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) &&
+            test_cell_over(r, ci, cj, tx, ty, t_cur, t_out, best))
             return 1;
         if (!(tc < t1))
             return 0;
@@ -437,10 +441,12 @@ static int walk_flat(const ray_ctx *r, candidate *best)
             ci += r->sx;
             if ((unsigned)ci >= cells)
                 return 0;
+            tx = exit_x(r, ci);
         } else {
             cj += r->sy;
             if ((unsigned)cj >= cells)
                 return 0;
+            ty = exit_y(r, cj);
         }
     }
 }
@@ -829,6 +835,18 @@ static double under_like_near(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, do
     return 0;
 }
 
+/* An occlusion walk over the ray's span: the flat walk where the span crosses fewer than
+ * TF_FLAT_OCCLUSION_CELLS cells (cells_per_t: cells crossed per unit of t), else the
+ * hierarchical one.  Both find the same first hit (the top of the file); a shadow ray the sun's
+ * strips prove clear a few bins on skims the surface all the way, where no block above level
+ * 0 can be culled, and the flat walk spares it the climbs and descents (bench/README.md
+ * section 27). */
+static int walk_occlusion(ray_ctx *r, double cells_per_t, candidate *best)
+{
+    const double span = (r->t1 - r->t0) * cells_per_t;
+    return span < TF_FLAT_OCCLUSION_CELLS ? walk_flat(r, best) : walk_hier(r, best);
+}
+
 int tf_occluded_coherent(const tf_ray_dir *dir, tf_vec3 origin, double tmax,
                          const tf_shadow_clear *near, tf_shadow_clear *mine)
 {
@@ -838,7 +856,7 @@ int tf_occluded_coherent(const tf_ray_dir *dir, tf_vec3 origin, double tmax,
     if (!(t > 0) && setup_ray_dir(&r, dir, origin, 0.0, tmax)) {
         candidate best = {INFINITY, 0, 0, 0};
         r.planes = 1; /* an occlusion walk: the plane test */
-        if (walk_hier(&r, &best))
+        if (walk_occlusion(&r, (fabs(d.x) + fabs(d.y)) * r.inv_cell, &best))
             t = best.t;
     }
     if (mine)

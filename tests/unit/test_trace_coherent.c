@@ -259,6 +259,64 @@ static void test_shadow_rows_terraces(void **state)
     shadow_rows(terraces, 6, 300, 7);
 }
 
+/* A shadow ray the strips prove clear past a few bins is walked flat, a longer one through the
+ * hierarchy (trace.c walk_occlusion): either walk, over any span, says tf_occluded's answer and
+ * records tf_trace's first hit, bit for bit.  Rays leave the surface toward a low sun, with
+ * ends a few cells off, some tens of cells off, past the flat walk's 64 cells, and none. */
+static void occlusion_spans(height_fn f, int k, double extent, uint64_t seed, int far_hits)
+{
+    tf_heightfield *hf = make_field(f, k, extent);
+    rng r = {seed};
+    const double e = hf->cells * hf->cell;
+    int hits_near = 0, hits_far = 0;
+    for (int n = 0; n < 60; n++) {
+        double az = range(&r, 0, 2 * M_PI), el = range(&r, 0.03, 0.5);
+        tf_vec3 sun = v3(cos(az) * cos(el), sin(az) * cos(el), sin(el));
+        const double t_cell = hf->cell / hypot(sun.x, sun.y); /* t per cell of run */
+        const double ends[4] = {range(&r, 1, 8) * t_cell, range(&r, 10, 40) * t_cell,
+                                range(&r, 70, 200) * t_cell, INFINITY};
+        tf_ray_dir sun_ray;
+        assert_true(tf_ray_dir_init(&sun_ray, hf, sun));
+        for (int i = 0; i < 100; i++) {
+            double x = range(&r, 0, e), y = range(&r, 0, e), lift = range(&r, 0, 0.004);
+            tf_vec3 o = v3(x, y, tf_heightfield_height_at(hf, x, y) + lift * (hf->hmax - hf->hmin + 1));
+            for (int c = 0; c < 4; c++) {
+                tf_shadow_clear mine;
+                tf_hit want;
+                int hit = tf_trace(hf, o, sun, 0.0, ends[c], &want);
+                assert_int_equal(tf_occluded(hf, o, sun, 0.0, ends[c]), hit);
+                assert_int_equal(tf_occluded_coherent(&sun_ray, o, ends[c], NULL, &mine), hit);
+                if (hit) {
+                    assert_memory_equal(&mine.t_under, &want.t, sizeof want.t);
+                    hits_near += want.t < 40 * t_cell;
+                    hits_far += want.t > 70 * t_cell;
+                }
+            }
+        }
+    }
+    assert_true(hits_near > 200); /* both walks were asked, and found hits */
+    assert_true(hits_far >= far_hits);
+    tf_heightfield_free(hf);
+}
+
+static void test_occlusion_finds_the_first_hit_over_any_span_hills(void **state)
+{
+    (void)state;
+    occlusion_spans(hills, 8, 150, 11, 20);
+}
+
+static void test_occlusion_finds_the_first_hit_over_any_span_terraces(void **state)
+{
+    (void)state;
+    occlusion_spans(terraces, 8, 200, 12, 20);
+}
+
+static void test_occlusion_finds_the_first_hit_over_any_span_rough(void **state)
+{
+    (void)state;
+    occlusion_spans(rough, 7, 100, 13, 0); /* its hits are all near */
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -275,6 +333,9 @@ int main(void)
         cmocka_unit_test(test_shadow_rows_hills),
         cmocka_unit_test(test_shadow_rows_rough),
         cmocka_unit_test(test_shadow_rows_terraces),
+        cmocka_unit_test(test_occlusion_finds_the_first_hit_over_any_span_hills),
+        cmocka_unit_test(test_occlusion_finds_the_first_hit_over_any_span_terraces),
+        cmocka_unit_test(test_occlusion_finds_the_first_hit_over_any_span_rough),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -115,13 +115,28 @@ TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f, TF_GLOBAL const float *ta
         return TF_SUN_UNDER;
     }
     const int end = b0 + f->look < f->bins - 1 ? b0 + f->look : f->bins - 1;
-    for (int c = b1; c <= end; c++)
-        if (base - f->eps > ra[TF_SUN_BIN * c] && base - f->eps > rb[TF_SUN_BIN * c]) {
-            const double start = f->along0 + c * f->ds; /* > along: c > b */
-            *t = (start - along) * f->t_per_cell * (1 + 1e-9) + 1e-9 * f->t_per_cell;
-            return TF_SUN_CLEAR_AFTER;
+    const double need = base - f->eps;
+    int c = b1;
+    while (c <= end && !(need > ra[TF_SUN_BIN * c] && need > rb[TF_SUN_BIN * c]))
+        c++;
+    if (c > end) {
+        /* Not within `look` bins.  Reach never grows away from the sun, so whether a bin
+         * clears the ray is false up to some bin and true from it on: found by halving. */
+        int lo = end + 1, hi = f->bins - 1;
+        if (lo > hi || !(need > ra[TF_SUN_BIN * hi] && need > rb[TF_SUN_BIN * hi]))
+            return TF_SUN_UNKNOWN;
+        while (lo < hi) {
+            const int mid = (lo + hi) / 2;
+            if (need > ra[TF_SUN_BIN * mid] && need > rb[TF_SUN_BIN * mid])
+                hi = mid;
+            else
+                lo = mid + 1;
         }
-    return TF_SUN_UNKNOWN;
+        c = lo;
+    }
+    const double start = f->along0 + c * f->ds; /* > along: c > b */
+    *t = (start - along) * f->t_per_cell * (1 + 1e-9) + 1e-9 * f->t_per_cell;
+    return TF_SUN_CLEAR_AFTER;
 }
 
 #endif

@@ -238,6 +238,37 @@ static void test_a_far_wall_is_proved_without_a_walk(void **state)
     tf_heightfield_free(hf);
 }
 
+/* A spike on a flat field, 1.5 cells beside a lit ray's line but in its strip, 140 cells on
+ * (35 bins, past the 16 the query tries one by one): the ray is under the strip's reach until
+ * past the spike, and is proved clear from the first bin after it, found by halving (reach
+ * never grows away from the sun). */
+static double spike(int i, int j, int n)
+{
+    (void)n;
+    return i == 128 && j == 160 ? 30.0 : 0.0;
+}
+
+static void test_a_ray_clear_past_the_look_ahead_is_proved_clear(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(spike, 8, 256); /* cell 1 */
+    const tf_vec3 sun = sun_at(M_PI / 2, 0.1);
+    tf_sun_strips *s = tf_sun_strips_build(hf, sun);
+    assert_non_null(s);
+    const tf_sun_frame *f = &s->frame;
+    for (double y = 10; y < 20; y += 0.37) {
+        const tf_vec3 o = v3(126.5, y, 0.01);
+        assert_false(tf_occluded(hf, o, sun, 0.0, TF_FAR_AWAY));
+        double t = -1;
+        assert_int_equal(tf_sun_strips_shadow(s, o, &t), TF_SUN_CLEAR_AFTER);
+        const tf_vec3 p = v3_add(o, v3_scale(sun, t));
+        assert_true(p.y > 160 && p.y < 160 + 2 * f->ds / f->b_s); /* just past the spike */
+        assert_false(tf_occluded(hf, o, sun, 0.0, t));
+    }
+    tf_sun_strips_free(s);
+    tf_heightfield_free(hf);
+}
+
 /* Tables that lie change answers: reaches lowered prove occluded rays clear, sinks raised
  * prove lit rays occluded. */
 static int answers_changed(const tf_heightfield *hf, const tf_sun_strips *s, tf_vec3 sun)
@@ -342,6 +373,7 @@ int main(void)
         cmocka_unit_test(test_rays_rough),
         cmocka_unit_test(test_rays_terraces),
         cmocka_unit_test(test_a_far_wall_is_proved_without_a_walk),
+        cmocka_unit_test(test_a_ray_clear_past_the_look_ahead_is_proved_clear),
         cmocka_unit_test(test_a_lying_table_changes_answers),
         cmocka_unit_test(test_a_nan_height_proves_nothing_there),
         cmocka_unit_test(test_no_strips),

@@ -160,7 +160,8 @@ static inline void test_if_inside(const ray_ctx *r, int ci, int cj, candidate *b
  * the hit found is the same, bit for bit.  A shadow ray just above the surface skips ~80% of
  * its cells' triangle tests this way; a camera ray, arriving where it hits, ~20%, which does
  * not pay for the test (bench/README.md section 26): only occlusion walks ask it. */
-static int above_planes(const ray_ctx *r, int ci, int cj, double t_in, double t_out)
+static inline __attribute__((always_inline)) int above_planes(const ray_ctx *r, int ci, int cj,
+                                                              double t_in, double t_out)
 {
     const tf_heightfield *hf = r->hf;
     const float *h = hf->h + (size_t)cj * hf->n + ci;

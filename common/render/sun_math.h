@@ -81,12 +81,30 @@ TF_SHARED int tf_sun_in_square(const tf_sun_frame *f, double x, double y)
     return x >= 0 && x <= top && y >= 0 && y <= top; /* a NaN is not */
 }
 
+/* The bin that gives sink = row's sink at bin b1: the last one whose sink is still that
+ * (sinks never grow away from the sun), by halving. */
+TF_SHARED int tf_sun_sink_bin(const tf_sun_frame *f, TF_GLOBAL const float *row, int b1,
+                              float sink)
+{
+    int lo = b1, hi = f->bins - 1;
+    while (lo < hi) {
+        const int mid = (lo + hi + 1) / 2;
+        if (row[TF_SUN_BIN * mid + 1] >= sink)
+            lo = mid;
+        else
+            hi = mid - 1;
+    }
+    return lo;
+}
+
 /* What the strips prove of the shadow ray from (ox, oy, oz): TF_SUN_CLEAR_AFTER with *t the
- * parameter past which it is clear for good (a little more: rounding), TF_SUN_UNDER with *t a
- * parameter where it is under the surface (it is occluded), or TF_SUN_UNKNOWN. */
+ * parameter past which it is clear for good (a little more: rounding), TF_SUN_UNDER (it is
+ * occluded), or TF_SUN_UNKNOWN.  With name_under an occluded ray's *t is a parameter where it
+ * is under the surface (the C renderer's next shadow ray looks for the surface there first);
+ * without, *t is 0 and the search for that point is spared (the kernels do not use it). */
 TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f, TF_GLOBAL const float *table,
                                 TF_GLOBAL const float *h, double ox, double oy, double oz,
-                                double *t)
+                                int name_under, double *t)
 {
     const double along = f->a_s * ox + f->b_s * oy, across = f->a_p * ox + f->b_p * oy;
     const double k = (across - f->across0) * f->inv_w, b = (along - f->along0) * f->inv_ds;
@@ -98,20 +116,16 @@ TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f, TF_GLOBAL const float *ta
     TF_GLOBAL const float *ra = table + TF_SUN_BIN * (size_t)ka * (size_t)f->bins;
     TF_GLOBAL const float *rb = table + TF_SUN_BIN * (size_t)kb * (size_t)f->bins;
     const int b1 = b0 + 1; /* < bins: b < bins - 1 */
-    /* under in the bin that gives the sink; *t names its middle.  Not asked within the margin
+    /* under in the bin that gives the sink; *t may name its middle.  Not asked within the margin
      * of a strip's edge (ka != kb): the bin, and so the point, would depend on the strip. */
     const float sink = ra[TF_SUN_BIN * b1 + 1];
     if (ka == kb && base + f->eps < sink && tf_sun_in_square(f, ox, oy) &&
         oz - tf_sun_surface_at(f, h, ox, oy) > f->eps) {
-        int lo = b1, hi = f->bins - 1;
-        while (lo < hi) {
-            const int mid = (lo + hi + 1) / 2;
-            if (ra[TF_SUN_BIN * mid + 1] >= sink)
-                lo = mid;
-            else
-                hi = mid - 1;
+        *t = 0;
+        if (name_under) {
+            const int named = tf_sun_sink_bin(f, ra, b1, sink);
+            *t = (f->along0 + (named + 0.5) * f->ds - along) * f->t_per_cell;
         }
-        *t = (f->along0 + (lo + 0.5) * f->ds - along) * f->t_per_cell;
         return TF_SUN_UNDER;
     }
     const int end = b0 + f->look < f->bins - 1 ? b0 + f->look : f->bins - 1;

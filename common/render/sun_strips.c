@@ -237,7 +237,7 @@ void tf_sun_strips_free(tf_sun_strips *s)
 
 int tf_sun_strips_shadow(const tf_sun_strips *s, tf_vec3 o, double *t)
 {
-    return s ? tf_sun_strips_say(&s->frame, s->table, s->h, o.x, o.y, o.z, t) : TF_SUN_UNKNOWN;
+    return s ? tf_sun_strips_say(&s->frame, s->table, s->h, o.x, o.y, o.z, 1, t) : TF_SUN_UNKNOWN;
 }
 
 size_t tf_sun_strips_table_bytes(const tf_sun_strips *s)

@@ -70,7 +70,10 @@ static void check_named_inside(const tf_sun_strips *s, const tf_heightfield *hf)
     const double e = hf->cells * hf->cell, ux = f->a_s * hf->cell, uy = f->b_s * hf->cell;
     for (int k = 0; k < f->strips; k++)
         for (int b = 0; b < f->bins; b++) {
-            const int at = named_bin(f, s->table + TF_SUN_BIN * (size_t)k * f->bins, b);
+            const float *row = s->table + TF_SUN_BIN * (size_t)k * f->bins;
+            const int at = named_bin(f, row, b);
+            if (at >= 0) /* the query's halving finds what the walk along the row finds */
+                assert_int_equal(tf_sun_sink_bin(f, row, b, row[TF_SUN_BIN * b + 1]), at);
             for (int c = 0; at >= 0 && c < 4; c++) {
                 const double al = (f->along0 + (at + (c & 1)) * f->ds) * hf->cell;
                 const double ac = (f->across0 + (k + (c >> 1)) / f->inv_w) * hf->cell;
@@ -136,6 +139,13 @@ static void check_ray(const tf_heightfield *hf, const tf_sun_strips *s, tf_vec3 
     const int want = tf_occluded(hf, o, sun, 0.0, TF_FAR_AWAY);
     double at = -1;
     const int said = tf_sun_strips_shadow(s, o, &at);
+    double unnamed = -1; /* the kernels' query: the same answer, no point named */
+    assert_int_equal(tf_sun_strips_say(&s->frame, s->table, s->h, o.x, o.y, o.z, 0, &unnamed),
+                     said);
+    if (said == TF_SUN_UNDER)
+        assert_true(unnamed == 0);
+    else if (said == TF_SUN_CLEAR_AFTER)
+        assert_true(unnamed == at);
     const int got = said == TF_SUN_UNDER ? 1
                     : tf_occluded(hf, o, sun, 0.0, said == TF_SUN_CLEAR_AFTER ? at : TF_FAR_AWAY);
     if (got != want)

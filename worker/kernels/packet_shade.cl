@@ -569,7 +569,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
              * clear past t, the walk ends there */
             double t;
             const int said = tf_sun_strips_say(&strips, w->strips, w->h, s->start.x[l],
-                                               s->start.y[l], s->start.z[l], &t);
+                                               s->start.y[l], s->start.z[l], 0, &t);
             if (said == TF_SUN_UNDER)
                 continue;
             int m = shadow.n++, q = m / TF_LANES, r = m % TF_LANES;

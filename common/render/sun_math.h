@@ -32,10 +32,12 @@
  *   (bench/README.md section 25).
  *
  * tf_sun_strips_say asks the under bound first (not for a ray within the strip margin below),
- * then tries bins b0+1 .. b0+look for the first that proves the ray clear.  Its rounding: along(o) and the products carry relative errors of
- * ~1e-16, far inside eps and the 1e-6 strip margin (a ray within it of a strip's edge must be
- * proved in both strips); the height under the start interpolates the very triangles the walk
- * tests. */
+ * then tries bins b0+1 .. b0+look for the first that proves the ray clear, and past them finds
+ * it by halving: reach never grows away from the sun, so once a bin proves the ray clear every
+ * later one does (bench/README.md section 27).  Its rounding: along(o) and the products carry
+ * relative errors of ~1e-16, far inside eps and the 1e-6 strip margin (a ray within it of a
+ * strip's edge must be proved in both strips); the height under the start interpolates the
+ * very triangles the walk tests. */
 #ifndef TF_SUN_MATH_H
 #define TF_SUN_MATH_H
 

@@ -30,7 +30,7 @@
 #define TF_SUN_STRIP_CELLS 2.5 /* strip width, cells */
 #define TF_SUN_BIN_CELLS 4.0   /* bin length, cells */
 #define TF_SUN_BLOCK_LEVEL 1   /* the max/min-grid level scattered into the bins */
-#define TF_SUN_LOOK 16         /* bins ahead a ray tries before walking as before */
+#define TF_SUN_LOOK 16         /* bins ahead a ray tries one by one before halving the rest */
 
 /* The frame: the sun's heading in cells, the strips' extent over the square. */
 static int frame_of(const tf_heightfield *hf, tf_vec3 sun, tf_sun_frame *f, double *ux,

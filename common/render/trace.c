@@ -39,7 +39,8 @@
  *
  * Occlusion walks (tf_occluded, tf_occluded_coherent) ask one more test before a cell's
  * triangles: whether the ray is above both their planes (above_planes), which spares a shadow
- * ray skimming the surface most of its triangle tests and cannot skip a hit.
+ * ray skimming the surface most of its triangle tests and cannot skip a hit.  A coherent one
+ * over a short span walks flat (walk_occlusion): the same hit, without the hierarchy.
  *
  * Coherence (tf_trace_coherent, tf_occluded_coherent; the two sections before the entry
  * points): a camera ray may skip the stretch the ray below it proves clear, and a shadow ray

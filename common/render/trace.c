@@ -51,6 +51,7 @@
 #include <math.h>
 #include "render/trace.h"
 #include "render/trace_internal.h"
+#include "terrain/grid_height.h" /* tf_grid_index */
 
 /* The arithmetic of the walk and the triangle tests, shared with the OpenCL kernels
  * (packet_trace.cl); what is here is the walk itself. */
@@ -219,20 +220,12 @@ static inline int test_cell_over(const ray_ctx *r, int ci, int cj, double tx, do
 
 /* ---- setup -------------------------------------------------------------------------------- */
 
-/* Index of the cell containing coordinate v along one axis, decided by the same products
- * (double)i * cell that place the vertices: i*cell <= v < (i+1)*cell, clamped to the grid.
- * g = v * inv_cell is only the first guess: both loops test monotone predicates, so the
- * index they settle on does not depend on it (a multiply, not a division: the guess's last
- * bit does not matter). */
+/* Index of the cell containing coordinate v along one axis (terrain/grid_height.h's
+ * tf_grid_index, which places it by the same products (double)i * cell that place the
+ * vertices), its search started from a multiply, not a division. */
 static int cell_of(const tf_heightfield *hf, double inv_cell, double v)
 {
-    double g = v * inv_cell;
-    int i = g > 0 ? (g < hf->cells ? (int)g : hf->cells - 1) : 0;
-    while (i > 0 && (double)i * hf->cell > v)
-        i--;
-    while (i < hf->cells - 1 && (double)(i + 1) * hf->cell <= v)
-        i++;
-    return i;
+    return tf_grid_index(v, hf->cell, v * inv_cell, hf->cells);
 }
 
 /* A walk's setup, in steps: the box (the part of (tmin, tmax) inside the terrain's box), the

@@ -21,17 +21,26 @@
 #endif
 #endif
 
-/* The index i of the cell holding coordinate v (in [0, cells * cell]) along one axis, decided
- * by the products (double)i * cell that place the samples (i * cell <= v < (i + 1) * cell, the
- * last cell closed), and v's fraction of the way across it in *frac. */
-TF_SHARED int tf_grid_cell_of(double v, double cell, int cells, double *frac)
+/* The index i of the cell holding coordinate v along one axis, decided by the products
+ * (double)i * cell that place the samples: i * cell <= v < (i + 1) * cell, clamped to
+ * [0, cells - 1] (the last cell closed).  guess, v / cell or any value near it (a multiply by
+ * 1 / cell), is only where the search starts: both loops test monotone predicates, so the
+ * index they settle on does not depend on it.  A NaN or huge guess starts at an end. */
+TF_SHARED int tf_grid_index(double v, double cell, double guess, int cells)
 {
-    int i = (int)(v / cell);
-    i = i < 0 ? 0 : i > cells - 1 ? cells - 1 : i;
+    int i = guess > 0 ? (guess < cells ? (int)guess : cells - 1) : 0;
     while (i > 0 && (double)i * cell > v)
         i--;
     while (i < cells - 1 && (double)(i + 1) * cell <= v)
         i++;
+    return i;
+}
+
+/* tf_grid_index of v (in [0, cells * cell]) and v's fraction of the way across that cell in
+ * *frac. */
+TF_SHARED int tf_grid_cell_of(double v, double cell, int cells, double *frac)
+{
+    const int i = tf_grid_index(v, cell, v / cell, cells);
     *frac = (v - (double)i * cell) / cell;
     return i;
 }

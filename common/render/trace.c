@@ -831,13 +831,13 @@ static double under_like_near(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, do
 }
 
 /* An occlusion walk over the ray's span: the flat walk where the span crosses fewer than
- * TF_FLAT_OCCLUSION_CELLS cells (cells_per_t: cells crossed per unit of t), else the
- * hierarchical one.  Both find the same first hit (the top of the file); a shadow ray the sun's
+ * TF_FLAT_OCCLUSION_CELLS cells, else the hierarchical one.  Both find the same first hit (the top of the file); a shadow ray the sun's
  * strips prove clear a few bins on skims the surface all the way, where no block above level
  * 0 can be culled, and the flat walk spares it the climbs and descents (bench/README.md
  * section 27). */
-static int walk_occlusion(ray_ctx *r, double cells_per_t, candidate *best)
+static int walk_occlusion(const ray_ctx *r, candidate *best)
 {
+    const double cells_per_t = (fabs(r->d[0]) + fabs(r->d[1])) * r->inv_cell;
     const double span = (r->t1 - r->t0) * cells_per_t;
     return span < TF_FLAT_OCCLUSION_CELLS ? walk_flat(r, best) : walk_hier(r, best);
 }
@@ -851,7 +851,7 @@ int tf_occluded_coherent(const tf_ray_dir *dir, tf_vec3 origin, double tmax,
     if (!(t > 0) && setup_ray_dir(&r, dir, origin, 0.0, tmax)) {
         candidate best = {INFINITY, 0, 0, 0};
         r.planes = 1; /* an occlusion walk: the plane test */
-        if (walk_occlusion(&r, (fabs(d.x) + fabs(d.y)) * r.inv_cell, &best))
+        if (walk_occlusion(&r, &best))
             t = best.t;
     }
     if (mine)

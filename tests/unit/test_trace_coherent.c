@@ -278,8 +278,9 @@ static void occlusion_spans(height_fn f, int k, double extent, uint64_t seed, in
         tf_ray_dir sun_ray;
         assert_true(tf_ray_dir_init(&sun_ray, hf, sun));
         for (int i = 0; i < 100; i++) {
-            double x = range(&r, 0, e), y = range(&r, 0, e), lift = range(&r, 0, 0.004);
-            tf_vec3 o = v3(x, y, tf_heightfield_height_at(hf, x, y) + lift * (hf->hmax - hf->hmin + 1));
+            const double x = range(&r, 0, e), y = range(&r, 0, e);
+            const double lift = range(&r, 0, 0.004) * (hf->hmax - hf->hmin + 1);
+            const tf_vec3 o = v3(x, y, tf_heightfield_height_at(hf, x, y) + lift);
             for (int c = 0; c < 4; c++) {
                 tf_shadow_clear mine;
                 tf_hit want;

@@ -181,23 +181,43 @@ static inline __attribute__((always_inline)) int above_planes(const ray_ctx *r, 
            zo - (ha + g1u * uo + g1v * vo) > m && zo - (ha + g2u * uo + g2v * vo) > m;
 }
 
-/* The neighbours of cell (ci, cj), whose exit crossings are tx, ty, that share its entry or
- * exit corner, tested when the ray passes that corner within tie_tol (see the top of the
- * file).  Returns 1 if anything has been hit. */
-static int test_ties(const ray_ctx *r, int ci, int cj, double tx, double ty, candidate *best)
+/* The neighbours of cell (ci, cj), whose exit crossings are tx, ty and entry crossings (of the
+ * lines it is entered by) tx_in, ty_in, that share its entry or exit corner, tested when the
+ * ray passes that corner within tie_tol (see the top of the file).  Returns 1 if anything has
+ * been hit. */
+static int test_ties_at(const ray_ctx *r, int ci, int cj, double tx, double ty, double tx_in,
+                        double ty_in, candidate *best)
 {
     if (r->sx && r->sy) {
         if (fabs(tx - ty) <= r->tie_tol) {
             test_if_inside(r, ci + r->sx, cj, best);
             test_if_inside(r, ci, cj + r->sy, best);
         }
-        double tx_in = xcross(r, ci + (r->sx < 0)), ty_in = ycross(r, cj + (r->sy < 0));
         if (fabs(tx_in - ty_in) <= r->tie_tol) {
             test_if_inside(r, ci - r->sx, cj, best);
             test_if_inside(r, ci, cj - r->sy, best);
         }
     }
     return best->t < INFINITY;
+}
+
+/* The crossings of the lines cell (ci, cj) is entered by (+inf on an axis not stepped). */
+static inline double entry_x(const ray_ctx *r, int ci)
+{
+    return r->sx ? xcross(r, ci + (r->sx < 0)) : INFINITY;
+}
+
+static inline double entry_y(const ray_ctx *r, int cj)
+{
+    return r->sy ? ycross(r, cj + (r->sy < 0)) : INFINITY;
+}
+
+/* test_ties_at, the entry crossings computed here. */
+static int test_ties(const ray_ctx *r, int ci, int cj, double tx, double ty, candidate *best)
+{
+    if (!(r->sx && r->sy))
+        return best->t < INFINITY;
+    return test_ties_at(r, ci, cj, tx, ty, entry_x(r, ci), entry_y(r, cj), best);
 }
 
 /* The complete test of cell (ci, cj): its own triangles and test_ties.  Returns 1 if anything
@@ -216,6 +236,22 @@ static inline int test_cell_over(const ray_ctx *r, int ci, int cj, double tx, do
     if (r->planes && above_planes(r, ci, cj, t_in, t_out))
         return test_ties(r, ci, cj, tx, ty, best);
     return test_cell(r, ci, cj, tx, ty, best);
+}
+
+/* test_cell_over for the flat walk, which carries the cell's entry crossings (the exits of the
+ * cells before it on either axis): the same tests, and where the plane test clears the cell
+ * and the ray passes neither corner within tie_tol -- nearly always -- no call at all. */
+static inline __attribute__((always_inline)) int test_cell_flat(const ray_ctx *r, int ci, int cj,
+                                                                double tx, double ty,
+                                                                double tx_in, double ty_in,
+                                                                double t_in, double t_out,
+                                                                candidate *best)
+{
+    if (!(r->planes && above_planes(r, ci, cj, t_in, t_out)))
+        test_triangles(r, ci, cj, best);
+    else if (!(fabs(tx - ty) <= r->tie_tol) && !(fabs(tx_in - ty_in) <= r->tie_tol))
+        return best->t < INFINITY;
+    return test_ties_at(r, ci, cj, tx, ty, tx_in, ty_in, best);
 }
 
 /* ---- setup -------------------------------------------------------------------------------- */
@@ -346,6 +382,41 @@ static int setup_ray(ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d,
     return 1;
 }
 
+/* tf_walk_tolerances's parts that depend on the direction only, for dir_tolerances: the box's
+ * top, |inv_dx|, |inv_dy|, |dz|, the heights' scale and range, and the slope's factor. */
+enum { TOL_TOP, TOL_AX, TOL_AY, TOL_ADZ, TOL_HSCALE, TOL_HRANGE, TOL_SLOPE, TOL_PARTS };
+_Static_assert(TOL_PARTS == sizeof ((tf_ray_dir *)0)->tol / sizeof(double), "tf_ray_dir.tol");
+
+static void dir_tolerance_parts(tf_ray_dir *k, const tf_heightfield *hf)
+{
+    const double hmin = hf->hmin, hmax = hf->hmax, slope = (hmax - hmin) / hf->cell;
+    k->tol[TOL_TOP] = (double)hf->cells * hf->cell;
+    k->tol[TOL_AX] = fabs(k->inv_dx), k->tol[TOL_AY] = fabs(k->inv_dy);
+    k->tol[TOL_ADZ] = fabs(k->d[2]);
+    k->tol[TOL_HSCALE] = fabs(hmin) > fabs(hmax) ? fabs(hmin) : fabs(hmax);
+    k->tol[TOL_HRANGE] = hmax - hmin;
+    k->tol[TOL_SLOPE] = fabs(k->d[2]) + 2 * slope * (fabs(k->d[0]) + fabs(k->d[1]));
+}
+
+/* setup_start's tolerances for a ray of direction k from o (after setup_box): trace_math.h's
+ * tf_walk_tolerances with k's parts of it computed once -- the same operations in the same
+ * order, so the same bits (test_trace.c's test_shared_direction_setup_is_the_rays_own). */
+static inline void dir_tolerances(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o)
+{
+    double tie = 0.0;
+    if (k->sx)
+        tie = tie + (k->tol[TOL_TOP] + fabs(o.x)) * k->tol[TOL_AX];
+    if (k->sy)
+        tie = tie + (k->tol[TOL_TOP] + fabs(o.y)) * k->tol[TOL_AY];
+    tie *= 1e-12;
+    const double tabs = fabs(r->t0) > fabs(r->t1) ? fabs(r->t0) : fabs(r->t1);
+    const double m = 1e-9 * (fabs(o.z) + k->tol[TOL_ADZ] * tabs + k->tol[TOL_HSCALE] +
+                             k->tol[TOL_HRANGE]) +
+                     2 * tie * k->tol[TOL_SLOPE];
+    r->tie_tol = isfinite(tie) ? tie : INFINITY;
+    r->margin = isfinite(m) ? m : INFINITY;
+}
+
 /* 1 / v rounded where that is a normal double, else 0 (clip_slab). */
 static double exit_inverse(double v)
 {
@@ -369,6 +440,7 @@ static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
     k->exit_inv[0] = exit_inverse(d.x);
     k->exit_inv[1] = exit_inverse(d.y);
     k->exit_inv[2] = exit_inverse(d.z);
+    dir_tolerance_parts(k, hf);
     return k->ok = 1;
 }
 
@@ -383,7 +455,9 @@ static int setup_ray_dir(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o, double tmin
         return 0;
     r->sx = k->sx, r->sy = k->sy, r->inv_dx = k->inv_dx, r->inv_dy = k->inv_dy;
     r->inv_cell = k->inv_cell;
-    setup_start(r, k->hf, o, d);
+    r->ci = cell_of(k->hf, r->inv_cell, o.x + r->t0 * d.x);
+    r->cj = cell_of(k->hf, r->inv_cell, o.y + r->t0 * d.y);
+    dir_tolerances(r, k, o);
     r->kx = k->kx, r->ky = k->ky, r->kz = k->kz, r->shx = k->shx, r->shy = k->shy, r->shz = k->shz;
     return 1;
 }
@@ -414,34 +488,47 @@ static int walk_flat(const ray_ctx *r, candidate *best)
     const tf_heightfield *hf = r->hf;
     const float *mx = hf->maxgrid[0], *mn = hf->mingrid[0];
     const unsigned cells = (unsigned)hf->cells;
-    const double oz = r->o[2], dz = r->d[2], t1 = r->t1;
+    const double oz = r->o[2], dz = r->d[2], t1 = r->t1, cell = hf->cell;
     int ci = r->ci, cj = r->cj;
     double t_cur = r->t0, z_cur = oz + t_cur * dz;
     double tx = exit_x(r, ci), ty = exit_y(r, cj);
+    double tx_in = entry_x(r, ci), ty_in = entry_y(r, cj);
+    /* the exit lines as doubles (exact: small integers), the cell's index in the grids, and
+     * their steps, kept as the walk goes instead of recomputed from (ci, cj) */
+    double X = ci + (r->sx > 0), Y = cj + (r->sy > 0);
+    const double dX = r->sx, dY = r->sy;
+    size_t idx = (size_t)cj * cells + (unsigned)ci;
+    const ptrdiff_t di = r->sx, dj = (ptrdiff_t)r->sy * (ptrdiff_t)cells;
     for (;;) {
         double tc = tx <= ty ? tx : ty;
         double t_out = tc < t1 ? tc : t1;
         if (t_out < t_cur)
             t_out = t_cur;
         double z_out = oz + t_out * dz;
-        size_t idx = (size_t)cj * cells + (unsigned)ci;
         if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) &&
-            test_cell_over(r, ci, cj, tx, ty, t_cur, t_out, best))
+            test_cell_flat(r, ci, cj, tx, ty, tx_in, ty_in, t_cur, t_out, best))
             return 1;
         if (!(tc < t1))
             return 0;
         t_cur = t_out;
         z_cur = z_out;
+        /* a finite crossing (tc < t1) on the axis stepped: that axis moves (sx or sy != 0) */
         if (tx <= ty) {
             ci += r->sx;
             if ((unsigned)ci >= cells)
                 return 0;
-            tx = exit_x(r, ci);
+            idx += di;
+            X += dX;
+            tx_in = tx; /* the line just crossed: exit_x of the cell before is entry_x of this */
+            tx = tf_grid_cross(X, cell, r->o[0], r->inv_dx); /* exit_x(r, ci) */
         } else {
             cj += r->sy;
             if ((unsigned)cj >= cells)
                 return 0;
-            ty = exit_y(r, cj);
+            idx += dj;
+            Y += dY;
+            ty_in = ty;
+            ty = tf_grid_cross(Y, cell, r->o[1], r->inv_dy);
         }
     }
 }

@@ -69,6 +69,7 @@ typedef struct tf_ray_dir {
     double inv_cell;
     int kx, ky, kz;        /* ray-space axes and shear (trace.c's triangle test) */
     double shx, shy, shz;
+    double tol[7];         /* the walk's tolerances' parts that depend on the direction only */
 } tf_ray_dir;
 
 /* Fill *dir for rays of direction d over hf; returns dir->ok. */

@@ -483,7 +483,10 @@ static void finish_hit(const ray_ctx *r, const candidate *c, tf_hit *hit)
 
 /* ---- the flat walk -------------------------------------------------------------------------- */
 
-static int walk_flat(const ray_ctx *r, candidate *best)
+/* The flat walk, for a ray that rises (dz > 0: the altitude span of a cell is z_in..z_out in
+ * that order, so culled() needs no ordering -- the same cells culled) or any ray. */
+static inline __attribute__((always_inline)) int walk_flat_as(const ray_ctx *r, candidate *best,
+                                                              int rising)
 {
     const tf_heightfield *hf = r->hf;
     const float *mx = hf->maxgrid[0], *mn = hf->mingrid[0];
@@ -505,7 +508,9 @@ static int walk_flat(const ray_ctx *r, candidate *best)
         if (t_out < t_cur)
             t_out = t_cur;
         double z_out = oz + t_out * dz;
-        if (!culled(z_cur, z_out, mx[idx], mn[idx], r->margin) &&
+        const int skip = rising ? z_cur > mx[idx] + r->margin || z_out < mn[idx] - r->margin
+                                : culled(z_cur, z_out, mx[idx], mn[idx], r->margin);
+        if (!skip &&
             test_cell_flat(r, ci, cj, tx, ty, tx_in, ty_in, t_cur, t_out, best))
             return 1;
         if (!(tc < t1))
@@ -531,6 +536,11 @@ static int walk_flat(const ray_ctx *r, candidate *best)
             ty = tf_grid_cross(Y, cell, r->o[1], r->inv_dy);
         }
     }
+}
+
+static int walk_flat(const ray_ctx *r, candidate *best)
+{
+    return r->d[2] > 0 ? walk_flat_as(r, best, 1) : walk_flat_as(r, best, 0);
 }
 
 /* ---- the hierarchical walk ---------------------------------------------------------------- */

@@ -445,17 +445,18 @@ static void tf_shadow(const bench *b, found *out)
  * then ends), then each with the record of the one before. */
 static void tf_shadow_coherent(const bench *b, found *out)
 {
-    tf_shadow_clear prev = {{0}, 0};
+    tf_shadow_clear prev = {{0}, 0, {0}}, named;
     for (int i = 0; i < b->shad.count; i++) {
         double t;
         const int said = tf_sun_strips_shadow(b->strips, b->shad.o[i], &t);
         if (said == TF_SUN_UNDER) {
-            prev = (tf_shadow_clear){{b->shad.d[i].x, b->shad.d[i].y, b->shad.d[i].z}, t};
+            prev = tf_sun_strips_under_record(b->strips, b->shad.o[i]);
             out->t[i] = 0;
             continue;
         }
         const double tmax = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
-        out->t[i] = tf_occluded_coherent(&b->sun_ray, b->shad.o[i], tmax, &prev, &prev)
+        const tf_shadow_clear *near = tf_sun_strips_named(b->strips, &prev, &named);
+        out->t[i] = tf_occluded_coherent(&b->sun_ray, b->shad.o[i], tmax, near, &prev)
                         ? 0
                         : INFINITY;
     }

@@ -408,7 +408,7 @@ static int shade_begin_row(const tf_renderer *r, int n, row_rays *q)
         q->so[k] = p->start, q->sd[k] = r->shader.sun_dir;
         q->stmin[k] = 0.0;
         /* proved under: the packet finds it */
-        tf_shadow_strips(&r->shader, p->start, &q->stmax[k], NULL);
+        tf_shadow_strips(&r->shader, p->start, &q->stmax[k]);
         k++;
     }
     return k;

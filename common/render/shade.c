@@ -94,13 +94,11 @@ static int trace_terrain(const tf_shader *sh, tf_vec3 o, tf_vec3 d, double tmax,
     return tf_trace(sh->hf, o, d, 0.0, tmax, hit);
 }
 
-int tf_shadow_strips(const tf_shader *sh, tf_vec3 o, double *tmax, double *t_under)
+int tf_shadow_strips(const tf_shader *sh, tf_vec3 o, double *tmax)
 {
     double t;
     const int said = tf_sun_strips_shadow(sh->sun_strips, o, &t);
     *tmax = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
-    if (t_under)
-        *t_under = said == TF_SUN_UNDER ? t : 0;
     return said == TF_SUN_UNDER;
 }
 
@@ -110,7 +108,7 @@ static int terrain_occludes(const tf_shader *sh, tf_vec3 o)
     if (sh->hf->proc)
         return tf_proc_occluded(sh->hf->proc, &sh->view, o, sh->sun_dir, 0.0, TF_FAR_AWAY);
     double tmax;
-    return tf_shadow_strips(sh, o, &tmax, NULL) || tf_occluded(sh->hf, o, sh->sun_dir, 0.0, tmax);
+    return tf_shadow_strips(sh, o, &tmax) || tf_occluded(sh->hf, o, sh->sun_dir, 0.0, tmax);
 }
 
 /* Shadow rays start this far along the normal from a terrain hit. */
@@ -418,12 +416,14 @@ static int resolve_shadow_coherent(const tf_shader *sh, const tf_shade_pending *
     if (!p->shadow)
         return 0;
     (*shadow_rays)++;
-    double tmax, t_under;
-    if (tf_shadow_strips(sh, p->start, &tmax, &t_under)) { /* the neighbours' probe: t_under */
+    double tmax;
+    if (tf_shadow_strips(sh, p->start, &tmax)) { /* its point named if a neighbour asks */
         if (mine)
-            *mine = (tf_shadow_clear){{sh->sun_dir.x, sh->sun_dir.y, sh->sun_dir.z}, t_under};
+            *mine = tf_sun_strips_under_record(sh->sun_strips, p->start);
         return 1;
     }
+    tf_shadow_clear named;
+    near = tf_sun_strips_named(sh->sun_strips, near, &named);
     return tf_occluded_coherent(&sh->sun_ray, p->start, tmax, near, mine);
 }
 

@@ -73,10 +73,10 @@ typedef struct tf_sample {
 /* TF_SKY_DIST: render/constants.h */
 
 /* What the sun's strips (sun_strips.h) prove of the shadow ray from o toward sh->sun_dir: 1,
- * it is occluded, under the surface at *t_under (if t_under is not NULL); else 0, and *tmax is
- * where tf_occluded may stop and still give the whole ray's answer (TF_FAR_AWAY where nothing
- * is proved, or there are no strips; TF_FAR_AWAY too where the ray is occluded). */
-int tf_shadow_strips(const tf_shader *sh, tf_vec3 o, double *tmax, double *t_under);
+ * it is occluded; else 0, and *tmax is where tf_occluded may stop and still give the whole
+ * ray's answer (TF_FAR_AWAY where nothing is proved, or there are no strips; TF_FAR_AWAY too
+ * where the ray is occluded). */
+int tf_shadow_strips(const tf_shader *sh, tf_vec3 o, double *tmax);
 
 void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
 

@@ -48,6 +48,13 @@
 #include "terrain/grid_height.h" /* TF_GLOBAL, tf_grid_height */
 #endif
 
+/* The query inlined where C calls it, its name_under a constant there (sun_strips.c). */
+#ifdef __OPENCL_VERSION__
+#define TF_SUN_INLINE
+#else
+#define TF_SUN_INLINE __attribute__((always_inline))
+#endif
+
 /* The numbers of one set of strips (what the kernels get in P[] / I[]). */
 typedef struct tf_sun_frame {
     double a_s, b_s, a_p, b_p;   /* along and across per world unit of x and y, in cells */
@@ -102,11 +109,12 @@ TF_SHARED int tf_sun_sink_bin(const tf_sun_frame *f, TF_GLOBAL const float *row,
 /* What the strips prove of the shadow ray from (ox, oy, oz): TF_SUN_CLEAR_AFTER with *t the
  * parameter past which it is clear for good (a little more: rounding), TF_SUN_UNDER (it is
  * occluded), or TF_SUN_UNKNOWN.  With name_under an occluded ray's *t is a parameter where it
- * is under the surface (the C renderer's next shadow ray looks for the surface there first);
- * without, *t is 0 and the search for that point is spared (the kernels do not use it). */
-TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f, TF_GLOBAL const float *table,
-                                TF_GLOBAL const float *h, double ox, double oy, double oz,
-                                int name_under, double *t)
+ * is under the surface (sun_strips.h's tf_sun_strips_named: a neighbour's shadow ray looks for
+ * the surface there first); without, *t is 0 and the search for that point is spared. */
+TF_SUN_INLINE TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f,
+                                              TF_GLOBAL const float *table,
+                                              TF_GLOBAL const float *h, double ox, double oy,
+                                              double oz, int name_under, double *t)
 {
     const double along = f->a_s * ox + f->b_s * oy, across = f->a_p * ox + f->b_p * oy;
     const double k = (across - f->across0) * f->inv_w, b = (along - f->along0) * f->inv_ds;

@@ -225,6 +225,7 @@ tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
     s->frame = f;
     s->table = a;
     s->h = hf->h;
+    s->sun = sun;
     return s;
 }
 
@@ -237,7 +238,25 @@ void tf_sun_strips_free(tf_sun_strips *s)
 
 int tf_sun_strips_shadow(const tf_sun_strips *s, tf_vec3 o, double *t)
 {
-    return s ? tf_sun_strips_say(&s->frame, s->table, s->h, o.x, o.y, o.z, 1, t) : TF_SUN_UNKNOWN;
+    return s ? tf_sun_strips_say(&s->frame, s->table, s->h, o.x, o.y, o.z, 0, t) : TF_SUN_UNKNOWN;
+}
+
+tf_shadow_clear tf_sun_strips_under_record(const tf_sun_strips *s, tf_vec3 o)
+{
+    return (tf_shadow_clear){{s->sun.x, s->sun.y, s->sun.z}, -1, {o.x, o.y, o.z}};
+}
+
+const tf_shadow_clear *tf_sun_strips_named(const tf_sun_strips *s, const tf_shadow_clear *near,
+                                           tf_shadow_clear *named)
+{
+    if (!s || !near || !(near->t_under < 0))
+        return near;
+    double t = 0;
+    *named = *near;
+    const int said = tf_sun_strips_say(&s->frame, s->table, s->h, near->o[0], near->o[1],
+                                       near->o[2], 1, &t);
+    named->t_under = said == TF_SUN_UNDER && t > 0 ? t : 0;
+    return named;
 }
 
 size_t tf_sun_strips_table_bytes(const tf_sun_strips *s)

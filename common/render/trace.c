@@ -952,7 +952,7 @@ int tf_occluded_coherent(const tf_ray_dir *dir, tf_vec3 origin, double tmax,
             t = best.t;
     }
     if (mine)
-        *mine = (tf_shadow_clear){{d.x, d.y, d.z}, t > 0 ? t : 0};
+        *mine = (tf_shadow_clear){{d.x, d.y, d.z}, t > 0 ? t : 0, {0, 0, 0}};
     return t > 0;
 }
 

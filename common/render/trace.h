@@ -41,7 +41,10 @@ int tf_occluded(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tm
  * (tf_occluded_coherent). */
 typedef struct tf_shadow_clear {
     double d[3];        /* the direction (a record helps rays of this very direction only) */
-    double t_under;     /* a parameter at which the ray was under the surface; 0: none known */
+    double t_under;     /* a parameter at which the ray was under the surface; 0: none known;
+                         * < 0: the sun's strips proved it under, the point not yet named
+                         * (sun_strips.h: tf_sun_strips_named names it, from o) */
+    double o[3];        /* the ray's origin, where t_under < 0 */
 } tf_shadow_clear;
 
 typedef struct tf_ray_clear {

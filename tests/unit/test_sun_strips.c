@@ -131,21 +131,38 @@ static void test_bound_rough(void **state)
 
 typedef struct tally { int rays, lit, proved_lit, occluded, proved_under; } tally;
 
-/* One shadow ray: occluded where the strips prove it, and the walk ended where they prove it
- * clear answers as the whole ray. */
+/* The point an occluded ray's record names when a neighbour asks (tf_sun_strips_named). */
+static double named_point(const tf_sun_strips *s, tf_vec3 o)
+{
+    const tf_shadow_clear rec = tf_sun_strips_under_record(s, o), *plain = NULL;
+    tf_shadow_clear named;
+    assert_true(rec.t_under < 0);
+    assert_ptr_equal(tf_sun_strips_named(s, plain, &named), NULL);
+    const tf_shadow_clear *got = tf_sun_strips_named(s, &rec, &named);
+    assert_ptr_equal(got, &named);
+    assert_memory_equal(named.d, rec.d, sizeof rec.d);
+    assert_ptr_equal(tf_sun_strips_named(s, got, &named), got); /* a named record is kept */
+    return got->t_under;
+}
+
+/* One shadow ray: occluded where the strips prove it (the point its record names under the
+ * surface), and the walk ended where they prove it clear answers as the whole ray. */
 static void check_ray(const tf_heightfield *hf, const tf_sun_strips *s, tf_vec3 o, tf_vec3 sun,
                       tally *t)
 {
     const int want = tf_occluded(hf, o, sun, 0.0, TF_FAR_AWAY);
     double at = -1;
     const int said = tf_sun_strips_shadow(s, o, &at);
-    double unnamed = -1; /* the kernels' query: the same answer, no point named */
-    assert_int_equal(tf_sun_strips_say(&s->frame, s->table, s->h, o.x, o.y, o.z, 0, &unnamed),
+    double named = -1; /* the query that names an occluded ray's point: the same answer */
+    assert_int_equal(tf_sun_strips_say(&s->frame, s->table, s->h, o.x, o.y, o.z, 1, &named),
                      said);
-    if (said == TF_SUN_UNDER)
-        assert_true(unnamed == 0);
-    else if (said == TF_SUN_CLEAR_AFTER)
-        assert_true(unnamed == at);
+    if (said == TF_SUN_UNDER) {
+        assert_true(at == 0);
+        at = named_point(s, o);
+        assert_true(at == named && at > 0);
+    } else if (said == TF_SUN_CLEAR_AFTER) {
+        assert_true(named == at);
+    }
     const int got = said == TF_SUN_UNDER ? 1
                     : tf_occluded(hf, o, sun, 0.0, said == TF_SUN_CLEAR_AFTER ? at : TF_FAR_AWAY);
     if (got != want)
@@ -241,6 +258,7 @@ static void test_a_far_wall_is_proved_without_a_walk(void **state)
         assert_true(tf_occluded(hf, o, sun, 0.0, TF_FAR_AWAY));
         double t = -1;
         assert_int_equal(tf_sun_strips_shadow(s, o, &t), TF_SUN_UNDER);
+        t = named_point(s, o);
         const tf_vec3 p = v3_add(o, v3_scale(sun, t));
         assert_true(p.y >= 200 && p.z < tf_heightfield_height_at(hf, p.x, p.y));
     }

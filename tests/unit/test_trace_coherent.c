@@ -225,13 +225,13 @@ static void shadow_rows(height_fn f, int k, double extent, uint64_t seed)
         tf_vec3 sun = v3(cos(az) * cos(el), sin(az) * cos(el), sin(el));
         double x = range(&r, -0.05, 1.05) * e, y = range(&r, 0, e), lift = range(&r, -0.002, 0.02);
         double dx = range(&r, -1, 1) * 0.5 * hf->cell, dy = range(&r, -1, 1) * 0.5 * hf->cell;
-        tf_shadow_clear prev = {{0}, 0};
+        tf_shadow_clear prev = {{0}, 0, {0}};
         tf_ray_dir sun_ray;
         assert_true(tf_ray_dir_init(&sun_ray, hf, sun));
         for (int i = 0; i < 40; i++, x += dx, y += dy) {
             double z = tf_heightfield_height_at(hf, x, y) + lift * (hf->hmax - hf->hmin + 1);
             tf_vec3 o = v3(x, y, z);
-            tf_shadow_clear mine, any = {{sun.x, sun.y, sun.z}, range(&r, -1, 2) * e};
+            tf_shadow_clear mine, any = {{sun.x, sun.y, sun.z}, range(&r, -1, 2) * e, {0}};
             int want = tf_occluded(hf, o, sun, 0.0, INFINITY);
             assert_int_equal(tf_occluded_coherent(&sun_ray, o, INFINITY, &prev, &mine), want);
             assert_int_equal(tf_occluded_coherent(&sun_ray, o, INFINITY, &any, NULL), want);

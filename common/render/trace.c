@@ -503,7 +503,9 @@ static inline __attribute__((always_inline)) int walk_flat_as(const ray_ctx *r, 
     size_t idx = (size_t)cj * cells + (unsigned)ci;
     const ptrdiff_t di = r->sx, dj = (ptrdiff_t)r->sy * (ptrdiff_t)cells;
     for (;;) {
-        double tc = tx <= ty ? tx : ty;
+        /* tx <= ty ? tx : ty, the crossings never NaN (finite lines times a finite inverse,
+         * or INFINITY): a minsd */
+        double tc = ty < tx ? ty : tx;
         double t_out = tc < t1 ? tc : t1;
         if (t_out < t_cur)
             t_out = t_cur;

@@ -668,7 +668,7 @@ static int walk_hier(const ray_ctx *r, candidate *best)
                        : INFINITY;
         double ty = sy ? tf_grid_cross((double)((bj + y_ahead) << level), cell, oy, inv_dy)
                        : INFINITY;
-        double tc = tx <= ty ? tx : ty;
+        double tc = ty < tx ? ty : tx; /* tx <= ty ? tx : ty: never NaN (walk_flat) */
         double t_out = tc < t1 ? tc : t1;
         if (t_out < t_cur)
             t_out = t_cur;

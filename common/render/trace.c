@@ -496,10 +496,9 @@ static inline __attribute__((always_inline)) int walk_flat_as(const ray_ctx *r, 
     double t_cur = r->t0, z_cur = oz + t_cur * dz;
     double tx = exit_x(r, ci), ty = exit_y(r, cj);
     double tx_in = entry_x(r, ci), ty_in = entry_y(r, cj);
-    /* the exit lines as doubles (exact: small integers), the cell's index in the grids, and
-     * their steps, kept as the walk goes instead of recomputed from (ci, cj) */
-    double X = ci + (r->sx > 0), Y = cj + (r->sy > 0);
-    const double dX = r->sx, dY = r->sy;
+    /* the exit lines' offsets from (ci, cj), and the cell's index in the grids and its steps,
+     * kept as the walk goes instead of recomputed from (ci, cj) */
+    const int ax = r->sx > 0, ay = r->sy > 0;
     size_t idx = (size_t)cj * cells + (unsigned)ci;
     const ptrdiff_t di = r->sx, dj = (ptrdiff_t)r->sy * (ptrdiff_t)cells;
     for (;;) {
@@ -525,17 +524,15 @@ static inline __attribute__((always_inline)) int walk_flat_as(const ray_ctx *r, 
             if ((unsigned)ci >= cells)
                 return 0;
             idx += di;
-            X += dX;
             tx_in = tx; /* the line just crossed: exit_x of the cell before is entry_x of this */
-            tx = tf_grid_cross(X, cell, r->o[0], r->inv_dx); /* exit_x(r, ci) */
+            tx = tf_grid_cross((double)(ci + ax), cell, r->o[0], r->inv_dx); /* exit_x(r, ci) */
         } else {
             cj += r->sy;
             if ((unsigned)cj >= cells)
                 return 0;
             idx += dj;
-            Y += dY;
             ty_in = ty;
-            ty = tf_grid_cross(Y, cell, r->o[1], r->inv_dy);
+            ty = tf_grid_cross((double)(cj + ay), cell, r->o[1], r->inv_dy);
         }
     }
 }

@@ -441,17 +441,42 @@ static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
     k->exit_inv[1] = exit_inverse(d.y);
     k->exit_inv[2] = exit_inverse(d.z);
     dir_tolerance_parts(k, hf);
+    k->exit_xy[0] = d.x > 0 ? k->tol[TOL_TOP] : 0;
+    k->exit_xy[1] = d.y > 0 ? k->tol[TOL_TOP] : 0;
+    k->moves_all = d.x != 0 && d.y != 0 && d.z != 0;
     return k->ok = 1;
 }
 
 /* setup_ray for a ray of direction k (tf_ray_dir): the same context, bit for bit. */
+/* Would each of setup_box's three clip_slab shortcuts hold for the window (tmin, tmax) of a ray
+ * of direction k from o?  Each keeps t0 = tmin and t1 = tmax, so the next one would see the
+ * window unchanged, and the box is the window itself.  The same comparisons of the same values
+ * (the exits' sides are the direction's), asked once each: a shadow ray the strips end nearly
+ * always passes. */
+static inline int window_in_box(const tf_ray_dir *k, tf_vec3 o, double tmin, double tmax)
+{
+    if (!(k->moves_all && tmin >= 0 && tmax >= DBL_MIN))
+        return 0;
+    const double beyond = tmax * (1 + 1e-12), top = k->tol[TOL_TOP];
+    if (!(o.x >= 0 && o.x <= top && (k->exit_xy[0] - o.x) * k->exit_inv[0] > beyond))
+        return 0;
+    if (!(o.y >= 0 && o.y <= top && (k->exit_xy[1] - o.y) * k->exit_inv[1] > beyond))
+        return 0;
+    const tf_heightfield *hf = k->hf;
+    const double zpad = tf_box_zpad(hf->hmin, hf->hmax, o.z);
+    const double zlo = hf->hmin - zpad, zhi = hf->hmax + zpad;
+    return o.z >= zlo && o.z <= zhi && ((k->d[2] > 0 ? zhi : zlo) - o.z) * k->exit_inv[2] > beyond;
+}
+
 static int setup_ray_dir(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o, double tmin, double tmax)
 {
     if (!k->ok || !startable(o, tmin, tmax))
         return 0;
     const tf_vec3 d = {k->d[0], k->d[1], k->d[2]};
     setup_fields(r, k->hf, o, d, tmin, tmax);
-    if (!setup_box(r, k->hf, o, d, tmin, tmax, k->exit_inv))
+    if (window_in_box(k, o, tmin, tmax))
+        r->t_square = r->t0 = tmin, r->t1 = tmax;
+    else if (!setup_box(r, k->hf, o, d, tmin, tmax, k->exit_inv))
         return 0;
     r->sx = k->sx, r->sy = k->sy, r->inv_dx = k->inv_dx, r->inv_dy = k->inv_dy;
     r->inv_cell = k->inv_cell;

@@ -73,6 +73,8 @@ typedef struct tf_ray_dir {
     int kx, ky, kz;        /* ray-space axes and shear (trace.c's triangle test) */
     double shx, shy, shz;
     double tol[7];         /* the walk's tolerances' parts that depend on the direction only */
+    double exit_xy[2];     /* the box's side a ray leaves by on x and y (cells * cell or 0) */
+    int moves_all;         /* d has no zero component (trace.c's window_in_box) */
 } tf_ray_dir;
 
 /* Fill *dir for rays of direction d over hf; returns dir->ok. */

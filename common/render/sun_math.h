@@ -141,8 +141,12 @@ TF_SUN_INLINE TF_SHARED int tf_sun_strips_say(const tf_sun_frame *f,
     const int end = b0 + f->look < f->bins - 1 ? b0 + f->look : f->bins - 1;
     const double need = base - f->eps;
     int c = b1;
-    while (c <= end && !(need > ra[TF_SUN_BIN * c] && need > rb[TF_SUN_BIN * c]))
-        c++;
+    if (ka == kb) /* one strip (nearly every ray): one comparison a bin */
+        while (c <= end && !(need > ra[TF_SUN_BIN * c]))
+            c++;
+    else
+        while (c <= end && !(need > ra[TF_SUN_BIN * c] && need > rb[TF_SUN_BIN * c]))
+            c++;
     if (c > end) {
         /* Not within `look` bins.  Reach never grows away from the sun, so whether a bin
          * clears the ray is false up to some bin and true from it on: found by halving. */

@@ -447,7 +447,6 @@ static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
     return k->ok = 1;
 }
 
-/* setup_ray for a ray of direction k (tf_ray_dir): the same context, bit for bit. */
 /* Would each of setup_box's three clip_slab shortcuts hold for the window (tmin, tmax) of a ray
  * of direction k from o?  Each keeps t0 = tmin and t1 = tmax, so the next one would see the
  * window unchanged, and the box is the window itself.  The same comparisons of the same values
@@ -468,6 +467,7 @@ static inline int window_in_box(const tf_ray_dir *k, tf_vec3 o, double tmin, dou
     return o.z >= zlo && o.z <= zhi && ((k->d[2] > 0 ? zhi : zlo) - o.z) * k->exit_inv[2] > beyond;
 }
 
+/* setup_ray for a ray of direction k (tf_ray_dir): the same context, bit for bit. */
 static int setup_ray_dir(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o, double tmin, double tmax)
 {
     if (!k->ok || !startable(o, tmin, tmax))

@@ -318,6 +318,48 @@ static void test_occlusion_finds_the_first_hit_over_any_span_rough(void **state)
     occlusion_spans(rough, 7, 100, 13, 0); /* its hits are all near */
 }
 
+/* Shadow rays aimed at grid vertices, so that they pass cell corners exactly: where the walk
+ * meets a corner it also tests the cells sharing it (trace.c, "Rounding"), the flat walk with
+ * the entry crossings it carries from the cells before.  Each direction's heading crosses
+ * corners on its way (diagonals, and 2:1 slopes every other column); rays end before, at and
+ * past the vertex.  tf_occluded_coherent says tf_occluded's answer and records tf_trace's
+ * first hit, bit for bit. */
+static void test_occlusion_through_corners(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(rough, 5, 32.0); /* cell 1: corners on whole numbers */
+    const double headings[][2] = {{1, 1}, {-1, 1}, {1, -1}, {-1, -1}, {2, 1}, {-1, 2}};
+    rng r = {41};
+    int hits = 0, compared = 0;
+    for (size_t h = 0; h < sizeof headings / sizeof headings[0]; h++)
+        for (int e = 0; e < 4; e++) {
+            const double run = hypot(headings[h][0], headings[h][1]), el = 0.05 + 0.2 * e;
+            const tf_vec3 sun = v3(headings[h][0] / run * cos(el), headings[h][1] / run * cos(el),
+                                   sin(el)); /* unit; the diagonals' |x| and |y| equal */
+            tf_ray_dir sun_ray;
+            assert_true(tf_ray_dir_init(&sun_ray, hf, sun));
+            for (int i = 0; i < 300; i++) {
+                const int vi = 4 + (int)range(&r, 0, 24), vj = 4 + (int)range(&r, 0, 24);
+                const tf_vec3 v = v3(vi, vj, hf->h[(size_t)vj * hf->n + vi] + range(&r, -0.5, 0.5));
+                const double s = range(&r, 1, 4) * hf->cell / hypot(sun.x, sun.y);
+                const tf_vec3 o = v3_sub(v, v3_scale(sun, s)); /* o + s sun is the vertex */
+                const double ends[] = {s, nextafter(s, 0), nextafter(s, INFINITY), 2 * s, INFINITY};
+                for (size_t c = 0; c < sizeof ends / sizeof ends[0]; c++) {
+                    tf_shadow_clear mine;
+                    tf_hit want;
+                    const int hit = tf_trace(hf, o, sun, 0.0, ends[c], &want);
+                    assert_int_equal(tf_occluded(hf, o, sun, 0.0, ends[c]), hit);
+                    assert_int_equal(tf_occluded_coherent(&sun_ray, o, ends[c], NULL, &mine), hit);
+                    if (hit)
+                        assert_memory_equal(&mine.t_under, &want.t, sizeof want.t), hits++;
+                    compared++;
+                }
+            }
+        }
+    assert_true(hits > compared / 4 && hits < compared * 3 / 4); /* both answers, often */
+    tf_heightfield_free(hf);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -335,6 +377,7 @@ int main(void)
         cmocka_unit_test(test_shadow_rows_rough),
         cmocka_unit_test(test_shadow_rows_terraces),
         cmocka_unit_test(test_occlusion_finds_the_first_hit_over_any_span_hills),
+        cmocka_unit_test(test_occlusion_through_corners),
         cmocka_unit_test(test_occlusion_finds_the_first_hit_over_any_span_terraces),
         cmocka_unit_test(test_occlusion_finds_the_first_hit_over_any_span_rough),
     };

@@ -181,24 +181,11 @@ static inline __attribute__((always_inline)) int above_planes(const ray_ctx *r, 
            zo - (ha + g1u * uo + g1v * vo) > m && zo - (ha + g2u * uo + g2v * vo) > m;
 }
 
-/* The neighbours of cell (ci, cj), whose exit crossings are tx, ty and entry crossings (of the
- * lines it is entered by) tx_in, ty_in, that share its entry or exit corner, tested when the
- * ray passes that corner within tie_tol (see the top of the file).  Returns 1 if anything has
- * been hit. */
-static int test_ties_at(const ray_ctx *r, int ci, int cj, double tx, double ty, double tx_in,
-                        double ty_in, candidate *best)
+/* The two neighbours of cell (ci, cj) that share its corner toward (sx, sy). */
+static void test_corner(const ray_ctx *r, int ci, int cj, int sx, int sy, candidate *best)
 {
-    if (r->sx && r->sy) {
-        if (fabs(tx - ty) <= r->tie_tol) {
-            test_if_inside(r, ci + r->sx, cj, best);
-            test_if_inside(r, ci, cj + r->sy, best);
-        }
-        if (fabs(tx_in - ty_in) <= r->tie_tol) {
-            test_if_inside(r, ci - r->sx, cj, best);
-            test_if_inside(r, ci, cj - r->sy, best);
-        }
-    }
-    return best->t < INFINITY;
+    test_if_inside(r, ci + sx, cj, best);
+    test_if_inside(r, ci, cj + sy, best);
 }
 
 /* The crossings of the lines cell (ci, cj) is entered by (+inf on an axis not stepped). */
@@ -212,12 +199,33 @@ static inline double entry_y(const ray_ctx *r, int cj)
     return r->sy ? ycross(r, cj + (r->sy < 0)) : INFINITY;
 }
 
-/* test_ties_at, the entry crossings computed here. */
+/* The neighbours of cell (ci, cj), whose exit crossings are tx, ty, that share its entry or
+ * exit corner, tested when the ray passes that corner within tie_tol (see the top of the
+ * file).  Returns 1 if anything has been hit.  The entry crossings are computed only when both
+ * axes step (test_ties_at takes them from a walk that carries them). */
 static int test_ties(const ray_ctx *r, int ci, int cj, double tx, double ty, candidate *best)
 {
-    if (!(r->sx && r->sy))
-        return best->t < INFINITY;
-    return test_ties_at(r, ci, cj, tx, ty, entry_x(r, ci), entry_y(r, cj), best);
+    if (r->sx && r->sy) {
+        if (fabs(tx - ty) <= r->tie_tol)
+            test_corner(r, ci, cj, r->sx, r->sy, best);
+        if (fabs(entry_x(r, ci) - entry_y(r, cj)) <= r->tie_tol)
+            test_corner(r, ci, cj, -r->sx, -r->sy, best);
+    }
+    return best->t < INFINITY;
+}
+
+/* test_ties for a walk that knows the cell's entry crossings tx_in, ty_in (of the lines it is
+ * entered by: the exits of the cells before it). */
+static int test_ties_at(const ray_ctx *r, int ci, int cj, double tx, double ty, double tx_in,
+                        double ty_in, candidate *best)
+{
+    if (r->sx && r->sy) {
+        if (fabs(tx - ty) <= r->tie_tol)
+            test_corner(r, ci, cj, r->sx, r->sy, best);
+        if (fabs(tx_in - ty_in) <= r->tie_tol)
+            test_corner(r, ci, cj, -r->sx, -r->sy, best);
+    }
+    return best->t < INFINITY;
 }
 
 /* The complete test of cell (ci, cj): its own triangles and test_ties.  Returns 1 if anything

@@ -234,6 +234,13 @@ TF_SHARED tf_lane tf_snow_v(tf_lane y, double extent)
     return y / (extent / TF_SNOW_WAVELENGTHS) - TF_SNOW_SALT_Y;
 }
 
+/* How much snow a slope of `slope` degrees holds: all of it up to the rock slope, none from
+ * TF_SNOW_SLIDE_DEG past it (exactly 0 there, which shade.c's snow_line_at relies on). */
+TF_SHARED tf_lane tf_snow_slope_weight(double rock_deg, tf_lane slope)
+{
+    return 1.0 - tf_smoothstep(TF_LANE(rock_deg), TF_LANE(rock_deg + TF_SNOW_SLIDE_DEG), slope);
+}
+
 /* Albedo by altitude z and slope (degrees): vegetation below tree_line, alpine ground above,
  * sand just above sea_level, rock on slopes past rock_deg, snow above snow_line (already
  * perturbed by its texture) thinning out on steep slopes; variation in [-1, 1] perturbs all but
@@ -250,8 +257,7 @@ TF_SHARED tf_lane3 tf_terrain_albedo(double tree_line, double sea_level, double 
     tf_lane w_rock = tf_smoothstep(TF_LANE(rock_deg - TF_ROCK_BLEND_DEG),
                                    TF_LANE(rock_deg + TF_ROCK_BLEND_DEG), slope);
     tf_lane w_snow = tf_smoothstep(snow_line - band, snow_line + band, z) *
-                     (1.0 - tf_smoothstep(TF_LANE(rock_deg), TF_LANE(rock_deg + TF_SNOW_SLIDE_DEG),
-                                          slope));
+                     tf_snow_slope_weight(rock_deg, slope);
     tf_lane3 c = tf_l3_lerp_ss(alpine, vegetation, w_veg);
     c = tf_l3_lerp_ps(c, sand, w_sand);
     c = tf_l3_lerp_ps(c, rock, w_rock);

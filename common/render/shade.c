@@ -310,28 +310,21 @@ static double fbm_with_gradient(const tf_noise *nz, double x, double y, double s
 
 /* The snow line's perturbation: fBm with H 0.5, lacunarity 2 and TF_SNOW_OCTAVES octaves, a fixed
  * plan made once (pthread_once: the tables are shared by every renderer and thread).
- * snow_fbm_bound is a strict upper bound on |snow fBm|: every noise value lies in (-1, 1)
- * (noise.h), so |sum| < sum of the weights; 1e-9 relative covers the rounding of the sum. */
+ * snow_rest_bound[k] is a strict upper bound on |octaves k.. of the snow fBm|: every noise value
+ * lies in (-1, 1) (noise.h), so that sum is below the sum of their weights; 1e-9 relative covers
+ * the rounding of the sum.  snow_rest_bound[0] bounds the whole fBm (snow_fbm_bound). */
 static tf_octaves snow_plan;
-static double snow_fbm_bound;
+static double snow_rest_bound[TF_MAX_OCTAVES + 1];
 static pthread_once_t snow_plan_once = PTHREAD_ONCE_INIT;
 
 static void make_snow_plan(void)
 {
     tf_octaves_plan(&snow_plan, TF_SNOW_H, 2.0, TF_SNOW_OCTAVES);
     double sum = 0;
-    for (int i = 0; i < snow_plan.count; i++)
-        sum += fabs(snow_plan.amp[i]);
-    snow_fbm_bound = sum * (1.0 + 1e-9);
-}
-
-/* Exactly tf_fbm2(nz, x, y, TF_SNOW_H, 2.0, TF_SNOW_OCTAVES), without re-planning per call. */
-static double snow_fbm(const tf_noise *nz, double x, double y)
-{
-    tf_noise_axis axes[TF_MAX_OCTAVES + 1];
-    pthread_once(&snow_plan_once, make_snow_plan);
-    tf_octave_axes(&snow_plan, y, axes);
-    return tf_fbm2_axes(nz, &snow_plan, x, axes);
+    for (int k = snow_plan.count - 1; k >= 0; k--) {
+        sum += fabs(snow_plan.amp[k]);
+        snow_rest_bound[k] = sum * (1.0 + 1e-9);
+    }
 }
 
 void tf_shade_octave_weights(double H, double *amp, int n)
@@ -344,7 +337,7 @@ void tf_shade_octave_weights(double H, double *amp, int n)
 double tf_shade_snow_fbm_bound(void)
 {
     pthread_once(&snow_plan_once, make_snow_plan);
-    return snow_fbm_bound;
+    return snow_rest_bound[0];
 }
 
 /* ---------------------------------------------------------------- sky and mist */
@@ -427,28 +420,47 @@ static int resolve_shadow_coherent(const tf_shader *sh, const tf_shade_pending *
     return tf_occluded_coherent(&sh->sun_ray, p->start, tmax, near, mine);
 }
 
-/* tf_snow_line_matters (sample_math.h) with this shader's bound on the snow fBm. */
-static int snow_line_matters(const tf_shader *sh, double z)
+/* The snow line that tf_terrain_albedo is given at p (z = p.z) on a slope of `slope` degrees:
+ * the scene's line moved by snow_jitter times the snow fBm, tf_fbm2(nz, u, v, TF_SNOW_H, 2.0,
+ * TF_SNOW_OCTAVES) at the point's snow coordinates -- or any line that gives the same albedo.
+ *
+ * The albedo depends on the line only through w_snow = smoothstep(line - band, line + band, z)
+ * times the slope's weight (sample_math.h), and
+ *   S1. where the slope's weight is exactly 0 (snow slid off a steep slope), w_snow is 0 for
+ *       every line: the line is left as it is;
+ *   S2. where z lies below line - band or above line + band for every line the octaves still to
+ *       come can give, smoothstep clamps to exactly 0 or 1 (rounding is monotone) for each of
+ *       them: after octave k the sum so far moves the line by jitter * P, and the octaves from
+ *       k on by less than jitter * snow_rest_bound[k] (tf_snow_line_matters' test, with its
+ *       slack).  The line with the sum so far is one of those lines, so it gives the albedo.
+ * Only 6% of default.scene's hits near the snow line need all five octaves; 65% need none (S1).
+ * The sum is tf_fbm2_axes' own, term by term, so a line that needs every octave has its bits. */
+static double snow_line_at(const tf_shader *sh, tf_vec3 p, double slope)
 {
     const tf_scene *s = sh->scene;
+    const double line = s->materials.snow_line, jitter = s->materials.snow_jitter;
+    if (!(jitter > 0) || tf_snow_slope_weight(s->materials.rock_slope_deg, slope) == 0.0)
+        return line;
     pthread_once(&snow_plan_once, make_snow_plan);
-    return tf_snow_line_matters(s->materials.snow_line, s->materials.snow_jitter, snow_fbm_bound,
-                                sh->band, z);
+    double x = tf_snow_u(p.x, sh->hf->extent), y = tf_snow_v(p.y, sh->hf->extent), sum = 0.0;
+    for (int k = 0; k < snow_plan.count; k++) {
+        if (!tf_snow_line_matters(line + jitter * sum, jitter, snow_rest_bound[k], sh->band, p.z))
+            break;
+        tf_noise_axis axis = tf_noise_axis_of(y); /* tf_octave_axes' y halves, one at a time */
+        sum += snow_plan.amp[k] * tf_noise2_axis(&sh->noise, x, &axis);
+        x *= snow_plan.lacunarity;
+        y *= snow_plan.lacunarity;
+    }
+    return line + jitter * sum;
 }
 
-/* Albedo at p with smooth normal n (tf_terrain_albedo), the snow line perturbed by its fBm
- * where that can matter; variation in [-1, 1] perturbs it. */
-static tf_vec3 terrain_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double variation)
+tf_vec3 tf_shade_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double variation)
 {
     const tf_scene *s = sh->scene;
     double slope = tf_slope_deg(n.z);
-    double snow_line = s->materials.snow_line;
-    if (s->materials.snow_jitter > 0 && snow_line_matters(sh, p.z))
-        snow_line += s->materials.snow_jitter * snow_fbm(&sh->noise, tf_snow_u(p.x, sh->hf->extent),
-                                                         tf_snow_v(p.y, sh->hf->extent));
     return tf_terrain_albedo(s->materials.tree_line, s->materials.sea_level,
-                             s->materials.rock_slope_deg, sh->band, p.z, slope, snow_line,
-                             variation);
+                             s->materials.rock_slope_deg, sh->band, p.z, slope,
+                             snow_line_at(sh, p, slope), variation);
 }
 
 /* A terrain hit shaded up to its shadow ray: the albedo, the sky's light and the sun's
@@ -470,7 +482,7 @@ static void terrain_begin(const tf_shader *sh, const tf_hit *hit, tf_shade_pendi
                                       octaves, 0.0, &gx, &gy);
         nb = tf_bump_normal(n, sh->scene->materials.bump, gx, gy);
     }
-    tf_vec3 albedo = terrain_albedo(sh, hit->p, n, variation);
+    tf_vec3 albedo = tf_shade_albedo(sh, hit->p, n, variation);
     if (sh->hf->silt)
         albedo = erosion_tint(sh, hit->p, albedo);
     p->surface = TF_SURFACE_TERRAIN;

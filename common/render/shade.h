@@ -129,6 +129,10 @@ tf_vec3 tf_shade_terrain(const tf_shader *sh, const tf_hit *hit, uint64_t *shado
 tf_vec3 tf_shade_water(const tf_shader *sh, tf_vec3 p, tf_vec3 dir, double dist,
                        uint64_t *shadow_rays);
 
+/* The albedo of terrain point p with smooth normal n (tf_terrain_albedo), the snow line moved
+ * by its fBm wherever that can change the albedo; variation in [-1, 1] perturbs it. */
+tf_vec3 tf_shade_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double variation);
+
 /* For the OpenCL host, which uploads what the shader uses instead of deriving it again:
  * tf_shade_octave_weights puts in amp[0 .. n-1] (n <= 32) the full-weight octave weights of
  * the texture fBm plan of exponent H (TF_BUMP_H, or TF_SNOW_H = TF_RIPPLE_H), lacunarity 2;

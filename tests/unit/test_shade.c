@@ -13,6 +13,8 @@
 
 #include "render/shade.h"
 #include "render/trace.h"
+#include "terrain/noise.h"
+#include "render/sample_math.h" /* the albedo's definition, to check tf_shade_albedo by */
 
 /* Simpson's rule for the optical depth of a straight path (unit speed in t). */
 static double numeric_depth(double density, double k, double z1, double z2, double len)
@@ -214,6 +216,58 @@ static void test_materials_by_altitude_and_slope(void **state)
     free(f);
 }
 
+/* The snow line moved by its full five-octave fBm at p, and the albedo with it: the definition
+ * that tf_shade_albedo may shorten (shade.c's snow_line_at) but must match bit for bit. */
+static double snow_line_by_definition(const tf_shader *sh, tf_vec3 p)
+{
+    double fbm = tf_fbm2(&sh->noise, tf_snow_u(p.x, sh->hf->extent),
+                         tf_snow_v(p.y, sh->hf->extent), TF_SNOW_H, 2.0, TF_SNOW_OCTAVES);
+    return sh->scene->materials.snow_line + sh->scene->materials.snow_jitter * fbm;
+}
+
+static tf_vec3 albedo_by_definition(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double variation)
+{
+    const tf_scene *s = sh->scene;
+    return tf_terrain_albedo(s->materials.tree_line, s->materials.sea_level,
+                             s->materials.rock_slope_deg, sh->band, p.z, tf_slope_deg(n.z),
+                             snow_line_by_definition(sh, p), variation);
+}
+
+static double uniform(double lo, double hi) { return lo + (hi - lo) * rand() / RAND_MAX; }
+
+/* Points all through the snow line's reach (jitter times the fBm's bound, plus the band), and
+ * just inside the band around the line itself, where a shortcut that under-bounds the octaves
+ * it skips gives a clamped weight for a partial one; slopes all through the snow's slide,
+ * half of them within a degree of where the snow slides off. */
+static void test_snow_line_shortcuts_keep_the_albedo(void **state)
+{
+    (void)state;
+    fixture *f = calloc(1, sizeof *f);
+    fill_scene(&f->scene);
+    f->scene.materials.snow_jitter = 40;
+    fill_plane(f, 700, 0);
+    tf_shader_init(&f->sh, &f->scene, &f->hf);
+    const double band = f->sh.band, reach = 40 * tf_shade_snow_fbm_bound() + band;
+    const double slide = f->scene.materials.rock_slope_deg + TF_SNOW_SLIDE_DEG;
+    srand(7);
+    int differ = 0, snowy = 0, bare = 0;
+    for (int i = 0; i < 300000; i++) {
+        tf_vec3 p = v3(uniform(0, 100), uniform(0, 100), 0);
+        double line = snow_line_by_definition(&f->sh, p);
+        p.z = i % 3 == 0 ? uniform(700 - 1.2 * reach, 700 + 1.2 * reach)
+                         : line + (i % 3 == 1 ? 0.999 : -0.999) * band;
+        double slope = i % 2 ? uniform(slide - 1, slide + 1) : uniform(0, 90);
+        tf_vec3 n = v3(sin(slope * TF_DEG2RAD), 0, cos(slope * TF_DEG2RAD));
+        tf_vec3 got = tf_shade_albedo(&f->sh, p, n, 0.25);
+        tf_vec3 want = albedo_by_definition(&f->sh, p, n, 0.25);
+        differ += memcmp(&got, &want, sizeof got) != 0;
+        snowy += got.z > 0.6, bare += got.z < 0.4;
+    }
+    assert_int_equal(differ, 0);
+    assert_true(snowy > 10000 && bare > 10000); /* both sides of the line were met */
+    free(f);
+}
+
 static void test_water_reflects_sky_with_fresnel(void **state)
 {
     (void)state;
@@ -335,6 +389,7 @@ int main(void)
         cmocka_unit_test(test_sky_rays_through_mist),
         cmocka_unit_test(test_sky_gradient_and_sun_glow),
         cmocka_unit_test(test_materials_by_altitude_and_slope),
+        cmocka_unit_test(test_snow_line_shortcuts_keep_the_albedo),
         cmocka_unit_test(test_water_reflects_sky_with_fresnel),
         cmocka_unit_test(test_sun_shadow_through_tracer),
         cmocka_unit_test(test_smooth_terminator_is_continuous),

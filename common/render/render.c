@@ -177,22 +177,39 @@ static inline double level_argument(double v)
     return v > 0.0 ? (v < 1.0 ? v : 1.0) : 0.0;
 }
 
-/* The largest per-channel range of display levels over n samples (n <= 5).  A correctly
+/* The lowest and highest clamped value (level_argument) of each channel over some samples:
+ * a quad's four corners, then its centre too. */
+typedef struct level_span {
+    double lo[3], hi[3];
+} level_span;
+
+static inline void span_add(level_span *sp, const tf_sample *s)
+{
+    const double v[3] = {level_argument(s->r), level_argument(s->g), level_argument(s->b)};
+    for (int ch = 0; ch < 3; ch++) {
+        sp->lo[ch] = v[ch] < sp->lo[ch] ? v[ch] : sp->lo[ch];
+        sp->hi[ch] = v[ch] > sp->hi[ch] ? v[ch] : sp->hi[ch];
+    }
+}
+
+static inline level_span span_of_corners(const tf_sample *const s[4])
+{
+    level_span sp = {{1, 1, 1}, {0, 0, 0}};
+    for (int k = 0; k < 4; k++)
+        span_add(&sp, s[k]);
+    return sp;
+}
+
+/* The largest per-channel range of display levels over a span's samples.  A correctly
  * rounded sqrt is monotone, so a channel's lowest and highest levels are the levels of its
  * lowest and highest clamped values: two square roots a channel, not one a sample (the
  * square roots were 5% of a render's CPU).  The same differences as packet_render.cl's
  * display_range over its stored levels, so both backends split the same quads. */
-static double display_range(const tf_sample *const s[], int n)
+static double display_range(const level_span *sp)
 {
     double widest = 0;
     for (int ch = 0; ch < 3; ch++) {
-        double lo = 1, hi = 0;
-        for (int k = 0; k < n; k++) {
-            double v = level_argument(ch == 0 ? s[k]->r : ch == 1 ? s[k]->g : s[k]->b);
-            lo = v < lo ? v : lo;
-            hi = v > hi ? v : hi;
-        }
-        double range = sqrt(hi) - sqrt(lo);
+        double range = sqrt(sp->hi[ch]) - sqrt(sp->lo[ch]);
         if (range > widest)
             widest = range;
     }
@@ -202,11 +219,13 @@ static double display_range(const tf_sample *const s[], int n)
 /* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice.  With coherence, each sample's
  * ray record too, `column`: the rectangle's record for each of the pixel's N+1 lattice
  * columns of the highest ray traced in it below this pixel row (NULL: no coherence), and
- * `lower`. */
+ * `lower`.  `traced` lists the points traced inside the pixel, beyond its four corners (most
+ * pixels trace none): what the pixel's end reads and clears instead of the whole lattice. */
 typedef struct pixel_cache {
     int side;           /* N + 1 */
     tf_sample *sample;  /* side * side */
-    unsigned char *have;
+    unsigned char *have; /* all 0 between pixels */
+    int *traced, ntraced; /* side * side */
     tf_sample_record *record; /* side * side */
     tf_sample_record *column;
     const tf_sample_record *lower; /* the records of the pixel's two corner columns
@@ -224,15 +243,35 @@ static const tf_sample_record *ray_below(const pixel_cache *pc, int i)
     return &pc->lower[2 * i >= pc->side - 1];
 }
 
-/* After a pixel: each of its columns' highest ray is the one the pixel above wants below it. */
+/* After a pixel: each of its columns' highest ray is the one the pixel above wants below it.
+ * The edge columns' is the top corner's; an inner column's, the traced point nearest the top. */
 static void note_columns(const pixel_cache *pc)
 {
-    for (int i = 0; i < pc->side; i++)
-        for (int j = 0; j < pc->side; j++)
-            if (pc->have[(size_t)j * (size_t)pc->side + (size_t)i]) {
-                pc->column[i] = pc->record[(size_t)j * (size_t)pc->side + (size_t)i];
-                break;
-            }
+    const int side = pc->side, N = side - 1;
+    int top[(1 << TF_AA_MAX_DEPTH) + 1];
+    for (int i = 1; i < N; i++)
+        top[i] = side;
+    for (int t = 0; t < pc->ntraced; t++) {
+        int i = pc->traced[t] % side, j = pc->traced[t] / side;
+        if (i > 0 && i < N && j < top[i])
+            top[i] = j;
+    }
+    pc->column[0] = pc->record[0];
+    pc->column[N] = pc->record[N];
+    for (int i = 1; i < N; i++)
+        if (top[i] < side)
+            pc->column[i] = pc->record[(size_t)top[i] * (size_t)side + (size_t)i];
+}
+
+/* The nearest distance among the pixel's samples (its corners and the points it traced). */
+static float nearest_dist(const pixel_cache *pc, const size_t at[4])
+{
+    float zmin = TF_SKY_DIST;
+    for (int q = 0; q < 4; q++)
+        zmin = pc->sample[at[q]].dist < zmin ? pc->sample[at[q]].dist : zmin;
+    for (int t = 0; t < pc->ntraced; t++)
+        zmin = pc->sample[pc->traced[t]].dist < zmin ? pc->sample[pc->traced[t]].dist : zmin;
+    return zmin;
 }
 
 typedef struct quad { int i, j, size; } quad;
@@ -250,6 +289,7 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
         else
             tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
         pc->have[k] = 1;
+        pc->traced[pc->ntraced++] = (int)k;
         tally->primary_rays++;
         (*spp)++;
     }
@@ -270,7 +310,7 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
     const int N = r->lattice;
     const size_t at[4] = {0, (size_t)N, (size_t)N * (size_t)pc->side,
                           (size_t)N * (size_t)pc->side + (size_t)N};
-    memset(pc->have, 0, (size_t)pc->side * (size_t)pc->side);
+    pc->ntraced = 0;
     for (int q = 0; q < 4; q++) {
         pc->sample[at[q]] = *cs->c[q];
         if (pc->column)
@@ -295,10 +335,12 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
         s[3] = cached_sample(r, pc, px, py, q.i + q.size, q.j + q.size, &spp, tally);
         if (q.size > 1) {
             double split_threshold = tf_aa_split_threshold(r->threshold, N, q.size);
-            if (display_range(s, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
+            level_span span = span_of_corners(s);
+            if (display_range(&span) > split_threshold * TF_AA_PROBE_FRACTION) {
                 int h = q.size / 2;
                 s[4] = cached_sample(r, pc, px, py, q.i + h, q.j + h, &spp, tally);
-                if (display_range(s, 5) > split_threshold) {
+                span_add(&span, s[4]);
+                if (display_range(&span) > split_threshold) {
                     stack[sp++] = (quad){q.i + h, q.j + h, h};
                     stack[sp++] = (quad){q.i, q.j + h, h};
                     stack[sp++] = (quad){q.i + h, q.j, h};
@@ -319,16 +361,15 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
         sum_a += tf_aa_flat_leaf(q.size, s[0]->a, s[1]->a, s[2]->a, s[3]->a);
     }
 
-    float zmin = TF_SKY_DIST;
-    size_t cells = (size_t)pc->side * (size_t)pc->side;
-    for (size_t k = 0; k < cells; k++)
-        if (pc->have[k] && pc->sample[k].dist < zmin)
-            zmin = pc->sample[k].dist;
     double area = (double)N * (double)N;
     *out = (tf_pixel){(float)(sum_r / area), (float)(sum_g / area), (float)(sum_b / area),
-                      (float)(sum_a / area), zmin, (float)spp};
+                      (float)(sum_a / area), nearest_dist(pc, at), (float)spp};
     if (pc->column)
         note_columns(pc);
+    for (int q = 0; q < 4; q++)
+        pc->have[at[q]] = 0;
+    for (int t = 0; t < pc->ntraced; t++)
+        pc->have[pc->traced[t]] = 0;
 }
 
 /* Corner sample c's lattice point on corner row cy. */
@@ -489,7 +530,8 @@ static tf_sample_record *corner_records(const rect_state *st, tf_rect rect, int 
 static void rect_state_free(rect_state *st)
 {
     free(st->above), free(st->below), free(st->ring);
-    free(st->pc.sample), free(st->pc.have), free(st->pc.record), free(st->how.column);
+    free(st->pc.sample), free(st->pc.have), free(st->pc.traced), free(st->pc.record);
+    free(st->how.column);
     if (st->how.q)
         row_rays_free(st->how.q);
 }
@@ -501,8 +543,9 @@ static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
     st->above = malloc(sizeof *st->above * w1);
     st->below = malloc(sizeof *st->below * w1);
     st->pc = (pixel_cache){(int)side, malloc(sizeof(tf_sample) * side * side),
-                           malloc(side * side), NULL, NULL, NULL};
-    int ok = st->above && st->below && st->pc.sample && st->pc.have;
+                           calloc(side * side, 1), malloc(sizeof(int) * side * side), 0,
+                           NULL, NULL, NULL};
+    int ok = st->above && st->below && st->pc.sample && st->pc.have && st->pc.traced;
     if (coherence_on(r)) {
         /* calloc: records that vouch for nothing until a ray below is traced */
         st->how.column = calloc((size_t)rect.w * (size_t)r->lattice + 1, sizeof *st->how.column);

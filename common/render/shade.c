@@ -133,9 +133,17 @@ static double height_sample(const tf_heightfield *hf, int i, int j)
     return hf->h[(size_t)j * (size_t)hf->n + (size_t)i];
 }
 
-/* Vertex normal by central differences (one-sided at the edges, through the clamping). */
+/* Vertex normal by central differences (one-sided at the edges, through the clamping).  An
+ * interior vertex, nearly every one, reads its four neighbours straight: the same heights and
+ * spans (2 cells: the differences of indices are exact) as through the clamping. */
 static tf_vec3 vertex_normal(const tf_heightfield *hf, int i, int j)
 {
+    if ((unsigned)(i - 1) < (unsigned)(hf->n - 2) && (unsigned)(j - 1) < (unsigned)(hf->n - 2)) {
+        const size_t n = (size_t)hf->n;
+        const float *h = hf->h + (size_t)j * n + (size_t)i;
+        const double span = 2.0 * hf->cell;
+        return tf_vertex_normal_of(h[-1], h[1], h[-n], h[n], span, span);
+    }
     double span_x = (double)((i + 1 < hf->n ? i + 1 : i) - (i > 0 ? i - 1 : i)) * hf->cell;
     double span_y = (double)((j + 1 < hf->n ? j + 1 : j) - (j > 0 ? j - 1 : j)) * hf->cell;
     return tf_vertex_normal_of(height_sample(hf, i - 1, j), height_sample(hf, i + 1, j),
@@ -233,8 +241,9 @@ static void prefix_plan(tf_octaves *o, const tf_octaves *full, double octaves)
 {
     int whole;
     double remainder;
-    *o = *full;
+    o->lacunarity = full->lacunarity;
     o->count = tf_octaves_split(octaves, &whole, &remainder);
+    memcpy(o->amp, full->amp, (size_t)o->count * sizeof o->amp[0]); /* the rest is never read */
     if (remainder > 0.0)
         o->amp[whole] *= remainder;
 }

@@ -8,7 +8,8 @@
  * Bottom to top for coherence (trace.h): a camera ray climbs above the ray below it, so traced
  * after it, it starts its walk where that one hit (tf_trace_coherent), if the terrain's slope
  * allows; and its shadow ray is first looked for under the surface where that one's went under
- * (tf_occluded_coherent).  Each sample's record is kept beside it.  A corner row's ray is helped
+ * (tf_occluded_coherent).  Each corner sample's record is kept beside it (a sample inside a
+ * pixel helps no other ray, and keeps none).  A corner row's ray is helped
  * by the highest ray traced below it in its lattice column (each column's highest record is
  * handed up to the next pixel row); a sample inside a pixel by the corner ray TF_LOWER_ROWS
  * corner rows down in the nearest corner column (ray_below), the corner rows' records being
@@ -218,10 +219,9 @@ static double display_range(const level_span *sp)
     return widest;
 }
 
-/* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice.  With coherence, each sample's
- * ray record too, `column`: the rectangle's record for each of the pixel's N+1 lattice
- * columns of the highest ray traced in it below this pixel row (NULL: no coherence), and
- * `lower`.  have[k] says what the pixel holds at point k: 0 nothing, 1 a sample it has used,
+/* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice.  With coherence, `column`: the
+ * rectangle's record for each of the pixel's N+1 lattice columns of the highest ray traced in
+ * it below this pixel row (NULL: no coherence), and `lower`.  have[k] says what the pixel holds at point k: 0 nothing, 1 a sample it has used,
  * 2 a sample a neighbour took on their shared edge (pixel_edge), not used yet.  `used` lists the
  * points used beyond the four corners (most pixels use none): what the pixel's end reads and
  * clears instead of the whole lattice. */
@@ -230,7 +230,6 @@ typedef struct pixel_cache {
     tf_sample *sample;  /* side * side */
     unsigned char *have; /* side * side, all 0 between pixels */
     int *used, nused;   /* side * side */
-    tf_sample_record *record; /* side * side */
     tf_sample_record *column;
     const tf_sample_record *lower; /* the records of the pixel's two corner columns
                                     * TF_LOWER_ROWS corner rows down (ray_below) */
@@ -247,13 +246,20 @@ static const tf_sample_record *ray_below(const pixel_cache *pc, int i)
     return &pc->lower[2 * i >= pc->side - 1];
 }
 
+/* A pixel's corners: samples c[0..3] (top left, top right, bottom left, bottom right) and,
+ * with coherence, their rays' records k[0..3]. */
+typedef struct corners {
+    const tf_sample *c[4];
+    const tf_sample_record *k[4];
+} corners;
+
 /* After a pixel: each of its corner columns' highest ray, its top corner's, is the one the
- * corner row above wants below it (corner_row_coherent reads the corner columns only). */
-static void note_columns(const pixel_cache *pc)
+ * corner row above wants below it.  Only the corner columns are read (corner_row_coherent),
+ * and only corner rays keep their records: a sample inside a pixel helps no other ray. */
+static void note_columns(const pixel_cache *pc, const corners *cs)
 {
-    const int N = pc->side - 1;
-    pc->column[0] = pc->record[0];
-    pc->column[N] = pc->record[N];
+    pc->column[0] = *cs->k[0];
+    pc->column[pc->side - 1] = *cs->k[1];
 }
 
 /* The nearest distance among the samples the pixel used (its corners and pc->used). */
@@ -272,13 +278,12 @@ static float nearest_dist(const pixel_cache *pc, const size_t at[4])
  * other.  Pixels go left to right along a row and rows bottom to top, so a pixel hands its
  * right edge to the next pixel and its top edge to the pixel above; it takes its left edge and
  * its bottom edge from them.  A sample is a function of its lattice point only
- * (render_internal.h), and its record of its ray only (trace.h's coherence), so a pixel that
- * takes one holds what tracing it would have given: the same bits, one ray fewer.  On
+ * (render_internal.h), so a pixel that takes one holds what tracing it would have given: the
+ * same bits, one ray fewer.  On
  * default.scene 480x270 one inner sample in six lies on an edge already traced. */
 typedef struct pixel_edge {
-    unsigned char *have;      /* 1: sample[m] (and record[m]) hold inner point m's */
+    unsigned char *have;      /* 1: sample[m] holds inner point m's */
     tf_sample *sample;
-    tf_sample_record *record; /* NULL without coherence */
 } pixel_edge;
 
 /* Take an edge's samples into the pixel's lattice points k0, k0 + step, ...  as not used yet. */
@@ -289,8 +294,6 @@ static void take_edge(pixel_cache *pc, const pixel_edge *e, size_t k0, size_t st
             size_t k = k0 + (size_t)m * step;
             pc->have[k] = 2;
             pc->sample[k] = e->sample[m];
-            if (e->record)
-                pc->record[k] = e->record[m];
         }
 }
 
@@ -300,11 +303,8 @@ static void hand_edge(const pixel_cache *pc, pixel_edge *e, size_t k0, size_t st
     for (int m = 0; m < pc->side - 2; m++) {
         size_t k = k0 + (size_t)m * step;
         e->have[m] = pc->have[k] == 1;
-        if (e->have[m]) {
+        if (e->have[m])
             e->sample[m] = pc->sample[k];
-            if (e->record)
-                e->record[m] = pc->record[k];
-        }
     }
 }
 
@@ -332,8 +332,8 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
         if (!pc->have[k]) {
             int64_t X = (int64_t)px * r->lattice + i, Y = (int64_t)py * r->lattice + j;
             if (pc->column)
-                lattice_sample_coherent(r, X, Y, ray_below(pc, i), &pc->record[k],
-                                        &pc->sample[k], &tally->shadow_rays);
+                lattice_sample_coherent(r, X, Y, ray_below(pc, i), NULL, &pc->sample[k],
+                                        &tally->shadow_rays);
             else
                 tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
             tally->primary_rays++;
@@ -344,13 +344,6 @@ static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int
     }
     return &pc->sample[k];
 }
-
-/* A pixel's corners: samples c[0..3] (top left, top right, bottom left, bottom right) and,
- * with coherence, their rays' records k[0..3]. */
-typedef struct corners {
-    const tf_sample *c[4];
-    const tf_sample_record *k[4];
-} corners;
 
 /* Refine pixel (px, py) whose four corner samples are given; write its value to *out.  `left`
  * holds the samples on its left edge and `below` those on its bottom edge (pixel_edge); they
@@ -365,11 +358,8 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
     pc->nused = 0;
     take_edge(pc, left, side, side);
     take_edge(pc, below, (size_t)N * side + 1, 1);
-    for (int q = 0; q < 4; q++) {
+    for (int q = 0; q < 4; q++)
         pc->sample[at[q]] = *cs->c[q];
-        if (pc->column)
-            pc->record[at[q]] = *cs->k[q];
-    }
     pc->have[0] = pc->have[N] = 1;
     pc->have[(size_t)N * (size_t)pc->side] = pc->have[(size_t)N * (size_t)pc->side + (size_t)N] = 1;
     int spp = 4;
@@ -419,7 +409,7 @@ static void render_pixel(const tf_renderer *r, pixel_cache *pc, int px, int py,
     *out = (tf_pixel){(float)(sum_r / area), (float)(sum_g / area), (float)(sum_b / area),
                       (float)(sum_a / area), nearest_dist(pc, at), (float)spp};
     if (pc->column)
-        note_columns(pc);
+        note_columns(pc, cs);
     hand_edge(pc, left, side + (size_t)N, side);
     hand_edge(pc, below, 1, 1);
     clear_pixel(pc, at);
@@ -584,31 +574,30 @@ static tf_sample_record *corner_records(const rect_state *st, tf_rect rect, int 
 
 /* Edges of `count` pixels' worth of inner points (n each; at least one, so no allocation is
  * empty), all holding nothing; 0 if out of memory. */
-static int pixel_edges_alloc(pixel_edge *e, size_t count, size_t n, int records)
+static int pixel_edges_alloc(pixel_edge *e, size_t count, size_t n)
 {
     const size_t points = count * (n > 0 ? n : 1);
     e->have = calloc(points, 1);
     e->sample = malloc(sizeof *e->sample * points);
-    e->record = records ? malloc(sizeof *e->record * points) : NULL;
-    return e->have && e->sample && (e->record || !records);
+    return e->have && e->sample;
 }
 
 static void pixel_edges_free(pixel_edge *e)
 {
-    free(e->have), free(e->sample), free(e->record);
+    free(e->have), free(e->sample);
 }
 
 /* Pixel column c's slice of a row of edges (n inner points each). */
 static pixel_edge edge_slice(const pixel_edge *e, int c, size_t n)
 {
     const size_t at = (size_t)c * n;
-    return (pixel_edge){e->have + at, e->sample + at, e->record ? e->record + at : NULL};
+    return (pixel_edge){e->have + at, e->sample + at};
 }
 
 static void rect_state_free(rect_state *st)
 {
     free(st->above), free(st->below), free(st->ring);
-    free(st->pc.sample), free(st->pc.have), free(st->pc.used), free(st->pc.record);
+    free(st->pc.sample), free(st->pc.have), free(st->pc.used);
     pixel_edges_free(&st->left), pixel_edges_free(&st->tops);
     free(st->how.column);
     if (st->how.q)
@@ -623,20 +612,19 @@ static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
     st->below = malloc(sizeof *st->below * w1);
     st->pc = (pixel_cache){(int)side, malloc(sizeof(tf_sample) * side * side),
                            calloc(side * side, 1), malloc(sizeof(int) * side * side), 0,
-                           NULL, NULL, NULL};
+                           NULL, NULL};
     int ok = st->above && st->below && st->pc.sample && st->pc.have && st->pc.used;
     if (coherence_on(r)) {
         /* calloc: records that vouch for nothing until a ray below is traced */
         st->how.column = calloc((size_t)rect.w * (size_t)r->lattice + 1, sizeof *st->how.column);
         st->ring = calloc(w1 * TF_CORNER_RING, sizeof *st->ring);
-        st->pc.record = malloc(sizeof *st->pc.record * side * side);
-        ok = ok && st->how.column && st->ring && st->pc.record;
+        ok = ok && st->how.column && st->ring;
     } else if (!r->hf->proc && tf_trace_packets_enabled()) {
         st->how.q = &st->rays;
         ok = ok && row_rays_alloc(&st->rays, w1);
     }
-    ok = pixel_edges_alloc(&st->left, 1, side - 2, coherence_on(r)) && ok;
-    ok = pixel_edges_alloc(&st->tops, (size_t)rect.w, side - 2, coherence_on(r)) && ok;
+    ok = pixel_edges_alloc(&st->left, 1, side - 2) && ok;
+    ok = pixel_edges_alloc(&st->tops, (size_t)rect.w, side - 2) && ok;
     if (!ok)
         tf_die(71, "tf_render_rect: out of memory for a %d-pixel row", rect.w);
 }

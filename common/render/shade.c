@@ -596,7 +596,8 @@ void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
                            const tf_sample_record *lower, tf_sample_record *mine, tf_sample *out,
                            uint64_t *shadow_rays)
 {
-    mine->camera.s_free = 0, mine->shadow.t_under = 0;
+    if (mine)
+        mine->camera.s_free = 0, mine->shadow.t_under = 0;
     if (sh->hf->proc) {
         tf_shade_ray(sh, origin, dir, out, shadow_rays);
         return;
@@ -605,11 +606,11 @@ void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
     tf_hit hit;
     tf_shade_pending p;
     int found = tf_trace_coherent(sh->hf, origin, dir, t_water, lower ? &lower->camera : NULL,
-                                  &hit, &mine->camera);
+                                  &hit, mine ? &mine->camera : NULL);
     tf_shade_begin(sh, origin, dir, t_water, found ? &hit : NULL, &p);
     tf_shade_end(sh, origin, dir, &p,
-                 resolve_shadow_coherent(sh, &p, lower ? &lower->shadow : NULL, &mine->shadow,
-                                         shadow_rays),
+                 resolve_shadow_coherent(sh, &p, lower ? &lower->shadow : NULL,
+                                         mine ? &mine->shadow : NULL, shadow_rays),
                  out);
 }
 

@@ -93,7 +93,8 @@ typedef struct tf_sample_record {
 
 /* tf_shade_ray, its camera ray traced with tf_trace_coherent and its shadow ray with
  * tf_occluded_coherent: the same bits, helped by `lower` (NULL or another sample's record);
- * *mine gets this sample's (one that vouches for nothing on a procedural terrain). */
+ * *mine, unless NULL, gets this sample's (one that vouches for nothing on a procedural
+ * terrain). */
 void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
                            const tf_sample_record *lower, tf_sample_record *mine, tf_sample *out,
                            uint64_t *shadow_rays);

@@ -185,12 +185,13 @@ static void match_c_backend(void **state)
     assert_int_equal(counts.pixels, fx.c_counts.pixels);
     assert_int_equal(counts.external_rays, fx.c_counts.external_rays);
     /* The kernels trace every sample a pixel uses; the C backend takes some from the pixel
-     * beside it instead (render.c's pixel_edge), each with its one shadow ray or none. */
-    uint64_t c_samples = (uint64_t)(W + 1) * (H + 1), taken;
+     * beside it instead (render.c's pixel_edge), each with its one shadow ray or none (1%
+     * either way: on a GPU a few pixels may refine differently). */
+    uint64_t c_samples = (uint64_t)(W + 1) * (H + 1);
     for (size_t i = 0; i < (size_t)W * H; i++)
         c_samples += (uint64_t)fx.c_img[i].spp - 4;
-    assert_true(fx.c_counts.primary_rays <= c_samples);
-    taken = c_samples - fx.c_counts.primary_rays;
+    assert_true(fx.c_counts.primary_rays < c_samples);
+    const uint64_t taken = c_samples - fx.c_counts.primary_rays;
     double dp = fabs((double)counts.primary_rays - (double)c_samples);
     print_message("primary rays %llu (C %llu, of %llu samples), shadow rays %llu (C %llu)\n",
                   (unsigned long long)counts.primary_rays,

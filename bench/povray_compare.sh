@@ -23,7 +23,7 @@
 #      own trace CPU-seconds, for terrafarm the thread CPU time of one tf_render_rect over the
 #      whole image (build/bench/povray_tf_render: a worker's task, without terrain synthesis,
 #      tuple traffic or file output); the camera rays per pixel of each; and the ratios
-#      terrafarm / POV-Ray (target <= 0.333).
+#      terrafarm / POV-Ray (targets <= 0.25, issue 23, and <= 1/3, docs/contract.md).
 #
 # Coordinates: terrafarm is right-handed with z up; POV-Ray is left-handed with y up.  The map
 # (x, y, z) -> (x, z, y) swaps two axes, which is exactly a change of handedness, so the view is
@@ -221,7 +221,8 @@ pov_trace_s() { sed -n 's/.*using [0-9]* thread(s) with \([0-9.]*\) CPU-seconds.
 # rays; with no reflection or refraction in the scene those are the camera rays (the
 # "Pixels:" count plus the antialiasing "Samples:").
 pov_rays_pp() { awk -v px="$(( W * H ))" '/^Rays:/ { printf "%.2f", $2 / px }' "$1"; }
-# terrafarm's statistics JSON: camera rays per pixel.
+# terrafarm's statistics JSON: camera rays traced per pixel (a sample on the edge between two
+# pixels of a task is traced once: bench/README-povray.md).
 tf_rays_pp() {
     awk -v px="$(( W * H ))" '/"primary_rays"/ { gsub(/[^0-9]/, "", $2); printf "%.2f", $2 / px }' "$1"
 }
@@ -281,6 +282,6 @@ for k in "${SIZE_LIST[@]}"; do
         fi
     done
 done
-echo "rays = camera rays per pixel; tf rend = CPU of terrafarm's render proper (one tf_render_rect over"
-echo "the image); pov trc = POV-Ray's trace CPU-seconds; cpu x = whole-process CPU ratio;"
-echo "trace x = tf rend / pov trc (target: <= 0.333)"
+echo "rays = camera rays traced per pixel; tf rend = CPU of terrafarm's render proper (one"
+echo "tf_render_rect over the image); pov trc = POV-Ray's trace CPU-seconds; cpu x = whole-process"
+echo "CPU ratio; trace x = tf rend / pov trc (targets: <= 0.25, issue 23; <= 1/3, docs/contract.md)"

@@ -221,10 +221,10 @@ static double display_range(const level_span *sp)
 
 /* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice.  With coherence, `column`: the
  * rectangle's record for each of the pixel's N+1 lattice columns of the highest ray traced in
- * it below this pixel row (NULL: no coherence), and `lower`.  have[k] says what the pixel holds at point k: 0 nothing, 1 a sample it has used,
- * 2 a sample a neighbour took on their shared edge (pixel_edge), not used yet.  `used` lists the
- * points used beyond the four corners (most pixels use none): what the pixel's end reads and
- * clears instead of the whole lattice. */
+ * it below this pixel row (NULL: no coherence), and `lower`.  have[k] says what the pixel holds
+ * at point k: 0 nothing, 1 a sample it has used, 2 a sample a neighbour took on their shared
+ * edge (pixel_edge), not used yet.  `used` lists the points used beyond the four corners (most
+ * pixels use none): what the pixel's end reads and clears instead of the whole lattice. */
 typedef struct pixel_cache {
     int side;           /* N + 1 */
     tf_sample *sample;  /* side * side */
@@ -279,8 +279,8 @@ static float nearest_dist(const pixel_cache *pc, const size_t at[4])
  * right edge to the next pixel and its top edge to the pixel above; it takes its left edge and
  * its bottom edge from them.  A sample is a function of its lattice point only
  * (render_internal.h), so a pixel that takes one holds what tracing it would have given: the
- * same bits, one ray fewer.  On
- * default.scene 480x270 one inner sample in six lies on an edge already traced. */
+ * same bits, one ray fewer.  On default.scene 480x270 one inner sample in six lies on an edge
+ * already traced. */
 typedef struct pixel_edge {
     unsigned char *have;      /* 1: sample[m] holds inner point m's */
     tf_sample *sample;

@@ -220,7 +220,7 @@ static double display_range(const level_span *sp)
 }
 
 /* Per-pixel sample cache on the pixel's (N+1) x (N+1) lattice.  With coherence, `column`: the
- * rectangle's record for each of the pixel's N+1 lattice columns of the highest ray traced in
+ * rectangle's record for each of the pixel's two corner columns of the highest ray traced in
  * it below this pixel row (NULL: no coherence), and `lower`.  have[k] says what the pixel holds
  * at point k: 0 nothing, 1 a sample it has used, 2 a sample a neighbour took on their shared
  * edge (pixel_edge), not used yet.  `used` lists the points used beyond the four corners (most
@@ -254,12 +254,12 @@ typedef struct corners {
 } corners;
 
 /* After a pixel: each of its corner columns' highest ray, its top corner's, is the one the
- * corner row above wants below it.  Only the corner columns are read (corner_row_coherent),
- * and only corner rays keep their records: a sample inside a pixel helps no other ray. */
+ * corner row above wants below it (corner_row_coherent).  Only corner rays keep their
+ * records: a sample inside a pixel helps no other ray. */
 static void note_columns(const pixel_cache *pc, const corners *cs)
 {
     pc->column[0] = *cs->k[0];
-    pc->column[pc->side - 1] = *cs->k[1];
+    pc->column[1] = *cs->k[1];
 }
 
 /* The nearest distance among the samples the pixel used (its corners and pc->used). */
@@ -515,7 +515,7 @@ static void corner_row_packets(const tf_renderer *r, tf_rect rect, int cy, row_r
 }
 
 /* The same samples as corner_row_single, each camera ray helped by the one traced below it in
- * its lattice column (column[c * N], NULL-free: a record that vouches for nothing at first);
+ * its corner column (column[c], NULL-free: a record that vouches for nothing at first);
  * the samples' records go to records[]. */
 static void corner_row_coherent(const tf_renderer *r, tf_rect rect, int cy,
                                 const tf_sample_record *column, tf_sample *row,
@@ -524,13 +524,12 @@ static void corner_row_coherent(const tf_renderer *r, tf_rect rect, int cy,
     for (int c = 0; c <= rect.w; c++) {
         int64_t X, Y;
         corner_point(r, rect, cy, c, &X, &Y);
-        lattice_sample_coherent(r, X, Y, &column[(size_t)c * (size_t)r->lattice], &records[c],
-                                &row[c], &tally->shadow_rays);
+        lattice_sample_coherent(r, X, Y, &column[c], &records[c], &row[c], &tally->shadow_rays);
     }
 }
 
 /* How a rectangle traces its corner rows: coherent rays (column not NULL: the rectangle's
- * records, one a lattice column), packets (q not NULL), or one ray at a time. */
+ * records, one a corner column), packets (q not NULL), or one ray at a time. */
 typedef struct row_tracer {
     row_rays *q;
     tf_sample_record *column;
@@ -616,7 +615,7 @@ static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
     int ok = st->above && st->below && st->pc.sample && st->pc.have && st->pc.used;
     if (coherence_on(r)) {
         /* calloc: records that vouch for nothing until a ray below is traced */
-        st->how.column = calloc((size_t)rect.w * (size_t)r->lattice + 1, sizeof *st->how.column);
+        st->how.column = calloc(w1, sizeof *st->how.column);
         st->ring = calloc(w1 * TF_CORNER_RING, sizeof *st->ring);
         ok = ok && st->how.column && st->ring;
     } else if (!r->hf->proc && tf_trace_packets_enabled()) {
@@ -653,7 +652,7 @@ static void render_pixel_row(const tf_renderer *r, tf_rect rect, int row, rect_s
         if (st->how.column) {
             cs.k[0] = &above[c], cs.k[1] = &above[c + 1];
             cs.k[2] = &below[c], cs.k[3] = &below[c + 1];
-            st->pc.column = &st->how.column[(size_t)c * (size_t)r->lattice];
+            st->pc.column = &st->how.column[c];
             st->pc.lower = &lower[c];
         }
         render_pixel(r, &st->pc, rect.x + c, rect.y + row, &cs, &st->left, &top,

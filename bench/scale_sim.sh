@@ -47,12 +47,11 @@ SCENE=${SCENE:-scenes/default.scene}
 RECORD_SIZE=${RECORD_SIZE:-960x544}
 mkdir -p "$OUT"
 CSV="$OUT/scale_sim.csv"
-PORT=$((20000 + $$ % 20000))
 EXR=/dev/shm/terrafarm-scale-sim-$$.exr
 LOG=$(mktemp)
 REC=/dev/shm/terrafarm-scale-payloads-$$.exr
 FLAT_MODEL=
-trap 'rm -f ${FLAT_MODEL:+"$FLAT_MODEL"} "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$REC" "${REC%.exr}.png"; rm -rf ${SMOKE_OUT:+"$SMOKE_OUT"}' EXIT
+trap 'rm -f ${FLAT_MODEL:+"$FLAT_MODEL"} "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$LOG.coord" "$REC" "${REC%.exr}.png"; rm -rf ${SMOKE_OUT:+"$SMOKE_OUT"}' EXIT
 
 [ -x "$TF" ] || { echo "scale_sim.sh: build first (make)" >&2; exit 1; }
 if [ "$MODEL" = flat ]; then
@@ -83,21 +82,25 @@ for ms in $TASK_MS; do
     for f in $WM; do
       if [ "$f" = auto ]; then wm=auto wm_args="--wait-workers $w"
       else wm=$((f * w + cols)) wm_args="--watermark $wm"; fi
-      PORT=$((PORT + 1))
-      $COORD_PIN "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:$PORT --size ${width}x$height \
-        --tasks stamps:8x8 $wm_args -o "$EXR" --overwrite --lease-timeout 600000 -q \
-        --stats "$LOG.stats" ${RENDER_ARGS:-} &
+      # port 0: the system's choice, which no other process holds (a port picked here could be
+      # some connection's local port); the coordinator names it once it listens
+      $COORD_PIN "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:0 --http 127.0.0.1:0 \
+        --size ${width}x$height --tasks stamps:8x8 $wm_args -o "$EXR" --overwrite \
+        --lease-timeout 600000 --stats "$LOG.stats" ${RENDER_ARGS:-} 2>"$LOG.coord" &
       coord=$!
-      # wait until the coordinator listens (a refused connect is not retried by the client)
-      i=0
-      until ss -Hltn "sport = :$PORT" | grep -q .; do
-        i=$((i + 1)); [ $i -lt 200 ] || { echo "scale_sim.sh: coordinator did not start" >&2; exit 1; }
+      # wait until it listens (a refused connect is not retried by the client), however long
+      # a busy machine takes: its log's first line names the port, or it has exited
+      PORT=
+      until PORT=$(sed -n 's/.*workers may join at 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$LOG.coord") &&
+            [ -n "$PORT" ]; do
+        kill -0 $coord 2>/dev/null ||
+          { cat "$LOG.coord" >&2; echo "scale_sim.sh: the coordinator did not start" >&2; exit 1; }
         sleep 0.05
       done
       /usr/bin/time -f '%U %S' -o "$LOG.time" \
         $SIM_PIN "$TF" worker --connect 127.0.0.1:$PORT --simulate "$MODEL" -j $w --pixel-us "$pixel_us" \
         --payloads "$REC" -q --timeout 30000 >"$LOG"
-      wait $coord
+      wait $coord || { cat "$LOG.coord" >&2; echo "scale_sim.sh: the coordinator failed" >&2; exit 1; }
       sim_cpu=$(awk '{ printf "%.2f", $1 + $2 }' "$LOG.time")
       line=$(cat "$LOG")
       get() { echo "$line" | tr ' ' '\n' | sed -n "s/^$1=//p"; }

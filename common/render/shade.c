@@ -321,7 +321,8 @@ static double fbm_with_gradient(const tf_noise *nz, double x, double y, double s
  * plan made once (pthread_once: the tables are shared by every renderer and thread).
  * snow_rest_bound[k] is a strict upper bound on |octaves k.. of the snow fBm|: every noise value
  * lies in (-1, 1) (noise.h), so that sum is below the sum of their weights; 1e-9 relative covers
- * the rounding of the sum.  snow_rest_bound[0] bounds the whole fBm (snow_fbm_bound). */
+ * the rounding of the sum.  snow_rest_bound[0] bounds the whole fBm
+ * (tf_shade_snow_fbm_bound). */
 static tf_octaves snow_plan;
 static double snow_rest_bound[TF_MAX_OCTAVES + 1];
 static pthread_once_t snow_plan_once = PTHREAD_ONCE_INIT;

@@ -14,8 +14,10 @@
  *                inside the square,
  * reach rounded up and sink down (a relative 1e-9 on the double, then to the next float).  A
  * height field with a NaN anywhere (a hole, slope_max NaN) gets no sinks: the under proof needs
- * a continuous surface.  One pass over 1/4 of the cells and one over the bins: ~20 ms and
- * 5.6 MB for 2049^2 samples.  Strips 2.5 cells wide instead of 4 bound the surface under a
+ * a continuous surface.  One pass over 1/4 of the cells and one over the bins: ~15 ms and
+ * 5.6 MB for 2049^2 samples, the table on huge pages where the system has them (a fresh
+ * table's first touch, one fault and one zeroed 4 KB page at a time, was a fifth of the
+ * build).  Strips 2.5 cells wide instead of 4 bound the surface under a
  * ray's line more tightly, so a lit ray is proved clear ~4% sooner in time (bench/README.md
  * section 27); narrower strips or shorter bins help a little more but hold more memory than
  * the comparison with Embree leaves (issue 23: 1/10 of its memory; 2 x 4 cells would be 68.5
@@ -64,14 +66,17 @@ static int frame_of(const tf_heightfield *hf, tf_vec3 sun, tf_sun_frame *f, doub
     return 1;
 }
 
-/* Every block of level L raises the tops and lowers the floors of the bins it meets (table:
- * top, floor in a bin's first two floats, until strip_bounds makes them reach and sink). */
-static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, double ux, double uy,
-                           float *table)
+/* Where the blocks of one level reach, from a block's corner cell (i, j): along and across
+ * spans [ux i + uy j + al_lo, .. + al_hi] and [-uy i + ux j + ac_lo, .. + ac_hi], each already
+ * widened by the margin. */
+typedef struct block_reach {
+    double ux, uy, B;
+    double al_lo, al_hi, ac_lo, ac_hi;
+} block_reach;
+
+static block_reach block_reach_of(const tf_sun_frame *f, int cells, double ux, double uy, int L)
 {
-    const int L = TF_SUN_BLOCK_LEVEL < hf->levels ? TF_SUN_BLOCK_LEVEL : hf->levels - 1;
-    const int side = hf->cells >> L;
-    const double B = (double)(1 << L), mu = 1e-9 * hf->cells + 1e-9;
+    const double B = (double)(1 << L), mu = 1e-9 * cells + 1e-9;
     /* a block's along and across spans from its corner (i, j): the corners' offsets */
     const double al_off[4] = {0, ux * B, uy * B, (ux + uy) * B};
     const double ac_off[4] = {0, -uy * B, ux * B, (ux - uy) * B};
@@ -80,26 +85,46 @@ static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, doub
         al_min = fmin(al_min, al_off[c]), al_max = fmax(al_max, al_off[c]);
         ac_min = fmin(ac_min, ac_off[c]), ac_max = fmax(ac_max, ac_off[c]);
     }
+    return (block_reach){ux, uy, B, al_min - mu - f->along0, al_max + mu - f->along0,
+                         ac_min - mu - f->across0, ac_max + mu - f->across0};
+}
+
+/* Block (bi, bj), bounded by top and bottom: every bin it meets takes its top, and its floor
+ * negated (so both are raised with one max, which the compiler does on the pair at once;
+ * strip_bounds negates the floors back). */
+static inline void scatter_block(const tf_sun_frame *f, const block_reach *r, int bi, int bj,
+                                 float top, float bottom, float *table)
+{
+    const double i = bi * r->B, j = bj * r->B;
+    const double al = r->ux * i + r->uy * j, ac = -r->uy * i + r->ux * j;
+    const int b0 = (int)((al + r->al_lo) * f->inv_ds), b1 = (int)((al + r->al_hi) * f->inv_ds);
+    const int k0 = (int)((ac + r->ac_lo) * f->inv_w), k1 = (int)((ac + r->ac_hi) * f->inv_w);
+    /* a block the grids could not bound (a NaN height) bounds its bins by nothing: they then
+     * prove neither clear nor under */
+    const float hi = isnan(top) ? INFINITY : top, neg_lo = isnan(bottom) ? INFINITY : -bottom;
+    for (int k = k0; k <= k1; k++) {
+        float *t = &table[TF_SUN_BIN * ((size_t)k * (size_t)f->bins + (size_t)b0)];
+        for (int b = 0; b <= b1 - b0; b++) {
+            t[2 * b] = hi > t[2 * b] ? hi : t[2 * b];
+            t[2 * b + 1] = neg_lo > t[2 * b + 1] ? neg_lo : t[2 * b + 1];
+        }
+    }
+}
+
+/* Every block of level L raises the tops and lowers the floors of the bins it meets (table:
+ * top, negated floor in a bin's first two floats, from -INFINITY, until strip_bounds makes
+ * them reach and sink). */
+static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, double ux, double uy,
+                           float *table)
+{
+    const int L = TF_SUN_BLOCK_LEVEL < hf->levels ? TF_SUN_BLOCK_LEVEL : hf->levels - 1;
+    const int side = hf->cells >> L;
+    const block_reach r = block_reach_of(f, hf->cells, ux, uy, L);
     const float *mx = hf->maxgrid[L], *mn = hf->mingrid[L];
     for (int bj = 0; bj < side; bj++)
         for (int bi = 0; bi < side; bi++) {
-            const double i = bi * B, j = bj * B;
-            const double al = ux * i + uy * j, ac = -uy * i + ux * j;
-            const int b0 = (int)((al + al_min - mu - f->along0) * f->inv_ds);
-            const int b1 = (int)((al + al_max + mu - f->along0) * f->inv_ds);
-            const int k0 = (int)((ac + ac_min - mu - f->across0) * f->inv_w);
-            const int k1 = (int)((ac + ac_max + mu - f->across0) * f->inv_w);
             const size_t at = (size_t)bj * (size_t)side + (size_t)bi;
-            /* a block the grids could not bound (a NaN height) bounds its bins by nothing:
-             * they then prove neither clear nor under */
-            const float hi = isnan(mx[at]) ? INFINITY : mx[at];
-            const float lo = isnan(mn[at]) ? -INFINITY : mn[at];
-            for (int k = k0; k <= k1; k++)
-                for (int b = b0; b <= b1; b++) {
-                    float *t = &table[TF_SUN_BIN * ((size_t)k * (size_t)f->bins + (size_t)b)];
-                    t[0] = hi > t[0] ? hi : t[0];
-                    t[1] = lo < t[1] ? lo : t[1];
-                }
+            scatter_block(f, &r, bi, bj, mx[at], mn[at], table);
         }
 }
 
@@ -192,7 +217,7 @@ static void strip_bounds(const tf_sun_frame *f, int cells, double ux, double uy,
             const double v = (top - rise) + 1e-9 * (fabs(top) + fabs(rise));
             reach = v > reach ? v : reach;
         }
-        const double bottom = bin[1], rise = f->climb * (f->along0 + (b + 1) * f->ds);
+        const double bottom = -bin[1], rise = f->climb * (f->along0 + (b + 1) * f->ds);
         if (b >= first && b <= last && isfinite(bottom)) {
             const float g = float_down((bottom - rise) - 1e-9 * (fabs(bottom) + fabs(rise)));
             sink = g > sink ? g : sink;
@@ -209,13 +234,13 @@ tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
         return NULL;
     const size_t n = (size_t)f.strips * (size_t)f.bins;
     tf_sun_strips *s = malloc(sizeof *s);
-    float *a = malloc(TF_SUN_BIN * n * sizeof *a);
+    float *a = tf_alloc_heights(TF_SUN_BIN * n * sizeof *a);
     if (!s || !a) {
         free(s), free(a);
         return NULL;
     }
     for (size_t i = 0; i < n; i++)
-        a[TF_SUN_BIN * i] = -INFINITY, a[TF_SUN_BIN * i + 1] = INFINITY;
+        a[TF_SUN_BIN * i] = -INFINITY, a[TF_SUN_BIN * i + 1] = -INFINITY;
     scatter_blocks(hf, &f, ux, uy, a);
     /* a hole (slope_max NaN: heightfield.h) breaks the under proof's continuous surface; the
      * grids cannot say, their min of four samples keeps or drops a NaN by its place */

@@ -34,6 +34,7 @@ program_case() {
 script_want() {
     case $1 in
     affinity_ab) WANT='^affinity on/off wall ratio: [0-9]' ;;
+    backend_ab) WANT='^C/OpenCL wall ratio (> 1: OpenCL faster; issue 23 asks >= 1.3): 64x36 [0-9]' ;;
     coordinator_ab) WANT='^B/A render_cpu_s: median of the pairs [0-9.]*, .*images identical' ;;
     erosion_farm) WANT="^erosion farm: every run's heights equal the 1-worker run's" ;;
     farm_sim) WANT='^farm_sim: 3 jobs, 2 x 2 simulated workers' ;;

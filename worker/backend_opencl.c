@@ -1023,27 +1023,30 @@ static cl_mem buffer_of(tf_cl_backend *b, const void *host, size_t bytes, cl_int
 }
 
 int tf_cl_backend_walk(tf_cl_backend *b, int n, const double *rays, const double *lows,
-                       double *t, double *records, char *err, size_t errlen)
+                       const double *fars, double *t, double *records, char *err,
+                       size_t errlen)
 {
     if (!b->renderer)
         return tf_seterr(err, errlen, "OpenCL: no scene attached to the backend");
     if (n <= 0)
         return 0;
-    cl_int rc = CL_SUCCESS, has_lows = lows != NULL;
+    cl_int rc = CL_SUCCESS, has_lows = lows != NULL, has_fars = fars != NULL;
     cl_kernel k = clCreateKernel(b->program, "tf_walk_rays8", &rc);
     const size_t nr = (size_t)n * TF_CL_RECORD_DOUBLES * sizeof(double);
     cl_mem in = buffer_of(b, rays, (size_t)n * 7 * sizeof(double), &rc);
-    cl_mem lo = buffer_of(b, lows, nr, &rc);
+    cl_mem lo = buffer_of(b, lows, nr, &rc), fa = buffer_of(b, fars, nr, &rc);
     cl_mem tb = clCreateBuffer(b->ctx, CL_MEM_WRITE_ONLY, (size_t)n * sizeof(double), NULL, &rc);
     cl_mem rb = clCreateBuffer(b->ctx, CL_MEM_WRITE_ONLY, nr, NULL, &rc);
-    if (k && in && lo && tb && rb) {
+    if (k && in && lo && fa && tb && rb) {
         rc = set_world_args(b, k);
         rc |= clSetKernelArg(k, 7, sizeof(cl_int), &n);
         rc |= clSetKernelArg(k, 8, sizeof(cl_mem), &in);
         rc |= clSetKernelArg(k, 9, sizeof(cl_mem), &lo);
         rc |= clSetKernelArg(k, 10, sizeof(cl_int), &has_lows);
-        rc |= clSetKernelArg(k, 11, sizeof(cl_mem), &tb);
-        rc |= clSetKernelArg(k, 12, sizeof(cl_mem), &rb);
+        rc |= clSetKernelArg(k, 11, sizeof(cl_mem), &fa);
+        rc |= clSetKernelArg(k, 12, sizeof(cl_int), &has_fars);
+        rc |= clSetKernelArg(k, 13, sizeof(cl_mem), &tb);
+        rc |= clSetKernelArg(k, 14, sizeof(cl_mem), &rb);
         size_t global = round_up(((size_t)n + (size_t)b->stream - 1) / (size_t)b->stream, b->local);
         if (rc == CL_SUCCESS)
             rc = clEnqueueNDRangeKernel(b->queue, k, 1, NULL, &global, &b->local, 0, NULL, NULL);
@@ -1055,8 +1058,8 @@ int tf_cl_backend_walk(tf_cl_backend *b, int n, const double *rays, const double
     } else if (rc == CL_SUCCESS) {
         rc = CL_OUT_OF_RESOURCES;
     }
-    cl_mem bufs[] = {in, lo, tb, rb};
-    for (int i = 0; i < 4; i++)
+    cl_mem bufs[] = {in, lo, fa, tb, rb};
+    for (int i = 0; i < 5; i++)
         if (bufs[i])
             clReleaseMemObject(bufs[i]);
     if (k)

@@ -44,10 +44,12 @@ void tf_cl_backend_free(tf_cl_backend *b);
  * attached height field, for tests and benchmarks: ray k is rays[7k .. 7k+6] (origin, direction,
  * tmax; tmin 0); if lows is not NULL, lows[5k .. 5k+4] is the coherence record that helps it
  * (trace.h's tf_ray_clear without the origin: ux, uy, k, s_in, s_free; it must be a record of a
- * ray from ray k's own origin).  Out: t[k], the hit's parameter (INFINITY: no hit), and
- * records[5k ..], ray k's own record.  0, or -1 with a message. */
+ * ray from ray k's own origin), and if fars is not NULL, fars[5k ..] is the one asked where
+ * that one cannot vouch (the pixel kernel's far corner).  Out: t[k], the hit's parameter
+ * (INFINITY: no hit), and records[5k ..], ray k's own record.  0, or -1 with a message. */
 int tf_cl_backend_walk(tf_cl_backend *b, int n, const double *rays, const double *lows,
-                       double *t, double *records, char *err, size_t errlen);
+                       const double *fars, double *t, double *records, char *err,
+                       size_t errlen);
 /* Render s from now on: a scene that differs from the backend's only in camera and sun (a
  * frame of the same sequence, tf_scene_at_frame).  Uploads the new parameters (a few hundred
  * bytes); the program and the height field stay.  s must outlive the backend's use of it.

@@ -26,6 +26,14 @@
  * terrain's slope across half a pixel of heading (trace.c's D), farther ones vouch for less;
  * 3, 5 and 8 measured on default.scene, 5 the fastest in C and in OpenCL. */
 #define TF_LOWER_ROWS 5
+/* In the OpenCL pixel kernel, where that corner's ray cannot vouch (one pixel camera ray in
+ * eleven on default.scene at 1920x1080, most with trace.c's D <= 0: its climb does not outpace
+ * the slope across the two headings), the corner this many rows down is asked instead: twice
+ * the climb for the same offset in heading.  It spares those rays most of a walk from the
+ * camera, which held up the other lanes of their packets (a pixel camera ray's steps 7.54 ->
+ * 6.29; 8 rows 6.46, 15 rows 6.81).  The C renderer keeps the one record: there such a walk
+ * holds up nothing, and the far record measured no gain (bench/README.md section 30). */
+#define TF_LOWER_ROWS_FAR 10
 /* lattice jitter: tf_hash64 of the key, X, and Y times the golden ratio; jy from the hash
  * xored with TF_JITTER_Y_SALT */
 #define TF_JITTER_Y_MUL 0x9e3779b97f4a7c15UL

@@ -7,7 +7,12 @@
  *   walk_matches_trace  every ray's hit parameter is tf_trace's to the bit, and its record
  *                       (heading, climb, the run it is above the surface) tf_trace_coherent's:
  *                       walked alone, helped by the record of the ray below it, and helped by a
- *                       random other ray's of its fan (which vouches for nothing when higher).
+ *                       random other ray's of its fan (which vouches for nothing when higher);
+ *                       and helped by the rays 5 and 10 rows below it, as the pixel kernel's
+ *                       samples are by their near and far corners.
+ *   a_far_record_is_asked_where_the_near_one_cannot_vouch   a false far record hides the hit
+ *                       after a near one that is missing or cannot vouch, and not after a true
+ *                       one; a far one that cannot vouch is not used.
  *   a_false_record_hides_a_hit   a record that claims the ray below stayed clear beyond this
  *                       ray's hit makes the kernel's walk start past it: the records are what
  *                       the walk goes by (so walk_matches_trace can fail).
@@ -110,12 +115,24 @@ static void check_ray(const tf_heightfield *hf, const ray_fan *f, int row, doubl
                  how, rec[0], rec[1], rec[2], rec[3], rec[4], c[0], c[1], c[2], c[3], c[4]);
 }
 
-static void walk(tf_cl_backend *b, const double *rays, const double *lows, double *t,
-                 double *rec)
+static void walk(tf_cl_backend *b, const double *rays, const double *lows, const double *fars,
+                 double *t, double *rec)
 {
     char err[1024];
-    if (tf_cl_backend_walk(b, RAYS, rays, lows, t, rec, err, sizeof err))
+    if (tf_cl_backend_walk(b, RAYS, rays, lows, fars, t, rec, err, sizeof err))
         fail_msg("%s", err);
+}
+
+/* lows[m] = the record of the ray `back` rows below ray m in its fan (none below the fan). */
+static void records_below(const double *rec, int back, double *lows)
+{
+    for (int m = 0; m < RAYS; m++) {
+        const int row = m % FAN_ROWS;
+        if (row - back < 0)
+            memset(lows + (size_t)m * REC, 0, sizeof(double) * REC);
+        else
+            memcpy(lows + (size_t)m * REC, rec + (size_t)(m - back) * REC, sizeof(double) * REC);
+    }
 }
 
 static void fans_over(height_fn fn, int k, double extent, uint64_t seed)
@@ -126,8 +143,8 @@ static void fans_over(height_fn fn, int k, double extent, uint64_t seed)
     ray_fan *fans = malloc(sizeof *fans * FANS);
     double *rays = malloc(sizeof *rays * RAYS * 7), *t = malloc(sizeof *t * RAYS);
     double *rec = malloc(sizeof *rec * RAYS * REC), *lows = malloc(sizeof *lows * RAYS * REC);
-    double *rec2 = malloc(sizeof *rec2 * RAYS * REC);
-    assert_true(fans && rays && t && rec && lows && rec2);
+    double *rec2 = malloc(sizeof *rec2 * RAYS * REC), *fars = malloc(sizeof *fars * RAYS * REC);
+    assert_true(fans && rays && t && rec && lows && rec2 && fars);
     rng r = {seed};
     for (int n = 0; n < FANS; n++) {
         make_fan(hf, &r, n, &fans[n]);
@@ -138,7 +155,7 @@ static void fans_over(height_fn fn, int k, double extent, uint64_t seed)
             y[6] = fans[n].tmax;
         }
     }
-    walk(b, rays, NULL, t, rec); /* alone: the hits, and the records that help below */
+    walk(b, rays, NULL, NULL, t, rec); /* alone: the hits, and the records that help below */
     int hits = 0, vouching = 0;
     for (int m = 0; m < RAYS; m++) {
         check_ray(hf, &fans[m / FAN_ROWS], m % FAN_ROWS, t[m], rec + (size_t)m * REC, "alone");
@@ -155,15 +172,20 @@ static void fans_over(height_fn fn, int k, double extent, uint64_t seed)
                 memcpy(lows + (size_t)m * REC, rec + (size_t)(base + from) * REC,
                        sizeof(double) * REC);
         }
-        walk(b, rays, lows, t, rec2);
+        walk(b, rays, lows, NULL, t, rec2);
         for (int m = 0; m < RAYS; m++)
             check_ray(hf, &fans[m / FAN_ROWS], m % FAN_ROWS, t[m], NULL,
                       pass == 0 ? "helped by the ray below" : "helped by another ray");
     }
+    records_below(rec, 5, lows);
+    records_below(rec, 10, fars);
+    walk(b, rays, lows, fars, t, rec2);
+    for (int m = 0; m < RAYS; m++)
+        check_ray(hf, &fans[m / FAN_ROWS], m % FAN_ROWS, t[m], NULL, "helped by rows 5 and 10");
     print_message("%d rays, %d hits, %d records vouching\n", RAYS, hits, vouching);
     assert_true(hits > RAYS / 5);
     assert_true(vouching > RAYS / 5);
-    free(fans), free(rays), free(t), free(rec), free(lows), free(rec2);
+    free(fans), free(rays), free(t), free(rec), free(lows), free(rec2), free(fars);
     env_free(&env);
 }
 
@@ -189,10 +211,43 @@ static void a_false_record_hides_a_hit(void **state)
     const double lie[REC] = {0, 1, -0.31, 0, 2 * hit.t}, none[REC] = {0};
     double t, rec[REC];
     char err[1024];
-    assert_int_equal(tf_cl_backend_walk(b, 1, ray, none, &t, rec, err, sizeof err), 0);
+    assert_int_equal(tf_cl_backend_walk(b, 1, ray, none, NULL, &t, rec, err, sizeof err), 0);
     assert_true(t == hit.t);
-    assert_int_equal(tf_cl_backend_walk(b, 1, ray, lie, &t, rec, err, sizeof err), 0);
+    assert_int_equal(tf_cl_backend_walk(b, 1, ray, lie, NULL, &t, rec, err, sizeof err), 0);
     assert_true(isinf(t));
+    env_free(&env);
+}
+
+/* The far record is asked only where the near one cannot vouch.  A false far record (it claims
+ * the run past this ray's hit) hides the hit after a missing near record and after one that
+ * climbs faster than this ray (so cannot vouch), not after a true one; a far record that climbs
+ * faster cannot vouch and is not used, however far it claims. */
+static void a_far_record_is_asked_where_the_near_one_cannot_vouch(void **state)
+{
+    (void)state;
+    walk_env env = env_over(hills, 6, 1000);
+    const tf_heightfield *hf = env.hf;
+    tf_cl_backend *b = env.b;
+    const tf_vec3 o = v3(500, 100, hf->hmax + 50), d = v3(0, 1, -0.3), low = v3(0, 1, -0.32);
+    tf_hit hit;
+    assert_true(tf_trace(hf, o, d, 0.0, INFINITY, &hit));
+    double below[REC], t, rec[REC];
+    char err[1024];
+    const double low_ray[7] = {o.x, o.y, o.z, low.x, low.y, low.z, INFINITY};
+    assert_int_equal(tf_cl_backend_walk(b, 1, low_ray, NULL, NULL, &t, below, err, sizeof err), 0);
+    assert_true(below[4] > 0);
+    const double ray[7] = {o.x, o.y, o.z, d.x, d.y, d.z, INFINITY};
+    const double lie[REC] = {0, 1, -0.31, 0, 2 * hit.t}, none[REC] = {0};
+    const double climber[REC] = {0, 1, -0.29, 0, 4 * hit.t};
+    const double *cases[][2] = {{none, lie}, {climber, lie}, {below, lie}, {none, climber},
+                                {below, climber}};
+    const int hides[] = {1, 1, 0, 0, 0};
+    for (int c = 0; c < 5; c++) {
+        assert_int_equal(
+            tf_cl_backend_walk(b, 1, ray, cases[c][0], cases[c][1], &t, rec, err, sizeof err), 0);
+        if (hides[c] ? !isinf(t) : t != hit.t)
+            fail_msg("case %d: t %.17g, tf_trace's %.17g", c, t, hit.t);
+    }
     env_free(&env);
 }
 
@@ -212,10 +267,10 @@ static void the_prefix_finds_a_hit_before_the_lower_ray_enters(void **state)
                              o.x, o.y, o.z, upper.x, upper.y, upper.z, INFINITY};
     double t[2], rec[2 * REC], lows[2 * REC] = {0};
     char err[1024];
-    assert_int_equal(tf_cl_backend_walk(b, 1, rays, NULL, t, rec, err, sizeof err), 0);
+    assert_int_equal(tf_cl_backend_walk(b, 1, rays, NULL, NULL, t, rec, err, sizeof err), 0);
     assert_true(rec[4] > rec[3]); /* the lower ray vouches */
     memcpy(lows + REC, rec, sizeof(double) * REC);
-    assert_int_equal(tf_cl_backend_walk(b, 2, rays, lows, t, rec, err, sizeof err), 0);
+    assert_int_equal(tf_cl_backend_walk(b, 2, rays, lows, NULL, t, rec, err, sizeof err), 0);
     assert_true(t[1] == plain.t);
     env_free(&env);
 }
@@ -227,6 +282,7 @@ int main(void)
         cmocka_unit_test(walk_matches_trace_rough),
         cmocka_unit_test(walk_matches_trace_terraces),
         cmocka_unit_test(a_false_record_hides_a_hit),
+        cmocka_unit_test(a_far_record_is_asked_where_the_near_one_cannot_vouch),
         cmocka_unit_test(the_prefix_finds_a_hit_before_the_lower_ray_enters),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

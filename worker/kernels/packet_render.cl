@@ -77,7 +77,7 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
         iv rays[TF_STREAM_PACKETS];
         for (int p = 0; p < TF_STREAM_PACKETS; p++)
             rays[p] = (iv)(0);
-        lattice_samples(&w, jitter_key, X, Y, n, &lows, s, rays, &rec);
+        lattice_samples(&w, jitter_key, X, Y, n, &lows, NULL, s, rays, &rec);
         dv lvl[TF_STREAM_PACKETS][3];
         for (int p = 0; p * TF_LANES < n; p++)
             for (int chn = 0; chn < 3; chn++)
@@ -95,24 +95,29 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
     }
 }
 
-/* The record of the corner that helps the camera ray of lattice point (X, Y) (trace.c's
- * coherence), into lane e of *lows: the corner TF_LOWER_ROWS pixel rows below the point's
- * pixel row (or the rectangle's last corner row), in the corner column nearest the point.  Any
- * lower ray from the camera may help; this one is below by enough to outclimb the terrain's
- * slope across a half pixel's heading (render.c's ray_below takes the nearest in the column,
- * which only the C renderer's bottom-to-top order has at hand). */
-void lower_corner(__global const double *records, long X, long Y, long N, int rx, int ry, int rw,
-                  int rh, int e, ray_clears *lows)
+/* The records of the corners that help the camera ray of lattice point (X, Y) (trace.c's
+ * coherence), into lane e of *lows and *fars: the corner TF_LOWER_ROWS pixel rows below the
+ * point's pixel row (or the rectangle's last corner row), in the corner column nearest the
+ * point; and the corner TF_LOWER_ROWS_FAR rows below it (or the last), where that is further
+ * down, which walk_stream asks where the first cannot vouch.  Any lower ray from the camera may
+ * help; these are below by enough to outclimb the terrain's slope across a half pixel's heading.
+ * render.c's ray_below takes the first only: a C ray that walks from the camera costs no lane
+ * of a packet, and the far record measured no gain there (bench/README.md section 30). */
+void lower_corners(__global const double *records, long X, long Y, long N, int rx, int ry,
+                   int rw, int rh, int e, ray_clears *lows, ray_clears *fars)
 {
     const int p = e / TF_LANES, l = e % TF_LANES;
-    long cy = Y / N + TF_LOWER_ROWS - ry, cx = (X + N / 2) / N - rx;
+    long cy = Y / N + TF_LOWER_ROWS - ry, fy = Y / N + TF_LOWER_ROWS_FAR - ry;
+    long cx = (X + N / 2) / N - rx;
     cy = cy < rh ? cy : rh;
+    fy = fy < rh ? fy : rh;
     cx = cx < 0 ? 0 : cx > rw ? rw : cx;
-    if ((cy + ry) * N <= Y) { /* no corner row below the point */
-        lows->s_free[p][l] = 0;
+    lows->s_free[p][l] = fars->s_free[p][l] = 0;
+    if ((cy + ry) * N <= Y) /* no corner row below the point */
         return;
-    }
     record_get(records + (size_t)(cy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES, e, lows);
+    if (fy > cy)
+        record_get(records + (size_t)(fy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES, e, fars);
 }
 
 /* render.c's display_range over the levels of n samples (n <= 5): the largest per-channel
@@ -336,14 +341,14 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
             break;
         /* every pixel still active waits on a queued sample, so q.n > 0 here */
         lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
-        ray_clears lows;
+        ray_clears lows, fars;
         for (int e = 0; e < q.n; e++) {
             const pixel_state *s = &ps[q.pixel[e]];
             int k = q.slot[e];
             long x = (long)s->px * LN + k % side, y = (long)s->py * LN + k / side;
             X[e / TF_LANES][e % TF_LANES] = x;
             Y[e / TF_LANES][e % TF_LANES] = y;
-            lower_corner(corner_records, x, y, LN, rx, ry, rw, rh, e, &lows);
+            lower_corners(corner_records, x, y, LN, rx, ry, rw, rh, e, &lows, &fars);
         }
         for (int e = q.n; e < (q.n + TF_LANES - 1) / TF_LANES * TF_LANES; e++) {
             X[e / TF_LANES][e % TF_LANES] = X[0][0];
@@ -353,7 +358,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         iv rays[TF_STREAM_PACKETS];
         for (int b = 0; b < TF_STREAM_PACKETS; b++)
             rays[b] = (iv)(0);
-        lattice_samples(&w, jitter_key, X, Y, q.n, &lows, smp, rays, NULL);
+        lattice_samples(&w, jitter_key, X, Y, q.n, &lows, &fars, smp, rays, NULL);
         for (int b = 0; b * TF_LANES < q.n; b++) {
             dv lvl[3];
             for (int ch = 0; ch < 3; ch++)
@@ -395,13 +400,15 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
 /* The rays' walk on its own, for the tests and benchmarks (tf_cl_backend_walk): rays
  * TF_STREAM g .. of n through walk_stream.  Ray k: rays[7k ..] = its origin, direction and tmax
  * (tmin 0); with has_lows, the record that helps it at lows[TF_CL_RECORD_DOUBLES k ..] (a record
- * of a ray from its own origin: walk_stream compares none); out: t[k], its hit's parameter
+ * of a ray from its own origin: walk_stream compares none), and with has_fars the one asked
+ * where that cannot vouch at fars[TF_CL_RECORD_DOUBLES k ..]; out: t[k], its hit's parameter
  * (INFINITY: none), and its own record at records[TF_CL_RECORD_DOUBLES k ..]. */
 __kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulong jitter_key,
                             __global const float *h, __global const float2 *mm,
                             __global const ushort *perm, __global const float *strips, int n,
                             __global const double *rays, __global const double *lows,
-                            int has_lows, __global double *t, __global double *records)
+                            int has_lows, __global const double *fars, int has_fars,
+                            __global double *t, __global double *records)
 {
     (void)jitter_key;
     const int base = (int)get_global_id(0) * TF_STREAM;
@@ -409,7 +416,7 @@ __kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulo
         return;
     world w = make_world(P, I, h, mm, perm, strips);
     ray_stream in;
-    ray_clears low, rec;
+    ray_clears low, far, rec;
     in.n = n - base < TF_STREAM ? n - base : TF_STREAM;
     for (int e = 0; e < in.n; e++) {
         const int p = e / TF_LANES, l = e % TF_LANES;
@@ -419,6 +426,8 @@ __kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulo
         in.tmin[p][l] = 0.0, in.tmax[p][l] = r[6];
         if (has_lows)
             record_get(lows + (size_t)(base + e) * TF_CL_RECORD_DOUBLES, e, &low);
+        if (has_fars)
+            record_get(fars + (size_t)(base + e) * TF_CL_RECORD_DOUBLES, e, &far);
     }
     lv found[TF_STREAM_PACKETS];
     hitp hit[TF_STREAM_PACKETS];
@@ -428,7 +437,7 @@ __kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulo
         hit[p].p = hit[p].n = zero;
         hit[p].ci = hit[p].cj = (iv)(0);
     }
-    walk_stream(&w, &in, has_lows ? &low : NULL, found, hit, &rec);
+    walk_stream(&w, &in, has_lows ? &low : NULL, has_fars ? &far : NULL, found, hit, &rec);
     for (int e = 0; e < in.n; e++) {
         const int p = e / TF_LANES, l = e % TF_LANES;
         t[base + e] = found[p][l] ? hit[p].t[l] : INFINITY;

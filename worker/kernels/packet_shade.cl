@@ -506,12 +506,12 @@ tf_sun_frame sun_frame(const world *w)
 /* The samples at n <= TF_STREAM lattice points: sample k is lane k % 8 of packet k / 8 of
  * X[], Y[], out[][0..4] (r, g, b, a, distance) and shadow_rays[] (which grows by the shadow
  * rays each sample cast).  lattice_sample + shade_ray per sample, with all the camera rays
- * walked as one stream and all the shadow rays as another.  lows (or NULL): the records of
- * lower camera rays that help sample k's (walk_stream); records (or NULL): where sample k's
- * camera ray leaves its own. */
+ * walked as one stream and all the shadow rays as another.  lows, fars (or NULL): the records
+ * of lower camera rays that help sample k's, the second where the first cannot (walk_stream);
+ * records (or NULL): where sample k's camera ray leaves its own. */
 void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[], int n,
-                     const ray_clears *lows, float8 out[][5], iv shadow_rays[],
-                     ray_clears *records)
+                     const ray_clears *lows, const ray_clears *fars, float8 out[][5],
+                     iv shadow_rays[], ray_clears *records)
 {
     const int np = (n + TF_LANES - 1) / TF_LANES;
     const v3p origin = v3p_splat(pvec(w, TFP_CAM_POS));
@@ -540,7 +540,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
         hit[p].p = hit[p].n = zero;
         hit[p].ci = hit[p].cj = (iv)(0);
     }
-    walk_stream(w, &cam, lows, found, hit, records);
+    walk_stream(w, &cam, lows, fars, found, hit, records);
 
     shading8 sh[TF_STREAM_PACKETS];
     lv terrain[TF_STREAM_PACKETS], water[TF_STREAM_PACKETS];
@@ -584,7 +584,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
     }
     lv blocked[TF_STREAM_PACKETS];
     if (shadow.n > 0) {
-        walk_stream(w, &shadow, NULL, blocked, NULL, NULL);
+        walk_stream(w, &shadow, NULL, NULL, blocked, NULL, NULL);
         for (int m = 0; m < shadow.n; m++) {
             int k = shadow_of[m];
             lit[k / TF_LANES][k % TF_LANES] = blocked[m / TF_LANES][m % TF_LANES] ? 0 : -1;

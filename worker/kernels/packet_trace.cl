@@ -475,20 +475,41 @@ void walker_init(walker *k)
     k->t_skip = k->t1_full = (dv)(0);
 }
 
-/* The lanes of the walker just dealt whose lower records (lux .. ls_free) vouch for part of
- * their rays: walk_coherent's start.  A lane with a prefix gets its t1 moved in; one without
- * starts at t_skip at once (or is done, if its walk has ended by then). */
-TF_INLINE void vouch8(const world *w, walker *k, dv lux, dv luy, dv lk, dv ls_in, dv ls_free)
+/* One lower record in each lane: heading ux, uy, climb k, the run [s_in, s_free) it is above
+ * the surface over (s_free 0: none). */
+typedef struct low8 {
+    dv ux, uy, k, s_in, s_free;
+} low8;
+
+/* The lanes of the walker just dealt that the first of their lower records `near`, `far` to
+ * vouch for part of their rays (trace.c's walk_coherent and tf_trace_coherent_first): a lane
+ * with a prefix gets its t1 moved in; one without starts at t_skip at once (or is done, if its
+ * walk has ended by then). */
+TF_INLINE void vouch8(const world *w, walker *k, const low8 *near, const low8 *far)
 {
     rayp *r = &k->r;
-    dv run, ux, uy, kk, t_pre, t_skip;
-    lv v = k->active & tf_heading(r->d.x, r->d.y, r->d.z, &run, &ux, &uy, &kk) & (ls_free > 0);
-    if (!any_lane(v))
+    dv run, ux, uy, kk, t_pre = (dv)(0), t_skip = (dv)(0);
+    const lv heads = k->active & tf_heading(r->d.x, r->d.y, r->d.z, &run, &ux, &uy, &kk);
+    if (!any_lane(heads & ((near->s_free > 0) | (far->s_free > 0))))
         return;
     const dv eps = tf_clearance_eps(w->P[TFP_EXTENT], w->P[TFP_HMIN], w->P[TFP_HMAX], r->o.x,
                                     r->o.y, r->o.z);
-    v &= tf_vouched(ux, uy, kk, run, r->t_square, r->t0, lux, luy, lk, ls_in, ls_free,
-                    w->P[TFP_SLOPE_MAX], eps, &t_pre, &t_skip);
+    lv v = heads & (near->s_free > 0);
+    if (any_lane(v))
+        v &= tf_vouched(ux, uy, kk, run, r->t_square, r->t0, near->ux, near->uy, near->k,
+                        near->s_in, near->s_free, w->P[TFP_SLOPE_MAX], eps, &t_pre, &t_skip);
+    const lv again = heads & ~v & (far->s_free > 0);
+    if (any_lane(again)) {
+        dv t_pre2, t_skip2;
+        const lv v2 = again & tf_vouched(ux, uy, kk, run, r->t_square, r->t0, far->ux, far->uy,
+                                         far->k, far->s_in, far->s_free, w->P[TFP_SLOPE_MAX],
+                                         eps, &t_pre2, &t_skip2);
+        t_pre = select(t_pre, t_pre2, v2);
+        t_skip = select(t_skip, t_skip2, v2);
+        v |= v2;
+    }
+    if (!any_lane(v))
+        return;
     const lv pre = v & (t_pre > r->t0), now = v & ~pre;
     k->prefix = pre;
     k->t_skip = t_skip;
@@ -544,17 +565,26 @@ void note_clears8(const world *w, const walker *k, lv ended, lv hit, ray_clears 
     }
 }
 
+/* Lane l of *to from ray r of a stream's records (none: s_free 0). */
+TF_INLINE void low_get(const ray_clears *from, int r, int l, low8 *to)
+{
+    const int p = r / TF_LANES, q = r % TF_LANES;
+    to->ux[l] = from->ux[p][q], to->uy[l] = from->uy[p][q], to->k[l] = from->k[p][q];
+    to->s_in[l] = from->s_in[p][q], to->s_free[l] = from->s_free[p][q];
+}
+
 /* Once all the walker's lanes are done, deal it rays *next, *next + 1, ... of the stream (up
- * to eight).  k->r is read only after a deal has set it. */
+ * to eight), with their lower records lows and fars (either NULL: none).  k->r is read only
+ * after a deal has set it. */
 TF_INLINE void walker_deal(const world *w, const ray_stream *in, const ray_clears *lows,
-                           int out_records, int *next, walker *k)
+                           const ray_clears *fars, int out_records, int *next, walker *k)
 {
     if (*next >= in->n || any_lane(k->active))
         return;
     const v3p zero = v3p_splat(v3(0, 0, 0));
     v3p o = zero, d = zero;
     dv tmin = (dv)(0), tmax = (dv)(0);
-    dv lux = (dv)(0), luy = (dv)(0), lk = (dv)(0), ls_in = (dv)(0), ls_free = (dv)(0);
+    low8 near = {(dv)(0), (dv)(0), (dv)(0), (dv)(0), (dv)(0)}, far = near;
     lv fresh = (lv)(0);
     for (int l = 0; l < TF_LANES && *next < in->n; l++) {
         int r = (*next)++, p = r / TF_LANES, q = r % TF_LANES;
@@ -564,16 +594,16 @@ TF_INLINE void walker_deal(const world *w, const ray_stream *in, const ray_clear
         d.x[l] = in->d[p].x[q], d.y[l] = in->d[p].y[q], d.z[l] = in->d[p].z[q];
         tmin[l] = in->tmin[p][q];
         tmax[l] = in->tmax[p][q];
-        if (lows) {
-            lux[l] = lows->ux[p][q], luy[l] = lows->uy[p][q], lk[l] = lows->k[p][q];
-            ls_in[l] = lows->s_in[p][q], ls_free[l] = lows->s_free[p][q];
-        }
+        if (lows)
+            low_get(lows, r, l, &near);
+        if (fars)
+            low_get(fars, r, l, &far);
     }
     k->active = setup_ray8(&k->r, w, o, d, tmin, tmax, fresh);
     k->above = out_records ? starts_above8(w, &k->r, k->active) : (lv)(0);
     k->prefix = (lv)(0);
-    if (lows)
-        vouch8(w, k, lux, luy, lk, ls_in, ls_free);
+    if (lows || fars)
+        vouch8(w, k, &near, &far);
     walk_start8(w, &k->r, k->active, &k->s);
     k->best.t = (dv)(INFINITY);
 }
@@ -613,13 +643,14 @@ TF_INLINE void walker_step(const world *w, walker *k, const fetchp *f, lv found[
 
 /* Walk every ray of the stream: found[k / 8] lane k % 8 says whether ray k hit; if hits is
  * not NULL, hits[k / 8] lane k % 8 holds that hit (finish_hit8's record).  If lows is not
- * NULL, ray k is helped by record k of it (the coherence section above: every ray of the stream
- * starts at the origin the records' rays started at); if records is not NULL, ray k's own record
+ * NULL, ray k is helped by record k of it, or where that one cannot vouch by record k of fars
+ * (if not NULL; the coherence section above: every ray of the stream starts at the origin the
+ * records' rays started at); if records is not NULL, ray k's own record
  * goes to record k of it (trace.c's note_clear).  TF_WALKERS packets
  * walk side by side: a step waits on its grid loads (a gather the next step depends on), so
  * every packet's loads are started (walk_fetch8) before any packet's step goes on with them. */
-void walk_stream(const world *w, const ray_stream *in, const ray_clears *lows, lv found[],
-                 hitp *hits, ray_clears *records)
+void walk_stream(const world *w, const ray_stream *in, const ray_clears *lows,
+                 const ray_clears *fars, lv found[], hitp *hits, ray_clears *records)
 {
     for (int p = 0; p < TF_STREAM_PACKETS; p++) {
         found[p] = (lv)(0);
@@ -633,7 +664,7 @@ void walk_stream(const world *w, const ray_stream *in, const ray_clears *lows, l
     for (;;) {
         int busy = 0;
         for (int g = 0; g < TF_WALKERS; g++) {
-            walker_deal(w, in, lows, records != NULL, &next, &k[g]);
+            walker_deal(w, in, lows, fars, records != NULL, &next, &k[g]);
             busy |= any_lane(k[g].active);
         }
         if (!busy) {

@@ -481,10 +481,10 @@ typedef struct low8 {
     dv ux, uy, k, s_in, s_free;
 } low8;
 
-/* The lanes of the walker just dealt that the first of their lower records `near`, `far` to
- * vouch for part of their rays (trace.c's walk_coherent and tf_trace_coherent_first): a lane
- * with a prefix gets its t1 moved in; one without starts at t_skip at once (or is done, if its
- * walk has ended by then). */
+/* walk_coherent's start (trace.c) for the lanes of the walker just dealt, by the first of
+ * their lower records that vouches for part of the ray: `near`, or where that one cannot, `far`
+ * (the C renderer asks one record only).  A lane with a prefix gets its t1 moved in; one
+ * without starts at t_skip at once (or is done, if its walk has ended by then). */
 TF_INLINE void vouch8(const world *w, walker *k, const low8 *near, const low8 *far)
 {
     rayp *r = &k->r;

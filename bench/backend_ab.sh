@@ -56,10 +56,8 @@ print("%.4f %.4f" % (wall, cpu))
 EOF
 }
 
-flags=" $(grep -m1 '^flags' /proc/cpuinfo) "
-isa=""
-for f in avx512f avx2 fma sse4_2; do case "$flags" in *" $f "*) isa="$isa $f" ;; esac; done
-echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//'), $(nproc) cores, isa:$isa"
+. bench/lib/cpu.sh
+bench_cpu_line
 echo "scene $SCENE, sizes $SIZES, -j $WORKERS, $PAIRS pairs C/OpenCL, binary $TF"
 echo "load before: $(cut -d' ' -f1-3 /proc/loadavg)"
 summary=""

@@ -46,10 +46,8 @@ d = json.load(open(sys.argv[1]))
 print(d["coordinator_render_cpu_s"], d["coordinator_supervise_cpu_s"])' "$W/$1.json" >>"$W/$1"
 }
 
-flags=" $(grep -m1 '^flags' /proc/cpuinfo) "
-isa=""
-for f in avx512f avx2 fma sse4_2; do case "$flags" in *" $f "*) isa="$isa $f" ;; esac; done
-echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//'), $(nproc) cores, isa:$isa"
+. bench/lib/cpu.sh
+bench_cpu_line
 echo "scene $SCENE, $SIZE ($pixels pixels), -j $WORKERS, tasks ${TASKS:-default}, $PAIRS pairs A/B"
 echo "A: $A"
 echo "B: $B"

@@ -43,10 +43,8 @@ W=$(mktemp -d "${TMPDIR:-/tmp}/tf-paintbench.XXXXXX")
 PIDS=""
 trap 'for p in $PIDS; do kill -9 $p 2>/dev/null; done; rm -rf "$W"' EXIT
 
-flags=$(grep -m1 '^flags' /proc/cpuinfo || true)
-isa=""
-for f in avx512f avx2 fma avx sse4_2; do case " $flags " in *" $f "*) isa="$isa $f" ;; esac; done
-echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//'), $(nproc) cores, isa:$isa"
+. bench/lib/cpu.sh
+bench_cpu_line
 echo "scene $SCENE at $SIZE; $ROUNDS round(s); render and paint alternate"
 
 median() { sort -g | awk '{v[NR]=$1} END {if (NR) print (NR%2 ? v[(NR+1)/2] : (v[NR/2]+v[NR/2+1])/2); else print -1}'; }

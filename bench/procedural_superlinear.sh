@@ -51,16 +51,13 @@ if [ -z "$SCENE" ] && [ "$SMOKE" = 1 ]; then
 fi
 SCENE=${SCENE:-scenes/closeup.scene}
 
-flags=$(grep -m1 '^flags' /proc/cpuinfo || true)
-isa=""
-for f in avx512f avx2 fma avx sse4_2; do
-    case " $flags " in *" $f "*) isa="$isa $f" ;; esac
-done
+. bench/lib/cpu.sh
+isa=$(bench_isa)
 echo "scene $SCENE, $SIZE, stamps:$STAMPS, workers: $WORKERS, $ROUNDS round(s) alternating on/off/big"
 echo "terrain cache per worker: $CACHE (on, off), $BIG (big: the no-thrash baseline)"
 echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) cores," \
      "load: $(cut -d' ' -f1-3 /proc/loadavg)"
-echo "vector ISA:${isa:- none of avx512f/avx2/fma/avx/sse4_2} (the build uses the Makefile's flags, no -march)"
+echo "vector ISA: ${isa:-none of avx512f/avx2/fma/avx/sse4_2} (the build uses the Makefile's flags, no -march)"
 
 # one CONFIG N ROUND: one render through terrafarm bench, kept in $W/CONFIG-N-ROUND/
 one() {

@@ -50,10 +50,8 @@ render() { # render SIDE BIN
         --overwrite -o "$W/$1.exr" --stats "$W/$1.json"
 }
 
-flags=" $(grep -m1 '^flags' /proc/cpuinfo) "
-isa=""
-for f in avx512f avx2 fma sse4_2; do case "$flags" in *" $f "*) isa="$isa $f" ;; esac; done
-echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//'), $(nproc) cores, isa:$isa"
+. bench/lib/cpu.sh
+bench_cpu_line
 echo "A: $A ($(ldd "$A" | grep -c '=>') shared libraries)"
 echo "B: $B ($(ldd "$B" | grep -c '=>') shared libraries)"
 echo "load before: $(cut -d' ' -f1-3 /proc/loadavg)"

@@ -67,8 +67,9 @@ static int frame_of(const tf_heightfield *hf, tf_vec3 sun, tf_sun_frame *f, doub
 }
 
 /* Where the blocks of one level reach, from a block's corner cell (i, j): along and across
- * spans [ux i + uy j + al_lo, .. + al_hi] and [-uy i + ux j + ac_lo, .. + ac_hi], each already
- * widened by the margin. */
+ * spans [ux i + uy j + al_lo, .. + al_hi] and [-uy i + ux j + ac_lo, .. + ac_hi] measured from
+ * the frame's along0 and across0 (so a span times inv_ds or inv_w is in bins or strips), each
+ * already widened by the margin. */
 typedef struct block_reach {
     double ux, uy, B;
     double al_lo, al_hi, ac_lo, ac_hi;

@@ -162,21 +162,17 @@ static void fans_over(height_fn fn, int k, double extent, uint64_t seed)
         hits += t[m] < INFINITY;
         vouching += rec[(size_t)m * REC + 4] > 0;
     }
-    for (int pass = 0; pass < 2; pass++) { /* the ray below's record; a random one's */
-        for (int m = 0; m < RAYS; m++) {
-            const int row = m % FAN_ROWS, base = m - row;
-            const int from = pass == 0 ? row - 1 : (int)(uni(&r) * FAN_ROWS) % FAN_ROWS;
-            if (from < 0)
-                memset(lows + (size_t)m * REC, 0, sizeof(double) * REC);
-            else
-                memcpy(lows + (size_t)m * REC, rec + (size_t)(base + from) * REC,
-                       sizeof(double) * REC);
-        }
-        walk(b, rays, lows, NULL, t, rec2);
-        for (int m = 0; m < RAYS; m++)
-            check_ray(hf, &fans[m / FAN_ROWS], m % FAN_ROWS, t[m], NULL,
-                      pass == 0 ? "helped by the ray below" : "helped by another ray");
+    records_below(rec, 1, lows); /* the ray below's record */
+    walk(b, rays, lows, NULL, t, rec2);
+    for (int m = 0; m < RAYS; m++)
+        check_ray(hf, &fans[m / FAN_ROWS], m % FAN_ROWS, t[m], NULL, "helped by the ray below");
+    for (int m = 0; m < RAYS; m++) { /* a random ray's of its fan */
+        const int from = m - m % FAN_ROWS + (int)(uni(&r) * FAN_ROWS) % FAN_ROWS;
+        memcpy(lows + (size_t)m * REC, rec + (size_t)from * REC, sizeof(double) * REC);
     }
+    walk(b, rays, lows, NULL, t, rec2);
+    for (int m = 0; m < RAYS; m++)
+        check_ray(hf, &fans[m / FAN_ROWS], m % FAN_ROWS, t[m], NULL, "helped by another ray");
     records_below(rec, 5, lows);
     records_below(rec, 10, fars);
     walk(b, rays, lows, fars, t, rec2);

@@ -55,7 +55,6 @@
 #define TF_RIPPLE_SALT 71.0       /* domain shift of the ripple texture */
 #define TF_COLOUR_VARIATION 0.15  /* fractal albedo perturbation (Musgrave 5.6.5) */
 #define TF_FRESNEL_R0 0.02        /* water at normal incidence */
-#define TF_FBM_GRADIENT_EPS 1e-3  /* forward difference step of the textures' gradients */
 /* The snow line texture: noise space is the terrain extent / TF_SNOW_WAVELENGTHS per unit,
  * shifted by (+TF_SNOW_SALT_X, -TF_SNOW_SALT_Y). */
 #define TF_SNOW_WAVELENGTHS 12.0

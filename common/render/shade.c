@@ -197,34 +197,6 @@ static tf_vec3 smooth_shadow_origin(const tf_heightfield *hf, const hit_triangle
                                    t->n11, t->fx, t->fy);
 }
 
-/* Noise at x and at x_dx (the same lattice row `ay`), as tf_noise2_axis(nz, x, ay) and
- * tf_noise2_axis(nz, x_dx, ay) compute them, operation for operation; when both lie in the same
- * lattice cell along x (nearly always: x_dx - x is small) the two column lines are looked up
- * once.  *n_dy is tf_noise2_axis(nz, x, ay_dy), which shares x's floor and fraction. */
-static void noise_triple(const tf_noise *nz, double x, double x_dx, const tf_noise_axis *ay,
-                         const tf_noise_axis *ay_dy, double *n, double *n_dx, double *n_dy)
-{
-    if (!(fabs(x) < TF_NOISE_COORD_LIMIT) || !(fabs(x_dx) < TF_NOISE_COORD_LIMIT) || !ay->ok ||
-        !ay_dy->ok) {
-        *n = tf_noise2_axis(nz, x, ay);
-        *n_dx = tf_noise2_axis(nz, x_dx, ay);
-        *n_dy = tf_noise2_axis(nz, x, ay_dy);
-        return;
-    }
-    double fx, fx_dx;
-    int64_t xi = tf_floor_split(x, &fx), xi_dx = tf_floor_split(x_dx, &fx_dx);
-    tf_noise_column left = tf_noise_column_at(nz, xi, ay);
-    tf_noise_column right = tf_noise_column_at(nz, xi + 1, ay);
-    *n = tf_noise_blend(fx, left, right);
-    if (xi_dx == xi)
-        *n_dx = tf_noise_blend(fx_dx, left, right);
-    else
-        *n_dx = tf_noise_blend(fx_dx, tf_noise_column_at(nz, xi_dx, ay),
-                               tf_noise_column_at(nz, xi_dx + 1, ay));
-    *n_dy = tf_noise_blend(fx, tf_noise_column_at(nz, xi, ay_dy),
-                           tf_noise_column_at(nz, xi + 1, ay_dy));
-}
-
 /* ---- octave plans without pow() per call
  *
  * tf_octaves_plan(H, lacunarity 2, octaves) gives amp[i] = pow(2^i, -H) (2^i is exact) for
@@ -282,39 +254,20 @@ static void texture_plan(tf_octaves *o, double H, double octaves)
         tf_octaves_plan(o, H, 2.0, octaves);
 }
 
-/* fBm value and gradient (per world unit, scaled by 1/scale) at (x, y) / scale, by forward
- * differences.  `salt` shifts the domain so different textures are uncorrelated.
- *
- * The three sums are exactly tf_fbm2(nz, q, H, 2.0, octaves) at q, q + (eps, 0) and
- * q + (0, eps) (tf_fbm2 = plan + y axes + tf_fbm2_axes, noise_impl.h): each is accumulated in
- * the same octave order with the same coordinates, scaled octave by octave exactly as
- * tf_fbm2_axes scales them.  But the octave plan (a pow() per octave) is made once, not three
- * times, the value and x-offset sums share their y axes, and noise_triple shares lattice
- * lookups between them.  Same bits as three tf_fbm2 calls, about half the cost. */
+/* fBm value and gradient at (x, y) / scale: tf_fbm2_gradient(nz, q, H, 2.0, octaves) at
+ * q = (x / scale + salt, y / scale - salt), bit for bit (the same inline code, noise_impl.h),
+ * with the octave plan from texture_plan.  The gradient is exact and per unit of q, so per
+ * world unit it is scaled by 1/scale.  `salt` shifts the domain so different textures are
+ * uncorrelated. */
 static double fbm_with_gradient(const tf_noise *nz, double x, double y, double scale, double H,
                                 double octaves, double salt, double *gx, double *gy)
 {
-    const double eps = TF_FBM_GRADIENT_EPS;
     double qx = x / scale + salt, qy = y / scale - salt;
     tf_octaves plan;
-    tf_noise_axis axes[TF_MAX_OCTAVES + 1], axes_dy[TF_MAX_OCTAVES + 1];
+    tf_noise_axis axes[TF_MAX_OCTAVES + 1];
     texture_plan(&plan, H, octaves);
     tf_octave_axes(&plan, qy, axes);
-    tf_octave_axes(&plan, qy + eps, axes_dy);
-    double f = 0.0, f_dx = 0.0, f_dy = 0.0;
-    double xo = qx, xo_dx = qx + eps;
-    for (int i = 0; i < plan.count; i++) {
-        double n, n_dx, n_dy;
-        noise_triple(nz, xo, xo_dx, &axes[i], &axes_dy[i], &n, &n_dx, &n_dy);
-        f += plan.amp[i] * n;
-        f_dx += plan.amp[i] * n_dx;
-        f_dy += plan.amp[i] * n_dy;
-        xo *= plan.lacunarity;
-        xo_dx *= plan.lacunarity;
-    }
-    *gx = (f_dx - f) / eps;
-    *gy = (f_dy - f) / eps;
-    return f;
+    return tf_fbm2_gradient_axes(nz, &plan, qx, axes, gx, gy);
 }
 
 /* The snow line's perturbation: fBm with H 0.5, lacunarity 2 and TF_SNOW_OCTAVES octaves, a fixed

@@ -32,6 +32,13 @@ double tf_noise2(const tf_noise *nz, double x, double y)
     return tf_noise2_axis(nz, x, &ay);
 }
 
+double tf_noise2_gradient(const tf_noise *nz, double x, double y, double *gx, double *gy)
+{
+    tf_noise_axis ay;
+    tf_noise_axis_set(&ay, y);
+    return tf_noise2_gradient_axis(nz, x, &ay, tf_fade_slope(ay.f0), gx, gy);
+}
+
 /* 3D gradients: Perlin's 12 cube edge directions (length sqrt 2), padded to 16 with four of
  * them repeated so the hash can be masked with 15 (Perlin 2002). */
 static inline double grad3_dot(unsigned h, double x, double y, double z)
@@ -86,6 +93,16 @@ double tf_fbm2(const tf_noise *nz, double x, double y, double H, double lacunari
     tf_octaves_plan(&o, H, lacunarity, octaves);
     tf_octave_axes(&o, y, axes);
     return tf_fbm2_axes(nz, &o, x, axes);
+}
+
+double tf_fbm2_gradient(const tf_noise *nz, double x, double y, double H, double lacunarity,
+                        double octaves, double *gx, double *gy)
+{
+    tf_octaves o;
+    tf_noise_axis axes[TF_MAX_OCTAVES + 1];
+    tf_octaves_plan(&o, H, lacunarity, octaves);
+    tf_octave_axes(&o, y, axes);
+    return tf_fbm2_gradient_axes(nz, &o, x, axes, gx, gy);
 }
 
 double tf_fbm3(const tf_noise *nz, double x, double y, double z, double H, double lacunarity,

@@ -18,10 +18,15 @@ typedef struct tf_noise tf_noise;
 void tf_noise_init(tf_noise *nz, uint64_t seed);
 double tf_noise2(const tf_noise *nz, double x, double y);
 double tf_noise3(const tf_noise *nz, double x, double y, double z);
+/* tf_noise2, bit for bit, and its exact gradient (d/dx, d/dy) in *gx, *gy. */
+double tf_noise2_gradient(const tf_noise *nz, double x, double y, double *gx, double *gy);
 
 /* fBm: sum over octaves i of noise(p * lacunarity^i) * lacunarity^(-H i); a fractional
  * remainder of `octaves` adds that fraction of one more octave. */
 double tf_fbm2(const tf_noise *nz, double x, double y, double H, double lacunarity, double octaves);
+/* tf_fbm2, bit for bit, and its exact gradient in *gx, *gy (the textures' bump, shade.c). */
+double tf_fbm2_gradient(const tf_noise *nz, double x, double y, double H, double lacunarity,
+                        double octaves, double *gx, double *gy);
 double tf_fbm3(const tf_noise *nz, double x, double y, double z, double H, double lacunarity,
                double octaves);
 

@@ -75,6 +75,38 @@ static inline double tf_noise2_axis(const tf_noise *nz, double x, const tf_noise
                           tf_noise_column_at(nz, xi + 1, ay));
 }
 
+/* The y derivatives of the column lines of tf_noise_column_at (noise_kernel.h's
+ * tf_noise_column_dy), with dfade = tf_fade_slope(ay->f0). */
+static inline void tf_noise_column_pair_at(const tf_noise *nz, int64_t xi, const tf_noise_axis *ay,
+                                           double dfade, tf_noise_column *line,
+                                           tf_noise_column *dy)
+{
+    const uint16_t *p = nz->perm;
+    int a = p[xi & (TF_NOISE_LATTICE - 1)] + ay->lattice;
+    const double *g0 = tf_grad2[p[a] & (TF_NOISE_GRADS - 1)];
+    const double *g1 = tf_grad2[p[a + 1] & (TF_NOISE_GRADS - 1)];
+    *line = tf_noise_column_line(g0[0], g0[1], g1[0], g1[1], ay->f0, ay->f1, ay->fade);
+    *dy = tf_noise_column_dy(g0[0], g0[1], g1[0], g1[1], ay->f0, ay->f1, ay->fade, dfade);
+}
+
+/* tf_noise2_axis(nz, x, ay), bit for bit, and its exact gradient (per lattice unit) in *dx,
+ * *dy; dfade = tf_fade_slope(ay->f0).  Where the noise is 0 for range, so is the gradient. */
+static inline double tf_noise2_gradient_axis(const tf_noise *nz, double x,
+                                             const tf_noise_axis *ay, double dfade, double *dx,
+                                             double *dy)
+{
+    *dx = *dy = 0.0;
+    if (!(fabs(x) < TF_NOISE_COORD_LIMIT) || !ay->ok)
+        return 0.0;
+    double fx;
+    int64_t xi = tf_floor_split(x, &fx);
+    tf_noise_column left, right, left_dy, right_dy;
+    tf_noise_column_pair_at(nz, xi, ay, dfade, &left, &left_dy);
+    tf_noise_column_pair_at(nz, xi + 1, ay, dfade, &right, &right_dy);
+    return tf_noise_blend_gradient(fx, tf_fade(fx), tf_fade_slope(fx), left, right, left_dy,
+                                   right_dy, dx, dy);
+}
+
 /* Octave plan shared by every spectral sum: amp[i] is the weight lacunarity^(-H i) of octave i
  * (amp[0] = 1), computed as pow(frequency, -H) with frequency multiplied up octave by octave as
  * in Musgrave's fBm(); the last entry carries the fractional remainder of `octaves` (2.3.2.1:
@@ -136,6 +168,27 @@ static inline double tf_fbm2_axes(const tf_noise *nz, const tf_octaves *o, doubl
         result += o->amp[i] * tf_noise2_axis(nz, x, &axes[i]);
         x *= o->lacunarity;
     }
+    return result;
+}
+
+/* tf_fbm2_axes, bit for bit, and the sum's exact gradient in *gx, *gy (per unit of x and y:
+ * octave i's noise gradient weighted by amp[i] lacunarity^i). */
+static inline double tf_fbm2_gradient_axes(const tf_noise *nz, const tf_octaves *o, double x,
+                                           const tf_noise_axis *axes, double *gx, double *gy)
+{
+    double result = 0.0, sx = 0.0, sy = 0.0, frequency = 1.0;
+    for (int i = 0; i < o->count; i++) {
+        double dx, dy;
+        double n = tf_noise2_gradient_axis(nz, x, &axes[i], tf_fade_slope(axes[i].f0), &dx, &dy);
+        double w = o->amp[i] * frequency;
+        result += o->amp[i] * n;
+        sx += w * dx;
+        sy += w * dy;
+        x *= o->lacunarity;
+        frequency *= o->lacunarity;
+    }
+    *gx = sx;
+    *gy = sy;
     return result;
 }
 

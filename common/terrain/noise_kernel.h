@@ -3,9 +3,10 @@
  * OpenCL build (worker/backend_opencl.c) loads this file so the kernels' texture noise and
  * lattice jitter run the same operations eight samples at a time.
  *
- * What is here is what both sides compute alike: the hash, the quintic fade, the floor split
- * of a coordinate, the y half of a 2D evaluation, a lattice column's line from its two corner
- * gradients, and the blend of two column lines.  What is not: the lattice lookups (the
+ * What is here is what both sides compute alike: the hash, the quintic fade and its slope, the
+ * floor split of a coordinate, the y half of a 2D evaluation, a lattice column's line from its
+ * two corner gradients and that line's derivative along y, and the blend of two column lines,
+ * alone or with the noise's exact gradient (the textures' bump).  What is not: the lattice lookups (the
  * permutation and gradient tables are C arrays on one side and per-lane gathers on the other;
  * noise_impl.h and packet_shade.cl) and the octave loops.
  * noise_impl.h explains the noise itself. */
@@ -51,6 +52,12 @@ TF_SHARED tf_lane tf_hash_unit(tf_lane_u64 x)
 TF_SHARED_HOT TF_SHARED tf_lane tf_fade(tf_lane t)
 {
     return t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
+}
+
+/* The fade's derivative, 30 t^2 (t - 1)^2, expanded as tf_fade is. */
+TF_SHARED_HOT TF_SHARED tf_lane tf_fade_slope(tf_lane t)
+{
+    return t * t * (t * (t * 30.0 - 60.0) + 30.0);
 }
 
 /* floor() for |x| < TF_NOISE_COORD_LIMIT without the libm call: truncate, then step down for
@@ -112,6 +119,37 @@ TF_SHARED_HOT TF_SHARED tf_lane tf_noise_blend_faded(tf_lane fx, tf_lane u, tf_n
 {
     tf_lane l = left.slope * fx + left.intercept;
     tf_lane r = right.slope * (fx - 1.0) + right.intercept;
+    return (l + u * (r - l)) * TF_NOISE2_SCALE;
+}
+
+/* A column line's derivative along y: tf_noise_column_line's slope and intercept
+ * differentiated by y (f0 and f1 move with y, the fade by dfade = tf_fade_slope(f0)). */
+TF_SHARED_HOT TF_SHARED tf_noise_column tf_noise_column_dy(tf_lane g0x, tf_lane g0y, tf_lane g1x,
+                                                           tf_lane g1y, tf_lane f0, tf_lane f1,
+                                                           tf_lane fade, tf_lane dfade)
+{
+    tf_lane e0 = g0y * f0, e1 = g1y * f1;
+    tf_noise_column c;
+    c.slope = dfade * (g1x - g0x);
+    c.intercept = g0y + dfade * (e1 - e0) + fade * (g1y - g0y);
+    return c;
+}
+
+/* Noise at x offset fx and its gradient, exact (not by differences): the value is
+ * tf_noise_blend_faded(fx, u, left, right), bit for bit; du = tf_fade_slope(fx), and left_dy,
+ * right_dy are the columns' tf_noise_column_dy.  *dx and *dy are per lattice unit. */
+TF_SHARED_HOT TF_SHARED tf_lane tf_noise_blend_gradient(tf_lane fx, tf_lane u, tf_lane du,
+                                                        tf_noise_column left, tf_noise_column right,
+                                                        tf_noise_column left_dy,
+                                                        tf_noise_column right_dy, tf_lane *dx,
+                                                        tf_lane *dy)
+{
+    tf_lane l = left.slope * fx + left.intercept;
+    tf_lane r = right.slope * (fx - 1.0) + right.intercept;
+    tf_lane ly = left_dy.slope * fx + left_dy.intercept;
+    tf_lane ry = right_dy.slope * (fx - 1.0) + right_dy.intercept;
+    *dx = (left.slope + du * (r - l) + u * (right.slope - left.slope)) * TF_NOISE2_SCALE;
+    *dy = (ly + u * (ry - ly)) * TF_NOISE2_SCALE;
     return (l + u * (r - l)) * TF_NOISE2_SCALE;
 }
 

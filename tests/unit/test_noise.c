@@ -2,8 +2,9 @@
  *
  * Checks the properties everything downstream relies on: the range [-1, 1], zeros at lattice
  * points, determinism per seed and variety across seeds, continuity with a bounded gradient,
- * fractional octaves, and that fBm's roughness follows H: the structure function
- * S(lag) = E[(f(x + lag) - f(x))^2] of fBm grows as lag^(2H) between its crossover scales. */
+ * fractional octaves, the exact gradients of noise and fBm, and that fBm's roughness follows
+ * H: the structure function S(lag) = E[(f(x + lag) - f(x))^2] of fBm grows as lag^(2H)
+ * between its crossover scales. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <setjmp.h>
@@ -249,6 +250,63 @@ static void test_fbm_fractional_octaves(void **state)
     }
 }
 
+/* The largest error of an exact gradient (gx, gy) of f at (x, y) against f's central
+ * differences at step h, relative to 1 + |gradient|. */
+typedef double (*field2)(const tf_noise *nz, double x, double y, double *gx, double *gy);
+
+static double noise2_field(const tf_noise *nz, double x, double y, double *gx, double *gy)
+{
+    return tf_noise2_gradient(nz, x, y, gx, gy);
+}
+
+static double fbm2_field(const tf_noise *nz, double x, double y, double *gx, double *gy)
+{
+    return tf_fbm2_gradient(nz, x, y, 0.8, 2.0, 3.6, gx, gy);
+}
+
+static double gradient_error(const tf_noise *nz, field2 f, double x, double y, double h)
+{
+    double gx, gy, unused_x, unused_y;
+    f(nz, x, y, &gx, &gy);
+    double cx = (f(nz, x + h, y, &unused_x, &unused_y) - f(nz, x - h, y, &unused_x, &unused_y)) /
+                (2 * h);
+    double cy = (f(nz, x, y + h, &unused_x, &unused_y) - f(nz, x, y - h, &unused_x, &unused_y)) /
+                (2 * h);
+    return fmax(fabs(gx - cx), fabs(gy - cy)) / (1.0 + hypot(gx, gy));
+}
+
+/* tf_noise2_gradient and tf_fbm2_gradient: the value is tf_noise2's / tf_fbm2's to the bit,
+ * and the gradient is the derivative: central differences agree to their own error (h^2
+ * times the third derivative, ~1e-9 here); a gradient off by a term (the fade's slope, a
+ * column's y derivative, an octave's frequency) misses by 0.01 or more. */
+static void test_noise_gradient_is_exact(void **state)
+{
+    (void)state;
+    tf_noise nz;
+    tf_noise_init(&nz, 5);
+    uint64_t c = 17;
+    double worst_noise = 0.0, worst_fbm = 0.0;
+    for (int k = 0; k < 20000; k++) {
+        double x = sample(&c, -60, 60), y = sample(&c, -60, 60), gx, gy;
+        assert_true(tf_noise2_gradient(&nz, x, y, &gx, &gy) == tf_noise2(&nz, x, y));
+        assert_true(tf_fbm2_gradient(&nz, x, y, 0.8, 2.0, 3.6, &gx, &gy) ==
+                    tf_fbm2(&nz, x, y, 0.8, 2.0, 3.6));
+        worst_noise = fmax(worst_noise, gradient_error(&nz, noise2_field, x, y, 1e-5));
+        worst_fbm = fmax(worst_fbm, gradient_error(&nz, fbm2_field, x, y, 1e-6));
+    }
+    print_message("exact gradient against central differences: noise %.2g, fbm %.2g\n",
+                  worst_noise, worst_fbm);
+    assert_true(worst_noise < 1e-6);
+    assert_true(worst_fbm < 1e-6);
+    /* At a lattice point the noise is 0 and its gradient is the corner's own, scaled. */
+    double gx, gy;
+    assert_true(tf_noise2_gradient(&nz, 7.0, -3.0, &gx, &gy) == 0.0);
+    assert_true(fabs(hypot(gx, gy) - TF_NOISE2_SCALE) < 1e-12);
+    /* Out of range: 0, and so is the gradient. */
+    assert_true(tf_noise2_gradient(&nz, NAN, 0.5, &gx, &gy) == 0.0 && gx == 0.0 && gy == 0.0);
+    assert_true(tf_noise2_gradient(&nz, 0.5, 1e300, &gx, &gy) == 0.0 && gx == 0.0 && gy == 0.0);
+}
+
 /* Least-squares slope of log S(lag) against log lag, lags 2^-lo_exp .. 2^-hi_exp. */
 static double structure_slope(const tf_noise *nz, double H, int lo_exp, int hi_exp)
 {
@@ -297,6 +355,7 @@ int main(void)
         cmocka_unit_test(test_noise_continuous_bounded_gradient),
         cmocka_unit_test(test_noise_out_of_range_is_zero),
         cmocka_unit_test(test_fbm_fractional_octaves),
+        cmocka_unit_test(test_noise_gradient_is_exact),
         cmocka_unit_test(test_fbm_roughness_follows_H),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

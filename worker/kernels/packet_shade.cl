@@ -36,7 +36,7 @@
  *     rays walk_stream reports no hit for are zeroed beforehand, so nothing is read
  *     uninitialised.
  *   - Work may be shared between lanes' computations only where their inputs are equal, so
- *     the outputs are too (fbm_with_gradient8's offset samples in the same lattice cell).
+ *     the outputs are too.
  *   - A scalar counter (shadow_rays) becomes an iv, bumped by the lanes that cast a ray.
  *
  * Profile (perf on bench_opencl, default.scene): shading is about a fifth of the kernels'
@@ -97,9 +97,9 @@ dv grad_x8(iv g)
 
 dv grad_y8(iv g) { return grad_x8(g + 12); }
 
-/* noise_column per lane, in two steps.  The gradients at the column's two lattice corners
- * depend only on the column's p[xi & 255] (px) and the y lattice: two noise values whose x and
- * y fall in the same lattice cells share them (fbm_with_gradient's offset samples mostly do). */
+/* noise_column per lane, in two steps: the gradients at the column's two lattice corners,
+ * which depend only on the column's p[xi & 255] (px) and the y lattice, and then the column's
+ * line (and for the bump, its y derivative) from them. */
 typedef struct column_grads8 { dv g0x, g0y, g1x, g1y; } column_grads8;
 
 TF_INLINE column_grads8 column_grads8_at(__global const ushort *p, iv px, iv lattice)
@@ -110,19 +110,18 @@ TF_INLINE column_grads8 column_grads8_at(__global const ushort *p, iv px, iv lat
     return g;
 }
 
-TF_INLINE column_grads8 column_grads8_select(column_grads8 a, column_grads8 b, lv m)
-{
-    column_grads8 r = {select(a.g0x, b.g0x, m), select(a.g0y, b.g0y, m),
-                       select(a.g1x, b.g1x, m), select(a.g1y, b.g1y, m)};
-    return r;
-}
-
 /* The column line slope * (x - X) + intercept from its gradients and the y axis. */
 typedef tf_noise_column column_line8;
 
 TF_INLINE column_line8 column_line8_of(const column_grads8 *g, const noise_axis8 *ay)
 {
     return tf_noise_column_line(g->g0x, g->g0y, g->g1x, g->g1y, ay->f0, ay->f1, ay->fade);
+}
+
+/* The column line's derivative along y (tf_noise_column_dy), dfade = tf_fade_slope(ay->f0). */
+TF_INLINE column_line8 column_dy8_of(const column_grads8 *g, const noise_axis8 *ay, dv dfade)
+{
+    return tf_noise_column_dy(g->g0x, g->g0y, g->g1x, g->g1y, ay->f0, ay->f1, ay->fade, dfade);
 }
 
 /* noise2_axis's x side, which depends on x alone. */
@@ -193,18 +192,13 @@ dv tf_fbm2_8(__global const ushort *p, __global const double *amp, dv x, dv y, d
     return result;
 }
 
-/* fbm_with_gradient per lane, with per-lane octave counts: the loop runs to the largest count
- * over `mask`; a lane adds octave i only while i < its own count.
- *
- * Per octave three noise values: (x0, y0), (x1, y0) and (x0, y1), x1 = x0 + eps, y1 = y0 + eps.
- * Their column gradients are functions of (lattice column, lattice row) alone, so a lane whose
- * x1 is in x0's column reuses (x0, y0)'s gradients -- and, the y axis being the same, its very
- * column lines; a lane whose y1 is in y0's row reuses the gradients.  The loads and gradients
- * of the other lanes are computed only when some lane needs them. */
+/* fbm_with_gradient per lane (tf_fbm2_gradient_axes, noise_impl.h), with per-lane octave
+ * counts: the loop runs to the largest count over `mask`; a lane adds octave i only while
+ * i < its own count.  Per octave one noise value and its exact gradient, from the two
+ * column lines and their y derivatives. */
 dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, dv octaves,
                       double salt, lv mask, dv *gx, dv *gy)
 {
-    const double eps = TF_FBM_GRADIENT_EPS;
     __global const double *amp = w->P + amp_table;
     __global const ushort *p = w->perm;
     dv qx = x / scale + salt, qy = y / scale - salt;
@@ -218,57 +212,34 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
     for (int l = 0; l < TF_LANES; l++)
         if (mask[l] && count[l] > most)
             most = count[l];
-    dv f = 0.0, fx = 0.0, fy = 0.0;
-    dv x0 = qx, x1 = qx + eps, y0 = qy, y1 = qy + eps;
+    dv f = 0.0, sx = 0.0, sy = 0.0;
+    double frequency = 1.0;
     for (int i = 0; i < most; i++) {
         lv in = convert_long8(count > i);
         dv a = (dv)(amp[i]);
         a = select(a, a * remainder, partial & convert_long8(whole == i));
-        noise_axis8 ay = tf_noise_axis_of(y0), ay1 = tf_noise_axis_of(y1);
-        noise_xaxis8 ax = noise_xaxis_set8(p, x0), ax1 = noise_xaxis_frac8(x1);
-
-        /* (x0, y0) */
+        noise_axis8 ay = tf_noise_axis_of(qy);
+        noise_xaxis8 ax = noise_xaxis_set8(p, qx);
+        dv dfade = tf_fade_slope(ay.f0);
         column_grads8 gl = column_grads8_at(p, ax.pl, ay.lattice);
         column_grads8 gr = column_grads8_at(p, ax.pr, ay.lattice);
         column_line8 left = column_line8_of(&gl, &ay), right = column_line8_of(&gr, &ay);
-
-        /* (x1, y0): the lanes whose x1 left x0's column get their own loads and lines */
-        column_line8 left1 = left, right1 = right;
-        lv xmoved = convert_long8(ax1.xi != ax.xi);
-        ax1.pl = ax.pl;
-        ax1.pr = ax.pr;
-        if (any_lane(xmoved)) {
-            iv moved = mask_i(xmoved);
-            ax1.pl = select(ax.pl, perm8(p, ax1.xi), moved);
-            ax1.pr = select(ax.pr, perm8(p, (ax1.xi + 1) & (TF_NOISE_LATTICE - 1)), moved);
-            column_grads8 gl1 = column_grads8_at(p, ax1.pl, ay.lattice);
-            column_grads8 gr1 = column_grads8_at(p, ax1.pr, ay.lattice);
-            column_line8 l1 = column_line8_of(&gl1, &ay), r1 = column_line8_of(&gr1, &ay);
-            left1.slope = select(left.slope, l1.slope, xmoved);
-            left1.intercept = select(left.intercept, l1.intercept, xmoved);
-            right1.slope = select(right.slope, r1.slope, xmoved);
-            right1.intercept = select(right.intercept, r1.intercept, xmoved);
-        }
-
-        /* (x0, y1): the lanes whose y1 left y0's row get their own gradients */
-        column_grads8 gly = gl, gry = gr;
-        lv ymoved = convert_long8(ay1.lattice != ay.lattice);
-        if (any_lane(ymoved)) {
-            gly = column_grads8_select(gl, column_grads8_at(p, ax.pl, ay1.lattice), ymoved);
-            gry = column_grads8_select(gr, column_grads8_at(p, ax.pr, ay1.lattice), ymoved);
-        }
-        column_line8 lefty = column_line8_of(&gly, &ay1), righty = column_line8_of(&gry, &ay1);
-
-        f = select(f, f + a * noise2_lines8(&ax, &left, &right, ay.ok), in);
-        fx = select(fx, fx + a * noise2_lines8(&ax1, &left1, &right1, ay.ok), in);
-        fy = select(fy, fy + a * noise2_lines8(&ax, &lefty, &righty, ay1.ok), in);
-        x0 *= 2.0;
-        x1 *= 2.0;
-        y0 *= 2.0;
-        y1 *= 2.0;
+        column_line8 left_dy = column_dy8_of(&gl, &ay, dfade);
+        column_line8 right_dy = column_dy8_of(&gr, &ay, dfade);
+        dv dx, dy;
+        dv n = tf_noise_blend_gradient(ax.f, ax.u, tf_fade_slope(ax.f), left, right, left_dy,
+                                       right_dy, &dx, &dy);
+        lv ok = in & ax.ok & ay.ok;
+        dv weight = a * frequency;
+        f = select(f, f + a * select((dv)(0.0), n, ax.ok & ay.ok), in);
+        sx = select(sx, sx + weight * select((dv)(0.0), dx, ok), in);
+        sy = select(sy, sy + weight * select((dv)(0.0), dy, ok), in);
+        qx *= 2.0;
+        qy *= 2.0;
+        frequency *= 2.0;
     }
-    *gx = (fx - f) / eps;
-    *gy = (fy - f) / eps;
+    *gx = sx;
+    *gy = sy;
     return f;
 }
 

@@ -70,7 +70,7 @@
 #define CPU_PIX 256
 #define GPU_STREAM 128
 #define GPU_PIX 64
-#define EPOCH_LIMIT 0x7fffffffu /* packet_render.cl: epochs stay below TF_QUEUED */
+#define EPOCH_LIMIT 0x3fffffffu /* packet_render.cl: epochs stay below TF_STORED and TF_QUEUED */
 #define MAX_SOURCE_BYTES (1 << 20)        /* a kernel file larger than this is not ours */
 /* Bytes of per-pixel sample caches a batch of pixels may use.  A CPU device with one compute
  * unit (one PoCL thread: what each of render -j N's processes gets, tf_backend_share_cores)
@@ -818,7 +818,7 @@ static int ensure_have(tf_cl_backend *b, size_t slots)
     return reset_have(b) == CL_SUCCESS ? 0 : -1;
 }
 
-/* A new epoch for the next tf_pixels8 launch; after 2^31 - 1 launches the slot states are
+/* A new epoch for the next tf_pixels8 launch; after 2^30 - 1 launches the slot states are
  * reset so an old mark can never pass for a new one. */
 static cl_int next_epoch(tf_cl_backend *b)
 {
@@ -995,11 +995,11 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
                  rect.x, rect.y, rc);
         return -1;
     }
-    uint64_t inner = 0; /* samples traced inside pixels beyond their 4 corners */
+    uint64_t inner = 0; /* camera rays traced inside pixels, beyond the corners */
     for (size_t k = 0; k < npixels; k++) {
         const float *p = pix + k * TF_CL_PIXEL_FLOATS;
         out[k] = (tf_pixel){p[0], p[1], p[2], p[3], p[4], p[5]};
-        inner += (uint64_t)p[5] - 4;
+        inner += (uint64_t)p[6];
     }
     if (counts) {
         counts->primary_rays += ncorners + inner;

@@ -28,10 +28,21 @@
  * display levels (render.c tf_display_level of r, g, b: what the contrast test compares, so
  * each is computed once per sample, not once per quad that looks at it) in `levels`.  Entries
  * are filled from the front in the order samples arrive -- a pixel takes a handful, so its
- * samples share a few cache lines -- and `where` maps a lattice slot to its entry.  `have`
- * marks a slot ready (== epoch) or queued (== epoch | TF_QUEUED).  The host gives every
- * launch a new epoch, so slices need no clearing between pixels.  The four pixel corners
- * stay where tf_corners8 wrote them. */
+ * samples share a few cache lines -- and `where` maps a lattice slot to its entry.  The host
+ * gives every launch a new epoch, so slices need no clearing between pixels.  The four pixel
+ * corners stay where tf_corners8 wrote them.
+ *
+ * Shared edges (render.c's pixel_edge): a lattice point on a pixel's left edge is the point
+ * on its left neighbour's right edge, and one on its lower edge (j == 0) the point on the top
+ * edge of the pixel a row down.  Where that neighbour is one of the work-item's pixels, it
+ * keeps the point (`keeper`): whichever of the two needs the point first queues it under the
+ * keeper's name, and both read it from the keeper's slice, so it is traced once.  A slot's
+ * state in `have`, for the pixel that owns the slice:
+ *   epoch              the pixel has used the sample (counted in its spp and nearest distance)
+ *   epoch | TF_STORED  the sample is in this slice, not yet used by this pixel
+ *   epoch | TF_QUEUED  the sample is queued for this slice
+ * A pixel that reads a point its neighbour keeps marks its own slot epoch when it first uses
+ * it.  So each pixel counts exactly the samples it uses, as render.c does. */
 
 #ifndef TF_PIX
 #define TF_PIX 64          /* pixels per work-item (the host passes -DTF_PIX) */
@@ -41,6 +52,7 @@
 #endif
 #define TF_QUEUE TF_STREAM /* queued samples per work-item: one stream */
 #define TF_QUEUED 0x80000000u
+#define TF_STORED 0x40000000u /* epochs stay below it (the host's EPOCH_LIMIT) */
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
 
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
@@ -144,7 +156,9 @@ typedef struct quad { int i, j, size; } quad;
 typedef struct pixel_state {
     quad stack[TF_STACK];
     int sp, spp, px, py;
-    int used;                /* cache entries filled */
+    int left, below;         /* the work-item's pixels that keep this one's left and lower
+                                edges (their right and top), or -1 */
+    int used;                /* cache entries filled: the camera rays traced for this slice */
     int asked;               /* stack[0 .. asked-1] have had their corners queued */
     uint rays;
     float zmin;
@@ -165,16 +179,46 @@ typedef struct sample_queue {
     short slot[TF_QUEUE];  /* its lattice slot j * (N+1) + i */
 } sample_queue;
 
-/* Is slot k of pixel p ready?  If it is neither ready nor queued, queue it (room permitting;
- * a pixel that finds the queue full simply asks again in the next round). */
-int want(pixel_state *ps, int p, int k, uint epoch, sample_queue *q)
+/* The pixel that keeps lattice point (i, j) of pixel p (shared edges, above), and the point's
+ * slot in that pixel's slice, *k. */
+int keeper(const pixel_state *ps, int p, int side, int i, int j, int *k)
 {
-    uint st = ps->have[k];
-    if (st == epoch)
+    const int N = side - 1;
+    if (i == 0 && j > 0 && j < N && ps[p].left >= 0) {
+        *k = j * side + N;
+        return ps[p].left;
+    }
+    if (j == 0 && i > 0 && i < N && ps[p].below >= 0) {
+        *k = N * side + i;
+        return ps[p].below;
+    }
+    *k = j * side + i;
+    return p;
+}
+
+/* Is lattice point (i, j) ready for pixel p?  The first time it is, the pixel counts it.  If it
+ * is neither stored nor queued, queue it for its keeper (room permitting; a pixel that finds
+ * the queue full simply asks again in the next round). */
+int want(pixel_state *ps, int p, int side, int i, int j, uint epoch, sample_queue *q)
+{
+    pixel_state *me = &ps[p];
+    const int mine = j * side + i;
+    if (me->have[mine] == epoch)
         return 1;
+    int k;
+    pixel_state *kp = &ps[keeper(ps, p, side, i, j, &k)];
+    uint st = kp->have[k];
+    if (st == epoch || st == (epoch | TF_STORED)) {
+        me->have[mine] = epoch;
+        me->spp++;
+        float z = kp->cache[(size_t)kp->where[k] * TF_CL_SAMPLE_FLOATS + 4];
+        if (z < me->zmin)
+            me->zmin = z;
+        return 1;
+    }
     if (st != (epoch | TF_QUEUED) && q->n < TF_QUEUE) {
-        ps->have[k] = epoch | TF_QUEUED;
-        q->pixel[q->n] = (uchar)p;
+        kp->have[k] = epoch | TF_QUEUED;
+        q->pixel[q->n] = (uchar)(kp - ps);
         q->slot[q->n] = (short)k;
         q->n++;
     }
@@ -184,10 +228,10 @@ int want(pixel_state *ps, int p, int k, uint epoch, sample_queue *q)
 /* The four corners of quad t of pixel p: all ready?  Queues the missing ones either way. */
 int want_corners(pixel_state *ps, int p, quad t, int side, uint epoch, sample_queue *q)
 {
-    int a = want(ps, p, t.j * side + t.i, epoch, q);
-    int b = want(ps, p, t.j * side + t.i + t.size, epoch, q);
-    int c = want(ps, p, (t.j + t.size) * side + t.i, epoch, q);
-    int d = want(ps, p, (t.j + t.size) * side + t.i + t.size, epoch, q);
+    int a = want(ps, p, side, t.i, t.j, epoch, q);
+    int b = want(ps, p, side, t.i + t.size, t.j, epoch, q);
+    int c = want(ps, p, side, t.i, t.j + t.size, epoch, q);
+    int d = want(ps, p, side, t.i + t.size, t.j + t.size, epoch, q);
     return a && b && c && d;
 }
 
@@ -198,46 +242,54 @@ int corner_of(int side, int i, int j)
     return (i == 0 || i == N) && (j == 0 || j == N) ? (j ? 2 : 0) + (i ? 1 : 0) : -1;
 }
 
-__global const float *slot_of(const pixel_state *ps, int side, int i, int j)
+/* Pixel p's sample at lattice point (i, j), and its display levels: a pixel corner where
+ * tf_corners8 left it, else from the keeper's slice. */
+__global const float *slot_of(const pixel_state *ps, int p, int side, int i, int j)
 {
-    int c = corner_of(side, i, j);
-    return c >= 0 ? ps->corner[c]
-                  : ps->cache + (size_t)ps->where[j * side + i] * TF_CL_SAMPLE_FLOATS;
+    int c = corner_of(side, i, j), k;
+    if (c >= 0)
+        return ps[p].corner[c];
+    const pixel_state *kp = &ps[keeper(ps, p, side, i, j, &k)];
+    return kp->cache + (size_t)kp->where[k] * TF_CL_SAMPLE_FLOATS;
 }
 
-__global const double *levels_of(const pixel_state *ps, int side, int i, int j)
+__global const double *levels_of(const pixel_state *ps, int p, int side, int i, int j)
 {
-    int c = corner_of(side, i, j);
-    return c >= 0 ? ps->corner_levels[c] : ps->levels + (size_t)ps->where[j * side + i] * 3;
+    int c = corner_of(side, i, j), k;
+    if (c >= 0)
+        return ps[p].corner_levels[c];
+    const pixel_state *kp = &ps[keeper(ps, p, side, i, j, &k)];
+    return kp->levels + (size_t)kp->where[k] * 3;
 }
 
 /* render_pixel's loop for pixel p, run until its stack is empty or it needs a sample it does
  * not have; then the corners of the quads further down its stack are queued too. */
-void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample_queue *q)
+void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sample_queue *q)
 {
     const int side = N + 1;
+    pixel_state *ps = &all[p];
     while (ps->sp > 0) {
         quad t = ps->stack[ps->sp - 1];
-        if (!want_corners(ps, p, t, side, epoch, q))
+        if (!want_corners(all, p, t, side, epoch, q))
             break;
         __global const float *s[5];
         __global const double *lvl[5];
-        s[0] = slot_of(ps, side, t.i, t.j);
-        s[1] = slot_of(ps, side, t.i + t.size, t.j);
-        s[2] = slot_of(ps, side, t.i, t.j + t.size);
-        s[3] = slot_of(ps, side, t.i + t.size, t.j + t.size);
+        s[0] = slot_of(all, p, side, t.i, t.j);
+        s[1] = slot_of(all, p, side, t.i + t.size, t.j);
+        s[2] = slot_of(all, p, side, t.i, t.j + t.size);
+        s[3] = slot_of(all, p, side, t.i + t.size, t.j + t.size);
         if (t.size > 1) {
             double split_threshold = tf_aa_split_threshold(threshold, N, t.size);
-            lvl[0] = levels_of(ps, side, t.i, t.j);
-            lvl[1] = levels_of(ps, side, t.i + t.size, t.j);
-            lvl[2] = levels_of(ps, side, t.i, t.j + t.size);
-            lvl[3] = levels_of(ps, side, t.i + t.size, t.j + t.size);
+            lvl[0] = levels_of(all, p, side, t.i, t.j);
+            lvl[1] = levels_of(all, p, side, t.i + t.size, t.j);
+            lvl[2] = levels_of(all, p, side, t.i, t.j + t.size);
+            lvl[3] = levels_of(all, p, side, t.i + t.size, t.j + t.size);
             if (display_range(lvl, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
                 int hs = t.size / 2;
-                if (!want(ps, p, (t.j + hs) * side + t.i + hs, epoch, q))
+                if (!want(all, p, side, t.i + hs, t.j + hs, epoch, q))
                     break;
-                s[4] = slot_of(ps, side, t.i + hs, t.j + hs);
-                lvl[4] = levels_of(ps, side, t.i + hs, t.j + hs);
+                s[4] = slot_of(all, p, side, t.i + hs, t.j + hs);
+                lvl[4] = levels_of(all, p, side, t.i + hs, t.j + hs);
                 ps->sp--;
                 ps->asked = min(ps->asked, ps->sp);
                 if (display_range(lvl, 5) > split_threshold) {
@@ -270,7 +322,7 @@ void advance(pixel_state *ps, int p, int N, double threshold, uint epoch, sample
         int room = TF_QUEUE - q->n;
         if (room < 4)
             break; /* this entry may not fit whole: ask again next round */
-        want_corners(ps, p, ps->stack[ps->asked], side, epoch, q);
+        want_corners(all, p, ps->stack[ps->asked], side, epoch, q);
     }
 }
 
@@ -308,6 +360,8 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         s->have = have + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         s->where = where + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         s->used = 0;
+        s->left = c > 0 && p > 0 ? p - 1 : -1;
+        s->below = p >= rw ? p - rw : -1;
         const int slot[4] = {0, N, N * side, N * side + N};
         const size_t from[4] = {(size_t)row * cw + c, (size_t)row * cw + c + 1,
                                 (size_t)(row + 1) * cw + c, (size_t)(row + 1) * cw + c + 1};
@@ -334,7 +388,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         for (int p = 0; p < np; p++) {
             if (ps[p].sp == 0)
                 continue;
-            advance(&ps[p], p, N, threshold, epoch, &q);
+            advance(ps, p, N, threshold, epoch, &q);
             active |= ps[p].sp > 0;
         }
         if (!active)
@@ -373,11 +427,8 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
                 for (int ch = 0; ch < 3; ch++)
                     s->levels[(size_t)at * 3 + ch] = lvl[ch][l];
                 s->where[k] = (ushort)at;
-                s->have[k] = epoch;
-                s->spp++;
+                s->have[k] = epoch | TF_STORED;
                 s->rays += (uint)rays[b][l];
-                if (smp[b][4][l] < s->zmin)
-                    s->zmin = smp[b][4][l];
             }
         }
     }
@@ -393,6 +444,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         o[3] = (float)(s->sum_a / area);
         o[4] = s->zmin;
         o[5] = (float)s->spp;
+        o[6] = (float)s->used;
         shadow[k] = s->rays;
     }
 }

@@ -83,12 +83,14 @@
 #define TF_CL_MAX_LEVELS 18
 #define TFI_COUNT        (TFI_LEVEL_OFFSET + TF_CL_MAX_LEVELS)
 
-/* Floats per stored sample (r, g, b, a, dist) and per output pixel (r, g, b, a, z, spp). */
+/* Floats per stored sample (r, g, b, a, dist) and per output pixel (r, g, b, a, z, spp, and
+ * the camera rays traced into the pixel's slice: its spp less its corners and the samples it
+ * took from a neighbour, plus the ones a neighbour took from it). */
 #define TF_CL_SAMPLE_FLOATS 5
 #define TF_CL_RECORD_DOUBLES 5 /* a corner's coherence record: ux, uy, k, s_in, s_free */
 /* tf_corners8's corner columns per work-item for batches of `stream` samples: a band of
  * TF_LOWER_ROWS (render/constants.h) rows of them fills a batch */
 #define TF_CL_CORNER_STRIP(stream) ((stream) / TF_LOWER_ROWS)
-#define TF_CL_PIXEL_FLOATS  6
+#define TF_CL_PIXEL_FLOATS  7
 
 #endif

@@ -914,7 +914,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     const size_t side = (size_t)b->lattice + 1;
     const size_t per_pixel = side * side *
                              (TF_CL_SAMPLE_FLOATS * sizeof(float) + 3 * sizeof(double) +
-                              sizeof(cl_uint) + sizeof(cl_ushort));
+                              sizeof(cl_uint) + sizeof(cl_uint)); /* have, where */
     const size_t per_item = (size_t)b->pix;
     size_t batch = b->scratch / per_pixel / per_item * per_item;
     if (batch < per_item)
@@ -936,7 +936,7 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
                         batch * side * side * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
                  ensure(b, &b->levels, &b->levels_cap, batch * side * side * 3 * sizeof(double)) ||
                  ensure_have(b, batch * side * side) ||
-                 ensure(b, &b->where, &b->where_cap, batch * side * side * sizeof(cl_ushort)) ||
+                 ensure(b, &b->where, &b->where_cap, batch * side * side * sizeof(cl_uint)) ||
                  ensure(b, &b->out, &b->out_cap, npixels * TF_CL_PIXEL_FLOATS * sizeof(float)) ||
                  ensure(b, &b->pixel_shadow, &b->pixel_shadow_cap, npixels * sizeof(cl_uint));
     if (failed) {

@@ -28,7 +28,8 @@
  * display levels (render.c tf_display_level of r, g, b: what the contrast test compares, so
  * each is computed once per sample, not once per quad that looks at it) in `levels`.  Entries
  * are filled from the front in the order samples arrive -- a pixel takes a handful, so its
- * samples share a few cache lines -- and `where` maps a lattice slot to its entry.  The host
+ * samples share a few cache lines -- and `where` maps a lattice slot to its sample's entry in
+ * the whole buffer (the slice's first entry plus its place in it).  The host
  * gives every launch a new epoch, so slices need no clearing between pixels.  The four pixel
  * corners stay where tf_corners8 wrote them.
  *
@@ -42,7 +43,9 @@
  *   epoch | TF_STORED  the sample is in this slice, not yet used by this pixel
  *   epoch | TF_QUEUED  the sample is queued for this slice
  * A pixel that reads a point its neighbour keeps marks its own slot epoch when it first uses
- * it.  So each pixel counts exactly the samples it uses, as render.c does. */
+ * it, and copies the keeper's `where` into its own: from then on it reads the sample as one of
+ * its own, with no keeper to find.  So each pixel counts exactly the samples it uses, as
+ * render.c does. */
 
 #ifndef TF_PIX
 #define TF_PIX 64          /* pixels per work-item (the host passes -DTF_PIX) */
@@ -158,15 +161,17 @@ typedef struct pixel_state {
     int sp, spp, px, py;
     int left, below;         /* the work-item's pixels that keep this one's left and lower
                                 edges (their right and top), or -1 */
-    int used;                /* cache entries filled: the camera rays traced for this slice */
+    int used;                /* slice entries filled: the camera rays traced for this slice */
+    uint entry0;             /* the slice's first entry in cache / levels */
     int asked;               /* stack[0 .. asked-1] have had their corners queued */
     uint rays;
     float zmin;
     double sum_r, sum_g, sum_b, sum_a;
-    __global float *cache;   /* (N+1)^2 samples */
-    __global double *levels; /* (N+1)^2 x 3 display levels */
+    __global float *cache;   /* every slice's samples, (N+1)^2 a slice */
+    __global double *levels; /* and their display levels, 3 a sample */
     __global uint *have;     /* (N+1)^2 slot states */
-    __global ushort *where;  /* (N+1)^2 slots: their cache entry, where have says ready */
+    __global uint *where;    /* (N+1)^2 slots: their sample's entry in cache / levels, for a
+                                slot used (have == epoch) or kept here (TF_STORED) */
     /* the four corner samples stay where tf_corners8 put them (shared with the neighbours):
      * slots 0, N, N (N+1), N (N+1) + N of the cache are never written */
     __global const float *corner[4];
@@ -196,22 +201,23 @@ int keeper(const pixel_state *ps, int p, int side, int i, int j, int *k)
     return p;
 }
 
-/* Is lattice point (i, j) ready for pixel p?  The first time it is, the pixel counts it.  If it
- * is neither stored nor queued, queue it for its keeper (room permitting; a pixel that finds
+/* want's path for a point pixel p has not used yet: if its keeper has the sample, the pixel
+ * takes it (its where, its spp and nearest distance) and it is ready; if the keeper neither
+ * has it nor waits for it, it is queued for the keeper (room permitting; a pixel that finds
  * the queue full simply asks again in the next round). */
-int want(pixel_state *ps, int p, int side, int i, int j, uint epoch, sample_queue *q)
+int want_new(pixel_state *ps, int p, int side, int i, int j, uint epoch, sample_queue *q)
 {
     pixel_state *me = &ps[p];
     const int mine = j * side + i;
-    if (me->have[mine] == epoch)
-        return 1;
     int k;
     pixel_state *kp = &ps[keeper(ps, p, side, i, j, &k)];
     uint st = kp->have[k];
     if (st == epoch || st == (epoch | TF_STORED)) {
+        uint entry = kp->where[k];
+        me->where[mine] = entry;
         me->have[mine] = epoch;
         me->spp++;
-        float z = kp->cache[(size_t)kp->where[k] * TF_CL_SAMPLE_FLOATS + 4];
+        float z = me->cache[(size_t)entry * TF_CL_SAMPLE_FLOATS + 4];
         if (z < me->zmin)
             me->zmin = z;
         return 1;
@@ -225,8 +231,14 @@ int want(pixel_state *ps, int p, int side, int i, int j, uint epoch, sample_queu
     return 0;
 }
 
+/* Is lattice point (i, j) ready for pixel p (and counted)?  Queues it if need be. */
+TF_INLINE int want(pixel_state *ps, int p, int side, int i, int j, uint epoch, sample_queue *q)
+{
+    return ps[p].have[j * side + i] == epoch || want_new(ps, p, side, i, j, epoch, q);
+}
+
 /* The four corners of quad t of pixel p: all ready?  Queues the missing ones either way. */
-int want_corners(pixel_state *ps, int p, quad t, int side, uint epoch, sample_queue *q)
+TF_INLINE int want_corners(pixel_state *ps, int p, quad t, int side, uint epoch, sample_queue *q)
 {
     int a = want(ps, p, side, t.i, t.j, epoch, q);
     int b = want(ps, p, side, t.i + t.size, t.j, epoch, q);
@@ -242,24 +254,19 @@ int corner_of(int side, int i, int j)
     return (i == 0 || i == N) && (j == 0 || j == N) ? (j ? 2 : 0) + (i ? 1 : 0) : -1;
 }
 
-/* Pixel p's sample at lattice point (i, j), and its display levels: a pixel corner where
- * tf_corners8 left it, else from the keeper's slice. */
-__global const float *slot_of(const pixel_state *ps, int p, int side, int i, int j)
+/* A pixel's sample at lattice point (i, j), which it has used (want), and its display
+ * levels: a pixel corner where tf_corners8 left it, else the entry its `where` names. */
+__global const float *slot_of(const pixel_state *ps, int side, int i, int j)
 {
-    int c = corner_of(side, i, j), k;
-    if (c >= 0)
-        return ps[p].corner[c];
-    const pixel_state *kp = &ps[keeper(ps, p, side, i, j, &k)];
-    return kp->cache + (size_t)kp->where[k] * TF_CL_SAMPLE_FLOATS;
+    int c = corner_of(side, i, j);
+    return c >= 0 ? ps->corner[c]
+                  : ps->cache + (size_t)ps->where[j * side + i] * TF_CL_SAMPLE_FLOATS;
 }
 
-__global const double *levels_of(const pixel_state *ps, int p, int side, int i, int j)
+__global const double *levels_of(const pixel_state *ps, int side, int i, int j)
 {
-    int c = corner_of(side, i, j), k;
-    if (c >= 0)
-        return ps[p].corner_levels[c];
-    const pixel_state *kp = &ps[keeper(ps, p, side, i, j, &k)];
-    return kp->levels + (size_t)kp->where[k] * 3;
+    int c = corner_of(side, i, j);
+    return c >= 0 ? ps->corner_levels[c] : ps->levels + (size_t)ps->where[j * side + i] * 3;
 }
 
 /* render_pixel's loop for pixel p, run until its stack is empty or it needs a sample it does
@@ -274,22 +281,22 @@ void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sampl
             break;
         __global const float *s[5];
         __global const double *lvl[5];
-        s[0] = slot_of(all, p, side, t.i, t.j);
-        s[1] = slot_of(all, p, side, t.i + t.size, t.j);
-        s[2] = slot_of(all, p, side, t.i, t.j + t.size);
-        s[3] = slot_of(all, p, side, t.i + t.size, t.j + t.size);
+        s[0] = slot_of(ps, side, t.i, t.j);
+        s[1] = slot_of(ps, side, t.i + t.size, t.j);
+        s[2] = slot_of(ps, side, t.i, t.j + t.size);
+        s[3] = slot_of(ps, side, t.i + t.size, t.j + t.size);
         if (t.size > 1) {
             double split_threshold = tf_aa_split_threshold(threshold, N, t.size);
-            lvl[0] = levels_of(all, p, side, t.i, t.j);
-            lvl[1] = levels_of(all, p, side, t.i + t.size, t.j);
-            lvl[2] = levels_of(all, p, side, t.i, t.j + t.size);
-            lvl[3] = levels_of(all, p, side, t.i + t.size, t.j + t.size);
+            lvl[0] = levels_of(ps, side, t.i, t.j);
+            lvl[1] = levels_of(ps, side, t.i + t.size, t.j);
+            lvl[2] = levels_of(ps, side, t.i, t.j + t.size);
+            lvl[3] = levels_of(ps, side, t.i + t.size, t.j + t.size);
             if (display_range(lvl, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
                 int hs = t.size / 2;
                 if (!want(all, p, side, t.i + hs, t.j + hs, epoch, q))
                     break;
-                s[4] = slot_of(all, p, side, t.i + hs, t.j + hs);
-                lvl[4] = levels_of(all, p, side, t.i + hs, t.j + hs);
+                s[4] = slot_of(ps, side, t.i + hs, t.j + hs);
+                lvl[4] = levels_of(ps, side, t.i + hs, t.j + hs);
                 ps->sp--;
                 ps->asked = min(ps->asked, ps->sp);
                 if (display_range(lvl, 5) > split_threshold) {
@@ -336,7 +343,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
                           int rx, int ry,
                          int rw, int first, int count, __global const float *corners,
                          __global const double *corner_levels, __global float *cache, __global double *levels,
-                         __global uint *have, __global ushort *where, uint epoch,
+                         __global uint *have, __global uint *where, uint epoch,
                          __global float *out, __global uint *shadow,
                          __global const double *corner_records, int rh)
 {
@@ -355,8 +362,9 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         int k = first + m0 + p, c = k % rw, row = k / rw;
         s->px = rx + c;
         s->py = ry + row;
-        s->cache = cache + (size_t)(m0 + p) * (size_t)side * (size_t)side * TF_CL_SAMPLE_FLOATS;
-        s->levels = levels + (size_t)(m0 + p) * (size_t)side * (size_t)side * 3;
+        s->cache = cache;
+        s->levels = levels;
+        s->entry0 = (uint)(m0 + p) * (uint)side * (uint)side;
         s->have = have + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         s->where = where + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         s->used = 0;
@@ -420,13 +428,14 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
             for (int l = 0; l < TF_LANES && b * TF_LANES + l < q.n; l++) {
                 int e = b * TF_LANES + l;
                 pixel_state *s = &ps[q.pixel[e]];
-                int k = q.slot[e], at = s->used++;
+                int k = q.slot[e];
+                uint at = s->entry0 + (uint)s->used++;
                 __global float *dst = s->cache + (size_t)at * TF_CL_SAMPLE_FLOATS;
                 for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)
                     dst[f] = smp[b][f][l];
                 for (int ch = 0; ch < 3; ch++)
                     s->levels[(size_t)at * 3 + ch] = lvl[ch][l];
-                s->where[k] = (ushort)at;
+                s->where[k] = at;
                 s->have[k] = epoch | TF_STORED;
                 s->rays += (uint)rays[b][l];
             }

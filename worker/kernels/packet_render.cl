@@ -135,22 +135,33 @@ void lower_corners(__global const double *records, long X, long Y, long N, int r
         record_get(records + (size_t)(fy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES, e, fars);
 }
 
-/* render.c's display_range over the levels of n samples (n <= 5): the largest per-channel
- * range, by the same comparisons as render.c's (levels are never NaN). */
-double display_range(__global const double *const lvl[], int n)
+/* The lowest and highest display level of each channel over some samples (render.c's
+ * level_span, on the stored levels): a quad's four corners, then its centre too.  Levels lie in
+ * [0, 1] and are never NaN, so minima and maxima taken in any order are render.c's, and so is
+ * display_range; three channels a vector, and the corners' span is kept for the centre. */
+typedef struct level_span { double3 lo, hi; } level_span;
+
+level_span span_of_corners(__global const double *const lvl[4])
 {
-    double widest = 0;
-    for (int ch = 0; ch < 3; ch++) {
-        double lo = 1, hi = 0;
-        for (int k = 0; k < n; k++) {
-            double v = lvl[k][ch];
-            lo = v < lo ? v : lo;
-            hi = v > hi ? v : hi;
-        }
-        if (hi - lo > widest)
-            widest = hi - lo;
-    }
-    return widest;
+    double3 a = vload3(0, lvl[0]), b = vload3(0, lvl[1]);
+    double3 c = vload3(0, lvl[2]), d = vload3(0, lvl[3]);
+    level_span sp = {fmin(fmin(a, b), fmin(c, d)), fmax(fmax(a, b), fmax(c, d))};
+    return sp;
+}
+
+level_span span_with(level_span sp, __global const double *lvl)
+{
+    double3 v = vload3(0, lvl);
+    sp.lo = fmin(sp.lo, v);
+    sp.hi = fmax(sp.hi, v);
+    return sp;
+}
+
+/* render.c's display_range: the largest channel's range. */
+double display_range(level_span sp)
+{
+    double3 r = sp.hi - sp.lo;
+    return fmax(r.x, fmax(r.y, r.z));
 }
 
 typedef struct quad { int i, j, size; } quad;
@@ -280,7 +291,7 @@ void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sampl
         if (!want_corners(all, p, t, side, epoch, q))
             break;
         __global const float *s[5];
-        __global const double *lvl[5];
+        __global const double *lvl[4];
         s[0] = slot_of(ps, side, t.i, t.j);
         s[1] = slot_of(ps, side, t.i + t.size, t.j);
         s[2] = slot_of(ps, side, t.i, t.j + t.size);
@@ -291,15 +302,16 @@ void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sampl
             lvl[1] = levels_of(ps, side, t.i + t.size, t.j);
             lvl[2] = levels_of(ps, side, t.i, t.j + t.size);
             lvl[3] = levels_of(ps, side, t.i + t.size, t.j + t.size);
-            if (display_range(lvl, 4) > split_threshold * TF_AA_PROBE_FRACTION) {
+            level_span span = span_of_corners(lvl);
+            if (display_range(span) > split_threshold * TF_AA_PROBE_FRACTION) {
                 int hs = t.size / 2;
                 if (!want(all, p, side, t.i + hs, t.j + hs, epoch, q))
                     break;
                 s[4] = slot_of(ps, side, t.i + hs, t.j + hs);
-                lvl[4] = levels_of(ps, side, t.i + hs, t.j + hs);
+                span = span_with(span, levels_of(ps, side, t.i + hs, t.j + hs));
                 ps->sp--;
                 ps->asked = min(ps->asked, ps->sp);
-                if (display_range(lvl, 5) > split_threshold) {
+                if (display_range(span) > split_threshold) {
                     quad *st = ps->stack + ps->sp;
                     st[0].i = t.i + hs, st[0].j = t.j + hs, st[0].size = hs;
                     st[1].i = t.i, st[1].j = t.j + hs, st[1].size = hs;

@@ -500,7 +500,8 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     /* the shader's own octave weights and snow bound (shade.h) */
     tf_shade_octave_weights(TF_BUMP_H, P + TFP_AMP_H08, TF_CL_AMP_TABLE);
     tf_shade_octave_weights(TF_SNOW_H, P + TFP_AMP_H05, TF_CL_AMP_TABLE); /* = TF_RIPPLE_H */
-    P[TFP_SNOW_BOUND] = tf_shade_snow_fbm_bound();
+    _Static_assert(TF_CL_SNOW_TERMS == (int)TF_SNOW_OCTAVES, "the kernels' snow octaves");
+    tf_shade_snow_rest_bounds(P + TFP_SNOW_REST, TF_CL_SNOW_TERMS);
 
     I[TFI_N] = hf->n;
     I[TFI_CELLS] = hf->cells;

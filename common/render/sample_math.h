@@ -213,13 +213,13 @@ TF_SHARED tf_lane tf_slope_deg(tf_lane nz)
  * line + band exactly 1 (smoothstep clamps), whatever the fBm value.  The bounds are widened
  * by a relative 1e-9 so rounding in line +- band cannot cross them.  Skipping the fBm there
  * gives the same bits and saves most snow noise on scenes whose terrain is mostly far from
- * the line. */
-TF_SHARED tf_mask tf_snow_line_matters(double snow_line, double jitter, double fbm_bound,
+ * the line.  snow_line may be a lane's own (the line moved by the octaves summed so far). */
+TF_SHARED tf_mask tf_snow_line_matters(tf_lane snow_line, double jitter, double fbm_bound,
                                        double band, tf_lane z)
 {
     double reach = jitter * fbm_bound + band;
-    double lo = snow_line - reach, hi = snow_line + reach;
-    double slack = 1e-9 * (fabs(lo) + fabs(hi) + reach);
+    tf_lane lo = snow_line - reach, hi = snow_line + reach;
+    tf_lane slack = 1e-9 * (fabs(lo) + fabs(hi) + reach);
     return (z >= lo - slack) & (z <= hi + slack);
 }
 

@@ -303,6 +303,13 @@ double tf_shade_snow_fbm_bound(void)
     return snow_rest_bound[0];
 }
 
+void tf_shade_snow_rest_bounds(double *bound, int n)
+{
+    pthread_once(&snow_plan_once, make_snow_plan);
+    for (int k = 0; k < n; k++)
+        bound[k] = k < snow_plan.count ? snow_rest_bound[k] : 0.0;
+}
+
 /* ---------------------------------------------------------------- sky and mist */
 
 tf_vec3 tf_sky_color(const tf_shader *sh, tf_vec3 dir)

@@ -138,9 +138,11 @@ tf_vec3 tf_shade_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double variat
  * tf_shade_octave_weights puts in amp[0 .. n-1] (n <= 32) the full-weight octave weights of
  * the texture fBm plan of exponent H (TF_BUMP_H, or TF_SNOW_H = TF_RIPPLE_H), lacunarity 2;
  * tf_shade_snow_fbm_bound is the strict bound on |snow line fBm| that snow shading tests
- * against (tf_snow_line_matters). */
+ * against (tf_snow_line_matters), and tf_shade_snow_rest_bounds puts in bound[k] (k < n) the
+ * bound on its octaves from k on (0 past its last octave). */
 void tf_shade_octave_weights(double H, double *amp, int n);
 double tf_shade_snow_fbm_bound(void);
+void tf_shade_snow_rest_bounds(double *bound, int n);
 
 /* Sky radiance in direction dir (unit), before mist. */
 tf_vec3 tf_sky_color(const tf_shader *sh, tf_vec3 dir);

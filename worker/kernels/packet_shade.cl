@@ -5,8 +5,8 @@
  *
  * The formulas are the C renderer's own (common/render/sample_math.h and
  * common/terrain/noise_kernel.h, compiled here on packets); this file holds their packet
- * schedule and what reads memory: the texture octave loops (fbm_with_gradient8, tf_fbm2_8,
- * sharing lattice lookups between lanes), the permutation and gradient lookups, the height
+ * schedule and what reads memory: the texture octave loops (fbm_with_gradient8,
+ * snow_line_at8), the permutation and gradient lookups, the height
  * reads of the vertex normals, and the shading split around the batch's shadow walk.  Each
  * function NAME8 left here is the packet form of NAME in common/render/shade.c or render.c.
  * The one rule, on which the bit-identity of the OpenCL and C backends rests:
@@ -168,30 +168,6 @@ TF_INLINE dv noise2_axes8(__global const ushort *p, const noise_xaxis8 *ax,
     return noise2_lines8(ax, &left, &right, ay->ok);
 }
 
-/* tf_fbm2 per lane, for an octave count shared by all lanes (the snow line's constant). */
-dv tf_fbm2_8(__global const ushort *p, __global const double *amp, dv x, dv y, double octaves)
-{
-    if (!(octaves >= 1.0))
-        octaves = 1.0;
-    if (octaves > TF_CL_AMP_TABLE - 1)
-        octaves = TF_CL_AMP_TABLE - 1;
-    int whole = (int)octaves;
-    double remainder = octaves - whole;
-    int count = whole + (remainder > 0.0);
-    dv result = 0.0;
-    for (int i = 0; i < count; i++) {
-        double a = amp[i];
-        if (remainder > 0.0 && i == whole)
-            a *= remainder;
-        noise_axis8 ay = tf_noise_axis_of(y);
-        noise_xaxis8 ax = noise_xaxis_set8(p, x);
-        result += a * noise2_axes8(p, &ax, &ay);
-        x *= 2.0;
-        y *= 2.0;
-    }
-    return result;
-}
-
 /* fbm_with_gradient per lane (tf_fbm2_gradient_axes, noise_impl.h), with per-lane octave
  * counts: the loop runs to the largest count over `mask`; a lane adds octave i only while
  * i < its own count.  Per octave one noise value and its exact gradient, from the two
@@ -335,24 +311,41 @@ lv sunlit_cast8(const world *w, v3p p, v3p ng, lv mask, v3p *start)
     return cast;
 }
 
-/* shade.c's terrain_albedo: tf_terrain_albedo with the snow line's fBm for the lanes where it
- * can matter (tf_snow_line_matters). */
+/* shade.c's snow_line_at per lane: the snow fBm's octaves summed only while they can still
+ * move the albedo -- past the slope's cut (S1 there) and while tf_snow_line_matters with the
+ * bound of the octaves to come (S2) -- each lane stopping where its C sample stops, the packet
+ * when all have. */
+dv snow_line_at8(const world *w, v3p p, dv slope, lv mask)
+{
+    const double line = w->P[TFP_SNOW_LINE], jitter = w->P[TFP_SNOW_JITTER];
+    const double extent = w->P[TFP_EXTENT], band = w->P[TFP_BAND];
+    lv on = mask & (tf_snow_slope_weight(w->P[TFP_ROCK_SLOPE], slope) != 0.0);
+    if (!(jitter > 0) || !any_lane(on))
+        return (dv)(line);
+    __global const double *amp = w->P + TFP_AMP_H05;
+    dv x = tf_snow_u(p.x, extent), y = tf_snow_v(p.y, extent), sum = 0.0;
+    lv adding = on;
+    for (int k = 0; k < TF_CL_SNOW_TERMS; k++) {
+        adding &= tf_snow_line_matters(line + jitter * sum, jitter, w->P[TFP_SNOW_REST + k],
+                                       band, p.z);
+        if (!any_lane(adding))
+            break;
+        noise_axis8 ay = tf_noise_axis_of(y);
+        noise_xaxis8 ax = noise_xaxis_set8(w->perm, x);
+        sum = select(sum, sum + amp[k] * noise2_axes8(w->perm, &ax, &ay), adding);
+        x *= 2.0;
+        y *= 2.0;
+    }
+    return select((dv)(line), line + jitter * sum, on);
+}
+
+/* shade.c's tf_shade_albedo. */
 v3p terrain_albedo8(const world *w, v3p p, v3p n, dv variation, lv mask)
 {
     dv slope = tf_slope_deg(n.z);
-    double extent = w->P[TFP_EXTENT], jitter = w->P[TFP_SNOW_JITTER];
-    dv snow_line = (dv)(w->P[TFP_SNOW_LINE]);
-    if (jitter > 0) {
-        lv snowy = mask & tf_snow_line_matters(w->P[TFP_SNOW_LINE], jitter, w->P[TFP_SNOW_BOUND],
-                                               w->P[TFP_BAND], p.z);
-        if (any_lane(snowy)) {
-            dv f = tf_fbm2_8(w->perm, w->P + TFP_AMP_H05, tf_snow_u(p.x, extent),
-                             tf_snow_v(p.y, extent), TF_SNOW_OCTAVES);
-            snow_line = select(snow_line, snow_line + jitter * f, snowy);
-        }
-    }
     return tf_terrain_albedo(w->P[TFP_TREE_LINE], w->P[TFP_SEA_LEVEL], w->P[TFP_ROCK_SLOPE],
-                             w->P[TFP_BAND], p.z, slope, snow_line, variation);
+                             w->P[TFP_BAND], p.z, slope, snow_line_at8(w, p, slope, mask),
+                             variation);
 }
 
 /* ---------------------------------------------------------------- shading around the shadows

@@ -53,14 +53,16 @@
 #define TF_CL_AMP_TABLE   8   /* octaves per table (textures use at most 5) */
 #define TFP_AMP_H08      65   /* H = 0.8: bump */
 #define TFP_AMP_H05      73   /* H = 0.5: snow line, water ripples */
-#define TFP_SNOW_BOUND   81   /* strict bound on |snow fBm| (shade.c snow_fbm_bound) */
+#define TFP_SNOW_REST    81   /* TF_CL_SNOW_TERMS: strict bounds on |octaves k.. of the snow
+                                 fBm| (shade.c snow_rest_bound; the first bounds it all) */
+#define TF_CL_SNOW_TERMS  5   /* the snow fBm's octaves: TF_SNOW_OCTAVES, whole */
 /* The sun's strips (render/sun_math.h's tf_sun_frame, its doubles in its order; the table
  * itself is the kernels' `strips` buffer): a_s, b_s, a_p, b_p, along0, across0, inv_w, inv_ds,
  * ds, climb, t_per_cell, eps, dx, dy, cell */
-#define TFP_SUN_FRAME    82   /* 15 */
+#define TFP_SUN_FRAME    86   /* 15 */
 #define TF_CL_SUN_DOUBLES 15
-#define TFP_SLOPE_MAX    97   /* hf->slope_max, NAN where it bounds nothing (coherence) */
-#define TFP_COUNT        98
+#define TFP_SLOPE_MAX   101   /* hf->slope_max, NAN where it bounds nothing (coherence) */
+#define TFP_COUNT       102
 
 /* ints */
 #define TFI_N             0   /* samples per side */

@@ -497,7 +497,7 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     put3(P, TFP_SKY_HORIZON, s->sky.horizon);
     put3(P, TFP_SKY_ZENITH, s->sky.zenith);
     P[TFP_THRESHOLD] = r->threshold;
-    /* the shader's own octave weights and snow bound (shade.h) */
+    /* the shader's own octave weights and snow bounds (shade.h) */
     tf_shade_octave_weights(TF_BUMP_H, P + TFP_AMP_H08, TF_CL_AMP_TABLE);
     tf_shade_octave_weights(TF_SNOW_H, P + TFP_AMP_H05, TF_CL_AMP_TABLE); /* = TF_RIPPLE_H */
     _Static_assert(TF_CL_SNOW_TERMS == (int)TF_SNOW_OCTAVES, "the kernels' snow octaves");

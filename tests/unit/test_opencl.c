@@ -186,10 +186,11 @@ static void match_c_backend(void **state)
     assert_int_equal(counts.external_rays, fx.c_counts.external_rays);
     /* Both backends take a pixel's edge samples from the neighbour that keeps them instead of
      * tracing them again: the C backend from every neighbour before it in the task (render.c's
-     * pixel_edge), the kernels from the neighbours in the pixel's work-item (packet_render.cl).
-     * So the kernels trace at least C's rays, fewer than one a sample, and at least a third as
-     * many fewer as C (1% either way: on a GPU a few pixels may refine differently); each
-     * sample with its one shadow ray or none. */
+     * pixel_edge), the kernels from the neighbours in the pixel's work-item, a tile of pixels
+     * (packet_render.cl).  So the kernels trace at least C's rays, fewer than one a sample, and
+     * at least 3/4 as many fewer as C (1% either way: on a GPU a few pixels may refine
+     * differently; a work-item of pixel rows instead of a tile saves 2/3); each sample with its
+     * one shadow ray or none. */
     uint64_t c_samples = (uint64_t)(W + 1) * (H + 1);
     for (size_t i = 0; i < (size_t)W * H; i++)
         c_samples += (uint64_t)fx.c_img[i].spp - 4;
@@ -202,7 +203,7 @@ static void match_c_backend(void **state)
                   (unsigned long long)fx.c_counts.shadow_rays);
     assert_true((double)fx.c_counts.primary_rays <= 1.01 * (double)counts.primary_rays);
     assert_true(counts.primary_rays < c_samples);
-    assert_true(3 * (c_samples - counts.primary_rays) >= taken);
+    assert_true(4 * (c_samples - counts.primary_rays) >= 3 * taken);
     assert_true((double)fx.c_counts.shadow_rays <= 1.01 * (double)counts.shadow_rays);
     assert_true((double)counts.shadow_rays <= 1.01 * (double)(fx.c_counts.shadow_rays + taken));
     /* Z is the nearest sample's distance: equal wherever the same samples were taken */

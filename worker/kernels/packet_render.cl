@@ -345,8 +345,37 @@ void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sampl
     }
 }
 
-/* Pixels first .. first+count-1 (row-major in the rw-wide rectangle at (rx, ry)); pixel
- * first + m uses scratch slice m of cache / levels / have / where ((N+1)^2 entries each).  corners,
+/* The order tf_pixels8 takes a rectangle's pixels in: tiles of TF_TILE x TF_TILE (narrower at
+ * the rectangle's right edge, lower at its top), a band of tiles at a time from the bottom,
+ * each tile row by row.  A work-item's TF_PIX pixels are then a tile, which shares its inner
+ * edges (keeper, above), not a row or two of the rectangle, which shares few of its lower
+ * ones.  Pixel t of that order: its column and row in the rw x rh rectangle, and its tile's
+ * width. */
+#if TF_PIX >= 256
+#define TF_TILE 16
+#elif TF_PIX >= 64
+#define TF_TILE 8
+#elif TF_PIX >= 16
+#define TF_TILE 4
+#elif TF_PIX >= 4
+#define TF_TILE 2
+#else
+#define TF_TILE 1
+#endif
+
+void tile_place(int t, int rw, int rh, int *c, int *row, int *tw)
+{
+    const int band = t / (TF_TILE * rw), th = min(TF_TILE, rh - band * TF_TILE);
+    const int in_band = t - band * TF_TILE * rw, tile = in_band / (TF_TILE * th);
+    const int in_tile = in_band - tile * TF_TILE * th;
+    *tw = min(TF_TILE, rw - tile * TF_TILE);
+    *c = tile * TF_TILE + in_tile % *tw;
+    *row = band * TF_TILE + in_tile / *tw;
+}
+
+/* Pixels first .. first+count-1 of the rw x rh rectangle at (rx, ry), in tile_place's order;
+ * pixel first + m uses scratch slice m of cache / levels / have / where ((N+1)^2 entries each)
+ * and its results go to out and shadow at its row-major place.  corners,
  * corner_levels: the output of tf_corners8.  epoch: this launch's mark (host: never 0, never
  * with TF_QUEUED set). */
 __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong jitter_key,
@@ -371,7 +400,8 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
     pixel_state ps[TF_PIX];
     for (int p = 0; p < np; p++) {
         pixel_state *s = &ps[p];
-        int k = first + m0 + p, c = k % rw, row = k / rw;
+        int c, row, tw;
+        tile_place(first + m0 + p, rw, rh, &c, &row, &tw);
         s->px = rx + c;
         s->py = ry + row;
         s->cache = cache;
@@ -380,8 +410,8 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         s->have = have + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         s->where = where + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         s->used = 0;
-        s->left = c > 0 && p > 0 ? p - 1 : -1;
-        s->below = p >= rw ? p - rw : -1;
+        s->left = c % TF_TILE > 0 && p > 0 ? p - 1 : -1;
+        s->below = row % TF_TILE > 0 && p >= tw ? p - tw : -1;
         const int slot[4] = {0, N, N * side, N * side + N};
         const size_t from[4] = {(size_t)row * cw + c, (size_t)row * cw + c + 1,
                                 (size_t)(row + 1) * cw + c, (size_t)(row + 1) * cw + c + 1};
@@ -457,7 +487,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
     const double area = (double)N * (double)N;
     for (int p = 0; p < np; p++) {
         const pixel_state *s = &ps[p];
-        int k = first + m0 + p;
+        int k = (s->py - ry) * rw + (s->px - rx);
         __global float *o = out + (size_t)k * TF_CL_PIXEL_FLOATS;
         o[0] = (float)(s->sum_r / area);
         o[1] = (float)(s->sum_g / area);

@@ -75,8 +75,8 @@ static inline double tf_noise2_axis(const tf_noise *nz, double x, const tf_noise
                           tf_noise_column_at(nz, xi + 1, ay));
 }
 
-/* The y derivatives of the column lines of tf_noise_column_at (noise_kernel.h's
- * tf_noise_column_dy), with dfade = tf_fade_slope(ay->f0). */
+/* tf_noise_column_at's line in *line, and its derivative along y (noise_kernel.h's
+ * tf_noise_column_dy) in *dy, with dfade = tf_fade_slope(ay->f0). */
 static inline void tf_noise_column_pair_at(const tf_noise *nz, int64_t xi, const tf_noise_axis *ay,
                                            double dfade, tf_noise_column *line,
                                            tf_noise_column *dy)

@@ -44,17 +44,24 @@ static inline int64_t tf_floor_i64(double x)
 
 static inline void tf_noise_axis_set(tf_noise_axis *a, double y) { *a = tf_noise_axis_of(y); }
 
-/* The noise along one lattice column (tf_noise_column, noise_kernel.h).  Both the point kernel
- * and the row evaluator build the noise from these column lines, so they perform the same
- * operations and agree to the bit. */
-static inline tf_noise_column tf_noise_column_at(const tf_noise *nz, int64_t xi,
-                                                 const tf_noise_axis *ay)
+/* The noise along one lattice column (tf_noise_column, noise_kernel.h), from the gradients at
+ * its two corners (tf_noise_column_grads).  Both the point kernel and the row evaluator build
+ * the noise from these column lines, so they perform the same operations and agree to the bit. */
+static inline void tf_noise_column_grads(const tf_noise *nz, int64_t xi, const tf_noise_axis *ay,
+                                         const double **g0, const double **g1)
 {
     const uint16_t *p = nz->perm;
     /* perm holds 0..255 twice, so perm[X] + Y + 1 <= 511 stays in bounds. */
     int a = p[xi & (TF_NOISE_LATTICE - 1)] + ay->lattice;
-    const double *g0 = tf_grad2[p[a] & (TF_NOISE_GRADS - 1)];
-    const double *g1 = tf_grad2[p[a + 1] & (TF_NOISE_GRADS - 1)];
+    *g0 = tf_grad2[p[a] & (TF_NOISE_GRADS - 1)];
+    *g1 = tf_grad2[p[a + 1] & (TF_NOISE_GRADS - 1)];
+}
+
+static inline tf_noise_column tf_noise_column_at(const tf_noise *nz, int64_t xi,
+                                                 const tf_noise_axis *ay)
+{
+    const double *g0, *g1;
+    tf_noise_column_grads(nz, xi, ay, &g0, &g1);
     return tf_noise_column_line(g0[0], g0[1], g1[0], g1[1], ay->f0, ay->f1, ay->fade);
 }
 
@@ -81,10 +88,8 @@ static inline void tf_noise_column_pair_at(const tf_noise *nz, int64_t xi, const
                                            double dfade, tf_noise_column *line,
                                            tf_noise_column *dy)
 {
-    const uint16_t *p = nz->perm;
-    int a = p[xi & (TF_NOISE_LATTICE - 1)] + ay->lattice;
-    const double *g0 = tf_grad2[p[a] & (TF_NOISE_GRADS - 1)];
-    const double *g1 = tf_grad2[p[a + 1] & (TF_NOISE_GRADS - 1)];
+    const double *g0, *g1;
+    tf_noise_column_grads(nz, xi, ay, &g0, &g1);
     *line = tf_noise_column_line(g0[0], g0[1], g1[0], g1[1], ay->f0, ay->f1, ay->fade);
     *dy = tf_noise_column_dy(g0[0], g0[1], g1[0], g1[1], ay->f0, ay->f1, ay->fade, dfade);
 }

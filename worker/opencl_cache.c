@@ -17,10 +17,11 @@
 #include "cachefile.h"
 #include "le_bytes.h"
 #include "log.h"
+#include "worker/pocl_binary.h"
 
 #define MAGIC "TFCLPRG\0"        /* 8 bytes */
 #define FORMAT 1u                /* the header's layout and the key's recipe */
-#define KEY_DOMAIN "terrafarm opencl program cache 1"
+#define KEY_DOMAIN "terrafarm opencl program cache 2" /* 2: PoCL 3.1 binaries without IR */
 #define MAX_BINARY ((size_t)256 << 20) /* a larger entry is not one of ours */
 /* header layout: magic[8] format:u32 zero:u32 key[32] length:u64 checksum[32], little-endian */
 enum { OFF_FORMAT = 8, OFF_ZERO = 12, OFF_KEY = 16, OFF_LENGTH = 48, OFF_SUM = 56 };
@@ -307,8 +308,16 @@ int tf_clcache_store(const tf_clcache *c, cl_program prog, char *err, size_t err
     if (!bin)
         return tf_seterr(err, errlen, "out of memory for a %zu-byte binary", n);
     rc = clGetProgramInfo(prog, CL_PROGRAM_BINARIES, sizeof bin, &bin, NULL);
-    int r = rc == CL_SUCCESS ? tf_clcache_write(c, bin, n, err, errlen)
-                             : tf_seterr(err, errlen, "cannot read the program's binary (error %d)", rc);
+    if (rc != CL_SUCCESS) {
+        free(bin);
+        return tf_seterr(err, errlen, "cannot read the program's binary (error %d)", rc);
+    }
+    unsigned char *slim = NULL;
+    size_t slim_n = 0;
+    int r = tf_pocl_binary_without_ir(bin, n, c->key, &slim, &slim_n) == 1
+                ? tf_clcache_write(c, slim, slim_n, err, errlen)
+                : tf_clcache_write(c, bin, n, err, errlen);
+    free(slim);
     free(bin);
     return r;
 }

@@ -56,7 +56,8 @@ cl_program tf_clcache_load(const tf_clcache *c, cl_context ctx, cl_device_id dev
                            const char *options, char *err, size_t errlen);
 
 /* Store prog's binary (one device) as the entry: a temporary file of mode 0600 renamed over it,
- * so a reader sees the old entry, the new one or none.  0, or -1 with a message. */
+ * so a reader sees the old entry, the new one or none.  A PoCL 3.1 binary is stored without its
+ * LLVM IR (pocl_binary.h), so that loading it starts no compiler.  0, or -1 with a message. */
 int tf_clcache_store(const tf_clcache *c, cl_program prog, char *err, size_t errlen);
 /* The same with the binary's bytes given (what tf_clcache_store writes; tests store binaries a
  * driver rejects with it). */

@@ -5,7 +5,8 @@
  *
  *   off_builds_from_source   TF_OPENCL_CACHE=off: "off", nothing written.
  *   miss_then_hit            an empty directory: the first backend builds and stores (a 0600
- *                            entry in a 0700 directory it created), the second is a hit.
+ *                            entry in a 0700 directory it created, on PoCL 3.1 without the
+ *                            program's LLVM IR), the second is a hit.
  *   stale_keys_differ        the key covers the source and the options: another source or
  *                            options give another entry, and an entry renamed to another key's
  *                            name is refused (its header holds its own key).
@@ -35,6 +36,7 @@
 #include <unistd.h>
 
 #include "worker/opencl_cache.h"
+#include "worker/pocl_binary.h"
 #include "installed_kernels.h"
 #include "worker/backend_opencl.h"
 #include "terrain/heightfield.h"
@@ -174,6 +176,21 @@ static void off_builds_from_source(void **state)
     expect("off", "off");
 }
 
+/* A PoCL 3.1 binary is stored without its LLVM IR (worker/pocl_binary.h); another driver's
+ * binary, which pocl_binary.c does not read, is stored as it is. */
+static void stored_without_ir(const char *entry)
+{
+    FILE *f = fopen(entry, "rb");
+    static unsigned char bin[8 << 20];
+    assert_non_null(f);
+    size_t n = fread(bin, 1, sizeof bin, f);
+    fclose(f);
+    assert_true(n > TF_CLCACHE_HEADER_BYTES && n < sizeof bin);
+    int ir = tf_pocl_binary_has_ir(bin + TF_CLCACHE_HEADER_BYTES, n - TF_CLCACHE_HEADER_BYTES);
+    print_message("stored binary: %s\n", ir < 0 ? "not PoCL 3.1's" : ir ? "with IR" : "no IR");
+    assert_int_not_equal(ir, 1);
+}
+
 static void miss_then_hit(void **state)
 {
     (void)state;
@@ -190,6 +207,7 @@ static void miss_then_hit(void **state)
     expect(dir, "hit");
     expect(dir, "hit");
     assert_int_equal(entries(dir, NULL, 0), 1);
+    stored_without_ir(entry);
 }
 
 /* The first device of the first platform, and a cache for a program of one source. */

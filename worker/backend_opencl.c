@@ -110,9 +110,28 @@ struct tf_cl_backend {
 
 /* ---------------------------------------------------------------- environment */
 
+/* The tuning variable `name` as a whole number in [lo, hi]: 1 with *v set, 0 when unset or
+ * empty; anything else is one warning naming the variable, its value and the range, and 0 (the
+ * device's default stays). */
+static int tuning_number(const char *name, long lo, long hi, long *v)
+{
+    const char *s = getenv(name);
+    char *end;
+    if (!s || !*s)
+        return 0;
+    errno = 0;
+    long n = strtol(s, &end, 10);
+    if (errno == 0 && *end == 0 && end != s && n >= lo && n <= hi) {
+        *v = n;
+        return 1;
+    }
+    tf_warn("%s=%s ignored: expected a whole number from %ld to %ld", name, s, lo, hi);
+    return 0;
+}
+
 /* TF_STREAM and TF_PIX for the device (CPU_STREAM ... above), or TERRAFARM_CL_ITEMS=SxP for
- * tuning and the tests: S a multiple of 8 from 8 to 256, P from 1 to 256 (anything else is
- * ignored, as the other TERRAFARM_CL_ settings are). */
+ * tuning and the tests: S a multiple of 8 from 8 to 256, P from 1 to 256 (anything else is one
+ * warning, and the device's sizes). */
 static void choose_item_sizes(tf_cl_backend *b, int gpu)
 {
     b->stream = gpu ? GPU_STREAM : CPU_STREAM;
@@ -120,10 +139,15 @@ static void choose_item_sizes(tf_cl_backend *b, int gpu)
     const char *items = getenv("TERRAFARM_CL_ITEMS");
     int stream, pix;
     char end;
-    if (items && sscanf(items, "%dx%d%c", &stream, &pix, &end) == 2 && stream >= 8 &&
-        stream <= 256 && stream % 8 == 0 && pix >= 1 && pix <= 256) {
+    if (!items || !*items)
+        return;
+    if (sscanf(items, "%dx%d%c", &stream, &pix, &end) == 2 && stream >= 8 && stream <= 256 &&
+        stream % 8 == 0 && pix >= 1 && pix <= 256) {
         b->stream = stream;
         b->pix = pix;
+    } else {
+        tf_warn("TERRAFARM_CL_ITEMS=%s ignored: expected SxP, S a multiple of 8 from 8 to 256 "
+                "(samples a batch) and P from 1 to 256 (pixels a work-item)", items);
     }
 }
 
@@ -639,14 +663,14 @@ static void choose_sizes(tf_cl_backend *b, cl_device_id dev)
      * groups of 1, 1.10x with 8).  On a GPU, a conventional 32. */
     cl_device_type type = 0;
     clGetDeviceInfo(dev, CL_DEVICE_TYPE, sizeof type, &type, NULL);
-    const char *local = getenv("TERRAFARM_CL_LOCAL");
-    b->local = local && atoi(local) > 0 && atoi(local) <= 1024 ? (size_t)atoi(local)
-               : (type & CL_DEVICE_TYPE_GPU)                   ? 32
-                                                               : 1;
+    long local, scratch;
+    b->local = tuning_number("TERRAFARM_CL_LOCAL", 1, 1024, &local) ? (size_t)local
+               : (type & CL_DEVICE_TYPE_GPU)                          ? 32
+                                                                      : 1;
     cl_uint units = 1;
     clGetDeviceInfo(dev, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof units, &units, NULL);
-    const char *scratch = getenv("TERRAFARM_CL_SCRATCH"); /* bytes; for tuning and the tests */
-    b->scratch = scratch && atol(scratch) > 0                 ? (size_t)atol(scratch)
+    /* bytes; for tuning and the tests */
+    b->scratch = tuning_number("TERRAFARM_CL_SCRATCH", 1, LONG_MAX, &scratch) ? (size_t)scratch
                  : (type & CL_DEVICE_TYPE_CPU) && units == 1 ? SCRATCH_ONE_CPU_UNIT
                                                              : SCRATCH_LARGE;
     choose_item_sizes(b, (type & CL_DEVICE_TYPE_GPU) != 0);

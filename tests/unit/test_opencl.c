@@ -33,6 +33,9 @@
  *   item_sizes          the kernels built for other work-item sizes (TERRAFARM_CL_ITEMS): a
  *                       GPU's 128 samples a batch and 64 pixels an item, and the smallest, 8
  *                       and 1: the same pixels, memcmp-identical on PoCL.
+ *   tuning_refused      a TERRAFARM_CL_ITEMS, _LOCAL or _SCRATCH value out of its range is one
+ *                       line on stderr naming it and the range, and the device's own setting
+ *                       stays (the C pixels); a good value prints nothing.
  *   cores_shared        N OpenCL worker processes share the cores through PoCL's environment.
  * Every test but cores_shared skips (cmocka skip()) with a message when no OpenCL platform
  * exists. */
@@ -40,6 +43,7 @@
 #include <stddef.h>
 #include <setjmp.h>
 #include <cmocka.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -539,6 +543,66 @@ static void item_sizes(void **state)
     check_item_sizes("8x1");
 }
 
+static int lines(const char *s)
+{
+    int n = 0;
+    for (; *s; s++)
+        n += *s == '\n';
+    return n;
+}
+
+/* A backend opened with name=value: what it wrote on stderr, in out. */
+static tf_cl_backend *opened_with(const char *name, const char *value, char *out, size_t len)
+{
+    char err[1024] = "", path[] = "/tmp/tf-test-stderr-XXXXXX";
+    int fd = mkstemp(path), saved = dup(2);
+    assert_true(fd >= 0 && saved >= 0);
+    unlink(path);
+    setenv(name, value, 1);
+    dup2(fd, 2);
+    tf_cl_backend *b = tf_cl_backend_new(fx.scene, fx.hf, err, sizeof err);
+    dup2(saved, 2);
+    close(saved);
+    unsetenv(name);
+    ssize_t n = pread(fd, out, len - 1, 0);
+    out[n > 0 ? n : 0] = 0;
+    close(fd);
+    if (!b)
+        fprintf(stderr, "%s=%s: %s\n", name, value, err);
+    assert_non_null(b);
+    return b;
+}
+
+static void tuning_refused(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    static const char *const bad[][2] = {
+        {"TERRAFARM_CL_ITEMS", "256x512"}, {"TERRAFARM_CL_ITEMS", "12x8"},
+        {"TERRAFARM_CL_ITEMS", "64"},      {"TERRAFARM_CL_LOCAL", "0"},
+        {"TERRAFARM_CL_LOCAL", "4k"},      {"TERRAFARM_CL_SCRATCH", "-5"},
+    };
+    char said[2048], want[128];
+    static tf_pixel img[W * H];
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        tf_cl_backend *b = opened_with(bad[i][0], bad[i][1], said, sizeof said);
+        snprintf(want, sizeof want, "%s=%s ignored: expected", bad[i][0], bad[i][1]);
+        if (!strstr(said, want))
+            print_message("%s: stderr was \"%s\"\n", want, said);
+        assert_non_null(strstr(said, want));
+        assert_int_equal(lines(said), 1);
+        if (i == 0) { /* the device's own sizes: the C pixels */
+            char err[1024] = "";
+            assert_int_equal(
+                tf_cl_backend_render(b, (tf_rect){0, 0, W, H}, img, NULL, err, sizeof err), 0);
+            assert_close_to_c(img, "after a refused setting");
+        }
+        tf_cl_backend_free(b);
+    }
+    tf_cl_backend_free(opened_with("TERRAFARM_CL_ITEMS", "128x64", said, sizeof said));
+    assert_string_equal(said, ""); /* a good value: not a word */
+}
+
 static void bad_rect(void **state)
 {
     (void)state;
@@ -605,6 +669,7 @@ int main(void)
         cmocka_unit_test(good_device_override), cmocka_unit_test(bad_kernel_dir),
         cmocka_unit_test(installed_kernel_dir), cmocka_unit_test(bad_rect),
         cmocka_unit_test(small_batches), cmocka_unit_test(item_sizes),
+        cmocka_unit_test(tuning_refused),
         cmocka_unit_test(cores_shared),     cmocka_unit_test(opened_ahead),
     };
     return cmocka_run_group_tests(tests, setup, teardown);

@@ -11,8 +11,10 @@
  * shared machine hits both), with the spread.
  * Also: the kernel build time cold (a fresh, empty POCL_CACHE_DIR, and terrafarm's own binary
  * cache, TF_OPENCL_CACHE, empty in it) and cached (the same directories again: a binary-cache
- * hit), device time per kernel (corners vs adaptive pixels), rays per second, and
- * the image match (PSNR, equal sample counts, bit-identical pixels).
+ * hit), a fresh worker process's start (the program run again with --start, as a forked
+ * worker starts: loading PoCL and LLVM, the backend from the binary cache, the first task;
+ * the median of START_RUNS processes), device time per kernel (corners vs adaptive pixels),
+ * rays per second, and the image match (PSNR, equal sample counts, bit-identical pixels).
  *
  *   build/bench/bench_opencl SCENE [WxH] [STAMP] [REPEATS]   (defaults: the scene's size, 64, 5)
  *   build/bench/bench_opencl --smoke SCENE   (16x9, stamps of 8, one round, and no cold build:
@@ -20,12 +22,17 @@
 #include <ftw.h>
 #include <math.h>
 #include <pthread.h>
+#include <spawn.h>
+#include <sys/wait.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
+
+#define CL_TARGET_OPENCL_VERSION 120
+#include <CL/cl.h>
 
 #include "worker/backend_opencl.h"
 #include "terrain/heightfield.h"
@@ -34,6 +41,10 @@
 
 #define MAX_THREADS 64
 #define MAX_REPEATS 99
+#define START_RUNS 5
+#define START_PHASES 3 /* PoCL loaded, backend ready, first task */
+
+extern char **environ;
 
 static double now(void)
 {
@@ -139,8 +150,101 @@ static int fresh_cache_dir(char *dir, size_t len)
     return mkdtemp(dir) ? 0 : -1;
 }
 
+/* --start SCENE WxH STAMP: as a fresh worker process, time loading the OpenCL platform (PoCL,
+ * LLVM), the backend (device, context, program from the binary cache, the scene and terrain
+ * uploaded) and the first task of one stamp; print the wall and CPU seconds of each. */
+static int start_child(const char *path, const char *size, int stamp)
+{
+    char err[1024];
+    int w, h;
+    tf_scene *s = tf_scene_load(path, err, sizeof err);
+    if (s && sscanf(size, "%dx%d", &w, &h) == 2)
+        tf_scene_set_size(s, w, h);
+    tf_heightfield *hf = s ? tf_heightfield_build(s, 0, err, sizeof err) : NULL;
+    tf_pixel *buf = malloc(sizeof *buf * (size_t)stamp * (size_t)stamp);
+    if (!hf || !buf) {
+        fprintf(stderr, "%s\n", hf ? "out of memory" : err);
+        return 1;
+    }
+    double t[START_PHASES + 1], c[START_PHASES + 1];
+    cl_platform_id plat;
+    cl_uint nplat = 0;
+    t[0] = now(), c[0] = cpu_now();
+    clGetPlatformIDs(1, &plat, &nplat);
+    t[1] = now(), c[1] = cpu_now();
+    tf_cl_backend *cl = tf_cl_backend_new(s, hf, err, sizeof err);
+    t[2] = now(), c[2] = cpu_now();
+    tf_rect r = {0, 0, stamp < s->width ? stamp : s->width, stamp < s->height ? stamp : s->height};
+    if (!cl || tf_cl_backend_render(cl, r, buf, NULL, err, sizeof err)) {
+        fprintf(stderr, "OpenCL backend: %s\n", err);
+        return 1;
+    }
+    t[3] = now(), c[3] = cpu_now();
+    for (int i = 0; i < START_PHASES; i++)
+        printf("%.6f %.6f ", t[i + 1] - t[i], c[i + 1] - c[i]);
+    printf("%s\n", tf_cl_backend_cache(cl));
+    return 0;
+}
+
+/* One fresh process through start_child: its phases' wall and CPU seconds.  0 or -1. */
+static int start_run(const char *scene, int width, int height, int stamp, double *wall,
+                     double *cpu)
+{
+    char size[32], st[16], line[256] = "";
+    snprintf(size, sizeof size, "%dx%d", width, height);
+    snprintf(st, sizeof st, "%d", stamp);
+    char *args[] = {"bench_opencl", "--start", (char *)scene, size, st, NULL};
+    int fds[2];
+    posix_spawn_file_actions_t fa;
+    pid_t pid;
+    if (pipe(fds) != 0)
+        return -1;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_adddup2(&fa, fds[1], 1);
+    posix_spawn_file_actions_addclose(&fa, fds[0]);
+    int rc = posix_spawn(&pid, "/proc/self/exe", &fa, NULL, args, environ);
+    posix_spawn_file_actions_destroy(&fa);
+    close(fds[1]);
+    FILE *f = fdopen(fds[0], "r");
+    if (f && !fgets(line, sizeof line, f))
+        line[0] = 0;
+    if (f)
+        fclose(f);
+    int status = 0;
+    if (rc == 0)
+        waitpid(pid, &status, 0);
+    return rc == 0 && WIFEXITED(status) && WEXITSTATUS(status) == 0 &&
+                   sscanf(line, "%lf %lf %lf %lf %lf %lf", &wall[0], &cpu[0], &wall[1], &cpu[1],
+                          &wall[2], &cpu[2]) == 6
+               ? 0
+               : -1;
+}
+
+/* The median start of `runs` fresh worker processes, one line.  0, or -1 when one failed. */
+static int report_start(const char *scene, int width, int height, int stamp, int runs)
+{
+    double wall[START_PHASES][START_RUNS], cpu[START_PHASES][START_RUNS], w[START_PHASES],
+        c[START_PHASES];
+    for (int k = 0; k < runs; k++) {
+        if (start_run(scene, width, height, stamp, w, c)) {
+            fprintf(stderr, "a fresh process (%s --start) could not start the backend\n",
+                    "bench_opencl");
+            return -1;
+        }
+        for (int i = 0; i < START_PHASES; i++)
+            wall[i][k] = w[i], cpu[i][k] = c[i];
+    }
+    printf("start      a fresh worker process, wall (CPU): PoCL and LLVM loaded %.4f s (%.4f), "
+           "backend ready %.4f s (%.4f), first task %.4f s (%.4f); median of %d\n",
+           median(wall[0], runs), median(cpu[0], runs), median(wall[1], runs),
+           median(cpu[1], runs), median(wall[2], runs), median(cpu[2], runs), runs);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
+    if (argc == 5 && !strcmp(argv[1], "--start"))
+        return start_child(argv[2], argv[3], atoi(argv[4]) > 0 ? atoi(argv[4]) : 64);
     int smoke = argc == 3 && !strcmp(argv[1], "--smoke");
     char *smoke_argv[] = {argv[0], argv[argc - 1], "16x9", "8", "1", NULL};
     if (smoke) {
@@ -233,6 +337,8 @@ int main(int argc, char **argv)
     }
     printf("first task %.3f s (includes PoCL's work-group function compile on a cold cache)\n",
            now() - t0);
+    if (report_start(argv[1], s->width, s->height, stamp, smoke ? 1 : START_RUNS))
+        return 1;
 
     /* rounds: C (threads over stamps), then OpenCL (the same stamps one by one) */
     job j = {.r = r, .width = s->width, .height = s->height, .stamp = stamp, .img = c_img};

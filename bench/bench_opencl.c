@@ -155,35 +155,40 @@ static int fresh_cache_dir(char *dir, size_t len)
  * uploaded) and the first task of one stamp; print the wall and CPU seconds of each. */
 static int start_child(const char *path, const char *size, int stamp)
 {
-    char err[1024];
-    int w, h;
+    char err[1024] = "";
+    int w, h, rc = 1;
     tf_scene *s = tf_scene_load(path, err, sizeof err);
     if (s && sscanf(size, "%dx%d", &w, &h) == 2)
         tf_scene_set_size(s, w, h);
     tf_heightfield *hf = s ? tf_heightfield_build(s, 0, err, sizeof err) : NULL;
     tf_pixel *buf = malloc(sizeof *buf * (size_t)stamp * (size_t)stamp);
-    if (!hf || !buf) {
-        fprintf(stderr, "%s\n", hf ? "out of memory" : err);
-        return 1;
-    }
+    tf_cl_backend *cl = NULL;
     double t[START_PHASES + 1], c[START_PHASES + 1];
+    if (!hf || !buf)
+        goto out;
     cl_platform_id plat;
     cl_uint nplat = 0;
     t[0] = now(), c[0] = cpu_now();
     clGetPlatformIDs(1, &plat, &nplat);
     t[1] = now(), c[1] = cpu_now();
-    tf_cl_backend *cl = tf_cl_backend_new(s, hf, err, sizeof err);
+    cl = tf_cl_backend_new(s, hf, err, sizeof err);
     t[2] = now(), c[2] = cpu_now();
     tf_rect r = {0, 0, stamp < s->width ? stamp : s->width, stamp < s->height ? stamp : s->height};
-    if (!cl || tf_cl_backend_render(cl, r, buf, NULL, err, sizeof err)) {
-        fprintf(stderr, "OpenCL backend: %s\n", err);
-        return 1;
-    }
+    if (!cl || tf_cl_backend_render(cl, r, buf, NULL, err, sizeof err))
+        goto out;
     t[3] = now(), c[3] = cpu_now();
     for (int i = 0; i < START_PHASES; i++)
         printf("%.6f %.6f ", t[i + 1] - t[i], c[i + 1] - c[i]);
     printf("%s\n", tf_cl_backend_cache(cl));
-    return 0;
+    rc = 0;
+out:
+    if (rc)
+        fprintf(stderr, "%s\n", err[0] ? err : "out of memory");
+    tf_cl_backend_free(cl);
+    free(buf);
+    tf_heightfield_free(hf);
+    tf_scene_free(s);
+    return rc;
 }
 
 /* One fresh process through start_child: its phases' wall and CPU seconds.  0 or -1. */

@@ -211,7 +211,9 @@ static int start_run(const char *scene, int width, int height, int stamp, double
     posix_spawn_file_actions_destroy(&fa);
     close(fds[1]);
     FILE *f = fdopen(fds[0], "r");
-    if (f && !fgets(line, sizeof line, f))
+    if (!f)
+        close(fds[0]);
+    else if (!fgets(line, sizeof line, f))
         line[0] = 0;
     if (f)
         fclose(f);
@@ -232,8 +234,8 @@ static int report_start(const char *scene, int width, int height, int stamp, int
         c[START_PHASES];
     for (int k = 0; k < runs; k++) {
         if (start_run(scene, width, height, stamp, w, c)) {
-            fprintf(stderr, "a fresh process (%s --start) could not start the backend\n",
-                    "bench_opencl");
+            fprintf(stderr, "a fresh process (bench_opencl --start) could not start the "
+                            "backend\n");
             return -1;
         }
         for (int i = 0; i < START_PHASES; i++)

@@ -195,11 +195,11 @@ int tf_pocl_binary_without_ir(const unsigned char *bin, size_t n,
 {
     const unsigned char *kernels_at = NULL;
     int bitcode, ok = read_binary(bin, n, &kernels_at, &bitcode);
+    *out = NULL;
+    if (ok <= 0) /* kernels_at may be unset: nothing below may use it */
+        return ok;
     size_t placeholder = strlen(PLACEHOLDER), root = 4 + placeholder + 4;
     size_t tail = (size_t)(bin + n - kernels_at);
-    *out = NULL;
-    if (ok <= 0)
-        return ok;
     unsigned char *o = malloc(HEADER_BYTES + 8 + root + tail);
     if (!o)
         return -1;

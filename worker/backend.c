@@ -69,7 +69,11 @@ tf_backend *tf_backend_new(const char *name, const tf_scene *s, const tf_heightf
     return NULL;
 }
 
-/* PoCL 3 reads POCL_MAX_PTHREAD_COUNT, PoCL 4 and later POCL_CPU_MAX_CU_COUNT. */
+/* PoCL 3 reads POCL_MAX_PTHREAD_COUNT, PoCL 4 and later POCL_CPU_MAX_CU_COUNT.  A share of
+ * one core also picks PoCL's "basic" CPU device, which runs a launch on the thread that waits
+ * for it, instead of "pthread" with one thread of its own: the host thread and PoCL's no longer
+ * hand every task back and forth (bench/README.md section 33: 480x270 -j 2 0.95x wall,
+ * 1920x1080 0.975x; the same pixels). */
 void tf_backend_share_cores(const char *name, int processes)
 {
     if (!name || !strcmp(name, "c") || processes < 2 || getenv("POCL_MAX_PTHREAD_COUNT") ||
@@ -80,6 +84,8 @@ void tf_backend_share_cores(const char *name, int processes)
     snprintf(v, sizeof v, "%d", share > 1 ? share : 1);
     setenv("POCL_MAX_PTHREAD_COUNT", v, 1);
     setenv("POCL_CPU_MAX_CU_COUNT", v, 1);
+    if (share <= 1)
+        setenv("POCL_DEVICES", "basic", 0); /* the user's choice of devices stands */
 }
 
 int tf_backend_render(tf_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,

@@ -28,8 +28,9 @@ void tf_backend_free(tf_backend *b);
 /* Before forking `processes` workers of backend `name` on this machine (render -j N, worker
  * -j N, a farm worker's processes for a job): PoCL runs each kernel on every core, so N OpenCL processes would start N times the
  * cores in threads, contending.  Each gets its share (cores / N, at least 1) through PoCL's
- * environment, inherited by the children, unless the user set PoCL's thread count.  Nothing
- * for the C backend; a GPU device ignores it. */
+ * environment, inherited by the children, unless the user set PoCL's thread count; a share
+ * of one core also selects PoCL's single-threaded "basic" device (POCL_DEVICES), unless the
+ * user chose PoCL's devices.  Nothing for the C backend; a GPU device ignores it. */
 void tf_backend_share_cores(const char *name, int processes);
 
 #endif

@@ -466,34 +466,56 @@ static void installed_kernel_dir(void **state)
 }
 
 /* tf_backend_share_cores: N OpenCL processes get cores / N PoCL threads each (at least 1), in
- * both of PoCL's variables; the C backend and a single process change nothing, nor does a
- * thread count the user set.  Needs no device. */
+ * both of PoCL's variables, and PoCL's single-threaded "basic" device exactly when that share
+ * is one core; the C backend and a single process change nothing, nor does a thread count or
+ * a choice of devices the user set.  Needs no device. */
 static void cores_shared(void **state)
 {
     (void)state;
+    const char *devices = getenv("POCL_DEVICES"); /* the test run's own, put back at the end */
+    char *saved_devices = devices ? strdup(devices) : NULL;
     unsetenv("POCL_MAX_PTHREAD_COUNT");
     unsetenv("POCL_CPU_MAX_CU_COUNT");
+    unsetenv("POCL_DEVICES");
     tf_backend_share_cores("c", 2);
     tf_backend_share_cores("opencl", 1);
     assert_null(getenv("POCL_MAX_PTHREAD_COUNT"));
     assert_null(getenv("POCL_CPU_MAX_CU_COUNT"));
+    assert_null(getenv("POCL_DEVICES"));
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
     char want[24];
     snprintf(want, sizeof want, "%ld", cores / 2 > 1 ? cores / 2 : 1);
     tf_backend_share_cores("auto", 2);
     assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), want);
     assert_string_equal(getenv("POCL_CPU_MAX_CU_COUNT"), want);
+    if (cores / 2 > 1)
+        assert_null(getenv("POCL_DEVICES"));
+    else
+        assert_string_equal(getenv("POCL_DEVICES"), "basic");
     unsetenv("POCL_MAX_PTHREAD_COUNT");
     unsetenv("POCL_CPU_MAX_CU_COUNT");
+    unsetenv("POCL_DEVICES");
     tf_backend_share_cores("opencl", 4096); /* more processes than cores: one thread each */
     assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), "1");
+    assert_string_equal(getenv("POCL_DEVICES"), "basic");
     unsetenv("POCL_MAX_PTHREAD_COUNT");
     unsetenv("POCL_CPU_MAX_CU_COUNT");
+    setenv("POCL_DEVICES", "pthread", 1); /* the user's choice of devices stands */
+    tf_backend_share_cores("opencl", 4096);
+    assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), "1");
+    assert_string_equal(getenv("POCL_DEVICES"), "pthread");
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    unsetenv("POCL_DEVICES");
     setenv("POCL_CPU_MAX_CU_COUNT", "7", 1); /* the user's choice stands */
-    tf_backend_share_cores("opencl", 2);
+    tf_backend_share_cores("opencl", 4096);
     assert_null(getenv("POCL_MAX_PTHREAD_COUNT"));
+    assert_null(getenv("POCL_DEVICES"));
     assert_string_equal(getenv("POCL_CPU_MAX_CU_COUNT"), "7");
     unsetenv("POCL_CPU_MAX_CU_COUNT");
+    if (saved_devices)
+        setenv("POCL_DEVICES", saved_devices, 1);
+    free(saved_devices);
 }
 
 static void small_batches(void **state)

@@ -84,8 +84,8 @@ void tf_backend_share_cores(const char *name, int processes)
     snprintf(v, sizeof v, "%d", share > 1 ? share : 1);
     setenv("POCL_MAX_PTHREAD_COUNT", v, 1);
     setenv("POCL_CPU_MAX_CU_COUNT", v, 1);
-    if (share <= 1)
-        setenv("POCL_DEVICES", "basic", 0); /* the user's choice of devices stands */
+    if (share <= 1 && !getenv("TERRAFARM_CL_DEVICE")) /* a device the user named stands */
+        setenv("POCL_DEVICES", "basic", 0);              /* as does their choice of PoCL's */
 }
 
 int tf_backend_render(tf_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,

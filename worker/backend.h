@@ -30,7 +30,8 @@ void tf_backend_free(tf_backend *b);
  * cores in threads, contending.  Each gets its share (cores / N, at least 1) through PoCL's
  * environment, inherited by the children, unless the user set PoCL's thread count; a share
  * of one core also selects PoCL's single-threaded "basic" device (POCL_DEVICES), unless the
- * user chose PoCL's devices.  Nothing for the C backend; a GPU device ignores it. */
+ * user chose PoCL's devices or named a device (TERRAFARM_CL_DEVICE, --cl-device).  Nothing for
+ * the C backend; a GPU device ignores it. */
 void tf_backend_share_cores(const char *name, int processes);
 
 #endif

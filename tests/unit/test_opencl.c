@@ -465,29 +465,88 @@ static void installed_kernel_dir(void **state)
     rmdir(dir);
 }
 
+/* An environment variable's value, copied (NULL when unset), and the variable unset; put back
+ * with env_give_back. */
+static char *env_take(const char *name)
+{
+    const char *v = getenv(name);
+    char *copy = v ? strdup(v) : NULL;
+    unsetenv(name);
+    return copy;
+}
+
+static void env_give_back(const char *name, char *value)
+{
+    if (value)
+        setenv(name, value, 1);
+    else
+        unsetenv(name);
+    free(value);
+}
+
 /* tf_backend_share_cores: N OpenCL processes get cores / N PoCL threads each (at least 1), in
- * both of PoCL's variables, and PoCL's single-threaded "basic" device exactly when that share
- * is one core; the C backend and a single process change nothing, nor does a thread count or
- * a choice of devices the user set.  Needs no device. */
+ * both of PoCL's variables; the C backend and a single process change nothing, nor does a
+ * thread count the user set.  Needs no device. */
 static void cores_shared(void **state)
 {
     (void)state;
-    const char *devices = getenv("POCL_DEVICES"); /* the test run's own, put back at the end */
-    char *saved_devices = devices ? strdup(devices) : NULL;
+    char *devices = env_take("POCL_DEVICES"), *named = env_take("TERRAFARM_CL_DEVICE");
     unsetenv("POCL_MAX_PTHREAD_COUNT");
     unsetenv("POCL_CPU_MAX_CU_COUNT");
-    unsetenv("POCL_DEVICES");
     tf_backend_share_cores("c", 2);
     tf_backend_share_cores("opencl", 1);
     assert_null(getenv("POCL_MAX_PTHREAD_COUNT"));
     assert_null(getenv("POCL_CPU_MAX_CU_COUNT"));
-    assert_null(getenv("POCL_DEVICES"));
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
     char want[24];
     snprintf(want, sizeof want, "%ld", cores / 2 > 1 ? cores / 2 : 1);
     tf_backend_share_cores("auto", 2);
     assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), want);
     assert_string_equal(getenv("POCL_CPU_MAX_CU_COUNT"), want);
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    tf_backend_share_cores("opencl", 4096); /* more processes than cores: one thread each */
+    assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), "1");
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    setenv("POCL_CPU_MAX_CU_COUNT", "7", 1); /* the user's choice stands */
+    tf_backend_share_cores("opencl", 2);
+    assert_null(getenv("POCL_MAX_PTHREAD_COUNT"));
+    assert_string_equal(getenv("POCL_CPU_MAX_CU_COUNT"), "7");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    env_give_back("POCL_DEVICES", devices);
+    env_give_back("TERRAFARM_CL_DEVICE", named);
+}
+
+/* The POCL_DEVICES tf_backend_share_cores leaves for more OpenCL processes than cores (a
+ * share of one core each), the thread counts it set cleared again. */
+static const char *devices_chosen(void)
+{
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    tf_backend_share_cores("opencl", 4096);
+    assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), "1");
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    unsetenv("POCL_CPU_MAX_CU_COUNT");
+    return getenv("POCL_DEVICES");
+}
+
+/* A share of one core picks PoCL's single-threaded "basic" device, unless the user chose PoCL's
+ * devices or named a device; a share of more than one, or a thread count the user set, keeps
+ * PoCL's default.  Needs no device. */
+static void basic_device_for_one_core(void **state)
+{
+    (void)state;
+    char *devices = env_take("POCL_DEVICES"), *named = env_take("TERRAFARM_CL_DEVICE");
+    assert_string_equal(devices_chosen(), "basic");
+    setenv("POCL_DEVICES", "pthread", 1);
+    assert_string_equal(devices_chosen(), "pthread");
+    unsetenv("POCL_DEVICES");
+    setenv("TERRAFARM_CL_DEVICE", "pthread", 1);
+    assert_null(devices_chosen());
+    unsetenv("TERRAFARM_CL_DEVICE");
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    tf_backend_share_cores("opencl", 2);
     if (cores / 2 > 1)
         assert_null(getenv("POCL_DEVICES"));
     else
@@ -495,27 +554,12 @@ static void cores_shared(void **state)
     unsetenv("POCL_MAX_PTHREAD_COUNT");
     unsetenv("POCL_CPU_MAX_CU_COUNT");
     unsetenv("POCL_DEVICES");
-    tf_backend_share_cores("opencl", 4096); /* more processes than cores: one thread each */
-    assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), "1");
-    assert_string_equal(getenv("POCL_DEVICES"), "basic");
-    unsetenv("POCL_MAX_PTHREAD_COUNT");
-    unsetenv("POCL_CPU_MAX_CU_COUNT");
-    setenv("POCL_DEVICES", "pthread", 1); /* the user's choice of devices stands */
+    setenv("POCL_MAX_PTHREAD_COUNT", "1", 1);
     tf_backend_share_cores("opencl", 4096);
-    assert_string_equal(getenv("POCL_MAX_PTHREAD_COUNT"), "1");
-    assert_string_equal(getenv("POCL_DEVICES"), "pthread");
-    unsetenv("POCL_MAX_PTHREAD_COUNT");
-    unsetenv("POCL_CPU_MAX_CU_COUNT");
-    unsetenv("POCL_DEVICES");
-    setenv("POCL_CPU_MAX_CU_COUNT", "7", 1); /* the user's choice stands */
-    tf_backend_share_cores("opencl", 4096);
-    assert_null(getenv("POCL_MAX_PTHREAD_COUNT"));
     assert_null(getenv("POCL_DEVICES"));
-    assert_string_equal(getenv("POCL_CPU_MAX_CU_COUNT"), "7");
-    unsetenv("POCL_CPU_MAX_CU_COUNT");
-    if (saved_devices)
-        setenv("POCL_DEVICES", saved_devices, 1);
-    free(saved_devices);
+    unsetenv("POCL_MAX_PTHREAD_COUNT");
+    env_give_back("POCL_DEVICES", devices);
+    env_give_back("TERRAFARM_CL_DEVICE", named);
 }
 
 static void small_batches(void **state)
@@ -691,7 +735,9 @@ int main(void)
         cmocka_unit_test(installed_kernel_dir), cmocka_unit_test(bad_rect),
         cmocka_unit_test(small_batches), cmocka_unit_test(item_sizes),
         cmocka_unit_test(tuning_refused),
-        cmocka_unit_test(cores_shared),     cmocka_unit_test(opened_ahead),
+        cmocka_unit_test(cores_shared),
+        cmocka_unit_test(basic_device_for_one_core),
+        cmocka_unit_test(opened_ahead),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

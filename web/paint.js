@@ -11,6 +11,7 @@
 const paint = {
   gen: 0, end: 0, width: 0, height: 0, img: null, dirty: false, view: null, viewGen: -1,
   messages: 0, bytes: 0, changedAt: 0, changedFrom: 0, latencyMs: null, errors: 0,
+  interest: null, interestSent: null, // the area clicked, and the promise of its POST
 };
 window.paint = paint;
 const $ = (id) => document.getElementById(id);
@@ -318,7 +319,7 @@ function wirePointing() {
     aw = Math.max(1, Math.min(aw, w - x)); ah = Math.max(1, Math.min(ah, h - y));
     from = null;
     paint.interest = { x, y, w: aw, h: ah };
-    control("/api/paint/interest", paint.interest);
+    paint.interestSent = control("/api/paint/interest", paint.interest); // the server's answer
     $("said").textContent = `painting ${aw}x${ah} at ${x},${y} first`;
   });
 }

@@ -75,7 +75,10 @@ box = page("(() => { const b = document.getElementById('picture').getBoundingCli
            " return [b.left, b.top, b.width, b.height]; })()")
 ch.click_at(box[0] + box[2] * 0.75, box[1] + box[3] * 0.33)
 area = wait_for(lambda: page("paint.interest || null"), "the click to mark an area", 20)
-time.sleep(0.2)  # the interest command reaches the loop before the first deal
+# The area is queued for the paint loop once the server has answered its POST; the resumes below
+# are queued after it, and the loop takes its commands in order, so it holds before any deal.
+if not page("paint.interestSent.then(a => a !== null)"):
+    ch.finish(1, ["FAIL: the server refused the area of interest"])
 
 # 3. steps
 steps, shares_when_done, first_draw_ms, shot = [], None, None, False

@@ -151,6 +151,10 @@ static void choose_item_sizes(tf_cl_backend *b, int gpu)
     }
 }
 
+/* PoCL's cache directory when terrafarm chose it (empty: the user's, or none), set once by
+ * tf_cl_prepare_environment before any thread opens a device. */
+static char pocl_dir[PATH_MAX];
+
 /* See backend_opencl.h. */
 void tf_cl_prepare_environment(void)
 {
@@ -158,13 +162,25 @@ void tf_cl_prepare_environment(void)
     if (done)
         return;
     done = 1;
-    char dir[PATH_MAX];
-    tf_pocl_cache_dir_choose(dir, sizeof dir);
-    if (!dir[0])
+    tf_pocl_cache_dir_choose(pocl_dir, sizeof pocl_dir);
+    if (!pocl_dir[0])
         return;
-    int removed = tf_pocl_cache_sweep(dir, time(NULL), TF_POCL_TEMPFILE_MAX_AGE_S);
+    int removed = tf_pocl_cache_sweep(pocl_dir, time(NULL), TF_POCL_TEMPFILE_MAX_AGE_S);
     if (removed > 0)
-        tf_debug("PoCL cache %s: removed %d temporary files PoCL left behind", dir, removed);
+        tf_debug("PoCL cache %s: removed %d temporary files PoCL left behind", pocl_dir, removed);
+}
+
+/* After a new entry was stored (a new source, options, driver or device): the entries and
+ * PoCL's programs nobody has used for TF_CLCACHE_MAX_IDLE_S go. */
+static void prune_caches(const tf_clcache *c)
+{
+    const time_t now = time(NULL);
+    int entries = tf_clcache_prune(c, now, TF_CLCACHE_MAX_IDLE_S);
+    int programs = pocl_dir[0] ? tf_pocl_cache_prune(pocl_dir, now, TF_CLCACHE_MAX_IDLE_S) : 0;
+    if (entries > 0 || programs > 0)
+        tf_debug("OpenCL caches: removed %d program entries and %d PoCL program directories "
+                 "unused for %ld days", entries > 0 ? entries : 0, programs > 0 ? programs : 0,
+                 TF_CLCACHE_MAX_IDLE_S / 86400);
 }
 
 /* Read a whole file of at most MAX_SOURCE_BYTES.  NULL if absent, unreadable or too big. */
@@ -408,8 +424,12 @@ static cl_program cached_program(tf_cl_backend *b, cl_device_id dev, char **src,
         c.state = TF_CLCACHE_REBUILT;
     }
     if (!p && (p = program_from_source(b->ctx, dev, src, len, options, dir, err, errlen)) &&
-        c.dirfd >= 0 && tf_clcache_store(&c, p, why, sizeof why))
-        tf_warn("OpenCL program cache: %s", why);
+        c.dirfd >= 0) {
+        if (tf_clcache_store(&c, p, why, sizeof why))
+            tf_warn("OpenCL program cache: %s", why);
+        else
+            prune_caches(&c);
+    }
     if (p)
         tf_debug("OpenCL program cache %s: %s/%s (program ready in %.3f s)",
                  tf_clcache_state_name(c.state), c.dir, c.name, tf_now_s() - t0);

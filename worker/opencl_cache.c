@@ -4,6 +4,7 @@
  * (openat, renameat), so a directory swapped after the check is never used. */
 #include "worker/opencl_cache.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <sodium.h>
@@ -185,6 +186,7 @@ static int read_entry(const tf_clcache *c, unsigned char **buf, size_t *size, ch
     *size = (size_t)st.st_size;
     *buf = malloc(*size);
     ssize_t got = *buf ? pread(fd, *buf, *size, 0) : -1;
+    futimens(fd, NULL); /* its last use, for tf_clcache_prune */
     close(fd);
     if (got == (ssize_t)*size)
         return 0;
@@ -320,4 +322,55 @@ int tf_clcache_store(const tf_clcache *c, cl_program prog, char *err, size_t err
     free(slim);
     free(bin);
     return r;
+}
+
+/* ---------------------------------------------------------------- pruning */
+
+/* Is name an entry's (64 lowercase hex digits and ".bin") or a temporary file of
+ * tf_clcache_write's ("." 16 of those digits "." pid "." 8 hex digits ".tmp")? */
+static int is_hex(const char *p, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!((p[i] >= '0' && p[i] <= '9') || (p[i] >= 'a' && p[i] <= 'f')))
+            return 0;
+    return 1;
+}
+
+static int is_cache_name(const char *name)
+{
+    const size_t n = strlen(name), key = 2 * TF_CLCACHE_KEY_BYTES;
+    if (n == key + 4 && is_hex(name, key) && strcmp(name + key, ".bin") == 0)
+        return 1;
+    const char *pid = name + 18, *dot = n > 30 ? name + n - 13 : NULL;
+    if (!dot || name[0] != '.' || !is_hex(name + 1, 16) || name[17] != '.' || *dot != '.' ||
+        !is_hex(dot + 1, 8) || strcmp(dot + 9, ".tmp") != 0 || pid == dot)
+        return 0;
+    for (const char *q = pid; q < dot; q++)
+        if (*q < '0' || *q > '9')
+            return 0;
+    return 1;
+}
+
+int tf_clcache_prune(const tf_clcache *c, time_t now, long max_idle_s)
+{
+    int fd = c->dirfd >= 0 ? openat(c->dirfd, ".", O_RDONLY | O_DIRECTORY | O_CLOEXEC) : -1;
+    DIR *d = fd >= 0 ? fdopendir(fd) : NULL;
+    if (!d) {
+        if (fd >= 0)
+            close(fd);
+        return -1;
+    }
+    int removed = 0;
+    struct dirent *de;
+    while ((de = readdir(d)) != NULL) {
+        struct stat st;
+        if (!is_cache_name(de->d_name) || strcmp(de->d_name, c->name) == 0 ||
+            fstatat(fd, de->d_name, &st, AT_SYMLINK_NOFOLLOW) != 0)
+            continue;
+        if (S_ISREG(st.st_mode) && st.st_uid == geteuid() && st.st_mtime < now - max_idle_s &&
+            unlinkat(fd, de->d_name, 0) == 0)
+            removed++;
+    }
+    closedir(d); /* closes fd */
+    return removed;
 }

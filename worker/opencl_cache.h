@@ -9,7 +9,10 @@
  * old entry.  The entry is an 88-byte header (magic, format version, the key, the binary's
  * length and its BLAKE2b checksum), then the binary.  Anything that does not check out -- the
  * directory not the user's own or writable by others, a header or checksum that differs, a
- * binary the driver rejects -- means building from source, and rewriting the entry. */
+ * binary the driver rejects -- means building from source, and rewriting the entry.  Loading an
+ * entry marks its last use (its time); storing one removes the entries not used for
+ * TF_CLCACHE_MAX_IDLE_S (tf_clcache_prune): a new source or driver leaves the old entries
+ * behind, and nothing else would ever remove them. */
 #ifndef TF_OPENCL_CACHE_H
 #define TF_OPENCL_CACHE_H
 
@@ -19,8 +22,10 @@
 #include <CL/cl.h>
 #include <limits.h>
 #include <stddef.h>
+#include <time.h>
 
 #define TF_CLCACHE_KEY_BYTES 32
+#define TF_CLCACHE_MAX_IDLE_S (30L * 86400) /* an entry unused this long goes (30 days) */
 #define TF_CLCACHE_HEADER_BYTES 88
 
 /* How a backend's program was made (tf_cl_backend_cache). */
@@ -63,6 +68,12 @@ int tf_clcache_store(const tf_clcache *c, cl_program prog, char *err, size_t err
  * driver rejects with it). */
 int tf_clcache_write(const tf_clcache *c, const unsigned char *bin, size_t len, char *err,
                      size_t errlen);
+
+/* Remove from the cache's directory every entry (a file named as tf_clcache names them, or a
+ * temporary file of tf_clcache_write's) of this user's last used before now - max_idle_s,
+ * except c's own; other names, links and other users' files stay.  How many went, or -1 when
+ * the cache is not open or its directory cannot be read. */
+int tf_clcache_prune(const tf_clcache *c, time_t now, long max_idle_s);
 
 /* "off", "refused", "hit", "miss", "rebuilt". */
 const char *tf_clcache_state_name(enum tf_clcache_state s);

@@ -1,6 +1,7 @@
 /* pocl_cachedir.c: see pocl_cachedir.h.  The directory is read through one descriptor opened
  * with O_NOFOLLOW, and every entry is examined and removed relative to it (fstatat, unlinkat),
- * so a directory swapped for a link after it was opened is never swept. */
+ * so a directory swapped for a link after it was opened is never swept; the prune goes down
+ * the same way, one O_NOFOLLOW descriptor a level. */
 #include "worker/pocl_cachedir.h"
 
 #include <dirent.h>
@@ -74,6 +75,123 @@ int tf_pocl_cache_sweep(const char *dir, time_t now, long max_age_s)
     while ((de = readdir(d)) != NULL)
         if (is_stale_tempfile(fd, de->d_name, now, max_age_s) && unlinkat(fd, de->d_name, 0) == 0)
             removed++;
+    closedir(d); /* closes fd */
+    return removed;
+}
+
+/* ---------------------------------------------------------------- program directories */
+
+#define PROGRAM_TREE_DEPTH 4 /* XX/YYY/kernel/variant/file: below a program, 3 levels at most */
+
+/* Is name made of PoCL's hash letters (A to P) only, between min and max of them? */
+static int is_hash_name(const char *name, size_t min, size_t max)
+{
+    size_t n = strlen(name);
+    if (n < min || n > max)
+        return 0;
+    for (size_t i = 0; i < n; i++)
+        if (name[i] < 'A' || name[i] > 'P')
+            return 0;
+    return 1;
+}
+
+/* Open directory `name` of dirfd, not through a link, if it is this user's.  -1 otherwise. */
+static int open_own_dir(int dirfd, const char *name)
+{
+    struct stat st;
+    int fd = openat(dirfd, name, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+    if (fd >= 0 && (fstat(fd, &st) != 0 || st.st_uid != geteuid())) {
+        close(fd);
+        return -1;
+    }
+    return fd;
+}
+
+/* Remove directory `name` of dirfd and everything in it, down to `depth` levels; a link is
+ * removed as a name, never followed.  0 when it is gone. */
+static int remove_tree(int dirfd, const char *name, int depth)
+{
+    int fd = depth > 0 ? openat(dirfd, name, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC)
+                       : -1;
+    DIR *d = fd >= 0 ? fdopendir(fd) : NULL;
+    if (!d) {
+        if (fd >= 0)
+            close(fd);
+        return -1;
+    }
+    struct dirent *de;
+    while ((de = readdir(d)) != NULL) {
+        struct stat st;
+        if (!strcmp(de->d_name, ".") || !strcmp(de->d_name, "..") ||
+            fstatat(fd, de->d_name, &st, AT_SYMLINK_NOFOLLOW) != 0)
+            continue;
+        if (S_ISDIR(st.st_mode))
+            remove_tree(fd, de->d_name, depth - 1);
+        else
+            unlinkat(fd, de->d_name, 0);
+    }
+    closedir(d); /* closes fd */
+    return unlinkat(dirfd, name, AT_REMOVEDIR);
+}
+
+/* When program directory `name` of bucketfd was last used: its last_accessed file's time, else
+ * its own.  -1 when it is not a directory of this user's. */
+static time_t program_last_use(int bucketfd, const char *name)
+{
+    int fd = open_own_dir(bucketfd, name);
+    if (fd < 0)
+        return -1;
+    struct stat st;
+    int touched =
+        fstatat(fd, "last_accessed", &st, AT_SYMLINK_NOFOLLOW) == 0 && S_ISREG(st.st_mode);
+    if (!touched && fstat(fd, &st) != 0)
+        st.st_mtime = -1;
+    close(fd);
+    return st.st_mtime;
+}
+
+/* Prune one XX directory of the cache; how many program directories went. */
+static int prune_bucket(int dirfd, const char *bucket, time_t now, long max_idle_s)
+{
+    int fd = open_own_dir(dirfd, bucket);
+    DIR *d = fd >= 0 ? fdopendir(fd) : NULL;
+    if (!d) {
+        if (fd >= 0)
+            close(fd);
+        return 0;
+    }
+    int removed = 0;
+    struct dirent *de;
+    while ((de = readdir(d)) != NULL) {
+        if (!is_hash_name(de->d_name, 8, 64))
+            continue;
+        time_t used = program_last_use(fd, de->d_name);
+        if (used >= 0 && used < now - max_idle_s &&
+            remove_tree(fd, de->d_name, PROGRAM_TREE_DEPTH - 1) == 0)
+            removed++;
+    }
+    closedir(d); /* closes fd */
+    if (removed)
+        unlinkat(dirfd, bucket, AT_REMOVEDIR); /* only if nothing else is left in it */
+    return removed;
+}
+
+int tf_pocl_cache_prune(const char *dir, time_t now, long max_idle_s)
+{
+    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+    DIR *d = fd >= 0 ? fdopendir(fd) : NULL;
+    if (!d) {
+        int e = errno;
+        if (fd >= 0)
+            close(fd);
+        errno = e;
+        return -1;
+    }
+    int removed = 0;
+    struct dirent *de;
+    while ((de = readdir(d)) != NULL)
+        if (is_hash_name(de->d_name, 2, 2))
+            removed += prune_bucket(fd, de->d_name, now, max_idle_s);
     closedir(d); /* closes fd */
     return removed;
 }

@@ -6,7 +6,9 @@
  * worker process, thousands on a farm that runs for weeks.  tf_pocl_cache_sweep removes those
  * left behind: only in terrafarm's own directory, only regular files of that name owned by this
  * user and older than TF_POCL_TEMPFILE_MAX_AGE_S (a PoCL at work writes and renames its temporary
- * files within seconds). */
+ * files within seconds).  Every new kernel source or driver adds a program directory there (a
+ * few hundred KB), which PoCL never removes: tf_pocl_cache_prune removes those not used for a
+ * long time, likewise only in terrafarm's own directory. */
 #ifndef TF_POCL_CACHEDIR_H
 #define TF_POCL_CACHEDIR_H
 
@@ -27,5 +29,14 @@ void tf_pocl_cache_dir_choose(char *dir, size_t len);
  * were removed, or -1 (errno set) if dir cannot be read; a file that vanished meanwhile (another
  * worker's sweep) is not an error. */
 int tf_pocl_cache_sweep(const char *dir, time_t now, long max_age_s);
+
+/* Remove from dir every program directory PoCL made (dir/XX/YYY..., both names of PoCL's hash
+ * letters A to P) that is this user's and was last used before now - max_idle_s: its
+ * last_accessed file's time (PoCL touches it whenever it builds a program from there), else the
+ * directory's own.  A program directory is removed with all it holds, depth first, nothing
+ * followed through a symbolic link (a link is removed as a name); an emptied XX goes too.  Other
+ * names, other users' directories and dir given as a link are left alone.  Returns how many
+ * program directories were removed, or -1 (errno set) if dir cannot be read. */
+int tf_pocl_cache_prune(const char *dir, time_t now, long max_idle_s);
 
 #endif

@@ -21,6 +21,13 @@
  *   unsafe_directory         a group- or world-writable directory, one not owned by this user
  *                            (as root), a symbolic link: "refused", built from source, nothing
  *                            written; made private again, it is used.
+ *   prunes_idle_entries      tf_clcache_prune (no device needed): entries and temporary files
+ *                            unused past the limit go, and only those: not the cache's own
+ *                            entry, not a younger one, not other names, links, directories or
+ *                            (as root) other users' files.
+ *   hit_marks_use_store_prunes  a hit marks the entry used (its time is now); the next store
+ *                            removes an entry idle past TF_CLCACHE_MAX_IDLE_S and keeps a
+ *                            recent one.
  * Every test skips (cmocka skip()) with a message when no OpenCL platform exists.  Nothing
  * depends on timing: hits and misses are read from tf_cl_backend_cache. */
 #include <stdarg.h>
@@ -33,6 +40,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "worker/opencl_cache.h"
@@ -379,6 +387,105 @@ static void unsafe_directory(void **state)
     expect(dir, "hit");
 }
 
+/* File dir/name holding a few bytes, its times `when`. */
+static void file_at(const char *dir, const char *name, time_t when)
+{
+    char p[800];
+    assert_true(snprintf(p, sizeof p, "%s/%s", dir, name) < (int)sizeof p);
+    FILE *f = fopen(p, "wb");
+    assert_non_null(f);
+    fputs("not a program", f);
+    assert_int_equal(fclose(f), 0);
+    struct timespec ts[2] = {{when, 0}, {when, 0}};
+    assert_int_equal(utimensat(AT_FDCWD, p, ts, AT_SYMLINK_NOFOLLOW), 0);
+}
+
+static int present(const char *dir, const char *name)
+{
+    char p[800];
+    struct stat st;
+    assert_true(snprintf(p, sizeof p, "%s/%s", dir, name) < (int)sizeof p);
+    return lstat(p, &st) == 0;
+}
+
+#define KEY_A "aaaa000000000000000000000000000000000000000000000000000000000001" /* no real key */
+#define KEY_B "bbbb000000000000000000000000000000000000000000000000000000000002"
+#define KEY_C "cccc000000000000000000000000000000000000000000000000000000000003"
+#define KEY_LINK "dddd000000000000000000000000000000000000000000000000000000000004"
+#define KEY_DIR "eeee000000000000000000000000000000000000000000000000000000000005"
+#define KEY_THEIRS "ffff000000000000000000000000000000000000000000000000000000000006"
+
+static void prunes_idle_entries(void **state)
+{
+    (void)state;
+    const time_t now = 2000000000, old = now - TF_CLCACHE_MAX_IDLE_S - 1;
+    const char *dir = scratch_path("prune");
+    assert_int_equal(mkdir(dir, 0700), 0);
+    tf_clcache c = {.dirfd = open(dir, O_RDONLY | O_DIRECTORY), .state = TF_CLCACHE_MISS};
+    assert_true(c.dirfd >= 0);
+    snprintf(c.name, sizeof c.name, "%s.bin", KEY_A);
+    const char *gone[] = {KEY_B ".bin", ".aaaa000000000000.4242.0badf00d.tmp"};
+    const char *kept[] = {KEY_A ".bin", /* the cache's own */
+                          "AAAA000000000000000000000000000000000000000000000000000000000001.bin",
+                          KEY_B ".bin.bak", KEY_B, "notes.txt", ".aaaa000000000000..0badf00d.tmp",
+                          ".aaaa000000000000.42x.0badf00d.tmp", "." KEY_B ".tmp"};
+    for (size_t i = 0; i < sizeof gone / sizeof gone[0]; i++)
+        file_at(dir, gone[i], old);
+    for (size_t i = 0; i < sizeof kept / sizeof kept[0]; i++)
+        file_at(dir, kept[i], old);
+    file_at(dir, KEY_C ".bin", now - TF_CLCACHE_MAX_IDLE_S); /* at the limit: not idle past it */
+    char p[800], away[800];
+    snprintf(away, sizeof away, "%s", scratch_path("prune-away"));
+    assert_int_equal(mkdir(away, 0700), 0);
+    file_at(away, "target", old);
+    snprintf(p, sizeof p, "%s/" KEY_LINK ".bin", dir);
+    assert_int_equal(symlink(away, p), 0); /* a link with an entry's name: left */
+    snprintf(p, sizeof p, "%s/" KEY_DIR ".bin", dir);
+    assert_int_equal(mkdir(p, 0700), 0);
+    int theirs = geteuid() == 0;
+    if (theirs) {
+        file_at(dir, KEY_THEIRS ".bin", old);
+        snprintf(p, sizeof p, "%s/" KEY_THEIRS ".bin", dir);
+        assert_int_equal(lchown(p, 12345, 12345), 0);
+    }
+    assert_int_equal(tf_clcache_prune(&c, now, TF_CLCACHE_MAX_IDLE_S), 2);
+    for (size_t i = 0; i < sizeof gone / sizeof gone[0]; i++)
+        assert_false(present(dir, gone[i]));
+    for (size_t i = 0; i < sizeof kept / sizeof kept[0]; i++)
+        assert_true(present(dir, kept[i]));
+    assert_true(present(dir, KEY_C ".bin"));
+    assert_true(present(away, "target"));
+    assert_true(present(dir, KEY_LINK ".bin") && present(dir, KEY_DIR ".bin"));
+    if (theirs)
+        assert_true(present(dir, KEY_THEIRS ".bin"));
+    assert_int_equal(tf_clcache_prune(&c, now, TF_CLCACHE_MAX_IDLE_S), 0);
+    tf_clcache_close(&c);
+}
+
+static void hit_marks_use_store_prunes(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    char entry[800];
+    struct stat st;
+    const char *dir = primed("marks", entry, sizeof entry);
+    const time_t now = time(NULL), old = now - TF_CLCACHE_MAX_IDLE_S - 86400;
+    struct timespec ts[2] = {{old, 0}, {old, 0}};
+    assert_int_equal(utimensat(AT_FDCWD, entry, ts, 0), 0);
+    expect(dir, "hit");
+    assert_int_equal(stat(entry, &st), 0);
+    assert_true(st.st_mtime >= now - 600); /* used just now, whatever the clock's steps */
+    file_at(dir, KEY_B ".bin", old);
+    file_at(dir, KEY_C ".bin", now);
+    expect(dir, "hit"); /* a hit stores nothing, so it prunes nothing */
+    assert_true(present(dir, KEY_B ".bin"));
+    assert_int_equal(unlink(entry), 0);
+    expect(dir, "miss"); /* stored again, and the idle entry is gone */
+    assert_false(present(dir, KEY_B ".bin"));
+    assert_true(present(dir, KEY_C ".bin"));
+    assert_int_equal(entries(dir, NULL, 0), 2);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -386,6 +493,7 @@ int main(void)
         cmocka_unit_test(stale_keys_differ),      cmocka_unit_test(changed_source_misses),
         cmocka_unit_test(tampered_binary),        cmocka_unit_test(tampered_header),
         cmocka_unit_test(driver_rejects_binary),  cmocka_unit_test(unsafe_directory),
+        cmocka_unit_test(prunes_idle_entries),    cmocka_unit_test(hit_marks_use_store_prunes),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -654,17 +654,34 @@ static inline int inside_block(const tf_heightfield *hf, int L, int ci, int cj, 
     return z <= hf->maxgrid[L][idx] + margin && z >= hf->mingrid[L][idx] - margin;
 }
 
-/* walk_hier's first level: see "Where to start" in walk_hier. */
+#ifndef NDEBUG
+/* start_level's answer found the other way, from the top level down. */
+static int start_level_from_top(const ray_ctx *r, double z0)
+{
+    const tf_heightfield *hf = r->hf;
+    int level = hf->levels - 1;
+    while (level > 1 && inside_block(hf, level, r->ci, r->cj, z0, r->margin))
+        level--;
+    return level;
+}
+#endif
+
+/* walk_hier's first level: see "Where to start" in walk_hier.  A block's max/min range holds
+ * those of the blocks inside it, so a level whose block holds z0 has every level above it
+ * holding z0 too: the levels that do not are 1 up to some K, and K is the answer.  Found from
+ * level 1 up (a walk starts at level 4 on average, of 11 over 2049^2 samples: a quarter fewer
+ * instructions than scanning down from the top; bench/README.md section 33). */
 static int start_level(const ray_ctx *r)
 {
     const tf_heightfield *hf = r->hf;
     const int top = hf->levels - 1;
     const double z0 = r->o[2] + r->t0 * r->d[2];
-    if (top > 0 && inside_block(hf, 1, r->ci, r->cj, z0, r->margin))
+    if (top == 0 || inside_block(hf, 1, r->ci, r->cj, z0, r->margin))
         return 0;
-    int level = top;
-    while (level > 1 && inside_block(hf, level, r->ci, r->cj, z0, r->margin))
-        level--;
+    int level = 1;
+    while (level < top && !inside_block(hf, level + 1, r->ci, r->cj, z0, r->margin))
+        level++;
+    assert(level == start_level_from_top(r, z0) && "start_level: the levels nest");
     return level;
 }
 

@@ -655,10 +655,18 @@ static inline int inside_block(const tf_heightfield *hf, int L, int ci, int cj, 
 }
 
 #ifndef NDEBUG
-/* start_level's answer found the other way, from the top level down. */
+/* start_level's answer found the other way, from the top level down; -1 where a block on the
+ * way has a NaN bound (a hole in the heights, which only tests make: terrain_build.c refuses
+ * them), whose levels need not nest. */
 static int start_level_from_top(const ray_ctx *r, double z0)
 {
     const tf_heightfield *hf = r->hf;
+    for (int L = 1; L < hf->levels; L++) {
+        const size_t idx =
+            (size_t)(r->cj >> L) * (size_t)(hf->cells >> L) + (size_t)(r->ci >> L);
+        if (isnan(hf->maxgrid[L][idx]) || isnan(hf->mingrid[L][idx]))
+            return -1;
+    }
     int level = hf->levels - 1;
     while (level > 1 && inside_block(hf, level, r->ci, r->cj, z0, r->margin))
         level--;
@@ -668,7 +676,9 @@ static int start_level_from_top(const ray_ctx *r, double z0)
 
 /* walk_hier's first level: see "Where to start" in walk_hier.  A block's max/min range holds
  * those of the blocks inside it, so a level whose block holds z0 has every level above it
- * holding z0 too: the levels that do not are 1 up to some K, and K is the answer.  Found from
+ * holding z0 too: the levels that do not are 1 up to some K, and K is the answer.  (Over a
+ * hole of NaN heights, which only tests make, the levels need not nest, and the scan down from
+ * the top could pick another level.)  Found from
  * level 1 up (a walk starts at level 4 on average, of 11 over 2049^2 samples: a quarter fewer
  * instructions than scanning down from the top; bench/README.md section 33). */
 static int start_level(const ray_ctx *r)
@@ -681,7 +691,10 @@ static int start_level(const ray_ctx *r)
     int level = 1;
     while (level < top && !inside_block(hf, level + 1, r->ci, r->cj, z0, r->margin))
         level++;
-    assert(level == start_level_from_top(r, z0) && "start_level: the levels nest");
+#ifndef NDEBUG
+    const int from_top = start_level_from_top(r, z0);
+    assert((from_top < 0 || level == from_top) && "start_level: the levels nest");
+#endif
     return level;
 }
 

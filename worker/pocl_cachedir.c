@@ -58,18 +58,31 @@ static int is_stale_tempfile(int dirfd, const char *name, time_t now, long max_a
     return S_ISREG(st.st_mode) && st.st_uid == geteuid() && st.st_mtime < now - max_age_s;
 }
 
-int tf_pocl_cache_sweep(const char *dir, time_t now, long max_age_s)
+/* Directory `name` (relative to parent; AT_FDCWD for a path), opened for reading without
+ * following a link; with `own`, only if it is this user's.  NULL with errno set otherwise. */
+static DIR *open_dir(int parent, const char *name, int own)
 {
-    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
-    if (fd < 0)
-        return -1;
-    DIR *d = fdopendir(fd);
-    if (!d) {
+    struct stat st;
+    int fd = openat(parent, name, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+    DIR *d = NULL;
+    if (fd >= 0 && own && (fstat(fd, &st) != 0 || st.st_uid != geteuid()))
+        errno = EPERM;
+    else if (fd >= 0)
+        d = fdopendir(fd);
+    if (!d && fd >= 0) {
         int e = errno;
         close(fd);
         errno = e;
-        return -1;
     }
+    return d;
+}
+
+int tf_pocl_cache_sweep(const char *dir, time_t now, long max_age_s)
+{
+    DIR *d = open_dir(AT_FDCWD, dir, 0);
+    if (!d)
+        return -1;
+    const int fd = dirfd(d);
     int removed = 0;
     struct dirent *de;
     while ((de = readdir(d)) != NULL)
@@ -95,30 +108,14 @@ static int is_hash_name(const char *name, size_t min, size_t max)
     return 1;
 }
 
-/* Open directory `name` of dirfd, not through a link, if it is this user's.  -1 otherwise. */
-static int open_own_dir(int dirfd, const char *name)
-{
-    struct stat st;
-    int fd = openat(dirfd, name, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
-    if (fd >= 0 && (fstat(fd, &st) != 0 || st.st_uid != geteuid())) {
-        close(fd);
-        return -1;
-    }
-    return fd;
-}
-
-/* Remove directory `name` of dirfd and everything in it, down to `depth` levels; a link is
+/* Remove directory `name` of parent and everything in it, down to `depth` levels; a link is
  * removed as a name, never followed.  0 when it is gone. */
-static int remove_tree(int dirfd, const char *name, int depth)
+static int remove_tree(int parent, const char *name, int depth)
 {
-    int fd = depth > 0 ? openat(dirfd, name, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC)
-                       : -1;
-    DIR *d = fd >= 0 ? fdopendir(fd) : NULL;
-    if (!d) {
-        if (fd >= 0)
-            close(fd);
+    DIR *d = depth > 0 ? open_dir(parent, name, 0) : NULL;
+    if (!d)
         return -1;
-    }
+    const int fd = dirfd(d);
     struct dirent *de;
     while ((de = readdir(d)) != NULL) {
         struct stat st;
@@ -131,35 +128,32 @@ static int remove_tree(int dirfd, const char *name, int depth)
             unlinkat(fd, de->d_name, 0);
     }
     closedir(d); /* closes fd */
-    return unlinkat(dirfd, name, AT_REMOVEDIR);
+    return unlinkat(parent, name, AT_REMOVEDIR);
 }
 
 /* When program directory `name` of bucketfd was last used: its last_accessed file's time, else
  * its own.  -1 when it is not a directory of this user's. */
 static time_t program_last_use(int bucketfd, const char *name)
 {
-    int fd = open_own_dir(bucketfd, name);
-    if (fd < 0)
+    DIR *d = open_dir(bucketfd, name, 1);
+    if (!d)
         return -1;
     struct stat st;
     int touched =
-        fstatat(fd, "last_accessed", &st, AT_SYMLINK_NOFOLLOW) == 0 && S_ISREG(st.st_mode);
-    if (!touched && fstat(fd, &st) != 0)
+        fstatat(dirfd(d), "last_accessed", &st, AT_SYMLINK_NOFOLLOW) == 0 && S_ISREG(st.st_mode);
+    if (!touched && fstat(dirfd(d), &st) != 0)
         st.st_mtime = -1;
-    close(fd);
+    closedir(d);
     return st.st_mtime;
 }
 
 /* Prune one XX directory of the cache; how many program directories went. */
-static int prune_bucket(int dirfd, const char *bucket, time_t now, long max_idle_s)
+static int prune_bucket(int parent, const char *bucket, time_t now, long max_idle_s)
 {
-    int fd = open_own_dir(dirfd, bucket);
-    DIR *d = fd >= 0 ? fdopendir(fd) : NULL;
-    if (!d) {
-        if (fd >= 0)
-            close(fd);
+    DIR *d = open_dir(parent, bucket, 1);
+    if (!d)
         return 0;
-    }
+    const int fd = dirfd(d);
     int removed = 0;
     struct dirent *de;
     while ((de = readdir(d)) != NULL) {
@@ -172,26 +166,20 @@ static int prune_bucket(int dirfd, const char *bucket, time_t now, long max_idle
     }
     closedir(d); /* closes fd */
     if (removed)
-        unlinkat(dirfd, bucket, AT_REMOVEDIR); /* only if nothing else is left in it */
+        unlinkat(parent, bucket, AT_REMOVEDIR); /* only if nothing else is left in it */
     return removed;
 }
 
 int tf_pocl_cache_prune(const char *dir, time_t now, long max_idle_s)
 {
-    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
-    DIR *d = fd >= 0 ? fdopendir(fd) : NULL;
-    if (!d) {
-        int e = errno;
-        if (fd >= 0)
-            close(fd);
-        errno = e;
+    DIR *d = open_dir(AT_FDCWD, dir, 0);
+    if (!d)
         return -1;
-    }
     int removed = 0;
     struct dirent *de;
     while ((de = readdir(d)) != NULL)
         if (is_hash_name(de->d_name, 2, 2))
-            removed += prune_bucket(fd, de->d_name, now, max_idle_s);
+            removed += prune_bucket(dirfd(d), de->d_name, now, max_idle_s);
     closedir(d); /* closes fd */
     return removed;
 }

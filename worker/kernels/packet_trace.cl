@@ -233,20 +233,30 @@ typedef struct walkp {
     dv t_cur, t_event;
 } walkp;
 
+/* trace.c's start_level per lane: 0 where the level-1 block around the start holds z(t0) (a
+ * ray starting at or under the surface nearby: shadow rays, valley cameras), else the highest
+ * level up to which no block around the start holds it (the levels nest), found from level 1
+ * up.  The walk's hit is the same from any level; this one spares it the descents in place. */
+TF_INLINE lv start_level8(const world *w, const rayp *r, lv mask)
+{
+    const int cells = w->cells, top = w->levels - 1;
+    const dv z0 = r->o.z + r->t0 * r->d.z;
+    lv level = (lv)(0), go = mask;
+    for (int L = 1; L <= top && any_lane(go); L++) {
+        lv idx = (lv)(w->I[TFI_LEVEL_OFFSET + L]) + (r->cj >> L) * (lv)(cells >> L) +
+                 (r->ci >> L);
+        dv hi, lo;
+        minmax_split8(gather_minmax(w->mm, idx, go), &hi, &lo);
+        go &= ~((z0 <= hi + r->margin) & (z0 >= lo - r->margin));
+        level = select(level, (lv)(L), go);
+    }
+    return level;
+}
+
 /* walk_hier's start, for the lanes of mask (the other lanes of *s are kept). */
 TF_INLINE void walk_start8(const world *w, const rayp *r, lv mask, walkp *s)
 {
-    const int cells = w->cells, top = w->levels - 1;
-    lv level = (lv)(top);
-    /* trace.c (b19dfb3): a ray starting at or under the surface of its level-1 block (shadow
-     * rays, valley cameras) starts at level 0 */
-    if (top > 0) {
-        const dv z0 = r->o.z + r->t0 * r->d.z;
-        lv i1 = (lv)(w->I[TFI_LEVEL_OFFSET + 1]) + (r->cj >> 1) * (cells >> 1) + (r->ci >> 1);
-        dv hi, lo;
-        minmax_split8(gather_minmax(w->mm, i1, mask), &hi, &lo);
-        level = select(level, (lv)(0), (z0 <= hi + r->margin) & (z0 >= lo - r->margin));
-    }
+    const lv level = start_level8(w, r, mask);
     s->ci = select(s->ci, r->ci, mask);
     s->cj = select(s->cj, r->cj, mask);
     s->level = select(s->level, level, mask);

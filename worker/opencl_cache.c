@@ -326,8 +326,7 @@ int tf_clcache_store(const tf_clcache *c, cl_program prog, char *err, size_t err
 
 /* ---------------------------------------------------------------- pruning */
 
-/* Is name an entry's (64 lowercase hex digits and ".bin") or a temporary file of
- * tf_clcache_write's ("." 16 of those digits "." pid "." 8 hex digits ".tmp")? */
+/* Are p[0..n) lowercase hex digits (sodium_bin2hex's)? */
 static int is_hex(const char *p, size_t n)
 {
     for (size_t i = 0; i < n; i++)
@@ -336,6 +335,8 @@ static int is_hex(const char *p, size_t n)
     return 1;
 }
 
+/* Is name an entry's (64 lowercase hex digits and ".bin") or a temporary file of
+ * tf_clcache_write's ("." 16 of those digits "." pid "." 8 hex digits ".tmp")? */
 static int is_cache_name(const char *name)
 {
     const size_t n = strlen(name), key = 2 * TF_CLCACHE_KEY_BYTES;

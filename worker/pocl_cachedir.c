@@ -94,7 +94,9 @@ int tf_pocl_cache_sweep(const char *dir, time_t now, long max_age_s)
 
 /* ---------------------------------------------------------------- program directories */
 
-#define PROGRAM_TREE_DEPTH 4 /* XX/YYY/kernel/variant/file: below a program, 3 levels at most */
+/* How deep below a program directory the removal goes: PoCL 3.1 keeps kernel/variant/file
+ * (3 levels); the rest is room for another layout, and a bound on the recursion. */
+#define PROGRAM_TREE_DEPTH 8
 
 /* Is name made of PoCL's hash letters (A to P) only, between min and max of them? */
 static int is_hash_name(const char *name, size_t min, size_t max)
@@ -161,7 +163,7 @@ static int prune_bucket(int parent, const char *bucket, time_t now, long max_idl
             continue;
         time_t used = program_last_use(fd, de->d_name);
         if (used >= 0 && used < now - max_idle_s &&
-            remove_tree(fd, de->d_name, PROGRAM_TREE_DEPTH - 1) == 0)
+            remove_tree(fd, de->d_name, PROGRAM_TREE_DEPTH) == 0)
             removed++;
     }
     closedir(d); /* closes fd */

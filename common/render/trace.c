@@ -676,11 +676,11 @@ static int start_level_from_top(const ray_ctx *r, double z0)
 
 /* walk_hier's first level: see "Where to start" in walk_hier.  A block's max/min range holds
  * those of the blocks inside it, so a level whose block holds z0 has every level above it
- * holding z0 too: the levels that do not are 1 up to some K, and K is the answer.  (Over a
- * hole of NaN heights, which only tests make, the levels need not nest, and the scan down from
- * the top could pick another level.)  Found from
+ * holding z0 too: the levels that do not are 1 up to some K, and K is the answer, found from
  * level 1 up (a walk starts at level 4 on average, of 11 over 2049^2 samples: a quarter fewer
- * instructions than scanning down from the top; bench/README.md section 33). */
+ * instructions than scanning down from the top; bench/README.md section 33).  Over a hole of
+ * NaN heights, which only tests make, the levels need not nest, and the scan down from the top
+ * could pick another level. */
 static int start_level(const ray_ctx *r)
 {
     const tf_heightfield *hf = r->hf;

@@ -647,10 +647,15 @@ static int settle_half(const ray_ctx *r, int axis, int stale, int level, double 
  * Then the walk's cull test of that block, over any span that contains z, fails (culled()'s
  * comparisons negated term for term): the walk would descend from it without moving.  Only the
  * index bits at and above L are used, which are right even on a stale axis. */
+static inline size_t block_index(const tf_heightfield *hf, int L, int ci, int cj)
+{
+    return (size_t)(cj >> L) * (size_t)(hf->cells >> L) + (size_t)(ci >> L);
+}
+
 static inline int inside_block(const tf_heightfield *hf, int L, int ci, int cj, double z,
                                double margin)
 {
-    const size_t idx = (size_t)(cj >> L) * (size_t)(hf->cells >> L) + (size_t)(ci >> L);
+    const size_t idx = block_index(hf, L, ci, cj);
     return z <= hf->maxgrid[L][idx] + margin && z >= hf->mingrid[L][idx] - margin;
 }
 
@@ -662,8 +667,7 @@ static int start_level_from_top(const ray_ctx *r, double z0)
 {
     const tf_heightfield *hf = r->hf;
     for (int L = 1; L < hf->levels; L++) {
-        const size_t idx =
-            (size_t)(r->cj >> L) * (size_t)(hf->cells >> L) + (size_t)(r->ci >> L);
+        const size_t idx = block_index(hf, L, r->ci, r->cj);
         if (isnan(hf->maxgrid[L][idx]) || isnan(hf->mingrid[L][idx]))
             return -1;
     }

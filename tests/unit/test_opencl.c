@@ -37,7 +37,9 @@
  *                       line on stderr naming it and the range, and the device's own setting
  *                       stays (the C pixels); a good value prints nothing.
  *   cores_shared        N OpenCL worker processes share the cores through PoCL's environment.
- * Every test but cores_shared skips (cmocka skip()) with a message when no OpenCL platform
+ *   basic_device_for_one_core   a share of one core picks PoCL's "basic" device, unless the user
+ *                       chose PoCL's devices, a thread count or a device.
+ * Every test but cores_shared and basic_device_for_one_core skips (cmocka skip()) with a message when no OpenCL platform
  * exists. */
 #include <stdarg.h>
 #include <stddef.h>

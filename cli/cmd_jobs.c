@@ -39,7 +39,8 @@ static const char usage[] =
     "      --paint               a paint job: the scene coming into focus in the browser on\n"
     "                            the farm's workers (its page: terrafarm job ID --json)\n"
     "      render options: --size --tasks --pixel --verify --verify-chunks --frames --frame\n"
-    "                      --watermark --affinity --lease-timeout (as terrafarm render)\n"
+    "                      --watermark --affinity --lease-timeout --wait-workers (as\n"
+    "                      terrafarm render; --wait-workers counts worker processes)\n"
     "job:\n"
     "      --output FILE.exr     download the finished output (--frame N: of a sequence)\n"
     "      --paint               open a paint job of job ID's scene; prints its id\n";
@@ -290,7 +291,8 @@ static int run_control(client *c, const char *action, char **args, int nargs)
 /* ---- the command line ---- */
 
 static const char *const render_flags[] = {"size", "tasks", "pixel", "verify", "frames", "frame",
-                                           "watermark", "affinity", "lease-timeout", NULL};
+                                           "watermark", "affinity", "lease-timeout",
+                                           "wait-workers", NULL};
 
 int cmd_jobs(int argc, char **argv)
 {

@@ -42,7 +42,8 @@ static int may_see(const farm_caller *who, const tf_job *j)
  * chooses the output, the listening socket, the secret, the workers and the statistics. */
 static const char *const allowed_options[] = {"--size", "--tasks", "--pixel", "--verify",
                                               "--frames", "--frame", "--watermark",
-                                              "--affinity", "--lease-timeout", NULL};
+                                              "--affinity", "--lease-timeout",
+                                              "--wait-workers", NULL};
 
 static int option_allowed(const char *flag)
 {
@@ -75,7 +76,8 @@ static int check_options(json_t *opts, char *err, size_t errlen)
         if (!kind)
             return tf_seterr(err, errlen, "options: '%s' is not a render option a farm job "
                              "may set (allowed: --size --tasks --pixel --verify --verify-chunks "
-                             "--frames --frame --watermark --affinity --lease-timeout)",
+                             "--frames --frame --watermark --affinity --lease-timeout "
+                             "--wait-workers)",
                              flag ? flag : "(not a string)");
         if (kind == 2)
             continue;

@@ -81,14 +81,49 @@ static const uint8_t *byte_at(const chunk_bytes *b, size_t o, size_t step, size_
     return (o & 1) ? b->odd + o / 2 : b->even + o / 2;
 }
 
+/* The scans below look at SCAN_BLOCK values at a time with no early exit, which the compiler
+ * turns into vector compares, and go value by value only in a block that holds a bad one (to
+ * name it).  In a split chunk (every ZIP chunk that shrank) a half's high bytes lie one after
+ * another and a float's two high bytes two apart; a raw chunk goes value by value. */
+#define SCAN_BLOCK 64
+
+static int block_has_bad_half(const uint8_t *hi)
+{
+    unsigned bad = 0;
+    for (int k = 0; k < SCAN_BLOCK; k++)
+        bad |= (hi[k] & 0x7c) == 0x7c;
+    return bad != 0;
+}
+
+/* b3 and b2: the two high bytes of SCAN_BLOCK floats, each two bytes from the next.  Read as
+ * 16-bit words whose low byte they are (little-endian), so the loop needs no byte shuffles. */
+typedef uint16_t u16_unaligned __attribute__((aligned(1), may_alias));
+
+static int block_has_bad_float(const uint8_t *b3, const uint8_t *b2)
+{
+    unsigned bad = 0;
+#if __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    const u16_unaligned *w3 = (const u16_unaligned *)b3, *w2 = (const u16_unaligned *)b2;
+    for (int k = 0; k < SCAN_BLOCK; k++)
+        bad |= ((w3[k] & 0x7f) == 0x7f) & ((w2[k] & 0x80) == 0x80);
+#else
+    for (int k = 0; k < SCAN_BLOCK; k++)
+        bad |= ((b3[2 * k] & 0x7f) == 0x7f) & ((b2[2 * k] & 0x80) == 0x80);
+#endif
+    return bad != 0;
+}
+
 /* Index of the first non-finite value among n little-endian halves or floats starting at
  * (even) byte o of the chunk, or -1: a half's exponent bits in its high byte, a float's in its
  * two high bytes. */
 static long first_bad_half(const chunk_bytes *b, size_t o, size_t n)
 {
-    size_t s;
+    size_t s, i = 0;
     const uint8_t *hi = byte_at(b, o + 1, 2, &s);
-    for (size_t i = 0; i < n; i++)
+    if (s == 1)
+        while (i + SCAN_BLOCK <= n && !block_has_bad_half(hi + i))
+            i += SCAN_BLOCK;
+    for (; i < n; i++)
         if ((hi[i * s] & 0x7c) == 0x7c)
             return (long)i;
     return -1;
@@ -96,9 +131,14 @@ static long first_bad_half(const chunk_bytes *b, size_t o, size_t n)
 
 static long first_bad_float(const chunk_bytes *b, size_t o, size_t n)
 {
-    size_t s;
+    size_t s, i = 0;
     const uint8_t *b3 = byte_at(b, o + 3, 4, &s), *b2 = byte_at(b, o + 2, 4, &s);
-    for (size_t i = 0; i < n; i++)
+    /* < n, not <= n: a block's words end one byte past its last float's high byte, which is
+     * a byte of the float after it (the chunk's last float is always looked at alone) */
+    if (s == 2)
+        while (i + SCAN_BLOCK < n && !block_has_bad_float(b3 + 2 * i, b2 + 2 * i))
+            i += SCAN_BLOCK;
+    for (; i < n; i++)
         if ((b3[i * s] & 0x7f) == 0x7f && (b2[i * s] & 0x80))
             return (long)i;
     return -1;

@@ -217,6 +217,18 @@ static void test_chunk_check(void **state)
     expect_bad_value(&tiled_half, (tf_rect){32, 16, 32, 16}, 40, 30, 2, 1e6f, "G"); /* > half */
     expect_bad_value(&tiled_half, (tf_rect){96, 32, 4, 13}, 99, 44, 4, NAN, "Z");
     expect_bad_value(&tiled_float, (tf_rect){32, 16, 32, 16}, 63, 16, 1, NAN, "B");
+    /* lines wider than the scan's blocks of 64 values: the last value of a block, one past
+     * it, and a line's (and a chunk's) last float */
+    tf_exr_layout rows_float = {W, H, 0, 0, 0, TF_PIXEL_FLOAT};
+    expect_bad_value(&rows, (tf_rect){0, 3, W, 4}, 63, 4, 4, NAN, "Z");
+    expect_bad_value(&rows, (tf_rect){0, 3, W, 4}, 64, 4, 1, INFINITY, "B");
+    expect_bad_value(&rows_float, (tf_rect){0, 3, W, 4}, 63, 5, 2, -INFINITY, "G");
+    expect_bad_value(&rows_float, (tf_rect){0, 3, W, 4}, 5, 3, 3, NAN, "R");
+    expect_bad_value(&rows_float, (tf_rect){0, 3, W, 4}, W - 1, 6, 5, NAN, "spp");
+    /* a line of exactly one block whose chunk fills its scratch buffer (4096 bytes): the scan
+     * reads nothing past the chunk's last byte (AddressSanitizer checks in make asan) */
+    tf_exr_layout tiled_64 = {W, H, 1, 64, 4, TF_PIXEL_HALF};
+    expect_bad_value(&tiled_64, (tf_rect){0, 8, 64, 4}, 63, 11, 5, NAN, "spp");
     /* raw (packed = unpacked) chunks are scanned as they are */
     tf_chunk_ref c = tf_layout_chunk(&rows, 0);
     uint8_t *raw = calloc(1, (size_t)c.unpacked), *scratch = NULL;

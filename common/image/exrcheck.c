@@ -35,24 +35,35 @@ int tf_exr_chunk_decodes(const uint8_t *packed, size_t packed_len, size_t unpack
 
 /* OpenEXR's delta predictor undone in place: p[i] = p[i - 1] + p[i] - 128 for i >= 1, a
  * running byte sum.  With SSE2 (every x86-64), 16 bytes at once: their sum within the block by
- * four shifted adds, then the block before's last byte added to every lane (the serial loop
- * was half of the coordinator's check of a networked chunk, ~1 cycle a byte). */
+ * four shifted adds, then the running total of the blocks before added to every lane (the
+ * serial loop was half of the coordinator's check of a networked chunk, ~1 cycle a byte).  The
+ * total is kept in a register and grows by each block's own last sum, which does not wait for
+ * the total: the only chain from block to block is one add (reading the total back from the
+ * stored block put a store and a load on that chain). */
+#ifdef __SSE2__
+static inline __m128i broadcast_last_byte(__m128i v)
+{
+    __m128i w = _mm_unpackhi_epi8(v, v);    /* word 7 = (byte 15, byte 15) */
+    w = _mm_shufflehi_epi16(w, 0xff);       /* words 4-7 = word 7 */
+    return _mm_shuffle_epi32(w, 0xff);      /* every dword = dword 3 */
+}
+#endif
+
 void tf_exr_undo_delta(uint8_t *p, size_t n)
 {
     size_t i = 1;
 #ifdef __SSE2__
     if (n > 16) {
         const __m128i flip = _mm_set1_epi8((char)0x80); /* - 128 mod 256 */
-        __m128i carry = _mm_set1_epi8((char)p[0]);
+        __m128i total = _mm_set1_epi8((char)p[0]);
         for (; i + 16 <= n; i += 16) {
             __m128i v = _mm_xor_si128(_mm_loadu_si128((const __m128i *)(p + i)), flip);
             v = _mm_add_epi8(v, _mm_slli_si128(v, 1));
             v = _mm_add_epi8(v, _mm_slli_si128(v, 2));
             v = _mm_add_epi8(v, _mm_slli_si128(v, 4));
             v = _mm_add_epi8(v, _mm_slli_si128(v, 8));
-            v = _mm_add_epi8(v, carry);
-            _mm_storeu_si128((__m128i *)(p + i), v);
-            carry = _mm_set1_epi8((char)p[i + 15]);
+            _mm_storeu_si128((__m128i *)(p + i), _mm_add_epi8(v, total));
+            total = _mm_add_epi8(total, broadcast_last_byte(v));
         }
     }
 #endif

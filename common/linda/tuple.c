@@ -18,6 +18,7 @@ struct tf_shared_bytes {
     atomic_int refs;
     void (*release)(void *ctx);
     void *ctx;
+    int adopted; /* our own malloc'd memory (tf_shared_bytes_adopt) */
 };
 
 tf_shared_bytes *tf_shared_bytes_wrap(void (*release)(void *ctx), void *ctx)
@@ -28,10 +29,19 @@ tf_shared_bytes *tf_shared_bytes_wrap(void (*release)(void *ctx), void *ctx)
     atomic_init(&s->refs, 1);
     s->release = release;
     s->ctx = ctx;
+    s->adopted = 0;
     return s;
 }
 
-tf_shared_bytes *tf_shared_bytes_adopt(void *mem) { return tf_shared_bytes_wrap(free, mem); }
+tf_shared_bytes *tf_shared_bytes_adopt(void *mem)
+{
+    tf_shared_bytes *s = tf_shared_bytes_wrap(free, mem);
+    if (s)
+        s->adopted = 1;
+    return s;
+}
+
+int tf_shared_bytes_adopted(const tf_shared_bytes *s) { return s->adopted; }
 
 void tf_shared_bytes_release(tf_shared_bytes *s)
 {

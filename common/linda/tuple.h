@@ -133,6 +133,10 @@ tf_shared_bytes *tf_shared_bytes_adopt(void *mem);
 tf_shared_bytes *tf_shared_bytes_wrap(void (*release)(void *ctx), void *ctx);
 /* Drop one reference; the last frees the memory.  Thread-safe; NULL does nothing. */
 void tf_shared_bytes_release(tf_shared_bytes *s);
+/* 1 for memory tf_shared_bytes_adopt wrapped (this process's own, which nothing else writes
+ * once adopted), 0 for memory owned elsewhere (tf_shared_bytes_wrap: e.g. a forked worker's
+ * outbox, which that process can still write). */
+int tf_shared_bytes_adopted(const tf_shared_bytes *s);
 /* Decode as tf_tuple_decode (no formals), except that every blob of at least min_shared bytes
  * stays where it is in buf, which must lie in owner's memory: the field takes a reference to
  * owner instead of a copy (a result's chunks are not copied out of the buffer they were received

@@ -222,23 +222,24 @@ static void check_inline(tf_resultcheck *rc, item *it)
     pthread_mutex_unlock(&rc->mu);
 }
 
-/* Does the tuple reference bytes it does not own (tf_tuple_decode_shared)? */
-static int holds_shared(const tf_tuple *t)
+/* Does the tuple reference bytes that another process lends it (a forked worker's outbox)?
+ * A networked worker's blobs lie in the receive buffer the server adopted: ours alone. */
+static int holds_lent(const tf_tuple *t)
 {
     for (int i = 0; i < t->nfields; i++)
-        if (t->f[i].type == TF_FIELD_BLOB && !t->f[i].formal && t->f[i].v.bytes.shared)
+        if (t->f[i].type == TF_FIELD_BLOB && !t->f[i].formal && t->f[i].v.bytes.shared &&
+            !tf_shared_bytes_adopted(t->f[i].v.bytes.shared))
             return 1;
     return 0;
 }
 
-/* Move result into the item, its shared bytes copied: they may lie in a forked worker's
- * outbox, which that process can still write, and the verdict must be about the very bytes
- * the writer will write.  (A networked worker's lie in a receive buffer nobody else writes;
- * copying them too costs a memcpy of the packed bytes, far below their check.)  0, or -1
- * without memory (result left as it was). */
+/* Move result into the item, its lent bytes copied: they may lie in a forked worker's outbox,
+ * which that process can still write, and the verdict must be about the very bytes the writer
+ * will write.  A networked worker's bytes move with the tuple, uncopied: nothing writes the
+ * buffer they were received into.  0, or -1 without memory (result left as it was). */
 static int take_own_copy(item *it, tf_tuple *result)
 {
-    if (!holds_shared(result)) {
+    if (!holds_lent(result)) {
         tf_tuple_move(&it->result, result);
         return 0;
     }

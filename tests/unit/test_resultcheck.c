@@ -7,7 +7,9 @@
  * buffer with garbage right after submitting: the verdict must still be "passed", and the
  * tuple it hands back must hold the bytes that were checked, for a small result (checked on the
  * caller's thread) and a large one (on the checker's thread).  And garbage submitted as such
- * is refused, so the first two cannot pass by not looking. */
+ * is refused, so the first two cannot pass by not looking.  A networked worker's result lies in
+ * the receive buffer the server adopted, which nothing else writes: it is checked and handed
+ * back where it lies, not copied. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -72,7 +74,7 @@ static void expect_checked_bytes_kept(const tf_exr_layout *l, tf_rect r)
     uint8_t *mem = malloc(n);
     assert_non_null(mem);
     memcpy(mem, want, n);
-    tf_shared_bytes *owner = tf_shared_bytes_adopt(mem);
+    tf_shared_bytes *owner = tf_shared_bytes_wrap(free, mem); /* lent, as an outbox's */
     assert_non_null(owner);
     char err[256];
     assert_int_equal(tf_tuple_decode_shared(mem, n, owner, 1, &shared, err, sizeof err), 0);
@@ -110,6 +112,38 @@ static void test_large_result_keeps_the_bytes_it_passed(void **state)
     expect_checked_bytes_kept(&layout, (tf_rect){0, 0, 256, 128}); /* 384 KiB: the thread */
 }
 
+/* A result whose blobs lie in adopted memory (a receive buffer) passes with its blobs where
+ * they were: the checker took the tuple, not a copy. */
+static void test_received_result_is_not_copied(void **state)
+{
+    (void)state;
+    tf_tuple original, shared, back;
+    pack_result(&layout, (tf_rect){0, 0, 256, 128}, &original);
+    size_t n;
+    uint8_t *mem = encoded(&original, &n);
+    tf_shared_bytes *owner = tf_shared_bytes_adopt(mem);
+    assert_non_null(owner);
+    char err[256];
+    assert_int_equal(tf_tuple_decode_shared(mem, n, owner, 1, &shared, err, sizeof err), 0);
+    tf_resultcheck *rc = tf_resultcheck_new(&layout, 1, err, sizeof err);
+    assert_non_null(rc);
+    assert_int_equal(tf_resultcheck_submit(rc, &shared), 0);
+    tf_tuple_init(&back);
+    assert_int_equal(verdict(rc, &back, err, sizeof err), 0);
+    int blobs = 0;
+    for (int i = 0; i < back.nfields; i++)
+        if (back.f[i].type == TF_FIELD_BLOB && back.f[i].v.bytes.shared) {
+            assert_ptr_equal(back.f[i].v.bytes.shared, owner);
+            assert_true(back.f[i].v.bytes.ptr >= mem && back.f[i].v.bytes.ptr < mem + n);
+            blobs++;
+        }
+    assert_true(blobs > 0);
+    tf_tuple_clear(&back);
+    tf_tuple_clear(&original);
+    tf_resultcheck_free(rc);
+    tf_shared_bytes_release(owner);
+}
+
 /* The same garbage, submitted as the result's bytes, is refused. */
 static void test_garbage_is_refused(void **state)
 {
@@ -134,6 +168,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_small_result_keeps_the_bytes_it_passed),
         cmocka_unit_test(test_large_result_keeps_the_bytes_it_passed),
+        cmocka_unit_test(test_received_result_is_not_copied),
         cmocka_unit_test(test_garbage_is_refused),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -72,6 +72,7 @@ json_t *tf_api_status(const tf_snapshot *s)
     json_object_set_new(o, "task_failures", json_integer(s->task_failures));
     json_object_set_new(o, "workers_connected", json_integer(s->live_workers));
     json_object_set_new(o, "workers_seen", json_integer(s->nworkers));
+    json_object_set_new(o, "workers_joined", json_integer(s->joined_workers));
     json_object_set_new(o, "exit_status", int_or_null(s->exit_status));
     json_object_set_new(o, "preview_stamps", json_integer(s->preview_stamps));
     json_object_set_new(o, "last_event", json_integer(s->nevents ? (json_int_t)s->events[s->nevents - 1].seq : 0));

@@ -448,6 +448,7 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written, int full)
         s->tasks_redealt = st->tasks_redealt;
         s->task_failures = st->task_failures;
         s->live_workers = tf_supervisor_live_workers(d->sup);
+        s->joined_workers = tf_supervisor_joined_workers(d->sup);
 
         /* connection -> worker, to name the holders of tasks */
         conn_owner *owners = calloc((size_t)st->nworkers + 1, sizeof *owners);

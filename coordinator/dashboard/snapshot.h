@@ -81,6 +81,7 @@ typedef struct tf_snapshot {
     int64_t tasks_total, tasks_written, tasks_redealt, task_failures;
     int task_w, task_h, task_cols, first_row; /* the task grid (tasks.h) */
     int live_workers;
+    int joined_workers;            /* workers that said hello (--wait-workers counts these) */
     int nworkers;
     tf_snap_worker *workers;
     int ntasks;

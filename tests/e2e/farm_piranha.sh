@@ -9,7 +9,8 @@
 # The job is submitted with --wait-workers 2 and the worker runs one process: its first
 # session cannot finish the job (the render deals nothing before a second process says hello),
 # so the owner's return falls in the middle of the job however fast this machine renders.  The
-# process of its second session is the second hello: the job then completes.
+# owner comes back only once that process has said hello (the render's workers_joined), so the
+# process of the second session is certainly the second hello: the job then completes.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 command -v setpriv >/dev/null 2>&1 || skip "setpriv (util-linux) is not installed"
@@ -27,6 +28,16 @@ wait_log() { # PATTERN [SECONDS]
     done
 }
 ARGS="--size 480x270 --tasks rows:2"
+joined() { # the job's render: how many worker processes have said hello (its /api/status)
+    python3 - "$(field "$job" dashboard)" <<'PY'
+import json, sys, urllib.parse, urllib.request
+u = urllib.parse.urlparse(sys.argv[1])
+token = urllib.parse.parse_qs(u.query)["token"][0]
+req = urllib.request.Request("%s://%s/api/status" % (u.scheme, u.netloc),
+                             headers={"Authorization": "Bearer " + token})
+print(json.load(urllib.request.urlopen(req, timeout=10))["workers_joined"])
+PY
+}
 
 say "the owner is busy: the worker takes nothing"
 owner_start
@@ -41,6 +52,11 @@ wait_log "owner present"
 say "the owner leaves: the worker serves"
 owner_stop
 wait_log "serving job $job"
+i=0
+until [ "$(joined)" = 1 ]; do
+    i=$((i + 1)); [ $i -lt 600 ] || fail "the worker's process never said hello: $(cat "$T/worker.log")"
+    sleep 0.2
+done
 say "the owner comes back in the middle of the job"
 owner_start
 t0=$(date +%s%N)

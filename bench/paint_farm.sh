@@ -26,7 +26,8 @@ T=$(mktemp -d "${TMPDIR:-/tmp}/tf-paint-farm.XXXXXX")
 trap 'kill $(jobs -p) 2>/dev/null; wait 2>/dev/null; [ -n "${KEEP:-}" ] || rm -rf "$T"' EXIT
 (umask 077; head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/secret")
 "$TF" farm --state "$T/state" --add-token bench --role submitter >"$T/token"
-"$TF" farm --listen 127.0.0.1:0 --state "$T/state" --secret-file "$T/secret" >"$T/farm.log" 2>&1 &
+: >"$T/farm.log" # there before the farm's shell opens it: sed below must find it (set -e)
+"$TF" farm --listen 127.0.0.1:0 --state "$T/state" --secret-file "$T/secret" >>"$T/farm.log" 2>&1 &
 for _ in $(seq 600); do
     PORT=$(sed -n 's/.*farm on http:\/\/127.0.0.1:\([0-9]*\):.*/\1/p' "$T/farm.log")
     [ -n "$PORT" ] && break

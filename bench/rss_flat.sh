@@ -51,8 +51,9 @@ for kind in $KINDS; do
     esac
     record $tasks $n
     rec="$DIR/rec.exr"
+    : >"$DIR/coord.err" # there before the render's shell opens it: sed below must find it (set -e)
     "$TF" render "$SCENE" -j 0 --listen 127.0.0.1:0 --size ${n}x$n --tasks $tasks \
-      -o "$DIR/out.exr" --overwrite --stats "$DIR/s.json" 2>"$DIR/coord.err" &
+      -o "$DIR/out.exr" --overwrite --stats "$DIR/s.json" 2>>"$DIR/coord.err" &
     coord=$!
     port=""
     for i in $(seq 100); do

@@ -51,7 +51,7 @@ EXR=/dev/shm/terrafarm-scale-sim-$$.exr
 LOG=$(mktemp)
 REC=/dev/shm/terrafarm-scale-payloads-$$.exr
 FLAT_MODEL=
-trap 'rm -f ${FLAT_MODEL:+"$FLAT_MODEL"} "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$LOG.coord" "$REC" "${REC%.exr}.png"; rm -rf ${SMOKE_OUT:+"$SMOKE_OUT"}' EXIT
+trap 'rm -f ${FLAT_MODEL:+"$FLAT_MODEL"} "$EXR" "${EXR%.exr}.png" "$LOG" "$LOG.stats" "$LOG.time" "$LOG.coord" "$LOG.dat" "$REC" "${REC%.exr}.png"; rm -rf ${SMOKE_OUT:+"$SMOKE_OUT"}' EXIT
 
 [ -x "$TF" ] || { echo "scale_sim.sh: build first (make)" >&2; exit 1; }
 if [ "$MODEL" = flat ]; then
@@ -113,12 +113,12 @@ for ms in $TASK_MS; do
 done
 
 if command -v gnuplot >/dev/null 2>&1; then
-  # best watermark per (task size, workers)
+  # best watermark per (task size, workers): the plot's data, a temporary file beside the log
   awk -F, 'NR > 1 { k = $2 " " $1; if (!(k in best) || $9 > best[k]) best[k] = $9 }
-           END { for (k in best) print k, best[k] }' "$CSV" | sort -n -k1,1 -k2,2 >"$OUT/scale_sim.dat"
+           END { for (k in best) print k, best[k] }' "$CSV" | sort -n -k1,1 -k2,2 >"$LOG.dat"
   plot=""
   for ms in $TASK_MS; do
-    plot="$plot${plot:+, }'$OUT/scale_sim.dat' using (\$1 == $ms ? \$2 : 1/0):3 with linespoints lw 2 title '$ms ms tasks'"
+    plot="$plot${plot:+, }'$LOG.dat' using (\$1 == $ms ? \$2 : 1/0):3 with linespoints lw 2 title '$ms ms tasks'"
   done
   gnuplot <<EOF
 set terminal svg size 800,500 dynamic

@@ -80,11 +80,12 @@ void sv_redeal_if_lost(tf_supervisor *s, task_slot *t)
     sv_deal_copy(s, t);
 }
 
-/* Remove any task tuples of a finished task still waiting in the space. */
+/* Remove any task tuples of a finished task still waiting in the space.  Nearly every task
+ * has none left by its result (a worker took its one copy): then no template is built. */
 void sv_withdraw_copies(tf_supervisor *s, task_slot *t)
 {
     tf_tuple tmpl, got;
-    if (tf_task_template(&tmpl, t->id))
+    if (t->in_space <= 0 || tf_task_template(&tmpl, t->id))
         return;
     while (t->in_space > 0) {
         tf_tuple_init(&got);

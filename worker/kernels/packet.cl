@@ -76,6 +76,12 @@ v3p v3p_lerp_ps(v3p a, vec3 b, dv t)
  * three instructions, and the same answer for masks (every lane 0 or -1). */
 int any_lane(lv m) { return as_ulong(convert_char8(m)) != 0; }
 
+/* The lanes of mask m as one byte each of a 64-bit word (lane l: bits 8 l .. 8 l + 7), for a
+ * loop over the lanes: `m[l]` with a variable l made PoCL store the whole vector to the stack
+ * at every turn and load the lane back, a 64-byte store the 8-byte load could not be forwarded
+ * from (perf: the hit loop of walker_step stalled there). */
+ulong lane_bytes(lv m) { return as_ulong(convert_char8(m)); }
+
 /* Loads of p[idx] for the active lanes; idle lanes read p[0] (which every buffer has) and get
  * whatever is there: callers discard them. */
 dv gather_f(__global const float *p, lv idx, lv mask)

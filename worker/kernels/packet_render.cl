@@ -137,23 +137,29 @@ void lower_corners(__global const double *records, long X, long Y, long N, int r
 
 /* The lowest and highest display level of each channel over some samples (render.c's
  * level_span, on the stored levels): a quad's four corners, then its centre too.  Levels lie in
- * [0, 1] and are never NaN, so minima and maxima taken in any order are render.c's, and so is
- * display_range; three channels a vector, and the corners' span is kept for the centre. */
+ * [0, 1] and are never NaN (nor -0), so minima and maxima taken in any order are render.c's,
+ * and so is display_range; three channels a vector, and the corners' span is kept for the
+ * centre.  Taken by comparisons, as render.c takes them: OpenCL's fmin and fmax must also
+ * handle NaN, which PoCL does with two more instructions each (perf: most of `advance`'s
+ * own time went to them). */
 typedef struct level_span { double3 lo, hi; } level_span;
+
+double3 min3(double3 a, double3 b) { return select(b, a, a < b); }
+double3 max3(double3 a, double3 b) { return select(b, a, a > b); }
 
 level_span span_of_corners(__global const double *const lvl[4])
 {
     double3 a = vload3(0, lvl[0]), b = vload3(0, lvl[1]);
     double3 c = vload3(0, lvl[2]), d = vload3(0, lvl[3]);
-    level_span sp = {fmin(fmin(a, b), fmin(c, d)), fmax(fmax(a, b), fmax(c, d))};
+    level_span sp = {min3(min3(a, b), min3(c, d)), max3(max3(a, b), max3(c, d))};
     return sp;
 }
 
 level_span span_with(level_span sp, __global const double *lvl)
 {
     double3 v = vload3(0, lvl);
-    sp.lo = fmin(sp.lo, v);
-    sp.hi = fmax(sp.hi, v);
+    sp.lo = min3(sp.lo, v);
+    sp.hi = max3(sp.hi, v);
     return sp;
 }
 
@@ -161,7 +167,8 @@ level_span span_with(level_span sp, __global const double *lvl)
 double display_range(level_span sp)
 {
     double3 r = sp.hi - sp.lo;
-    return fmax(r.x, fmax(r.y, r.z));
+    double m = r.y > r.z ? r.y : r.z;
+    return r.x > m ? r.x : m;
 }
 
 typedef struct quad { int i, j, size; } quad;

@@ -184,10 +184,12 @@ dv fbm_with_gradient8(const world *w, dv x, dv y, double scale, int amp_table, d
     dv remainder = octaves - convert_double8(whole);
     lv partial = remainder > 0.0;
     iv count = whole - mask_i(partial);
-    int most = 0;
-    for (int l = 0; l < TF_LANES; l++)
-        if (mask[l] && count[l] > most)
-            most = count[l];
+    /* the most octaves a lane of mask needs (0: none), as a vector maximum (a loop over the
+     * lanes stored the mask to the stack at every turn: lane_bytes) */
+    iv c = select((iv)(0), count, convert_int8(mask));
+    int4 c4 = max(c.lo, c.hi);
+    int2 c2 = max(c4.lo, c4.hi);
+    int most = max(max(c2.x, c2.y), 0);
     dv f = 0.0, sx = 0.0, sy = 0.0;
     double frequency = 1.0;
     for (int i = 0; i < most; i++) {
@@ -526,8 +528,9 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
         }
         shadow_rays[p] -= mask_i(s->cast);
         lit[p] = (lv)(0);
+        const ulong casts = lane_bytes(s->cast);
         for (int l = 0; l < TF_LANES; l++) {
-            if (!s->cast[l])
+            if (!((casts >> (8 * l)) & 1))
                 continue;
             /* what the sun's strips prove (shade.c tf_shadow_strips): occluded, no walk; or
              * clear past t, the walk ends there */

@@ -565,8 +565,9 @@ void note_clears8(const world *w, const walker *k, lv ended, lv hit, ray_clears 
     lv free = select(k->above, tf_hit_from_above(ha, hb, hc, hd, w->cell, k->best.tri == 0, r->d),
                      hit);
     dv s_free = select((dv)(0), select(r->t1, k->best.t, hit) * run, ok & free);
+    const ulong lanes = lane_bytes(ok);
     for (int l = 0; l < TF_LANES; l++) {
-        if (!ok[l])
+        if (!((lanes >> (8 * l)) & 1))
             continue;
         int y = (int)k->ray[l], p = y / TF_LANES, q = y % TF_LANES;
         out->ux[p][q] = ux[l], out->uy[p][q] = uy[l], out->k[p][q] = kk[l];
@@ -634,8 +635,9 @@ TF_INLINE void walker_step(const world *w, walker *k, const fetchp *f, lv found[
         hitp h;
         if (hits)
             finish_hit8(w, &k->r, &k->best, hit, &h);
+        const ulong lanes = lane_bytes(hit);
         for (int l = 0; l < TF_LANES; l++) {
-            if (!hit[l])
+            if (!((lanes >> (8 * l)) & 1))
                 continue;
             int r = (int)k->ray[l], p = r / TF_LANES, q = r % TF_LANES;
             found[p][q] = -1;

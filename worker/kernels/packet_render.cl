@@ -185,6 +185,10 @@ typedef struct pixel_state {
     uint rays;
     float zmin;
     double sum_r, sum_g, sum_b, sum_a;
+    /* probing: the quad on top of the stack has its corners in hand and their span (in
+     * probe_span) passed the probe test; only its centre was missing when advance stopped */
+    int probing;
+    level_span probe_span;
     __global float *cache;   /* every slice's samples, (N+1)^2 a slice */
     __global double *levels; /* and their display levels, 3 a sample */
     __global uint *have;     /* (N+1)^2 slot states */
@@ -295,7 +299,9 @@ void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sampl
     pixel_state *ps = &all[p];
     while (ps->sp > 0) {
         quad t = ps->stack[ps->sp - 1];
-        if (!want_corners(all, p, t, side, epoch, q))
+        /* a quad stopped at its centre comes back with its corners counted and its span kept:
+         * the same decisions, without loading and comparing the corners' levels again */
+        if (!ps->probing && !want_corners(all, p, t, side, epoch, q))
             break;
         __global const float *s[5];
         __global const double *lvl[4];
@@ -305,15 +311,24 @@ void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sampl
         s[3] = slot_of(ps, side, t.i + t.size, t.j + t.size);
         if (t.size > 1) {
             double split_threshold = tf_aa_split_threshold(threshold, N, t.size);
-            lvl[0] = levels_of(ps, side, t.i, t.j);
-            lvl[1] = levels_of(ps, side, t.i + t.size, t.j);
-            lvl[2] = levels_of(ps, side, t.i, t.j + t.size);
-            lvl[3] = levels_of(ps, side, t.i + t.size, t.j + t.size);
-            level_span span = span_of_corners(lvl);
-            if (display_range(span) > split_threshold * TF_AA_PROBE_FRACTION) {
+            level_span span;
+            if (ps->probing) {
+                span = ps->probe_span;
+            } else {
+                lvl[0] = levels_of(ps, side, t.i, t.j);
+                lvl[1] = levels_of(ps, side, t.i + t.size, t.j);
+                lvl[2] = levels_of(ps, side, t.i, t.j + t.size);
+                lvl[3] = levels_of(ps, side, t.i + t.size, t.j + t.size);
+                span = span_of_corners(lvl);
+            }
+            if (ps->probing || display_range(span) > split_threshold * TF_AA_PROBE_FRACTION) {
                 int hs = t.size / 2;
-                if (!want(all, p, side, t.i + hs, t.j + hs, epoch, q))
+                if (!want(all, p, side, t.i + hs, t.j + hs, epoch, q)) {
+                    ps->probing = 1;
+                    ps->probe_span = span;
                     break;
+                }
+                ps->probing = 0;
                 s[4] = slot_of(ps, side, t.i + hs, t.j + hs);
                 span = span_with(span, levels_of(ps, side, t.i + hs, t.j + hs));
                 ps->sp--;
@@ -433,6 +448,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         s->stack[0].i = 0, s->stack[0].j = 0, s->stack[0].size = N;
         s->sp = 1;
         s->asked = 0;
+        s->probing = 0;
         s->spp = 4;
         s->rays = 0;
         s->sum_r = s->sum_g = s->sum_b = s->sum_a = 0;

@@ -102,8 +102,11 @@ lv cell_of8(const world *w, dv v)
     return i;
 }
 
-/* setup_ray per lane: the lanes of `mask` whose ray can meet the height field. */
-lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
+/* setup_ray per lane: the lanes of `mask` whose ray can meet the height field.  Inlined into
+ * its one caller: called, its ten vectors went over the stack as 32-byte halves that its 64-byte
+ * loads could not be forwarded from (perf: the hottest instruction of setup_ray8 was its first
+ * load of an argument). */
+TF_INLINE lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
 {
     mask &= isfinite(o.x) & isfinite(o.y) & isfinite(o.z) & isfinite(d.x) & isfinite(d.y) &
             isfinite(d.z) & ~((d.x == 0) & (d.y == 0) & (d.z == 0)) & (tmin < tmax);

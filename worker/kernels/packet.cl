@@ -71,16 +71,16 @@ v3p v3p_lerp_ps(v3p a, vec3 b, dv t)
     return v3p_make(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t);
 }
 
-/* Is some lane of mask m set?  OpenCL's any() tests every lane's sign bit; PoCL compiles that
- * to a chain of extracts and ORs.  Narrowing the lanes to bytes and testing the 64-bit word is
- * three instructions, and the same answer for masks (every lane 0 or -1). */
-int any_lane(lv m) { return as_ulong(convert_char8(m)) != 0; }
-
 /* The lanes of mask m as one byte each of a 64-bit word (lane l: bits 8 l .. 8 l + 7), for a
  * loop over the lanes: `m[l]` with a variable l made PoCL store the whole vector to the stack
  * at every turn and load the lane back, a 64-byte store the 8-byte load could not be forwarded
  * from (perf: the hit loop of walker_step stalled there). */
 ulong lane_bytes(lv m) { return as_ulong(convert_char8(m)); }
+
+/* Is some lane of mask m set?  OpenCL's any() tests every lane's sign bit; PoCL compiles that
+ * to a chain of extracts and ORs.  Narrowing the lanes to bytes and testing the 64-bit word is
+ * three instructions, and the same answer for masks (every lane 0 or -1). */
+int any_lane(lv m) { return lane_bytes(m) != 0; }
 
 /* Loads of p[idx] for the active lanes; idle lanes read p[0] (which every buffer has) and get
  * whatever is there: callers discard them. */

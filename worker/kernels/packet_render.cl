@@ -140,8 +140,8 @@ void lower_corners(__global const double *records, long X, long Y, long N, int r
  * [0, 1] and are never NaN (nor -0), so minima and maxima taken in any order are render.c's,
  * and so is display_range; three channels a vector, and the corners' span is kept for the
  * centre.  Taken by comparisons, as render.c takes them: OpenCL's fmin and fmax must also
- * handle NaN, which PoCL does with two more instructions each (perf: most of `advance`'s
- * own time went to them). */
+ * handle NaN, which PoCL does with two more instructions each (perf: they topped `advance`'s
+ * own profile). */
 typedef struct level_span { double3 lo, hi; } level_span;
 
 double3 min3(double3 a, double3 b) { return select(b, a, a < b); }

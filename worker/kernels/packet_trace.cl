@@ -579,40 +579,39 @@ void note_clears8(const world *w, const walker *k, lv ended, lv hit, ray_clears 
     }
 }
 
-/* Lane l of *to from ray r of a stream's records (none: s_free 0). */
-TF_INLINE void low_get(const ray_clears *from, int r, int l, low8 *to)
+/* Packet p of a stream's records, in the lanes of m (none: s_free 0). */
+TF_INLINE low8 low_packet(const ray_clears *from, int p, lv m)
 {
-    const int p = r / TF_LANES, q = r % TF_LANES;
-    to->ux[l] = from->ux[p][q], to->uy[l] = from->uy[p][q], to->k[l] = from->k[p][q];
-    to->s_in[l] = from->s_in[p][q], to->s_free[l] = from->s_free[p][q];
+    const dv zero = (dv)(0);
+    low8 to = {select(zero, from->ux[p], m), select(zero, from->uy[p], m),
+               select(zero, from->k[p], m), select(zero, from->s_in[p], m),
+               select(zero, from->s_free[p], m)};
+    return to;
 }
 
 /* Once all the walker's lanes are done, deal it rays *next, *next + 1, ... of the stream (up
  * to eight), with their lower records lows and fars (either NULL: none).  k->r is read only
- * after a deal has set it. */
+ * after a deal has set it.  Deals are whole packets: *next starts at 0, and a deal takes eight
+ * rays, or the rest of the stream when fewer are left, so it always starts a packet and the
+ * rays go to their lanes as vectors (lane by lane, PoCL kept every vector on the stack). */
 TF_INLINE void walker_deal(const world *w, const ray_stream *in, const ray_clears *lows,
                            const ray_clears *fars, int out_records, int *next, walker *k)
 {
     if (*next >= in->n || any_lane(k->active))
         return;
+    const int p = *next / TF_LANES, count = min(TF_LANES, in->n - *next);
+    const lv lane = (lv)(0, 1, 2, 3, 4, 5, 6, 7);
+    const lv fresh = lane < (lv)(count);
+    k->ray = (lv)(*next) + lane;
+    *next += count;
     const v3p zero = v3p_splat(v3(0, 0, 0));
-    v3p o = zero, d = zero;
-    dv tmin = (dv)(0), tmax = (dv)(0);
+    v3p o = v3p_select(zero, in->o[p], fresh), d = v3p_select(zero, in->d[p], fresh);
+    dv tmin = select((dv)(0), in->tmin[p], fresh), tmax = select((dv)(0), in->tmax[p], fresh);
     low8 near = {(dv)(0), (dv)(0), (dv)(0), (dv)(0), (dv)(0)}, far = near;
-    lv fresh = (lv)(0);
-    for (int l = 0; l < TF_LANES && *next < in->n; l++) {
-        int r = (*next)++, p = r / TF_LANES, q = r % TF_LANES;
-        k->ray[l] = r;
-        fresh[l] = -1;
-        o.x[l] = in->o[p].x[q], o.y[l] = in->o[p].y[q], o.z[l] = in->o[p].z[q];
-        d.x[l] = in->d[p].x[q], d.y[l] = in->d[p].y[q], d.z[l] = in->d[p].z[q];
-        tmin[l] = in->tmin[p][q];
-        tmax[l] = in->tmax[p][q];
-        if (lows)
-            low_get(lows, r, l, &near);
-        if (fars)
-            low_get(fars, r, l, &far);
-    }
+    if (lows)
+        near = low_packet(lows, p, fresh);
+    if (fars)
+        far = low_packet(fars, p, fresh);
     k->active = setup_ray8(&k->r, w, o, d, tmin, tmax, fresh);
     k->above = out_records ? starts_above8(w, &k->r, k->active) : (lv)(0);
     k->prefix = (lv)(0);

@@ -463,12 +463,13 @@ void record_put(__global double *to, const ray_clears *c, int k)
 }
 
 /* One packet walking a stream: its rays (rayp), where their walks stand, their best hits, the
- * lanes at work and which ray of the stream each lane holds. */
+ * lanes at work and which packet of the stream they hold (lane l: its lane l). */
 typedef struct walker {
     rayp r;
     walkp s;
     candp best;
-    lv active, ray;
+    lv active;
+    int packet;         /* the stream's packet dealt to the lanes (walker_deal: whole packets) */
     lv prefix;          /* lanes walking the prefix of a vouched-for ray (t1 moved in) */
     dv t_skip, t1_full; /* their restart, and their own t1 */
     lv above;           /* lanes whose ray starts above its cell's maximum (for records) */
@@ -484,7 +485,8 @@ void walker_init(walker *k)
     candp best = {(dv)(INFINITY), (lv)(0), (lv)(0), (lv)(0)};
     k->s = s;
     k->best = best;
-    k->active = k->ray = k->prefix = k->above = (lv)(0);
+    k->active = k->prefix = k->above = (lv)(0);
+    k->packet = 0;
     k->t_skip = k->t1_full = (dv)(0);
 }
 
@@ -556,7 +558,7 @@ lv starts_above8(const world *w, const rayp *r, lv mask)
 }
 
 /* trace.c's note_clear for the lanes of `ended` (hit: the ones that hit, best holding it):
- * their records go to rays k->ray of *out. */
+ * their records go to the same lanes of packet k->packet of *out. */
 void note_clears8(const world *w, const walker *k, lv ended, lv hit, ray_clears *out)
 {
     const rayp *r = &k->r;
@@ -568,15 +570,12 @@ void note_clears8(const world *w, const walker *k, lv ended, lv hit, ray_clears 
     lv free = select(k->above, tf_hit_from_above(ha, hb, hc, hd, w->cell, k->best.tri == 0, r->d),
                      hit);
     dv s_free = select((dv)(0), select(r->t1, k->best.t, hit) * run, ok & free);
-    const ulong lanes = lane_bytes(ok);
-    for (int l = 0; l < TF_LANES; l++) {
-        if (!((lanes >> (8 * l)) & 1))
-            continue;
-        int y = (int)k->ray[l], p = y / TF_LANES, q = y % TF_LANES;
-        out->ux[p][q] = ux[l], out->uy[p][q] = uy[l], out->k[p][q] = kk[l];
-        out->s_in[p][q] = r->t_square[l] * run[l];
-        out->s_free[p][q] = s_free[l];
-    }
+    const int p = k->packet;
+    out->ux[p] = select(out->ux[p], ux, ok);
+    out->uy[p] = select(out->uy[p], uy, ok);
+    out->k[p] = select(out->k[p], kk, ok);
+    out->s_in[p] = select(out->s_in[p], r->t_square * run, ok);
+    out->s_free[p] = select(out->s_free[p], s_free, ok);
 }
 
 /* Packet p of a stream's records, in the lanes of m (none: s_free 0). */
@@ -602,7 +601,7 @@ TF_INLINE void walker_deal(const world *w, const ray_stream *in, const ray_clear
     const int p = *next / TF_LANES, count = min(TF_LANES, in->n - *next);
     const lv lane = (lv)(0, 1, 2, 3, 4, 5, 6, 7);
     const lv fresh = lane < (lv)(count);
-    k->ray = (lv)(*next) + lane;
+    k->packet = p;
     *next += count;
     const v3p zero = v3p_splat(v3(0, 0, 0));
     v3p o = v3p_select(zero, in->o[p], fresh), d = v3p_select(zero, in->d[p], fresh);
@@ -637,19 +636,15 @@ TF_INLINE void walker_step(const world *w, walker *k, const fetchp *f, lv found[
         hitp h;
         if (hits)
             finish_hit8(w, &k->r, &k->best, hit, &h);
-        const ulong lanes = lane_bytes(hit);
-        for (int l = 0; l < TF_LANES; l++) {
-            if (!((lanes >> (8 * l)) & 1))
-                continue;
-            int r = (int)k->ray[l], p = r / TF_LANES, q = r % TF_LANES;
-            found[p][q] = -1;
-            if (hits) {
-                hits[p].t[q] = h.t[l];
-                hits[p].p.x[q] = h.p.x[l], hits[p].p.y[q] = h.p.y[l], hits[p].p.z[q] = h.p.z[l];
-                hits[p].n.x[q] = h.n.x[l], hits[p].n.y[q] = h.n.y[l], hits[p].n.z[q] = h.n.z[l];
-                hits[p].ci[q] = h.ci[l];
-                hits[p].cj[q] = h.cj[l];
-            }
+        const int p = k->packet;
+        found[p] |= hit;
+        if (hits) {
+            const iv hit_i = convert_int8(hit);
+            hits[p].t = select(hits[p].t, h.t, hit);
+            hits[p].p = v3p_select(hits[p].p, h.p, hit);
+            hits[p].n = v3p_select(hits[p].n, h.n, hit);
+            hits[p].ci = select(hits[p].ci, h.ci, hit_i);
+            hits[p].cj = select(hits[p].cj, h.cj, hit_i);
         }
     }
     k->active &= ~(hit | missed);

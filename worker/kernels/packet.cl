@@ -72,9 +72,9 @@ v3p v3p_lerp_ps(v3p a, vec3 b, dv t)
 }
 
 /* The lanes of mask m as one byte each of a 64-bit word (lane l: bits 8 l .. 8 l + 7), for a
- * loop over the lanes: `m[l]` with a variable l made PoCL store the whole vector to the stack
- * at every turn and load the lane back, a 64-byte store the 8-byte load could not be forwarded
- * from (perf: the hit loop of walker_step stalled there). */
+ * loop over the lanes that cannot be vector selects (lattice_samples' shadow rays): `m[l]` with
+ * a variable l made PoCL store the whole vector to the stack at every turn and load the lane
+ * back, a 64-byte store the 8-byte load could not be forwarded from. */
 ulong lane_bytes(lv m) { return as_ulong(convert_char8(m)); }
 
 /* Is some lane of mask m set?  OpenCL's any() tests every lane's sign bit; PoCL compiles that

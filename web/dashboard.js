@@ -242,6 +242,11 @@ function drawPlot() {
     pts.push({ t: b.t, rays: (b.rays - a.rays) / dt / 1e6, busy: (b.busy_s - a.busy_s) / dt, workers: b.workers });
     a = b;
   }
+  const first = history[0], last = history[history.length - 1];
+  if (pts.length < 1 && history.length > 1 && last.t > first.t) { // under a second in all: one rate
+    const dt = last.t - first.t;
+    pts.push({ t: last.t, rays: (last.rays - first.rays) / dt / 1e6, busy: (last.busy_s - first.busy_s) / dt, workers: last.workers });
+  }
   document.body.dataset.plotPoints = pts.length;
   if (pts.length < 1) return;
   const tmax = Math.max(1, pts[pts.length - 1].t);
@@ -324,6 +329,7 @@ async function poll() {
     document.body.dataset.polls = tick;
     if (s.state !== "rendering" && s.state !== "starting") {
       ended = true;
+      document.body.dataset.ended = "1"; // the final history and plot are drawn
       return; // final: nothing more will change
     }
   } catch (e) {

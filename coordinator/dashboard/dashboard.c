@@ -379,7 +379,8 @@ static int64_t owner_of(const conn_owner *owners, int n, uint64_t conn)
 static void sample_history(tf_dashboard *d, double t, uint64_t rays, double busy, int rows,
                            int live)
 {
-    if (t - d->hist_last_s < d->hist_interval_s)
+    /* the end is always sampled: a render shorter than the interval still has its rate */
+    if (t - d->hist_last_s < d->hist_interval_s && d->state < TF_RUN_FINISHED)
         return;
     if (d->nhist == HISTORY_MAX) { /* keep every other sample, sample half as often */
         for (int i = 0; i < HISTORY_MAX / 2; i++)

@@ -2,17 +2,22 @@
 """tests/e2e/cdp_dashboard.py: drive a real headless Chromium at the dashboard of a running
 render over the DevTools protocol (cdp_lib.py), sample what the page shows while the render
 runs, save a screenshot, and check it: no error shown, workers listed, progress rising,
-finished stamps drawn.
+finished stamps drawn, the throughput plotted, the whole picture once finished.
 
-usage: cdp_dashboard.py CHROMIUM URL SCREENSHOT.png [SECONDS]
+usage: cdp_dashboard.py CHROMIUM URL SCREENSHOT.png SECONDS COORDINATOR_PID
+The coordinator's forked workers must be frozen (lib.sh freeze_workers_at_birth): they run in
+slices (worker_slices.py) until the page has shown the render part done, stamps drawn and
+progress risen, so the page is sure to see the render under way on a machine of any speed; the
+screenshot is taken then; then they run free to the end.  SECONDS bounds the whole check.
 Exit 0 if every check holds, 1 with one line per failed check, 77 if Chromium cannot start."""
-import base64, json, os, sys, time
+import base64, json, os, signal, sys, time
 
 chromium, url, shot = sys.argv[1], sys.argv[2], sys.argv[3]
-limit = float(sys.argv[4]) if len(sys.argv) > 4 else 40.0
+limit, coordinator = float(sys.argv[4]), int(sys.argv[5])
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from cdp_lib import Chrome  # noqa: E402  (the DevTools plumbing the browser tests share)
+from worker_slices import signal_workers  # noqa: E402
 
 ch = Chrome(chromium, 1280, 1280)
 
@@ -48,38 +53,63 @@ def screenshot():
             "scale": float(os.environ.get("TF_SHOT_SCALE", "1"))}
     return call("Page.captureScreenshot", {"format": "png", "clip": clip}, session)["data"]
 
+def probe():
+    r = call("Runtime.evaluate", {"expression": PROBE, "returnByValue": True}, session)
+    return json.loads(r["result"]["value"]) if r["result"].get("type") == "string" else None
+
+
+def ended(d):
+    return d.get("state") in ("finished", "failed", "interrupted")
+
+
+def under_way(seen):
+    """The page has shown the render running, part done, stamps drawn, progress risen."""
+    run = [v for v in seen if v["data"].get("state") == "rendering"]
+    pcts = {float(v["data"].get("percent", -1)) for v in run}
+    last = run[-1]["data"] if run else {}
+    return (len(pcts) >= 2 and 0 < float(last.get("percent", 0)) < 100 and
+            int(last.get("previewPixels", 0)) > 0 and int(last.get("stampsDrawn", 0)) > 0 and
+            run[-1]["events"] > 0 and run[-1]["rows"] > 0)
+
+
 samples = []
 start = time.time()
 shot_taken = False
-while time.time() - start < limit:
-    r = call("Runtime.evaluate", {"expression": PROBE, "returnByValue": True}, session)
-    v = json.loads(r["result"]["value"]) if r["result"].get("type") == "string" else None
+try:
+    # Slices: the workers run 50 ms, are frozen again, and the page gets a second to show it
+    # (its polls are half a second apart, the dashboard's snapshots 200 ms).
+    while time.time() - start < limit and not under_way(samples):
+        signal_workers(coordinator, signal.SIGCONT)
+        time.sleep(0.05)
+        signal_workers(coordinator, signal.SIGSTOP)
+        for _ in range(4):
+            time.sleep(0.25)
+            v = probe()
+            if v:
+                samples.append(v)
+        if samples and ended(samples[-1]["data"]):
+            break
+    if under_way(samples):  # mid-render, workers frozen: the screenshot for the README
+        open(shot, "wb").write(base64.b64decode(screenshot()))
+        shot_taken = True
+finally:
+    signal_workers(coordinator, signal.SIGCONT)
+while time.time() - start < limit and not (samples and ended(samples[-1]["data"])):
+    time.sleep(0.25)
+    v = probe()
     if v:
         samples.append(v)
-        d = v["data"]
-        # mid-render, once something is drawn: the screenshot for the README
-        if (not shot_taken and d.get("state") == "rendering" and
-                float(d.get("percent", 0)) >= 30 and int(d.get("previewPixels", 0)) > 0 and
-                v["events"] > 0):
-            png = screenshot()
-            open(shot, "wb").write(base64.b64decode(png))
-            shot_taken = True
-        if d.get("state") in ("finished", "failed", "interrupted"):
-            break
-    time.sleep(0.25)
 
-# Finished: the page must come to show the whole picture (the coordinator keeps serving the final
-# state while --on-done runs); a page that stopped at the picture of its last poll while
-# rendering shows the last stamps missing.
+# Finished: the page must come to show the whole picture and its final plot (the coordinator
+# keeps serving the final state while --on-done runs); data-ended says its last poll is drawn.
 final = samples[-1]["data"] if samples else {}
-if final.get("state") == "finished":
-    end = time.time() + 8
-    while not (int(final.get("previewTotal", 0)) > 0 and
-               final.get("previewPixels") == final.get("previewTotal")) and time.time() < end:
+if ended(final):
+    while not (final.get("ended") == "1" and int(final.get("previewTotal", 0)) > 0 and
+               final.get("previewPixels") == final.get("previewTotal")) and time.time() - start < limit:
         time.sleep(0.25)
-        r = call("Runtime.evaluate", {"expression": PROBE, "returnByValue": True}, session)
-        if r["result"].get("type") == "string":
-            final = json.loads(r["result"]["value"])["data"]
+        v = probe()
+        if v:
+            final = v["data"]
 
 rendering = [s for s in samples if s["data"].get("state") == "rendering"]
 problems = []
@@ -100,8 +130,12 @@ else:
         problems.append("FAIL: no finished stamp drawn on the image while rendering")
     if max(s["events"] for s in rendering) < 1:
         problems.append("FAIL: the event log stayed empty (no join seen)")
-    if max(int(s["data"].get("plotPoints", 0)) for s in samples) < 1:
-        problems.append("FAIL: the throughput plot has no point")
+if max([int(s["data"].get("plotPoints", 0)) for s in samples] + [int(final.get("plotPoints", 0))]) < 1:
+    problems.append("FAIL: the throughput plot has no point")
+if not ended(final):
+    problems.append("FAIL: the page never showed the render ended (last state %s)" % final.get("state"))
+if ended(final) and final.get("ended") != "1":
+    problems.append("FAIL: the page did not finish drawing the final state")
 if final.get("state") == "finished" and final.get("previewPixels") != final.get("previewTotal"):
     problems.append("FAIL: the finished page shows %s of the picture's %s pixels" %
                     (final.get("previewPixels"), final.get("previewTotal")))

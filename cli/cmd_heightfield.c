@@ -60,6 +60,7 @@ static const char usage[] =
     "                        runs on N forked workers, one patch each, exchanging their\n"
     "                        edges through the tuple space (default: in this process, on\n"
     "                        every core)\n"
+    "      --threads N       threads for the terrain synthesis; [erosion] in this process\n"
     "      --halo K          erosion: steps between edge exchanges, K rows each (default 12)\n"
     "      --remote M        erosion: M more patches for networked workers (terrafarm worker\n"
     "                        --connect HOST:PORT), who read the scene and derive the start\n"

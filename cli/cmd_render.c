@@ -63,6 +63,12 @@ static const char usage[] =
     "                            (e.g. 4M, 512M; default an eighth of memory, at most 512M)\n"
     "      --lease-timeout T     drop a worker silent this long and re-deal its task (default 15s;\n"
     "                            T is a number with ms, s, m or h; a bare number is milliseconds)\n"
+    "      --http HOST:PORT|none the live dashboard and JSON API (default 127.0.0.1:7880; if that\n"
+    "                            port is taken, a free one; the URL is logged)\n"
+    "      --http-token-file F   the dashboard's token (else derived from --secret-file); a\n"
+    "                            non-loopback --http needs one of the two\n"
+    "      --on-done CMD         run /bin/sh -c CMD when the render ends, the outcome in\n"
+    "                            TERRAFARM_STATUS, TERRAFARM_EXIT, TERRAFARM_OUTPUT, ... (README)\n"
     "  -q, --quiet               errors only\n"
     "  -v, --verbose             more detail (workers joining, re-dealt tasks)\n"
     "  -h, --help                this help\n";

@@ -9,6 +9,7 @@
 #include "cli/commands.h"
 #include "coordinator/render/coordinator.h"
 #include "coordinator/render/frames.h"
+#include "farmproto.h"
 #include "image/exrlayout.h"
 #include "log.h"
 
@@ -226,9 +227,9 @@ int cmd_render(int argc, char **argv)
         case O_LEASE:
         {
             int64_t ms;
-            if (tf_parse_duration_ms(optarg, &ms) || ms < 100 || ms > 86400000) {
-                tf_error("--lease-timeout '%s': expected a duration from 100ms to 24h (e.g. 15s, "
-                         "500ms, 2m; a bare number is milliseconds)", optarg);
+            if (tf_parse_duration_ms(optarg, &ms) || ms < TF_LEASE_MIN_MS || ms > 86400000) {
+                tf_error("--lease-timeout '%s': expected a duration from 1s to 24h (e.g. 15s, "
+                         "1500ms, 2m; a bare number is milliseconds)", optarg);
                 return TF_EXIT_USAGE;
             }
             o.lease_timeout_ms = (int)ms;

@@ -7,13 +7,14 @@
 #define TF_WORKER_H
 
 #include "terrain/heightfield.h"
+#include "farmproto.h"
 #include "scene.h"
 #include "linda/tsclient.h"
 #include "render/render.h"
 #include "image/exrlayout.h"
 
-/* Heartbeat interval: well under the coordinator's default 15 s silence timeout. */
-#define TF_WORKER_HEARTBEAT_MS 2000
+/* Heartbeat interval (farmproto.h: a quarter of the shortest lease a coordinator accepts). */
+#define TF_WORKER_HEARTBEAT_MS TF_HEARTBEAT_MS
 
 /* Exit status of a worker that could not start at all (e.g. no OpenCL device): the coordinator
  * does not restart it. */

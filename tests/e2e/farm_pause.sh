@@ -2,8 +2,9 @@
 # farm_pause.sh: a coordinator paused for longer than the lease heals by itself (leases,
 # docs/contract.md section 3).
 # A render with one forked and two networked workers, --lease-timeout 1500, --wait-workers 3.
-# Once the forked worker and the first networked one have joined (idle: nothing is dealt before
-# the third), the coordinator is SIGSTOPped for three lease periods (as a VM migration or a
+# The forked worker and the first networked one join and wait idle (nothing is dealt before the
+# third) for three lease periods: their heartbeats alone must keep them (workers pinged every
+# 2 s and were dropped here).  Then the coordinator is SIGSTOPped for three lease periods (as a VM migration or a
 # closed laptop lid would) while their heartbeats pile up unread, and the second networked
 # worker connects into its listen queue meanwhile; then it is continued.  On waking it must
 # read what arrived before it judges anyone silent: no worker is dropped, the third joins, the
@@ -29,6 +30,8 @@ while [ "$(grep -c 'worker [0-9]* joined: ' "$T/coord.err")" -lt 2 ]; do
     i=$((i + 1)); [ $i -gt 600 ] && fail "the first two workers did not join: $(cat "$T/coord.err")"
     sleep 0.1
 done
+say "the two wait idle at the gate for three lease periods: their heartbeats keep them"
+sleep $((3 * LEASE / 1000)).$((3 * LEASE % 1000))
 say "SIGSTOP the coordinator for $((3 * LEASE)) ms; the third worker connects meanwhile"
 kill -STOP $coord
 "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --timeout 120s 2>"$T/worker2.err" &

@@ -50,7 +50,10 @@ function control(job, action, label, body) {
   const b = el('button', label);
   b.dataset.job = job.id;
   b.dataset.action = action;
-  b.addEventListener('click', () => act(job.id, action, body));
+  if (body !== undefined) b.dataset.body = JSON.stringify(body);
+  /* what a click does is all in the button's attributes: an unchanged button is kept */
+  b.addEventListener('click', () =>
+    act(b.dataset.job, action, b.dataset.body === undefined ? undefined : JSON.parse(b.dataset.body)));
   return b;
 }
 
@@ -143,9 +146,23 @@ async function fetchDashboards(jobs) {
   }));
 }
 
+/* The row shown for a job: its old row with only the cells that changed replaced, so a button
+ * the pointer is pressing stays in the page (a button replaced between mousedown and mouseup
+ * gets no click) and the refresh does not flicker. */
+function mergeRow(row, fresh) {
+  if (!row || row.cells.length !== fresh.cells.length) return fresh;
+  Object.assign(row.dataset, fresh.dataset);
+  const oldCells = [...row.cells], newCells = [...fresh.cells];
+  oldCells.forEach((c, i) => { if (!c.isEqualNode(newCells[i])) row.replaceChild(newCells[i], c); });
+  return row;
+}
+
 function drawJobs(jobs) {
   const body = document.querySelector('#jobs tbody');
-  body.replaceChildren(...jobs.slice().reverse().map(jobRow));
+  const shown = new Map([...body.rows].map(r => [r.dataset.job, r]));
+  const rows = jobs.slice().reverse().map(j => mergeRow(shown.get(String(j.id)), jobRow(j)));
+  rows.forEach((r, i) => { if (body.rows[i] !== r) body.insertBefore(r, body.rows[i] || null); });
+  while (body.rows.length > rows.length) body.deleteRow(-1);
   document.getElementById('no-jobs').hidden = jobs.length > 0;
 }
 

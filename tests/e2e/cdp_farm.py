@@ -119,7 +119,20 @@ if v["role"] != "admin" or not v["workersShown"]:
     finish(1, ["FAIL: logged in as %s, workers table shown: %s" % (v["role"], v["workersShown"])])
 print("page lists jobs %s: %s" % (jobs, [state_of(v, j) for j in jobs]))
 
-if not click('tr[data-job="%s"] button[data-action="resume"]' % paused):
+# Refreshes keep an unchanged button: the page used to rebuild every row once a second, and a
+# click whose press and release straddled a rebuild was lost (no click event at all).
+resume = 'tr[data-job="%s"] button[data-action="resume"]' % paused
+def page(expr):
+    return call("Runtime.evaluate", {"expression": expr, "returnByValue": True}, session)["result"].get("value")
+mark = page("(() => { const b = document.querySelector(%s); if (!b) return -1; window.tfKept = b;"
+            " return +document.body.dataset.refreshes; })()" % json.dumps(resume))
+if mark is None or mark < 0:
+    finish(1, ["FAIL: no resume button on job %s" % paused])
+wait_for(lambda v: v["refreshes"] >= mark + 2, "two more refreshes", 60)
+if not page("window.tfKept.isConnected && document.querySelector(%s) === window.tfKept" % json.dumps(resume)):
+    finish(1, ["FAIL: a refresh replaced job %s's resume button (a click across it is lost)" % paused])
+print("job %s's resume button kept across two refreshes" % paused)
+if not click(resume):
     finish(1, ["FAIL: no resume button on job %s" % paused])
 wait_for(lambda v: state_of(v, paused) != "paused", "the click did not resume job %s" % paused, 60)
 print("clicked resume on job %s" % paused)

@@ -17,6 +17,7 @@
 #include <poll.h>
 #include <pthread.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -44,6 +45,7 @@ struct ts_client {
     tf_buf raw, wire;      /* records read but not opened; records being sent */
     char err[256];
     pthread_mutex_t send_lock;
+    _Atomic int64_t last_tx_ms; /* when a frame last left (tf_now_ms): a ping is due after it */
     /* heartbeat */
     pthread_t hb_thread;
     int hb_running, hb_stop, hb_interval_ms;
@@ -105,6 +107,7 @@ static int send_all(int fd, const uint8_t *buf, size_t len);
 /* Send plaintext bytes (whole frames), sealed when the connection is; call under send_lock. */
 static int send_plain(ts_client *c, const uint8_t *buf, size_t len)
 {
+    atomic_store(&c->last_tx_ms, tf_now_ms());
     if (!c->sealed)
         return send_all(c->fd, buf, len);
     c->wire.len = c->wire.off = 0;
@@ -455,15 +458,20 @@ int ts_out_in_poll(ts_client *c, tf_tuple *out)
 }
 
 /* ---- heartbeat ---- */
+/* A ping goes out once nothing else has for an interval: a worker sending results keeps its
+ * connection alive by them, and pings only while it renders a long task or waits idle. */
 static void *heartbeat_main(void *arg)
 {
     ts_client *c = arg;
     pthread_mutex_lock(&c->hb_lock);
     while (!c->hb_stop) {
-        struct timespec ts = tf_realtime_in(c->hb_interval_ms);
+        int64_t wait = atomic_load(&c->last_tx_ms) + c->hb_interval_ms - tf_now_ms();
+        struct timespec ts = tf_realtime_in(wait > 0 ? (double)wait : 0.0);
         pthread_cond_timedwait(&c->hb_cond, &c->hb_lock, &ts);
         if (c->hb_stop)
             break;
+        if (tf_now_ms() - atomic_load(&c->last_tx_ms) < c->hb_interval_ms)
+            continue; /* a frame left meanwhile */
         /* A PING with request id 0 wants no reply; send errors surface on the main thread. */
         uint8_t frame[TF_FRAME_HEADER] = {TF_FRAME_MIN_LENGTH, 0, 0, 0, TF_PROTO_VERSION,
                                           TF_OP_PING, 0, 0, 0, 0};

@@ -70,10 +70,9 @@
 #define TF_HELLO_FIELDS 6
 #define TF_FAILED_FIELDS 4
 
-/* Liveness: a worker pings its coordinator every TF_HEARTBEAT_MS, busy or idle, and a
- * coordinator's silence timeout (--lease-timeout) is at least TF_LEASE_MIN_MS, four pings, so
- * a live worker is never taken for a silent one.  A ping is a 10-byte frame: four a second
- * from each worker cost a coordinator nothing measurable. */
+/* Liveness: a worker that has sent nothing for TF_HEARTBEAT_MS pings its coordinator, busy or
+ * idle (linda/tsclient.c), and a coordinator's silence timeout (--lease-timeout) is at least
+ * TF_LEASE_MIN_MS, four intervals, so a live worker is never taken for a silent one. */
 #define TF_HEARTBEAT_MS 250
 #define TF_LEASE_MIN_MS (4 * TF_HEARTBEAT_MS)
 

@@ -4,10 +4,16 @@ DevTools protocol (cdp_lib.py), as tests/e2e/farm_browser.sh asks: log in throug
 its states, click "resume" on the paused job with the mouse and see it run to done, see a running
 job's dashboard link (and that it answers), see the workers table, save a screenshot.
 
-usage: cdp_farm.py CHROMIUM BASE_URL TOKEN SHOT.png READY_FILE PAUSED_ID JOB_ID... [--limit S]
-READY_FILE is created once the page shows every job (the caller then starts the worker).
+usage: cdp_farm.py CHROMIUM BASE_URL TOKEN SHOT.png READY_FILE PAUSED_ID JOB_ID... --worker-pid FILE
+       [--limit S]
+READY_FILE is created once the page shows every job (the caller then starts the worker).  The
+caller writes the staying worker's PID to FILE, the worker frozen (SIGSTOP) from birth: it and
+its forked processes run in slices of 20 ms, the page looked at only once it has refreshed
+while they are frozen, until a running job's dashboard link has been seen and has answered --
+frozen, no job can end while the page shows it and its dashboard is asked, on a machine of any
+speed -- then they run free to the end.
 Exit 0 if every check holds, 1 with a FAIL line per failed check, 77 if Chromium cannot start."""
-import base64, http.client, json, os, sys, time, urllib.parse
+import base64, http.client, json, os, signal, sys, time, urllib.parse
 
 args = sys.argv[1:]
 limit = 300.0
@@ -15,11 +21,15 @@ if "--limit" in args:
     i = args.index("--limit")
     limit = float(args[i + 1])
     del args[i:i + 2]
+i = args.index("--worker-pid")
+worker_pid_file = args[i + 1]
+del args[i:i + 2]
 chromium, base, token, shot, ready_file, paused = args[:6]
 jobs = [paused] + args[6:]
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from cdp_lib import Chrome  # noqa: E402  (the DevTools plumbing the browser tests share)
+from worker_slices import signal_workers  # noqa: E402
 
 ch = Chrome(chromium, 1280, 900)
 
@@ -138,10 +148,36 @@ wait_for(lambda v: state_of(v, paused) != "paused", "the click did not resume jo
 print("clicked resume on job %s" % paused)
 open(ready_file, "w").close()
 
+
+def worker_signal(sig):
+    """sig to the staying worker, then to its forked processes (stopped first, it forks none
+    that the second step would miss)."""
+    try:
+        os.kill(worker, sig)
+    except ProcessLookupError:
+        pass
+    signal_workers(worker, sig)
+
+
+def run_slice():
+    """Let the worker run 20 ms, freeze it, and wait until the page has refreshed since (a
+    refresh begun before the freeze ends first: two)."""
+    worker_signal(signal.SIGCONT)
+    time.sleep(0.02)
+    worker_signal(signal.SIGSTOP)
+    r = probe()["refreshes"]
+    wait_for(lambda v: v["refreshes"] >= r + 2, "two refreshes after a slice", 60)
+
+
+wait_for(lambda v: os.path.exists(worker_pid_file), "the worker's PID", 60)
+worker = int(open(worker_pid_file).read())
+worker_signal(signal.SIGSTOP)
 seen_link = shot_taken = False
 seen_workers = set()
 end = start + limit
 while time.time() < end:
+    if not seen_link:
+        run_slice()
     v = probe()
     if v["error"]:
         finish(1, ["FAIL: the page shows an error: %s" % v["error"]])
@@ -152,6 +188,8 @@ while time.time() < end:
                 finish(1, ["FAIL: job %s's dashboard link is %s" % (j["id"], j["dashboard"])])
             seen_link = dashboard_answers(j["dashboard"]) or seen_link
             print("job %s running, its dashboard at %s" % (j["id"], j["dashboard"].split("?")[0]))
+            if seen_link:
+                worker_signal(signal.SIGCONT)  # seen: now the worker runs free
         if j["dashboard"] and not shot_taken and j["bar"] not in ("", "0%") and v["workers"]:
             screenshot()
             shot_taken = True

@@ -4,10 +4,14 @@
 
   1. the page is up and has drawn nothing while paused;
   2. a click on the picture marks an area of interest (the page posts it);
-  3. the painting is then run in steps -- resume until a result arrives, pause, wait until
-     every dealt task is answered and drawn -- and the canvas is read after each step: the area
+  3. the painting is then run in steps, with paint's forked workers frozen (SIGSTOP) between
+     them -- resume until the paint has dealt its tasks (as many as it deals at once: the
+     frozen workers answer none meanwhile), pause, thaw the workers until every dealt task is
+     answered and drawn, freeze them again -- and the canvas is read after each step: the area
      clicked is all exact while most of the rest is not, and the picture sharpens (its PSNR
-     against the final picture rises from the first coarse step to the last);
+     against the final picture rises from the first coarse step to the last).  A step is thus
+     one deal of tasks whatever the machine's speed; after the steps (80 at most) the
+     workers run free, to the end of this view and through the next;
   4. painted, the canvas is the render's PNG preview byte for byte (REF_PNG);
   5. the camera is moved with the page's own control: the next view is painted while running,
      and the latency from the click to its first pixels is measured; painted, its canvas is
@@ -15,14 +19,17 @@
      Save writes) and the page must have seen exactly one new view.
 Timings are printed, never judged.  A screenshot mid-paint goes to OUT/paint.png.
 
-usage: cdp_paint.py CHROMIUM URL REF_PNG OUT
+usage: cdp_paint.py CHROMIUM URL REF_PNG OUT PAINT_PID
+PAINT_PID is the `terrafarm paint` process (started --paused): its children are its workers.
 Exit 0 if every check holds, 1 with one line per failed check, 77 if Chromium cannot start."""
-import base64, json, os, sys, time, urllib.request
+import base64, json, os, signal, sys, time, urllib.request
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from cdp_lib import Chrome, psnr, read_png_rgb
+from worker_slices import signal_workers  # noqa: E402
 
 chromium, url, ref_png, out = sys.argv[1:5]
+painter = int(sys.argv[5])
 url = url.rstrip("/") + "/"
 ch = Chrome(chromium)
 problems = []
@@ -80,7 +87,11 @@ area = wait_for(lambda: page("paint.interest || null"), "the click to mark an ar
 if not page("paint.interestSent.then(a => a !== null)"):
     ch.finish(1, ["FAIL: the server refused the area of interest"])
 
-# 3. steps
+# 3. steps.  Paused, the paint deals nothing; its workers (forked before its page was up) are
+# frozen.  Resumed, it deals in one go as many tasks as it keeps out (two a worker, plus one) and
+# no more until results come back, which frozen workers cannot send: so once the status shows
+# tasks out, pausing makes the step exactly that deal, on a machine of any speed.
+signal_workers(painter, signal.SIGSTOP)
 steps, shares_when_done, first_draw_ms, shot = [], None, None, False
 t_resume = time.time()
 while len(steps) < 80:
@@ -90,10 +101,12 @@ while len(steps) < 80:
     if not control("resume"):
         problems.append("FAIL: the page's resume control was refused")
         break
-    wait_for(lambda: status()["results"] > before["results"] or status()["painted_s"] >= 0,
-             "a result after resuming")
+    wait_for(lambda: (lambda s: s["outstanding"] > 0 or s["painted_s"] >= 0)(status()),
+             "tasks dealt after resuming")
     control("pause")
+    signal_workers(painter, signal.SIGCONT)
     s = wait_for(lambda: (lambda s: s if drawn_all(s) else None)(status()), "the step to be drawn")
+    signal_workers(painter, signal.SIGSTOP)
     if first_draw_ms is None:
         first_draw_ms = (time.time() - t_resume) * 1000
     inside, outside = page("paint.exactShares(paint.interest)")
@@ -103,6 +116,7 @@ while len(steps) < 80:
     if not shot and s["counts"]["exact_pixels"] > 0.3 * w * h:
         ch.screenshot(os.path.join(out, "paint.png"))
         shot = True
+signal_workers(painter, signal.SIGCONT)
 control("resume")
 s = wait_for(lambda: (lambda s: s if s["painted_s"] >= 0 and drawn_all(s) else None)(status()),
              "the view to be painted")

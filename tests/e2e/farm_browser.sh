@@ -4,7 +4,10 @@
 # three jobs with their states (one paused), click "resume" and see that job run to done with
 # the others, see a running job's own dashboard link (and that it answers), see the workers
 # table; a screenshot is saved ($TF_FARM_SHOT, default in the test's temp dir).  The worker is
-# started only once the page has shown the queue and the click has resumed the paused job.
+# started only once the page has shown the queue and the click has resumed the paused job, and
+# born frozen (SIGSTOP): cdp_farm.py lets it run in 20 ms slices, looking at the page only while
+# it is frozen, until a running job's dashboard link has been seen and has answered, so no job
+# can end while that is checked, however fast the machine; then it runs free.
 . "$(dirname "$0")/lib.sh"
 e2e_init
 CHROMIUM=$(command -v chromium || command -v chromium-browser) || skip "chromium is not installed (make deps)"
@@ -30,7 +33,8 @@ long=$(submit "$TF_ROOT/scenes/alps.scene" --size 1280x720 --name long --priorit
 say "Chromium at http://127.0.0.1:$PORT/"
 shot=${TF_FARM_SHOT:-$T/farm.png}
 python3 "$(dirname "$0")/cdp_farm.py" "$CHROMIUM" "http://127.0.0.1:$PORT" "$(tail -1 "$T/admin")" \
-    "$shot" "$T/page-ready" "$paused" "$first" "$long" --limit 400 >"$T/cdp.out" 2>&1 &
+    "$shot" "$T/page-ready" "$paused" "$first" "$long" --worker-pid "$T/worker.pid" --limit 400 \
+    >"$T/cdp.out" 2>&1 &
 CDP=$!
 e2e_track $CDP
 i=0
@@ -39,10 +43,13 @@ until [ -e "$T/page-ready" ]; do
     sleep 0.1; i=$((i + 1)); [ $i -lt 1200 ] || fail "the page did not list the jobs: $(cat "$T/cdp.out")"
 done
 if [ -e "$T/page-ready" ]; then
-    say "the page listed the queue and resumed the paused job: a staying worker joins"
-    "$TF_BIN" worker --connect "http://127.0.0.1:$PORT" --secret-file "$T/secret" --name w1 -j 1 \
-        >"$T/worker.log" 2>&1 &
+    say "the page listed the queue and resumed the paused job: a staying worker joins, frozen"
+    # the shell stops itself before it becomes the worker (exec keeps its PID): frozen at birth
+    # shellcheck disable=SC2016
+    sh -c 'kill -STOP $$; exec "$@"' sh "$TF_BIN" worker --connect "http://127.0.0.1:$PORT" \
+        --secret-file "$T/secret" --name w1 -j 1 >"$T/worker.log" 2>&1 &
     e2e_track $!
+    echo $! >"$T/worker.pid.new" && mv "$T/worker.pid.new" "$T/worker.pid"
 fi
 wait $CDP
 crc=$?

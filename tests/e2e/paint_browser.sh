@@ -2,7 +2,10 @@
 # paint_browser.sh: Raypaint in a real browser (headless Chromium over the DevTools protocol,
 # cdp_paint.py).  A --paused `terrafarm paint` is opened, an area clicked, and the painting run
 # in steps: the clicked area comes first, the picture sharpens, and once painted the canvas is
-# the render's PNG preview byte for byte.  Then the page's camera control makes a new view:
+# the render's PNG preview byte for byte.  A step is one deal of tasks, not what the workers
+# finish while the checker looks: paint's forked workers are frozen (SIGSTOP) while it resumes
+# and deals, and thawed, paused, only to answer that deal, so the steps are the same on a
+# machine of any speed.  Then the page's camera control makes a new view:
 # painted, its canvas equals the render of the scene the page's Save wrote.  Screenshot:
 # $TF_PAINT_SHOT (default in the test's temp dir).
 . "$(dirname "$0")/lib.sh"
@@ -16,7 +19,8 @@ say "terrafarm paint, paused, watched by Chromium"
 # tasks of ~1000 rays: a 320x180 picture in dozens of tasks, so the order of dealing shows
 start_paint "$T/paint.err" --size $SIZE -j 2 --paused --http 127.0.0.1:0 --save "$T/saved.scene" \
     --task-rays 1000
-python3 "$(dirname "$0")/cdp_paint.py" "$CHROMIUM" "$PAINT_URL" "$T/ref.png" "$T" >"$T/cdp.out" 2>&1
+python3 "$(dirname "$0")/cdp_paint.py" "$CHROMIUM" "$PAINT_URL" "$T/ref.png" "$T" "$PAINT_PID" \
+    >"$T/cdp.out" 2>&1
 crc=$?
 cat "$T/cdp.out"
 [ $crc -eq 77 ] && skip "$(tail -1 "$T/cdp.out")"

@@ -4,7 +4,8 @@
 # are kept (rows_resumed), never rendered again, and the final image is byte-identical to an
 # uninterrupted render.  Kills land while the new file's header is written, the instant the file
 # appears, as a resumed run starts, at ~30% of the output file's final size, inside the resume's
-# copy of the verified chunks, and at ~60% and ~90% (plus a random few milliseconds, so they fall
+# copy of the verified chunks (or, if a disk too fast for the watching shell lets that copy end
+# unseen, just after it), and at ~60% and ~90% (plus a random few milliseconds, so they fall
 # anywhere, mid-write included).  Forked workers die with their coordinator (PR_SET_PDEATHSIG).
 # Prints, per interruption, rows on disk after the kill and rows the next run resumed. RESUME_TASKS
 # (default rows:1, a scanline file) picks the task shape: resume_kill_tiled.sh runs the same
@@ -34,6 +35,10 @@ for pct in create early 0 30 copy 60 90; do
     run=$((run + 1))
     had_file=no; [ -e "$OUT" ] && had_file=yes
     : >"$T/run$run.err"
+    # the copy run's marker of the old file: an x bit, which the file the copy makes lacks
+    if [ $pct = copy ]; then
+        chmod u+x "$OUT" || fail "run $run: no output file to resume"
+    fi
     "$TF_BIN" render "$SCENE" $ARGS --resume --listen 127.0.0.1:0 -o "$OUT" 2>"$T/run$run.err" &
     coord=$!; e2e_track $coord
     netw=""
@@ -60,11 +65,28 @@ for pct in create early 0 30 copy 60 90; do
         done
         jitter=0
     elif [ $pct = copy ]; then
-        # while --resume copies the verified chunks into OUT.resume.tmp, before its rename
+        # while --resume copies the verified chunks into OUT.resume.tmp, before its rename: a
+        # busy wait, the coordinator stopped the instant the copy shows.  The copy lasts tens of
+        # ms on ext4 (an fsync), far less on a faster disk or tmpfs, where a descheduled shell
+        # may miss it: the wait also ends once OUT is no longer the old file (the copy renamed
+        # over it: OUT has lost the x bit set above), and the kill then lands just after the
+        # copy, which must lose nothing either.  The workers (forked before the copy) are
+        # frozen at birth meanwhile, so the render cannot run on to its end however late this
+        # shell stops it.
+        freeze_workers_at_birth $coord 2 &
+        freezer=$!
         i=0
-        while [ ! -e "$OUT.resume.tmp" ]; do
+        while [ ! -e "$OUT.resume.tmp" ] && [ -x "$OUT" ] && kill -0 $coord 2>/dev/null; do
             i=$((i + 1)); [ $i -lt 2000000 ] || fail "run $run: no $OUT.resume.tmp appeared"
         done
+        kill -STOP $coord 2>/dev/null
+        wait $freezer || fail "run $run: its workers were not frozen at birth: $(tail -3 "$T/run$run.err")"
+        frozen=$(pgrep -P $coord)
+        if [ -e "$OUT.resume.tmp" ]; then
+            say "run $run stopped inside its copy of the verified chunks"
+        else
+            say "run $run had passed its copy of the verified chunks: killed just after it"
+        fi
         jitter=0
     elif [ $pct -eq 0 ]; then
         # before this run writes its first row: as soon as it says it is rendering (workers

@@ -80,16 +80,21 @@ grep -q "job $gpu" "$T/worker-w2.log" || fail "the gpu job was not served by the
 grep -q "job $big" "$T/worker-w3.log" || fail "the big job was not served by the worker tagged big"
 
 say "a farm killed mid-queue continues where it stopped"
-# Once the first job runs the workers are frozen (SIGSTOP), the second is queued behind it,
-# and the farm is killed: whatever the machine's speed, the second is unfinished then (no
-# worker could move since it came), and every job running at the kill must be started again
-# and resumed.
+# The workers are frozen (SIGSTOP) before the first job comes and let run 20 ms at a time, the
+# farm asked only while they are frozen, until it shows that job running (or done, on a machine
+# that renders it in one slice): it cannot end unseen between two looks, whatever the machine's
+# speed.  Frozen, the second is queued behind it and the farm is killed: the second is
+# unfinished then (no worker could move since it came), and every job running at the kill must
+# be started again and resumed.  (A worker's forked processes share its command line: a second
+# STOP catches one forked while the first was sent.)
+freeze() { workers_signal "$PORT" STOP; workers_signal "$PORT" STOP; }
+freeze
 long=$(submit "$TF_ROOT/scenes/alps.scene" --size 480x270 --name long --tasks rows:2)
 i=0
-until [ "$(field "$long" state)" = running ]; do
-    i=$((i + 1)); [ $i -lt 3000 ] || fail "job $long never ran"; sleep 0.05
+until case $(field "$long" state) in running | done) true ;; *) false ;; esac; do
+    i=$((i + 1)); [ $i -lt 1200 ] || fail "job $long never ran"
+    workers_signal "$PORT" CONT; sleep 0.02; freeze; sleep 0.05
 done
-workers_signal "$PORT" STOP
 next=$(submit "$TF_ROOT/scenes/valley.scene" --size 480x270 --name next --tasks rows:2)
 at_kill="$long:$(field "$long" state) $next:$(field "$next" state)"
 OLDPORT=$PORT

@@ -44,10 +44,8 @@ until [ -e "$T/page-ready" ]; do
 done
 if [ -e "$T/page-ready" ]; then
     say "the page listed the queue and resumed the paused job: a staying worker joins, frozen"
-    # the shell stops itself before it becomes the worker (exec keeps its PID): frozen at birth
-    # shellcheck disable=SC2016
-    sh -c 'kill -STOP $$; exec "$@"' sh "$TF_BIN" worker --connect "http://127.0.0.1:$PORT" \
-        --secret-file "$T/secret" --name w1 -j 1 >"$T/worker.log" 2>&1 &
+    start_stopped "$T/worker.log" "$TF_BIN" worker --connect "http://127.0.0.1:$PORT" \
+        --secret-file "$T/secret" --name w1 -j 1
     e2e_track $!
     echo $! >"$T/worker.pid.new" && mv "$T/worker.pid.new" "$T/worker.pid"
 fi

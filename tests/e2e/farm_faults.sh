@@ -17,12 +17,6 @@ say "reference: -j 2, $SIZE"
 render -q -j 2 --size $SIZE --tasks rows:8 -o "$T/ref.exr" || fail "reference render: $(cat "$T/last.err")"
 full=$(wc -c <"$T/ref.exr")
 
-# busy ADDR: "id:task" of each worker the dashboard at ADDR shows holding a task
-busy() {
-    "$TF_BIN" status "$1" --json 2>/dev/null |
-        python3 -c 'import json,sys; print(*["%d:%d" % (w["id"], w["task"]) for w in json.load(sys.stdin)["workers"] if w["state"] == "busy"])' 2>/dev/null
-}
-
 say "1. kill -KILL one forked worker mid-render (rows:8, -j 2)"
 # --wait-workers 3: the two forked workers join and wait at the gate, nothing dealt, and are
 # frozen there; the third, a networked worker started stopped, runs 20 ms at a time until it
@@ -32,15 +26,14 @@ say "1. kill -KILL one forked worker mid-render (rows:8, -j 2)"
     --stats "$T/kill.json" 2>"$T/kill.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/kill.err") || fail "coordinator printed no port: $(cat "$T/kill.err")"
-addr=$(dashboard_url "$T/kill.err" $coord | sed 's#http://\([^/]*\)/#\1#')
+addr=$(dashboard_addr "$T/kill.err" $coord)
 i=0
 while [ "$(grep -c 'worker [0-9]* joined: forked' "$T/kill.err")" -lt 2 ]; do
     kill -0 $coord 2>/dev/null || fail "the coordinator ended: $(tail -3 "$T/kill.err")"
     sleep 0.05; i=$((i + 1)); [ $i -lt 1200 ] || fail "the forked workers did not join: $(cat "$T/kill.err")"
 done
 freeze_workers $coord
-# shellcheck disable=SC2016
-sh -c 'kill -STOP $$; exec "$@"' sh "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -q 2>"$T/third.err" &
+start_stopped "$T/third.err" "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -q
 third=$!; e2e_track $third
 i=0
 until grep -q 'joined: networked' "$T/kill.err"; do
@@ -55,8 +48,8 @@ while [ -z "$victim" ]; do
     kill -0 $coord 2>/dev/null || fail "the render ended before a worker was seen holding a task: $(tail -3 "$T/kill.err")"
     run_slice $coord
     i=$((i + 1)); [ $i -lt 1200 ] || fail "no forked worker was seen holding a task"
-    held=$(busy "$addr"); sleep 0.25
-    for it in $(busy "$addr"); do
+    held=$(busy_workers "$addr"); sleep 0.25
+    for it in $(busy_workers "$addr"); do
         case " $held " in *" $it "*) ;; *) continue ;; esac
         victim=$(sed -n "s/.*worker ${it%%:*} joined: forked on .*(pid \([0-9]*\),.*/\1/p" "$T/kill.err" | head -1)
         [ -n "$victim" ] && break
@@ -94,13 +87,13 @@ say "2. SIGSTOP a networked worker holding a task (--lease-timeout 4000, -j 0)"
     --listen 127.0.0.1:0 --http 127.0.0.1:0 -o "$T/stop.exr" --stats "$T/stop.json" 2>"$T/stop.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/stop.err") || fail "coordinator printed no port: $(cat "$T/stop.err")"
-addr=$(dashboard_url "$T/stop.err" $coord | sed 's#http://\([^/]*\)/#\1#')
-sh -c 'kill -STOP $$; exec "$@"' sh "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -v 2>"$T/workerA.err" &
+addr=$(dashboard_addr "$T/stop.err" $coord)
+start_stopped "$T/workerA.err" "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -v
 wa=$!; e2e_track $wa
 i=0
-until [ "$(wc -c 2>/dev/null <"$T/stop.exr" || echo 0)" -ge $((full / 4)) ] && [ -n "$(busy "$addr")" ]; do
+until [ "$(wc -c 2>/dev/null <"$T/stop.exr" || echo 0)" -ge $((full / 4)) ] && [ -n "$(busy_workers "$addr")" ]; do
     kill -0 $coord 2>/dev/null || fail "the render ended before the stop: $(tail -3 "$T/stop.err")"
-    kill -CONT $wa; sleep 0.02; kill -STOP $wa; sleep 0.25
+    run_process_slice $wa
     i=$((i + 1)); [ $i -lt 1200 ] || fail "A never held a task past a quarter of the file: $(cat "$T/workerA.err")"
 done
 grep -q 'joined: .*networked' "$T/stop.err" || fail "networked worker never joined: $(cat "$T/workerA.err")"

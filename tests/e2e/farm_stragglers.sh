@@ -19,16 +19,15 @@ rm -f "$T/s.exr" "$T/s.json"
     -o "$T/s.exr" --stats "$T/s.json" -v 2>"$T/s.err" &
 coord=$!; e2e_track $coord
 port=$(e2e_port "$T/s.err") || fail "the coordinator printed no port: $(cat "$T/s.err")"
-addr=$(dashboard_url "$T/s.err" $coord | sed 's#http://\([^/]*\)/#\1#')
+addr=$(dashboard_addr "$T/s.err" $coord)
 # the first worker starts stopped (its shell stops itself before it execs the worker) and runs
 # in slices until the coordinator shows it holding a task
-sh -c 'kill -STOP $$; exec "$@"' sh "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -q 2>"$T/a.err" &
+start_stopped "$T/a.err" "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -q
 slow=$!; e2e_track $slow
 i=0
-until "$TF_BIN" status "$addr" --json 2>/dev/null |
-        python3 -c 'import json,sys; sys.exit(0 if [w for w in json.load(sys.stdin)["workers"] if w["state"] == "busy"] else 1)' 2>/dev/null; do
+until [ -n "$(busy_workers "$addr")" ]; do
     kill -0 $coord 2>/dev/null || fail "the render ended before the first worker was frozen: $(tail -3 "$T/s.err")"
-    kill -CONT $slow; sleep 0.02; kill -STOP $slow; sleep 0.25
+    run_process_slice $slow
     i=$((i + 1)); [ $i -lt 1200 ] || fail "the first worker never held a task: $(cat "$T/a.err")"
 done
 "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -q 2>"$T/b.err" &

@@ -152,6 +152,23 @@ dashboard_url() {
     sed -n 's/.*dashboard at \(http:[^ ]*\).*/\1/p' "$1" | head -1
 }
 
+# dashboard_addr LOGFILE PID: dashboard_url's HOST:PORT, as `terrafarm status` takes it.
+dashboard_addr() { dashboard_url "$1" "$2" | sed 's#http://\([^/]*\)/#\1#'; }
+
+# busy_workers HOST:PORT: "id:task" of each worker the dashboard there shows holding a task.
+busy_workers() {
+    "$TF_BIN" status "$1" --json 2>/dev/null |
+        python3 -c 'import json,sys; print(*["%d:%d" % (w["id"], w["task"]) for w in json.load(sys.stdin)["workers"] if w["state"] == "busy"])' 2>/dev/null
+}
+
+# start_stopped LOGFILE CMD...: CMD in the background, stopped (SIGSTOP) before it runs at all
+# (its shell stops itself, then execs CMD under the same pid, $!); its output to LOGFILE.
+start_stopped() {
+    log=$1; shift
+    # shellcheck disable=SC2016
+    sh -c 'kill -STOP $$; exec "$@"' sh "$@" >"$log" 2>&1 &
+}
+
 # freeze_workers PID / thaw_workers PID: SIGSTOP / SIGCONT the forked workers of coordinator
 # PID, so that a render lasts exactly as long as a test needs (the coordinator keeps serving).
 freeze_workers() { for c in $(pgrep -P "$1"); do kill -STOP "$c" 2>/dev/null; done; }
@@ -183,3 +200,6 @@ PY
 # test waits for never races the machine's speed.  worker_slices.py (beside this file) is the
 # same for the scripts' python.
 run_slice() { thaw_workers "$1"; sleep 0.02; freeze_workers "$1"; sleep 0.25; }
+
+# run_process_slice PID: the same for one stopped process (e.g. one start_stopped began).
+run_process_slice() { kill -CONT "$1"; sleep 0.02; kill -STOP "$1"; sleep 0.25; }

@@ -5,12 +5,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "clock.h"
 #include "cli/commands.h"
 #include "coordinator/render/coordinator.h"
-#include "coordinator/render/frames.h"
-#include "farmproto.h"
-#include "image/exrlayout.h"
+#include "coordinator/render/render_option.h"
 #include "log.h"
 
 static const char usage[] =
@@ -74,16 +71,14 @@ static const char usage[] =
     "  -v, --verbose             more detail (workers joining, re-dealt tasks)\n"
     "  -h, --help                this help\n";
 
-static int parse_int(const char *flag, const char *s, int lo, int hi, int *out)
+/* An option render_option.c parses: 0, or -1 once its message is printed. */
+static int set_value(tf_render_opts *o, const char *flag, const char *value)
 {
-    char *end;
-    long v = strtol(s, &end, 10);
-    if (end == s || *end || v < lo || v > hi) {
-        tf_error("%s '%s': expected an integer from %d to %d", flag, s, lo, hi);
-        return -1;
-    }
-    *out = (int)v;
-    return 0;
+    char err[512];
+    if (tf_render_option_set(o, flag, value, err, sizeof err) == 0)
+        return 0;
+    tf_error("%s", err);
+    return -1;
 }
 
 int cmd_render(int argc, char **argv)
@@ -126,50 +121,25 @@ int cmd_render(int argc, char **argv)
     };
     tf_render_opts o;
     tf_render_opts_init(&o);
-    char err[512];
-    int c;
+    int c, longindex = 0;
     optind = 1;
     opterr = 0;
-    while ((c = getopt_long(argc, argv, ":o:j:qvh", longopts, NULL)) != -1) {
+    while ((c = getopt_long(argc, argv, ":o:j:qvh", longopts, &longindex)) != -1) {
         switch (c) {
-        case 'o': o.output = optarg; break;
         case 'j':
-            if (parse_int("--workers", optarg, 0, 4096, &o.workers))
+            if (set_value(&o, "--workers", optarg))
                 return TF_EXIT_USAGE;
             break;
-        case O_WAIT_WORKERS:
-            if (parse_int("--wait-workers", optarg, 0, 1 << 20, &o.wait_workers))
+        case O_WAIT_WORKERS: case O_TASKS: case O_WATERMARK: case O_AFFINITY: case O_SIZE:
+        case O_BACKEND: case O_FRAMES: case O_FRAME: case O_PIXEL: case O_VERIFY:
+        case O_PREVIEW_INTERVAL: case O_LEASE: {
+            char flag[40];
+            snprintf(flag, sizeof flag, "--%s", longopts[longindex].name);
+            if (set_value(&o, flag, optarg))
                 return TF_EXIT_USAGE;
             break;
-        case O_TASKS:
-            if (tf_task_spec_parse(optarg, &o.tasks, err, sizeof err)) {
-                tf_error("%s", err);
-                return TF_EXIT_USAGE;
-            }
-            o.tasks_given = 1;
-            break;
-        case O_WATERMARK:
-            if (parse_int("--watermark", optarg, 1, 1 << 20, &o.watermark))
-                return TF_EXIT_USAGE;
-            break;
-        case O_AFFINITY:
-            if (strcmp(optarg, "on") && strcmp(optarg, "off")) {
-                tf_error("--affinity '%s': expected on or off", optarg);
-                return TF_EXIT_USAGE;
-            }
-            o.affinity = !strcmp(optarg, "on");
-            break;
-        case O_SIZE:
-            if (tf_parse_image_size("--size", optarg, &o.width, &o.height))
-                return TF_EXIT_USAGE;
-            break;
-        case O_BACKEND:
-            if (strcmp(optarg, "c") && strcmp(optarg, "opencl") && strcmp(optarg, "auto")) {
-                tf_error("--backend '%s': expected c, opencl or auto", optarg);
-                return TF_EXIT_USAGE;
-            }
-            o.backend = optarg;
-            break;
+        }
+        case 'o': o.output = optarg; break;
         case O_LISTEN: o.listen = optarg; break;
         case O_SECRET: o.secret_file = optarg; break;
         case O_RESUME: o.resume = 1; break;
@@ -179,62 +149,8 @@ int cmd_render(int argc, char **argv)
         case O_HTTP_TOKEN: o.http_token_file = optarg; break;
         case O_ON_DONE: o.on_done = optarg; break;
         case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
-        case O_FRAMES:
-        case O_FRAME: {
-            const char *flag = c == O_FRAME ? "--frame" : "--frames";
-            tf_frame_range fr;
-            if (o.frames_given) {
-                tf_error("render: give --frames or --frame once");
-                return TF_EXIT_USAGE;
-            }
-            if (tf_frame_range_parse(flag, optarg, &fr, err, sizeof err)) {
-                tf_error("%s", err);
-                return TF_EXIT_USAGE;
-            }
-            if (c == O_FRAME && fr.last != fr.first) {
-                tf_error("--frame '%s': expected one frame number (--frames takes a range)",
-                         optarg);
-                return TF_EXIT_USAGE;
-            }
-            o.frames_given = 1;
-            o.frame_first = fr.first;
-            o.frame_last = fr.last;
-            o.frame_step = fr.step;
-            break;
-        }
         case O_MOVIE: o.movie = optarg; break;
-        case O_PIXEL:
-            if (tf_pixel_type_parse(optarg, &o.pixel)) {
-                tf_error("--pixel '%s': expected half or float", optarg);
-                return TF_EXIT_USAGE;
-            }
-            o.pixel_given = 1;
-            break;
         case O_VERIFY_CHUNKS: o.verify_chunks = 1; break;
-        case O_VERIFY: {
-            char *end;
-            o.verify_fraction = strtod(optarg, &end);
-            if (end == optarg || *end || !(o.verify_fraction >= 0 && o.verify_fraction <= 1)) {
-                tf_error("--verify '%s': expected a fraction from 0 to 1", optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        }
-        case O_PREVIEW_INTERVAL:
-            if (parse_int("--preview-interval", optarg, 100, 86400000, &o.preview_interval_ms))
-                return TF_EXIT_USAGE;
-            break;
-        case O_LEASE:
-        {
-            int64_t ms;
-            if (tf_parse_duration_ms(optarg, &ms) || ms < TF_LEASE_MIN_MS || ms > 86400000) {
-                tf_error("--lease-timeout '%s': expected a duration from 1s to 24h (e.g. 15s, "
-                         "1500ms, 2m; a bare number is milliseconds)", optarg);
-                return TF_EXIT_USAGE;
-            }
-            o.lease_timeout_ms = (int)ms;
-            break;
-        }
         case O_TERRAIN_CACHE:
             if (tf_parse_byte_size("--terrain-cache", optarg, &o.terrain_cache))
                 return TF_EXIT_USAGE;

@@ -17,7 +17,7 @@ int cmd_paint(int argc, char **argv);       /* cmd_paint.c: Raypaint, the intera
  * 1024) and an optional B or iB.  0, or -1 after one line naming flag and text. */
 #include <stddef.h>
 int tf_parse_byte_size(const char *flag, const char *text, size_t *bytes);
-/* `--size WxH`: sides 1 to 65536.  0, or -1 after one line naming flag and text. */
+/* `--size WxH` of paint: sides 1 to 65536.  0, or -1 after one line naming flag and text. */
 int tf_parse_image_size(const char *flag, const char *text, int *w, int *h);
 
 enum { TF_EXIT_OK = 0, TF_EXIT_FAIL = 1, TF_EXIT_USAGE = 2 };

@@ -14,6 +14,7 @@
 
 #include "coordinator/farm/jobrun.h"
 #include "coordinator/render/frames.h"
+#include "coordinator/render/render_option.h"
 #include "log.h"
 #include "scene.h"
 
@@ -64,9 +65,12 @@ static int value_ok(const char *v)
     return 1;
 }
 
-/* The options array: known flags, each with one plain value; 0 or a message in err. */
-static int check_options(json_t *opts, char *err, size_t errlen)
+/* The options array: known flags, each with one plain value that the render takes (parsed
+ * into *ro as the render will parse it); 0 or a message in err. */
+static int check_options(json_t *opts, tf_render_opts *ro, char *err, size_t errlen)
 {
+    char why[512];
+    tf_render_opts_init(ro);
     if (opts && !json_is_array(opts))
         return tf_seterr(err, errlen, "options: expected an array of strings");
     size_t n = json_array_size(opts);
@@ -84,7 +88,23 @@ static int check_options(json_t *opts, char *err, size_t errlen)
         const char *v = ++i < n ? json_string_value(json_array_get(opts, i)) : NULL;
         if (!v || !value_ok(v))
             return tf_seterr(err, errlen, "options: %s needs one plain value", flag);
+        if (tf_render_option_set(ro, flag, v, why, sizeof why))
+            return tf_seterr(err, errlen, "options: %s", why);
     }
+    return 0;
+}
+
+/* What the options ask of this scene: the frames it has; the image size. */
+static int check_options_with(const tf_render_opts *ro, const tf_scene *s, tf_job *j, char *err,
+                              size_t errlen)
+{
+    char why[512];
+    tf_frame_range range = {ro->frame_first, ro->frame_last, ro->frame_step};
+    if (ro->frames_given && tf_frame_range_fits(&range, s->animation.frames, j->name, why,
+                                                sizeof why))
+        return tf_seterr(err, errlen, "options: %s", why);
+    j->width = ro->width ? ro->width : s->width;
+    j->height = ro->height ? ro->height : s->height;
     return 0;
 }
 
@@ -193,16 +213,6 @@ static int read_settings(tf_farm *f, const farm_caller *who, json_t *req, tf_job
     return 0;
 }
 
-static void size_from_options(json_t *opts, const tf_scene *s, tf_job *j)
-{
-    j->width = s->width;
-    j->height = s->height;
-    for (size_t i = 0; i + 1 < json_array_size(opts); i++)
-        if (!strcmp(json_string_value(json_array_get(opts, i)), "--size"))
-            sscanf(json_string_value(json_array_get(opts, i + 1)), "%dx%d", &j->width,
-                   &j->height);
-}
-
 /* The job's kind from the request ("render" when absent): 0, or -1 and err. */
 static int read_kind(json_t *req, json_t *opts, tf_job *j, char *err, size_t errlen)
 {
@@ -227,12 +237,13 @@ json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status
         return farm_error(status, 403, "a %s may not submit jobs", who->role);
     char err[1024];
     tf_job j = {0};
+    tf_render_opts ro;
     const char *text = json_string_value(json_object_get(req, "scene"));
     json_t *opts = json_object_get(req, "options");
     if (!text || strlen(text) > SCENE_TEXT_MAX)
         return farm_error(status, 400, "scene: the scene file's text (at most 1 MiB)");
-    if (read_settings(f, who, req, &j, err, sizeof err) || check_options(opts, err, sizeof err) ||
-        read_kind(req, opts, &j, err, sizeof err))
+    if (read_settings(f, who, req, &j, err, sizeof err) ||
+        check_options(opts, &ro, err, sizeof err) || read_kind(req, opts, &j, err, sizeof err))
         return farm_error(status, 400, "%s", err);
     size_t hm_len = 0;
     const char *hm_name;
@@ -248,7 +259,10 @@ json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status
         return farm_error(status, 400, "%s: an [animation] cannot be painted; paint a still",
                           j.name);
     }
-    size_from_options(opts, s, &j);
+    if (check_options_with(&ro, s, &j, err, sizeof err)) {
+        tf_scene_free(s);
+        return farm_error(status, 400, "%s", err);
+    }
     tf_job_content c = {.scene = (char *)text, .scene_len = strlen(text),
                         .heightmap = s->heightmap, .heightmap_len = s->heightmap_len,
                         .heightmap_name = (char *)(hm_name ? hm_name : "heightmap"),

@@ -144,19 +144,12 @@ static int choose_frames(render *r)
     const tf_render_opts *o = r->o;
     const tf_animation *a = &r->scene->animation;
     r->animated = a->frames > 0;
-    if (o->frames_given && !r->animated) {
-        tf_error("--frame/--frames: %s has no [animation] section: it is a still (render it "
-                 "without them)", o->scene_path);
-        return step_failed(r, 2, NULL);
-    }
     tf_frame_range range = {0, r->animated ? a->frames - 1 : 0, 1};
     if (o->frames_given) {
+        char err[512];
         range = (tf_frame_range){o->frame_first, o->frame_last, o->frame_step};
-        if (range.last >= a->frames) {
-            tf_error("--frame/--frames: %s has frames 0..%d; frame %d is not one of them",
-                     o->scene_path, a->frames - 1, range.last);
-            return step_failed(r, 2, NULL);
-        }
+        if (tf_frame_range_fits(&range, a->frames, o->scene_path, err, sizeof err))
+            return step_failed(r, 2, err);
     }
     if (o->movie) {
         char err[512];

@@ -49,6 +49,18 @@ bad:
                      "STEP >= 1)", flag, text, TF_ANIM_MAX_FRAMES - 1);
 }
 
+int tf_frame_range_fits(const tf_frame_range *r, int scene_frames, const char *what, char *err,
+                        size_t errlen)
+{
+    if (scene_frames <= 0)
+        return tf_seterr(err, errlen, "--frame/--frames: %s has no [animation] section: it is a "
+                         "still (render it without them)", what);
+    if (r->last >= scene_frames)
+        return tf_seterr(err, errlen, "--frame/--frames: %s has frames 0..%d; frame %d is not "
+                         "one of them", what, scene_frames - 1, r->last);
+    return 0;
+}
+
 int tf_frame_range_count(const tf_frame_range *r) { return (r->last - r->first) / r->step + 1; }
 
 char *tf_frame_default_pattern(const char *scene_path)

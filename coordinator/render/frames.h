@@ -14,6 +14,10 @@ typedef struct tf_frame_range {
 /* "A-B", "A-B:S" or "N" (a single frame).  0, or -1 with a one-line message naming flag. */
 int tf_frame_range_parse(const char *flag, const char *text, tf_frame_range *r, char *err,
                          size_t errlen);
+/* Whether a render of a scene with `scene_frames` frames (0: a still) may cover r: 0, or -1
+ * with a one-line message naming the scene (`what`). */
+int tf_frame_range_fits(const tf_frame_range *r, int scene_frames, const char *what, char *err,
+                        size_t errlen);
 /* Number of frames in r. */
 int tf_frame_range_count(const tf_frame_range *r);
 

@@ -265,6 +265,22 @@ def main():
                  ["--size", 48], ["--watermark", "\u00e9t\u00e9"]):
         expect(f"option values {opts}", "POST", "/api/jobs", alice,
                {"scene": default_scene, "options": opts}, status=400, contains="plain value")
+    say("option values the render would refuse when it starts are refused at submission")
+    for opts, says in ((["--lease-timeout", "5ms"], "--lease-timeout '5ms': expected a duration"),
+                       (["--size", "0x32"], "--size '0x32': expected WxH"),
+                       (["--tasks", "rows:0"], "--tasks 'rows:0'"),
+                       (["--pixel", "quarter"], "--pixel 'quarter': expected half or float"),
+                       (["--verify", "2"], "--verify '2': expected a fraction from 0 to 1"),
+                       (["--affinity", "maybe"], "--affinity 'maybe': expected on or off"),
+                       (["--watermark", "0"], "--watermark '0': expected an integer"),
+                       (["--wait-workers", "many"], "--wait-workers 'many': expected an integer"),
+                       (["--frame", "2-5"], "--frame '2-5': expected one frame number"),
+                       (["--frames", "5-2"], "the last frame is before the first"),
+                       (["--frames", "0-1", "--frame", "1"], "give --frames or --frame once"),
+                       (["--frames", "0-1"], "has no [animation] section")):
+        expect(f"option values {opts}", "POST", "/api/jobs", alice,
+               {"scene": default_scene, "options": opts, "name": "values"}, status=400,
+               contains=says)
     expect("options not an array", "POST", "/api/jobs", alice,
            {"scene": default_scene, "options": "--size 48x32"}, status=400, contains="array")
     for field, value, rule in (("name", "x" * 10240, "name"), ("name", "../etc", "name"),

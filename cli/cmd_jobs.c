@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "clock.h"
 #include "cli/commands.h"
@@ -215,12 +216,20 @@ static int download(client *c, long long id, int frame, const char *file)
     int rc = TF_EXIT_FAIL;
     snprintf(tmp, sizeof tmp, "%s.download.tmp", file);
     FILE *f = a.code == 200 ? fopen(tmp, "wb") : NULL;
-    if (a.code != 200)
-        tf_error("%s %s answered %d: %.300s", c->farm, path, a.code, a.body);
-    else if (!f || fwrite(a.body, 1, a.len, f) != a.len || fclose(f) || rename(tmp, file))
-        tf_error("%s: cannot write the output", file);
-    else
-        rc = TF_EXIT_OK;
+    char said[320];
+    if (a.code != 200) {
+        tf_http_error_text(a.body, a.len, said, sizeof said);
+        tf_error("%s %s answered %d: %s", c->farm, path, a.code, said);
+    } else {
+        int wrote = f && fwrite(a.body, 1, a.len, f) == a.len;
+        wrote = f && fclose(f) == 0 && wrote;
+        if (wrote && rename(tmp, file) == 0)
+            rc = TF_EXIT_OK;
+        else {
+            tf_error("%s: cannot write the output", file);
+            unlink(tmp);
+        }
+    }
     free(a.body);
     return rc;
 }

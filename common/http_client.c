@@ -116,6 +116,29 @@ int tf_http_request(const char *addr, const char *method, const char *path, cons
     return 0;
 }
 
+void tf_http_error_text(const char *body, size_t len, char *out, size_t outlen)
+{
+    json_t *doc = json_loadb(body, len, 0, NULL);
+    const char *text = json_string_value(json_object_get(doc, "error"));
+    size_t n = text ? strlen(text) : len;
+    if (!text) {
+        text = body;
+        const char *nl = memchr(body, '\n', len);
+        n = nl ? (size_t)(nl - body) : len;
+    }
+    if (n > 300)
+        n = 300;
+    if (outlen && n > outlen - 1)
+        n = outlen - 1;
+    for (size_t i = 0; i < n; i++) {
+        const unsigned char ch = (unsigned char)text[i];
+        out[i] = ch < 0x20 || ch == 0x7f ? '?' : (char)ch;
+    }
+    if (outlen)
+        out[n] = '\0';
+    json_decref(doc);
+}
+
 json_t *tf_http_json(const char *addr, const char *method, const char *path, const char *token,
                      json_t *body, int64_t deadline, int *code, char *err, size_t errlen)
 {
@@ -136,10 +159,9 @@ json_t *tf_http_json(const char *addr, const char *method, const char *path, con
     if (a.code == 204) {
         doc = json_object();
     } else if (a.code < 200 || a.code > 299) {
-        char *nl = strchr(a.body, '\n');
-        if (nl)
-            *nl = 0;
-        tf_seterr(err, errlen, "%s %s answered %d: %.300s", addr, path, a.code, a.body);
+        char said[320];
+        tf_http_error_text(a.body, a.len, said, sizeof said);
+        tf_seterr(err, errlen, "%s %s answered %d: %s", addr, path, a.code, said);
     } else {
         json_error_t jerr;
         doc = json_loadb(a.body, a.len, JSON_REJECT_DUPLICATES, &jerr);

@@ -25,8 +25,13 @@ int tf_http_request(const char *addr, const char *method, const char *path, cons
 
 /* The same for a JSON document: body (may be NULL) is sent as application/json; a 2xx answer
  * must be a JSON object (returned, new reference; *code set).  A 204 answers an empty object.
- * Any other status fails with "ADDR PATH answered CODE: first line of its body". */
+ * Any other status fails with "ADDR PATH answered CODE: " and tf_http_error_text's line. */
 json_t *tf_http_json(const char *addr, const char *method, const char *path, const char *token,
                      json_t *body, int64_t deadline_ms, int *code, char *err, size_t errlen);
+
+/* What an error answer says, fit for one line of a terminal: the "error" string of a JSON
+ * object (terrafarm's services answer {"error": "..."}), else the body's first line; at most
+ * 300 bytes, every control byte (an escape sequence a hostile server sends) shown as '?'. */
+void tf_http_error_text(const char *body, size_t len, char *out, size_t outlen);
 
 #endif

@@ -19,6 +19,16 @@ void tf_log_set_tag(const char *tag)
     snprintf(log_tag, sizeof log_tag, "%s", tag ? tag : "");
 }
 
+/* A message is one line, whatever it quotes: a peer's string (a worker's failure, a host name,
+ * a service's answer) with a newline could forge a line of its own, and one with an escape
+ * sequence could drive the terminal.  Every control byte becomes '?'. */
+static void one_line(char *s, size_t len)
+{
+    for (size_t i = 0; i < len; i++)
+        if ((unsigned char)s[i] < 0x20 || s[i] == 0x7f)
+            s[i] = '?';
+}
+
 static void emit(int level, const char *kind, const char *fmt, va_list ap)
 {
     if (level > log_level)
@@ -34,6 +44,7 @@ static void emit(int level, const char *kind, const char *fmt, va_list ap)
     size_t len = strlen(line);
     while (len > 0 && line[len - 1] == '\n')
         len--;
+    one_line(line, len);
     line[len++] = '\n';
     ssize_t w = write(STDERR_FILENO, line, len);
     (void)w;

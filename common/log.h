@@ -1,6 +1,7 @@
 /* log.h: the one place messages leave the program.  Errors are one line on stderr
  * ("terrafarm: what is wrong"); info and debug obey -q / -v.  Every message is written with a
- * single write(2) so lines from forked workers never interleave mid-line. */
+ * single write(2) so lines from forked workers never interleave mid-line, and is one line
+ * whatever it quotes: control bytes (a peer's newline or escape sequence) are written as '?'. */
 #ifndef TF_LOG_H
 #define TF_LOG_H
 

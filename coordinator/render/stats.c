@@ -139,9 +139,10 @@ static json_t *stats_doc(const tf_run_info *run, const tf_farm_stats *st)
         const tf_worker_stats *w = &st->workers[i];
         json_t *wo = json_object();
         json_object_set_new(wo, "id", json_integer(w->id));
-        json_object_set_new(wo, "kind", json_string(w->kind));
-        /* host and backend come from the worker's hello: not trusted to be UTF-8 */
+        /* kind, host and backend come from the worker's hello: not trusted to be UTF-8 */
+        json_t *kind = json_string(w->kind);
         json_t *host = json_string(w->host), *backend = json_string(w->backend);
+        json_object_set_new(wo, "kind", kind ? kind : json_string("?"));
         json_object_set_new(wo, "host", host ? host : json_string("?"));
         json_object_set_new(wo, "backend", backend ? backend : json_string("?"));
         json_object_set_new(wo, "tasks", json_integer(w->tasks));

@@ -38,6 +38,12 @@ fails=$(jstat task_failures "$T/a.json")
 [ "$fails" -ge 2 ] || fail "task_failures is $fails, expected at least 2"
 say "$fails failures reported, $(grep -c 'failed task' "$T/a.err") warnings; the good worker did the rest"
 same "$T/ref.exr" "$T/a.exr" "render with a failing worker"
+# its failure message carries a newline, a forged line and an escape sequence
+! grep -q '^terrafarm: wrote /tmp/forged' "$T/a.err" ||
+    fail "a worker's failure message forged a line of the coordinator's log: $(grep -n forged "$T/a.err" | head -2)"
+! grep -q "$(printf '\033')" "$T/a.err" || fail "a worker's escape sequence reached the coordinator's log"
+grep -q 'injected failure?terrafarm: wrote /tmp/forged' "$T/a.err" ||
+    fail "the failure message is not shown on its one line: $(grep -m1 'failed task' "$T/a.err")"
 
 say "three workers fail everything: the render stops with one clear line"
 "$TF_BIN" render "$SCENE" -j 0 --listen 127.0.0.1:0 $ARGS -o "$T/b.exr" 2>"$T/b.err" &

@@ -4,9 +4,13 @@
 Usage: failing_worker.py HOST PORT
 Speaks the tuple-space protocol (common/linda/proto.h, tuple encoding in common/linda/tuple.h) and the
 farm's tuples (common/farmproto.h) directly: takes a worker id, says hello, then for every task
-it is not excluded from puts ("failed", id, worker, "injected failure") back; a task that lists
+it is not excluded from puts ("failed", id, worker, FAILURE) back; a task that lists
 it as excluded goes back into the space untouched.  Leaves on the stop task (id -1), which it
-also puts back, or when the coordinator goes away.  Exit 0 on a stop task, 1 otherwise."""
+also puts back, or when the coordinator goes away.  Exit 0 on a stop task, 1 otherwise.
+
+Its words are hostile too: its host name carries an escape sequence and its failure message a
+newline and a forged line of the coordinator's ("terrafarm: wrote ..."), which the coordinator's
+log must show as one line with the control bytes made harmless (common/log.c)."""
 import os
 import socket
 import struct
@@ -14,6 +18,8 @@ import sys
 import time
 
 OUT, IN, TUPLE, OK, HELLO = 1, 2, 6, 8, 11
+FAILURE = "injected failure\nterrafarm: wrote /tmp/forged.exr (240x135) \x1b[2J"
+HOST = "failing\x1b]0;owned\x07"
 INT, DOUBLE, STRING, BLOB, FORMAL = 1, 2, 3, 4, 0x80
 
 
@@ -82,7 +88,7 @@ def main():
     c = Conn(sys.argv[1], int(sys.argv[2]))
     op, body = c.call(IN, [(STRING, "next_worker"), (INT, None)])
     me = dec(body)[1]  # the coordinator binds this id to the connection and restores the counter
-    c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, "failing"),
+    c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, HOST),
                  (INT, os.getpid()), (STRING, "c")])
     # ("task", id, frame, x, y, w, h, excluded)
     task_tmpl = [(STRING, "task")] + [(INT, None)] * 6 + [(BLOB, None)]
@@ -105,7 +111,7 @@ def main():
             c.call(OUT, back)
             time.sleep(0.2)
             continue
-        c.call(OUT, [(STRING, "failed"), (INT, tid), (INT, me), (STRING, "injected failure")])
+        c.call(OUT, [(STRING, "failed"), (INT, tid), (INT, me), (STRING, FAILURE)])
         failures += 1
 
 

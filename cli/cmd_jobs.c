@@ -84,6 +84,12 @@ static json_t *call(const client *c, const char *method, const char *path, json_
     return doc;
 }
 
+/* A string field of the farm's answer, fit for the terminal (tf_printable: "-" when absent). */
+static const char *field(json_t *o, const char *key, char *buf, size_t n)
+{
+    return tf_printable(json_string_value(json_object_get(o, key)), buf, n);
+}
+
 static void print_json(json_t *doc)
 {
     char *t = json_dumps(doc, JSON_INDENT(2));
@@ -175,13 +181,13 @@ static int run_jobs(client *c)
     printf("%6s %-20s %-12s %-10s %5s %-10s %7s %s\n", "id", "name", "owner", "state", "prio",
            "pool", "workers", "size");
     json_array_foreach(json_object_get(a, "jobs"), i, j) {
+        char name[64], owner[64], state[64], pool[64];
         printf("%6lld %-20.20s %-12.12s %-10s %5lld %-10.10s %7lld %lldx%lld%s\n",
                (long long)json_integer_value(json_object_get(j, "id")),
-               json_string_value(json_object_get(j, "name")),
-               json_string_value(json_object_get(j, "owner")),
-               json_string_value(json_object_get(j, "state")),
+               field(j, "name", name, sizeof name), field(j, "owner", owner, sizeof owner),
+               field(j, "state", state, sizeof state),
                (long long)json_integer_value(json_object_get(j, "priority")),
-               json_string_value(json_object_get(j, "pool")),
+               field(j, "pool", pool, sizeof pool),
                (long long)json_integer_value(json_object_get(j, "workers")),
                (long long)json_integer_value(json_object_get(j, "width")),
                (long long)json_integer_value(json_object_get(j, "height")),
@@ -234,6 +240,19 @@ static int download(client *c, long long id, int frame, const char *file)
     return rc;
 }
 
+/* A job's history, one event a line, each line fit for the terminal. */
+static void print_history(const char *history)
+{
+    for (const char *line = history; line && *line;) {
+        const char *nl = strchr(line, '\n');
+        size_t n = nl ? (size_t)(nl - line) : strlen(line);
+        char text[512], shown[512];
+        snprintf(text, sizeof text, "%.*s", (int)(n < sizeof text ? n : sizeof text - 1), line);
+        printf("%s\n", tf_printable(text, shown, sizeof shown));
+        line += n + (nl != NULL);
+    }
+}
+
 static int run_job(client *c, const char *id_text, const char *output, int frame)
 {
     long long id;
@@ -249,15 +268,15 @@ static int run_job(client *c, const char *id_text, const char *output, int frame
     if (c->json) {
         print_json(a);
     } else {
-        printf("job %lld %s: %s (priority %lld, pool %s, %lld workers)%s%s\n%s", id,
-               json_string_value(json_object_get(a, "name")),
-               json_string_value(json_object_get(a, "state")),
+        char name[128], state[64], pool[64], reason[512];
+        const char *why = json_string_value(json_object_get(a, "reason"));
+        printf("job %lld %s: %s (priority %lld, pool %s, %lld workers)%s%s\n", id,
+               field(a, "name", name, sizeof name), field(a, "state", state, sizeof state),
                (long long)json_integer_value(json_object_get(a, "priority")),
-               json_string_value(json_object_get(a, "pool")),
+               field(a, "pool", pool, sizeof pool),
                (long long)json_integer_value(json_object_get(a, "workers")),
-               *json_string_value(json_object_get(a, "reason")) ? ": " : "",
-               json_string_value(json_object_get(a, "reason")),
-               json_string_value(json_object_get(a, "history")));
+               why && *why ? ": " : "", why && *why ? tf_printable(why, reason, sizeof reason) : "");
+        print_history(json_string_value(json_object_get(a, "history")));
     }
     json_decref(a);
     return TF_EXIT_OK;
@@ -290,9 +309,11 @@ static int run_control(client *c, const char *action, char **args, int nargs)
         print_json(a);
     else if (!strcmp(action, "paint"))
         printf("%lld\n", (long long)json_integer_value(json_object_get(a, "id")));
-    else
-        printf("job %lld: %s, priority %lld\n", id, json_string_value(json_object_get(a, "state")),
+    else {
+        char state[64];
+        printf("job %lld: %s, priority %lld\n", id, field(a, "state", state, sizeof state),
                (long long)json_integer_value(json_object_get(a, "priority")));
+    }
     json_decref(a);
     return TF_EXIT_OK;
 }

@@ -73,6 +73,22 @@ void tf_die(int status, const char *fmt, ...)
     exit(status);
 }
 
+const char *tf_printable(const char *s, char *buf, size_t n)
+{
+    if (!n)
+        return buf;
+    size_t k = 0, len = s ? strlen(s) : 1;
+    if (!s)
+        s = "-";
+    const size_t room = len < n ? len : (n > 4 ? n - 4 : n - 1);
+    for (; k < room; k++)
+        buf[k] = (unsigned char)s[k] < 0x20 || s[k] == 0x7f ? '?' : s[k];
+    if (k < len && n > 4)
+        memcpy(buf + k, "...", 3), k += 3;
+    buf[k] = '\0';
+    return buf;
+}
+
 int tf_vseterr(char *err, size_t errlen, const char *fmt, va_list ap)
 {
     if (err && errlen > 0)

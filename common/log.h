@@ -22,6 +22,10 @@ void tf_debug(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* tf_error, then exit(status). */
 void tf_die(int status, const char *fmt, ...) __attribute__((format(printf, 2, 3), noreturn));
 
+/* s shown safely in a message or a table: at most n - 1 bytes of it in buf, control bytes as
+ * '?', "..." where it was cut; "-" for NULL.  Returns buf. */
+const char *tf_printable(const char *s, char *buf, size_t n);
+
 /* The one error formatter.  Functions that can fail take (char *err, size_t errlen) and put one
  * line there saying what is wrong, naming the file, line or peer; the caller decides whether it
  * becomes a log line or an exit.  Writes nothing if err is NULL or errlen is 0; returns -1 so

@@ -46,18 +46,6 @@ int tf_raster_decode(const uint8_t *data, size_t len, const char *name, tf_raste
     return tf_raster_read_gdal(data, len, name, r, err, errlen);
 }
 
-/* value, made printable and cut short for a one-line message */
-static const char *printable(const char *value, char *buf, size_t len)
-{
-    size_t k = 0;
-    for (const char *c = value; *c && k + 4 < len; c++)
-        buf[k++] = (*c >= 0x20 && *c < 0x7f) ? *c : '?';
-    if (strlen(value) > k)
-        buf[k++] = '.', buf[k++] = '.', buf[k++] = '.';
-    buf[k] = '\0';
-    return buf;
-}
-
 /* A whole decimal number in [lo, hi] (lo excluded if open_lo), or -1 with the key named. */
 static int parse_number(const char *key, const char *value, double lo, int open_lo, double hi,
                         const char *name, double *out, char *err, size_t errlen)
@@ -68,7 +56,7 @@ static int parse_number(const char *key, const char *value, double lo, int open_
     if (end == value || *end != '\0' || errno == ERANGE || !isfinite(v) || v > hi || v < lo ||
         (open_lo && v == lo))
         return tf_seterr(err, errlen, "%s: %s: '%s' is not a number in %s%g, %g]", name, key,
-                         printable(value, shown, sizeof shown), open_lo ? "(" : "[", lo, hi);
+                         tf_printable(value, shown, sizeof shown), open_lo ? "(" : "[", lo, hi);
     *out = v;
     return 0;
 }
@@ -82,7 +70,7 @@ static int parse_first_row(const char *value, const char *name, int *out, char *
         return 0;
     }
     return tf_seterr(err, errlen, "%s: %s: '%s' is neither north nor south", name,
-                     TF_RASTER_KEY_FIRST_ROW, printable(value, shown, sizeof shown));
+                     TF_RASTER_KEY_FIRST_ROW, tf_printable(value, shown, sizeof shown));
 }
 
 int tf_raster_meta_key(const char *key)

@@ -51,10 +51,14 @@ static double num(json_t *o, const char *key)
     return json_is_number(v) ? json_number_value(v) : -1;
 }
 
+/* A string of the dashboard's answer, fit for the terminal: control bytes (a worker's host name
+ * may carry an escape sequence) as '?', "?" when absent.  Eight may be in use in one printf. */
 static const char *str(json_t *o, const char *key)
 {
+    static char ring[8][1024];
+    static unsigned next;
     const char *s = json_string_value(json_object_get(o, key));
-    return s ? s : "?";
+    return s ? tf_printable(s, ring[next++ % 8], sizeof ring[0]) : "?";
 }
 
 static void duration(char *buf, size_t len, double s)

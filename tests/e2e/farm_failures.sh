@@ -27,6 +27,14 @@ while ! grep -q 'failed task 0' "$T/a.err"; do
 done
 sleep 0.5
 kill -0 $coord 2>/dev/null || fail "the coordinator gave up with one worker failing: $(cat "$T/a.err")"
+# the failing worker said hello with an escape sequence in its host name: `terrafarm status`
+# lists it (it has joined, the render waits for a worker that has not failed) and must print it
+# harmlessly
+"$TF_BIN" status "$(dashboard_addr "$T/a.err" $coord)" >"$T/status.out" 2>&1 ||
+    fail "terrafarm status: $(cat "$T/status.out")"
+grep -q 'failing?]0;owned' "$T/status.out" || fail "status does not list the failing worker: $(cat -v "$T/status.out")"
+! tr -d '\n' <"$T/status.out" | grep -q '[[:cntrl:]]' ||
+    fail "status printed a worker's control bytes: $(cat -v "$T/status.out")"
 "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 -q 2>"$T/w.err" &
 worker=$!; e2e_track $worker
 wait_exit $coord 60

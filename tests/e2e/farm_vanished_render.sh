@@ -12,12 +12,8 @@ e2e_init
 
 (umask 077; head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \n' >"$T/secret")
 python3 "$TF_ROOT/tests/tools/vanishing_farm.py" "$T/port" "$T/outcome" &
-e2e_track $!
-i=0
-while [ ! -s "$T/port" ]; do
-    i=$((i + 1)); [ $i -lt 600 ] || fail "vanishing_farm.py did not start"
-    sleep 0.1
-done
+farm=$!; e2e_track $farm
+wait_for_file "$T/port" $farm vanishing_farm.py
 PORT=$(cat "$T/port")
 
 say "a worker sent to job 7, whose render refuses the connection"

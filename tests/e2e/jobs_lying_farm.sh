@@ -8,12 +8,8 @@
 e2e_init
 
 python3 "$TF_ROOT/tests/tools/lying_farm.py" "$T/port" &
-e2e_track $!
-i=0
-while [ ! -s "$T/port" ]; do
-    i=$((i + 1)); [ $i -lt 600 ] || fail "lying_farm.py did not start"
-    sleep 0.1
-done
+farm=$!; e2e_track $farm
+wait_for_file "$T/port" $farm lying_farm.py
 export TERRAFARM_FARM="127.0.0.1:$(cat "$T/port")"
 (umask 077; echo "tf_0123456789abcdef" >"$T/token")
 export TERRAFARM_TOKEN_FILE="$T/token"

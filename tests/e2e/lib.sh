@@ -152,6 +152,17 @@ dashboard_url() {
     sed -n 's/.*dashboard at \(http:[^ ]*\).*/\1/p' "$1" | head -1
 }
 
+# wait_for_file FILE PID WHAT: until FILE is not empty (a helper's port file), failing if the
+# process PID (WHAT) exits first or a minute passes.
+wait_for_file() {
+    i=0
+    while [ ! -s "$1" ]; do
+        kill -0 "$2" 2>/dev/null || fail "$3 exited before writing $(basename "$1")"
+        i=$((i + 1)); [ $i -lt 600 ] || fail "$3 did not write $(basename "$1") in a minute"
+        sleep 0.1
+    done
+}
+
 # dashboard_addr LOGFILE PID: dashboard_url's HOST:PORT, as `terrafarm status` takes it.
 dashboard_addr() { dashboard_url "$1" "$2" | sed 's#http://\([^/]*\)/#\1#'; }
 

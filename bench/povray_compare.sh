@@ -21,8 +21,9 @@
 #   4. prints the medians of whole-process CPU time (user + sys, children included: robust on
 #      a shared machine) and of wall time; the CPU time of the render proper: for POV-Ray its
 #      own trace CPU-seconds, for terrafarm the thread CPU time of one tf_render_rect over the
-#      whole image (build/bench/povray_tf_render: a worker's task, without terrain synthesis,
-#      tuple traffic or file output); the camera rays per pixel of each; and the ratios
+#      whole image (build/bench/povray_tf_render: a worker's task, without terrain synthesis
+#      and what is built once with it -- the sun's strips, as POV-Ray builds its bounding at
+#      parse time --, tuple traffic or file output); the camera rays per pixel of each; and the ratios
 #      terrafarm / POV-Ray (targets <= 0.25, issue 23, and <= 1/3, docs/contract.md).
 #
 # Coordinates: terrafarm is right-handed with z up; POV-Ray is left-handed with y up.  The map

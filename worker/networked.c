@@ -12,6 +12,7 @@
 
 #include "clock.h"
 #include "log.h"
+#include "render/render.h"
 #include "scene.h"
 #include "worker/backend.h"
 #include "worker/backend_opencl.h"
@@ -281,6 +282,7 @@ int tf_networked_worker_run(const tf_networked_opts *o)
     }
     if (o->terrain_cache)
         tf_heightfield_set_cache(hf, o->terrain_cache);
+    tf_render_prepare(s, hf, 0); /* once, on all cores, for the processes forked below */
     int status;
     if (nproc == 1) {
         status = run_one(connect, k, timeout_ms, s, hf, backend, paint, c);

@@ -99,8 +99,11 @@ tf_renderer *tf_renderer_new(const tf_scene *s, const tf_heightfield *hf, char *
     r->lattice = 1 << r->depth;
     r->threshold = s->antialias.threshold;
     r->jitter_key = tf_hash64(s->terrain.seed ^ 0x6a69747465724b59ULL);
-    if (sun_strips_pay(s, hf))
-        r->shader.sun_strips = r->sun_strips = tf_sun_strips_build(hf, r->shader.sun_dir);
+    if (sun_strips_pay(s, hf)) {
+        const tf_sun_strips *kept = tf_sun_strips_kept(hf, r->shader.sun_dir);
+        r->shader.sun_strips =
+            kept ? kept : (r->sun_strips = tf_sun_strips_build(hf, r->shader.sun_dir));
+    }
     return r;
 }
 
@@ -109,6 +112,12 @@ void tf_renderer_free(tf_renderer *r)
     if (r)
         tf_sun_strips_free(r->sun_strips);
     free(r);
+}
+
+void tf_render_prepare(const tf_scene *s, tf_heightfield *hf, int threads)
+{
+    if (s && hf && sun_strips_pay(s, hf))
+        tf_sun_strips_keep(hf, tf_sun_direction(s), threads);
 }
 
 static int coherence_forced = -1;

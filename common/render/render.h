@@ -27,6 +27,12 @@ typedef struct tf_renderer tf_renderer;
 tf_renderer *tf_renderer_new(const tf_scene *s, const tf_heightfield *hf, char *err, size_t errlen);
 void tf_renderer_free(tf_renderer *r);
 
+/* What every renderer of scene s over hf would build for itself from the terrain alone (the
+ * sun's strips), built once on `threads` threads (0: all online CPUs) and kept with hf
+ * (sun_strips.h): a process calls it before it forks its renderers, which then share it.
+ * Changes no pixel, only who spends the time; nothing happens where it would not pay. */
+void tf_render_prepare(const tf_scene *s, tf_heightfield *hf, int threads);
+
 /* Render `rect` (must lie inside the image) into out[rect.w * rect.h], row-major.
  * Adds to *counts if not NULL.  Thread-safe: a renderer may be shared by threads. */
 void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render_counts *counts);

@@ -28,7 +28,8 @@ struct tf_renderer {
     int lattice;        /* N = 2^depth lattice steps per pixel */
     double threshold;   /* antialias.threshold */
     uint64_t jitter_key;/* hash of the scene seed, start of every jitter hash */
-    struct tf_sun_strips *sun_strips; /* the shader's (NULL: none), owned here */
+    struct tf_sun_strips *sun_strips; /* built for this renderer (NULL: none, or the strips
+                                       * kept with the height field, borrowed) */
 };
 
 /* Samples helped by the samples below them (trace.h's coherence) in tf_render_rect, whose

@@ -22,6 +22,12 @@
  * lookups, the height-field reads and the shadow rays. */
 #include "render/sample_math.h"
 
+tf_vec3 tf_sun_direction(const tf_scene *s)
+{
+    double az = s->sun.azimuth_deg * TF_DEG2RAD, el = s->sun.elevation_deg * TF_DEG2RAD;
+    return v3(sin(az) * cos(el), cos(az) * cos(el), sin(el));
+}
+
 void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
 {
     *sh = (tf_shader){0};
@@ -31,8 +37,7 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
     sh->smooth = s->terrain.smooth;
     if (sh->textured)
         tf_noise_init(&sh->noise, s->terrain.seed ^ 0x7465787475726573ULL); /* "textures" */
-    double az = s->sun.azimuth_deg * TF_DEG2RAD, el = s->sun.elevation_deg * TF_DEG2RAD;
-    sh->sun_dir = v3(sin(az) * cos(el), cos(az) * cos(el), sin(el));
+    sh->sun_dir = tf_sun_direction(s);
     tf_ray_dir_init(&sh->sun_ray, hf, sh->sun_dir);
     sh->sun_light = v3_scale(s->sun.color, s->sun.intensity);
     sh->sky_light = v3_scale(v3_lerp(s->sky.horizon, s->sky.zenith, 0.5), s->sky.intensity);

@@ -58,8 +58,8 @@ typedef struct tf_shader {
     double pixel_angle;      /* angle one pixel subtends at the image centre, radians */
     tf_proc_view view;       /* a procedural terrain's levels of detail for this camera */
     double flow_ref;         /* [erosion]: flow at which a bed looks fully wet (mean * 8) */
-    /* NULL, or the sun's strips (sun_strips.h, owned by the renderer): where a shadow ray's
-     * walk may end, the same answer from a shorter walk */
+    /* NULL, or the sun's strips (sun_strips.h: the renderer's, or kept with the height
+     * field): where a shadow ray's walk may end, the same answer from a shorter walk */
     const struct tf_sun_strips *sun_strips;
 } tf_shader;
 
@@ -79,6 +79,8 @@ typedef struct tf_sample {
 int tf_shadow_strips(const tf_shader *sh, tf_vec3 o, double *tmax);
 
 void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf);
+/* The unit vector toward the scene's sun (tf_shader_init's sun_dir, the same bits). */
+tf_vec3 tf_sun_direction(const tf_scene *s);
 
 /* Trace and shade one camera ray (dir unit).  Adds the shadow rays it casts to *shadow_rays. */
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,

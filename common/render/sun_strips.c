@@ -17,13 +17,17 @@
  * a continuous surface.  One pass over 1/4 of the cells and one over the bins: ~15 ms and
  * 5.6 MB for 2049^2 samples, the table on huge pages where the system has them (a fresh
  * table's first touch, one fault and one zeroed 4 KB page at a time, was a fifth of the
- * build).  Strips 2.5 cells wide instead of 4 bound the surface under a
+ * build).  On several threads each takes a range of whole strips (every thread reads every
+ * block, and scatters only into its own strips), so the table is the same bits for any number
+ * of threads; a process that forks renderers builds it so once and keeps it with the terrain
+ * (tf_sun_strips_keep), and its children share the one copy.  Strips 2.5 cells wide instead of 4 bound the surface under a
  * ray's line more tightly, so a lit ray is proved clear ~4% sooner in time (bench/README.md
  * section 27); narrower strips or shorter bins help a little more but hold more memory than
  * the comparison with Embree leaves (issue 23: 1/10 of its memory; 2 x 4 cells would be 68.5
  * of the 68.4 MB allowed at 2049^2). */
 #include <float.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -94,12 +98,13 @@ static block_reach block_reach_of(const tf_sun_frame *f, int cells, double ux, d
  * negated (so both are raised with one max, which the compiler does on the pair at once;
  * strip_bounds negates the floors back). */
 static inline void scatter_block(const tf_sun_frame *f, const block_reach *r, int bi, int bj,
-                                 float top, float bottom, float *table)
+                                 float top, float bottom, int k_lo, int k_hi, float *table)
 {
     const double i = bi * r->B, j = bj * r->B;
     const double al = r->ux * i + r->uy * j, ac = -r->uy * i + r->ux * j;
     const int b0 = (int)((al + r->al_lo) * f->inv_ds), b1 = (int)((al + r->al_hi) * f->inv_ds);
-    const int k0 = (int)((ac + r->ac_lo) * f->inv_w), k1 = (int)((ac + r->ac_hi) * f->inv_w);
+    int k0 = (int)((ac + r->ac_lo) * f->inv_w), k1 = (int)((ac + r->ac_hi) * f->inv_w);
+    k0 = k0 > k_lo ? k0 : k_lo, k1 = k1 < k_hi ? k1 : k_hi; /* this thread's strips only */
     /* a block the grids could not bound (a NaN height) bounds its bins by nothing: they then
      * prove neither clear nor under */
     const float hi = isnan(top) ? INFINITY : top, neg_lo = isnan(bottom) ? INFINITY : -bottom;
@@ -112,11 +117,11 @@ static inline void scatter_block(const tf_sun_frame *f, const block_reach *r, in
     }
 }
 
-/* Every block of level L raises the tops and lowers the floors of the bins it meets (table:
- * top, negated floor in a bin's first two floats, from -INFINITY, until strip_bounds makes
- * them reach and sink). */
+/* Every block of level L raises the tops and lowers the floors of the bins it meets in strips
+ * k_lo..k_hi (table: top, negated floor in a bin's first two floats, from -INFINITY, until
+ * strip_bounds makes them reach and sink). */
 static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, double ux, double uy,
-                           float *table)
+                           int k_lo, int k_hi, float *table)
 {
     const int L = TF_SUN_BLOCK_LEVEL < hf->levels ? TF_SUN_BLOCK_LEVEL : hf->levels - 1;
     const int side = hf->cells >> L;
@@ -125,7 +130,7 @@ static void scatter_blocks(const tf_heightfield *hf, const tf_sun_frame *f, doub
     for (int bj = 0; bj < side; bj++)
         for (int bi = 0; bi < side; bi++) {
             const size_t at = (size_t)bj * (size_t)side + (size_t)bi;
-            scatter_block(f, &r, bi, bj, mx[at], mn[at], table);
+            scatter_block(f, &r, bi, bj, mx[at], mn[at], k_lo, k_hi, table);
         }
 }
 
@@ -227,7 +232,36 @@ static void strip_bounds(const tf_sun_frame *f, int cells, double ux, double uy,
     }
 }
 
-tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
+/* The part of a build one thread does: strips k_lo..k_hi, whole (their bins cleared, every
+ * block's share scattered into them, their bounds from the far end back).  No two parts write
+ * the same bin, and a bin's value is a max over the same blocks whichever thread computes it:
+ * the table does not depend on the number of threads. */
+typedef struct strips_part {
+    const tf_heightfield *hf;
+    const tf_sun_frame *f;
+    double ux, uy;
+    int holes, k_lo, k_hi;
+    float *table;
+} strips_part;
+
+static void *build_part(void *arg)
+{
+    const strips_part *p = arg;
+    const tf_sun_frame *f = p->f;
+    const size_t bins = (size_t)f->bins;
+    for (size_t i = (size_t)p->k_lo * bins; i < (size_t)(p->k_hi + 1) * bins; i++)
+        p->table[TF_SUN_BIN * i] = -INFINITY, p->table[TF_SUN_BIN * i + 1] = -INFINITY;
+    scatter_blocks(p->hf, f, p->ux, p->uy, p->k_lo, p->k_hi, p->table);
+    for (int k = p->k_lo; k <= p->k_hi; k++)
+        strip_bounds(f, p->hf->cells, p->ux, p->uy, p->holes, k,
+                     p->table + TF_SUN_BIN * (size_t)k * bins);
+    return NULL;
+}
+
+#define TF_SUN_MAX_THREADS 64
+#define TF_SUN_PARALLEL_MIN_CELLS (1 << 20) /* below ~1 M cells a thread costs more than it saves */
+
+tf_sun_strips *tf_sun_strips_build_threads(const tf_heightfield *hf, tf_vec3 sun, int threads)
 {
     tf_sun_frame f;
     double ux, uy;
@@ -240,19 +274,62 @@ tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
         free(s), free(a);
         return NULL;
     }
-    for (size_t i = 0; i < n; i++)
-        a[TF_SUN_BIN * i] = -INFINITY, a[TF_SUN_BIN * i + 1] = -INFINITY;
-    scatter_blocks(hf, &f, ux, uy, a);
     /* a hole (slope_max NaN: heightfield.h) breaks the under proof's continuous surface; the
      * grids cannot say, their min of four samples keeps or drops a NaN by its place */
     const int holes = !(hf->slope_max >= 0 && hf->slope_max < INFINITY);
-    for (int k = 0; k < f.strips; k++)
-        strip_bounds(&f, hf->cells, ux, uy, holes, k, a + TF_SUN_BIN * (size_t)k * (size_t)f.bins);
+    threads = tf_thread_count(threads);
+    if ((double)hf->cells * hf->cells < TF_SUN_PARALLEL_MIN_CELLS)
+        threads = 1;
+    threads = threads < f.strips ? threads : f.strips;
+    threads = threads < TF_SUN_MAX_THREADS ? threads : TF_SUN_MAX_THREADS;
+    strips_part parts[TF_SUN_MAX_THREADS];
+    pthread_t tids[TF_SUN_MAX_THREADS];
+    int started[TF_SUN_MAX_THREADS] = {0};
+    for (int t = 0; t < threads; t++) {
+        parts[t] = (strips_part){hf, &f, ux, uy, holes, (int)((int64_t)f.strips * t / threads),
+                                 (int)((int64_t)f.strips * (t + 1) / threads) - 1, a};
+        if (t > 0)
+            started[t] = pthread_create(&tids[t], NULL, build_part, &parts[t]) == 0;
+    }
+    build_part(&parts[0]);
+    for (int t = 1; t < threads; t++)
+        if (started[t])
+            pthread_join(tids[t], NULL);
+        else
+            build_part(&parts[t]); /* a thread that could not start: its part here */
     s->frame = f;
     s->table = a;
     s->h = hf->h;
     s->sun = sun;
     return s;
+}
+
+tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun)
+{
+    return tf_sun_strips_build_threads(hf, sun, 1);
+}
+
+/* ---------------------------------------------------------------- strips kept with the terrain */
+
+static void free_kept(void *s) { tf_sun_strips_free(s); }
+
+int tf_sun_strips_keep(tf_heightfield *hf, tf_vec3 sun, int threads)
+{
+    if (!hf || hf->derived)
+        return -1;
+    tf_sun_strips *s = tf_sun_strips_build_threads(hf, sun, threads);
+    if (!s)
+        return -1;
+    hf->derived = s;
+    hf->derived_free = free_kept;
+    return 0;
+}
+
+const tf_sun_strips *tf_sun_strips_kept(const tf_heightfield *hf, tf_vec3 sun)
+{
+    const tf_sun_strips *s = hf && hf->derived_free == free_kept ? hf->derived : NULL;
+    /* kept for this very sun (the same bits): a sequence whose sun moves builds its own */
+    return s && s->h == hf->h && memcmp(&s->sun, &sun, sizeof sun) == 0 ? s : NULL;
 }
 
 void tf_sun_strips_free(tf_sun_strips *s)

@@ -31,7 +31,17 @@ typedef struct tf_sun_strips {
  * NULL where none help: a procedural terrain, a sun at or below the horizon or overhead, no
  * memory. */
 tf_sun_strips *tf_sun_strips_build(const tf_heightfield *hf, tf_vec3 sun);
+/* The same table built on `threads` threads (0: all online CPUs), each a range of strips. */
+tf_sun_strips *tf_sun_strips_build_threads(const tf_heightfield *hf, tf_vec3 sun, int threads);
 void tf_sun_strips_free(tf_sun_strips *s);
+
+/* Strips kept with the terrain.  A process that builds a height field and then forks the
+ * renderers (a render's coordinator, `terrafarm worker -j N`) builds them once, on all its
+ * cores, before the fork: tf_sun_strips_keep puts them in hf->derived (freed with hf); 0, or
+ * -1 where none help or hf keeps something already.  tf_sun_strips_kept gives them to a
+ * renderer of hf whose sun is exactly `sun`, else NULL (it builds its own). */
+int tf_sun_strips_keep(tf_heightfield *hf, tf_vec3 sun, int threads);
+const tf_sun_strips *tf_sun_strips_kept(const tf_heightfield *hf, tf_vec3 sun);
 
 /* tf_sun_strips_say for a shadow ray of the strips' sun from o (TF_SUN_UNKNOWN where s is
  * NULL): TF_SUN_CLEAR_AFTER, *t a tmax for tf_occluded that gives its answer over

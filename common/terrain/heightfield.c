@@ -201,6 +201,8 @@ void tf_heightfield_free(tf_heightfield *hf)
 {
     if (!hf)
         return;
+    if (hf->derived_free)
+        hf->derived_free(hf->derived);
     free_grids(hf);
     free(hf->h);
     free(hf->water);

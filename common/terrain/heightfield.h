@@ -45,6 +45,12 @@ typedef struct tf_heightfield {
      * running water depth, deposited silt, and the decaying flow of water through each vertex
      * (terrain/eroded.h); the shading darkens wet beds and colours deposits with them */
     float *water, *silt, *flow;
+    /* What a later layer derives from the heights alone and keeps with them, so that the
+     * processes forked after it was made share one copy (render/sun_strips.h keeps the sun's
+     * strips here before a farm forks its workers); NULL, or freed with the height field by
+     * derived_free. */
+    void *derived;
+    void (*derived_free)(void *);
 } tf_heightfield;
 
 /* Build the scene's height field with `threads` threads (0 = all online CPUs); for a

@@ -28,6 +28,7 @@
 #include "linda/auth.h"
 #include "linda/sock.h"
 #include "log.h"
+#include "render/render.h"
 #include "terrain/eroded.h"
 #include "terrain/terrain_build.h"
 #include "worker/paint_worker.h"
@@ -111,6 +112,7 @@ static int build_terrain(paint *p)
         tf_error("%s", err);
         return 1;
     }
+    tf_render_prepare(p->scene, p->hf, 0); /* the sun's strips, once for all the workers */
     return 0;
 }
 

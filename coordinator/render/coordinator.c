@@ -24,6 +24,7 @@
 #include "terrain/heightfield.h"
 #include "terrain/terrain_build.h"
 #include "log.h"
+#include "render/render.h"
 #include "image/preview.h"
 #include "coordinator/render/progress.h"
 #include "coordinator/render/rowwriter.h"
@@ -440,7 +441,10 @@ static int build_terrain(render *r)
     r->hf_s = tf_now_s() - t0;
     if (r->o->terrain_cache) /* the forked workers inherit the budget */
         tf_heightfield_set_cache(r->hf, r->o->terrain_cache);
-    tf_debug("height field %dx%d built in %.2f s", r->hf->n, r->hf->n, r->hf_s);
+    t0 = tf_now_s();
+    tf_render_prepare(r->scene, r->hf, 0); /* the sun's strips, once for all the workers */
+    tf_debug("height field %dx%d built in %.2f s, what its renderers share in %.3f s", r->hf->n,
+             r->hf->n, r->hf_s, tf_now_s() - t0);
     warn_camera_underground(r);
     return 0;
 }

@@ -165,6 +165,38 @@ static void test_sun_strips_change_no_bit(void **state)
     tf_renderer_free(plain);
 }
 
+/* After tf_render_prepare the strips are kept with the height field: a renderer made then
+ * borrows them (builds none, frees none) and renders the same bits; a renderer of another sun
+ * builds its own. */
+static void test_prepared_strips_are_borrowed(void **state)
+{
+    fixture *f = *state;
+    char err[256];
+    tf_heightfield *hf = tf_heightfield_from_heights(f->hf->h, K, f->hf->extent, 1);
+    assert_non_null(hf);
+    tf_render_prepare(&f->scene, hf, 2);
+    assert_non_null(hf->derived);
+    tf_renderer *r = tf_renderer_new(&f->scene, hf, err, sizeof err);
+    assert_non_null(r);
+    assert_null(r->sun_strips);
+    assert_ptr_equal(r->shader.sun_strips, hf->derived);
+    tf_pixel *img = calloc(W * H, sizeof *img);
+    tf_render_counts c = {0};
+    tf_render_rect(r, (tf_rect){0, 0, W, H}, img, &c);
+    assert_memory_equal(img, f->whole, sizeof f->whole);
+    assert_memory_equal(&c, &f->whole_counts, sizeof c);
+    tf_scene moved = f->scene;
+    moved.sun.azimuth_deg += 10;
+    tf_renderer *other = tf_renderer_new(&moved, hf, err, sizeof err);
+    assert_non_null(other);
+    assert_non_null(other->sun_strips);
+    assert_ptr_equal(other->shader.sun_strips, other->sun_strips);
+    tf_renderer_free(other);
+    tf_renderer_free(r);
+    tf_heightfield_free(hf); /* frees the kept strips (make asan: no leak, no double free) */
+    free(img);
+}
+
 typedef struct thread_job { const tf_renderer *r; tf_pixel *img; int first_row; } thread_job;
 
 static void *render_alternate_rows(void *arg)
@@ -374,6 +406,7 @@ int main(void)
         cmocka_unit_test(test_single_pixels_identical_to_whole),
         cmocka_unit_test(test_coherence_changes_no_bit),
         cmocka_unit_test(test_sun_strips_change_no_bit),
+        cmocka_unit_test(test_prepared_strips_are_borrowed),
         cmocka_unit_test(test_two_threads_identical_to_whole),
         cmocka_unit_test(test_sky_not_subdivided_edges_are),
         cmocka_unit_test(test_counts_add_up),

@@ -392,6 +392,72 @@ static void test_no_strips(void **state)
     tf_heightfield_free(hf);
 }
 
+/* ---- built on threads, kept with the terrain ---------------------------------------------- */
+
+static int same_table(const tf_sun_strips *a, const tf_sun_strips *b)
+{
+    return a && b && a->frame.strips == b->frame.strips && a->frame.bins == b->frame.bins &&
+           memcmp(a->table, b->table, tf_sun_strips_table_bytes(a)) == 0;
+}
+
+/* The table does not depend on how many threads built it: each builds whole strips, and a bin
+ * is the same max over the same blocks whoever computes it.  2^10 cells a side (the threaded
+ * path starts at 2^20 cells), suns from every side, a field with a hole too. */
+static void test_threads_build_the_same_table(void **state)
+{
+    (void)state;
+    tf_heightfield *fields[2] = {make_field(rough, 10, 2000), make_field(hills, 10, 2000)};
+    const int mid = fields[1]->n / 2;
+    fields[1]->h[(size_t)mid * fields[1]->n + mid] = NAN;
+    tf_heightfield *holed = tf_heightfield_wrap(fields[1]->h, 10, 2000, 2);
+    assert_non_null(holed);
+    fields[1]->h = NULL;
+    tf_heightfield_free(fields[1]);
+    fields[1] = holed;
+    const double headings[] = {0.0, 0.3, M_PI / 2, 2.5, M_PI, -2.2, -M_PI / 4};
+    for (int f = 0; f < 2; f++)
+        for (size_t h = 0; h < sizeof headings / sizeof headings[0]; h++) {
+            const tf_vec3 sun = sun_at(headings[h], 0.1 + 0.1 * (double)h);
+            tf_sun_strips *one = tf_sun_strips_build(fields[f], sun);
+            assert_non_null(one);
+            const int threads[] = {2, 3, 7};
+            for (int t = 0; t < 3; t++) {
+                tf_sun_strips *many = tf_sun_strips_build_threads(fields[f], sun, threads[t]);
+                if (!same_table(one, many))
+                    fail_msg("field %d, heading %.2f: %d threads built another table", f,
+                             headings[h], threads[t]);
+                tf_sun_strips_free(many);
+            }
+            tf_sun_strips_free(one);
+        }
+    tf_heightfield_free(fields[0]);
+    tf_heightfield_free(fields[1]);
+}
+
+/* Kept strips are given for their very sun only, and go with the height field (make asan
+ * would see a leak); a field keeps one table. */
+static void test_kept_strips_serve_their_sun_only(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(hills, 6, 150);
+    const tf_vec3 sun = sun_at(0.7, 0.3), other = sun_at(0.7, 0.31);
+    assert_null(tf_sun_strips_kept(hf, sun));
+    assert_int_equal(tf_sun_strips_keep(hf, sun, 0), 0);
+    const tf_sun_strips *kept = tf_sun_strips_kept(hf, sun);
+    assert_non_null(kept);
+    tf_sun_strips *own = tf_sun_strips_build(hf, sun);
+    assert_true(same_table(kept, own));
+    tf_sun_strips_free(own);
+    assert_null(tf_sun_strips_kept(hf, other));
+    assert_int_equal(tf_sun_strips_keep(hf, other, 0), -1); /* one table a field */
+    assert_int_equal(tf_sun_strips_keep(hf, v3(0, 0, 1), 0), -1);
+    tf_heightfield *flat = make_field(hills, 5, 100);
+    assert_int_equal(tf_sun_strips_keep(flat, v3(0, 0, 1), 0), -1); /* overhead: none help */
+    assert_null(flat->derived);
+    tf_heightfield_free(flat);
+    tf_heightfield_free(hf);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -405,6 +471,8 @@ int main(void)
         cmocka_unit_test(test_a_lying_table_changes_answers),
         cmocka_unit_test(test_a_nan_height_proves_nothing_there),
         cmocka_unit_test(test_no_strips),
+        cmocka_unit_test(test_threads_build_the_same_table),
+        cmocka_unit_test(test_kept_strips_serve_their_sun_only),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -5,6 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "render/sun_strips.h"
+
 #define SHELF_MAX 16
 
 typedef struct shelf_entry {
@@ -29,7 +31,8 @@ size_t tf_heightfield_bytes(const tf_heightfield *hf)
         grids += 2 * side * side;
     }
     int maps = (hf->water != NULL) + (hf->silt != NULL) + (hf->flow != NULL);
-    return sizeof *hf + (n2 * (size_t)(1 + maps) + grids) * sizeof(float);
+    return sizeof *hf + (n2 * (size_t)(1 + maps) + grids) * sizeof(float) +
+           tf_sun_strips_kept_bytes(hf);
 }
 
 tf_terrain_shelf *tf_terrain_shelf_new(size_t budget_bytes)

@@ -325,6 +325,11 @@ int tf_sun_strips_keep(tf_heightfield *hf, tf_vec3 sun, int threads)
     return 0;
 }
 
+size_t tf_sun_strips_kept_bytes(const tf_heightfield *hf)
+{
+    return hf && hf->derived_free == free_kept ? tf_sun_strips_bytes(hf->derived) : 0;
+}
+
 const tf_sun_strips *tf_sun_strips_kept(const tf_heightfield *hf, tf_vec3 sun)
 {
     const tf_sun_strips *s = hf && hf->derived_free == free_kept ? hf->derived : NULL;

@@ -42,6 +42,8 @@ void tf_sun_strips_free(tf_sun_strips *s);
  * renderer of hf whose sun is exactly `sun`, else NULL (it builds its own). */
 int tf_sun_strips_keep(tf_heightfield *hf, tf_vec3 sun, int threads);
 const tf_sun_strips *tf_sun_strips_kept(const tf_heightfield *hf, tf_vec3 sun);
+/* Bytes of the strips kept with hf, whatever their sun (0: none). */
+size_t tf_sun_strips_kept_bytes(const tf_heightfield *hf);
 
 /* tf_sun_strips_say for a shadow ray of the strips' sun from o (TF_SUN_UNKNOWN where s is
  * NULL): TF_SUN_CLEAR_AFTER, *t a tmax for tf_occluded that gives its answer over

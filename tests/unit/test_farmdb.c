@@ -24,6 +24,7 @@
 #include <unistd.h>
 
 #include "coordinator/farm/farmdb.h"
+#include "render/sun_strips.h"
 #include "scratch_dir.h"
 #include "worker/terrain_shelf.h"
 
@@ -443,6 +444,17 @@ static void shelf_bytes(void **state)
     hf->silt = malloc(4);
     assert_int_equal(tf_heightfield_bytes(hf), sizeof *hf + 3 * 33 * 33 * sizeof(float));
     tf_heightfield_free(hf);
+    /* the sun's strips kept with a terrain (render/sun_strips.h) count too */
+    float h[33 * 33];
+    for (int i = 0; i < 33 * 33; i++)
+        h[i] = (float)(i % 7);
+    tf_heightfield *real = tf_heightfield_from_heights(h, 5, 100.0, 1);
+    assert_non_null(real);
+    const size_t bare = tf_heightfield_bytes(real);
+    assert_int_equal(tf_sun_strips_keep(real, v3(0.5, 0.5, 0.7), 1), 0);
+    assert_true(tf_sun_strips_kept_bytes(real) > 0);
+    assert_int_equal(tf_heightfield_bytes(real), bare + tf_sun_strips_kept_bytes(real));
+    tf_heightfield_free(real);
 }
 
 static void keys_are(tf_terrain_shelf *sh, const char *const *want, int n)

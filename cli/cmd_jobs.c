@@ -275,7 +275,8 @@ static int run_job(client *c, const char *id_text, const char *output, int frame
                (long long)json_integer_value(json_object_get(a, "priority")),
                field(a, "pool", pool, sizeof pool),
                (long long)json_integer_value(json_object_get(a, "workers")),
-               why && *why ? ": " : "", why && *why ? tf_printable(why, reason, sizeof reason) : "");
+               why && *why ? ": " : "",
+               why && *why ? tf_printable(why, reason, sizeof reason) : "");
         print_history(json_string_value(json_object_get(a, "history")));
     }
     json_decref(a);

@@ -20,11 +20,11 @@
  * build).  On several threads each takes a range of whole strips (every thread reads every
  * block, and scatters only into its own strips), so the table is the same bits for any number
  * of threads; a process that forks renderers builds it so once and keeps it with the terrain
- * (tf_sun_strips_keep), and its children share the one copy.  Strips 2.5 cells wide instead of 4 bound the surface under a
- * ray's line more tightly, so a lit ray is proved clear ~4% sooner in time (bench/README.md
- * section 27); narrower strips or shorter bins help a little more but hold more memory than
- * the comparison with Embree leaves (issue 23: 1/10 of its memory; 2 x 4 cells would be 68.5
- * of the 68.4 MB allowed at 2049^2). */
+ * (tf_sun_strips_keep), and its children share the one copy.  Strips 2.5 cells wide instead
+ * of 4 bound the surface under a ray's line more tightly, so a lit ray is proved clear ~4%
+ * sooner in time (bench/README.md section 27); narrower strips or shorter bins help a little
+ * more but hold more memory than the comparison with Embree leaves (issue 23: 1/10 of its
+ * memory; 2 x 4 cells would be 68.5 of the 68.4 MB allowed at 2049^2). */
 #include <float.h>
 #include <math.h>
 #include <pthread.h>
@@ -259,6 +259,21 @@ static void *build_part(void *arg)
 }
 
 #define TF_SUN_MAX_THREADS 64
+
+/* parts[0] on this thread, the others on threads of their own (one that cannot start: here). */
+static void run_parts(strips_part *parts, int n)
+{
+    pthread_t tids[TF_SUN_MAX_THREADS];
+    int started[TF_SUN_MAX_THREADS] = {0};
+    for (int t = 1; t < n; t++)
+        started[t] = pthread_create(&tids[t], NULL, build_part, &parts[t]) == 0;
+    build_part(&parts[0]);
+    for (int t = 1; t < n; t++)
+        if (started[t])
+            pthread_join(tids[t], NULL);
+        else
+            build_part(&parts[t]);
+}
 #define TF_SUN_PARALLEL_MIN_CELLS (1 << 20) /* below ~1 M cells a thread costs more than it saves */
 
 tf_sun_strips *tf_sun_strips_build_threads(const tf_heightfield *hf, tf_vec3 sun, int threads)
@@ -283,20 +298,10 @@ tf_sun_strips *tf_sun_strips_build_threads(const tf_heightfield *hf, tf_vec3 sun
     threads = threads < f.strips ? threads : f.strips;
     threads = threads < TF_SUN_MAX_THREADS ? threads : TF_SUN_MAX_THREADS;
     strips_part parts[TF_SUN_MAX_THREADS];
-    pthread_t tids[TF_SUN_MAX_THREADS];
-    int started[TF_SUN_MAX_THREADS] = {0};
-    for (int t = 0; t < threads; t++) {
+    for (int t = 0; t < threads; t++)
         parts[t] = (strips_part){hf, &f, ux, uy, holes, (int)((int64_t)f.strips * t / threads),
                                  (int)((int64_t)f.strips * (t + 1) / threads) - 1, a};
-        if (t > 0)
-            started[t] = pthread_create(&tids[t], NULL, build_part, &parts[t]) == 0;
-    }
-    build_part(&parts[0]);
-    for (int t = 1; t < threads; t++)
-        if (started[t])
-            pthread_join(tids[t], NULL);
-        else
-            build_part(&parts[t]); /* a thread that could not start: its part here */
+    run_parts(parts, threads);
     s->frame = f;
     s->table = a;
     s->h = hf->h;

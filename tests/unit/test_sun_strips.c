@@ -424,8 +424,8 @@ static void test_threads_build_the_same_table(void **state)
             for (int t = 0; t < 3; t++) {
                 tf_sun_strips *many = tf_sun_strips_build_threads(fields[f], sun, threads[t]);
                 if (!same_table(one, many))
-                    fail_msg("field %d, heading %.2f: %d threads built another table", f,
-                             headings[h], threads[t]);
+                    fail_msg("field %d, heading %.2f: %d threads built another table",
+                             f, headings[h], threads[t]);
                 tf_sun_strips_free(many);
             }
             tf_sun_strips_free(one);

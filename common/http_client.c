@@ -130,12 +130,11 @@ void tf_http_error_text(const char *body, size_t len, char *out, size_t outlen)
         n = 300;
     if (outlen && n > outlen - 1)
         n = outlen - 1;
-    for (size_t i = 0; i < n; i++) {
-        const unsigned char ch = (unsigned char)text[i];
-        out[i] = ch < 0x20 || ch == 0x7f ? '?' : (char)ch;
-    }
-    if (outlen)
+    if (outlen) {
+        memcpy(out, text, n);
+        tf_one_line(out, n);
         out[n] = '\0';
+    }
     json_decref(doc);
 }
 

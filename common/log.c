@@ -22,7 +22,7 @@ void tf_log_set_tag(const char *tag)
 /* A message is one line, whatever it quotes: a peer's string (a worker's failure, a host name,
  * a service's answer) with a newline could forge a line of its own, and one with an escape
  * sequence could drive the terminal.  Every control byte becomes '?'. */
-static void one_line(char *s, size_t len)
+void tf_one_line(char *s, size_t len)
 {
     for (size_t i = 0; i < len; i++)
         if ((unsigned char)s[i] < 0x20 || s[i] == 0x7f)
@@ -44,7 +44,7 @@ static void emit(int level, const char *kind, const char *fmt, va_list ap)
     size_t len = strlen(line);
     while (len > 0 && line[len - 1] == '\n')
         len--;
-    one_line(line, len);
+    tf_one_line(line, len);
     line[len++] = '\n';
     ssize_t w = write(STDERR_FILENO, line, len);
     (void)w;
@@ -77,12 +77,12 @@ const char *tf_printable(const char *s, char *buf, size_t n)
 {
     if (!n)
         return buf;
-    size_t k = 0, len = s ? strlen(s) : 1;
     if (!s)
         s = "-";
-    const size_t room = len < n ? len : (n > 4 ? n - 4 : n - 1);
-    for (; k < room; k++)
-        buf[k] = (unsigned char)s[k] < 0x20 || s[k] == 0x7f ? '?' : s[k];
+    const size_t len = strlen(s);
+    size_t k = len < n ? len : (n > 4 ? n - 4 : n - 1); /* room for "..." where cut */
+    memcpy(buf, s, k);
+    tf_one_line(buf, k);
     if (k < len && n > 4)
         memcpy(buf + k, "...", 3), k += 3;
     buf[k] = '\0';

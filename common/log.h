@@ -22,6 +22,10 @@ void tf_debug(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* tf_error, then exit(status). */
 void tf_die(int status, const char *fmt, ...) __attribute__((format(printf, 2, 3), noreturn));
 
+/* Each control byte of s[0..len) (a newline, an escape sequence) overwritten with '?': what
+ * every message and every string shown from a peer goes through. */
+void tf_one_line(char *s, size_t len);
+
 /* s shown safely in a message or a table: at most n - 1 bytes of it in buf, control bytes as
  * '?', "..." where it was cut; "-" for NULL.  Returns buf. */
 const char *tf_printable(const char *s, char *buf, size_t n);

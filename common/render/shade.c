@@ -558,9 +558,10 @@ void tf_shade_end(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, const tf_sha
     *out = (tf_sample){(float)c.x, (float)c.y, (float)c.z, 1.0f, (float)p->dist};
 }
 
-void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
-                           const tf_sample_record *lower, tf_sample_record *mine, tf_sample *out,
-                           uint64_t *shadow_rays)
+void tf_shade_ray_coherent_among(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
+                                 const tf_ray_clear *const *lowers, int n,
+                                 const tf_shadow_clear *near, tf_sample_record *mine,
+                                 tf_sample *out, uint64_t *shadow_rays)
 {
     if (mine)
         mine->camera.s_free = 0, mine->shadow.t_under = 0;
@@ -571,13 +572,22 @@ void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
     double t_water = tf_shade_t_water(sh, origin, dir);
     tf_hit hit;
     tf_shade_pending p;
-    int found = tf_trace_coherent(sh->hf, origin, dir, t_water, lower ? &lower->camera : NULL,
-                                  &hit, mine ? &mine->camera : NULL);
+    int found = tf_trace_coherent_among(sh->hf, origin, dir, t_water, lowers, n, &hit,
+                                        mine ? &mine->camera : NULL);
     tf_shade_begin(sh, origin, dir, t_water, found ? &hit : NULL, &p);
     tf_shade_end(sh, origin, dir, &p,
-                 resolve_shadow_coherent(sh, &p, lower ? &lower->shadow : NULL,
-                                         mine ? &mine->shadow : NULL, shadow_rays),
+                 resolve_shadow_coherent(sh, &p, near, mine ? &mine->shadow : NULL,
+                                         shadow_rays),
                  out);
+}
+
+void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
+                           const tf_sample_record *lower, tf_sample_record *mine, tf_sample *out,
+                           uint64_t *shadow_rays)
+{
+    const tf_ray_clear *camera = lower ? &lower->camera : NULL;
+    tf_shade_ray_coherent_among(sh, origin, dir, &camera, camera != NULL,
+                                lower ? &lower->shadow : NULL, mine, out, shadow_rays);
 }
 
 void tf_shade_ray(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir, tf_sample *out,

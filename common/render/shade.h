@@ -100,6 +100,12 @@ typedef struct tf_sample_record {
 void tf_shade_ray_coherent(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
                            const tf_sample_record *lower, tf_sample_record *mine, tf_sample *out,
                            uint64_t *shadow_rays);
+/* tf_shade_ray_coherent with its camera ray helped by whichever of lowers[0 .. n) vouches for
+ * most (tf_trace_coherent_among) and its shadow ray by `near` (NULL: none). */
+void tf_shade_ray_coherent_among(const tf_shader *sh, tf_vec3 origin, tf_vec3 dir,
+                                 const tf_ray_clear *const *lowers, int n,
+                                 const tf_shadow_clear *near, tf_sample_record *mine,
+                                 tf_sample *out, uint64_t *shadow_rays);
 
 /* tf_shade_ray in three steps, split at the shadow ray, so that a caller can trace many
  * samples' rays together (render.c's corner rows, trace_packet.h) with the same bits:

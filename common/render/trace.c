@@ -885,12 +885,34 @@ static int vouched(const ray_ctx *r, const heading *h, const tf_ray_clear *lower
                       lower->k, lower->s_in, lower->s_free, hf->slope_max, eps, t_pre, t_skip);
 }
 
-/* walk_hier, skipping what `lower` vouches for. */
-static int walk_coherent(ray_ctx *r, const heading *h, const tf_ray_clear *lower,
+/* tf_vouched's D before its margin is positive: false only where tf_vouched's D (the same
+ * expression, less a margin) is not positive either, and without tf_vouched's divisions. */
+static inline int climbs_clear(const ray_ctx *r, const heading *h, const tf_ray_clear *lower)
+{
+    const double dx = h->ux - lower->ux, dy = h->uy - lower->uy;
+    return (h->k - lower->k) - r->hf->slope_max * (fabs(dx) + fabs(dy)) > 0;
+}
+
+/* The first of lowers[0 .. n) (NULL entries allowed) that vouches for part of the ray: its
+ * prefix end and skip (vouched); 0 if none does.  Any one that vouches is a proof of its own,
+ * so which is taken changes only the time: callers list the likeliest to reach furthest
+ * first. */
+static int first_vouched(const ray_ctx *r, const heading *h, const tf_ray_clear *const *lowers,
+                         int n, double *t_pre, double *t_skip)
+{
+    for (int m = 0; m < n; m++)
+        if (lowers[m] && lowers[m]->s_free > 0 && climbs_clear(r, h, lowers[m]) &&
+            vouched(r, h, lowers[m], t_pre, t_skip))
+            return 1;
+    return 0;
+}
+
+/* walk_hier, skipping what the first of `lowers` that can vouches for. */
+static int walk_coherent(ray_ctx *r, const heading *h, const tf_ray_clear *const *lowers, int n,
                          candidate *best)
 {
     double t_pre, t_skip;
-    if (!lower || !vouched(r, h, lower, &t_pre, &t_skip))
+    if (!first_vouched(r, h, lowers, n, &t_pre, &t_skip))
         return walk_hier(r, best);
     if (t_pre > r->t0) { /* the prefix: the walk with its end moved in */
         const double t1 = r->t1;
@@ -930,8 +952,9 @@ static void note_clear(const ray_ctx *r, const heading *h, const candidate *c, i
         mine->s_free = (c ? c->t : r->t1) * h->run;
 }
 
-int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
-                      const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine)
+int tf_trace_coherent_among(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+                            const tf_ray_clear *const *lowers, int n, tf_hit *hit,
+                            tf_ray_clear *mine)
 {
     ray_ctx r;
     heading h;
@@ -941,14 +964,20 @@ int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, dou
     if (!setup_ray(&r, hf, origin, dir, 0.0, tmax))
         return 0;
     if (hf->proc || !heading_of(&r, &h)) /* no slope_max, or no heading: the plain walk */
-        lower = NULL, mine = NULL;
+        n = 0, mine = NULL;
     const int above = mine && starts_above(&r);
-    int found = walk_coherent(&r, &h, lower, &best); /* may move r's start, never o, d, t1 */
+    int found = walk_coherent(&r, &h, lowers, n, &best); /* may move r's start, never o, d, t1 */
     if (mine)
         note_clear(&r, &h, found ? &best : NULL, above, mine);
     if (found && hit)
         finish_hit(&r, &best, hit);
     return found;
+}
+
+int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+                      const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine)
+{
+    return tf_trace_coherent_among(hf, origin, dir, tmax, &lower, lower != NULL, hit, mine);
 }
 
 /* ---- coherence of shadow rays: under the surface where the neighbour was ----------------------

@@ -58,6 +58,11 @@ typedef struct tf_ray_clear {
  * (if not NULL) with this ray's record.  The same return and hit as tf_trace. */
 int tf_trace_coherent(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
                       const tf_ray_clear *lower, tf_hit *hit, tf_ray_clear *mine);
+/* tf_trace_coherent helped by whichever of lowers[0 .. n) (NULL entries allowed) vouches for
+ * the longest skip: the same return and hit. */
+int tf_trace_coherent_among(const tf_heightfield *hf, tf_vec3 origin, tf_vec3 dir, double tmax,
+                            const tf_ray_clear *const *lowers, int n, tf_hit *hit,
+                            tf_ray_clear *mine);
 /* What a walk's setup computes from a direction alone: its steps, inverses and shear (a dozen
  * divisions), made once by tf_ray_dir_init for every ray of that direction over `hf` -- the
  * sun's shadow rays.  Fields are trace.c's; callers only hold it. */

@@ -74,9 +74,24 @@ static int check_one(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmax
     return ha;
 }
 
+/* tf_trace_coherent_among with lowers[0 .. n) gives tf_trace's hit too. */
+static void check_among(const tf_heightfield *hf, tf_vec3 o, tf_vec3 d, double tmax,
+                        const tf_ray_clear *const *lowers, int n)
+{
+    tf_hit a, b;
+    memset(&a, 0, sizeof a);
+    memset(&b, 0, sizeof b);
+    int ha = tf_trace(hf, o, d, 0.0, tmax, &a);
+    int hb = tf_trace_coherent_among(hf, o, d, tmax, lowers, n, &b, NULL);
+    if (ha != hb || (ha && memcmp(&a, &b, sizeof a) != 0))
+        fail_msg("coherent trace among %d records differs: o=(%.17g,%.17g,%.17g) "
+                 "d=(%.17g,%.17g,%.17g) hit %d/%d", n, o.x, o.y, o.z, d.x, d.y, d.z, ha, hb);
+}
+
 /* A fan (test_fans.h) traced bottom-up, each ray with the record of the one below; then
  * again, each with the record of a random other ray of the fan (higher ones vouch for nothing,
- * which must not matter either), and with a record from another origin. */
+ * which must not matter either), with a record from another origin, and among a list of
+ * records (NULL, another origin's, any of the fan's, the one below), as render.c asks. */
 static void fan(const tf_heightfield *hf, rng *r, const ray_fan *f, fan_tally *t)
 {
     tf_ray_clear rec[FAN_ROWS];
@@ -90,6 +105,9 @@ static void fan(const tf_heightfield *hf, rng *r, const ray_fan *f, fan_tally *t
         tf_ray_clear mine, other;
         check_one(hf, f->o, f->d[i], f->tmax, &rec[(int)(uni(r) * FAN_ROWS) % FAN_ROWS], &mine);
         check_one(hf, elsewhere, f->d[(i + 1) % FAN_ROWS], f->tmax, &rec[i], &other);
+        const tf_ray_clear *lowers[5] = {NULL, &other, &rec[(7 * i + 3) % FAN_ROWS],
+                                         &rec[(5 * i + 1) % FAN_ROWS], i ? &rec[i - 1] : NULL};
+        check_among(hf, f->o, f->d[i], f->tmax, lowers, 5);
     }
 }
 
@@ -129,6 +147,29 @@ static void test_a_false_record_hides_a_hit(void **state)
     /* the same record from another origin is ignored */
     lie.o[2] += 1;
     assert_int_equal(tf_trace_coherent(hf, o, d, INFINITY, &lie, NULL, NULL), 1);
+    tf_heightfield_free(hf);
+}
+
+/* Among several records the walk goes by the first that vouches: a record from another origin
+ * is passed over, a false one after it hides the hit; a true one before the false one is the
+ * one taken, and the hit is tf_trace's. */
+static void test_among_the_first_record_that_vouches_is_taken(void **state)
+{
+    (void)state;
+    tf_heightfield *hf = make_field(hills, 6, 1000);
+    tf_vec3 o = v3(500, 100, hf->hmax + 50), d = v3(0, 1, -0.3);
+    tf_hit want, got;
+    assert_true(tf_trace(hf, o, d, 0.0, INFINITY, &want));
+    tf_ray_clear lie = {{o.x, o.y, o.z}, 0, 1, -0.31, 0, 2 * want.t}, elsewhere = lie, below;
+    elsewhere.o[2] += 1;
+    const tf_ray_clear *lies[3] = {NULL, &elsewhere, &lie};
+    assert_int_equal(tf_trace_coherent_among(hf, o, d, INFINITY, lies, 3, NULL, NULL), 0);
+    assert_int_equal(tf_trace_coherent_among(hf, o, d, INFINITY, lies, 2, NULL, NULL), 1);
+    assert_true(tf_trace_coherent(hf, o, v3(0, 1, -0.35), INFINITY, NULL, NULL, &below));
+    assert_true(below.s_free > 0);
+    const tf_ray_clear *truth_first[2] = {&below, &lie};
+    assert_true(tf_trace_coherent_among(hf, o, d, INFINITY, truth_first, 2, &got, NULL));
+    assert_memory_equal(&got, &want, sizeof want);
     tf_heightfield_free(hf);
 }
 
@@ -370,6 +411,7 @@ int main(void)
         cmocka_unit_test(test_fans_hills),
         cmocka_unit_test(test_fans_terraces),
         cmocka_unit_test(test_a_false_record_hides_a_hit),
+        cmocka_unit_test(test_among_the_first_record_that_vouches_is_taken),
         cmocka_unit_test(test_the_prefix_finds_a_hit_before_the_lower_ray_enters),
         cmocka_unit_test(test_a_steep_side_keeps_a_diverging_ray_unvouched),
         cmocka_unit_test(test_a_hole_in_the_field_vouches_for_nothing),

@@ -28,6 +28,49 @@ tf_vec3 tf_sun_direction(const tf_scene *s)
     return v3(sin(az) * cos(el), cos(az) * cos(el), sin(el));
 }
 
+/* ---- the slope's blends
+ *
+ * tf_terrain_albedo reads a hit's slope (tf_slope_deg: an acos) only through two clamped
+ * smoothsteps, rock over rock_slope -+ TF_ROCK_BLEND_DEG and the snow's slide over rock_slope ..
+ * rock_slope + TF_SNOW_SLIDE_DEG (snow_line_at too, through the latter).  A slope at or below
+ * gentle = rock_slope - TF_ROCK_BLEND_DEG gives both their lower ends exactly (no rock, all
+ * the snow), one at or above steep = rock_slope + TF_SNOW_SLIDE_DEG (past the rock's blend too)
+ * both upper ends; those two values are the smoothsteps' own edges, computed by the same
+ * expressions.  So where a normal's z proves its slope beyond one of them, that edge stands in
+ * for the acos, and the albedo has the same bits: nz >= cos(gentle) + 1e-9 puts acos(nz) at
+ * least 1e-9 below gentle (|acos'| >= 1), orders above the roundings of cos, acos and the
+ * degrees (~1e-16); likewise nz <= cos(steep) - 1e-9.  On default.scene two hits in three
+ * skip the acos. */
+static double slope_gentle(const tf_scene *s)
+{
+    return s->materials.rock_slope_deg - TF_ROCK_BLEND_DEG;
+}
+
+static double slope_steep(const tf_scene *s)
+{
+    return s->materials.rock_slope_deg + TF_SNOW_SLIDE_DEG;
+}
+
+static void blend_normals(tf_shader *sh)
+{
+    _Static_assert(TF_SNOW_SLIDE_DEG >= TF_ROCK_BLEND_DEG && TF_ROCK_BLEND_DEG > 0,
+                   "the steep edge lies past the rock's blend, the gentle one before the snow's");
+    const double gentle = slope_gentle(sh->scene), steep = slope_steep(sh->scene);
+    sh->nz_gentle = gentle > 0 && gentle < 90 ? cos(gentle * TF_DEG2RAD) + 1e-9 : INFINITY;
+    sh->nz_steep = steep > 0 && steep < 180 ? cos(steep * TF_DEG2RAD) - 1e-9 : -INFINITY;
+}
+
+/* The slope tf_terrain_albedo is given for a normal's z: tf_slope_deg's, or a blend's edge
+ * that gives the same albedo (above). */
+static double material_slope(const tf_shader *sh, double nz)
+{
+    if (nz >= sh->nz_gentle)
+        return slope_gentle(sh->scene);
+    if (nz <= sh->nz_steep)
+        return slope_steep(sh->scene);
+    return tf_slope_deg(nz);
+}
+
 void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
 {
     *sh = (tf_shader){0};
@@ -54,6 +97,7 @@ void tf_shader_init(tf_shader *sh, const tf_scene *s, const tf_heightfield *hf)
         sh->pixel_angle = 2.0 * tan(0.5 * s->camera.fov_deg * TF_DEG2RAD) / columns;
     if (hf->proc)
         sh->view = tf_proc_view_of(hf->proc, s->camera.position, sh->pixel_angle);
+    blend_normals(sh);
     if (hf->flow) {
         double sum = 0;
         for (size_t i = 0; i < (size_t)hf->n * (size_t)hf->n; i++)
@@ -432,7 +476,7 @@ static double snow_line_at(const tf_shader *sh, tf_vec3 p, double slope)
 tf_vec3 tf_shade_albedo(const tf_shader *sh, tf_vec3 p, tf_vec3 n, double variation)
 {
     const tf_scene *s = sh->scene;
-    double slope = tf_slope_deg(n.z);
+    double slope = material_slope(sh, n.z);
     return tf_terrain_albedo(s->materials.tree_line, s->materials.sea_level,
                              s->materials.rock_slope_deg, sh->band, p.z, slope,
                              snow_line_at(sh, p, slope), variation);

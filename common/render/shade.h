@@ -58,6 +58,9 @@ typedef struct tf_shader {
     double pixel_angle;      /* angle one pixel subtends at the image centre, radians */
     tf_proc_view view;       /* a procedural terrain's levels of detail for this camera */
     double flow_ref;         /* [erosion]: flow at which a bed looks fully wet (mean * 8) */
+    /* a normal's z at or above nz_gentle is a slope below both materials' blends, at or below
+     * nz_steep one past them (tf_shade_albedo: no acos needed there) */
+    double nz_gentle, nz_steep;
     /* NULL, or the sun's strips (sun_strips.h: the renderer's, or kept with the height
      * field): where a shadow ray's walk may end, the same answer from a shorter walk */
     const struct tf_sun_strips *sun_strips;

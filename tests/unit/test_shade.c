@@ -268,6 +268,42 @@ static void test_snow_line_shortcuts_keep_the_albedo(void **state)
     free(f);
 }
 
+/* Normals whose slope lies on either side of the blends' edges (shade.c's material_slope), by a
+ * few ulps of their z and by up to a degree: the albedo has the definition's bits, with the
+ * acos or without it. */
+static void test_slope_shortcuts_keep_the_albedo(void **state)
+{
+    (void)state;
+    fixture *f = calloc(1, sizeof *f);
+    fill_scene(&f->scene);
+    f->scene.materials.snow_jitter = 40;
+    fill_plane(f, 700, 0);
+    tf_shader_init(&f->sh, &f->scene, &f->hf);
+    const double edges[2] = {f->sh.nz_gentle, f->sh.nz_steep};
+    assert_true(edges[0] < 1 && edges[1] > 0); /* default.scene's rock slope has both */
+    srand(11);
+    int differ = 0, checked = 0;
+    for (int e = 0; e < 2; e++) {
+        double nz = edges[e];
+        for (int k = 0; k < 40; k++)
+            nz = nextafter(nz, -2);
+        for (int i = 0; i < 20000; i++) {
+            double z = i < 80 ? nz : edges[e] + uniform(-0.02, 0.02);
+            if (i < 80)
+                nz = nextafter(nz, 2);
+            tf_vec3 n = v3(sqrt(1 - z * z), 0, z);
+            tf_vec3 p = v3(uniform(0, 100), uniform(0, 100), uniform(650, 750));
+            tf_vec3 got = tf_shade_albedo(&f->sh, p, n, -0.5);
+            tf_vec3 want = albedo_by_definition(&f->sh, p, n, -0.5);
+            differ += memcmp(&got, &want, sizeof got) != 0;
+            checked++;
+        }
+    }
+    assert_int_equal(differ, 0);
+    assert_int_equal(checked, 40000);
+    free(f);
+}
+
 static void test_water_reflects_sky_with_fresnel(void **state)
 {
     (void)state;
@@ -390,6 +426,7 @@ int main(void)
         cmocka_unit_test(test_sky_gradient_and_sun_glow),
         cmocka_unit_test(test_materials_by_altitude_and_slope),
         cmocka_unit_test(test_snow_line_shortcuts_keep_the_albedo),
+        cmocka_unit_test(test_slope_shortcuts_keep_the_albedo),
         cmocka_unit_test(test_water_reflects_sky_with_fresnel),
         cmocka_unit_test(test_sun_shadow_through_tracer),
         cmocka_unit_test(test_smooth_terminator_is_continuous),

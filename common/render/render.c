@@ -359,25 +359,36 @@ static void inner_sample_coherent(const tf_renderer *r, const pixel_cache *pc, i
                                 out, shadow_rays);
 }
 
-/* Sample at local lattice point (i, j) of pixel (px, py), tracing it on first use unless a
- * neighbour handed it over; *spp counts the samples the pixel uses, however they came. */
-static const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int px, int py,
-                                      int i, int j, int *spp, tf_render_counts *tally)
+/* cached_sample's first use of point k: trace it unless a neighbour handed it over, and note
+ * it used. */
+static __attribute__((noinline)) void first_use(const tf_renderer *r, pixel_cache *pc, int px,
+                                                int py, int i, int j, size_t k, int *spp,
+                                                tf_render_counts *tally)
 {
-    size_t k = (size_t)j * (size_t)pc->side + (size_t)i;
-    if (pc->have[k] != 1) {
-        if (!pc->have[k]) {
-            int64_t X = (int64_t)px * r->lattice + i, Y = (int64_t)py * r->lattice + j;
-            if (pc->column)
-                inner_sample_coherent(r, pc, X, Y, i, &pc->sample[k], &tally->shadow_rays);
-            else
-                tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
-            tally->primary_rays++;
-        }
-        pc->have[k] = 1;
-        pc->used[pc->nused++] = (int)k;
-        (*spp)++;
+    if (!pc->have[k]) {
+        int64_t X = (int64_t)px * r->lattice + i, Y = (int64_t)py * r->lattice + j;
+        if (pc->column)
+            inner_sample_coherent(r, pc, X, Y, i, &pc->sample[k], &tally->shadow_rays);
+        else
+            tf_render_lattice_sample(r, X, Y, &pc->sample[k], &tally->shadow_rays);
+        tally->primary_rays++;
     }
+    pc->have[k] = 1;
+    pc->used[pc->nused++] = (int)k;
+    (*spp)++;
+}
+
+/* Sample at local lattice point (i, j) of pixel (px, py), tracing it on first use unless a
+ * neighbour handed it over; *spp counts the samples the pixel uses, however they came.  The
+ * pixel's quads ask for most of their corners again (a point already used: a load and a
+ * compare here, the call only on a first use). */
+static inline const tf_sample *cached_sample(const tf_renderer *r, pixel_cache *pc, int px,
+                                             int py, int i, int j, int *spp,
+                                             tf_render_counts *tally)
+{
+    const size_t k = (size_t)j * (size_t)pc->side + (size_t)i;
+    if (pc->have[k] != 1)
+        first_use(r, pc, px, py, i, j, k, spp, tally);
     return &pc->sample[k];
 }
 

@@ -239,6 +239,7 @@ typedef struct pixel_cache {
     tf_sample *sample;  /* side * side */
     unsigned char *have; /* side * side, all 0 between pixels */
     int *used, nused;   /* side * side */
+    int took;           /* an edge handed the pixel samples (take_edge) */
     tf_sample_record *column;
     /* rows[m]: the records of the pixel's two corner columns m + 1 corner rows below its top
      * corner row (rows[m][0] left, rows[m][1] right), m < nrows <= TF_LOWER_ROWS */
@@ -304,13 +305,18 @@ static float nearest_dist(const pixel_cache *pc, const size_t at[4])
  * same bits, one ray fewer.  On default.scene 480x270 one inner sample in six lies on an edge
  * already traced. */
 typedef struct pixel_edge {
-    unsigned char *have;      /* 1: sample[m] holds inner point m's */
+    unsigned char *have;      /* 1: sample[m] holds inner point m's (only while *held) */
     tf_sample *sample;
+    unsigned char *held;      /* 0: the edge holds nothing (most pixels use no inner point:
+                               * their edges are neither scanned nor cleared) */
 } pixel_edge;
 
 /* Take an edge's samples into the pixel's lattice points k0, k0 + step, ...  as not used yet. */
 static void take_edge(pixel_cache *pc, const pixel_edge *e, size_t k0, size_t step)
 {
+    if (!*e->held)
+        return;
+    pc->took = 1;
     for (int m = 0; m < pc->side - 2; m++)
         if (e->have[m]) {
             size_t k = k0 + (size_t)m * step;
@@ -322,11 +328,14 @@ static void take_edge(pixel_cache *pc, const pixel_edge *e, size_t k0, size_t st
 /* Hand the samples the pixel used at lattice points k0, k0 + step, ... to an edge. */
 static void hand_edge(const pixel_cache *pc, pixel_edge *e, size_t k0, size_t step)
 {
+    *e->held = 0;
+    if (pc->nused == 0) /* only its corners */
+        return;
     for (int m = 0; m < pc->side - 2; m++) {
         size_t k = k0 + (size_t)m * step;
         e->have[m] = pc->have[k] == 1;
         if (e->have[m])
-            e->sample[m] = pc->sample[k];
+            e->sample[m] = pc->sample[k], *e->held = 1;
     }
 }
 
@@ -338,8 +347,10 @@ static void clear_pixel(pixel_cache *pc, const size_t at[4])
         pc->have[at[q]] = 0;
     for (int t = 0; t < pc->nused; t++)
         pc->have[pc->used[t]] = 0;
-    for (size_t m = 1; m < N; m++) /* taken, never used */
-        pc->have[m * side] = pc->have[N * side + m] = 0;
+    if (pc->took) /* taken, never used */
+        for (size_t m = 1; m < N; m++)
+            pc->have[m * side] = pc->have[N * side + m] = 0;
+    pc->took = 0;
 }
 
 typedef struct quad { int i, j, size; } quad;
@@ -625,19 +636,20 @@ static int pixel_edges_alloc(pixel_edge *e, size_t count, size_t n)
     const size_t points = count * (n > 0 ? n : 1);
     e->have = calloc(points, 1);
     e->sample = malloc(sizeof *e->sample * points);
-    return e->have && e->sample;
+    e->held = calloc(count, 1);
+    return e->have && e->sample && e->held;
 }
 
 static void pixel_edges_free(pixel_edge *e)
 {
-    free(e->have), free(e->sample);
+    free(e->have), free(e->sample), free(e->held);
 }
 
 /* Pixel column c's slice of a row of edges (n inner points each). */
 static pixel_edge edge_slice(const pixel_edge *e, int c, size_t n)
 {
     const size_t at = (size_t)c * n;
-    return (pixel_edge){e->have + at, e->sample + at};
+    return (pixel_edge){e->have + at, e->sample + at, e->held + c};
 }
 
 static void rect_state_free(rect_state *st)
@@ -657,7 +669,7 @@ static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
     st->above = malloc(sizeof *st->above * w1);
     st->below = malloc(sizeof *st->below * w1);
     st->pc = (pixel_cache){(int)side, malloc(sizeof(tf_sample) * side * side),
-                           calloc(side * side, 1), malloc(sizeof(int) * side * side), 0,
+                           calloc(side * side, 1), malloc(sizeof(int) * side * side), 0, 0,
                            NULL, {NULL}, 0};
     int ok = st->above && st->below && st->pc.sample && st->pc.have && st->pc.used;
     if (coherence_on(r)) {
@@ -692,7 +704,7 @@ static void render_pixel_row(const tf_renderer *r, tf_rect rect, int row, rect_s
     for (int m = 0; m < down - row; m++)
         rows[m] = corner_records(st, rect, row + 1 + m);
     const size_t inner = (size_t)r->lattice - 1;
-    memset(st->left.have, 0, inner); /* the row's first pixel has no left neighbour here */
+    *st->left.held = 0; /* the row's first pixel has no left neighbour here */
     for (int c = 0; c < rect.w; c++) {
         pixel_edge top = edge_slice(&st->tops, c, inner);
         corners cs = {{&st->above[c], &st->above[c + 1], &st->below[c], &st->below[c + 1]},

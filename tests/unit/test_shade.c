@@ -235,6 +235,18 @@ static tf_vec3 albedo_by_definition(const tf_shader *sh, tf_vec3 p, tf_vec3 n, d
 
 static double uniform(double lo, double hi) { return lo + (hi - lo) * rand() / RAND_MAX; }
 
+/* default.scene's materials over a level plane at the snow line (700), its line moved by up to
+ * 40 times the snow fBm, the shader set up. */
+static fixture *snowy_plane(void)
+{
+    fixture *f = calloc(1, sizeof *f);
+    fill_scene(&f->scene);
+    f->scene.materials.snow_jitter = 40;
+    fill_plane(f, 700, 0);
+    tf_shader_init(&f->sh, &f->scene, &f->hf);
+    return f;
+}
+
 /* Points all through the snow line's reach (jitter times the fBm's bound, plus the band), and
  * just inside the band around the line itself, where a shortcut that under-bounds the octaves
  * it skips gives a clamped weight for a partial one; slopes all through the snow's slide,
@@ -242,11 +254,7 @@ static double uniform(double lo, double hi) { return lo + (hi - lo) * rand() / R
 static void test_snow_line_shortcuts_keep_the_albedo(void **state)
 {
     (void)state;
-    fixture *f = calloc(1, sizeof *f);
-    fill_scene(&f->scene);
-    f->scene.materials.snow_jitter = 40;
-    fill_plane(f, 700, 0);
-    tf_shader_init(&f->sh, &f->scene, &f->hf);
+    fixture *f = snowy_plane();
     const double band = f->sh.band, reach = 40 * tf_shade_snow_fbm_bound() + band;
     const double slide = f->scene.materials.rock_slope_deg + TF_SNOW_SLIDE_DEG;
     srand(7);
@@ -274,11 +282,7 @@ static void test_snow_line_shortcuts_keep_the_albedo(void **state)
 static void test_slope_shortcuts_keep_the_albedo(void **state)
 {
     (void)state;
-    fixture *f = calloc(1, sizeof *f);
-    fill_scene(&f->scene);
-    f->scene.materials.snow_jitter = 40;
-    fill_plane(f, 700, 0);
-    tf_shader_init(&f->sh, &f->scene, &f->hf);
+    fixture *f = snowy_plane();
     const double edges[2] = {f->sh.nz_gentle, f->sh.nz_steep};
     assert_true(edges[0] < 1 && edges[1] > 0); /* default.scene's rock slope has both */
     srand(11);

@@ -7,6 +7,7 @@
 #include "render/sun_strips.h"
 #include "render/trace_procedural.h"
 
+#include <assert.h>
 #include <math.h>
 #include <pthread.h>
 #include <string.h>
@@ -53,8 +54,9 @@ static double slope_steep(const tf_scene *s)
 
 static void blend_normals(tf_shader *sh)
 {
-    _Static_assert(TF_SNOW_SLIDE_DEG >= TF_ROCK_BLEND_DEG && TF_ROCK_BLEND_DEG > 0,
-                   "the steep edge lies past the rock's blend, the gentle one before the snow's");
+    /* (floating constants: not an integer constant expression for _Static_assert) */
+    assert(TF_SNOW_SLIDE_DEG >= TF_ROCK_BLEND_DEG && TF_ROCK_BLEND_DEG > 0 &&
+           "the steep edge lies past the rock's blend, the gentle one before the snow's");
     const double gentle = slope_gentle(sh->scene), steep = slope_steep(sh->scene);
     sh->nz_gentle = gentle > 0 && gentle < 90 ? cos(gentle * TF_DEG2RAD) + 1e-9 : INFINITY;
     sh->nz_steep = steep > 0 && steep < 180 ? cos(steep * TF_DEG2RAD) - 1e-9 : -INFINITY;

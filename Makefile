@@ -120,7 +120,8 @@ FORCE:
 $(BUILD)/%.o: %.c $(FLAGS_STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -MMD -MP -c $< -o $@
-$(RENDER_SRC:%.c=$(BUILD)/%.o): ALL_CFLAGS += $(HOT_CFLAGS)
+# private: the flags stamp, a prerequisite of these objects too, records the common flags only
+$(RENDER_SRC:%.c=$(BUILD)/%.o): private ALL_CFLAGS += $(HOT_CFLAGS)
 
 $(LIB): $(LIB_OBJ)
 	@mkdir -p $(dir $@)

@@ -12,13 +12,16 @@
 #      scenes/default.scene at 240x135; both workers take tasks; the image is bit-identical
 #      (cmp) to a local render of the same scene and size.
 #   3. The same at a larger size with --tasks rows:4, --lease-timeout 2000 and a watermark that
-#      lets every task be dealt (see below why); once the coordinator's dashboard shows worker
-#      2 holding a task (the worker frozen meanwhile), its cable is pulled at the switch (ip link
-#      set down).  The coordinator hears nothing more
+#      lets every task be dealt (see below why); both workers join and are frozen before the
+#      first task is dealt (a third, tests/tools/gate_worker.py, opens the --wait-workers gate
+#      and takes nothing), so the render advances only while the test lets it; once the
+#      coordinator's dashboard shows worker 2 holding a task (the worker frozen meanwhile), its
+#      cable is pulled at the switch (ip link set down).  The coordinator hears nothing more
 #      from it, drops it after the lease timeout and deals its task again (tasks_redealt >= 1
 #      in --stats); worker 1 finishes the render and the image still equals the local render.
 #   4. A partition: every worker's cable is pulled for longer than the lease (2.5 leases), then
-#      plugged back.  The coordinator drops both as silent and deals their tasks again; the
+#      plugged back (pulled after both joined and before the first task is dealt: the gate
+#      worker, on the coordinator's host, opens the gate once they are cut off).  The coordinator drops both as silent and deals their tasks again; the
 #      workers notice the broken connections once the network is back, reconnect with backoff
 #      within --timeout, authenticate and join again, and finish the render: exit 0 for all,
 #      no manual restart, the image identical to the local render.
@@ -265,9 +268,10 @@ fi
 note "wrong secret refused: $(cat "$TMP/wrong.log")"
 
 # ---- 2. a render across the two worker hosts equals a local render ----
-# (the coordinator runs with --wait-workers 2 in every part: nothing is dealt before both hosts
+# (the coordinator runs with --wait-workers in every part: nothing is dealt before both hosts
 # have joined, so neither can finish a render alone before the other is in, and the first two
-# tasks go one to each: both render, whichever is faster)
+# tasks go one to each: both render, whichever is faster; parts 3 and 4 wait for a third, the
+# gate worker, started once the test has the two where it wants them)
 start "$NS_W1" "$TMP/small.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1
 W1=$LAST
@@ -294,7 +298,7 @@ note "$SMALL across 2 hosts: identical to the local render; tasks per worker:" \
 # of that task well before the lease expires (the render recovers, tasks_duplicated counts it,
 # but nothing is re-dealt).  Here worker 1 keeps rendering fresh tasks, so it is the lease that
 # notices the silent worker and deals its task again.
-start_coordinator cut "$LARGE" --wait-workers 2 --tasks rows:4 --lease-timeout 2000 --watermark 1000 \
+start_coordinator cut "$LARGE" --wait-workers 3 --tasks rows:4 --lease-timeout 2000 --watermark 1000 \
     --http "$COORD_IP:$HTTP_PORT"
 # One after the other, so that worker 2 is the second to join: id 2 at the coordinator (the
 # coordinator logs each join at -v).
@@ -315,7 +319,16 @@ start "$NS_W2" "$TMP/cut.w2.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1
 W2=$LAST
 wait_joined 2
-kill -0 "$COORD" 2>/dev/null || fail "the render finished before the cut (make LARGE bigger)"
+# Both frozen before any task is dealt, then the gate opened by a worker that takes none: from
+# here the render advances only in cut_while_holding's short runs, whatever the machine's speed.
+w2pid=$(child_of "$W2") w1pid=$(child_of "$W1")
+[ -n "$w2pid" ] && [ -n "$w1pid" ] || fail "cannot find the worker processes under $W2 $W1"
+kill -STOP "$w2pid" "$w1pid"
+STOPPED="$w2pid $w1pid"
+start "$NS_W1" "$TMP/cut.gate.log" python3 "$ROOT/tests/tools/gate_worker.py" "$COORD_IP" \
+    "$PORT" "$TMP/secret"
+GATE=$LAST
+wait_joined 3
 cut_while_holding "$W2" p-w2 "$W1"
 cut_at=$(date +%s)
 note "cut worker 2's cable (p-w2 down) mid-render"
@@ -351,7 +364,7 @@ wait "$W2" 2>/dev/null
 forget "$W2"
 ip -n "$NS_LAN" link set p-w2 up || fail "cannot plug worker 2 back in"
 LIMIT=$((LIMIT + 55)) # the partition and the reconnections come on top of the render
-start_coordinator part "$LARGE" --wait-workers 2 --tasks rows:4 --lease-timeout 2000
+start_coordinator part "$LARGE" --wait-workers 3 --tasks rows:4 --lease-timeout 2000
 start "$NS_W1" "$TMP/part.w1.log" "$TF" worker --connect "$COORD_IP:$PORT" \
     --secret-file "$TMP/secret" -j 1 --timeout 30000
 W1=$LAST
@@ -365,11 +378,13 @@ while [ "$(count_lines "$TMP/part.coord.log" 'joined: networked')" -lt 2 ]; do
     [ "$i" -le 200 ] || { cat "$TMP/part.coord.log"; fail "the two workers did not join"; }
     sleep 0.1
 done
-kill -0 "$COORD" 2>/dev/null || fail "the render finished before the partition (make LARGE bigger)"
 if ! { ip -n "$NS_LAN" link set p-w1 down && ip -n "$NS_LAN" link set p-w2 down; }; then
     fail "cannot pull the cables"
 fi
-note "both workers' cables pulled for 5 s (2.5 leases)"
+start "$NS_COORD" "$TMP/part.gate.log" python3 "$ROOT/tests/tools/gate_worker.py" "$COORD_IP" \
+    "$PORT" "$TMP/secret"
+wait_for_line "$TMP/part.coord.log" "3 workers joined: dealing tasks" 20 "$COORD"
+note "both workers' cables pulled for 5 s (2.5 leases), then the gate opened"
 sleep 5
 if ! { ip -n "$NS_LAN" link set p-w1 up && ip -n "$NS_LAN" link set p-w2 up; }; then
     fail "cannot plug the cables back"

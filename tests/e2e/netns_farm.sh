@@ -322,12 +322,13 @@ wait_joined 2
 # Both frozen before any task is dealt, then the gate opened by a worker that takes none: from
 # here the render advances only in cut_while_holding's short runs, whatever the machine's speed.
 w2pid=$(child_of "$W2") w1pid=$(child_of "$W1")
-[ -n "$w2pid" ] && [ -n "$w1pid" ] || fail "cannot find the worker processes under $W2 $W1"
+if [ -z "$w2pid" ] || [ -z "$w1pid" ]; then
+    fail "cannot find the worker processes under $W2 $W1"
+fi
 kill -STOP "$w2pid" "$w1pid"
 STOPPED="$w2pid $w1pid"
 start "$NS_W1" "$TMP/cut.gate.log" python3 "$ROOT/tests/tools/gate_worker.py" "$COORD_IP" \
-    "$PORT" "$TMP/secret"
-GATE=$LAST
+    "$PORT" "$TMP/secret" # ends with the render; cleanup kills it otherwise
 wait_joined 3
 cut_while_holding "$W2" p-w2 "$W1"
 cut_at=$(date +%s)

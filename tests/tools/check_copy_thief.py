@@ -21,18 +21,10 @@ import struct
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from tfwire import Conn, dec, IN, OUT, RD, INT, STRING, BLOB, OK  # noqa: E402
+from tfwire import Conn, dec, join, IN, OUT, RD, INT, STRING, BLOB, OK  # noqa: E402
 from lying_worker import layout_of, chunks_of, preview_len  # noqa: E402
 
 TASK = [(STRING, "task")] + [(INT, None)] * 6 + [(BLOB, None)]
-
-
-def join(c, name):
-    op, body = c.call(IN, [(STRING, "next_worker"), (INT, None)])
-    me = dec(body)[1]
-    c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, name),
-                 (INT, os.getpid()), (STRING, "c")])
-    return me
 
 
 def zero_result(tid, me, rect, scene):

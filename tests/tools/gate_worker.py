@@ -12,26 +12,14 @@ import select
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from tfwire import IN, INT, OK, OP_NAMES, OUT, STRING, TUPLE, Conn, dec  # noqa: E402
-
-
-def join(c):
-    op, body = c.call(IN, [(STRING, "next_worker"), (INT, None)])
-    if op != TUPLE:
-        raise SystemExit("gate_worker: cannot take a worker id: %s" % OP_NAMES.get(op, op))
-    me = dec(body)[1]
-    op, _ = c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, "gate"),
-                         (INT, os.getpid()), (STRING, "c")])
-    if op != OK:
-        raise SystemExit("gate_worker: hello refused: %s" % OP_NAMES.get(op, op))
-    return me
+from tfwire import Conn, join  # noqa: E402
 
 
 def main():
     if len(sys.argv) != 4:
         raise SystemExit("usage: gate_worker.py HOST PORT SECRET_FILE")
     c = Conn(sys.argv[1], int(sys.argv[2]), sys.argv[3])
-    me = join(c)
+    me = join(c, "gate")
     print("gate_worker: joined as worker %d" % me, flush=True)
     # A heartbeat twice a second (the coordinator drops a connection silent for a lease), the
     # replies read and dropped, until the coordinator closes or resets the connection.

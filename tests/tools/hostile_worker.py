@@ -18,7 +18,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from tfwire import (BLOB, DOUBLE, ERROR, IN, INP, INT, OK, OP_NAMES, OUT, RD, RDP, STRING,  # noqa: E402
-                    TUPLE, Conn, dec)
+                    TUPLE, Conn, dec, join)
 
 HOARDERS = 4
 # ("task", id, frame, x, y, w, h, excluded)
@@ -37,18 +37,6 @@ def expect(c, what, op, fields, want=ERROR):
     else:
         print("answered %s as expected: %s" % (OP_NAMES[rop], what))
     return rop, body
-
-
-def join(c):
-    op, body = c.call(IN, [(STRING, "next_worker"), (INT, None)])
-    if op != TUPLE:
-        raise SystemExit("cannot join: %s" % OP_NAMES.get(op, op))
-    me = dec(body)[1]
-    op, _ = c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, "hostile"),
-                         (INT, os.getpid()), (STRING, "c")])
-    if op != OK:
-        raise SystemExit("hello refused")
-    return me
 
 
 def take(c):
@@ -80,7 +68,7 @@ def main():
         int(sys.argv[4]), int(sys.argv[5]), sys.argv[6]
     c = Conn(host, port, secret)
     expect(c, "a task taken before joining", IN, TASK_TMPL)
-    me = join(c)
+    me = join(c, "hostile")
     print("hostile worker joined as %d" % me)
     expect(c, "joining twice (taking the worker counter again)", IN,
            [(STRING, "next_worker"), (INT, None)])
@@ -144,7 +132,7 @@ def main():
     hoard = [c]
     for _ in range(HOARDERS):
         h = Conn(host, port, secret)
-        join(h)
+        join(h, "hostile")
         take(h)
         hoard.append(h)
     print("hostile worker: every attack refused; hoarding %d tasks" % len(hoard))

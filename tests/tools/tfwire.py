@@ -6,7 +6,8 @@ flood/tamper tools; failing_worker.py predates it and keeps its own copy.
 Conn(host, port, secret_path=None) connects, reads the HELLO and, with a secret, runs the
 mutual HMAC-SHA256 handshake (key = SHA-256 of the secret file's bytes without trailing
 newlines) and then seals every frame (see seal.py's description in common/linda/seal.h).
-call(op, fields) sends one request and returns (reply_op, body)."""
+call(op, fields) sends one request and returns (reply_op, body); join(c, name) joins a render as
+a networked worker."""
 import hashlib
 import hmac
 import os
@@ -189,6 +190,20 @@ class Conn:
 
     def close(self):
         self.s.close()
+
+
+def join(c, name):
+    """Join a render on Conn c as a worker does: take a worker id, say hello as a networked
+    worker on host `name`; returns the id.  Exits (SystemExit) with a message if refused."""
+    op, body = c.call(IN, [(STRING, "next_worker"), (INT, None)])
+    if op != TUPLE:
+        raise SystemExit("cannot take a worker id: %s" % OP_NAMES.get(op, op))
+    me = dec(body)[1]
+    op, _ = c.call(OUT, [(STRING, "hello"), (INT, me), (STRING, "networked"), (STRING, name),
+                         (INT, os.getpid()), (STRING, "c")])
+    if op != OK:
+        raise SystemExit("hello refused: %s" % OP_NAMES.get(op, op))
+    return me
 
 
 # ---- proxies (tests/tools/lying_proxy.py, flip_proxy.py): a machine on the path ----

@@ -76,6 +76,9 @@ typedef struct tf_erosion_view {
     size_t stride;
     int gi, gj;      /* global coordinates of element 0 */
     int nx, ny;      /* size of the window */
+    /* the kernel's rolling row buffers, TF_EROSION_ROWS(nx) int32s of any content, kept by the
+     * window across steps (erosion_state.h); NULL: each step allocates its own */
+    int32_t *rows;
 } tf_erosion_view;
 
 /* Exact integer bookkeeping of one step (or a sum of steps) over the vertices a piece owns. */
@@ -96,6 +99,16 @@ float tf_erosion_rain_now(const tf_erosion_model *m, int step);
  * after each row's last needed vertex (a stride of nx + TF_EROSION_PAD, and as many spare
  * elements after the last row). */
 #define TF_EROSION_PAD 16
+
+/* The kernel's row buffers for a window nx wide: two rows of derived values (3 arrays each) and
+ * three of edges (4 arrays each), each array up to nx + 3 * TF_EROSION_PAD long.  While every
+ * step allocated and freed its own (77 KiB at 1049 wide), its speed was left to malloc: of two
+ * farm workers with patches of one size, the first forked computed 12-18% slower than the
+ * other, whatever patch or core it had.  Kept by the window, both run as fast as the faster
+ * one did, and one process's erosion 10% faster (bench/README.md section 39; why malloc's
+ * blocks cost that much was not found). */
+#define TF_EROSION_ROW_ARRAYS 18
+#define TF_EROSION_ROWS(nx) (TF_EROSION_ROW_ARRAYS * ((size_t)(nx) + 3 * TF_EROSION_PAD))
 
 /* One time step on the vertices [r0, r1) x [c0, c1) of view v (window coordinates), in place.
  * Needs the old state of one more vertex on every side of the rectangle (inside the window;

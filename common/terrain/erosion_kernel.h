@@ -405,18 +405,26 @@ INLINE void update(const row_ctx *rc, size_t at, int c, const edge_row *hor,
 }
 
 /* The buffers of one call: two derived rows and three edge rows, `len` elements each, zeroed
- * (lanes past the rectangle's end read what no loop wrote; they are discarded). */
+ * (lanes past the rectangle's end read what no loop wrote; they are discarded): the view's
+ * own (erosion.h, TF_EROSION_ROWS), or allocated for this call (owned set) where it has none. */
 typedef struct {
     int32_t *mem;
+    int owned;
     derived_row der[2];
     edge_row edges[3];
 } step_bufs;
 
-INLINE int bufs_alloc(step_bufs *sb, int len)
+_Static_assert(2 * 3 + 3 * 4 == TF_EROSION_ROW_ARRAYS, "bufs_alloc's arrays");
+
+INLINE int bufs_alloc(step_bufs *sb, const tf_erosion_view *v, int len)
 {
-    sb->mem = calloc(18 * (size_t)len, sizeof(int32_t));
+    size_t count = TF_EROSION_ROW_ARRAYS * (size_t)len;
+    sb->owned = !v->rows || count > TF_EROSION_ROWS(v->nx);
+    sb->mem = sb->owned ? calloc(count, sizeof(int32_t)) : v->rows;
     if (!sb->mem)
         return -1;
+    if (!sb->owned)
+        memset(sb->mem, 0, count * sizeof(int32_t));
     int32_t *p = sb->mem;
     for (int r = 0; r < 2; r++, p += 3 * (size_t)len)
         sb->der[r] = (derived_row){p, p + len, (float *)(p + 2 * (size_t)len)};
@@ -458,7 +466,7 @@ int TF_KERNEL(const tf_erosion_model *model, const tf_erosion_view *v, tf_erosio
     consts local = consts_of(model, rain_now);
     const consts *m = &local;
     step_bufs sb;
-    if (bufs_alloc(&sb, (count + 2 + W - 1) / W * W + 2 * W) != 0)
+    if (bufs_alloc(&sb, v, (count + 2 + W - 1) / W * W + 2 * W) != 0)
         return -1;
     const derived_row *dj = &sb.der[0], *dj1 = &sb.der[1];
     const edge_row *down = &sb.edges[0], *up = &sb.edges[1], *hor = &sb.edges[2];
@@ -475,7 +483,8 @@ int TF_KERNEL(const tf_erosion_model *model, const tf_erosion_view *v, tf_erosio
         down = up;
         up = swap_e;
     }
-    free(sb.mem);
+    if (sb.owned)
+        free(sb.mem);
     return 0;
 }
 

@@ -59,8 +59,13 @@ int tf_erosion_window_alloc(tf_erosion_window *win, int nx, int ny)
     size_t each = stride * ((size_t)ny + 1); /* the spare row: room after the last */
     memset(win, 0, sizeof *win);
     win->mem = calloc(each * ARRAYS, 4);
-    if (!win->mem)
+    /* the kernel's rows, once for all the window's steps (erosion.h, TF_EROSION_ROWS) */
+    void *rows = NULL;
+    if (!win->mem || posix_memalign(&rows, 4096, TF_EROSION_ROWS(nx) * sizeof(int32_t)) != 0) {
+        free(win->mem);
+        win->mem = NULL;
         return -1;
+    }
     int32_t *i32 = win->mem;
     tf_erosion_view *v = &win->v;
     v->b = i32;
@@ -73,12 +78,14 @@ int tf_erosion_window_alloc(tf_erosion_window *win, int nx, int ny)
     v->stride = stride;
     v->nx = nx;
     v->ny = ny;
+    v->rows = rows;
     return 0;
 }
 
 void tf_erosion_window_free(tf_erosion_window *win)
 {
     free(win->mem);
+    free(win->v.rows);
     memset(win, 0, sizeof *win);
 }
 

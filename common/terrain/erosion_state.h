@@ -35,7 +35,8 @@ int64_t tf_erosion_solid(const tf_erosion_state *st, int n);
 int64_t tf_erosion_water(const tf_erosion_state *st, int n);
 
 /* A window of nx x ny vertices with its own arrays (stride nx + TF_EROSION_PAD, spare room
- * after the last row), for a piece of the grid and its halo. */
+ * after the last row), for a piece of the grid and its halo, and the kernel's row buffers for
+ * all its steps (v.rows: erosion.h, TF_EROSION_ROWS). */
 typedef struct tf_erosion_window {
     tf_erosion_view v;
     void *mem;

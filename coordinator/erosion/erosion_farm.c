@@ -174,7 +174,7 @@ static int take_band(farm *f, const tf_tuple *got, char *err, size_t errlen)
     if (tf_erosion_block_check(data, len, (int)rows, i1 - i0, from, err, errlen) != 0)
         return -1;
     tf_erosion_view v = {f->st.b, f->st.t, f->st.d, f->st.w, f->st.s, f->st.flow, f->st.soft,
-                         (size_t)f->st.n, 0, 0, f->st.n, f->st.n};
+                         (size_t)f->st.n, 0, 0, f->st.n, f->st.n, NULL /* unpacked, not stepped */};
     tf_erosion_rect r = {j0 + (int)row, j0 + (int)(row + rows), i0, i1};
     tf_erosion_block_unpack(&v, r, data);
     f->rows_in[p] += (int)rows;

@@ -196,6 +196,63 @@ static void test_same_bits_as_first_kernel(void **state)
     free(h);
 }
 
+/* Steps 0 .. steps - 1 over all of window win but its one-vertex rim (whatever rows holds: the
+ * window's own row buffers, or none). */
+static void step_window(const run *r, tf_erosion_window *win, int steps, int garbage)
+{
+    tf_erosion_rect all = {1, win->v.ny - 1, 1, win->v.nx - 1};
+    tf_erosion_tally t = {0};
+    for (int s = 0; s < steps; s++) {
+        if (garbage && win->v.rows)
+            memset(win->v.rows, 0xA5, TF_EROSION_ROWS(win->v.nx) * sizeof(int32_t));
+        assert_int_equal(tf_erosion_step(&r->m, &win->v, all, all, s, &t), 0);
+    }
+}
+
+/* A window keeps the kernel's row buffers for every step (erosion.h, TF_EROSION_ROWS): the
+ * kernel uses them (they no longer hold what they held) and its result does not depend on what
+ * they held before a step: the same bits as a step that allocates its own, on every kernel. */
+static void test_window_rows_reused_whatever_they_hold(void **state)
+{
+    (void)state;
+    int n = 65;
+    float *h = fbm_heights(6);
+    tf_erosion_keys k = keys(30);
+    const char *isa[] = {"avx512", "avx2", "portable"};
+    for (size_t i = 0; i < sizeof isa / sizeof isa[0]; i++) {
+        if (tf_erosion_force_isa(isa[i]) != 0)
+            continue;
+        run r;
+        start(&r, h, n, &k);
+        tf_erosion_window kept, own;
+        assert_int_equal(tf_erosion_window_alloc(&kept, 50, 40), 0);
+        assert_int_equal(tf_erosion_window_alloc(&own, 50, 40), 0);
+        assert_non_null(kept.v.rows);
+        free(own.v.rows);
+        own.v.rows = NULL; /* each step allocates its own */
+        tf_erosion_window_load(&kept, &r.st, 7, 11);
+        tf_erosion_window_load(&own, &r.st, 7, 11);
+        step_window(&r, &kept, 30, 1);
+        step_window(&r, &own, 30, 0);
+        size_t bytes = kept.v.stride * (size_t)kept.v.ny * 4;
+        assert_memory_equal(kept.v.b, own.v.b, bytes);
+        assert_memory_equal(kept.v.t, own.v.t, bytes);
+        assert_memory_equal(kept.v.d, own.v.d, bytes);
+        assert_memory_equal(kept.v.w, own.v.w, bytes);
+        assert_memory_equal(kept.v.s, own.v.s, bytes);
+        assert_memory_equal(kept.v.flow, own.v.flow, bytes);
+        size_t garbage = 0;
+        for (size_t e = 0; e < TF_EROSION_ROWS(kept.v.nx); e++)
+            garbage += (uint32_t)kept.v.rows[e] == 0xA5A5A5A5u;
+        assert_true(garbage < TF_EROSION_ROWS(kept.v.nx) / 2);
+        tf_erosion_window_free(&kept);
+        tf_erosion_window_free(&own);
+        tf_erosion_state_free(&r.st);
+    }
+    tf_erosion_force_isa(NULL);
+    free(h);
+}
+
 /* A flat dry plane: the ground never moves; far from the outlet rain stays where it falls. */
 static void test_flat_plane(void **state)
 {
@@ -301,7 +358,7 @@ static void test_block_check(void **state)
     start(&r, h, n, &k);
     go(&r, 0, 30, 1, 8, 0, 0);
     tf_erosion_view v = {r.st.b, r.st.t, r.st.d, r.st.w, r.st.s, r.st.flow, r.st.soft,
-                         (size_t)n, 0, 0, n, n};
+                         (size_t)n, 0, 0, n, n, NULL};
     tf_erosion_rect rect = {2, 5, 1, 16};
     size_t len = tf_erosion_block_bytes(3, 15);
     uint8_t *b = malloc(len + 4);
@@ -383,6 +440,7 @@ int main(void)
         cmocka_unit_test(test_mass_conserved),
         cmocka_unit_test(test_identical_any_tiling),
         cmocka_unit_test(test_same_bits_as_first_kernel),
+        cmocka_unit_test(test_window_rows_reused_whatever_they_hold),
         cmocka_unit_test(test_flat_plane),
         cmocka_unit_test(test_single_vertex),
         cmocka_unit_test(test_ramp_erodes_and_deposits),

@@ -164,6 +164,18 @@ static uint64_t fnv1a(uint64_t h, const void *p, size_t len)
     return h;
 }
 
+/* The kernels this CPU runs, one after another: forces the next from *i on (start at 0) and
+ * says 1, or puts the choice back and says 0 once every one was had. */
+static int next_kernel(size_t *i)
+{
+    static const char *const isa[] = {"avx512", "avx2", "portable"};
+    while (*i < sizeof isa / sizeof isa[0])
+        if (tf_erosion_force_isa(isa[(*i)++]) == 0)
+            return 1;
+    tf_erosion_force_isa(NULL);
+    return 0;
+}
+
 /* The kernels may be rewritten for speed, never for results: 97 steps of test 2's reference run
  * give the bits the first kernel gave (commit 87d4353, AVX2 and portable alike), on every
  * kernel this CPU runs. */
@@ -173,10 +185,7 @@ static void test_same_bits_as_first_kernel(void **state)
     int n = 65;
     float *h = fbm_heights(6);
     tf_erosion_keys k = keys(97);
-    const char *isa[] = {"avx512", "avx2", "portable"};
-    for (size_t i = 0; i < sizeof isa / sizeof isa[0]; i++) {
-        if (tf_erosion_force_isa(isa[i]) != 0)
-            continue;
+    for (size_t i = 0; next_kernel(&i);) {
         run r;
         start(&r, h, n, &k);
         go(&r, 0, 97, 1, 97, n, n);
@@ -192,7 +201,6 @@ static void test_same_bits_as_first_kernel(void **state)
         assert_int_equal(r.tally.out_load, 1358433662);
         tf_erosion_state_free(&r.st);
     }
-    tf_erosion_force_isa(NULL);
     free(h);
 }
 
@@ -209,47 +217,48 @@ static void step_window(const run *r, tf_erosion_window *win, int steps, int gar
     }
 }
 
+/* One kernel's case of the test below: 30 steps on a window with its rows garbled before each
+ * step and on one without rows give the same bits, and the rows were written. */
+static void window_rows_case(const float *h, int n, const tf_erosion_keys *k)
+{
+    run r;
+    start(&r, h, n, k);
+    tf_erosion_window kept, own;
+    assert_int_equal(tf_erosion_window_alloc(&kept, 50, 40), 0);
+    assert_int_equal(tf_erosion_window_alloc(&own, 50, 40), 0);
+    assert_non_null(kept.v.rows);
+    free(own.v.rows);
+    own.v.rows = NULL; /* each step allocates its own */
+    tf_erosion_window_load(&kept, &r.st, 7, 11);
+    tf_erosion_window_load(&own, &r.st, 7, 11);
+    step_window(&r, &kept, 30, 1);
+    step_window(&r, &own, 30, 0);
+    size_t bytes = kept.v.stride * (size_t)kept.v.ny * 4;
+    assert_memory_equal(kept.v.b, own.v.b, bytes);
+    assert_memory_equal(kept.v.t, own.v.t, bytes);
+    assert_memory_equal(kept.v.d, own.v.d, bytes);
+    assert_memory_equal(kept.v.w, own.v.w, bytes);
+    assert_memory_equal(kept.v.s, own.v.s, bytes);
+    assert_memory_equal(kept.v.flow, own.v.flow, bytes);
+    size_t garbage = 0;
+    for (size_t e = 0; e < TF_EROSION_ROWS(kept.v.nx); e++)
+        garbage += (uint32_t)kept.v.rows[e] == 0xA5A5A5A5u;
+    assert_true(garbage < TF_EROSION_ROWS(kept.v.nx) / 2);
+    tf_erosion_window_free(&kept);
+    tf_erosion_window_free(&own);
+    tf_erosion_state_free(&r.st);
+}
+
 /* A window keeps the kernel's row buffers for every step (erosion.h, TF_EROSION_ROWS): the
  * kernel uses them (they no longer hold what they held) and its result does not depend on what
  * they held before a step: the same bits as a step that allocates its own, on every kernel. */
 static void test_window_rows_reused_whatever_they_hold(void **state)
 {
     (void)state;
-    int n = 65;
     float *h = fbm_heights(6);
     tf_erosion_keys k = keys(30);
-    const char *isa[] = {"avx512", "avx2", "portable"};
-    for (size_t i = 0; i < sizeof isa / sizeof isa[0]; i++) {
-        if (tf_erosion_force_isa(isa[i]) != 0)
-            continue;
-        run r;
-        start(&r, h, n, &k);
-        tf_erosion_window kept, own;
-        assert_int_equal(tf_erosion_window_alloc(&kept, 50, 40), 0);
-        assert_int_equal(tf_erosion_window_alloc(&own, 50, 40), 0);
-        assert_non_null(kept.v.rows);
-        free(own.v.rows);
-        own.v.rows = NULL; /* each step allocates its own */
-        tf_erosion_window_load(&kept, &r.st, 7, 11);
-        tf_erosion_window_load(&own, &r.st, 7, 11);
-        step_window(&r, &kept, 30, 1);
-        step_window(&r, &own, 30, 0);
-        size_t bytes = kept.v.stride * (size_t)kept.v.ny * 4;
-        assert_memory_equal(kept.v.b, own.v.b, bytes);
-        assert_memory_equal(kept.v.t, own.v.t, bytes);
-        assert_memory_equal(kept.v.d, own.v.d, bytes);
-        assert_memory_equal(kept.v.w, own.v.w, bytes);
-        assert_memory_equal(kept.v.s, own.v.s, bytes);
-        assert_memory_equal(kept.v.flow, own.v.flow, bytes);
-        size_t garbage = 0;
-        for (size_t e = 0; e < TF_EROSION_ROWS(kept.v.nx); e++)
-            garbage += (uint32_t)kept.v.rows[e] == 0xA5A5A5A5u;
-        assert_true(garbage < TF_EROSION_ROWS(kept.v.nx) / 2);
-        tf_erosion_window_free(&kept);
-        tf_erosion_window_free(&own);
-        tf_erosion_state_free(&r.st);
-    }
-    tf_erosion_force_isa(NULL);
+    for (size_t i = 0; next_kernel(&i);)
+        window_rows_case(h, 65, &k);
     free(h);
 }
 

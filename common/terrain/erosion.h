@@ -105,8 +105,7 @@ float tf_erosion_rain_now(const tf_erosion_model *m, int step);
  * step allocated and freed its own (77 KiB at 1049 wide), its speed was left to malloc: of two
  * farm workers with patches of one size, the first forked computed 12-18% slower than the
  * other, whatever patch or core it had.  Kept by the window, both run as fast as the faster
- * one did, and one process's erosion 10% faster (bench/README.md section 39; why malloc's
- * blocks cost that much was not found). */
+ * one did (bench/README.md section 39; why malloc's blocks cost that much was not found). */
 #define TF_EROSION_ROW_ARRAYS 18
 #define TF_EROSION_ROWS(nx) (TF_EROSION_ROW_ARRAYS * ((size_t)(nx) + 3 * TF_EROSION_PAD))
 

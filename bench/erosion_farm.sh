@@ -23,6 +23,10 @@ T=$(mktemp -d "${TMPDIR:-/tmp}/tf-erosion-bench.XXXXXX")
 NS=tf-eb-$$
 cleanup() { ip netns delete "$NS" 2>/dev/null; ip link delete "tfeb$$" 2>/dev/null; rm -rf "$T"; }
 trap cleanup EXIT
+# killed, the namespace and the cable must go too: a cable left holding 10.78.0.1 sends every
+# later run's networked worker nowhere (netns_farm.sh does the same)
+trap 'exit 130' INT
+trap 'exit 143' TERM
 export TF_EROSION_CACHE=off
 
 sed -e "s/^size_exp .*/size_exp = $E/" "$ROOT/scenes/default.scene" >"$T/s.scene"

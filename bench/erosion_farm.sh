@@ -21,7 +21,12 @@ if [ "${1:-}" = --smoke ]; then E=6 STEPS=40 REPS=1; else E=${1:-12} STEPS=${2:-
 CORES=$(nproc)
 T=$(mktemp -d "${TMPDIR:-/tmp}/tf-erosion-bench.XXXXXX")
 NS=tf-eb-$$
-cleanup() { ip netns delete "$NS" 2>/dev/null; ip link delete "tfeb$$" 2>/dev/null; rm -rf "$T"; }
+hf=""
+# a networked run's coordinator (hf) waits for its worker for good: it goes with the script
+cleanup() {
+    [ -n "$hf" ] && kill "$hf" 2>/dev/null
+    ip netns delete "$NS" 2>/dev/null; ip link delete "tfeb$$" 2>/dev/null; rm -rf "$T"
+}
 trap cleanup EXIT
 # killed, the namespace and the cable must go too: a cable left holding 10.78.0.1 sends every
 # later run's networked worker nowhere (netns_farm.sh does the same)
@@ -78,6 +83,7 @@ networked() {
     ip netns exec "$NS" "$TF" worker --connect 10.78.0.1:$port --secret-file "$T/key" 2>"$T/$1.w.err" ||
         { echo "FAIL: networked worker: $(tail -1 "$T/$1.w.err")"; exit 1; }
     wait $hf || { echo "FAIL: networked: $(tail -1 "$T/$1.err")"; exit 1; }
+    hf=""
 }
 
 best1="" best2="" best4="" bestn=""

@@ -22,7 +22,8 @@
  * render.c would trace: the corners of the quad on top of its stack, the probe centre of that
  * quad once its corners show the contrast that asks for it, and -- to keep the batches full --
  * the corners of the quads further down its stack, which render.c reaches and needs whatever
- * happens.  So the samples traced, the sample count and the nearest distance are C's too.
+ * happens, and the centres of those of them whose corners ask for a probe (centre_ahead).  So
+ * the samples traced, the sample count and the nearest distance are C's too.
  *
  * Sample cache: each pixel owns a slice of (N+1)^2 entries of `cache`, with the samples'
  * display levels (render.c tf_display_level of r, g, b: what the contrast test compares, so
@@ -77,16 +78,21 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
         const int y0 = y1 > TF_LOWER_ROWS ? y1 - TF_LOWER_ROWS : 0, n = (y1 - y0) * cols;
         lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
         ray_clears lows, rec;
+        long xs[TF_STREAM], ys[TF_STREAM]; /* made packets after (records_gather) */
+        int low_at[TF_STREAM];
         for (int e = 0; e < TF_STREAM; e++) {
-            const int k = e < n ? e : n - 1, p = e / TF_LANES, l = e % TF_LANES;
+            const int k = e < n ? e : n - 1;
             const int y = y0 + k / cols, c = c0 + k % cols;
-            X[p][l] = (long)(rx + c) * N;
-            Y[p][l] = (long)(ry + y) * N;
-            lows.s_free[p][l] = 0;
-            if (e < n && y + TF_LOWER_ROWS < ch)
-                record_get(out_records +
-                               ((size_t)(y + TF_LOWER_ROWS) * cw + c) * TF_CL_RECORD_DOUBLES,
-                           e, &lows);
+            xs[e] = (long)(rx + c) * N;
+            ys[e] = (long)(ry + y) * N;
+            low_at[e] = e < n && y + TF_LOWER_ROWS < ch
+                            ? ((y + TF_LOWER_ROWS) * cw + c) * TF_CL_RECORD_DOUBLES
+                            : -1;
+        }
+        for (int p = 0; p < TF_STREAM_PACKETS; p++) {
+            X[p] = vload8(p, xs);
+            Y[p] = vload8(p, ys);
+            records_gather(out_records, low_at + p * TF_LANES, p, &lows);
         }
         float8 s[TF_STREAM_PACKETS][5];
         iv rays[TF_STREAM_PACKETS];
@@ -110,29 +116,32 @@ __kernel void tf_corners8(__global const double *P, __global const int *I, ulong
     }
 }
 
-/* The records of the corners that help the camera ray of lattice point (X, Y) (trace.c's
- * coherence), into lane e of *lows and *fars: the corner TF_LOWER_ROWS pixel rows below the
- * point's pixel row (or the rectangle's last corner row), in the corner column nearest the
- * point; and the corner TF_LOWER_ROWS_FAR rows below it (or the last), where that is further
- * down, which walk_stream asks where the first cannot vouch.  Any lower ray from the camera may
- * help; these are below by enough to outclimb the terrain's slope across a half pixel's heading.
- * render.c's ray_below takes the first only: a C ray that walks from the camera costs no lane
- * of a packet, and the far record measured no gain there (bench/README.md section 30). */
-void lower_corners(__global const double *records, long X, long Y, long N, int rx, int ry,
-                   int rw, int rh, int e, ray_clears *lows, ray_clears *fars)
+/* The records of the corners that help the camera ray of lattice point (px N + i, py N + j),
+ * 0 <= i, j <= N (trace.c's coherence), as offsets into the corner records (-1: none): *near,
+ * the corner TF_LOWER_ROWS pixel rows below the point's pixel row (or the rectangle's last
+ * corner row), in the corner column nearest the point; and *far, the corner TF_LOWER_ROWS_FAR
+ * rows below it (or the last), where that is further down, which walk_stream asks where the
+ * first cannot vouch.  Any lower ray from the camera may help; these are below by enough to
+ * outclimb the terrain's slope across a half pixel's heading.  render.c's ray_below takes the
+ * first only: a C ray that walks from the camera costs no lane of a packet, and the far record
+ * measured no gain there (bench/README.md section 30). */
+void lower_corners(int px, int py, int i, int j, int N, int rx, int ry, int rw, int rh,
+                   int *near, int *far)
 {
-    const int p = e / TF_LANES, l = e % TF_LANES;
-    long cy = Y / N + TF_LOWER_ROWS - ry, fy = Y / N + TF_LOWER_ROWS_FAR - ry;
-    long cx = (X + N / 2) / N - rx;
+    /* the point's pixel row is py, or py + 1 on the pixel's top edge; its nearest corner
+     * column px, or px + 1 in the pixel's right half */
+    const int row = py + (j == N);
+    int cy = row + TF_LOWER_ROWS - ry, fy = row + TF_LOWER_ROWS_FAR - ry;
+    int cx = px + (i + N / 2 >= N) - rx;
     cy = cy < rh ? cy : rh;
     fy = fy < rh ? fy : rh;
     cx = cx < 0 ? 0 : cx > rw ? rw : cx;
-    lows->s_free[p][l] = fars->s_free[p][l] = 0;
-    if ((cy + ry) * N <= Y) /* no corner row below the point */
+    *near = *far = -1;
+    if ((long)(cy + ry) * N <= (long)py * N + j) /* no corner row below the point */
         return;
-    record_get(records + (size_t)(cy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES, e, lows);
+    *near = (cy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES;
     if (fy > cy)
-        record_get(records + (size_t)(fy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES, e, fars);
+        *far = (fy * (rw + 1) + cx) * TF_CL_RECORD_DOUBLES;
 }
 
 /* The lowest and highest display level of each channel over some samples (render.c's
@@ -182,6 +191,8 @@ typedef struct pixel_state {
     int used;                /* slice entries filled: the camera rays traced for this slice */
     uint entry0;             /* the slice's first entry in cache / levels */
     int asked;               /* stack[0 .. asked-1] have had their corners queued */
+    uint centred;            /* bit e: stack[e], below the top, has had its probe decided
+                                (centre_ahead) */
     uint rays;
     float zmin;
     double sum_r, sum_g, sum_b, sum_a;
@@ -203,23 +214,23 @@ typedef struct pixel_state {
 typedef struct sample_queue {
     int n;
     uchar pixel[TF_QUEUE]; /* which of the work-item's pixels asked */
-    short slot[TF_QUEUE];  /* its lattice slot j * (N+1) + i */
+    uchar i[TF_QUEUE], j[TF_QUEUE]; /* the lattice point (slot j * (N+1) + i; N <= 64) */
 } sample_queue;
 
-/* The pixel that keeps lattice point (i, j) of pixel p (shared edges, above), and the point's
- * slot in that pixel's slice, *k. */
-int keeper(const pixel_state *ps, int p, int side, int i, int j, int *k)
+/* The pixel that keeps lattice point (i, j) of pixel p (shared edges, above), and the point
+ * in that pixel's slice, (*ki, *kj). */
+int keeper(const pixel_state *ps, int p, int side, int i, int j, int *ki, int *kj)
 {
     const int N = side - 1;
     if (i == 0 && j > 0 && j < N && ps[p].left >= 0) {
-        *k = j * side + N;
+        *ki = N, *kj = j;
         return ps[p].left;
     }
     if (j == 0 && i > 0 && i < N && ps[p].below >= 0) {
-        *k = N * side + i;
+        *ki = i, *kj = N;
         return ps[p].below;
     }
-    *k = j * side + i;
+    *ki = i, *kj = j;
     return p;
 }
 
@@ -231,8 +242,9 @@ int want_new(pixel_state *ps, int p, int side, int i, int j, uint epoch, sample_
 {
     pixel_state *me = &ps[p];
     const int mine = j * side + i;
-    int k;
-    pixel_state *kp = &ps[keeper(ps, p, side, i, j, &k)];
+    int ki, kj;
+    pixel_state *kp = &ps[keeper(ps, p, side, i, j, &ki, &kj)];
+    const int k = kj * side + ki;
     uint st = kp->have[k];
     if (st == epoch || st == (epoch | TF_STORED)) {
         uint entry = kp->where[k];
@@ -247,7 +259,8 @@ int want_new(pixel_state *ps, int p, int side, int i, int j, uint epoch, sample_
     if (st != (epoch | TF_QUEUED) && q->n < TF_QUEUE) {
         kp->have[k] = epoch | TF_QUEUED;
         q->pixel[q->n] = (uchar)(kp - ps);
-        q->slot[q->n] = (short)k;
+        q->i[q->n] = (uchar)ki;
+        q->j[q->n] = (uchar)kj;
         q->n++;
     }
     return 0;
@@ -291,8 +304,41 @@ __global const double *levels_of(const pixel_state *ps, int side, int i, int j)
     return c >= 0 ? ps->corner_levels[c] : ps->levels + (size_t)ps->where[j * side + i] * 3;
 }
 
+/* Ask ahead for the probe centres of the quads below the top of pixel p's stack: render.c
+ * pops every one of them whatever happens above it, and probes it where its corners' span
+ * asks for it, so once an entry's corners are in hand its centre is a sample render.c traces,
+ * and it is queued now rather than in the round the entry comes to the top (a pixel that
+ * splits deep otherwise asks one centre a round).  The decision is advance's own. */
+void centre_ahead(pixel_state *all, int p, int side, double threshold, uint epoch,
+                  sample_queue *q)
+{
+    pixel_state *ps = &all[p];
+    const int N = side - 1;
+    const uint below = ps->sp > 1 ? (1u << (ps->sp - 1)) - 1u : 0u;
+    if ((ps->centred & below) == below)
+        return; /* every entry below the top decided */
+    for (int e = 0; e < ps->sp - 1 && q->n < TF_QUEUE; e++) {
+        const quad t = ps->stack[e];
+        if ((ps->centred >> e) & 1u)
+            continue;
+        if (t.size > 1) {
+            if (!want_corners(all, p, t, side, epoch, q))
+                continue; /* its corners are on their way: decide in a later round */
+            __global const double *lvl[4] = {
+                levels_of(ps, side, t.i, t.j), levels_of(ps, side, t.i + t.size, t.j),
+                levels_of(ps, side, t.i, t.j + t.size),
+                levels_of(ps, side, t.i + t.size, t.j + t.size)};
+            const double split_threshold = tf_aa_split_threshold(threshold, N, t.size);
+            if (display_range(span_of_corners(lvl)) > split_threshold * TF_AA_PROBE_FRACTION)
+                want(all, p, side, t.i + t.size / 2, t.j + t.size / 2, epoch, q);
+        }
+        ps->centred |= 1u << e;
+    }
+}
+
 /* render_pixel's loop for pixel p, run until its stack is empty or it needs a sample it does
- * not have; then the corners of the quads further down its stack are queued too. */
+ * not have; then the corners of the quads further down its stack are queued too, and the
+ * centres of those whose corners are in hand (centre_ahead). */
 void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sample_queue *q)
 {
     const int side = N + 1;
@@ -335,6 +381,7 @@ void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sampl
                 ps->asked = min(ps->asked, ps->sp);
                 if (display_range(span) > split_threshold) {
                     quad *st = ps->stack + ps->sp;
+                    ps->centred &= ~(0xfu << ps->sp);
                     st[0].i = t.i + hs, st[0].j = t.j + hs, st[0].size = hs;
                     st[1].i = t.i, st[1].j = t.j + hs, st[1].size = hs;
                     st[2].i = t.i + hs, st[2].j = t.j, st[2].size = hs;
@@ -365,6 +412,7 @@ void advance(pixel_state *all, int p, int N, double threshold, uint epoch, sampl
             break; /* this entry may not fit whole: ask again next round */
         want_corners(all, p, ps->stack[ps->asked], side, epoch, q);
     }
+    centre_ahead(all, p, side, threshold, epoch, q);
 }
 
 /* The order tf_pixels8 takes a rectangle's pixels in: tiles of TF_TILE x TF_TILE (narrower at
@@ -428,9 +476,9 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         s->py = ry + row;
         s->cache = cache;
         s->levels = levels;
-        s->entry0 = (uint)(m0 + p) * (uint)side * (uint)side;
         s->have = have + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         s->where = where + (size_t)(m0 + p) * (size_t)side * (size_t)side;
+        s->entry0 = (uint)(m0 + p) * (uint)side * (uint)side;
         s->used = 0;
         s->left = c % TF_TILE > 0 && p > 0 ? p - 1 : -1;
         s->below = row % TF_TILE > 0 && p >= tw ? p - tw : -1;
@@ -448,6 +496,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         s->stack[0].i = 0, s->stack[0].j = 0, s->stack[0].size = N;
         s->sp = 1;
         s->asked = 0;
+        s->centred = 0;
         s->probing = 0;
         s->spp = 4;
         s->rays = 0;
@@ -469,17 +518,26 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         /* every pixel still active waits on a queued sample, so q.n > 0 here */
         lv X[TF_STREAM_PACKETS], Y[TF_STREAM_PACKETS];
         ray_clears lows, fars;
+        /* the queue's points a sample at a time into arrays, then into packets (a lane put
+         * into a vector in place stores and reloads the whole vector) */
+        long xs[TF_STREAM], ys[TF_STREAM];
+        int near_at[TF_STREAM], far_at[TF_STREAM];
         for (int e = 0; e < q.n; e++) {
             const pixel_state *s = &ps[q.pixel[e]];
-            int k = q.slot[e];
-            long x = (long)s->px * LN + k % side, y = (long)s->py * LN + k / side;
-            X[e / TF_LANES][e % TF_LANES] = x;
-            Y[e / TF_LANES][e % TF_LANES] = y;
-            lower_corners(corner_records, x, y, LN, rx, ry, rw, rh, e, &lows, &fars);
+            const int i = q.i[e], j = q.j[e];
+            xs[e] = (long)s->px * LN + i;
+            ys[e] = (long)s->py * LN + j;
+            lower_corners(s->px, s->py, i, j, N, rx, ry, rw, rh, &near_at[e], &far_at[e]);
         }
         for (int e = q.n; e < (q.n + TF_LANES - 1) / TF_LANES * TF_LANES; e++) {
-            X[e / TF_LANES][e % TF_LANES] = X[0][0];
-            Y[e / TF_LANES][e % TF_LANES] = Y[0][0];
+            xs[e] = xs[0], ys[e] = ys[0];
+            near_at[e] = far_at[e] = -1;
+        }
+        for (int b = 0; b * TF_LANES < q.n; b++) {
+            X[b] = vload8(b, xs);
+            Y[b] = vload8(b, ys);
+            records_gather(corner_records, near_at + b * TF_LANES, b, &lows);
+            records_gather(corner_records, far_at + b * TF_LANES, b, &fars);
         }
         float8 smp[TF_STREAM_PACKETS][5];
         iv rays[TF_STREAM_PACKETS];
@@ -493,7 +551,7 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
             for (int l = 0; l < TF_LANES && b * TF_LANES + l < q.n; l++) {
                 int e = b * TF_LANES + l;
                 pixel_state *s = &ps[q.pixel[e]];
-                int k = q.slot[e];
+                int k = q.j[e] * side + q.i[e];
                 uint at = s->entry0 + (uint)s->used++;
                 __global float *dst = s->cache + (size_t)at * TF_CL_SAMPLE_FLOATS;
                 for (int f = 0; f < TF_CL_SAMPLE_FLOATS; f++)

@@ -488,9 +488,9 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
     lv mask[TF_STREAM_PACKETS], lit[TF_STREAM_PACKETS];
     ray_stream cam; /* d: the directions, tmax: the water distances (TF_FAR_AWAY: none) */
     cam.n = n;
+    const lv lane = (lv)(0, 1, 2, 3, 4, 5, 6, 7);
     for (int p = 0; p < np; p++) {
-        for (int l = 0; l < TF_LANES; l++)
-            mask[p][l] = p * TF_LANES + l < n ? -1 : 0;
+        mask[p] = lane < (lv)(n - p * TF_LANES);
         v3p dir = lattice_dir8(w, jitter_key, X[p], Y[p]);
         dv t_water = (dv)(TF_FAR_AWAY);
         t_water = select(t_water, (sea - origin.z) / dir.z, (dir.z < 0.0) & (origin.z > sea));
@@ -512,6 +512,9 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
     lv terrain[TF_STREAM_PACKETS], water[TF_STREAM_PACKETS];
     ray_stream shadow;
     uchar shadow_of[TF_STREAM]; /* the sample that cast shadow ray m */
+    /* shadow ray m's start and tmax, gathered a ray at a time and made packets after (a lane
+     * put into a vector in place stores and reloads the whole vector) */
+    double start_x[TF_STREAM], start_y[TF_STREAM], start_z[TF_STREAM], until[TF_STREAM];
     shadow.n = 0;
     for (int p = 0; p < np; p++) {
         terrain[p] = mask[p] & found[p];
@@ -539,23 +542,32 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
                                                s->start.y[l], s->start.z[l], 0, &t);
             if (said == TF_SUN_UNDER)
                 continue;
-            int m = shadow.n++, q = m / TF_LANES, r = m % TF_LANES;
+            const int m = shadow.n++;
             shadow_of[m] = (uchar)(p * TF_LANES + l);
-            shadow.o[q].x[r] = s->start.x[l];
-            shadow.o[q].y[r] = s->start.y[l];
-            shadow.o[q].z[r] = s->start.z[l];
-            shadow.d[q] = v3p_splat(sun);
-            shadow.tmin[q][r] = 0.0;
-            shadow.tmax[q][r] = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
+            start_x[m] = s->start.x[l];
+            start_y[m] = s->start.y[l];
+            start_z[m] = s->start.z[l];
+            until[m] = said == TF_SUN_CLEAR_AFTER ? t : TF_FAR_AWAY;
         }
     }
     lv blocked[TF_STREAM_PACKETS];
     if (shadow.n > 0) {
-        walk_stream(w, &shadow, NULL, NULL, blocked, NULL, NULL);
-        for (int m = 0; m < shadow.n; m++) {
-            int k = shadow_of[m];
-            lit[k / TF_LANES][k % TF_LANES] = blocked[m / TF_LANES][m % TF_LANES] ? 0 : -1;
+        for (int m = shadow.n; m % TF_LANES; m++) /* the last packet's lanes past the end */
+            start_x[m] = start_y[m] = start_z[m] = until[m] = 0.0;
+        for (int q = 0; q * TF_LANES < shadow.n; q++) {
+            shadow.o[q] = v3p_make(vload8(q, start_x), vload8(q, start_y), vload8(q, start_z));
+            shadow.d[q] = v3p_splat(sun);
+            shadow.tmin[q] = (dv)(0.0);
+            shadow.tmax[q] = vload8(q, until);
         }
+        walk_stream(w, &shadow, NULL, NULL, blocked, NULL, NULL);
+        long lit_of[TF_STREAM]; /* sample k: lit (-1) or not */
+        for (int k = 0; k < np * TF_LANES; k++)
+            lit_of[k] = 0;
+        for (int m = 0; m < shadow.n; m++)
+            lit_of[shadow_of[m]] = blocked[m / TF_LANES][m % TF_LANES] ? 0 : -1;
+        for (int p = 0; p < np; p++)
+            lit[p] = vload8(p, lit_of);
     }
 
     for (int p = 0; p < np; p++) {

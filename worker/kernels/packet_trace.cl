@@ -462,6 +462,25 @@ void record_put(__global double *to, const ray_clears *c, int k)
     to[3] = c->s_in[p][l], to[4] = c->s_free[p][l];
 }
 
+/* Packet p of *to: lane l the record at offset at[l] of records (-1: none,
+ * s_free 0), gathered a field at a time (a record put in lane by lane stored and reloaded the
+ * packet's vectors for every lane). */
+void records_gather(__global const double *records, const int at[TF_LANES], int p,
+                    ray_clears *to)
+{
+    const lv has = convert_long8(vload8(0, at) >= 0);
+    const lv k = select((lv)(0), convert_long8(vload8(0, at)), has);
+#define TF_GATHER_FIELD(f)                                                                     \
+    (dv)(records[k.s0 + (f)], records[k.s1 + (f)], records[k.s2 + (f)], records[k.s3 + (f)],  \
+         records[k.s4 + (f)], records[k.s5 + (f)], records[k.s6 + (f)], records[k.s7 + (f)])
+    to->ux[p] = TF_GATHER_FIELD(0);
+    to->uy[p] = TF_GATHER_FIELD(1);
+    to->k[p] = TF_GATHER_FIELD(2);
+    to->s_in[p] = TF_GATHER_FIELD(3);
+    to->s_free[p] = select((dv)(0), TF_GATHER_FIELD(4), has);
+#undef TF_GATHER_FIELD
+}
+
 /* One packet walking a stream: its rays (rayp), where their walks stand, their best hits, the
  * lanes at work and which packet of the stream they hold (lane l: its lane l). */
 typedef struct walker {

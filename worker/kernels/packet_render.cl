@@ -58,6 +58,9 @@
 #define TF_QUEUED 0x80000000u
 #define TF_STORED 0x40000000u /* epochs stay below it (the host's EPOCH_LIMIT) */
 #define TF_STACK (3 * TF_AA_MAX_DEPTH + 1)
+#if TF_STACK > 32 || TF_AA_MAX_DEPTH > 7
+#error "a pixel's stack positions are the bits of a uint (centred), its lattice points uchars"
+#endif
 
 __kernel void tf_corners8(__global const double *P, __global const int *I, ulong jitter_key,
                           __global const float *h, __global const float2 *mm,
@@ -476,9 +479,9 @@ __kernel void tf_pixels8(__global const double *P, __global const int *I, ulong 
         s->py = ry + row;
         s->cache = cache;
         s->levels = levels;
+        s->entry0 = (uint)(m0 + p) * (uint)side * (uint)side;
         s->have = have + (size_t)(m0 + p) * (size_t)side * (size_t)side;
         s->where = where + (size_t)(m0 + p) * (size_t)side * (size_t)side;
-        s->entry0 = (uint)(m0 + p) * (uint)side * (uint)side;
         s->used = 0;
         s->left = c % TF_TILE > 0 && p > 0 ? p - 1 : -1;
         s->below = row % TF_TILE > 0 && p >= tw ? p - tw : -1;

@@ -5,6 +5,9 @@
  *                       (tf_render_rect vs tf_cl_backend_render): PSNR >= 45 dB over linear RGB
  *                       in [0, 1], per-pixel sample counts equal for >= 99% of pixels, alpha
  *                       equal for >= 99%, ray counts within 1%, external rays identical.
+ *   one_tile_same_rays  16x16 tasks (one work-item's tile on a CPU device): on PoCL's CPU
+ *                       device the kernels trace exactly the C backend's primary and shadow
+ *                       rays, no sample more.
  *   rect_invariance     the decomposition invariant on the device: stamps of the image give
  *                       memcmp-identical pixels to the whole-image render.
  *   mixed_backends      an image whose rectangles alternate between the backends (what a render
@@ -216,6 +219,34 @@ static void match_c_backend(void **state)
     for (size_t i = 0; i < (size_t)W * H; i++)
         z_close += fabs(img[i].z - fx.c_img[i].z) <= 1e-3f * fx.c_img[i].z;
     assert_true(z_close * 100 >= (size_t)W * H * 99);
+}
+
+/* A 16x16 task is one work-item's tile on a CPU device (256 pixels an item), so the kernels
+ * share every edge sample of it, as render.c shares them across a task: on PoCL's CPU device they
+ * must trace exactly the C backend's rays, no sample more (a sample asked ahead that render.c
+ * would not trace, or one traced twice, changes no pixel but costs a ray). */
+static void one_tile_same_rays(void **state)
+{
+    (void)state;
+    skip_without_opencl();
+    if (!on_pocl_cpu(fx.cl))
+        skip(); /* a GPU's work-items hold 8x8 tiles; and its rounding may refine otherwise */
+    const tf_rect rects[] = {{72, 40, 16, 16}, {0, 0, 16, 16}, {144, 74, 16, 16}};
+    for (size_t k = 0; k < sizeof rects / sizeof rects[0]; k++) {
+        tf_pixel c_img[16 * 16], cl_img[16 * 16];
+        tf_render_counts c = {0}, cl = {0};
+        char err[1024];
+        tf_render_rect(fx.r, rects[k], c_img, &c);
+        assert_int_equal(tf_cl_backend_render(fx.cl, rects[k], cl_img, &cl, err, sizeof err), 0);
+        print_message("16x16 at %d,%d: primary rays C %llu, OpenCL %llu; shadow %llu, %llu\n",
+                      rects[k].x, rects[k].y, (unsigned long long)c.primary_rays,
+                      (unsigned long long)cl.primary_rays, (unsigned long long)c.shadow_rays,
+                      (unsigned long long)cl.shadow_rays);
+        assert_memory_equal(cl_img, c_img, sizeof c_img);
+        assert_true(c.primary_rays > (16 + 1) * (16 + 1)); /* some pixel refined */
+        assert_int_equal(cl.primary_rays, c.primary_rays);
+        assert_int_equal(cl.shadow_rays, c.shadow_rays);
+    }
 }
 
 /* Copy rect's pixels (row-major in rect) into the whole-image array dst. */
@@ -727,7 +758,8 @@ static void opened_ahead(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(match_c_backend), cmocka_unit_test(rect_invariance),
+        cmocka_unit_test(match_c_backend), cmocka_unit_test(one_tile_same_rays),
+        cmocka_unit_test(rect_invariance),
         cmocka_unit_test(mixed_backends),  cmocka_unit_test(other_scenes),
         cmocka_unit_test(coherent_near_terrain),
         cmocka_unit_test(smooth_scenes),

@@ -6,7 +6,23 @@ reader of the 8-bit PNGs terrafarm writes, for the browser tests (cdp_paint.py).
     ch.open(url); ch.eval("1 + 1"); ch.click_at(x, y); ch.screenshot(path)
     ch.finish(code, lines)           # prints lines, closes Chromium, exits
 """
-import base64, json, os, select, shutil, struct, subprocess, sys, tempfile, time, zlib
+import atexit, base64, json, os, select, shutil, signal, struct, subprocess, sys, tempfile, time
+import zlib
+
+
+def group_running(pgid):
+    """Does any process of group pgid still run (a zombie runs no more)?"""
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            with open("/proc/%s/stat" % pid) as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            return True
+    return False
 
 
 class Chrome:
@@ -23,23 +39,49 @@ class Chrome:
             os.dup2(to_r, 3)
             os.dup2(from_w, 4)
         self.log = open(os.path.join(self.profile, "chromium.log"), "w")
+        # Chromium and its helpers (network service, renderers) in a process group of their
+        # own, so that stop() can wait for them all and end them if need be: the browser
+        # killed alone left a helper writing into the profile after it was removed, and its own
+        # temporary directory (org.chromium.Chromium.*) in TMPDIR, one each a test
         self.proc = subprocess.Popen(args, pass_fds=(3, 4), preexec_fn=child_fds,
-                                     stdout=self.log, stderr=self.log)
+                                     stdout=self.log, stderr=self.log, start_new_session=True)
+        atexit.register(self.stop)
         os.close(to_r)
         os.close(from_w)
         self.buf = b""
         self.next_id = 0
         self.session = None
 
+    def stop(self):
+        """Closes Chromium (Browser.close: it removes its own temporary files then), or kills its
+        whole process group if it does not exit, waits until none of it runs, and removes the
+        profile.  Safe to call twice (finish, then atexit)."""
+        if self.proc.returncode is None:
+            try:
+                os.write(self.to_w, json.dumps({"id": 1 << 30, "method": "Browser.close"})
+                         .encode() + b"\0")
+                self.proc.wait(60)
+            except (OSError, subprocess.TimeoutExpired):
+                pass
+        if self.proc.returncode is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                pass
+        deadline = time.time() + 10
+        while group_running(self.proc.pid) and time.time() < deadline:
+            time.sleep(0.05)
+        self.log.close()
+        shutil.rmtree(self.profile, ignore_errors=True)
+
     def finish(self, code, lines=()):
         for line in lines:
             print(line)
-        try:
-            self.proc.kill()
-            self.proc.wait(5)
-        except Exception:
-            pass
-        shutil.rmtree(self.profile, ignore_errors=True)
+        self.stop()
         sys.exit(code)
 
     def _read(self, deadline):

@@ -31,11 +31,12 @@ done
 url=$(sed -n 's/.*dashboard at \(http:[^ ]*\).*/\1/p' "$T/coord.err" | head -1)
 say "page at $url"
 shot=${TF_DASHBOARD_SHOT:-$T/dashboard.png}
-python3 "$(dirname "$0")/cdp_dashboard.py" "$CHROMIUM" "$url" "$shot" 150 $pid >"$T/cdp.out" 2>&1
+TMPDIR=$(browser_tmp) python3 "$(dirname "$0")/cdp_dashboard.py" "$CHROMIUM" "$url" "$shot" 150 $pid >"$T/cdp.out" 2>&1
 crc=$?
 thaw_workers $pid
 touch "$T/checked"
 cat "$T/cdp.out"
+no_browser_leftovers
 [ $crc -eq 77 ] && skip "$(tail -1 "$T/cdp.out")"
 [ $crc -eq 0 ] || fail "the dashboard page in Chromium: $(grep FAIL "$T/cdp.out" | head -3)"
 [ -s "$shot" ] || fail "no screenshot saved"

@@ -32,7 +32,7 @@ long=$(submit "$TF_ROOT/scenes/alps.scene" --size 1280x720 --name long --priorit
 
 say "Chromium at http://127.0.0.1:$PORT/"
 shot=${TF_FARM_SHOT:-$T/farm.png}
-python3 "$(dirname "$0")/cdp_farm.py" "$CHROMIUM" "http://127.0.0.1:$PORT" "$(tail -1 "$T/admin")" \
+TMPDIR=$(browser_tmp) python3 "$(dirname "$0")/cdp_farm.py" "$CHROMIUM" "http://127.0.0.1:$PORT" "$(tail -1 "$T/admin")" \
     "$shot" "$T/page-ready" "$paused" "$first" "$long" --worker-pid "$T/worker.pid" --limit 400 \
     >"$T/cdp.out" 2>&1 &
 CDP=$!
@@ -52,6 +52,7 @@ fi
 wait $CDP
 crc=$?
 cat "$T/cdp.out"
+no_browser_leftovers
 [ $crc -eq 77 ] && skip "$(tail -1 "$T/cdp.out")"
 [ $crc -eq 0 ] || fail "the farm's page in Chromium: $(grep FAIL "$T/cdp.out" | head -3)"
 python3 -c 'import sys; d=open(sys.argv[1],"rb").read(24); sys.exit(0 if d[:8]==b"\x89PNG\r\n\x1a\n" and int.from_bytes(d[16:20],"big")>=640 else 1)' "$shot" \

@@ -23,10 +23,11 @@ farm_worker w1
 
 say "Chromium at http://$TERRAFARM_FARM/"
 shot=${TF_FARM_PAINT_SHOT:-$T/farm_paint.png}
-python3 "$(dirname "$0")/cdp_farm_paint.py" "$CHROMIUM" "http://$TERRAFARM_FARM" \
+TMPDIR=$(browser_tmp) python3 "$(dirname "$0")/cdp_farm_paint.py" "$CHROMIUM" "http://$TERRAFARM_FARM" \
     "$(tail -1 "$T/alice")" "$still" "$T/ref.png" "$shot" >"$T/cdp.out" 2>&1
 crc=$?
 cat "$T/cdp.out"
+no_browser_leftovers
 [ $crc -eq 77 ] && skip "$(tail -1 "$T/cdp.out")"
 [ $crc -eq 0 ] || fail "Raypaint from the farm's page: $(grep FAIL "$T/cdp.out" | head -3)"
 paint=$(sed -n 's/^paint_job=//p' "$T/cdp.out")

@@ -117,6 +117,16 @@ no_leftovers() {
     return 0
 }
 
+# browser_tmp: the temporary directory a browser check (cdp_*.py) runs with (TMPDIR=...), where
+# cdp_lib.py keeps Chromium's profile; no_browser_leftovers: after the check, it must be empty
+# (cdp_lib.py removes the profile once no process of Chromium's runs: a helper left running
+# wrote into it after it was gone).
+browser_tmp() { mkdir -p "$T/browser-tmp" && echo "$T/browser-tmp"; }
+no_browser_leftovers() {
+    nbl=$(ls -A "$T/browser-tmp" 2>/dev/null)
+    [ -z "$nbl" ] || fail "Chromium's profile left behind in the temporary directory: $nbl"
+}
+
 # make_partial OUT MINBYTES ARGS...: start a render of $SCENE (or $PARTIAL_SCENE) into OUT and
 # SIGKILL it once OUT holds at least MINBYTES: an interrupted render, as a crash leaves it.
 make_partial() {

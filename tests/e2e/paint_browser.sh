@@ -19,10 +19,11 @@ say "terrafarm paint, paused, watched by Chromium"
 # tasks of ~1000 rays: a 320x180 picture in dozens of tasks, so the order of dealing shows
 start_paint "$T/paint.err" --size $SIZE -j 2 --paused --http 127.0.0.1:0 --save "$T/saved.scene" \
     --task-rays 1000
-python3 "$(dirname "$0")/cdp_paint.py" "$CHROMIUM" "$PAINT_URL" "$T/ref.png" "$T" "$PAINT_PID" \
+TMPDIR=$(browser_tmp) python3 "$(dirname "$0")/cdp_paint.py" "$CHROMIUM" "$PAINT_URL" "$T/ref.png" "$T" "$PAINT_PID" \
     >"$T/cdp.out" 2>&1
 crc=$?
 cat "$T/cdp.out"
+no_browser_leftovers
 [ $crc -eq 77 ] && skip "$(tail -1 "$T/cdp.out")"
 [ $crc -eq 0 ] || fail "Raypaint in Chromium: $(grep FAIL "$T/cdp.out" | head -3)"
 [ -n "${TF_PAINT_SHOT:-}" ] && cp "$T/paint.png" "$TF_PAINT_SHOT"

@@ -118,13 +118,14 @@ no_leftovers() {
 }
 
 # browser_tmp: the temporary directory a browser check (cdp_*.py) runs with (TMPDIR=...), where
-# cdp_lib.py keeps Chromium's profile; no_browser_leftovers: after the check, it must be empty
-# (cdp_lib.py removes the profile once no process of Chromium's runs: a helper left running
-# wrote into it after it was gone).
+# cdp_lib.py keeps Chromium's profile and Chromium its own temporary files; no_browser_leftovers:
+# after the check, it must be empty (cdp_lib.py closes Chromium and removes the profile once no
+# process of Chromium's runs: a helper left running wrote into it after it was gone, and a
+# killed browser leaves its org.chromium.Chromium.* directory).
 browser_tmp() { mkdir -p "$T/browser-tmp" && echo "$T/browser-tmp"; }
 no_browser_leftovers() {
     nbl=$(ls -A "$T/browser-tmp" 2>/dev/null)
-    [ -z "$nbl" ] || fail "Chromium's profile left behind in the temporary directory: $nbl"
+    [ -z "$nbl" ] || fail "Chromium's files left behind in the temporary directory: $nbl"
 }
 
 # make_partial OUT MINBYTES ARGS...: start a render of $SCENE (or $PARTIAL_SCENE) into OUT and

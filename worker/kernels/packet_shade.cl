@@ -54,7 +54,7 @@ dv height_sample8(const world *w, iv i, iv j)
     i = select(i, (iv)(w->n - 1), i >= w->n);
     j = select(j, (iv)(0), j < 0);
     j = select(j, (iv)(w->n - 1), j >= w->n);
-    lv k = convert_long8(j) * (long)w->n + convert_long8(i);
+    lv k = vertex_index8(w, convert_long8(i), convert_long8(j));
     return gather_f(w->h, k, (lv)(-1));
 }
 

@@ -31,6 +31,9 @@ typedef struct rayp {
 
 typedef struct candp { dv t; lv ci, cj, tri; } candp;
 
+/* Vertex (i, j)'s index in the heights, j n + i: n = cells + 1 = 2^cell_shift + 1. */
+lv vertex_index8(const world *w, lv i, lv j) { return (j << w->cell_shift) + j + i; }
+
 lv gather_i(__global const int *p, lv idx, lv mask)
 {
     lv k = select((lv)(0), idx, mask);
@@ -155,7 +158,7 @@ typedef tf_sheared shearedp;
 /* Vertex (i, j) per lane, its offsets from the origin permuted to each lane's ray space. */
 shearedp shear_vertex8(const world *w, const rayp *r, lv i, lv j, lv mask)
 {
-    dv hz = gather_f(w->h, j * w->n + i, mask);
+    dv hz = gather_f(w->h, vertex_index8(w, i, j), mask);
     dv a0 = to_d(i) * w->cell - r->o.x, a1 = to_d(j) * w->cell - r->o.y, a2 = hz - r->o.z;
     return tf_shear(pick3(a0, a1, a2, r->kx), pick3(a0, a1, a2, r->ky), pick3(a0, a1, a2, r->kz),
                     r->shx, r->shy, r->shz);
@@ -242,11 +245,11 @@ typedef struct walkp {
  * up.  The walk's hit is the same from any level; this one spares it the descents in place. */
 TF_INLINE lv start_level8(const world *w, const rayp *r, lv mask)
 {
-    const int cells = w->cells, top = w->levels - 1;
+    const int top = w->levels - 1;
     const dv z0 = r->o.z + r->t0 * r->d.z;
     lv level = (lv)(0), go = mask;
     for (int L = 1; L <= top && any_lane(go); L++) {
-        lv idx = (lv)(w->I[TFI_LEVEL_OFFSET + L]) + (r->cj >> L) * (lv)(cells >> L) +
+        lv idx = (lv)(w->I[TFI_LEVEL_OFFSET + L]) + ((r->cj >> L) << (w->cell_shift - L)) +
                  (r->ci >> L);
         dv hi, lo;
         minmax_split8(gather_minmax(w->mm, idx, go), &hi, &lo);
@@ -336,7 +339,7 @@ TF_INLINE void walk_fetch8(const world *w, const rayp *r, const walkp *s, lv act
     const lv level = s->level, bi = s->ci >> level, bj = s->cj >> level;
     f->tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
     f->ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
-    lv idx = level_offset8(w, level, active) + bj * ((lv)(cells) >> level) + bi;
+    lv idx = level_offset8(w, level, active) + (bj << ((lv)(w->cell_shift) - level)) + bi;
     f->minmax = gather_minmax(w->mm, idx, active);
 }
 
@@ -405,7 +408,7 @@ TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, co
 
 void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *hit)
 {
-    lv base = c->cj * w->n + c->ci;
+    lv base = vertex_index8(w, c->ci, c->cj);
     dv ha = gather_f(w->h, base, mask), hb = gather_f(w->h, base + 1, mask);
     dv hd = gather_f(w->h, base + w->n, mask), hc = gather_f(w->h, base + w->n + 1, mask);
     hit->t = c->t;
@@ -570,7 +573,7 @@ TF_INLINE lv resume8(const world *w, walker *k, lv missed)
 /* trace.c's starts_above per lane: z(t0) above the maximum of the ray's start cell. */
 lv starts_above8(const world *w, const rayp *r, lv mask)
 {
-    lv idx = (lv)(w->I[TFI_LEVEL_OFFSET]) + r->cj * (lv)(w->cells) + r->ci;
+    lv idx = (lv)(w->I[TFI_LEVEL_OFFSET]) + (r->cj << w->cell_shift) + r->ci;
     dv hi, lo;
     minmax_split8(gather_minmax(w->mm, idx, mask), &hi, &lo);
     return mask & (r->o.z + r->t0 * r->d.z > hi + r->margin);
@@ -583,7 +586,7 @@ void note_clears8(const world *w, const walker *k, lv ended, lv hit, ray_clears 
     const rayp *r = &k->r;
     dv run, ux, uy, kk;
     lv ok = ended & tf_heading(r->d.x, r->d.y, r->d.z, &run, &ux, &uy, &kk);
-    lv base = k->best.cj * w->n + k->best.ci, h_at = hit & ok;
+    lv base = vertex_index8(w, k->best.ci, k->best.cj), h_at = hit & ok;
     dv ha = gather_f(w->h, base, h_at), hb = gather_f(w->h, base + 1, h_at);
     dv hd = gather_f(w->h, base + w->n, h_at), hc = gather_f(w->h, base + w->n + 1, h_at);
     lv free = select(k->above, tf_hit_from_above(ha, hb, hc, hd, w->cell, k->best.tri == 0, r->d),

@@ -42,6 +42,9 @@ typedef struct world {
     __global const float *strips; /* the sun's strips' table (render/sun_math.h;
                                    * I[TFI_SUN_STRIPS] 0: none, two unread floats) */
     int n, cells, levels;
+    int cell_shift;               /* cells == 1 << cell_shift (heightfield.c: n = 2^k + 1), so
+                                   * a row's offset is a shift, not a 64-bit vector multiply
+                                   * (vpmullq: three uops, 15 cycles, on a walk step's path) */
     double cell;
     /* I[TFI_LEVEL_OFFSET + L] for L < 16 in two vectors: the walk looks a level's offset up with
      * one permute instead of a gather (packet_trace.cl level_offset8) */
@@ -65,6 +68,7 @@ world make_world(__global const double *P, __global const int *I, __global const
     w.n = I[TFI_N];
     w.cells = I[TFI_CELLS];
     w.levels = I[TFI_LEVELS];
+    w.cell_shift = 31 - clz(w.cells);
     w.cell = P[TFP_CELL];
     long off[16];
     for (int L = 0; L < 16; L++)

@@ -19,6 +19,10 @@
  *   the_prefix_finds_a_hit_before_the_lower_ray_enters   a ray helped by a lower one's record
  *                       still hits a hill before the lower ray enters the square: the prefix
  *                       walk (trace.c's C3), which no fan happens to need.
+ *   parallel_rays_match_trace   rays of one direction (the shadow rays' case: the kernels set
+ *                       the direction up once and skip the box's divisions where a ray's
+ *                       window stays in the box, window_in_box8), from origins over, under and
+ *                       outside the square, with short and endless windows: tf_trace's hits.
  * On PoCL's CPU device the bits are demanded; elsewhere the test says so and asks nothing (a
  * GPU's division may round differently).  Skipped without an OpenCL platform. */
 #include <stdarg.h>
@@ -271,6 +275,82 @@ static void the_prefix_finds_a_hit_before_the_lower_ray_enters(void **state)
     env_free(&env);
 }
 
+/* Streams of parallel rays, as the shadow rays are, which the kernels set up once for the
+ * stream (tf_walk_rays8 sees that every ray shares the first's direction): each direction's
+ * rays hit where tf_trace says and leave tf_trace_coherent's records.  Most packets start
+ * inside the square with windows of a few cells (what the sun's strips give), so the box's
+ * shortcut (window_in_box8) is taken for all their lanes; in every other packet one lane
+ * starts just outside the square, and every fifth packet's windows never end, so the
+ * shortcut is refused and the box clipped.  A shortcut that kept a window it should have cut
+ * (one taken whatever the box) fails here. */
+static void parallel_rays_match_trace(void **state)
+{
+    (void)state;
+    walk_env env = env_over(hills, 7, 1000);
+    const tf_heightfield *hf = env.hf;
+    tf_cl_backend *b = env.b;
+    const tf_vec3 dirs[] = {v3_norm(v3(-0.9, -0.33, 0.25)), v3_norm(v3(0.4, 0.7, 0.3)),
+                            v3_norm(v3(0.5, -0.2, -0.4)), v3_norm(v3(0, 0.8, 0.2)),
+                            v3_norm(v3(-0.6, 0.0, 0.5))};
+    enum { N = 2048 };
+    double *rays = malloc(sizeof *rays * N * 7), *t = malloc(sizeof *t * N);
+    double *rec = malloc(sizeof *rec * N * REC);
+    assert_true(rays && t && rec);
+    rng r = {7};
+    int hits = 0, kept = 0;
+    for (size_t k = 0; k < sizeof dirs / sizeof dirs[0]; k++) {
+        const tf_vec3 d = dirs[k];
+        for (int m = 0; m < N; m++) { /* packets of 8 (the kernels' lanes) */
+            double *y = rays + (size_t)m * 7;
+            const int lane = m % 8, packet = m / 8;
+            /* most packets inside the square with short windows, so the shortcut is open to
+             * all their lanes but one: the last lane of every other packet starts outside */
+            const int outside = lane == 7 && packet % 2 == 0;
+            y[0] = range(&r, 0, 1000), y[1] = range(&r, 0, 1000);
+            if (outside && uni(&r) < 0.5) /* a few cells out, so that it enters in its window */
+                y[0] = uni(&r) < 0.5 ? range(&r, -20, -0.1) : range(&r, 1000.1, 1020);
+            else if (outside)
+                y[1] = uni(&r) < 0.5 ? range(&r, -20, -0.1) : range(&r, 1000.1, 1020);
+            const int endless = packet % 5 == 4;
+            y[2] = endless ? range(&r, hf->hmin - 20, hf->hmax + 40)
+                           : range(&r, hf->hmin + 30, hf->hmax - 30);
+            y[3] = d.x, y[4] = d.y, y[5] = d.z;
+            y[6] = endless ? INFINITY : range(&r, 1, 30); /* a few cells, as the strips say */
+        }
+        char err[1024];
+        if (tf_cl_backend_walk(b, N, rays, NULL, NULL, t, rec, err, sizeof err))
+            fail_msg("%s", err);
+        for (int m = 0; m < N; m++) {
+            const double *y = rays + (size_t)m * 7;
+            const tf_vec3 o = v3(y[0], y[1], y[2]);
+            tf_hit hit;
+            tf_ray_clear mine;
+            const int found = tf_trace_coherent(hf, o, d, y[6], NULL, &hit, &mine);
+            const double want = found ? hit.t : INFINITY;
+            if (memcmp(&want, &t[m], sizeof want) != 0)
+                fail_msg("direction %zu: o=(%.17g,%.17g,%.17g) tmax %.17g: t %.17g, C %.17g", k,
+                         o.x, o.y, o.z, y[6], t[m], want);
+            double c[REC];
+            put_record(c, &mine);
+            const double *got = rec + (size_t)m * REC;
+            if (memcmp(&c[4], &got[4], sizeof c[4]) != 0 ||
+                (mine.s_free > 0 && memcmp(c, got, sizeof c) != 0))
+                fail_msg("direction %zu: o=(%.17g,%.17g,%.17g) tmax %.17g: record s_in %.17g "
+                         "s_free %.17g, C %.17g %.17g", k, o.x, o.y, o.z, y[6], got[3], got[4],
+                         c[3], c[4]);
+            hits += found;
+            const double top = (double)hf->cells * hf->cell;
+            kept += o.x >= 0 && o.x <= top && o.y >= 0 && o.y <= top && isfinite(y[6]);
+        }
+    }
+    print_message("%d parallel rays, %d hits, %d short windows inside the square\n",
+                  (int)(N * (sizeof dirs / sizeof dirs[0])), hits, kept);
+    assert_true(hits > N / 2);
+    assert_true(kept > N);
+    free(rays), free(t), free(rec);
+    env_free(&env);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -280,6 +360,7 @@ int main(void)
         cmocka_unit_test(a_false_record_hides_a_hit),
         cmocka_unit_test(a_far_record_is_asked_where_the_near_one_cannot_vouch),
         cmocka_unit_test(the_prefix_finds_a_hit_before_the_lower_ray_enters),
+        cmocka_unit_test(parallel_rays_match_trace),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -605,6 +605,7 @@ __kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulo
     ray_stream in;
     ray_clears low, far, rec;
     in.n = n - base < TF_STREAM ? n - base : TF_STREAM;
+    in.one_dir = 1; /* rays of one direction are set up as the shadow rays are */
     for (int e = 0; e < in.n; e++) {
         const int p = e / TF_LANES, l = e % TF_LANES;
         __global const double *r = rays + (size_t)(base + e) * 7;
@@ -615,6 +616,8 @@ __kernel void tf_walk_rays8(__global const double *P, __global const int *I, ulo
             record_get(lows + (size_t)(base + e) * TF_CL_RECORD_DOUBLES, e, &low);
         if (has_fars)
             record_get(fars + (size_t)(base + e) * TF_CL_RECORD_DOUBLES, e, &far);
+        in.one_dir &= r[3] == rays[(size_t)base * 7 + 3] && r[4] == rays[(size_t)base * 7 + 4] &&
+                      r[5] == rays[(size_t)base * 7 + 5];
     }
     lv found[TF_STREAM_PACKETS];
     hitp hit[TF_STREAM_PACKETS];

@@ -488,6 +488,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
     lv mask[TF_STREAM_PACKETS], lit[TF_STREAM_PACKETS];
     ray_stream cam; /* d: the directions, tmax: the water distances (TF_FAR_AWAY: none) */
     cam.n = n;
+    cam.one_dir = 0;
     const lv lane = (lv)(0, 1, 2, 3, 4, 5, 6, 7);
     for (int p = 0; p < np; p++) {
         mask[p] = lane < (lv)(n - p * TF_LANES);
@@ -560,6 +561,7 @@ void lattice_samples(const world *w, ulong jitter_key, const lv X[], const lv Y[
             shadow.tmin[q] = (dv)(0.0);
             shadow.tmax[q] = vload8(q, until);
         }
+        shadow.one_dir = 1; /* every shadow ray's direction is the sun's */
         walk_stream(w, &shadow, NULL, NULL, blocked, NULL, NULL);
         long lit_of[TF_STREAM]; /* sample k: lit (-1) or not */
         for (int k = 0; k < np * TF_LANES; k++)

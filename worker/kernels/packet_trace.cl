@@ -105,52 +105,120 @@ lv cell_of8(const world *w, dv v)
     return i;
 }
 
-/* setup_ray per lane: the lanes of `mask` whose ray can meet the height field.  Inlined into
- * its one caller: called, its ten vectors went over the stack as 32-byte halves that its 64-byte
- * loads could not be forwarded from (perf: the hottest instruction of setup_ray8 was its first
- * load of an argument). */
-TF_INLINE lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
+/* setup_ray's fields that depend on the direction alone (every lane's own): the steps, the
+ * inverses and the watertight test's axes and shear.  (kz + 1) mod 3 by a select: a vector
+ * `%` is a division. */
+TF_INLINE void setup_dir8(rayp *r, v3p d)
 {
+    r->d = d;
+    r->sx = select(select((lv)(0), (lv)(-1), d.x < 0), (lv)(1), d.x > 0);
+    r->sy = select(select((lv)(0), (lv)(-1), d.y < 0), (lv)(1), d.y > 0);
+    r->inv_dx = select((dv)(0), tf_safe_inverse(d.x), r->sx != 0);
+    r->inv_dy = select((dv)(0), tf_safe_inverse(d.y), r->sy != 0);
+    dv ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
+    r->kz = select(select((lv)(2), (lv)(1), ay >= az), select((lv)(2), (lv)(0), ax >= az),
+                   ax >= ay);
+    r->kx = select(r->kz + 1, (lv)(0), r->kz == 2);
+    r->ky = select(r->kx + 1, (lv)(0), r->kx == 2);
+    dv dkz = pick3(d.x, d.y, d.z, r->kz);
+    r->shx = pick3(d.x, d.y, d.z, r->kx) / dkz;
+    r->shy = pick3(d.x, d.y, d.z, r->ky) / dkz;
+    r->shz = 1.0 / dkz;
+}
+
+/* The rest of setup_ray, for the lanes of `mask`, r's direction set (setup_dir8): the lanes
+ * whose ray can meet the height field.  The lanes of `window` are known to keep their window
+ * (tmin, tmax) through the box's three slabs (window_in_box8); when every lane is, the slabs'
+ * six divisions are skipped (the clip would give the same t0, t1 and t_square). */
+TF_INLINE lv setup_from8(rayp *r, const world *w, v3p o, dv tmin, dv tmax, lv mask, lv window)
+{
+    const v3p d = r->d;
     mask &= isfinite(o.x) & isfinite(o.y) & isfinite(o.z) & isfinite(d.x) & isfinite(d.y) &
             isfinite(d.z) & ~((d.x == 0) & (d.y == 0) & (d.z == 0)) & (tmin < tmax);
     r->o = o;
-    r->d = d;
     r->tmin = tmin;
     r->tmax = tmax;
 
     const double top = (double)w->cells * w->cell;
     const double hmin = w->P[TFP_HMIN], hmax = w->P[TFP_HMAX];
-    const dv zpad = tf_box_zpad(hmin, hmax, o.z);
     dv t0 = tmin, t1 = tmax;
-    mask &= tf_clip_slab(o.x, d.x, (dv)(0), (dv)(top), &t0, &t1);
-    mask &= tf_clip_slab(o.y, d.y, (dv)(0), (dv)(top), &t0, &t1);
-    r->t_square = t0;
-    mask &= tf_clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1);
+    if (any_lane(mask & ~window)) {
+        const dv zpad = tf_box_zpad(hmin, hmax, o.z);
+        mask &= tf_clip_slab(o.x, d.x, (dv)(0), (dv)(top), &t0, &t1);
+        mask &= tf_clip_slab(o.y, d.y, (dv)(0), (dv)(top), &t0, &t1);
+        r->t_square = t0;
+        mask &= tf_clip_slab(o.z, d.z, hmin - zpad, hmax + zpad, &t0, &t1);
+    } else {
+        r->t_square = t0;
+    }
     mask &= isfinite(t0) & isfinite(t1);
     r->t0 = t0;
     r->t1 = t1;
 
-    r->sx = select(select((lv)(0), (lv)(-1), d.x < 0), (lv)(1), d.x > 0);
-    r->sy = select(select((lv)(0), (lv)(-1), d.y < 0), (lv)(1), d.y > 0);
-    r->inv_dx = select((dv)(0), tf_safe_inverse(d.x), r->sx != 0);
-    r->inv_dy = select((dv)(0), tf_safe_inverse(d.y), r->sy != 0);
     /* idle lanes get harmless positions so the correction loops stay short */
     r->ci = cell_of8(w, select((dv)(0), o.x + t0 * d.x, mask));
     r->cj = cell_of8(w, select((dv)(0), o.y + t0 * d.y, mask));
 
     tf_walk_tolerances(top, w->cell, hmin, hmax, o, d, r->sx != 0, r->sy != 0, r->inv_dx,
                        r->inv_dy, t0, t1, &r->tie_tol, &r->margin);
-
-    dv ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
-    r->kz = select(select((lv)(2), (lv)(1), ay >= az), select((lv)(2), (lv)(0), ax >= az),
-                   ax >= ay);
-    r->kx = (r->kz + 1) % 3;
-    r->ky = (r->kx + 1) % 3;
-    dv dkz = pick3(d.x, d.y, d.z, r->kz);
-    r->shx = pick3(d.x, d.y, d.z, r->kx) / dkz;
-    r->shy = pick3(d.x, d.y, d.z, r->ky) / dkz;
-    r->shz = 1.0 / dkz;
     return mask;
+}
+
+/* setup_ray per lane: the lanes of `mask` whose ray can meet the height field.  Inlined into
+ * its one caller: called, its ten vectors went over the stack as 32-byte halves that its 64-byte
+ * loads could not be forwarded from (perf: the hottest instruction of setup_ray8 was its first
+ * load of an argument). */
+TF_INLINE lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax, lv mask)
+{
+    setup_dir8(r, d);
+    return setup_from8(r, w, o, tmin, tmax, mask, (lv)(0));
+}
+
+/* A direction every ray of a stream shares (the shadow rays toward the sun): its setup_dir8,
+ * made once for the stream, and what trace.c's window_in_box asks of it. */
+typedef struct one_dir8 {
+    rayp r;                       /* setup_dir8's fields */
+    int moves_all;                /* no component 0 */
+    double exit_x, exit_y;        /* the square's sides the ray leaves by on x and y */
+    double exit_inv[3];           /* trace.c's exit_inverse of each component */
+} one_dir8;
+
+/* trace.c's exit_inverse: 1 / v where that is a normal double, else 0. */
+double exit_inverse(double v)
+{
+    const double inv = 1.0 / v;
+    return fabs(inv) >= DBL_MIN && fabs(inv) <= DBL_MAX ? inv : 0.0;
+}
+
+void one_dir8_make(one_dir8 *k, const world *w, vec3 d)
+{
+    setup_dir8(&k->r, v3p_splat(d));
+    const double top = (double)w->cells * w->cell;
+    k->moves_all = d.x != 0 && d.y != 0 && d.z != 0;
+    k->exit_x = d.x > 0 ? top : 0;
+    k->exit_y = d.y > 0 ? top : 0;
+    k->exit_inv[0] = exit_inverse(d.x);
+    k->exit_inv[1] = exit_inverse(d.y);
+    k->exit_inv[2] = exit_inverse(d.z);
+}
+
+/* trace.c's window_in_box per lane: would each of the box's three slabs leave the window
+ * (tmin, tmax) of a ray of direction k from o as it is?  The same comparisons of the same
+ * values (trace.c argues them); a shadow ray the sun's strips end nearly always passes. */
+lv window_in_box8(const world *w, const one_dir8 *k, v3p o, dv tmin, dv tmax)
+{
+    if (!k->moves_all)
+        return (lv)(0);
+    const double top = (double)w->cells * w->cell;
+    const double hmin = w->P[TFP_HMIN], hmax = w->P[TFP_HMAX];
+    const dv beyond = tmax * (1 + 1e-12);
+    lv in = (tmin >= 0) & (tmax >= DBL_MIN);
+    in &= (o.x >= 0) & (o.x <= top) & ((k->exit_x - o.x) * k->exit_inv[0] > beyond);
+    in &= (o.y >= 0) & (o.y <= top) & ((k->exit_y - o.y) * k->exit_inv[1] > beyond);
+    const dv zpad = tf_box_zpad(hmin, hmax, o.z);
+    const dv zlo = hmin - zpad, zhi = hmax + zpad;
+    const dv exit_z = k->r.d.z.s0 > 0 ? zhi : zlo;
+    return in & (o.z >= zlo) & (o.z <= zhi) & ((exit_z - o.z) * k->exit_inv[2] > beyond);
 }
 
 typedef tf_sheared shearedp;
@@ -435,9 +503,10 @@ void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *h
 #error "TF_STREAM: a multiple of TF_LANES, at most 256 (streams index rays with a uchar)"
 #endif
 
-/* Up to TF_STREAM rays; ray k is lane k % 8 of packet k / 8. */
+/* Up to TF_STREAM rays; ray k is lane k % 8 of packet k / 8.  one_dir: every ray's direction
+ * is the first's (the shadow rays toward the sun), set up once for the stream. */
 typedef struct ray_stream {
-    int n;
+    int n, one_dir;
     v3p o[TF_STREAM_PACKETS], d[TF_STREAM_PACKETS];
     dv tmin[TF_STREAM_PACKETS], tmax[TF_STREAM_PACKETS];
 } ray_stream;
@@ -615,8 +684,9 @@ TF_INLINE low8 low_packet(const ray_clears *from, int p, lv m)
  * after a deal has set it.  Deals are whole packets: *next starts at 0, and a deal takes eight
  * rays, or the rest of the stream when fewer are left, so it always starts a packet and the
  * rays go to their lanes as vectors (lane by lane, PoCL kept every vector on the stack). */
-TF_INLINE void walker_deal(const world *w, const ray_stream *in, const ray_clears *lows,
-                           const ray_clears *fars, int out_records, int *next, walker *k)
+TF_INLINE void walker_deal(const world *w, const ray_stream *in, const one_dir8 *one,
+                           const ray_clears *lows, const ray_clears *fars, int out_records,
+                           int *next, walker *k)
 {
     if (*next >= in->n || any_lane(k->active))
         return;
@@ -633,7 +703,13 @@ TF_INLINE void walker_deal(const world *w, const ray_stream *in, const ray_clear
         near = low_packet(lows, p, fresh);
     if (fars)
         far = low_packet(fars, p, fresh);
-    k->active = setup_ray8(&k->r, w, o, d, tmin, tmax, fresh);
+    if (one) { /* the stream's one direction, set up once */
+        k->r = one->r;
+        k->active = setup_from8(&k->r, w, o, tmin, tmax, fresh,
+                                window_in_box8(w, one, o, tmin, tmax));
+    } else {
+        k->active = setup_ray8(&k->r, w, o, d, tmin, tmax, fresh);
+    }
     k->above = out_records ? starts_above8(w, &k->r, k->active) : (lv)(0);
     k->prefix = (lv)(0);
     if (lows || fars)
@@ -691,11 +767,15 @@ void walk_stream(const world *w, const ray_stream *in, const ray_clears *lows,
     walker k[TF_WALKERS];
     for (int g = 0; g < TF_WALKERS; g++)
         walker_init(&k[g]);
+    one_dir8 one;
+    if (in->one_dir)
+        one_dir8_make(&one, w, v3(in->d[0].x.s0, in->d[0].y.s0, in->d[0].z.s0));
     int next = 0;
     for (;;) {
         int busy = 0;
         for (int g = 0; g < TF_WALKERS; g++) {
-            walker_deal(w, in, lows, fars, records != NULL, &next, &k[g]);
+            walker_deal(w, in, in->one_dir ? &one : NULL, lows, fars, records != NULL, &next,
+                        &k[g]);
             busy |= any_lane(k[g].active);
         }
         if (!busy) {

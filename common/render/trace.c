@@ -425,13 +425,6 @@ static inline void dir_tolerances(ray_ctx *r, const tf_ray_dir *k, tf_vec3 o)
     r->margin = isfinite(m) ? m : INFINITY;
 }
 
-/* 1 / v rounded where that is a normal double, else 0 (clip_slab). */
-static double exit_inverse(double v)
-{
-    const double inv = 1.0 / v;
-    return fabs(inv) >= DBL_MIN && fabs(inv) <= DBL_MAX ? inv : 0.0;
-}
-
 /* tf_ray_dir_init (trace.h): the direction's steps, inverses and shear, kept. */
 static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
 {
@@ -445,9 +438,9 @@ static int dir_of(tf_ray_dir *k, const tf_heightfield *hf, tf_vec3 d)
     k->sx = r.sx, k->sy = r.sy, k->inv_dx = r.inv_dx, k->inv_dy = r.inv_dy;
     k->inv_cell = r.inv_cell;
     k->kx = r.kx, k->ky = r.ky, k->kz = r.kz, k->shx = r.shx, k->shy = r.shy, k->shz = r.shz;
-    k->exit_inv[0] = exit_inverse(d.x);
-    k->exit_inv[1] = exit_inverse(d.y);
-    k->exit_inv[2] = exit_inverse(d.z);
+    k->exit_inv[0] = tf_exit_inverse(d.x);
+    k->exit_inv[1] = tf_exit_inverse(d.y);
+    k->exit_inv[2] = tf_exit_inverse(d.z);
     dir_tolerance_parts(k, hf);
     k->exit_xy[0] = d.x > 0 ? k->tol[TOL_TOP] : 0;
     k->exit_xy[1] = d.y > 0 ? k->tol[TOL_TOP] : 0;

@@ -43,6 +43,15 @@ TF_SHARED tf_lane tf_box_zpad(double hmin, double hmax, tf_lane oz)
     return 1e-9 * (fabs(hmin) + fabs(hmax) + fabs(oz) + (hmax - hmin)) + DBL_MIN;
 }
 
+/* 1 / v rounded where that is a normal double, else 0: what the window test of a shared
+ * direction multiplies an exit's distance by (trace.c window_in_box, packet_trace.cl
+ * window_in_box8). */
+TF_SHARED double tf_exit_inverse(double v)
+{
+    const double inv = 1.0 / v;
+    return fabs(inv) >= DBL_MIN && fabs(inv) <= DBL_MAX ? inv : 0.0;
+}
+
 /* 1 / v, with +-DBL_MAX for an infinite quotient. */
 TF_SHARED tf_lane tf_safe_inverse(tf_lane v)
 {

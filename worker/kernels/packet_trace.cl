@@ -179,27 +179,21 @@ TF_INLINE lv setup_ray8(rayp *r, const world *w, v3p o, v3p d, dv tmin, dv tmax,
 typedef struct one_dir8 {
     rayp r;                       /* setup_dir8's fields */
     int moves_all;                /* no component 0 */
+    double top;                   /* the square's side */
     double exit_x, exit_y;        /* the square's sides the ray leaves by on x and y */
-    double exit_inv[3];           /* trace.c's exit_inverse of each component */
+    double exit_inv[3];           /* tf_exit_inverse of each component */
 } one_dir8;
-
-/* trace.c's exit_inverse: 1 / v where that is a normal double, else 0. */
-double exit_inverse(double v)
-{
-    const double inv = 1.0 / v;
-    return fabs(inv) >= DBL_MIN && fabs(inv) <= DBL_MAX ? inv : 0.0;
-}
 
 void one_dir8_make(one_dir8 *k, const world *w, vec3 d)
 {
     setup_dir8(&k->r, v3p_splat(d));
-    const double top = (double)w->cells * w->cell;
+    k->top = (double)w->cells * w->cell;
     k->moves_all = d.x != 0 && d.y != 0 && d.z != 0;
-    k->exit_x = d.x > 0 ? top : 0;
-    k->exit_y = d.y > 0 ? top : 0;
-    k->exit_inv[0] = exit_inverse(d.x);
-    k->exit_inv[1] = exit_inverse(d.y);
-    k->exit_inv[2] = exit_inverse(d.z);
+    k->exit_x = d.x > 0 ? k->top : 0;
+    k->exit_y = d.y > 0 ? k->top : 0;
+    k->exit_inv[0] = tf_exit_inverse(d.x);
+    k->exit_inv[1] = tf_exit_inverse(d.y);
+    k->exit_inv[2] = tf_exit_inverse(d.z);
 }
 
 /* trace.c's window_in_box per lane: would each of the box's three slabs leave the window
@@ -209,7 +203,7 @@ lv window_in_box8(const world *w, const one_dir8 *k, v3p o, dv tmin, dv tmax)
 {
     if (!k->moves_all)
         return (lv)(0);
-    const double top = (double)w->cells * w->cell;
+    const double top = k->top;
     const double hmin = w->P[TFP_HMIN], hmax = w->P[TFP_HMAX];
     const dv beyond = tmax * (1 + 1e-12);
     lv in = (tmin >= 0) & (tmax >= DBL_MIN);

@@ -652,49 +652,6 @@ static inline int inside_block(const tf_heightfield *hf, int L, int ci, int cj, 
     return z <= hf->maxgrid[L][idx] + margin && z >= hf->mingrid[L][idx] - margin;
 }
 
-#ifndef NDEBUG
-/* start_level's answer found the other way, from the top level down; -1 where a block on the
- * way has a NaN bound (a hole in the heights, which only tests make: terrain_build.c refuses
- * them), whose levels need not nest. */
-static int start_level_from_top(const ray_ctx *r, double z0)
-{
-    const tf_heightfield *hf = r->hf;
-    for (int L = 1; L < hf->levels; L++) {
-        const size_t idx = block_index(hf, L, r->ci, r->cj);
-        if (isnan(hf->maxgrid[L][idx]) || isnan(hf->mingrid[L][idx]))
-            return -1;
-    }
-    int level = hf->levels - 1;
-    while (level > 1 && inside_block(hf, level, r->ci, r->cj, z0, r->margin))
-        level--;
-    return level;
-}
-#endif
-
-/* walk_hier's first level: see "Where to start" in walk_hier.  A block's max/min range holds
- * those of the blocks inside it, so a level whose block holds z0 has every level above it
- * holding z0 too: the levels that do not are 1 up to some K, and K is the answer, found from
- * level 1 up (a walk starts at level 4 on average, of 11 over 2049^2 samples: a quarter fewer
- * instructions than scanning down from the top; bench/README.md section 33).  Over a hole of
- * NaN heights, which only tests make, the levels need not nest, and the scan down from the top
- * could pick another level. */
-static int start_level(const ray_ctx *r)
-{
-    const tf_heightfield *hf = r->hf;
-    const int top = hf->levels - 1;
-    const double z0 = r->o[2] + r->t0 * r->d[2];
-    if (top == 0 || inside_block(hf, 1, r->ci, r->cj, z0, r->margin))
-        return 0;
-    int level = 1;
-    while (level < top && !inside_block(hf, level + 1, r->ci, r->cj, z0, r->margin))
-        level++;
-#ifndef NDEBUG
-    const int from_top = start_level_from_top(r, z0);
-    assert((from_top < 0 || level == from_top) && "start_level: the levels nest");
-#endif
-    return level;
-}
-
 static int walk_hier(const ray_ctx *r, candidate *best)
 {
     const tf_heightfield *hf = r->hf;
@@ -707,18 +664,15 @@ static int walk_hier(const ray_ctx *r, candidate *best)
     int ci = r->ci, cj = r->cj;
     int stale = STALE_NONE;
     double t_cur = r->t0, t_event = r->t0;
-    /* Where to start.  A ray that starts at or under the terrain's surface nearby (a shadow
-     * ray leaving the surface, a camera down in a valley) would descend from the top level,
-     * without moving, nearly all the way to level 0: no block around its start can be culled.
-     * Start those at level 0 instead (saving `top` iterations per shadow ray, ~5% of a
-     * default.scene render).  "Nearby" is the level-1 block of the start cell: a shadow ray
-     * starts a hair above its hit point (shadow_lift), often above its own cell's max.
+    /* Where to start: level 0, the flat walk itself, from which the usual climbing begins.
      * The hit is the same from any start level: every level's walk groups the same cell
-     * sequence and skips only culled blocks (top of the file), and level 0 is the flat walk
-     * itself, from which the usual climbing resumes.  Every other ray starts at the highest
-     * level whose block around the start does not hold z(t0) (inside_block): the walk would
-     * only descend, in place, through the ones above it (~5 steps of a primary ray's ~30). */
-    int level = start_level(r);
+     * sequence and skips only culled blocks (top of the file).  A ray that starts at or under
+     * the surface nearby (a shadow ray, a camera down in a valley) would only descend, in
+     * place, from any higher level; one that starts above the terrain climbs as it goes.  A
+     * search for the highest level whose block around the start does not hold z(t0), a load
+     * and two comparisons a level, cost more than the climbs it spared: renders took 1.5-2%
+     * more CPU with it (bench/README.md section 42). */
+    int level = 0;
     for (;;) {
         const int bi = ci >> level, bj = cj >> level;
         double tx = sx ? tf_grid_cross((double)((bi + x_ahead) << level), cell, ox, inv_dx)
@@ -1104,8 +1058,6 @@ int tf_trace_setup_dir(tf_ray_ctx *r, const tf_ray_dir *dir, tf_vec3 o, double t
 {
     return setup_ray_dir(r, dir, o, tmin, tmax);
 }
-
-int tf_trace_start_level(const tf_ray_ctx *r) { return start_level(r); }
 
 int tf_trace_test_cell(const tf_ray_ctx *r, int ci, int cj, double tx, double ty,
                        tf_trace_cand *best)

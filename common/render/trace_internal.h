@@ -1,7 +1,7 @@
 /* trace_internal.h: the pieces of trace.c's single-ray walk that the packet tracer
  * (trace_packet.c and its kernels) calls lane by lane, so that every lane runs exactly the
- * single-ray code where it matters: the ray's setup, the start level, a level-0 cell's
- * triangle tests and the hit record.
+ * single-ray code where it matters: the ray's setup, a level-0 cell's triangle tests and the
+ * hit record.
  * Not an interface for anyone else: render code calls trace.h or trace_packet.h. */
 #ifndef TF_TRACE_INTERNAL_H
 #define TF_TRACE_INTERNAL_H
@@ -44,8 +44,6 @@ int tf_trace_setup(tf_ray_ctx *r, const tf_heightfield *hf, tf_vec3 o, tf_vec3 d
  * bit, with fewer divisions (what tf_occluded_coherent does; the tests compare the two). */
 int tf_trace_setup_dir(tf_ray_ctx *r, const tf_ray_dir *dir, tf_vec3 o, double tmin,
                        double tmax);
-/* The level walk_hier starts at (the top, or 0 for a ray starting at the surface nearby). */
-int tf_trace_start_level(const tf_ray_ctx *r);
 /* The complete test of level-0 cell (ci, cj) whose exit crossings are tx, ty: 1 on a hit. */
 int tf_trace_test_cell(const tf_ray_ctx *r, int ci, int cj, double tx, double ty,
                        tf_trace_cand *best);

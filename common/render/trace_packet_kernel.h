@@ -108,7 +108,7 @@ INLINE void load_lanes(const tf_heightfield *hf, int first, int n, const tf_vec3
         L->t1[l] = r->t1, L->inv_dx[l] = r->inv_dx, L->inv_dy[l] = r->inv_dy;
         L->margin[l] = r->margin;
         L->sx[l] = r->sx, L->sy[l] = r->sy, L->x_ahead[l] = r->sx > 0, L->y_ahead[l] = r->sy > 0;
-        L->ci[l] = r->ci, L->cj[l] = r->cj, L->level[l] = tf_trace_start_level(r);
+        L->ci[l] = r->ci, L->cj[l] = r->cj, L->level[l] = 0; /* walk_hier's start */
         L->stale[l] = TF_STALE_NONE;
         L->t_cur[l] = r->t0, L->t_event[l] = r->t0;
         L->active[l] = -1;

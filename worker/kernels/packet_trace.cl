@@ -34,13 +34,6 @@ typedef struct candp { dv t; lv ci, cj, tri; } candp;
 /* Vertex (i, j)'s index in the heights, j n + i: n = cells + 1 = 2^cell_shift + 1. */
 lv vertex_index8(const world *w, lv i, lv j) { return (j << w->cell_shift) + j + i; }
 
-lv gather_i(__global const int *p, lv idx, lv mask)
-{
-    lv k = select((lv)(0), idx, mask);
-    return convert_long8((int8)(p[k.s0], p[k.s1], p[k.s2], p[k.s3], p[k.s4], p[k.s5], p[k.s6],
-                                p[k.s7]));
-}
-
 /* The (max, min) pairs of grid cells idx per lane, as loaded: one 64-bit load a lane, one cache
  * line; minmax_split8 makes doubles of them.  The grids are read-only, so reading the float pairs
  * as 64-bit words aliases nothing that changes.  The loads are volatile so that LLVM keeps them
@@ -61,14 +54,17 @@ void minmax_split8(ulong8 v, dv *hi, dv *lo)
     *lo = convert_double8(f.odd);
 }
 
-/* I[TFI_LEVEL_OFFSET + level] per lane: a permute of the world's offset vectors (a gather's
- * latency sat on every walk step's critical path), for height fields of up to 16 levels
- * (65536^2 cells); the gather beyond. */
-TF_INLINE lv level_offset8(const world *w, lv level, lv mask)
+/* I[TFI_LEVEL_OFFSET + level] per lane, from its closed form.  The levels are concatenated and
+ * level l holds 4^(k-l) cells (cells = 2^k: heightfield.c), so level L starts at
+ * 4^k + 4^(k-1) + ... + 4^(k-L+1) = ((4^L - 1) / 3) 4^(k-L+1), and (4^L - 1) / 3 is L ones at
+ * the even bit positions: four integer operations.  PoCL compiled the permute of the offsets
+ * this replaced (shuffle2 with a variable mask) into eight lanes picked one at a time through
+ * the stack, ~60 instructions on every walk step (bench/README.md section 42). */
+TF_INLINE lv level_offset8(const world *w, lv level)
 {
-    if (w->levels <= 16)
-        return shuffle2(w->offset_lo, w->offset_hi, as_ulong8(level));
-    return gather_i(w->I + TFI_LEVEL_OFFSET, level, mask);
+    const ulong8 twice = as_ulong8(level + level);
+    const ulong8 ones = (ulong8)(0x5555555555555555UL) & (((ulong8)(1) << twice) - 1);
+    return as_long8(ones << ((ulong8)(2 * w->cell_shift + 2) - twice));
 }
 
 dv to_d(lv v) { return convert_double8(v); }
@@ -387,7 +383,7 @@ TF_INLINE void walk_fetch8(const world *w, const rayp *r, const walkp *s, lv act
     const lv level = s->level, bi = s->ci >> level, bj = s->cj >> level;
     f->tx = select((dv)(INFINITY), xcross8(w, r, (bi + step_x) << level), r->sx != 0);
     f->ty = select((dv)(INFINITY), ycross8(w, r, (bj + step_y) << level), r->sy != 0);
-    lv idx = level_offset8(w, level, active) + (bj << ((lv)(w->cell_shift) - level)) + bi;
+    lv idx = level_offset8(w, level) + (bj << ((lv)(w->cell_shift) - level)) + bi;
     f->minmax = gather_minmax(w->mm, idx, active);
 }
 

@@ -46,9 +46,6 @@ typedef struct world {
                                    * a row's offset is a shift, not a 64-bit vector multiply
                                    * (vpmullq: three uops, 15 cycles, on a walk step's path) */
     double cell;
-    /* I[TFI_LEVEL_OFFSET + L] for L < 16 in two vectors: the walk looks a level's offset up with
-     * one permute instead of a gather (packet_trace.cl level_offset8) */
-    long8 offset_lo, offset_hi;
     tf_camera cam;
 } world;
 
@@ -70,11 +67,6 @@ world make_world(__global const double *P, __global const int *I, __global const
     w.levels = I[TFI_LEVELS];
     w.cell_shift = 31 - clz(w.cells);
     w.cell = P[TFP_CELL];
-    long off[16];
-    for (int L = 0; L < 16; L++)
-        off[L] = L < w.levels ? I[TFI_LEVEL_OFFSET + L] : 0;
-    w.offset_lo = vload8(0, off);
-    w.offset_hi = vload8(1, off);
     w.cam.kind = I[TFI_CAM_KIND];
     w.cam.width = I[TFI_WIDTH];
     w.cam.height = I[TFI_HEIGHT];

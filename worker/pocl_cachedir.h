@@ -6,7 +6,9 @@
  * worker process, thousands on a farm that runs for weeks.  tf_pocl_cache_sweep removes those
  * left behind: only in terrafarm's own directory, only regular files of that name owned by this
  * user and older than TF_POCL_TEMPFILE_MAX_AGE_S (a PoCL at work writes and renames its temporary
- * files within seconds).  Every new kernel source or driver adds a program directory there (a
+ * files within seconds).  Every worker start sweeps, and the sweep looks at each such file, so
+ * the age bounds its cost: with an hour, a machine busy with renders held ~2,500 of them and a
+ * worker's start took 4 ms longer (bench/README.md section 42).  Every new kernel source or driver adds a program directory there (a
  * few hundred KB), which PoCL never removes: tf_pocl_cache_prune removes those not used for a
  * long time, likewise only in terrafarm's own directory. */
 #ifndef TF_POCL_CACHEDIR_H
@@ -15,7 +17,7 @@
 #include <stddef.h>
 #include <time.h>
 
-#define TF_POCL_TEMPFILE_MAX_AGE_S 3600
+#define TF_POCL_TEMPFILE_MAX_AGE_S 300
 
 /* Set POCL_CACHE_DIR, unless the user did, to $XDG_CACHE_HOME/terrafarm/pocl, else
  * $HOME/.cache/terrafarm/pocl, else /tmp/terrafarm-pocl-UID, whichever can be created private

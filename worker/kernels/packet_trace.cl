@@ -297,14 +297,13 @@ typedef struct walkp {
     dv t_cur, t_event;
 } walkp;
 
-/* walk_hier's start, for the lanes of mask (the other lanes of *s are kept), at level 0.
- * trace.c's walk_hier starts a ray that begins above the terrain higher (start_level: the
- * highest level whose block around the start does not hold z(t0), found a level at a time);
- * in lanes that search was a gather a level, ~2.9 of them a packet at default.scene's nine
- * levels, each waited on before the next, and a walk from level 0 climbs as it goes.  The hit
- * is the same from any start level (trace.c, walk_hier's "Where to start").  Starting every lane
- * at 0 took 4.8% off an OpenCL render's CPU at 1920x1080 and 3.3% at 480x270 (bench/README.md
- * section 42). */
+/* walk_hier's start, for the lanes of mask (the other lanes of *s are kept): level 0, as in
+ * trace.c ("Where to start"; the hit is the same from any start level).  Both walks searched
+ * for a higher one until session 44: the highest level whose block around the start does not
+ * hold z(t0), found a level at a time, in lanes a gather a level (~2.9 a packet at
+ * default.scene's nine levels), each waited on before the next; a walk from level 0 climbs as
+ * it goes, and the kernels took 4.8% less CPU at 1920x1080 without the search, 3.3% at 480x270
+ * (bench/README.md section 42). */
 TF_INLINE void walk_start8(const rayp *r, lv mask, walkp *s)
 {
     s->ci = select(s->ci, r->ci, mask);

@@ -7,6 +7,7 @@
 #include "image/preview.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -24,7 +25,7 @@ static double srgb_encode(double v)
     return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055;
 }
 
-uint8_t tf_srgb8(float linear)
+uint8_t tf_srgb8_exact(float linear)
 {
     double v = (double)linear * TF_PREVIEW_EXPOSURE;
     if (!(v > 0.0)) /* also catches NaN: a broken sample shows as black, never as garbage */
@@ -32,6 +33,54 @@ uint8_t tf_srgb8(float linear)
     if (v >= 1.0)
         return 255;
     return (uint8_t)(srgb_encode(v) * 255.0 + 0.5);
+}
+
+/* tf_srgb8 without pow.  tf_srgb8_exact never decreases from one float to the next (checked
+ * for every float in (0, 1): tests/unit/test_preview.c), so the floats it maps to byte k begin
+ * at srgb_start[k], and a value's byte is the last k whose start is at or below it.  The starts
+ * are found with tf_srgb8_exact itself, bisecting the positive floats' bit patterns (ordered as
+ * the floats are), once a process: ~7,600 calls, against three a pixel of every preview. */
+static float srgb_start[256]; /* srgb_start[0] = 0 */
+static pthread_once_t srgb_once = PTHREAD_ONCE_INIT;
+
+static float float_of_bits(uint32_t bits)
+{
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+static void find_srgb_starts(void)
+{
+    const uint32_t one = 0x3f800000u; /* 1.0f, which maps to 255 */
+    uint32_t below = 0;               /* +0.0f: maps below every k >= 1 */
+    for (int k = 1; k < 256; k++) {
+        uint32_t lo = below, hi = one; /* tf_srgb8_exact(lo) < k <= tf_srgb8_exact(hi) */
+        while (hi - lo > 1) {
+            uint32_t mid = lo + (hi - lo) / 2;
+            if (tf_srgb8_exact(float_of_bits(mid)) >= k)
+                hi = mid;
+            else
+                lo = mid;
+        }
+        srgb_start[k] = float_of_bits(hi);
+        below = lo;
+    }
+}
+
+uint8_t tf_srgb8(float linear)
+{
+    double v = (double)linear * TF_PREVIEW_EXPOSURE;
+    if (!(v > 0.0))
+        return 0;
+    if (v >= 1.0)
+        return 255;
+    pthread_once(&srgb_once, find_srgb_starts);
+    unsigned k = 0;
+    for (unsigned step = 128; step > 0; step >>= 1)
+        if (srgb_start[k + step] <= linear)
+            k += step;
+    return (uint8_t)k;
 }
 
 typedef struct preview_state {

@@ -6,8 +6,11 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* Linear value -> 8-bit sRGB (exposure 1, clamp, sRGB transfer curve). */
+/* Linear value -> 8-bit sRGB (exposure 1, clamp, sRGB transfer curve), by a table of where
+ * each byte's values begin; the same byte as tf_srgb8_exact for every float. */
 uint8_t tf_srgb8(float linear);
+/* The same through the transfer curve itself (pow): what the table is made from. */
+uint8_t tf_srgb8_exact(float linear);
 /* Write png_path from the EXR at exr_path. */
 int tf_preview_from_exr(const char *exr_path, const char *png_path, char *err, size_t errlen);
 

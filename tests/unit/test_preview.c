@@ -1,5 +1,5 @@
 /* test_preview.c: the sRGB PNG preview (common/image/preview.c): the tone curve's fixed points and
- * monotonicity, and a PNG streamed from an EXR read back with libpng (size, format, pixels,
+ * monotonicity, its table against the curve at every float, and a PNG streamed from an EXR read back with libpng (size, format, pixels,
  * black rows for a partial render, clear error for a missing EXR). */
 #include <stdarg.h>
 #include <stddef.h>
@@ -93,6 +93,38 @@ static void test_srgb8_fixed_points(void **state)
     assert_int_equal(tf_srgb8(0.001f), 3);       /* on the toe: 12.92 * 0.001 * 255 = 3.3 */
 }
 
+/* The table (tf_srgb8) gives the transfer curve's byte (tf_srgb8_exact) for every float from
+ * 2^-14 to 1, and the curve's byte never decreases from one float to the next there, which is
+ * what the table's construction assumes; below 2^-14 (byte 0: 12.92 * 2^-14 * 255 < 0.5) one
+ * float in 4096.  ~1.2e8 floats; off by one at any byte's first float, or at any float the
+ * table mishandles, it fails.  (Every float in (0, 1) was checked too: bench/README.md
+ * section 42.) */
+static void test_srgb8_table_is_the_curve_at_every_float(void **state)
+{
+    (void)state;
+    const uint32_t one = 0x3f800000u, low = 0x38800000u; /* 1.0f, 2^-14 */
+    for (uint32_t bits = 1; bits < low; bits += 4096) {
+        float f;
+        memcpy(&f, &bits, sizeof f);
+        assert_int_equal(tf_srgb8_exact(f), 0);
+        assert_int_equal(tf_srgb8(f), 0);
+    }
+    int prev = 0;
+    uint32_t changes = 0;
+    for (uint32_t bits = low; bits < one; bits++) {
+        float f;
+        memcpy(&f, &bits, sizeof f);
+        const int exact = tf_srgb8_exact(f), table = tf_srgb8(f);
+        if (exact != table)
+            fail_msg("tf_srgb8(%a) = %d, the curve gives %d", (double)f, table, exact);
+        if (exact < prev)
+            fail_msg("the curve decreases at %a: %d after %d", (double)f, exact, prev);
+        changes += exact != prev;
+        prev = exact;
+    }
+    assert_int_equal(changes, 255); /* every byte, each from one float on */
+}
+
 static void test_srgb8_is_monotonic_and_reaches_every_code(void **state)
 {
     (void)state;
@@ -166,6 +198,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_srgb8_fixed_points),
         cmocka_unit_test(test_srgb8_is_monotonic_and_reaches_every_code),
+        cmocka_unit_test(test_srgb8_table_is_the_curve_at_every_float),
         cmocka_unit_test(test_preview_png_has_size_and_pixels),
         cmocka_unit_test(test_preview_of_partial_render_is_full_size_with_black_rest),
         cmocka_unit_test(test_preview_of_missing_exr_fails_clearly),

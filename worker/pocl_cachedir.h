@@ -8,9 +8,10 @@
  * user and older than TF_POCL_TEMPFILE_MAX_AGE_S (a PoCL at work writes and renames its temporary
  * files within seconds).  Every worker start sweeps, and the sweep looks at each such file, so
  * the age bounds its cost: with an hour, a machine busy with renders held ~2,500 of them and a
- * worker's start took 4 ms longer (bench/README.md section 42).  Every new kernel source or driver adds a program directory there (a
- * few hundred KB), which PoCL never removes: tf_pocl_cache_prune removes those not used for a
- * long time, likewise only in terrafarm's own directory. */
+ * worker's start took 4 ms longer (bench/README.md section 42).  Every new kernel source or
+ * driver adds a program directory there (a few hundred KB), which PoCL never removes:
+ * tf_pocl_cache_prune removes those not used for a long time, likewise only in terrafarm's own
+ * directory. */
 #ifndef TF_POCL_CACHEDIR_H
 #define TF_POCL_CACHEDIR_H
 

@@ -35,8 +35,9 @@ uint8_t tf_srgb8_exact(float linear)
     return (uint8_t)(srgb_encode(v) * 255.0 + 0.5);
 }
 
-/* tf_srgb8 without pow.  tf_srgb8_exact never decreases from one float to the next (checked
- * for every float in (0, 1): tests/unit/test_preview.c), so the floats it maps to byte k begin
+/* tf_srgb8 without pow.  tf_srgb8_exact never decreases from one float to the next (checked at
+ * every float in (0, 1) once, bench/README.md section 42, and from 2^-14 up, where its byte
+ * leaves 0, by tests/unit/test_preview.c), so the floats it maps to byte k begin
  * at srgb_start[k], and a value's byte is the last k whose start is at or below it.  The starts
  * are found with tf_srgb8_exact itself, bisecting the positive floats' bit patterns (ordered as
  * the floats are), once a process: ~7,600 calls, against three a pixel of every preview. */

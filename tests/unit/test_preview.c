@@ -1,6 +1,7 @@
-/* test_preview.c: the sRGB PNG preview (common/image/preview.c): the tone curve's fixed points and
- * monotonicity, its table against the curve at every float, and a PNG streamed from an EXR read back with libpng (size, format, pixels,
- * black rows for a partial render, clear error for a missing EXR). */
+/* test_preview.c: the sRGB PNG preview (common/image/preview.c): the tone curve's fixed points
+ * and monotonicity, its table against the curve at every float, and a PNG streamed from an EXR
+ * read back with libpng (size, format, pixels, black rows for a partial render, clear error for
+ * a missing EXR). */
 #include <stdarg.h>
 #include <stddef.h>
 #include <setjmp.h>

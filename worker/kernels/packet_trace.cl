@@ -449,14 +449,24 @@ TF_INLINE void walk_step8(const world *w, const rayp *r, walkp *s, lv active, co
     s->stale = stale;
 }
 
+/* The heights at the four corners of cell (ci, cj) per lane of mask: a at (ci, cj), b at
+ * (ci + 1, cj), c at (ci + 1, cj + 1), d at (ci, cj + 1) (trace.c's order for a hit's cell). */
+typedef struct corners8 { dv a, b, c, d; } corners8;
+
+TF_INLINE corners8 cell_corners8(const world *w, lv ci, lv cj, lv mask)
+{
+    const lv base = vertex_index8(w, ci, cj);
+    corners8 h = {gather_f(w->h, base, mask), gather_f(w->h, base + 1, mask),
+                  gather_f(w->h, base + w->n + 1, mask), gather_f(w->h, base + w->n, mask)};
+    return h;
+}
+
 void finish_hit8(const world *w, const rayp *r, const candp *c, lv mask, hitp *hit)
 {
-    lv base = vertex_index8(w, c->ci, c->cj);
-    dv ha = gather_f(w->h, base, mask), hb = gather_f(w->h, base + 1, mask);
-    dv hd = gather_f(w->h, base + w->n, mask), hc = gather_f(w->h, base + w->n + 1, mask);
+    const corners8 h = cell_corners8(w, c->ci, c->cj, mask);
     hit->t = c->t;
     hit->p = v3p_make(r->o.x + c->t * r->d.x, r->o.y + c->t * r->d.y, r->o.z + c->t * r->d.z);
-    hit->n = tf_hit_normal(ha, hb, hc, hd, w->cell, c->tri == 0);
+    hit->n = tf_hit_normal(h.a, h.b, h.c, h.d, w->cell, c->tri == 0);
     hit->ci = convert_int8(c->ci);
     hit->cj = convert_int8(c->cj);
 }
@@ -539,6 +549,7 @@ typedef struct walker {
     lv prefix;          /* lanes walking the prefix of a vouched-for ray (t1 moved in) */
     dv t_skip, t1_full; /* their restart, and their own t1 */
     lv above;           /* lanes whose ray starts above its cell's maximum (for records) */
+    int one_dir_set;    /* r holds the stream's one direction (walker_deal) */
 } walker;
 
 #ifndef TF_WALKERS
@@ -554,6 +565,7 @@ void walker_init(walker *k)
     k->active = k->prefix = k->above = (lv)(0);
     k->packet = 0;
     k->t_skip = k->t1_full = (dv)(0);
+    k->one_dir_set = 0;
 }
 
 /* One lower record in each lane: heading ux, uy, climb k, the run [s_in, s_free) it is above
@@ -614,10 +626,11 @@ TF_INLINE lv resume8(const world *w, walker *k, lv missed)
     return missed & ~go;
 }
 
-/* trace.c's starts_above per lane: z(t0) above the maximum of the ray's start cell. */
+/* trace.c's starts_above per lane: z(t0) above the maximum of the ray's start cell (level 0,
+ * which begins the concatenated grids). */
 lv starts_above8(const world *w, const rayp *r, lv mask)
 {
-    lv idx = (lv)(w->I[TFI_LEVEL_OFFSET]) + (r->cj << w->cell_shift) + r->ci;
+    lv idx = (r->cj << w->cell_shift) + r->ci;
     dv hi, lo;
     minmax_split8(gather_minmax(w->mm, idx, mask), &hi, &lo);
     return mask & (r->o.z + r->t0 * r->d.z > hi + r->margin);
@@ -630,11 +643,9 @@ void note_clears8(const world *w, const walker *k, lv ended, lv hit, ray_clears 
     const rayp *r = &k->r;
     dv run, ux, uy, kk;
     lv ok = ended & tf_heading(r->d.x, r->d.y, r->d.z, &run, &ux, &uy, &kk);
-    lv base = vertex_index8(w, k->best.ci, k->best.cj), h_at = hit & ok;
-    dv ha = gather_f(w->h, base, h_at), hb = gather_f(w->h, base + 1, h_at);
-    dv hd = gather_f(w->h, base + w->n, h_at), hc = gather_f(w->h, base + w->n + 1, h_at);
-    lv free = select(k->above, tf_hit_from_above(ha, hb, hc, hd, w->cell, k->best.tri == 0, r->d),
-                     hit);
+    const corners8 h = cell_corners8(w, k->best.ci, k->best.cj, hit & ok);
+    lv free = select(k->above,
+                     tf_hit_from_above(h.a, h.b, h.c, h.d, w->cell, k->best.tri == 0, r->d), hit);
     dv s_free = select((dv)(0), select(r->t1, k->best.t, hit) * run, ok & free);
     const int p = k->packet;
     out->ux[p] = select(out->ux[p], ux, ok);
@@ -678,8 +689,10 @@ TF_INLINE void walker_deal(const world *w, const ray_stream *in, const one_dir8 
         near = low_packet(lows, p, fresh);
     if (fars)
         far = low_packet(fars, p, fresh);
-    if (one) { /* the stream's one direction, set up once */
-        k->r = one->r;
+    if (one) { /* the stream's one direction, set up once; no later deal or step changes it */
+        if (!k->one_dir_set)
+            k->r = one->r;
+        k->one_dir_set = 1;
         k->active = setup_from8(&k->r, w, o, tmin, tmax, fresh,
                                 window_in_box8(w, one, o, tmin, tmax));
     } else {

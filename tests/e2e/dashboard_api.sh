@@ -123,7 +123,7 @@ for key in ("rows_written", "rays_total", "tasks_written", "percent", "elapsed_s
     check(seq == sorted(seq), "%s went down while rendering: %s" % (key, seq))
 for k in ("scene", "size", "frame", "frames_total", "rows_written", "rows_total", "percent",
           "elapsed_s", "eta_s", "rays_per_s", "samples_per_pixel_avg", "watermark",
-          "outstanding_tasks", "workers_connected", "workers_joined"):
+          "outstanding_tasks", "workers_connected", "workers_joined", "workers_seen"):
     check(k in fs, "status lacks %s" % k)
 check(fs["frame"] is None and fs["frames_total"] is None, "a still has frame/frames_total set")
 ids = {w["id"] for w in stats["workers"]}
@@ -161,6 +161,9 @@ check(fs["tasks_written"] == stats["tasks_total"], "tasks_written %d != tasks_to
 check(fs["workers_joined"] == len(stats["workers"]) > 0,
       "workers_joined %d, --stats names %d workers" % (fs["workers_joined"], len(stats["workers"])))
 check(abs(fs["percent"] - 100) < 1e-9 and fs["eta_s"] == 0, "final percent/eta %s %s" % (fs["percent"], fs["eta_s"]))
+check(fs["workers_seen"] == len(fw["workers"]) >= fs["workers_joined"],
+      "workers_seen %d, /api/workers lists %d, %d joined" % (fs["workers_seen"], len(fw["workers"]),
+                                                           fs["workers_joined"]))
 api_w = sorted((w["id"], w["kind"], w["host"], w["backend"], w["tasks"], w["rays"]) for w in fw["workers"])
 st_w = sorted((w["id"], w["kind"], w["host"], w["backend"], w["tasks"], w["rays"]) for w in stats["workers"])
 check(api_w == st_w, "final workers %s != --stats %s" % (api_w, st_w))

@@ -392,13 +392,9 @@ static void sample_history(tf_dashboard *d, double t, uint64_t rays, double busy
     d->hist_last_s = t;
 }
 
-static tf_snapshot *capture(tf_dashboard *d, int rows_written, int full)
+/* What the render is and how far it has come, with the time left (-1: unknown). */
+static void capture_progress(const tf_dashboard *d, tf_snapshot *s, int rows_written, double t)
 {
-    tf_snapshot *s = calloc(1, sizeof *s);
-    if (!s)
-        return NULL;
-    double t = since_start(d);
-    s->version = ++d->version;
     s->state = d->state;
     s->exit_status = d->exit_status;
     memcpy(s->scene, d->scene, sizeof s->scene);
@@ -426,100 +422,138 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written, int full)
         s->task_cols = d->tasks->cols;
         s->tasks_total = d->tasks->count;
     }
-    if (d->sup) {
-        const tf_farm_stats *st = tf_supervisor_stats(d->sup);
-        s->tasks_total = st->tasks_total; /* over every frame of a sequence */
-        s->rays_total = st->primary_rays + st->shadow_rays;
-        s->rays_per_s = t > 0 ? (double)s->rays_total / t : 0;
-        if (t - d->rate_t >= RECENT_RATE_WINDOW_S) {
-            d->rate_prev_t = d->rate_t;
-            d->rate_prev_rays = d->rate_rays;
-            d->rate_t = t;
-            d->rate_rays = s->rays_total;
-        }
-        s->rays_per_s_recent = t - d->rate_prev_t > 0.1
-                                   ? (double)(s->rays_total - d->rate_prev_rays) / (t - d->rate_prev_t)
-                                   : s->rays_per_s;
-        s->spp_avg = st->pixels ? st->spp_sum / (double)st->pixels : 0;
-        s->watermark = tf_supervisor_watermark(d->sup);
-        s->watermark_min = d->tasks ? d->tasks->cols : 1;
-        s->watermark_max = tf_supervisor_watermark_max(d->sup);
-        s->outstanding = tf_supervisor_outstanding(d->sup);
-        s->max_outstanding = st->max_outstanding_tasks;
-        s->tasks_redealt = st->tasks_redealt;
-        s->task_failures = st->task_failures;
-        s->live_workers = tf_supervisor_live_workers(d->sup);
-        s->joined_workers = tf_supervisor_joined_workers(d->sup);
+}
 
-        /* connection -> worker, to name the holders of tasks */
-        conn_owner *owners = calloc((size_t)st->nworkers + 1, sizeof *owners);
-        int nowners = 0;
-        double busy = 0;
-        for (int i = 0; owners && i < st->nworkers; i++) {
-            busy += st->workers[i].busy_s;
-            if (st->workers[i].conn) {
-                owners[nowners++] = (conn_owner){st->workers[i].conn, st->workers[i].id};
-                note_worker_conn(d, st->workers[i].id, st->workers[i].conn);
-            }
-        }
-        if (owners)
-            qsort(owners, (size_t)nowners, sizeof *owners, cmp_owner);
-        sample_history(d, t, s->rays_total, busy, rows_written, s->live_workers);
-
-        int cap = s->outstanding > 0 ? s->outstanding : 1;
-        tf_task_view *views = full ? malloc((size_t)cap * sizeof *views) : NULL;
-        s->tasks = full ? malloc((size_t)cap * sizeof *s->tasks) : NULL;
-        s->workers = full ? calloc((size_t)st->nworkers + 1, sizeof *s->workers) : NULL;
-        if (!full) /* the lists of tasks and workers wait for a reader too */
-            tf_supervisor_task_views(d->sup, &s->tasks_written, NULL, 0);
-        if (views && s->tasks && s->workers && owners) {
-            int64_t write_task = 0;
-            int n = tf_supervisor_task_views(d->sup, &write_task, views, cap);
-            s->tasks_written = write_task;
-            for (int i = 0; i < n; i++) {
-                tf_snap_task *o = &s->tasks[i];
-                o->id = views[i].id;
-                if (tf_supervisor_task_rect(d->sup, views[i].id, &o->rect, &o->frame))
-                    o->rect = (tf_rect){0, 0, 0, 0}, o->frame = -1;
-                o->done = views[i].has_result;
-                o->worker = views[i].holder_conn ? owner_of(owners, nowners, views[i].holder_conn) : -1;
-            }
-            s->ntasks = n;
-            /* connection -> a task it holds (reusing the pairs: .worker holds a task id) */
-            conn_owner *held = malloc((size_t)(n > 0 ? n : 1) * sizeof *held);
-            int nheld = 0;
-            for (int i = 0; held && i < n; i++)
-                if (views[i].holder_conn && !views[i].has_result)
-                    held[nheld++] = (conn_owner){views[i].holder_conn, views[i].id};
-            if (held)
-                qsort(held, (size_t)nheld, sizeof *held, cmp_owner);
-            for (int i = 0; i < st->nworkers; i++) {
-                const tf_worker_stats *w = &st->workers[i];
-                tf_snap_worker *o = &s->workers[i];
-                o->id = w->id;
-                memcpy(o->kind, w->kind, sizeof o->kind);
-                memcpy(o->host, w->host, sizeof o->host);
-                memcpy(o->backend, w->backend, sizeof o->backend);
-                o->tasks = w->tasks;
-                o->rays = w->rays;
-                o->busy_s = w->busy_s;
-                o->holding = w->conn && held ? owner_of(held, nheld, w->conn) : -1;
-                worker_seen *ws = seen_worker(d, w->id);
-                o->since_s = ws ? ws->since_s : -1;
-                o->last_heard_s = ws ? ws->last_s : -1;
-                o->state = !w->conn ? (ws && ws->dropped ? TF_WS_DROPPED : TF_WS_LEFT)
-                           : o->holding >= 0 ? TF_WS_BUSY
-                                             : TF_WS_IDLE;
-            }
-            s->nworkers = st->nworkers;
-            free(held);
-        }
-        free(views);
-        free(owners);
+/* The farm's totals from the supervisor: rays and their rates (the recent one over about
+ * RECENT_RATE_WINDOW_S), samples, the watermark, tasks and workers. */
+static void capture_farm_totals(tf_dashboard *d, tf_snapshot *s, const tf_farm_stats *st,
+                                double t)
+{
+    s->tasks_total = st->tasks_total; /* over every frame of a sequence */
+    s->rays_total = st->primary_rays + st->shadow_rays;
+    s->rays_per_s = t > 0 ? (double)s->rays_total / t : 0;
+    if (t - d->rate_t >= RECENT_RATE_WINDOW_S) {
+        d->rate_prev_t = d->rate_t;
+        d->rate_prev_rays = d->rate_rays;
+        d->rate_t = t;
+        d->rate_rays = s->rays_total;
     }
-    s->partial = !full;
-    if (!full)
-        return s; /* nobody watches: the events and the preview, costly copies, wait too */
+    s->rays_per_s_recent = t - d->rate_prev_t > 0.1
+                               ? (double)(s->rays_total - d->rate_prev_rays) / (t - d->rate_prev_t)
+                               : s->rays_per_s;
+    s->spp_avg = st->pixels ? st->spp_sum / (double)st->pixels : 0;
+    s->watermark = tf_supervisor_watermark(d->sup);
+    s->watermark_min = d->tasks ? d->tasks->cols : 1;
+    s->watermark_max = tf_supervisor_watermark_max(d->sup);
+    s->outstanding = tf_supervisor_outstanding(d->sup);
+    s->max_outstanding = st->max_outstanding_tasks;
+    s->tasks_redealt = st->tasks_redealt;
+    s->task_failures = st->task_failures;
+    s->live_workers = tf_supervisor_live_workers(d->sup);
+    s->joined_workers = tf_supervisor_joined_workers(d->sup);
+}
+
+/* The worker on each open connection, sorted by connection for owner_of (NULL: out of
+ * memory), each connection noted as its worker's; *busy gets every worker's busy time. */
+static conn_owner *connection_owners(tf_dashboard *d, const tf_farm_stats *st, int *n,
+                                     double *busy)
+{
+    conn_owner *owners = calloc((size_t)st->nworkers + 1, sizeof *owners);
+    *n = 0;
+    *busy = 0;
+    for (int i = 0; owners && i < st->nworkers; i++) {
+        *busy += st->workers[i].busy_s;
+        if (st->workers[i].conn) {
+            owners[(*n)++] = (conn_owner){st->workers[i].conn, st->workers[i].id};
+            note_worker_conn(d, st->workers[i].id, st->workers[i].conn);
+        }
+    }
+    if (owners)
+        qsort(owners, (size_t)*n, sizeof *owners, cmp_owner);
+    return owners;
+}
+
+/* The n outstanding tasks of views: each one's rectangle, frame, and the worker holding it. */
+static void capture_tasks(const tf_dashboard *d, tf_snapshot *s, const tf_task_view *views,
+                          int n, const conn_owner *owners, int nowners)
+{
+    for (int i = 0; i < n; i++) {
+        tf_snap_task *o = &s->tasks[i];
+        o->id = views[i].id;
+        if (tf_supervisor_task_rect(d->sup, views[i].id, &o->rect, &o->frame))
+            o->rect = (tf_rect){0, 0, 0, 0}, o->frame = -1;
+        o->done = views[i].has_result;
+        o->worker = views[i].holder_conn ? owner_of(owners, nowners, views[i].holder_conn) : -1;
+    }
+    s->ntasks = n;
+}
+
+/* Every worker the farm has seen: its counts, the task it holds (from the n views), when it
+ * was heard, and its state. */
+static void capture_workers(tf_dashboard *d, tf_snapshot *s, const tf_farm_stats *st,
+                            const tf_task_view *views, int n)
+{
+    /* connection -> a task it holds (the pairs reused: .worker holds a task id) */
+    conn_owner *held = malloc((size_t)(n > 0 ? n : 1) * sizeof *held);
+    int nheld = 0;
+    for (int i = 0; held && i < n; i++)
+        if (views[i].holder_conn && !views[i].has_result)
+            held[nheld++] = (conn_owner){views[i].holder_conn, views[i].id};
+    if (held)
+        qsort(held, (size_t)nheld, sizeof *held, cmp_owner);
+    for (int i = 0; i < st->nworkers; i++) {
+        const tf_worker_stats *w = &st->workers[i];
+        tf_snap_worker *o = &s->workers[i];
+        o->id = w->id;
+        memcpy(o->kind, w->kind, sizeof o->kind);
+        memcpy(o->host, w->host, sizeof o->host);
+        memcpy(o->backend, w->backend, sizeof o->backend);
+        o->tasks = w->tasks;
+        o->rays = w->rays;
+        o->busy_s = w->busy_s;
+        o->holding = w->conn && held ? owner_of(held, nheld, w->conn) : -1;
+        worker_seen *ws = seen_worker(d, w->id);
+        o->since_s = ws ? ws->since_s : -1;
+        o->last_heard_s = ws ? ws->last_s : -1;
+        o->state = !w->conn ? (ws && ws->dropped ? TF_WS_DROPPED : TF_WS_LEFT)
+                   : o->holding >= 0 ? TF_WS_BUSY
+                                     : TF_WS_IDLE;
+    }
+    s->nworkers = st->nworkers;
+    free(held);
+}
+
+/* The supervisor's part of a snapshot: totals always; the lists of tasks and workers only
+ * when full (someone reads them), else just the write front. */
+static void capture_farm(tf_dashboard *d, tf_snapshot *s, int rows_written, double t, int full)
+{
+    const tf_farm_stats *st = tf_supervisor_stats(d->sup);
+    capture_farm_totals(d, s, st, t);
+    int nowners;
+    double busy;
+    conn_owner *owners = connection_owners(d, st, &nowners, &busy);
+    sample_history(d, t, s->rays_total, busy, rows_written, s->live_workers);
+    int cap = s->outstanding > 0 ? s->outstanding : 1;
+    tf_task_view *views = full ? malloc((size_t)cap * sizeof *views) : NULL;
+    s->tasks = full ? malloc((size_t)cap * sizeof *s->tasks) : NULL;
+    s->workers = full ? calloc((size_t)st->nworkers + 1, sizeof *s->workers) : NULL;
+    if (!full) /* the lists of tasks and workers wait for a reader too */
+        tf_supervisor_task_views(d->sup, &s->tasks_written, NULL, 0);
+    if (views && s->tasks && s->workers && owners) {
+        int64_t write_task = 0;
+        int n = tf_supervisor_task_views(d->sup, &write_task, views, cap);
+        s->tasks_written = write_task;
+        capture_tasks(d, s, views, n, owners, nowners);
+        capture_workers(d, s, st, views, n);
+    }
+    free(views);
+    free(owners);
+}
+
+/* What only a reader needs, costly to copy: the events, the throughput history and the
+ * preview. */
+static void capture_for_reader(const tf_dashboard *d, tf_snapshot *s)
+{
     s->events = malloc(TF_EVENTS_MAX * sizeof *s->events);
     if (s->events)
         s->nevents = tf_events_since(d->events, 0, s->events, TF_EVENTS_MAX);
@@ -537,6 +571,23 @@ static tf_snapshot *capture(tf_dashboard *d, int rows_written, int full)
         s->preview_version = d->preview->version;
         s->preview_stamps = d->preview->stamps;
     }
+}
+
+/* A snapshot of the render now; a partial one (!full: nobody watches) leaves out the lists,
+ * the events and the preview. */
+static tf_snapshot *capture(tf_dashboard *d, int rows_written, int full)
+{
+    tf_snapshot *s = calloc(1, sizeof *s);
+    if (!s)
+        return NULL;
+    double t = since_start(d);
+    s->version = ++d->version;
+    capture_progress(d, s, rows_written, t);
+    if (d->sup)
+        capture_farm(d, s, rows_written, t, full);
+    s->partial = !full;
+    if (full)
+        capture_for_reader(d, s);
     return s;
 }
 

@@ -203,80 +203,58 @@ static int open_device_ahead(const tf_scene *s, const char *backend, int paint, 
     return tf_opencl_ahead_start() == 0;
 }
 
-int tf_networked_worker_run(const tf_networked_opts *o)
+/* --simulate with --payloads: refuse a recording that cannot stand in for this render's
+ * results before joining (its layout from the coordinator on c).  0 if it fits. */
+static int payloads_fit_render(ts_client *c, const char *path)
 {
-    const char *connect = o->connect, *backend = o->backend, *model = o->simulate_model;
-    int timeout_ms = o->timeout_ms, nproc = o->processes;
-    const char *secret = o->secret_file;
-    double pixel_us = o->pixel_us;
-    signal(SIGPIPE, SIG_IGN);
-    uint8_t key[TF_KEY_BYTES];
     char err[1024];
-    if (secret && (tf_auth_init() || tf_secret_load(secret, key, err, sizeof err))) {
+    tf_exr_layout l;
+    tf_payloads *rec = tf_worker_fetch_layout(c, &l, err, sizeof err) == 0
+                           ? tf_payloads_load(path, err, sizeof err)
+                           : NULL;
+    int fits = rec && tf_payloads_fit(rec, &l, err, sizeof err) == 0;
+    tf_payloads_free(rec);
+    if (!fits)
         tf_error("%s", err);
-        return 1;
-    }
-    const uint8_t *k = secret ? key : NULL;
+    return fits ? 0 : -1;
+}
 
-    /* The scene, from the coordinator (tsnet model): the first connection only reads it. */
-    ts_client *c = tf_networked_connect(connect, k, timeout_ms, err, sizeof err);
-    if (!c) {
-        tf_error("%s", err);
-        return 1;
-    }
-    int kind = TF_SPACE_RENDER;
-    tf_scene *s = tf_worker_fetch_scene_ex(c, connect, &kind, err, sizeof err);
-    if (!s) {
-        tf_error("%s", err);
+/* --simulate: the synthetic workers in place of real ones (c, the scene's connection, is
+ * closed first). */
+static int serve_simulated(const tf_networked_opts *o, const uint8_t *key, ts_client *c,
+                           const tf_scene *s, int paint)
+{
+    if (paint) {
+        tf_error("%s paints (terrafarm paint): --simulate serves renders only", o->connect);
         ts_client_close(c);
         return 1;
     }
-    if (kind == TF_SPACE_EROSION) { /* the coordinator runs an erosion: serve one patch of it */
-        int status = tf_erosion_networked(c, s, connect, TF_WORKER_HEARTBEAT_MS);
-        tf_scene_free(s);
-        ts_client_close(c);
-        return status;
-    }
-    int paint = kind == TF_SPACE_PAINT;
-    if (paint && model) {
-        tf_error("%s paints (terrafarm paint): --simulate serves renders only", connect);
-        tf_scene_free(s);
+    if (o->payloads && payloads_fit_render(c, o->payloads)) {
         ts_client_close(c);
         return 1;
     }
-    if (model) {
-        if (o->payloads) { /* refuse a recording that cannot stand in before joining */
-            tf_exr_layout l;
-            tf_payloads *rec = tf_worker_fetch_layout(c, &l, err, sizeof err) == 0
-                                   ? tf_payloads_load(o->payloads, err, sizeof err)
-                                   : NULL;
-            int fits = rec && tf_payloads_fit(rec, &l, err, sizeof err) == 0;
-            tf_payloads_free(rec);
-            if (!fits) {
-                tf_error("%s", err);
-                ts_client_close(c);
-                tf_scene_free(s);
-                return 1;
-            }
-        }
-        ts_client_close(c);
-        int status = run_simulated(connect, k, timeout_ms, s, model, nproc ? nproc : 16,
-                                   pixel_us, o->payloads);
-        tf_scene_free(s);
-        return status;
-    }
-    if (nproc == 0)
-        nproc = tf_thread_count(0);
-    tf_info("joining %s: %dx%d render of a %s terrain; building the height field", connect,
+    ts_client_close(c);
+    return run_simulated(o->connect, key, o->timeout_ms, s, o->simulate_model,
+                         o->processes ? o->processes : 16, o->pixel_us, o->payloads);
+}
+
+/* A render or a paint: the height field built (the OpenCL device started alongside where this
+ * process renders with it), then one worker on c, or the processes asked for on connections of
+ * their own (c closed). */
+static int serve_render(const tf_networked_opts *o, const uint8_t *key, ts_client *c,
+                        const tf_scene *s, int paint)
+{
+    char err[1024];
+    int nproc = o->processes ? o->processes : tf_thread_count(0);
+    tf_info("joining %s: %dx%d render of a %s terrain; building the height field", o->connect,
             s->width, s->height, tf_generator_name(s->terrain.generator));
     ts_client_heartbeat(c, TF_WORKER_HEARTBEAT_MS); /* stay alive while the terrain builds */
-    if (open_device_ahead(s, backend, paint, nproc))
+    if (open_device_ahead(s, o->backend, paint, nproc))
         tf_debug("OpenCL: starting the device while the terrain is built");
     tf_heightfield *hf = tf_heightfield_build(s, 0, err, sizeof err);
     if (!hf) {
         tf_error("%s", err);
         tf_opencl_ahead_drop();
-        tf_scene_free(s);
         ts_client_close(c);
         return 1;
     }
@@ -285,15 +263,48 @@ int tf_networked_worker_run(const tf_networked_opts *o)
     tf_render_prepare(s, hf, 0); /* once, on all cores, for the processes forked below */
     int status;
     if (nproc == 1) {
-        status = run_one(connect, k, timeout_ms, s, hf, backend, paint, c);
+        status = run_one(o->connect, key, o->timeout_ms, s, hf, o->backend, paint, c);
     } else {
         ts_client_close(c);
-        status = run_processes(nproc, connect, k, timeout_ms, s, hf, backend, paint);
+        status = run_processes(nproc, o->connect, key, o->timeout_ms, s, hf, o->backend, paint);
     }
     if (status == 0)
         tf_info("%s finished; worker leaving", paint ? "painting" : "render");
     tf_opencl_ahead_drop(); /* not taken: the worker ended before making its backend */
     tf_heightfield_free(hf);
+    return status;
+}
+
+int tf_networked_worker_run(const tf_networked_opts *o)
+{
+    signal(SIGPIPE, SIG_IGN);
+    uint8_t key[TF_KEY_BYTES];
+    char err[1024];
+    if (o->secret_file &&
+        (tf_auth_init() || tf_secret_load(o->secret_file, key, err, sizeof err))) {
+        tf_error("%s", err);
+        return 1;
+    }
+    const uint8_t *k = o->secret_file ? key : NULL;
+    /* The scene, from the coordinator (tsnet model): the first connection only reads it. */
+    ts_client *c = tf_networked_connect(o->connect, k, o->timeout_ms, err, sizeof err);
+    int kind = TF_SPACE_RENDER;
+    tf_scene *s = c ? tf_worker_fetch_scene_ex(c, o->connect, &kind, err, sizeof err) : NULL;
+    if (!s) {
+        tf_error("%s", err);
+        if (c)
+            ts_client_close(c);
+        return 1;
+    }
+    int status;
+    if (kind == TF_SPACE_EROSION) { /* the coordinator runs an erosion: serve one patch of it */
+        status = tf_erosion_networked(c, s, o->connect, TF_WORKER_HEARTBEAT_MS);
+        ts_client_close(c);
+    } else if (o->simulate_model) {
+        status = serve_simulated(o, k, c, s, kind == TF_SPACE_PAINT);
+    } else {
+        status = serve_render(o, k, c, s, kind == TF_SPACE_PAINT);
+    }
     tf_scene_free(s);
     return status;
 }

@@ -206,6 +206,110 @@ static void resample_line(const double *src, int len, size_t ss, double *dst, in
     }
 }
 
+/* Steps 2 and 3: the w x h window at (wx, wy) as world heights (NAN: nodata), still in the
+ * file's row order; *valid gets how many are data.  NULL with a message in err. */
+static float *window_heights(const tf_terrain *t, const tf_raster *r, const char *name, int wx,
+                             int wy, int w, int h, size_t *valid, char *err, size_t errlen)
+{
+    float *win = malloc((size_t)w * (size_t)h * sizeof *win);
+    if (!win)
+        return tf_seterr(err, errlen, "%s: out of memory", name), NULL;
+    double vscale, voffset;
+    vertical(t, &r->meta, &vscale, &voffset);
+    *valid = 0;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            float v = r->v[(size_t)(wy + y) * (size_t)r->width + (size_t)(wx + x)];
+            float zz = isnan(v) ? NAN : (float)((double)v * vscale + voffset);
+            if (!isnan(zz) && !isfinite(zz)) {
+                free(win);
+                return tf_seterr(err, errlen, "%s: value %g at pixel (%d, %d) times "
+                                 "vertical_scale is not a finite float", name, (double)v,
+                                 wx + x, wy + y), NULL;
+            }
+            *valid += !isnan(zz);
+            win[(size_t)y * (size_t)w + (size_t)x] = zz;
+        }
+    return win;
+}
+
+/* Step 4: the window's nodata samples given heights (valid of its w x h are data; none is an
+ * error, its message naming the crop window if there is one).  0 or -1. */
+static int fill_window(const tf_terrain *t, const char *name, float *win, int w, int h,
+                       int cropped, size_t valid, char *err, size_t errlen)
+{
+    size_t count = (size_t)w * (size_t)h;
+    if (valid == 0)
+        return tf_seterr(err, errlen, "%s: no data: all %dx%d samples%s are nodata", name, w, h,
+                         cropped ? " of the crop window" : "");
+    if (valid == count)
+        return 0;
+    if (t->nodata == TF_NODATA_SEA) {
+        float sea = (float)(t->file_sea_level - 1.0);
+        for (size_t i = 0; i < count; i++)
+            if (isnan(win[i]))
+                win[i] = sea;
+        return 0;
+    }
+    if (fill_nodata(win, w, h) != 0)
+        return tf_seterr(err, errlen, "%s: out of memory filling nodata", name);
+    return 0;
+}
+
+/* Steps 5 and 6's size: the w x h window at row wy must cover a square (within
+ * SQUARE_TOLERANCE); *side gets its side (in metres, or pixels without georeferencing). */
+static int square_side(const tf_raster *r, const char *name, int wy, int w, int h,
+                       double *side, char *err, size_t errlen)
+{
+    double dx, dy;
+    if (pixel_size(r, wy, h, name, &dx, &dy, err, errlen) != 0)
+        return -1;
+    double side_x = (w - 1) * dx, side_y = (h - 1) * dy;
+    if (fabs(side_x - side_y) > SQUARE_TOLERANCE * fmax(side_x, side_y)) {
+        int wide = side_x > side_y;
+        return tf_seterr(err, errlen, "%s: the window covers %.6g x %.6g %s (%dx%d pixels), not "
+                         "a square as the terrain is: crop it, e.g. %s = %ld", name, side_x,
+                         side_y, r->has_georef ? "metres" : "pixels", w, h,
+                         wide ? "crop_width" : "crop_height",
+                         wide ? lround(side_y / dx) + 1 : lround(side_x / dy) + 1);
+    }
+    *side = side_x;
+    return 0;
+}
+
+/* Steps 5 and 7: the w x h window (file row order) turned south first and west first, then
+ * resampled onto n x n samples: rows to n columns, then columns to n rows.  NULL when out of
+ * memory. */
+static float *resample_window(const float *win, int w, int h, int south, int flip_x, int n)
+{
+    double *z = malloc((size_t)w * (size_t)h * sizeof *z);
+    double *tmp = malloc((size_t)h * (size_t)n * sizeof *tmp);
+    double *col = malloc((size_t)n * sizeof *col);
+    float *out = malloc((size_t)n * (size_t)n * sizeof *out);
+    if (z && tmp && col && out) {
+        for (int y = 0; y < h; y++) {
+            int sy = south ? y : h - 1 - y; /* z row y is world row y (south first) */
+            for (int x = 0; x < w; x++)
+                z[(size_t)y * (size_t)w + (size_t)x] =
+                    win[(size_t)sy * (size_t)w + (size_t)(flip_x ? w - 1 - x : x)];
+        }
+        for (int y = 0; y < h; y++)
+            resample_line(z + (size_t)y * (size_t)w, w, 1, tmp + (size_t)y * (size_t)n, n, 1);
+        for (int i = 0; i < n; i++) {
+            resample_line(tmp + i, h, (size_t)n, col, n, 1);
+            for (int j = 0; j < n; j++)
+                out[(size_t)j * (size_t)n + (size_t)i] = (float)col[j];
+        }
+    } else {
+        free(out);
+        out = NULL;
+    }
+    free(z);
+    free(tmp);
+    free(col);
+    return out;
+}
+
 float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size_t errlen)
 {
     const char *name = t->file_name ? t->file_name : t->file_path;
@@ -214,107 +318,25 @@ float *tf_heightmap_heights(const tf_terrain *t, double *extent, char *err, size
     tf_raster r;
     if (tf_raster_decode(t->file_bytes, t->file_len, name, &r, err, errlen) != 0)
         return NULL;
-    float *out = NULL;
-    double *z = NULL, *tmp = NULL;
+    float *win = NULL, *out = NULL;
     int wx, wy, w, h;
-    if (crop_window(t, &r, name, &wx, &wy, &w, &h, err, errlen) != 0)
-        goto out;
-
-    /* 2, 3: the window's world heights, still in file row order */
-    size_t count = (size_t)w * (size_t)h;
-    float *win = malloc(count * sizeof *win);
-    if (!win) {
-        tf_seterr(err, errlen, "%s: out of memory", name);
-        goto out;
-    }
-    double vscale, voffset;
-    vertical(t, &r.meta, &vscale, &voffset);
     size_t valid = 0;
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++) {
-            float v = r.v[(size_t)(wy + y) * (size_t)r.width + (size_t)(wx + x)];
-            float zz = isnan(v) ? NAN
-                                : (float)((double)v * vscale + voffset);
-            if (!isnan(zz) && !isfinite(zz)) {
-                free(win);
-                tf_seterr(err, errlen, "%s: value %g at pixel (%d, %d) times vertical_scale is "
-                          "not a finite float", name, (double)v, wx + x, wy + y);
-                goto out;
-            }
-            valid += !isnan(zz);
-            win[(size_t)y * (size_t)w + (size_t)x] = zz;
-        }
-    /* 4 */
-    if (valid == 0) {
-        free(win);
-        tf_seterr(err, errlen, "%s: no data: all %dx%d samples%s are nodata", name, w, h,
-                  (wx || wy || w != r.width || h != r.height) ? " of the crop window" : "");
+    double side = 0;
+    if (crop_window(t, &r, name, &wx, &wy, &w, &h, err, errlen) != 0 ||
+        !(win = window_heights(t, &r, name, wx, wy, w, h, &valid, err, errlen)) ||
+        fill_window(t, name, win, w, h, wx || wy || w != r.width || h != r.height, valid, err,
+                    errlen) != 0 ||
+        square_side(&r, name, wy, w, h, &side, err, errlen) != 0)
         goto out;
-    }
-    if (valid < count) {
-        if (t->nodata == TF_NODATA_SEA) {
-            float sea = (float)(t->file_sea_level - 1.0);
-            for (size_t i = 0; i < count; i++)
-                if (isnan(win[i]))
-                    win[i] = sea;
-        } else if (fill_nodata(win, w, h) != 0) {
-            free(win);
-            tf_seterr(err, errlen, "%s: out of memory filling nodata", name);
-            goto out;
-        }
-    }
-    /* 5, 6 */
-    double dx, dy;
-    if (pixel_size(&r, wy, h, name, &dx, &dy, err, errlen) != 0) {
-        free(win);
-        goto out;
-    }
-    double side_x = (w - 1) * dx, side_y = (h - 1) * dy;
-    if (fabs(side_x - side_y) > SQUARE_TOLERANCE * fmax(side_x, side_y)) {
-        free(win);
-        int wide = side_x > side_y;
-        tf_seterr(err, errlen, "%s: the window covers %.6g x %.6g %s (%dx%d pixels), not a "
-                  "square as the terrain is: crop it, e.g. %s = %ld", name, side_x, side_y,
-                  r.has_georef ? "metres" : "pixels", w, h, wide ? "crop_width" : "crop_height",
-                  wide ? lround(side_y / dx) + 1 : lround(side_x / dy) + 1);
-        goto out;
-    }
-    *extent = t->extent > 0 ? t->extent : side_x;
-    int south = south_first(t, &r);
-    int flip_x = r.has_georef && r.gt[1] < 0;
-
-    /* 7: rows to n columns (tmp, h x n), then columns to n rows (out, n x n) */
-    int n = (1 << t->size_exp) + 1;
-    z = malloc(count * sizeof *z);
-    tmp = malloc((size_t)h * (size_t)n * sizeof *tmp);
-    double *col = malloc((size_t)n * sizeof *col);
-    out = malloc((size_t)n * (size_t)n * sizeof *out);
-    if (!z || !tmp || !col || !out) {
-        free(win);
-        free(col);
-        free(out);
-        out = NULL;
+    const int n = (1 << t->size_exp) + 1;
+    out = resample_window(win, w, h, south_first(t, &r), r.has_georef && r.gt[1] < 0, n);
+    if (!out) {
         tf_seterr(err, errlen, "%s: out of memory resampling to %dx%d", name, n, n);
         goto out;
     }
-    for (int y = 0; y < h; y++) {
-        int sy = south ? y : h - 1 - y; /* z row y is world row y (south first) */
-        for (int x = 0; x < w; x++)
-            z[(size_t)y * (size_t)w + (size_t)x] =
-                win[(size_t)sy * (size_t)w + (size_t)(flip_x ? w - 1 - x : x)];
-    }
-    free(win);
-    for (int y = 0; y < h; y++)
-        resample_line(z + (size_t)y * (size_t)w, w, 1, tmp + (size_t)y * (size_t)n, n, 1);
-    for (int i = 0; i < n; i++) {
-        resample_line(tmp + i, h, (size_t)n, col, n, 1);
-        for (int j = 0; j < n; j++)
-            out[(size_t)j * (size_t)n + (size_t)i] = (float)col[j];
-    }
-    free(col);
+    *extent = t->extent > 0 ? t->extent : side;
 out:
-    free(z);
-    free(tmp);
+    free(win);
     tf_raster_free(&r);
     return out;
 }

@@ -99,14 +99,9 @@ static int seed_row(void *user, int y, const tf_pixel *row)
     return 0;
 }
 
-tf_dashboard *tf_dashboard_open(const tf_dashboard_config *cfg, char *err, size_t errlen)
+/* What the dashboard says of the render from the start: its names, size and clocks. */
+static void describe_render(tf_dashboard *d, const tf_dashboard_config *cfg)
 {
-    tf_dashboard *d = calloc(1, sizeof *d);
-    if (!d) {
-        tf_seterr(err, errlen, "out of memory");
-        return NULL;
-    }
-    d->listen_fd = -1;
     d->exit_status = -1;
     d->t_start = cfg->t_start;
     struct timespec now;
@@ -125,40 +120,42 @@ tf_dashboard *tf_dashboard_open(const tf_dashboard_config *cfg, char *err, size_
     d->frames_done = cfg->frames_total >= 0 ? 0 : -1;
     d->hist_interval_s = HISTORY_FIRST_INTERVAL_S;
     d->hist_last_s = -1e9;
+}
 
-    const char *spec = cfg->http ? cfg->http : TF_DEFAULT_HTTP;
+/* The address spec (HOST:PORT) checked, and the token: from the token file, else derived from
+ * the farm's key, which an address beyond loopback requires.  0 or -1. */
+static int choose_address_and_token(tf_dashboard *d, const tf_dashboard_config *cfg,
+                                    const char *spec, char *err, size_t errlen)
+{
     char port[32], why[256];
     if (!strncmp(spec, "unix:", 5) ||
-        tf_split_hostport(spec, d->host, sizeof d->host, port, sizeof port, why, sizeof why)) {
-        tf_seterr(err, errlen, "--http %s: expected HOST:PORT (a TCP address) or none", spec);
-        goto fail;
-    }
+        tf_split_hostport(spec, d->host, sizeof d->host, port, sizeof port, why, sizeof why))
+        return tf_seterr(err, errlen, "--http %s: expected HOST:PORT (a TCP address) or none",
+                         spec);
     d->loopback = tf_listen_is_loopback(spec);
     if (cfg->token_file) {
         if (tf_http_token_load(cfg->token_file, d->token, sizeof d->token, err, errlen))
-            goto fail;
+            return -1;
         d->have_token = 1;
     } else if (!d->loopback) {
-        if (!cfg->farm_key) {
-            tf_seterr(err, errlen, "--http %s is not a loopback address: the dashboard there "
-                      "needs a token (--http-token-file FILE, or --secret-file FILE to derive "
-                      "one)", spec);
-            goto fail;
-        }
-        if (tf_http_token_derive(cfg->farm_key, d->token, sizeof d->token)) {
-            tf_seterr(err, errlen, "cannot derive the dashboard token");
-            goto fail;
-        }
+        if (!cfg->farm_key)
+            return tf_seterr(err, errlen, "--http %s is not a loopback address: the dashboard "
+                             "there needs a token (--http-token-file FILE, or --secret-file FILE "
+                             "to derive one)", spec);
+        if (tf_http_token_derive(cfg->farm_key, d->token, sizeof d->token))
+            return tf_seterr(err, errlen, "cannot derive the dashboard token");
         d->have_token = 1;
     }
-    d->have_web = tf_web_dir_find(d->web_dir, sizeof d->web_dir) == 0;
-    if (!d->have_web)
-        tf_warn("the dashboard's page (web/index.html) was not found beside the executable or "
-                "in PREFIX/share/terrafarm/web (set TERRAFARM_WEB): serving the JSON API only");
+    return 0;
+}
 
+/* The listening socket at spec; where the default address was asked for and its port is taken
+ * (another render?), any free port of that host.  0 or -1. */
+static int listen_at(tf_dashboard *d, const char *spec, int is_default, char *err,
+                     size_t errlen)
+{
     d->listen_fd = tf_sock_listen(spec, &d->port, err, errlen);
-    if (d->listen_fd < 0 && !cfg->http) {
-        /* the default port is taken (another render?): any free one will do */
+    if (d->listen_fd < 0 && is_default) {
         char fallback[300];
         snprintf(fallback, sizeof fallback, "%s:0", d->host);
         d->listen_fd = tf_sock_listen(fallback, &d->port, err, errlen);
@@ -166,16 +163,21 @@ tf_dashboard *tf_dashboard_open(const tf_dashboard_config *cfg, char *err, size_
     if (d->listen_fd < 0) {
         char why[512];
         snprintf(why, sizeof why, "%s", err);
-        tf_seterr(err, errlen, "--http: %s", why);
-        goto fail;
+        return tf_seterr(err, errlen, "--http: %s", why);
     }
+    return 0;
+}
+
+/* The events, the live preview (seeded with the rows a resumed render already has) and the
+ * history.  0 or -1. */
+static int start_live_state(tf_dashboard *d, const tf_dashboard_config *cfg, char *err,
+                            size_t errlen)
+{
     d->events = tf_events_new();
     d->preview = tf_livepreview_new(cfg->width, cfg->height, PREVIEW_MAX_SIDE);
     d->hist = calloc(HISTORY_MAX, sizeof *d->hist);
-    if (!d->events || !d->preview || !d->hist || tf_hub_init(&d->hub)) {
-        tf_seterr(err, errlen, "out of memory");
-        goto fail;
-    }
+    if (!d->events || !d->preview || !d->hist || tf_hub_init(&d->hub))
+        return tf_seterr(err, errlen, "out of memory");
     d->hub_ok = 1;
     tf_livepreview_frame(d->preview, cfg->first_frame); /* so its first results keep the seed */
     if (cfg->resume_exr && cfg->first_row > 0) {
@@ -186,6 +188,27 @@ tf_dashboard *tf_dashboard_open(const tf_dashboard_config *cfg, char *err, size_
             rows < cfg->first_row)
             tf_debug("dashboard: the resumed rows are not in the live preview: %s", e);
     }
+    return 0;
+}
+
+tf_dashboard *tf_dashboard_open(const tf_dashboard_config *cfg, char *err, size_t errlen)
+{
+    tf_dashboard *d = calloc(1, sizeof *d);
+    if (!d) {
+        tf_seterr(err, errlen, "out of memory");
+        return NULL;
+    }
+    d->listen_fd = -1;
+    describe_render(d, cfg);
+    const char *spec = cfg->http ? cfg->http : TF_DEFAULT_HTTP;
+    if (choose_address_and_token(d, cfg, spec, err, errlen))
+        goto fail;
+    d->have_web = tf_web_dir_find(d->web_dir, sizeof d->web_dir) == 0;
+    if (!d->have_web)
+        tf_warn("the dashboard's page (web/index.html) was not found beside the executable or "
+                "in PREFIX/share/terrafarm/web (set TERRAFARM_WEB): serving the JSON API only");
+    if (listen_at(d, spec, !cfg->http, err, errlen) || start_live_state(d, cfg, err, errlen))
+        goto fail;
     return d;
 fail:
     tf_dashboard_close(d);

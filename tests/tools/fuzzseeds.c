@@ -1,4 +1,4 @@
-/* fuzzseeds.c: writes the valid seeds of two fuzz corpora, so their replay in `make test`
+/* fuzzseeds.c: writes the valid seeds of three fuzz corpora, so their replay in `make test`
  * reaches the accept paths and not only the refusals:
  *   CORPUS/seal/    records sealed under tests/fuzz/fuzz_seal.c's fixed key and handshake
  *                   (client to server), holding ordinary frames: one record, several records,
@@ -9,15 +9,22 @@
  *                   layouts and tasks: scanline half and float, a whole tile, an edge tile;
  *                   and refused_*: a result for another task, a preview one byte short, a
  *                   chunk whose zlib checksum is wrong (structurally fine: only the
- *                   --verify-chunks walk refuses it).
+ *                   --verify-chunks walk refuses it);
+ *   CORPUS/paint/   fuzz_paint.c's header, a node list made by tf_paint_nodes_put and an
+ *                   answer of the length tf_paint_task_values gives, every value in range: a
+ *                   sampled node, one with its corners known, an exact node clipped by the
+ *                   image's edge; and refused_*: a NaN, an alpha of 2, a sample count of 3,
+ *                   the answer a value short, a node of size 3, a node with unknown flags.
  * Every seed is deterministic and small.  Usage: build/tools/fuzzseeds tests/corpus */
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
 #include "farmproto.h"
+#include "paintproto.h"
 #include "image/exrencode.h"
 #include "linda/seal.h"
 
@@ -260,14 +267,101 @@ static int result_seeds(const char *dir)
     return 0;
 }
 
+/* ---- paint: fuzz_paint.c's input */
+
+enum paint_spoil { PAINT_FINE, PAINT_NAN, PAINT_ALPHA, PAINT_SPP, PAINT_SHORT, PAINT_SIZE,
+                   PAINT_FLAGS };
+
+typedef struct paint_spec {
+    const char *name;
+    enum paint_spoil spoil;
+} paint_spec;
+
+/* A value in range for field f of a node's record (exact: a pixel's six floats). */
+static float paint_value(size_t i, int exact)
+{
+    const size_t f = i % (exact ? TF_PAINT_PIXEL_FLOATS : TF_PAINT_SAMPLE_FLOATS);
+    if (exact && f == 3)
+        return 1.0f;                          /* alpha */
+    if (exact && f == 4)
+        return 100.0f + (float)(i % 7);       /* depth */
+    if (exact && f == 5)
+        return 4.0f + (float)(i % 3);         /* samples, aa_depth 3 allows 4 .. 81 */
+    return 0.25f + 0.01f * (float)(i % 50);   /* a colour */
+}
+
+static int paint_seed(const char *dir, const paint_spec *spec)
+{
+    const int w = 64, h = 48, aa_depth = 3;
+    tf_paint_node nodes[3] = {{0, 0, 16, 4, 0},
+                              {16, 0, 16, 8, TF_PAINT_CORNERS_KNOWN},
+                              {32, 32, 32, 0, 0}}; /* exact, 32 x 16 inside the image */
+    const int count = 3;
+    size_t nvalues = tf_paint_task_values(nodes, count, w, h);
+    float *v = malloc(nvalues * sizeof *v);
+    if (!v)
+        return -1;
+    size_t at = 0;
+    for (int k = 0; k < count; k++) {
+        size_t n = tf_paint_node_values(&nodes[k], w, h);
+        for (size_t i = 0; i < n; i++)
+            v[at + i] = paint_value(i, nodes[k].d == 0);
+        at += n;
+    }
+    const size_t exact_at = nvalues - tf_paint_node_values(&nodes[2], w, h);
+    if (spec->spoil == PAINT_NAN)
+        v[5] = NAN;
+    if (spec->spoil == PAINT_ALPHA)
+        v[exact_at + 3] = 2.0f;
+    if (spec->spoil == PAINT_SPP)
+        v[exact_at + 5] = 3.0f;
+    if (spec->spoil == PAINT_SHORT)
+        nvalues--;
+    uint8_t blob[3 * TF_PAINT_RECORD_BYTES];
+    tf_paint_nodes_put(blob, nodes, count);
+    if (spec->spoil == PAINT_SIZE)
+        blob[8] = 3; /* the first node's s, little-endian */
+    if (spec->spoil == PAINT_FLAGS)
+        blob[TF_PAINT_RECORD_BYTES + 16] |= 4; /* the second node's flags */
+    const size_t len = 7 + sizeof blob + nvalues * sizeof *v;
+    uint8_t *seed = malloc(len);
+    int rc = -1;
+    if (seed) {
+        const uint8_t head[7] = {(w - 1) & 255, (w - 1) >> 8, (h - 1) & 255, (h - 1) >> 8,
+                                 aa_depth, sizeof blob & 255, sizeof blob >> 8};
+        memcpy(seed, head, sizeof head);
+        memcpy(seed + 7, blob, sizeof blob);
+        memcpy(seed + 7 + sizeof blob, v, nvalues * sizeof *v); /* little-endian floats */
+        rc = write_file(dir, "paint", spec->name, seed, len);
+    }
+    free(seed);
+    free(v);
+    return rc;
+}
+
+static const paint_spec PAINTS[] = {
+    {"three_nodes", PAINT_FINE},         {"refused_nan", PAINT_NAN},
+    {"refused_alpha", PAINT_ALPHA},      {"refused_sample_count", PAINT_SPP},
+    {"refused_short", PAINT_SHORT},      {"refused_node_size", PAINT_SIZE},
+    {"refused_node_flags", PAINT_FLAGS},
+};
+
+static int paint_seeds(const char *dir)
+{
+    for (size_t i = 0; i < sizeof PAINTS / sizeof PAINTS[0]; i++)
+        if (paint_seed(dir, &PAINTS[i]))
+            return -1;
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2) {
-        fprintf(stderr, "usage: %s CORPUS_DIR   (writes CORPUS_DIR/seal/ and /result/)\n",
-                argv[0]);
+        fprintf(stderr, "usage: %s CORPUS_DIR   (writes CORPUS_DIR/seal/, /result/ and "
+                        "/paint/)\n", argv[0]);
         return 2;
     }
-    if (make_dir(argv[1], "seal") || make_dir(argv[1], "result"))
+    if (make_dir(argv[1], "seal") || make_dir(argv[1], "result") || make_dir(argv[1], "paint"))
         return 1;
-    return seal_seeds(argv[1]) || result_seeds(argv[1]) ? 1 : 0;
+    return seal_seeds(argv[1]) || result_seeds(argv[1]) || paint_seeds(argv[1]) ? 1 : 0;
 }

@@ -34,6 +34,7 @@
 #define CL_TARGET_OPENCL_VERSION 120
 #include <CL/cl.h>
 
+#include "worker/backend.h"
 #include "worker/backend_opencl.h"
 #include "terrain/heightfield.h"
 #include "render/render.h"
@@ -150,12 +151,15 @@ static int fresh_cache_dir(char *dir, size_t len)
     return mkdtemp(dir) ? 0 : -1;
 }
 
-/* --start SCENE WxH STAMP: as a fresh worker process, time loading the OpenCL platform (PoCL,
- * LLVM), the backend (device, context, program from the binary cache, the scene and terrain
- * uploaded) and the first task of one stamp; print the wall and CPU seconds of each. */
+/* --start SCENE WxH STAMP: as a fresh worker process of `render -j <online CPUs>` (its share
+ * of the cores, so PoCL's basic device where that is one core: tf_backend_share_cores), time
+ * loading the OpenCL platform (PoCL, LLVM), the backend (device, context, program from the
+ * binary cache, the scene and terrain uploaded) and the first task of one stamp; print the
+ * wall and CPU seconds of each, the binary cache's answer and the device. */
 static int start_child(const char *path, const char *size, int stamp)
 {
     char err[1024] = "";
+    tf_backend_share_cores("opencl", tf_thread_count(0));
     int w, h, rc = 1;
     tf_scene *s = tf_scene_load(path, err, sizeof err);
     if (s && sscanf(size, "%dx%d", &w, &h) == 2)
@@ -179,7 +183,7 @@ static int start_child(const char *path, const char *size, int stamp)
     t[3] = now(), c[3] = cpu_now();
     for (int i = 0; i < START_PHASES; i++)
         printf("%.6f %.6f ", t[i + 1] - t[i], c[i + 1] - c[i]);
-    printf("%s\n", tf_cl_backend_cache(cl));
+    printf("%s %s\n", tf_cl_backend_cache(cl), tf_cl_backend_device(cl));
     rc = 0;
 out:
     if (rc)
@@ -191,11 +195,12 @@ out:
     return rc;
 }
 
-/* One fresh process through start_child: its phases' wall and CPU seconds.  0 or -1. */
+/* One fresh process through start_child: its phases' wall and CPU seconds, and its device
+ * (device_len bytes).  0 or -1. */
 static int start_run(const char *scene, int width, int height, int stamp, double *wall,
-                     double *cpu)
+                     double *cpu, char *device, size_t device_len)
 {
-    char size[32], st[16], line[256] = "";
+    char size[32], st[16], line[512] = "";
     snprintf(size, sizeof size, "%dx%d", width, height);
     snprintf(st, sizeof st, "%d", stamp);
     char *args[] = {"bench_opencl", "--start", (char *)scene, size, st, NULL};
@@ -220,11 +225,13 @@ static int start_run(const char *scene, int width, int height, int stamp, double
     int status = 0;
     if (rc == 0)
         waitpid(pid, &status, 0);
-    return rc == 0 && WIFEXITED(status) && WEXITSTATUS(status) == 0 &&
-                   sscanf(line, "%lf %lf %lf %lf %lf %lf", &wall[0], &cpu[0], &wall[1], &cpu[1],
-                          &wall[2], &cpu[2]) == 6
-               ? 0
-               : -1;
+    int at = 0;
+    if (rc != 0 || !WIFEXITED(status) || WEXITSTATUS(status) != 0 ||
+        sscanf(line, "%lf %lf %lf %lf %lf %lf %*s %n", &wall[0], &cpu[0], &wall[1], &cpu[1],
+               &wall[2], &cpu[2], &at) != 6 || at == 0)
+        return -1;
+    snprintf(device, device_len, "%.*s", (int)strcspn(line + at, "\n"), line + at);
+    return 0;
 }
 
 /* The median start of `runs` fresh worker processes, one line.  0, or -1 when one failed. */
@@ -232,8 +239,9 @@ static int report_start(const char *scene, int width, int height, int stamp, int
 {
     double wall[START_PHASES][START_RUNS], cpu[START_PHASES][START_RUNS], w[START_PHASES],
         c[START_PHASES];
+    char device[256] = "";
     for (int k = 0; k < runs; k++) {
-        if (start_run(scene, width, height, stamp, w, c)) {
+        if (start_run(scene, width, height, stamp, w, c, device, sizeof device)) {
             fprintf(stderr, "a fresh process (bench_opencl --start) could not start the "
                             "backend\n");
             return -1;
@@ -241,10 +249,12 @@ static int report_start(const char *scene, int width, int height, int stamp, int
         for (int i = 0; i < START_PHASES; i++)
             wall[i][k] = w[i], cpu[i][k] = c[i];
     }
-    printf("start      a fresh worker process, wall (CPU): PoCL and LLVM loaded %.4f s (%.4f), "
-           "backend ready %.4f s (%.4f), first task %.4f s (%.4f); median of %d\n",
-           median(wall[0], runs), median(cpu[0], runs), median(wall[1], runs),
-           median(cpu[1], runs), median(wall[2], runs), median(cpu[2], runs), runs);
+    printf("start      a fresh worker process of render -j %d, wall (CPU): PoCL and LLVM loaded "
+           "%.4f s (%.4f), backend ready %.4f s (%.4f), first task %.4f s (%.4f); median of %d; "
+           "device %s\n",
+           tf_thread_count(0), median(wall[0], runs), median(cpu[0], runs),
+           median(wall[1], runs), median(cpu[1], runs), median(wall[2], runs),
+           median(cpu[2], runs), runs, device);
     return 0;
 }
 

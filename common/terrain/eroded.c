@@ -5,6 +5,7 @@
 #include <fcntl.h>
 #include <math.h>
 #include <sodium.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -124,6 +125,41 @@ uint8_t *tf_eroded_encode(const tf_terrain *t, const tf_erosion_state *st,
     return b;
 }
 
+/* The first value of a blob's map k (0 heights, 1 water, 2 silt, 3 flow) that no erosion
+ * produces: not finite, or below 0 where the map is a depth or a flow.  Its index, or -1. */
+static ptrdiff_t first_impossible(const uint8_t *at, size_t count, int k)
+{
+    for (size_t i = 0; i < count; i++) {
+        float v;
+        memcpy(&v, at + (size_t)k * count * 4 + i * 4, 4);
+        if (!isfinite(v) || (k > 0 && !(v >= 0.0f)))
+            return (ptrdiff_t)i;
+    }
+    return -1;
+}
+
+/* Every value of the blob's maps is one tf_eroded_encode can write (finite heights; finite
+ * depths and flows >= 0): the checksum only says the bytes arrived as they were sent, and a
+ * coordinator that sends a networked worker its eroded terrain may send anything.  0, or -1
+ * with one line naming `from`, the map and the vertex. */
+static int check_values(const uint8_t *at, int n, const char *from, char *err, size_t errlen)
+{
+    static const char *const names[MAPS] = {"a height", "a water depth", "a silt depth",
+                                            "a flow"};
+    const size_t count = (size_t)n * (size_t)n;
+    for (int k = 0; k < MAPS; k++) {
+        ptrdiff_t i = first_impossible(at, count, k);
+        if (i >= 0) {
+            float v;
+            memcpy(&v, at + (size_t)k * count * 4 + (size_t)i * 4, 4);
+            return tf_seterr(err, errlen, "%s: eroded terrain holds %s of %g at vertex (%d, %d), "
+                             "which no erosion produces", from, names[k], (double)v,
+                             (int)(i % n), (int)(i / n));
+        }
+    }
+    return 0;
+}
+
 int tf_eroded_parse(const tf_terrain *t, int n, const uint8_t *bytes, size_t len,
                     const char *from, float *h, tf_eroded_maps *maps, char *err, size_t errlen)
 {
@@ -141,6 +177,8 @@ int tf_eroded_parse(const tf_terrain *t, int n, const uint8_t *bytes, size_t len
                          "settings", from);
     size_t count = (size_t)n * (size_t)n;
     const uint8_t *at = bytes + HEADER_BYTES;
+    if (check_values(at, n, from, err, errlen))
+        return -1;
     memcpy(h, at, count * 4);
     if (!maps)
         return 0;

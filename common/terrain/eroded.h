@@ -12,8 +12,10 @@
  *
  * heights are world heights of the ground, water and silt world depths, flow the decaying sum
  * of the water leaving each vertex per step (erosion.h) in world metres.  A blob is accepted
- * only whole: the right length for its n, its own checksum, and the key the reader computes
- * from its own scene; anything else is one line naming where it came from. */
+ * only whole: the right length for its n, its own checksum, the key the reader computes from
+ * its own scene, and only values an erosion writes (finite heights; finite depths and flows
+ * >= 0: whoever sends a blob can also checksum it); anything else is one line naming where it
+ * came from. */
 #ifndef TF_ERODED_H
 #define TF_ERODED_H
 

@@ -82,6 +82,20 @@ grep -q 'checksum does not match; eroding again' "$T/hf.err" ||
 same "$T/ref.exr" "$T/c4.exr" "heights after a damaged cache entry"
 say "damaged entry: $(grep checksum "$T/hf.err")"
 [ -f "$entry" ] || fail "the entry was not rewritten"
+# A NaN height, the checksum made to match it (as whoever sends a blob can): refused for its
+# value, not trusted for its checksum, and eroded again (it hung the render before).
+latest=$(ls -t "$T"/.terrafarm-cache/*.eroded | head -1) # the scene's own, just rewritten
+python3 - "$latest" <<'PY' || fail "cannot spoil the cache entry"
+import hashlib, struct, sys
+b = bytearray(open(sys.argv[1], 'rb').read())
+struct.pack_into('<f', b, 8 + 32 + 4 + 8 + 4 + 4 * 7, float('nan'))
+b[-32:] = hashlib.sha256(bytes(b[:-32])).digest()
+open(sys.argv[1], 'wb').write(b)
+PY
+hf -o "$T/c5.exr" || fail "an entry holding a NaN: $(cat "$T/hf.err")"
+grep -q 'holds a height of nan at vertex (7, 0), which no erosion produces; eroding again' \
+    "$T/hf.err" || fail "an entry holding a NaN was not refused: $(cat "$T/hf.err")"
+same "$T/ref.exr" "$T/c5.exr" "heights after a cache entry holding a NaN"
 
 say "a render erodes once; a networked worker receives the eroded terrain"
 "$TF_BIN" render "$SCENE" -q -j 1 --size 160x90 --listen 127.0.0.1:0 -o "$T/r/forked.exr" \

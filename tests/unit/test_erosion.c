@@ -13,6 +13,7 @@
 #include <string.h>
 #include <math.h>
 #include <cmocka.h>
+#include <sodium.h>
 #include "terrain/erosion.h"
 #include "terrain/erosion_run.h"
 #include "terrain/erosion_state.h"
@@ -400,6 +401,46 @@ static void test_block_check(void **state)
 }
 
 /* An eroded terrain's blob: accepted whole for its own scene only. */
+/* A blob's map k (0 heights, 1 water, 2 silt, 3 flow) given v at vertex (i, j), and its
+ * checksum made to match, as a coordinator that sends it could. */
+static void spoil_blob(uint8_t *b, size_t len, int n, int k, int i, int j, float v)
+{
+    const size_t header = 8 + 32 + 4 + 8 + 4;
+    memcpy(b + header + ((size_t)k * n * n + (size_t)j * n + i) * 4, &v, 4);
+    crypto_hash_sha256(b + len - 32, b, len - 32);
+}
+
+/* Values no erosion writes are refused although the checksum matches, naming the map and the
+ * vertex; the blob as it was still parses. */
+static void blob_values_checked(const tf_terrain *t, int n, const uint8_t *b, size_t len)
+{
+    static const struct { int k; float v; const char *what; } bad[] = {
+        {0, NAN, "a height of nan at vertex (3, 5)"},
+        {0, INFINITY, "a height of inf at vertex (3, 5)"},
+        {1, -0.5f, "a water depth of -0.5 at vertex (3, 5)"},
+        {2, NAN, "a silt depth of nan at vertex (3, 5)"},
+        {3, -INFINITY, "a flow of -inf at vertex (3, 5)"},
+    };
+    uint8_t *copy = malloc(len);
+    float *out = malloc((size_t)n * n * sizeof *out);
+    char err[256];
+    for (size_t c = 0; c < sizeof bad / sizeof bad[0]; c++) {
+        memcpy(copy, b, len);
+        spoil_blob(copy, len, n, bad[c].k, 3, 5, bad[c].v);
+        tf_eroded_maps maps = {0};
+        assert_int_equal(tf_eroded_parse(t, n, copy, len, "blob", out, &maps, err, sizeof err),
+                         -1);
+        if (!strstr(err, bad[c].what))
+            fail_msg("case %zu: \"%s\" does not say \"%s\"", c, err, bad[c].what);
+        assert_null(maps.water);
+    }
+    memcpy(copy, b, len);
+    spoil_blob(copy, len, n, 0, 3, 5, -3e38f); /* finite, if absurd: a height like any other */
+    assert_int_equal(tf_eroded_parse(t, n, copy, len, "blob", out, NULL, err, sizeof err), 0);
+    free(copy);
+    free(out);
+}
+
 static void test_blob_checks(void **state)
 {
     (void)state;
@@ -425,6 +466,7 @@ static void test_blob_checks(void **state)
     float *want = malloc((size_t)n * n * sizeof *want);
     tf_erosion_heights(&r.st, &r.m, want);
     assert_memory_equal(out, want, (size_t)n * n * sizeof *out);
+    blob_values_checked(&t, n, b, len);
     /* another scene's terrain: its key differs */
     tf_terrain other = t;
     other.erosion.softness = 0.31;

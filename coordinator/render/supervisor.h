@@ -13,7 +13,8 @@
  * tasks go back into the space (tasks_redealt).  A task a worker reports as failed, or loses by
  * dying, counts against that worker; after two failures there the worker is excluded from it
  * (the task tuple carries the exclusion list), and a task that fails on max_task_failures
- * distinct workers stops the render (rows already written remain valid for --resume).
+ * distinct workers, or on every worker when all are the coordinator's forked ones and each is
+ * excluded from it, stops the render (rows already written remain valid for --resume).
  * Stragglers: when no fresh task can be dealt and workers are idle, a task held for several
  * mean task times is dealt once more (a few at a time); the first result wins and later ones
  * are dropped.

@@ -28,6 +28,31 @@ static int untried_worker_left(const tf_supervisor *s, const task_slot *t)
     return 0;
 }
 
+/* Times worker `id` failed task t (as far as t remembers). */
+static int failures_of(const task_slot *t, int64_t id)
+{
+    for (int k = 0; k < t->nfailed; k++)
+        if (t->failed_worker[k] == id)
+            return t->failed_count[k];
+    return 0;
+}
+
+/* 1 if the connected workers in good standing are all ones this coordinator forked (no
+ * client's connections among them) and each is no longer dealt task t. */
+static int forked_workers_all_excluded(const tf_supervisor *s, const task_slot *t)
+{
+    int any = 0;
+    for (int i = 0; i < s->stats.nworkers; i++) {
+        const tf_worker_stats *w = &s->stats.workers[i];
+        if (!w->conn || w->excluded)
+            continue;
+        if (!w->forked_conn || failures_of(t, w->id) < FAILURES_TO_EXCLUDE)
+            return 0;
+        any = 1;
+    }
+    return any;
+}
+
 /* Record that `worker` failed task t; returns 1 if the task has now failed everywhere. */
 int sv_note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
 {
@@ -53,9 +78,13 @@ int sv_note_failure(tf_supervisor *s, task_slot *t, int64_t worker)
      * connected worker is left that has not: many connections of one client failing a task
      * (each joins as a worker of its own) cannot stop a render that real workers can finish.
      * Past MAX_FAILED_WORKERS the last entry is reused, so a huge farm failing a task for real
-     * stops at MAX_TASK_FAILURES instead of dealing it round forever. */
-    if (t->nfailed >= s->cfg.max_task_failures &&
-        (t->failures >= MAX_TASK_FAILURES || !untried_worker_left(s, t))) {
+     * stops at MAX_TASK_FAILURES instead of dealing it round forever.  Workers this coordinator
+     * forked are no client's connections: when they are all the farm has and none may be dealt
+     * the task any more, it has failed everywhere too (else two of them, each excluded, left
+     * the task to bounce between them forever, the render hung). */
+    if ((t->nfailed >= s->cfg.max_task_failures &&
+         (t->failures >= MAX_TASK_FAILURES || !untried_worker_left(s, t))) ||
+        forked_workers_all_excluded(s, t)) {
         char what[128];
         sv_fail(s, "%s failed on %d different workers; stopping (rows written so far are kept: "
                 "rerun with --resume)",

@@ -21,40 +21,12 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
-#include "coordinator/render/rowwriter.h"
-#include "coordinator/render/supervisor.h"
 #include "farmproto.h"
-#include "image/exrfile.h"
 #include "linda/tsserver.h"
 #include "linda/tuplespace.h"
-#include "scratch_dir.h"
+#include "supervisor_still.h"
 
-#define W 64
-#define H 16 /* two tasks of rows:8 */
 #define NETWORKED_CONN 9999 /* a connection id the server never handed out: not forked */
-
-static const tf_exr_layout layout = {W, H, 0, 0, 0, TF_PIXEL_HALF};
-
-/* hooks.open: the output in the scratch directory and its writer thread. */
-static tf_rowwriter *open_output(void *ctx, int job, char *err, size_t errlen)
-{
-    (void)ctx, (void)job;
-    tf_exr_meta meta = {.width = W, .height = H, .pixel = TF_PIXEL_HALF};
-    tf_exr_writer *w = tf_exr_create(scratch_path("failures.exr"), &meta, err, errlen);
-    if (!w)
-        return NULL;
-    tf_rowwriter_config cfg = {8, 1000, NULL, 1000, NULL, 1};
-    tf_rowwriter *rw = tf_rowwriter_start(w, &layout, &cfg, err, errlen);
-    if (!rw)
-        tf_exr_abandon(w);
-    return rw;
-}
-
-static int finish_output(void *ctx, int job, tf_rowwriter *w, char *err, size_t errlen)
-{
-    (void)ctx, (void)job;
-    return tf_rowwriter_finish(w, err, errlen);
-}
 
 typedef struct {
     ts_space *space;
@@ -67,21 +39,10 @@ typedef struct {
 
 static void farm_open(farm *f)
 {
-    static const tf_frame_job still = {-1, 0, 0};
-    tf_supervisor_config cfg = {
-        .width = W, .height = H, .njobs = 1, .jobs = &still,
-        .hooks = {NULL, open_output, finish_output, NULL},
-        .layout = layout, .aa_max_depth = 2,
-        .spec = {TF_TASKS_ROWS, W, 8}, .watermark = 0, .expected_workers = 2,
-        .max_task_failures = 3,
-    };
+    tf_supervisor_config cfg = still_config(2, 3);
     char err[256];
     memset(f, 0, sizeof *f);
-    f->space = ts_space_new();
-    f->sup = tf_supervisor_new(f->space, &cfg, err, sizeof err);
-    if (!f->sup)
-        print_message("tf_supervisor_new: %s\n", err);
-    assert_non_null(f->sup);
+    f->sup = still_supervisor_new(&cfg, &f->space);
     f->hooks = tf_supervisor_hooks(f->sup);
     f->srv = ts_server_new(f->space, NULL, &f->hooks, err, sizeof err);
     if (!f->srv)
@@ -92,13 +53,10 @@ static void farm_open(farm *f)
 
 static void farm_close(farm *f)
 {
-    tf_rowwriter *open[1];
-    int jobs[1];
     ts_server_free(f->srv);
     for (int i = 0; i < f->nfar; i++)
         close(f->far_end[i]);
-    for (int i = tf_supervisor_take_open_writers(f->sup, open, jobs, 1); i > 0; i--)
-        tf_rowwriter_abandon(open[i - 1]);
+    still_abandon_output(f->sup);
     tf_supervisor_free(f->sup);
     ts_space_free(f->space);
 }
@@ -144,6 +102,15 @@ static int take_and_fail(farm *f, uint64_t conn, int64_t id, int64_t worker)
     return 0;
 }
 
+/* Two forked workers joined: ids 1 (*a) and 2 (*b). */
+static void two_forked_workers(farm *f, uint64_t *a, uint64_t *b)
+{
+    *a = forked_conn(f, "local worker 0");
+    *b = forked_conn(f, "local worker 1");
+    join(f, *a, 1);
+    join(f, *b, 2);
+}
+
 /* Worker `worker` on conn fails task 0 twice: it is no longer dealt it. */
 static void fail_twice(farm *f, uint64_t conn, int64_t worker, double *now)
 {
@@ -158,9 +125,8 @@ static void test_forked_workers_all_failing_stop_the_render(void **state)
     (void)state;
     farm f;
     farm_open(&f);
-    uint64_t a = forked_conn(&f, "local worker 0"), b = forked_conn(&f, "local worker 1");
-    join(&f, a, 1);
-    join(&f, b, 2);
+    uint64_t a, b;
+    two_forked_workers(&f, &a, &b);
     double now = 1000.0;
     fail_twice(&f, a, 1, &now);
     assert_null(tf_supervisor_error(f.sup)); /* worker 2 may still be dealt it */
@@ -177,9 +143,8 @@ static void test_a_networked_worker_left_keeps_the_render_going(void **state)
     (void)state;
     farm f;
     farm_open(&f);
-    uint64_t a = forked_conn(&f, "local worker 0"), b = forked_conn(&f, "local worker 1");
-    join(&f, a, 1);
-    join(&f, b, 2);
+    uint64_t a, b;
+    two_forked_workers(&f, &a, &b);
     join(&f, NETWORKED_CONN, 3);
     double now = 1000.0;
     fail_twice(&f, a, 1, &now);

@@ -13,39 +13,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "coordinator/render/rowwriter.h"
-#include "coordinator/render/supervisor.h"
 #include "farmproto.h"
 #include "image/exrencode.h"
-#include "image/exrfile.h"
 #include "linda/tuplespace.h"
-#include "scratch_dir.h"
-
-#define W 64
-#define H 16 /* two tasks of rows:8 */
-
-static const tf_exr_layout layout = {W, H, 0, 0, 0, TF_PIXEL_HALF};
-
-/* hooks.open: the output in the scratch directory and its writer thread. */
-static tf_rowwriter *open_output(void *ctx, int job, char *err, size_t errlen)
-{
-    (void)ctx, (void)job;
-    tf_exr_meta meta = {.width = W, .height = H, .pixel = TF_PIXEL_HALF};
-    tf_exr_writer *w = tf_exr_create(scratch_path("wait.exr"), &meta, err, errlen);
-    if (!w)
-        return NULL;
-    tf_rowwriter_config cfg = {8, 1000, NULL, 1000, NULL, 1};
-    tf_rowwriter *rw = tf_rowwriter_start(w, &layout, &cfg, err, errlen);
-    if (!rw)
-        tf_exr_abandon(w);
-    return rw;
-}
-
-static int finish_output(void *ctx, int job, tf_rowwriter *w, char *err, size_t errlen)
-{
-    (void)ctx, (void)job;
-    return tf_rowwriter_finish(w, err, errlen);
-}
+#include "supervisor_still.h"
 
 typedef struct {
     ts_space *space;
@@ -55,30 +26,14 @@ typedef struct {
 
 static void farm_open(farm *f)
 {
-    static const tf_frame_job still = {-1, 0, 0};
-    tf_supervisor_config cfg = {
-        .width = W, .height = H, .njobs = 1, .jobs = &still,
-        .hooks = {NULL, open_output, finish_output, NULL},
-        .layout = layout, .aa_max_depth = 2,
-        .spec = {TF_TASKS_ROWS, W, 8}, .watermark = 0, .expected_workers = 1,
-        .max_task_failures = 64,
-    };
-    char err[256];
-    f->space = ts_space_new();
-    f->sup = tf_supervisor_new(f->space, &cfg, err, sizeof err);
-    if (!f->sup)
-        print_message("tf_supervisor_new: %s\n", err);
-    assert_non_null(f->sup);
+    tf_supervisor_config cfg = still_config(1, 64);
+    f->sup = still_supervisor_new(&cfg, &f->space);
     f->hooks = tf_supervisor_hooks(f->sup);
 }
 
-/* As an interrupted render ends: its open output closed as a partial render. */
 static void farm_close(farm *f)
 {
-    tf_rowwriter *open[1];
-    int jobs[1];
-    for (int i = tf_supervisor_take_open_writers(f->sup, open, jobs, 1); i > 0; i--)
-        tf_rowwriter_abandon(open[i - 1]);
+    still_abandon_output(f->sup);
     tf_supervisor_free(f->sup);
     ts_space_free(f->space);
 }

@@ -224,16 +224,12 @@ static int payloads_fit_render(ts_client *c, const char *path)
 static int serve_simulated(const tf_networked_opts *o, const uint8_t *key, ts_client *c,
                            const tf_scene *s, int paint)
 {
-    if (paint) {
+    if (paint)
         tf_error("%s paints (terrafarm paint): --simulate serves renders only", o->connect);
-        ts_client_close(c);
-        return 1;
-    }
-    if (o->payloads && payloads_fit_render(c, o->payloads)) {
-        ts_client_close(c);
-        return 1;
-    }
+    const int refused = paint || (o->payloads && payloads_fit_render(c, o->payloads));
     ts_client_close(c);
+    if (refused)
+        return 1;
     return run_simulated(o->connect, key, o->timeout_ms, s, o->simulate_model,
                          o->processes ? o->processes : 16, o->pixel_us, o->payloads);
 }

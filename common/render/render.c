@@ -623,9 +623,12 @@ typedef struct rect_state {
 #define TF_CORNER_RING (TF_LOWER_ROWS + 1) /* a pixel row's lower corner row and those above */
 
 /* The records of the rectangle's corner row y (0 at its top; y > 0 rows kept only while they
- * are among the TF_CORNER_RING lowest not yet left behind). */
+ * are among the TF_CORNER_RING lowest not yet left behind); NULL when its rays are not traced
+ * coherently, which keeps no records. */
 static tf_sample_record *corner_records(const rect_state *st, tf_rect rect, int y)
 {
+    if (!st->ring)
+        return NULL;
     return st->ring + (size_t)(y % TF_CORNER_RING) * ((size_t)rect.w + 1);
 }
 
@@ -737,10 +740,10 @@ void tf_render_rect(const tf_renderer *r, tf_rect rect, tf_pixel *out, tf_render
     tf_render_counts tally = {0};
     tf_tile_counts cache_before = tf_tilecache_thread_counts();
     corner_row(r, rect, rect.y + rect.h, 1, &st.how, st.below,
-               st.ring ? corner_records(&st, rect, rect.h) : NULL, &tally);
+               corner_records(&st, rect, rect.h), &tally);
     for (int row = rect.h - 1; row >= 0; row--) {
         corner_row(r, rect, rect.y + row, 0, &st.how, st.above,
-                   st.ring ? corner_records(&st, rect, row) : NULL, &tally);
+                   corner_records(&st, rect, row), &tally);
         render_pixel_row(r, rect, row, &st, out, &tally);
         rect_state_step(&st);
     }

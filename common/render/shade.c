@@ -10,6 +10,7 @@
 #include <assert.h>
 #include <math.h>
 #include <pthread.h>
+#include <stddef.h>
 #include <string.h>
 
 /* The inline kernels tf_fbm2 is made of (noise_impl.h calls itself private to noise.c and
@@ -190,8 +191,8 @@ static double height_sample(const tf_heightfield *hf, int i, int j)
 static tf_vec3 vertex_normal(const tf_heightfield *hf, int i, int j)
 {
     if ((unsigned)(i - 1) < (unsigned)(hf->n - 2) && (unsigned)(j - 1) < (unsigned)(hf->n - 2)) {
-        const size_t n = (size_t)hf->n;
-        const float *h = hf->h + (size_t)j * n + (size_t)i;
+        const ptrdiff_t n = hf->n; /* signed: h[-n] is the row below, not a wrap-around */
+        const float *h = hf->h + (ptrdiff_t)j * n + i;
         const double span = 2.0 * hf->cell;
         return tf_vertex_normal_of(h[-1], h[1], h[-n], h[n], span, span);
     }

@@ -111,55 +111,52 @@ static int grow_ring(tf_supervisor *s, int64_t need)
     return 0;
 }
 
-/* Worker w lied and some of its results are already written: take them back through the
- * resume path.  The write job's file is closed as a partial render and reopened keeping only
- * the chunks before the liar's first written task (hooks.rewind: the shorter file is made
- * beside and renamed over it, so a crash meanwhile leaves a resumable partial either way);
- * every task from there to the write front is dealt again, whoever wrote it, and the write
- * front moves back.  0 when done; -1 when it cannot be (the render stops, saying why). */
-static int rewind_liar(tf_supervisor *s, tf_worker_stats *w)
+/* The liar's first written task in the write job j (-1 when it wrote none there);
+ * *before: how many it wrote before that, in frames already finished. */
+static int64_t first_written_in_job(const tf_supervisor *s, const tf_worker_stats *w,
+                                    const job_state *j, int64_t *before)
 {
-    job_state *j = s->write_job < s->njobs ? &s->jobs[s->write_job] : NULL;
-    int64_t k0 = -1, before = 0;
+    *before = 0;
     for (int64_t id = 0; s->written_by && id < s->write_task; id++)
         if (s->written_by[id] == w->id) {
-            if (j && id >= j->first_id) {
-                k0 = id;
-                break;
-            }
-            before++;
+            if (j && id >= j->first_id)
+                return id;
+            (*before)++;
         }
-    if (before > 0 || k0 < 0 || !j || !j->writer || !s->cfg.hooks.rewind) {
-        sv_fail(s, "worker %" PRId64 " (%s) lied, and %" PRId64 " of its results are in a frame "
-             "already finished, which cannot be taken back; render that frame again with "
-             "--overwrite", w->id, w->host, w->written);
-        return -1;
-    }
-    int64_t old_write = s->write_task;
-    tf_rect r0 = sv_rect_of(s, k0);
+    return -1;
+}
+
+/* The write job's file reopened keeping only the chunks before task k0 (hooks.rewind).  0, or
+ * -1 when the render stops (said). */
+static int rewind_output(tf_supervisor *s, job_state *j, int64_t k0, const tf_worker_stats *w)
+{
     int64_t keep = 0;
     int count = 0;
     char err[1024] = "cannot rewind the output";
     if (grow_ring(s, s->next_deal - k0) ||
-        tf_layout_rect_chunks(&s->cfg.layout, r0, &keep, &count)) {
+        tf_layout_rect_chunks(&s->cfg.layout, sv_rect_of(s, k0), &keep, &count)) {
         sv_fail(s, "worker %" PRId64 " lied: cannot take back its results (out of memory)", w->id);
         return -1;
     }
-    tf_rowwriter *nw = s->cfg.hooks.rewind(s->cfg.hooks.ctx, (int)(j - s->jobs), j->writer, keep,
-                                           err, sizeof err);
-    j->writer = nw;
-    if (!nw) {
+    j->writer = s->cfg.hooks.rewind(s->cfg.hooks.ctx, (int)(j - s->jobs), j->writer, keep, err,
+                                    sizeof err);
+    if (!j->writer) {
         sv_fail(s, "%s", err);
         return -1;
     }
     tf_warn("worker %" PRId64 " lied after passing a check: taking back the %" PRId64 " tasks "
             "written since its first written result (task %" PRId64 ", row %d): the output is "
-            "rewound to %" PRId64 " chunks and they are dealt again", w->id, old_write - k0, k0,
-            r0.y, keep);
+            "rewound to %" PRId64 " chunks and they are dealt again", w->id, s->write_task - k0,
+            k0, sv_rect_of(s, k0).y, keep);
     tf_events_add(s->events, TF_EV_REDEAL, w->id, k0, "rewound the output to task %" PRId64
                   " to take back what a liar wrote", k0);
-    s->write_task = k0;
-    for (int64_t id = k0; id < old_write; id++) {
+    return 0;
+}
+
+/* Tasks [k0, end) written no more: each slot fresh and dealt again, whoever wrote it. */
+static void redeal_unwritten(tf_supervisor *s, int64_t k0, int64_t end)
+{
+    for (int64_t id = k0; id < end; id++) {
         task_slot *t = &s->ring[id % s->ring_size];
         memset(t, 0, sizeof *t);
         t->id = id;
@@ -173,13 +170,43 @@ static int rewind_liar(tf_supervisor *s, tf_worker_stats *w)
         s->stats.tasks_redealt++;
         sv_deal_copy(s, t);
     }
+}
+
+/* The job's rows on disk now end where row `row` begins (none before its first row). */
+static void unwrite_rows(tf_supervisor *s, job_state *j, int row)
+{
     int frame = (int)(j - s->jobs);
-    int rows = r0.y > j->job.first_row ? r0.y : j->job.first_row;
+    int rows = row > j->job.first_row ? row : j->job.first_row;
     if (rows < j->rows_written) {
         s->stats.rows_rendered -= j->rows_written - rows;
         s->stats.frames[frame].rows_rendered -= j->rows_written - rows;
         j->rows_written = rows;
     }
+}
+
+/* Worker w lied and some of its results are already written: take them back through the
+ * resume path.  The write job's file is closed as a partial render and reopened keeping only
+ * the chunks before the liar's first written task (hooks.rewind: the shorter file is made
+ * beside and renamed over it, so a crash meanwhile leaves a resumable partial either way);
+ * every task from there to the write front is dealt again, whoever wrote it, and the write
+ * front moves back.  0 when done; -1 when it cannot be (the render stops, saying why). */
+static int rewind_liar(tf_supervisor *s, tf_worker_stats *w)
+{
+    job_state *j = s->write_job < s->njobs ? &s->jobs[s->write_job] : NULL;
+    int64_t before;
+    int64_t k0 = first_written_in_job(s, w, j, &before);
+    if (before > 0 || k0 < 0 || !j || !j->writer || !s->cfg.hooks.rewind) {
+        sv_fail(s, "worker %" PRId64 " (%s) lied, and %" PRId64 " of its results are in a frame "
+             "already finished, which cannot be taken back; render that frame again with "
+             "--overwrite", w->id, w->host, w->written);
+        return -1;
+    }
+    if (rewind_output(s, j, k0, w))
+        return -1;
+    int64_t old_write = s->write_task;
+    s->write_task = k0;
+    redeal_unwritten(s, k0, old_write);
+    unwrite_rows(s, j, sv_rect_of(s, k0).y);
     w->written = 0;
     return 0;
 }

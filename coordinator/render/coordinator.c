@@ -521,47 +521,37 @@ static int put_scene_tuples(ts_space *space, const tf_scene *s, const char *layo
     return 0;
 }
 
-/* 3. The tuple space, the supervisor and the server (listening) -- before the output is
- *    created, so a busy port cannot cost an old image at the output path. */
-static int start_space(render *r)
+/* The supervisor's settings: the render's frames, layout and the options that steer it. */
+static void supervisor_config(render *r, tf_supervisor_config *scfg)
 {
-    char err[1024];
     const tf_render_opts *o = r->o;
-    tf_tasks_init(&r->tasks, r->scene->width, r->scene->height, r->jobs[0].first_row, r->spec);
-    tf_tasks_skip(&r->tasks, r->jobs[0].first_tiles);
-    r->space = ts_space_new();
-    r->finisher = tf_finisher_new();
-    if (!r->space || !r->finisher || put_scene_tuples(r->space, r->scene, r->layout_text))
-        return step_failed(r, 1, "out of memory");
-    int expected_workers = r->nworkers > 0 ? r->nworkers : 4;
-    tf_supervisor_config scfg;
-    memset(&scfg, 0, sizeof scfg);
-    scfg.width = r->scene->width;
-    scfg.height = r->scene->height;
-    scfg.njobs = r->njobs;
-    scfg.jobs = r->jobs;
-    scfg.hooks = (tf_frame_hooks){r, open_frame_writer, finish_frame_writer, rewind_frame_writer};
-    scfg.layout = r->layout;
-    scfg.verify_chunks = o->verify_chunks;
-    scfg.aa_max_depth = r->scene->antialias.max_depth;
-    scfg.verify_fraction = o->verify_fraction;
-    scfg.verify_seed = tf_verify_seed();
-    scfg.spec = r->spec;
-    scfg.watermark = o->watermark; /* 0: auto, following the connected workers */
-    scfg.expected_workers = expected_workers;
-    scfg.wait_workers = o->wait_workers;
-    if (o->wait_workers > 0)
-        tf_info("dealing no task until %d worker%s joined (--wait-workers)", o->wait_workers,
-                o->wait_workers == 1 ? " has" : "s have");
-    scfg.max_task_failures = o->max_task_failures;
-    scfg.affinity = o->affinity;
-    r->sup = tf_supervisor_new(r->space, &scfg, err, sizeof err);
-    if (!r->sup)
-        return step_failed(r, 2, err);
+    memset(scfg, 0, sizeof *scfg);
+    scfg->width = r->scene->width;
+    scfg->height = r->scene->height;
+    scfg->njobs = r->njobs;
+    scfg->jobs = r->jobs;
+    scfg->hooks = (tf_frame_hooks){r, open_frame_writer, finish_frame_writer, rewind_frame_writer};
+    scfg->layout = r->layout;
+    scfg->verify_chunks = o->verify_chunks;
+    scfg->aa_max_depth = r->scene->antialias.max_depth;
+    scfg->verify_fraction = o->verify_fraction;
+    scfg->verify_seed = tf_verify_seed();
+    scfg->spec = r->spec;
+    scfg->watermark = o->watermark; /* 0: auto, following the connected workers */
+    scfg->expected_workers = r->nworkers > 0 ? r->nworkers : 4;
+    scfg->wait_workers = o->wait_workers;
+    scfg->max_task_failures = o->max_task_failures;
+    scfg->affinity = o->affinity;
+}
+
+/* The server on --listen (or the default port, or any port when only local workers need it),
+ * its connections' hooks the supervisor's (watched by the dashboard's, if any). */
+static int start_server(render *r, char *err, size_t errlen)
+{
     memset(&r->cfg, 0, sizeof r->cfg);
     r->cfg.listen = r->listen;
     r->cfg.key = r->have_key ? r->key : NULL;
-    r->cfg.silence_timeout_ms = o->lease_timeout_ms;
+    r->cfg.silence_timeout_ms = r->o->lease_timeout_ms;
     tf_worker_role_init(&r->worker_role, r->sup, &r->tasks);
     r->cfg.role = &r->worker_role;
     r->cfg.max_space_bytes = MAX_SPACE_BYTES;
@@ -570,13 +560,35 @@ static int start_space(render *r)
         hooks = tf_dashboard_hooks(r->dash, hooks);
         tf_supervisor_set_events(r->sup, tf_dashboard_events(r->dash));
     }
-    r->srv = ts_server_new(r->space, &r->cfg, &hooks, err, sizeof err);
-    if (!r->srv && !o->listen && r->nworkers > 0) {
+    r->srv = ts_server_new(r->space, &r->cfg, &hooks, err, errlen);
+    if (!r->srv && !r->o->listen && r->nworkers > 0) {
         /* The default port is taken (another render?): local workers do not need it. */
         r->cfg.listen = "127.0.0.1:0";
-        r->srv = ts_server_new(r->space, &r->cfg, &hooks, err, sizeof err);
+        r->srv = ts_server_new(r->space, &r->cfg, &hooks, err, errlen);
     }
-    if (!r->srv)
+    return r->srv ? 0 : -1;
+}
+
+/* 3. The tuple space, the supervisor and the server (listening) -- before the output is
+ *    created, so a busy port cannot cost an old image at the output path. */
+static int start_space(render *r)
+{
+    char err[1024];
+    tf_tasks_init(&r->tasks, r->scene->width, r->scene->height, r->jobs[0].first_row, r->spec);
+    tf_tasks_skip(&r->tasks, r->jobs[0].first_tiles);
+    r->space = ts_space_new();
+    r->finisher = tf_finisher_new();
+    if (!r->space || !r->finisher || put_scene_tuples(r->space, r->scene, r->layout_text))
+        return step_failed(r, 1, "out of memory");
+    if (r->o->wait_workers > 0)
+        tf_info("dealing no task until %d worker%s joined (--wait-workers)", r->o->wait_workers,
+                r->o->wait_workers == 1 ? " has" : "s have");
+    tf_supervisor_config scfg;
+    supervisor_config(r, &scfg);
+    r->sup = tf_supervisor_new(r->space, &scfg, err, sizeof err);
+    if (!r->sup)
+        return step_failed(r, 2, err);
+    if (start_server(r, err, sizeof err))
         return step_failed(r, 1, err);
     tf_supervisor_attach(r->sup, r->srv);
     if (r->dash)

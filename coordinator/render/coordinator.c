@@ -859,29 +859,20 @@ static int make_movie(render *r)
     return 0;
 }
 
-/* 6. Finish: the workers, the summary, the statistics, the movie (each output was finished
- *    by the supervisor the moment its last row was queued). */
-static int finish(render *r)
+/* Networked workers given time to read the stop tuple: one that is finishing a task (a
+ * straggler's copy, a spot check) takes it when it asks for the next; at most 5 s, and only
+ * while a worker that joined is still connected. */
+static void let_workers_leave(render *r)
 {
-    char err[1024];
-    tf_supervisor_stop_workers(r->sup);
-    if (tf_finisher_wait(r->finisher, err, sizeof err)) {
-        if (discard_beside(r))
-            snprintf(err + strlen(err), sizeof err - strlen(err),
-                     "; the finished render at the output was kept as it was");
-        return step_failed(r, 1, err);
-    }
-    if (commit_beside(r, err, sizeof err))
-        return step_failed(r, 1, err);
-    tf_local_workers_drain(&r->lw, 5.0);
-    /* Let networked workers read the stop tuple: one that is finishing a task (a straggler's
-     * copy, a spot check) takes it when it asks for the next; at most 5 s, and only while a
-     * worker that joined is still connected. */
     for (int i = 0; i < 250 && ts_server_conn_count(r->srv) > 0 &&
                     (i < 10 || tf_supervisor_live_workers(r->sup) > 0);
          i++)
         ts_server_run_once(r->srv, 20);
-    double wall = tf_now_s() - r->t_start;
+}
+
+/* The summary line: what was written, how fast, how many tasks. */
+static void say_written(const render *r, double wall)
+{
     const tf_farm_stats *st = tf_supervisor_stats(r->sup);
     uint64_t rays = st->primary_rays + st->shadow_rays;
     char what[1024];
@@ -897,22 +888,45 @@ static int finish(render *r)
             wall > 0 ? rays / wall / 1e6 : 0,
             st->pixels ? st->spp_sum / (double)st->pixels : 0, (long long)st->tasks_total,
             (long long)st->tasks_redealt);
-    if (r->o->stats_path) {
-        int *skipped = calloc((size_t)r->nouts + 1, sizeof *skipped), nskipped = 0;
-        if (!skipped)
-            return step_failed(r, 1, "out of memory");
-        for (int i = 0; i < r->nouts; i++)
-            if (r->outs[i].plan.complete)
-                skipped[nskipped++] = r->outs[i].frame;
-        tf_run_info run = {wall, r->scene->width, r->scene->height, r->scene->path, r->pattern,
-                           r->tdesc, r->nworkers, r->hf_s, r->setup_cpu_s, r->supervise_cpu_s,
-                           r->layout_text,
-                           r->t_start, r->animated, skipped, nskipped};
-        int bad = tf_stats_write(r->o->stats_path, &run, st, err, sizeof err);
-        free(skipped);
-        if (bad)
-            return step_failed(r, 1, err);
+}
+
+/* --stats: the run's statistics to their file.  0, or -1 with one line in err. */
+static int write_stats(const render *r, double wall, char *err, size_t errlen)
+{
+    int *skipped = calloc((size_t)r->nouts + 1, sizeof *skipped), nskipped = 0;
+    if (!skipped)
+        return tf_seterr(err, errlen, "out of memory");
+    for (int i = 0; i < r->nouts; i++) /* frames already complete before this run */
+        if (r->outs[i].plan.complete)
+            skipped[nskipped++] = r->outs[i].frame;
+    tf_run_info run = {wall, r->scene->width, r->scene->height, r->scene->path, r->pattern,
+                       r->tdesc, r->nworkers, r->hf_s, r->setup_cpu_s, r->supervise_cpu_s,
+                       r->layout_text, r->t_start, r->animated, skipped, nskipped};
+    int bad = tf_stats_write(r->o->stats_path, &run, tf_supervisor_stats(r->sup), err, errlen);
+    free(skipped);
+    return bad;
+}
+
+/* 6. Finish: the workers, the summary, the statistics, the movie (each output was finished
+ *    by the supervisor the moment its last row was queued). */
+static int finish(render *r)
+{
+    char err[1024];
+    tf_supervisor_stop_workers(r->sup);
+    if (tf_finisher_wait(r->finisher, err, sizeof err)) {
+        if (discard_beside(r))
+            snprintf(err + strlen(err), sizeof err - strlen(err),
+                     "; the finished render at the output was kept as it was");
+        return step_failed(r, 1, err);
     }
+    if (commit_beside(r, err, sizeof err))
+        return step_failed(r, 1, err);
+    tf_local_workers_drain(&r->lw, 5.0);
+    let_workers_leave(r);
+    double wall = tf_now_s() - r->t_start;
+    say_written(r, wall);
+    if (r->o->stats_path && write_stats(r, wall, err, sizeof err))
+        return step_failed(r, 1, err);
     if (make_movie(r))
         return -1;
     r->status = 0;

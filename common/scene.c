@@ -224,6 +224,34 @@ static char *resolve_heightmap_path(const char *scene_path, const char *file_pat
     return out;
 }
 
+/* All of f, or its first max + 1 bytes when it is longer (so the caller sees it is too
+ * long): malloc'd, its length in *len.  NULL when out of memory. */
+static uint8_t *read_at_most(FILE *f, size_t max, size_t *len)
+{
+    size_t cap = max < (1 << 20) ? max + 1 : 1 << 20;
+    uint8_t *buf = malloc(cap);
+    *len = 0;
+    while (buf) {
+        if (*len == cap) {
+            if (cap > max)
+                break; /* one byte past the bound read: too long */
+            size_t grown = cap * 2 > max ? max + 1 : cap * 2;
+            uint8_t *b = realloc(buf, grown);
+            if (!b) {
+                free(buf);
+                return NULL;
+            }
+            buf = b;
+            cap = grown;
+        }
+        size_t got = fread(buf + *len, 1, cap - *len, f);
+        *len += got;
+        if (got == 0)
+            break;
+    }
+    return buf;
+}
+
 /* Read the whole height map file (at most TF_HEIGHTMAP_MAX_BYTES) and attach it. */
 static int load_heightmap(tf_scene *s, char *err, size_t errlen)
 {
@@ -232,54 +260,25 @@ static int load_heightmap(tf_scene *s, char *err, size_t errlen)
         return tf_seterr(err, errlen, "%s: out of memory", s->path);
     int rc = -1;
     uint8_t *buf = NULL;
+    size_t len = 0;
     FILE *f = fopen(path, "rb");
-    if (!f) {
+    if (!f)
         tf_seterr(err, errlen, "%s: height map %s: cannot open: %s", s->path, path,
                   strerror(errno));
-        goto out;
-    }
-    size_t cap = 1 << 20, len = 0;
-    buf = malloc(cap);
-    while (buf) {
-        if (len == cap) {
-            if (cap > TF_HEIGHTMAP_MAX_BYTES) /* read one byte past the bound: too large */
-                break;
-            size_t grown = cap * 2 > TF_HEIGHTMAP_MAX_BYTES ? TF_HEIGHTMAP_MAX_BYTES + 1 : cap * 2;
-            uint8_t *b = realloc(buf, grown);
-            if (!b) {
-                free(buf);
-                buf = NULL;
-                break;
-            }
-            buf = b;
-            cap = grown;
-        }
-        size_t got = fread(buf + len, 1, cap - len, f);
-        len += got;
-        if (got == 0)
-            break;
-    }
-    if (!buf) {
+    else if (!(buf = read_at_most(f, TF_HEIGHTMAP_MAX_BYTES, &len)))
         tf_seterr(err, errlen, "%s: height map %s: out of memory", s->path, path);
-        goto out;
-    }
-    if (ferror(f)) {
+    else if (ferror(f))
         tf_seterr(err, errlen, "%s: height map %s: cannot read: %s", s->path, path,
                   strerror(errno));
-        goto out;
-    }
-    if (len > TF_HEIGHTMAP_MAX_BYTES) {
+    else if (len > TF_HEIGHTMAP_MAX_BYTES)
         tf_seterr(err, errlen, "%s: height map %s: too large (more than %zu MiB)", s->path, path,
                   TF_HEIGHTMAP_MAX_BYTES >> 20);
-        goto out;
-    }
-    if (len == 0) {
+    else if (len == 0)
         tf_seterr(err, errlen, "%s: height map %s: empty file", s->path, path);
-        goto out;
+    else {
+        rc = tf_scene_attach_heightmap(s, buf, len, path, err, errlen);
+        buf = NULL; /* owned by the scene, or freed */
     }
-    rc = tf_scene_attach_heightmap(s, buf, len, path, err, errlen);
-    buf = NULL; /* owned by the scene, or freed */
-out:
     if (f)
         fclose(f);
     free(buf);

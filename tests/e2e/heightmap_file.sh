@@ -91,6 +91,9 @@ bad() {
 }
 bad missing "cannot open" nothere.tif
 : >"$T/maps/empty.tif"; bad empty "empty" empty.tif
+# one byte over the 512 MiB a scene's height map may have (sparse: no disk, read once)
+truncate -s $(( (512 << 20) + 1 )) "$T/maps/over.tif"; bad over_512mib "too large" over.tif
+rm -f "$T/maps/over.tif"
 echo "this is not a raster" >"$T/maps/text.tif"; bad not_a_raster "not a raster" text.tif
 # A coordinator without local workers (-j 0, a farm's render) decodes the map once before any
 # worker joins: a bad one is a bad scene, status 2, which a farm takes as final (no retries).

@@ -284,6 +284,55 @@ static int written(tf_rowwriter *rw, tf_tuple *item, int rc, int more, char *err
     return rc;
 }
 
+/* Under rw->mu: the oldest queued result moved into item, out of the ring (R2 holds for what
+ * stays queued).  1 if there was one to write (none after a failure). */
+static int take_next(tf_rowwriter *rw, tf_tuple *item)
+{
+    tf_tuple_init(item);
+    if (rw->count == 0 || rw->failed)
+        return 0;
+    tf_tuple_move(item, &rw->slot[rw->head]);
+    rw->head = (rw->head + 1) % rw->depth;
+    if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
+        pthread_cond_signal(&rw->nonfull);
+    return 1;
+}
+
+/* Under rw->mu, after a failure: drop the queue, as nothing more may be written past the gap. */
+static void drop_queue(tf_rowwriter *rw)
+{
+    while (rw->count > 0) {
+        tf_tuple_clear(&rw->slot[rw->head]);
+        rw->head = (rw->head + 1) % rw->depth;
+        rw->count--;
+    }
+    pthread_cond_signal(&rw->nonfull);
+}
+
+/* Outside the lock: write item (if have), sync the file once fsync_ms have passed since the
+ * last sync of something written (*dirty), and refresh the preview when it is due.  0, or -1
+ * with the failure in err. */
+static int write_and_sync(tf_rowwriter *rw, tf_tuple *item, int have, int more, int *dirty,
+                          double *last_sync, char *err, size_t errlen)
+{
+    int rc = 0;
+    if (have) {
+        rc = write_result(rw, item, err, errlen);
+        rc = written(rw, item, rc, more, err, errlen);
+        *dirty = 1;
+    }
+    double now = tf_now_msf();
+    if (rc == 0 && *dirty && now - *last_sync >= rw->fsync_ms) { /* held results stay alive */
+        rc = tf_exr_sync(rw->w, err, errlen);
+        *last_sync = tf_now_msf();
+        *dirty = 0;
+    }
+    if (rw->preview_dirty && rw->preview && now - rw->preview_last >= rw->preview_ms)
+        write_preview(rw, 0);
+    return rc;
+}
+
+/* The writer thread: each queued result written in order, until stopped (rowwriter.h). */
 static void *writer_main(void *arg)
 {
     tf_rowwriter *rw = arg;
@@ -297,32 +346,12 @@ static void *writer_main(void *arg)
         assert(assert_queue(rw));
         if (rw->count == 0 && rw->stop)
             break;
-        int have = rw->count > 0 && !rw->failed;
         tf_tuple item;
-        tf_tuple_init(&item);
-        if (have) { /* take it out of the ring: R2 holds for what stays queued */
-            tf_tuple_move(&item, &rw->slot[rw->head]);
-            rw->head = (rw->head + 1) % rw->depth;
-            if (rw->count-- == rw->depth) /* the producer waits only on a full queue */
-                pthread_cond_signal(&rw->nonfull);
-        }
+        int have = take_next(rw, &item);
         more = rw->count > 0; /* queued behind this one: their chunks join its write */
         pthread_mutex_unlock(&rw->mu);
 
-        int rc = 0;
-        if (have) {
-            rc = write_result(rw, &item, err, sizeof err);
-            rc = written(rw, &item, rc, more, err, sizeof err);
-            dirty = 1;
-        }
-        double now = tf_now_msf();
-        if (rc == 0 && dirty && now - last_sync >= rw->fsync_ms) { /* held results stay alive */
-            rc = tf_exr_sync(rw->w, err, sizeof err);
-            last_sync = tf_now_msf();
-            dirty = 0;
-        }
-        if (rw->preview_dirty && rw->preview && now - rw->preview_last >= rw->preview_ms)
-            write_preview(rw, 0);
+        int rc = write_and_sync(rw, &item, have, more, &dirty, &last_sync, err, sizeof err);
         int rows = tf_exr_next_row(rw->w);
 
         pthread_mutex_lock(&rw->mu);
@@ -332,15 +361,8 @@ static void *writer_main(void *arg)
         }
         if (rows > rw->rows_written)
             rw->rows_written = rows;
-        if (!have && rw->failed && rw->count > 0) {
-            /* after a failure, drop the queue: nothing more may be written past the gap */
-            while (rw->count > 0) {
-                tf_tuple_clear(&rw->slot[rw->head]);
-                rw->head = (rw->head + 1) % rw->depth;
-                rw->count--;
-            }
-            pthread_cond_signal(&rw->nonfull);
-        }
+        if (!have && rw->failed && rw->count > 0)
+            drop_queue(rw);
     }
     pthread_mutex_unlock(&rw->mu);
     return NULL;

@@ -39,6 +39,60 @@ static int copy_string_attr(tf_exr_reader *r, const char *name, char *out, size_
     return 0;
 }
 
+/* The tile size of a tiled part into l (one level, sides 1 .. TF_EXR_MAX_DIM).  0 or -1. */
+static int check_tiles(tf_exr_reader *r, tf_exr_layout *l, char *err, size_t errlen)
+{
+    uint32_t tw = 0, th = 0;
+    exr_tile_level_mode_t lm;
+    exr_tile_round_mode_t rm;
+    if (exr_get_tile_descriptor(r->ctx, 0, &tw, &th, &lm, &rm) != EXR_ERR_SUCCESS ||
+        lm != EXR_TILE_ONE_LEVEL || tw < 1 || th < 1 || tw > TF_EXR_MAX_DIM ||
+        th > TF_EXR_MAX_DIM)
+        return tf_seterr(err, errlen, "%s: not a terrafarm render (tiles)", r->path);
+    l->tile_w = (int)tw;
+    l->tile_h = (int)th;
+    return 0;
+}
+
+/* The pixel type of the channels (exrlayout.h): TF_PIXEL_HALF when R is half, else float. */
+static int pixel_type_of(const exr_attr_chlist_t *chl)
+{
+    for (int i = 0; i < chl->num_channels; i++)
+        if (!strcmp(chl->entries[i].name.str, "R") &&
+            chl->entries[i].pixel_type == EXR_PIXEL_HALF)
+            return TF_PIXEL_HALF;
+    return TF_PIXEL_FLOAT;
+}
+
+/* Every channel one of the six of pixel type `pixel`, sampled 1:1 (r->channels set to them).
+ * 0 or -1. */
+static int check_channels(tf_exr_reader *r, const exr_attr_chlist_t *chl, int pixel,
+                          char *err, size_t errlen)
+{
+    r->channels = tf_exr_render_channels(pixel, &r->nchannels);
+    for (int i = 0; i < chl->num_channels; i++) {
+        const exr_attr_chlist_entry_t *e = &chl->entries[i];
+        const tf_exr_channel *m = tf_exr_find_channel(r->channels, r->nchannels, e->name.str);
+        if (!m || e->pixel_type != m->type || e->x_sampling != 1 || e->y_sampling != 1)
+            return tf_seterr(err, errlen, "%s: not a terrafarm render (channel %s)", r->path,
+                             e->name.str);
+    }
+    return 0;
+}
+
+/* The layout found, as the reader's and its metadata's. */
+static void keep_layout(tf_exr_reader *r, const tf_exr_layout *l)
+{
+    r->layout = *l;
+    r->meta.width = l->width;
+    r->meta.height = l->height;
+    r->meta.tiled = l->tiled;
+    r->meta.tile_w = l->tile_w;
+    r->meta.tile_h = l->tile_h;
+    r->meta.pixel = l->pixel;
+    r->nchunks = tf_layout_chunk_count(l);
+}
+
 /* The part must be a single scanline ZIPS part or a one-level tiled ZIP part holding exactly
  * our six channels, of the types of one pixel type (exrpart.h). */
 static int check_layout(tf_exr_reader *r, char *err, size_t errlen)
@@ -54,56 +108,22 @@ static int check_layout(tf_exr_reader *r, char *err, size_t errlen)
         exr_get_compression(r->ctx, 0, &comp) != EXR_ERR_SUCCESS ||
         exr_get_data_window(r->ctx, 0, &dw) != EXR_ERR_SUCCESS || dw.min.x != 0 ||
         dw.min.y != 0 || exr_get_channels(r->ctx, 0, &chl) != EXR_ERR_SUCCESS ||
-        chl->num_channels != 6) {
-        tf_seterr(err, errlen, "%s: not a terrafarm render (unexpected EXR layout)", r->path);
-        return -1;
-    }
+        chl->num_channels != 6)
+        return tf_seterr(err, errlen, "%s: not a terrafarm render (unexpected EXR layout)",
+                         r->path);
     int64_t w = (int64_t)dw.max.x + 1, h = (int64_t)dw.max.y + 1;
-    if (w > TF_EXR_MAX_DIM || h > TF_EXR_MAX_DIM || !tf_exr_valid_size((int)w, (int)h)) {
-        tf_seterr(err, errlen, "%s: not a terrafarm render (size %" PRId64 "x%" PRId64 ")",
-                 r->path, w, h);
-        return -1;
-    }
+    if (w > TF_EXR_MAX_DIM || h > TF_EXR_MAX_DIM || !tf_exr_valid_size((int)w, (int)h))
+        return tf_seterr(err, errlen, "%s: not a terrafarm render (size %" PRId64 "x%" PRId64 ")",
+                         r->path, w, h);
     tf_exr_layout l = {(int)w, (int)h, storage == EXR_STORAGE_TILED, 0, 0, TF_PIXEL_FLOAT};
-    if (l.tiled) {
-        uint32_t tw = 0, th = 0;
-        exr_tile_level_mode_t lm;
-        exr_tile_round_mode_t rm;
-        if (exr_get_tile_descriptor(r->ctx, 0, &tw, &th, &lm, &rm) != EXR_ERR_SUCCESS ||
-            lm != EXR_TILE_ONE_LEVEL || tw < 1 || th < 1 || tw > TF_EXR_MAX_DIM ||
-            th > TF_EXR_MAX_DIM) {
-            tf_seterr(err, errlen, "%s: not a terrafarm render (tiles)", r->path);
-            return -1;
-        }
-        l.tile_w = (int)tw;
-        l.tile_h = (int)th;
-    }
-    for (int i = 0; i < chl->num_channels; i++)
-        if (!strcmp(chl->entries[i].name.str, "R") &&
-            chl->entries[i].pixel_type == EXR_PIXEL_HALF)
-            l.pixel = TF_PIXEL_HALF;
-    if (comp != tf_exr_layout_compression(&l)) {
-        tf_seterr(err, errlen, "%s: not a terrafarm render (compression)", r->path);
+    if (l.tiled && check_tiles(r, &l, err, errlen))
         return -1;
-    }
-    r->channels = tf_exr_render_channels(l.pixel, &r->nchannels);
-    for (int i = 0; i < chl->num_channels; i++) {
-        const exr_attr_chlist_entry_t *e = &chl->entries[i];
-        const tf_exr_channel *m = tf_exr_find_channel(r->channels, r->nchannels, e->name.str);
-        if (!m || e->pixel_type != m->type || e->x_sampling != 1 || e->y_sampling != 1) {
-            tf_seterr(err, errlen, "%s: not a terrafarm render (channel %s)", r->path,
-                     e->name.str);
-            return -1;
-        }
-    }
-    r->layout = l;
-    r->meta.width = l.width;
-    r->meta.height = l.height;
-    r->meta.tiled = l.tiled;
-    r->meta.tile_w = l.tile_w;
-    r->meta.tile_h = l.tile_h;
-    r->meta.pixel = l.pixel;
-    r->nchunks = tf_layout_chunk_count(&l);
+    l.pixel = pixel_type_of(chl);
+    if (comp != tf_exr_layout_compression(&l))
+        return tf_seterr(err, errlen, "%s: not a terrafarm render (compression)", r->path);
+    if (check_channels(r, chl, l.pixel, err, errlen))
+        return -1;
+    keep_layout(r, &l);
     return 0;
 }
 

@@ -247,59 +247,85 @@ static int contains_ci(const char *hay, const char *needle)
 #define MAX_PLATFORMS 16
 #define MAX_DEVICES 32
 
+/* The device TERRAFARM_CL_DEVICE asks for: "P:D" (platform and device indices), or a part of
+ * its name; text NULL when unset. */
+typedef struct device_wish {
+    const char *text;
+    int p, d; /* -1: by name */
+} device_wish;
+
+static device_wish wish_from_env(void)
+{
+    device_wish w = {getenv("TERRAFARM_CL_DEVICE"), -1, -1};
+    char tail;
+    if (w.text && !*w.text)
+        w.text = NULL;
+    if (w.text && sscanf(w.text, "%d:%d%c", &w.p, &w.d, &tail) != 2)
+        w.p = w.d = -1;
+    return w;
+}
+
+static int wished(const device_wish *w, cl_uint p, cl_uint d, const char *dname)
+{
+    return w->p >= 0 ? (int)p == w->p && (int)d == w->d : contains_ci(dname, w->text);
+}
+
+/* 2: a GPU with double precision, 1: another device with it, 0: none. */
+static int device_rank(cl_device_id dev)
+{
+    if (!device_has_fp64(dev))
+        return 0;
+    cl_device_type type = 0;
+    clGetDeviceInfo(dev, CL_DEVICE_TYPE, sizeof type, &type, NULL);
+    return (type & CL_DEVICE_TYPE_GPU) ? 2 : 1;
+}
+
+/* The device the user named, if it has double precision.  0, or -1 with a message. */
+static int take_wished(cl_device_id dev, const char *dname, const device_wish *w,
+                       cl_device_id *out, char *name, size_t namelen, char *err, size_t errlen)
+{
+    if (!device_has_fp64(dev))
+        return tf_seterr(err, errlen, "OpenCL device '%s' (TERRAFARM_CL_DEVICE=%s) lacks double "
+                         "precision (cl_khr_fp64)", dname, w->text);
+    *out = dev;
+    snprintf(name, namelen, "%s", dname);
+    return 0;
+}
+
+/* Platform plat's devices into devs (at most MAX_DEVICES): how many. */
+static cl_uint platform_devices(cl_platform_id plat, cl_device_id *devs)
+{
+    cl_uint nd = 0;
+    if (clGetDeviceIDs(plat, CL_DEVICE_TYPE_ALL, MAX_DEVICES, devs, &nd) != CL_SUCCESS)
+        return 0;
+    return nd > MAX_DEVICES ? MAX_DEVICES : nd;
+}
+
 /* Choose the device (see the top of the file).  0, or -1 with a message. */
 static int choose_device(cl_device_id *out, char *name, size_t namelen, char *err, size_t errlen)
 {
     cl_platform_id plats[MAX_PLATFORMS];
     cl_uint np = 0;
-    if (clGetPlatformIDs(MAX_PLATFORMS, plats, &np) != CL_SUCCESS || np == 0) {
-        tf_seterr(err, errlen, "no OpenCL platform found (install an OpenCL ICD, e.g. "
-                              "pocl-opencl-icd, or use --backend c)");
-        return -1;
-    }
+    if (clGetPlatformIDs(MAX_PLATFORMS, plats, &np) != CL_SUCCESS || np == 0)
+        return tf_seterr(err, errlen, "no OpenCL platform found (install an OpenCL ICD, e.g. "
+                                      "pocl-opencl-icd, or use --backend c)");
     if (np > MAX_PLATFORMS)
         np = MAX_PLATFORMS;
-    const char *want = getenv("TERRAFARM_CL_DEVICE");
-    int want_p = -1, want_d = -1;
-    if (want && *want) {
-        char tail;
-        if (sscanf(want, "%d:%d%c", &want_p, &want_d, &tail) != 2)
-            want_p = want_d = -1;
-    } else {
-        want = NULL;
-    }
+    const device_wish w = wish_from_env();
     cl_device_id best = NULL;
-    int best_rank = 0; /* 2: GPU with fp64, 1: other device with fp64 */
+    int best_rank = 0;
     for (cl_uint p = 0; p < np; p++) {
         cl_device_id devs[MAX_DEVICES];
-        cl_uint nd = 0;
-        if (clGetDeviceIDs(plats[p], CL_DEVICE_TYPE_ALL, MAX_DEVICES, devs, &nd) != CL_SUCCESS)
-            continue;
-        if (nd > MAX_DEVICES)
-            nd = MAX_DEVICES;
+        cl_uint nd = platform_devices(plats[p], devs);
         for (cl_uint d = 0; d < nd; d++) {
             char dname[256] = "";
             clGetDeviceInfo(devs[d], CL_DEVICE_NAME, sizeof dname - 1, dname, NULL);
-            if (want) {
-                int match = want_p >= 0 ? (int)p == want_p && (int)d == want_d
-                                        : contains_ci(dname, want);
-                if (!match)
-                    continue;
-                if (!device_has_fp64(devs[d])) {
-                    snprintf(err, errlen,
-                             "OpenCL device '%s' (TERRAFARM_CL_DEVICE=%s) lacks double "
-                             "precision (cl_khr_fp64)", dname, want);
-                    return -1;
-                }
-                *out = devs[d];
-                snprintf(name, namelen, "%s", dname);
-                return 0;
-            }
-            if (!device_has_fp64(devs[d]))
+            if (w.text) {
+                if (wished(&w, p, d, dname))
+                    return take_wished(devs[d], dname, &w, out, name, namelen, err, errlen);
                 continue;
-            cl_device_type type = 0;
-            clGetDeviceInfo(devs[d], CL_DEVICE_TYPE, sizeof type, &type, NULL);
-            int rank = (type & CL_DEVICE_TYPE_GPU) ? 2 : 1;
+            }
+            int rank = device_rank(devs[d]);
             if (rank > best_rank) {
                 best_rank = rank;
                 best = devs[d];
@@ -307,14 +333,10 @@ static int choose_device(cl_device_id *out, char *name, size_t namelen, char *er
             }
         }
     }
-    if (want) {
-        tf_seterr(err, errlen, "TERRAFARM_CL_DEVICE=%s matches no OpenCL device", want);
-        return -1;
-    }
-    if (!best) {
-        tf_seterr(err, errlen, "no OpenCL device with double precision (cl_khr_fp64)");
-        return -1;
-    }
+    if (w.text)
+        return tf_seterr(err, errlen, "TERRAFARM_CL_DEVICE=%s matches no OpenCL device", w.text);
+    if (!best)
+        return tf_seterr(err, errlen, "no OpenCL device with double precision (cl_khr_fp64)");
     *out = best;
     return 0;
 }

@@ -231,51 +231,77 @@ static int may_submit(const farm_caller *who)
            !strcmp(who->role, "paint");
 }
 
-json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status)
+/* The request checked: its settings, options, kind, height map and scene, and the options
+ * against the scene.  NULL with the scene in *out (the caller frees it) and the height map's
+ * name in *hm_name; else the refusal's document, *status set. */
+static json_t *checked_job(tf_farm *f, const farm_caller *who, json_t *req, tf_job *j,
+                           tf_scene **out, const char **hm_name, int *status)
 {
-    if (!may_submit(who))
-        return farm_error(status, 403, "a %s may not submit jobs", who->role);
     char err[1024];
-    tf_job j = {0};
     tf_render_opts ro;
     const char *text = json_string_value(json_object_get(req, "scene"));
     json_t *opts = json_object_get(req, "options");
     if (!text || strlen(text) > SCENE_TEXT_MAX)
         return farm_error(status, 400, "scene: the scene file's text (at most 1 MiB)");
-    if (read_settings(f, who, req, &j, err, sizeof err) ||
-        check_options(opts, &ro, err, sizeof err) || read_kind(req, opts, &j, err, sizeof err))
+    if (read_settings(f, who, req, j, err, sizeof err) ||
+        check_options(opts, &ro, err, sizeof err) || read_kind(req, opts, j, err, sizeof err))
         return farm_error(status, 400, "%s", err);
     size_t hm_len = 0;
-    const char *hm_name;
     int bad;
-    uint8_t *hm = decode_heightmap(json_object_get(req, "heightmap"), &hm_len, &hm_name, &bad);
+    uint8_t *hm = decode_heightmap(json_object_get(req, "heightmap"), &hm_len, hm_name, &bad);
     if (bad)
         return farm_error(status, 400, "heightmap: expected {\"name\": ..., \"base64\": ...}");
-    tf_scene *s = check_scene(text, hm, hm_len, hm_name, &j, err, sizeof err);
+    tf_scene *s = check_scene(text, hm, hm_len, *hm_name, j, err, sizeof err);
     if (!s)
         return farm_error(status, 400, "%s", err);
-    if (tf_job_is_paint(&j) && j.frames) {
+    json_t *refused = NULL;
+    if (tf_job_is_paint(j) && j->frames)
+        refused = farm_error(status, 400, "%s: an [animation] cannot be painted; paint a still",
+                             j->name);
+    else if (check_options_with(&ro, s, j, err, sizeof err))
+        refused = farm_error(status, 400, "%s", err);
+    if (refused)
         tf_scene_free(s);
-        return farm_error(status, 400, "%s: an [animation] cannot be painted; paint a still",
-                          j.name);
-    }
-    if (check_options_with(&ro, s, &j, err, sizeof err)) {
-        tf_scene_free(s);
-        return farm_error(status, 400, "%s", err);
-    }
+    else
+        *out = s;
+    return refused;
+}
+
+/* The checked job queued: stored in the database and appended to the farm's jobs.  0, or -1
+ * with one line in err. */
+static int queue_job(tf_farm *f, tf_job *j, json_t *req, const tf_scene *s, const char *hm_name,
+                     char *err, size_t errlen)
+{
+    const char *text = json_string_value(json_object_get(req, "scene"));
+    json_t *opts = json_object_get(req, "options");
     tf_job_content c = {.scene = (char *)text, .scene_len = strlen(text),
                         .heightmap = s->heightmap, .heightmap_len = s->heightmap_len,
                         .heightmap_name = (char *)(hm_name ? hm_name : "heightmap"),
                         .options = opts ? json_dumps(opts, JSON_COMPACT) : strdup("[]")};
-    snprintf(j.state, sizeof j.state, "queued");
-    snprintf(j.output, sizeof j.output, "%s", tf_job_is_paint(&j) ? "painted.exr"
-                                              : j.frames ? "frame.####.exr" : "out.exr");
+    snprintf(j->state, sizeof j->state, "queued");
+    snprintf(j->output, sizeof j->output, "%s", tf_job_is_paint(j) ? "painted.exr"
+                                               : j->frames ? "frame.####.exr" : "out.exr");
     struct timespec ts;
     clock_gettime(CLOCK_REALTIME, &ts);
-    j.created = (double)ts.tv_sec + ts.tv_nsec / 1e9;
-    int rc = tf_farm_nonce_new(j.nonce) || !c.options ||
-             tf_farmdb_insert(f->db, &j, &c, err, sizeof err) || farm_append_job(f, &j);
+    j->created = (double)ts.tv_sec + ts.tv_nsec / 1e9;
+    int rc = tf_farm_nonce_new(j->nonce) || !c.options ||
+             tf_farmdb_insert(f->db, j, &c, err, errlen) || farm_append_job(f, j);
     free(c.options);
+    return rc ? -1 : 0;
+}
+
+json_t *farm_submit(tf_farm *f, const farm_caller *who, json_t *req, int *status)
+{
+    if (!may_submit(who))
+        return farm_error(status, 403, "a %s may not submit jobs", who->role);
+    tf_job j = {0};
+    tf_scene *s = NULL;
+    const char *hm_name = NULL;
+    json_t *refused = checked_job(f, who, req, &j, &s, &hm_name, status);
+    if (refused)
+        return refused;
+    char err[1024] = "";
+    int rc = queue_job(f, &j, req, s, hm_name, err, sizeof err);
     tf_scene_free(s);
     if (rc)
         return farm_error(status, 500, "cannot queue the job: %s", err);

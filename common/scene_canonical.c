@@ -74,6 +74,27 @@ static void canonical_name(struct strbuf *b, const struct key_def *k, const void
     sb_printf(b, "%s = %s\n", k->name, (i >= 0 && i < count) ? names[i] : "?");
 }
 
+/* The [animation]'s camera keys, one a frame, each on three lines. */
+static void canonical_camera_keys(struct strbuf *b, const tf_animation *a)
+{
+    for (int j = 0; j < a->ncamera; j++) {
+        const tf_camera_key *c = &a->camera[j];
+        sb_printf(b, "camera = %d position %.17g %.17g %.17g\n", c->frame, c->position.x,
+                  c->position.y, c->position.z);
+        sb_printf(b, "    look_at %.17g %.17g %.17g\n", c->look_at.x, c->look_at.y, c->look_at.z);
+        sb_printf(b, "    up %.17g %.17g %.17g fov %.17g\n", c->up.x, c->up.y, c->up.z,
+                  c->fov_deg);
+    }
+}
+
+/* The [animation]'s sun keys, one line each. */
+static void canonical_sun_keys(struct strbuf *b, const tf_animation *a)
+{
+    for (int j = 0; j < a->nsun; j++)
+        sb_printf(b, "sun = %d azimuth %.17g elevation %.17g\n", a->sun[j].frame,
+                  a->sun[j].azimuth_deg, a->sun[j].elevation_deg);
+}
+
 static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
 {
     const struct key_def *k = &SCENE_KEYS[key];
@@ -113,20 +134,10 @@ static void canonical_key(struct strbuf *b, const tf_scene *s, int key)
             canonical_envelope(b, &s->terrain);
         break;
     case KT_CAMERA_KEY:
-        for (int j = 0; j < s->animation.ncamera; j++) {
-            const tf_camera_key *c = &s->animation.camera[j];
-            sb_printf(b, "camera = %d position %.17g %.17g %.17g\n", c->frame, c->position.x,
-                      c->position.y, c->position.z);
-            sb_printf(b, "    look_at %.17g %.17g %.17g\n", c->look_at.x, c->look_at.y,
-                      c->look_at.z);
-            sb_printf(b, "    up %.17g %.17g %.17g fov %.17g\n", c->up.x, c->up.y, c->up.z,
-                      c->fov_deg);
-        }
+        canonical_camera_keys(b, &s->animation);
         break;
     case KT_SUN_KEY:
-        for (int j = 0; j < s->animation.nsun; j++)
-            sb_printf(b, "sun = %d azimuth %.17g elevation %.17g\n", s->animation.sun[j].frame,
-                      s->animation.sun[j].azimuth_deg, s->animation.sun[j].elevation_deg);
+        canonical_sun_keys(b, &s->animation);
         break;
     case KT_PATH:
     case KT_SHA256:

@@ -398,6 +398,43 @@ static void mhd_log(void *cls, const char *fmt, va_list ap)
     tf_debug("dashboard: %s", buf);
 }
 
+/* The dashboard's three files, read from web_dir when given (else served from memory).
+ * 0, or -1 with one line. */
+static int load_files(tf_httpd *h, const char *web_dir, char *err, size_t errlen)
+{
+    h->files[0] = (web_file){"index.html", "text/html; charset=utf-8", NULL, 0};
+    h->files[1] = (web_file){"dashboard.js", "text/javascript; charset=utf-8", NULL, 0};
+    h->files[2] = (web_file){"dashboard.css", "text/css; charset=utf-8", NULL, 0};
+    for (size_t i = 0; web_dir && i < sizeof h->files / sizeof h->files[0]; i++)
+        if (load_file(web_dir, &h->files[i], err, errlen))
+            return -1;
+    return 0;
+}
+
+/* libmicrohttpd on the listening socket, a thread per connection.  Its threads inherit the
+ * signal mask set here: they never take SIGINT or SIGTERM, so an interrupt always reaches the
+ * event loop's thread (and wakes its poll). */
+static struct MHD_Daemon *start_daemon(tf_httpd *h, int listen_fd)
+{
+    sigset_t block, old;
+    sigemptyset(&block);
+    sigaddset(&block, SIGINT);
+    sigaddset(&block, SIGTERM);
+    sigaddset(&block, SIGPIPE);
+    pthread_sigmask(SIG_BLOCK, &block, &old);
+    struct MHD_Daemon *d = MHD_start_daemon(
+        MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL |
+            MHD_USE_ERROR_LOG,
+        0, NULL, NULL, handle, h, MHD_OPTION_LISTEN_SOCKET, listen_fd,
+        MHD_OPTION_CONNECTION_LIMIT, (unsigned)MAX_CONNECTIONS, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
+        (unsigned)MAX_PER_IP, MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S,
+        MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)CONNECTION_MEMORY,
+        MHD_OPTION_NOTIFY_COMPLETED, tf_web_request_done, NULL, MHD_OPTION_EXTERNAL_LOGGER, mhd_log,
+        NULL, MHD_OPTION_END);
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
+    return d;
+}
+
 tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen)
 {
     tf_httpd *h = calloc(1, sizeof *h);
@@ -416,41 +453,15 @@ tf_httpd *tf_httpd_start(const tf_httpd_config *cfg, char *err, size_t errlen)
     pthread_mutex_init(&h->png_lock, NULL);
     pthread_mutex_init(&h->streams_lock, NULL);
     pthread_cond_init(&h->streams_done, NULL);
-    h->files[0] = (web_file){"index.html", "text/html; charset=utf-8", NULL, 0};
-    h->files[1] = (web_file){"dashboard.js", "text/javascript; charset=utf-8", NULL, 0};
-    h->files[2] = (web_file){"dashboard.css", "text/css; charset=utf-8", NULL, 0};
-    if (cfg->web_dir)
-        for (size_t i = 0; i < sizeof h->files / sizeof h->files[0]; i++)
-            if (load_file(cfg->web_dir, &h->files[i], err, errlen)) {
-                close(cfg->listen_fd);
-                tf_httpd_stop(h);
-                return NULL;
-            }
-    /* The server's threads inherit this signal mask: they never take SIGINT or SIGTERM, so
-     * an interrupt always reaches the event loop's thread (and wakes its poll). */
-    sigset_t block, old;
-    sigemptyset(&block);
-    sigaddset(&block, SIGINT);
-    sigaddset(&block, SIGTERM);
-    sigaddset(&block, SIGPIPE);
-    pthread_sigmask(SIG_BLOCK, &block, &old);
-    h->mhd = MHD_start_daemon(
-        MHD_USE_THREAD_PER_CONNECTION | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL |
-            MHD_USE_ERROR_LOG,
-        0, NULL, NULL, handle, h, MHD_OPTION_LISTEN_SOCKET, cfg->listen_fd,
-        MHD_OPTION_CONNECTION_LIMIT, (unsigned)MAX_CONNECTIONS, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
-        (unsigned)MAX_PER_IP, MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)CONNECTION_TIMEOUT_S,
-        MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)CONNECTION_MEMORY,
-        MHD_OPTION_NOTIFY_COMPLETED, tf_web_request_done, NULL, MHD_OPTION_EXTERNAL_LOGGER, mhd_log,
-        NULL, MHD_OPTION_END);
-    pthread_sigmask(SIG_SETMASK, &old, NULL);
-    if (!h->mhd) {
-        close(cfg->listen_fd);
+    if (load_files(h, cfg->web_dir, err, errlen) == 0) {
+        h->mhd = start_daemon(h, cfg->listen_fd);
+        if (h->mhd)
+            return h;
         tf_seterr(err, errlen, "cannot start the dashboard's HTTP server on port %d", cfg->port);
-        tf_httpd_stop(h);
-        return NULL;
     }
-    return h;
+    close(cfg->listen_fd);
+    tf_httpd_stop(h);
+    return NULL;
 }
 
 void tf_httpd_linger(tf_httpd *h, int ms)

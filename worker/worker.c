@@ -77,145 +77,201 @@ int tf_worker_serve(ts_client *c, int64_t id, const tf_exr_layout *layout,
     return tf_worker_serve_from(c, id, layout, step, NULL);
 }
 
+/* ---- the serving loop: a task taken, rendered, encoded and returned, until the stop ---- */
+
+/* What the loop carries from one task to the next. */
+typedef struct serve_state {
+    ts_client *c;
+    int64_t id; /* this worker's */
+    const tf_worker_step *step;
+    tf_exr_encoder *enc;
+    tf_tuple tmpl;  /* any task */
+    tf_tuple next;  /* the next task, taken with the last result (ts_out_in) */
+    int have_next;
+    tf_pixel *px;   /* the task's pixels: px_cap of them */
+    size_t px_cap;
+    unsigned seed;  /* the random pauses after an excluded task */
+    int bounces;    /* excluded tasks taken in a row */
+    char err[1024];
+} serve_state;
+
+/* A task's turn ends with SERVE_GO_ON (take the next one) or with a TF_SERVE_* status. */
+#define SERVE_GO_ON (-1)
+
+static int serve_begin(serve_state *st, ts_client *c, int64_t id, const tf_exr_layout *layout,
+                       const tf_worker_step *step, tf_tuple *first)
+{
+    memset(st, 0, sizeof *st);
+    st->c = c;
+    st->id = id;
+    st->step = step;
+    if (!(st->enc = tf_exr_encoder_new(layout, st->err, sizeof st->err))) {
+        tf_error("%s", st->err);
+        return -1;
+    }
+    tf_task_template(&st->tmpl, TF_TASK_ANY);
+    tf_tuple_init(&st->next);
+    st->seed = (unsigned)getpid() ^ (unsigned)tf_now_ns() ^ (unsigned)id * 2654435761u;
+    if (first) { /* taken when joining (tf_worker_join_take) */
+        st->next = *first;
+        tf_tuple_init(first);
+        st->have_next = 1;
+    }
+    return 0;
+}
+
+static void serve_end(serve_state *st)
+{
+    tf_tuple_clear(&st->next);
+    tf_tuple_clear(&st->tmpl);
+    free(st->px);
+    tf_exr_encoder_free(st->enc);
+}
+
+/* The next task into *task: the one taken with the last result, or one waited for.  0, or -1
+ * when the coordinator is lost. */
+static int take_task(serve_state *st, tf_tuple *task)
+{
+    tf_tuple_init(task);
+    if (!st->have_next)
+        return ts_in(st->c, &st->tmpl, task) ? -1 : 0;
+    *task = st->next; /* moved */
+    tf_tuple_init(&st->next);
+    st->have_next = 0;
+    return 0;
+}
+
+/* A task this worker may not render: put it back for a worker that may, after a pause.  The
+ * pause is random: two workers each holding the other's task and pausing alike would otherwise
+ * take the same tuples back in the same order forever (a livelock seen with --verify check
+ * copies). */
+static void pass_on(serve_state *st, tf_tuple *task, int64_t task_id)
+{
+    tf_debug("task %" PRId64 " excludes this worker: put back", task_id);
+    put_back(st->c, task);
+    if (st->bounces < 4)
+        st->bounces++;
+    usleep((useconds_t)(30 + rand_r(&st->seed) % (60u << st->bounces)) * 1000u);
+}
+
+/* Task `task` answered with a failure instead of pixels: `logged` to the log (NULL: nothing),
+ * `reported` to the coordinator, which deals the task again.  SERVE_GO_ON, or
+ * TF_SERVE_UNDELIVERED when the report cannot go. */
+static int fail_task(serve_state *st, int64_t task, const char *logged, const char *reported)
+{
+    if (logged)
+        tf_warn("%s", logged);
+    return report_failure(st->c, task, st->id, reported) ? TF_SERVE_UNDELIVERED : SERVE_GO_ON;
+}
+
+/* The same for a step's failure in st->err, logged with the task's number before it. */
+static int fail_step(serve_state *st, int64_t task)
+{
+    char line[sizeof st->err + 32];
+    snprintf(line, sizeof line, "task %" PRId64 ": %s", task, st->err);
+    return fail_task(st, task, line, st->err);
+}
+
+/* Room for n pixels in st->px.  0, or -1 without memory. */
+static int ensure_pixels(serve_state *st, size_t n)
+{
+    if (n <= st->px_cap)
+        return 0;
+    tf_pixel *np = realloc(st->px, n * sizeof *np);
+    if (!np)
+        return -1;
+    st->px = np;
+    st->px_cap = n;
+    return 0;
+}
+
+/* The encoded pixels back with the request for the next task: one round trip per task. */
+static int deliver(serve_state *st, int64_t task, const tf_render_counts *counts, int64_t busy,
+                   size_t n, const tf_chunk_payload *pay)
+{
+    double spp = 0; /* integer-valued floats: exact in a double */
+    for (size_t i = 0; i < n; i++)
+        spp += st->px[i].spp;
+    tf_tuple result;
+    int rc = tf_result_pack(&result, task, st->id, counts, busy, (int64_t)spp, pay) ||
+             ts_out_in(st->c, &result, &st->tmpl, &st->next);
+    tf_tuple_clear(&result);
+    if (rc) {
+        tf_tuple_clear(&st->next);
+        return TF_SERVE_UNDELIVERED;
+    }
+    st->have_next = 1;
+    return SERVE_GO_ON;
+}
+
+/* Render, check and encode task m, and deliver it.  Whatever a task tuple says, it can only
+ * become a reported failure here, never a crash or an exit: no size, a size no image has, or a
+ * rectangle outside the image. */
+static int answer_task(serve_state *st, const tf_task_msg *m)
+{
+    const char *bad = tf_task_rect_problem(m->rect, st->step->image_w, st->step->image_h);
+    if (bad) {
+        snprintf(st->err, sizeof st->err, "task %" PRId64 " (%dx%d at %d,%d): %s", m->id,
+                 m->rect.w, m->rect.h, m->rect.x, m->rect.y, bad);
+        return fail_task(st, m->id, st->err, st->err);
+    }
+    size_t n = (size_t)m->rect.w * (size_t)m->rect.h;
+    if (ensure_pixels(st, n))
+        return fail_task(st, m->id, NULL, "out of memory");
+    tf_render_counts counts = {0};
+    int64_t busy = 0;
+    if (st->step->render(st->step->ctx, m->frame, m->rect, st->px, &counts, &busy, st->err,
+                         sizeof st->err))
+        return fail_step(st, m->id);
+    long nf = tf_first_non_finite(st->px, n);
+    if (nf >= 0) { /* never emit a NaN or an infinity: the file would carry it forever */
+        snprintf(st->err, sizeof st->err, "task %" PRId64 ": the renderer produced a "
+                 "non-finite value at pixel (%ld,%ld); not sending it", m->id,
+                 m->rect.x + nf % m->rect.w, m->rect.y + nf / m->rect.w);
+        return fail_task(st, m->id, st->err, st->err);
+    }
+    tf_chunk_payload pay;
+    if (tf_exr_encode_rect(st->enc, m->rect, st->px, &pay, st->err, sizeof st->err))
+        return fail_step(st, m->id);
+    return deliver(st, m->id, &counts, busy, n, &pay);
+}
+
+/* One turn of the loop: a task taken and answered, passed on, or the stop. */
+static int serve_one(serve_state *st)
+{
+    tf_tuple task;
+    tf_task_msg m;
+    if (take_task(st, &task))
+        return TF_SERVE_LOST;
+    if (tf_task_unpack(&task, &m)) {
+        static tf_ratelimit rl;
+        tf_warn_limited(&rl, "ignoring a malformed task tuple");
+        tf_tuple_clear(&task);
+        return SERVE_GO_ON;
+    }
+    if (m.id == TF_TASK_STOP) {
+        put_back(st->c, &task); /* so every other worker sees it too */
+        return TF_SERVE_STOPPED;
+    }
+    if (tf_task_excludes(&m, st->id)) {
+        pass_on(st, &task, m.id);
+        return SERVE_GO_ON;
+    }
+    st->bounces = 0;
+    tf_tuple_clear(&task);
+    return answer_task(st, &m);
+}
+
 int tf_worker_serve_from(ts_client *c, int64_t id, const tf_exr_layout *layout,
                          const tf_worker_step *step, tf_tuple *first)
 {
-    char err[1024];
-    tf_exr_encoder *enc = NULL;
-    if (!(enc = tf_exr_encoder_new(layout, err, sizeof err))) {
-        tf_error("%s", err);
+    serve_state st;
+    if (serve_begin(&st, c, id, layout, step, first))
         return TF_SERVE_LOST;
-    }
-    tf_tuple tmpl;
-    tf_task_template(&tmpl, TF_TASK_ANY);
-    int status = TF_SERVE_STOPPED;
-    tf_pixel *px = NULL;
-    size_t px_cap = 0;
-    unsigned seed = (unsigned)getpid() ^ (unsigned)tf_now_ns() ^ (unsigned)id * 2654435761u;
-    int bounces = 0; /* excluded tasks taken in a row */
-    /* The next task, taken with the last result (ts_out_in). */
-    tf_tuple next;
-    tf_tuple_init(&next);
-    int have_next = 0;
-    if (first) { /* taken when joining (tf_worker_join_take) */
-        next = *first;
-        tf_tuple_init(first);
-        have_next = 1;
-    }
-    for (;;) {
-        tf_tuple task;
-        tf_task_msg m;
-        tf_tuple_init(&task);
-        int rc = 0;
-        if (have_next) {
-            task = next; /* moved */
-            tf_tuple_init(&next);
-            have_next = 0;
-        } else {
-            rc = ts_in(c, &tmpl, &task);
-        }
-        if (rc) {
-            status = TF_SERVE_LOST;
-            break;
-        }
-        if (tf_task_unpack(&task, &m)) {
-            static tf_ratelimit rl;
-            tf_warn_limited(&rl, "ignoring a malformed task tuple");
-            tf_tuple_clear(&task);
-            continue;
-        }
-        if (m.id == TF_TASK_STOP) {
-            put_back(c, &task); /* so every other worker sees it too */
-            break;
-        }
-        if (tf_task_excludes(&m, id)) {
-            tf_debug("task %" PRId64 " excludes this worker: put back", m.id);
-            put_back(c, &task);
-            /* Let a worker that can render it take it.  The pause is random: two workers each
-             * holding the other's task and pausing alike would otherwise take the same tuples
-             * back in the same order forever (a livelock seen with --verify check copies). */
-            if (bounces < 4)
-                bounces++;
-            usleep((useconds_t)(30 + rand_r(&seed) % (60u << bounces)) * 1000u);
-            continue;
-        }
-        bounces = 0;
-        tf_tuple_clear(&task);
-        /* Whatever a task tuple says, it can only become a reported failure here, never a
-         * crash or an exit: no size, a size no image has, or a rectangle outside the image. */
-        const char *bad = tf_task_rect_problem(m.rect, step->image_w, step->image_h);
-        if (bad) {
-            snprintf(err, sizeof err, "task %" PRId64 " (%dx%d at %d,%d): %s", m.id, m.rect.w,
-                     m.rect.h, m.rect.x, m.rect.y, bad);
-            tf_warn("%s", err);
-            if (report_failure(c, m.id, id, err)) {
-                status = TF_SERVE_UNDELIVERED;
-                break;
-            }
-            continue;
-        }
-        size_t n = (size_t)m.rect.w * (size_t)m.rect.h;
-        if (n > px_cap) {
-            tf_pixel *np = realloc(px, n * sizeof *px);
-            if (!np) {
-                report_failure(c, m.id, id, "out of memory");
-                continue;
-            }
-            px = np;
-            px_cap = n;
-        }
-        tf_render_counts counts = {0};
-        int64_t busy = 0;
-        if (step->render(step->ctx, m.frame, m.rect, px, &counts, &busy, err, sizeof err)) {
-            tf_warn("task %" PRId64 ": %s", m.id, err);
-            if (report_failure(c, m.id, id, err)) {
-                status = TF_SERVE_UNDELIVERED;
-                break;
-            }
-            continue;
-        }
-        long nf = tf_first_non_finite(px, n);
-        if (nf >= 0) {
-            /* Never emit a NaN or an infinity: the file would carry it forever. */
-            snprintf(err, sizeof err, "task %" PRId64 ": the renderer produced a non-finite value "
-                     "at pixel (%ld,%ld); not sending it", m.id, m.rect.x + nf % m.rect.w,
-                     m.rect.y + nf / m.rect.w);
-            tf_warn("%s", err);
-            if (report_failure(c, m.id, id, err)) {
-                status = TF_SERVE_UNDELIVERED;
-                break;
-            }
-            continue;
-        }
-        tf_chunk_payload pay;
-        rc = tf_exr_encode_rect(enc, m.rect, px, &pay, err, sizeof err);
-        if (rc) {
-            tf_warn("task %" PRId64 ": %s", m.id, err);
-            if (report_failure(c, m.id, id, err)) {
-                status = TF_SERVE_UNDELIVERED;
-                break;
-            }
-            continue;
-        }
-        double spp = 0; /* integer-valued floats: exact in a double */
-        for (size_t i = 0; i < n; i++)
-            spp += px[i].spp;
-        /* The result goes with the request for the next task: one round trip per task. */
-        tf_tuple result;
-        rc = tf_result_pack(&result, m.id, id, &counts, busy, (int64_t)spp, &pay) ||
-             ts_out_in(c, &result, &tmpl, &next);
-        tf_tuple_clear(&result);
-        if (rc) {
-            tf_tuple_clear(&next);
-            status = TF_SERVE_UNDELIVERED;
-            break;
-        }
-        have_next = 1;
-    }
-    tf_tuple_clear(&next);
-    tf_tuple_clear(&tmpl);
-    free(px);
-    tf_exr_encoder_free(enc);
+    int status = SERVE_GO_ON;
+    while (status == SERVE_GO_ON)
+        status = serve_one(&st);
+    serve_end(&st);
     return status;
 }
 

@@ -172,15 +172,18 @@ static int choose_frames(render *r)
                                : tf_output_default_path(o->scene_path);
     if (!r->pattern)
         return step_failed(r, 1, "out of memory");
-    r->nouts = r->animated ? tf_frame_range_count(&range) : 1;
-    if (r->nouts > 1 && !tf_frame_pattern_has_number(r->pattern)) {
+    /* r->nouts counts entries of r->outs, which the cleanup and --on-done walk: it is set once
+     * they exist, not before a refusal */
+    int n = r->animated ? tf_frame_range_count(&range) : 1;
+    if (n > 1 && !tf_frame_pattern_has_number(r->pattern)) {
         tf_error("-o %s: a sequence of %d frames needs a run of '#' in the output name for the "
-                 "frame number (e.g. out/flyby.####.exr)", r->pattern, r->nouts);
+                 "frame number (e.g. out/flyby.####.exr)", r->pattern, n);
         return step_failed(r, 2, NULL);
     }
-    r->outs = calloc((size_t)r->nouts, sizeof *r->outs);
+    r->outs = calloc((size_t)n, sizeof *r->outs);
     if (!r->outs)
         return step_failed(r, 1, "out of memory");
+    r->nouts = n;
     for (int i = 0; i < r->nouts; i++) {
         frame_output *fo = &r->outs[i];
         fo->frame = r->animated ? range.first + i * range.step : -1;

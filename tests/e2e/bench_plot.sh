@@ -8,7 +8,7 @@ e2e_init
 say "no gnuplot on PATH: a clear one-line error, nothing rendered"
 PATH=/nonexistent "$TF_BIN" bench "$SCENE" --workers 1 --repeat 1 --size 32x18 \
     --plot "$T/p.svg" 2>"$T/e1"; rc=$?
-[ $rc -ne 0 ] && grep -q 'needs gnuplot' "$T/e1" && [ "$(wc -l <"$T/e1")" -eq 1 ] ||
+refused $rc && grep -q 'needs gnuplot' "$T/e1" && [ "$(wc -l <"$T/e1")" -eq 1 ] ||
     fail "without gnuplot: rc $rc: $(cat "$T/e1")"
 "$TF_BIN" bench "$SCENE" --plot "$T/p.pdf" 2>"$T/e2"; rc=$?
 [ $rc -eq 2 ] && grep -q 'svg or .png' "$T/e2" || fail "--plot p.pdf: rc $rc: $(cat "$T/e2")"

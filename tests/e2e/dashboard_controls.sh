@@ -107,7 +107,7 @@ same "$T/ref.exr" "$T/drop.exr" "render with dropped workers and a new watermark
 say "4. --on-done on a failed render"
 "$TF_BIN" render "$T/no-such.scene" --http none --on-done "sh -c '$ENVDUMP' '$T/fail.env'" 2>"$T/fail.err"
 rc=$?
-[ $rc -ne 0 ] || fail "a render of a missing scene exited 0"
+refused $rc || fail "a render of a missing scene exited $rc"
 grep -qx 'TERRAFARM_STATUS=failed' "$T/fail.env" || fail "--on-done after a failure: $(cat "$T/fail.env")"
 grep -qx "TERRAFARM_EXIT=$rc" "$T/fail.env" || fail "--on-done exit after a failure: $(cat "$T/fail.env")"
 grep -q '^TERRAFARM_ERROR=.*no-such.scene' "$T/fail.env" || fail "--on-done has no reason: $(cat "$T/fail.env")"

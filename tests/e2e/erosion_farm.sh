@@ -117,7 +117,7 @@ same_pixels "$T/r/forked.exr" "$T/r/net.exr" "a networked worker's render of the
 
 "$TF_BIN" render "$SCENE" -j 1 --backend opencl --size 160x90 --listen 127.0.0.1:0 \
     -o "$T/r/cl.exr" 2>"$T/cl.err"; rc=$?
-[ $rc -ne 0 ] && grep -q 'cannot shade an eroded terrain' "$T/cl.err" ||
+refused $rc && grep -q 'cannot shade an eroded terrain' "$T/cl.err" ||
     fail "--backend opencl on an eroded terrain: exit $rc, $(cat "$T/cl.err")"
 say "refused: $(cat "$T/cl.err")"
 
@@ -143,7 +143,7 @@ hf_remote "$T/lie.exr"
 python3 "$TF_ROOT/tests/tools/erosion_liar.py" 127.0.0.1 "$hport" >"$T/liar.out" 2>&1 ||
     fail "the liar was not refused: $(cat "$T/liar.out")"
 wait_exit $hfc 60
-[ $rc -ne 0 ] || fail "an erosion with a lying worker exited 0"
+refused $rc || fail "an erosion with a lying worker exited $rc"
 grep -q "erosion failed on a worker: .*edge .* of round 0: erosion block of" "$T/hfr.err" ||
     fail "the short edge was not refused: $(cat "$T/hfr.err")"
 [ -e "$T/lie.exr" ] && fail "a failed erosion wrote its output"

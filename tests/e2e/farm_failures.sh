@@ -62,7 +62,7 @@ for n in 1 2 3; do
     p=$!; e2e_track $p
 done
 wait_exit $coord 30
-[ $rc -ne 0 ] || fail "a render whose tasks fail everywhere exited 0"
+refused $rc || fail "a render whose tasks fail everywhere exited $rc"
 grep -q 'failed on 3 different workers' "$T/b.err" || fail "no clear error: $(tail -3 "$T/b.err")"
 say "$(grep 'failed on 3 different workers' "$T/b.err")"
 

@@ -28,7 +28,7 @@ grep -q 'secret required' "$T/auth.err" || fail "coordinator does not say a secr
 "$TF_BIN" worker --connect 127.0.0.1:$port --secret-file "$T/bad.key" -j 1 2>"$T/bad.err" &
 bad=$!; e2e_track $bad
 wait_exit $bad 20
-[ $rc -ne 0 ] || fail "the worker with a wrong secret exited 0"
+refused $rc || fail "the worker with a wrong secret exited $rc"
 say "wrong-secret worker exited $rc: $(tail -1 "$T/bad.err")"
 grep -qi 'authentication failed\|secret' "$T/bad.err" || fail "unclear refusal: $(cat "$T/bad.err")"
 python3 "$GARBAGE" 127.0.0.1 $port || fail "garbage before authentication was not dropped"
@@ -74,7 +74,7 @@ for k in short open; do
             "$TF_BIN" worker --connect 127.0.0.1:9 --secret-file "$T/$k.key" -j 1 2>"$T/weak.err"
         fi
         rc=$?
-        [ $rc -ne 0 ] || fail "$cmd accepted the $k secret file"
+        refused $rc || fail "$cmd accepted the $k secret file (exit $rc)"
         [ "$(wc -l <"$T/weak.err")" -eq 1 ] || fail "$cmd: refusal of the $k secret is not one line: $(cat "$T/weak.err")"
         grep -q "$T/$k.key" "$T/weak.err" || fail "$cmd: refusal does not name the file: $(cat "$T/weak.err")"
         say "$cmd, $k secret: $(cat "$T/weak.err")"

@@ -18,6 +18,9 @@ E2E_PIDS=""
 say() { echo "-- $*"; }
 fail() { echo "FAIL: $*"; exit 1; }
 skip() { echo "$*"; exit 77; }
+# refused RC: true when exit status RC is a refusal -- non-zero by the program's choice -- and
+# not a crash: a process killed by a signal exits 128+N, which `[ $rc -ne 0 ]` would accept
+refused() { [ "$1" -ge 1 ] && [ "$1" -lt 128 ]; }
 
 e2e_cleanup() {
     for p in $E2E_PIDS; do

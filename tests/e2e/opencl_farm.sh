@@ -124,7 +124,7 @@ coord=$!; e2e_track $coord
 port=$(e2e_port "$T/coord2.err") || fail "coordinator printed no port: $(cat "$T/coord2.err")"
 "$TF_BIN" worker --connect 127.0.0.1:$port -j 1 --backend opencl --cl-device no-such-gpu-xyzzy \
     2>"$T/bad.err"; rc=$?
-[ $rc -ne 0 ] || fail "a worker with --cl-device no-such-gpu-xyzzy exited 0"
+refused $rc || fail "a worker with --cl-device no-such-gpu-xyzzy exited $rc"
 grep -q 'no-such-gpu-xyzzy matches no OpenCL device' "$T/bad.err" ||
     fail "unexpected error: $(cat "$T/bad.err")"
 say "worker error: $(grep xyzzy "$T/bad.err" | head -1)"

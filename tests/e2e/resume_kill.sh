@@ -128,7 +128,7 @@ for pct in create early 0 30 copy 60 90; do
     no_leftovers $kids
     if [ -n "$netw" ]; then
         wait_exit $netw 10
-        [ $rc -ne 0 ] || fail "the networked worker exited 0 after its coordinator was killed"
+        refused $rc || fail "the networked worker exited $rc after its coordinator was killed"
         say "networked worker left with status $rc: $(tail -1 "$T/netw.err")"
     fi
     said=$(grep -c 'resuming .* rows already on disk\|nothing to resume' "$T/run$run.err")

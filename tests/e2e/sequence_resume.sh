@@ -71,7 +71,7 @@ sed 's/^camera = 30  position 400 250 230/camera = 30  position 400 250 231/' "$
 cmp -s "$FLY" "$T/changed.scene" && fail "the test scene was not changed"
 rm "$T/out/f.0009.exr"   # one frame to render, so the others are looked at
 "$TF_BIN" render "$T/changed.scene" $ARGS --resume --listen 127.0.0.1:0 -o "$T/out/f.####.exr" 2>"$T/changed.err"; rc=$?
-[ $rc -ne 0 ] || fail "a resume of a changed animation exited 0"
+refused $rc || fail "a resume of a changed animation exited $rc"
 grep -q 'cannot resume: the scene changed' "$T/changed.err" || fail "no clear refusal: $(cat "$T/changed.err")"
 [ "$(grep -c . "$T/changed.err")" -eq 1 ] || fail "more than one line: $(cat "$T/changed.err")"
 say "$(cat "$T/changed.err")"

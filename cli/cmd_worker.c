@@ -97,151 +97,196 @@ static int run_farm_worker(tf_farm_worker_opts *fo, piranha *pir)
     return rc == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
 }
 
-int cmd_worker(int argc, char **argv)
+enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE, O_PAYLOADS,
+       O_TERRAIN_CACHE, O_POOL, O_TAGS, O_NAME, O_TERRAIN_MEMORY, O_MAX_SESSIONS, O_IDLE_ONLY,
+       O_OWNER, O_IDLE_AFTER, O_CPU_THRESHOLD };
+
+static const struct option longopts[] = {
+    {"connect", required_argument, NULL, 'c'},
+    {"secret-file", required_argument, NULL, O_SECRET},
+    {"backend", required_argument, NULL, O_BACKEND},
+    {"workers", required_argument, NULL, 'j'},
+    {"timeout", required_argument, NULL, O_TIMEOUT},
+    {"simulate", required_argument, NULL, O_SIMULATE},
+    {"pixel-us", required_argument, NULL, O_PIXEL_US},
+    {"payloads", required_argument, NULL, O_PAYLOADS},
+    {"cl-device", required_argument, NULL, O_CL_DEVICE},
+    {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
+    {"pool", required_argument, NULL, O_POOL},
+    {"tags", required_argument, NULL, O_TAGS},
+    {"name", required_argument, NULL, O_NAME},
+    {"terrain-memory", required_argument, NULL, O_TERRAIN_MEMORY},
+    {"max-sessions", required_argument, NULL, O_MAX_SESSIONS},
+    {"idle-only", no_argument, NULL, O_IDLE_ONLY},
+    {"owner", required_argument, NULL, O_OWNER},
+    {"idle-after", required_argument, NULL, O_IDLE_AFTER},
+    {"cpu-threshold", required_argument, NULL, O_CPU_THRESHOLD},
+    {"quiet", no_argument, NULL, 'q'},
+    {"verbose", no_argument, NULL, 'v'},
+    {"help", no_argument, NULL, 'h'},
+    {NULL, 0, NULL, 0},
+};
+
+/* What the command line asks for. */
+typedef struct worker_args {
+    const char *connect, *secret, *backend, *model, *payloads;
+    double pixel_us;
+    size_t terrain_cache;
+    int nproc, timeout_ms;
+    tf_farm_worker_opts fo; /* --connect http://: a standing farm's options */
+    piranha pir;
+} worker_args;
+
+/* Option parsers: 0, or -1 after one line naming the flag, its value and what was expected. */
+static int int_option(const char *flag, const char *text, long lo, long hi, const char *expect,
+                      int *out)
 {
-    enum { O_SECRET = 256, O_BACKEND, O_TIMEOUT, O_SIMULATE, O_PIXEL_US, O_CL_DEVICE, O_PAYLOADS,
-           O_TERRAIN_CACHE, O_POOL, O_TAGS, O_NAME, O_TERRAIN_MEMORY, O_MAX_SESSIONS, O_IDLE_ONLY, O_OWNER, O_IDLE_AFTER,
-           O_CPU_THRESHOLD };
-    static const struct option longopts[] = {
-        {"connect", required_argument, NULL, 'c'},
-        {"secret-file", required_argument, NULL, O_SECRET},
-        {"backend", required_argument, NULL, O_BACKEND},
-        {"workers", required_argument, NULL, 'j'},
-        {"timeout", required_argument, NULL, O_TIMEOUT},
-        {"simulate", required_argument, NULL, O_SIMULATE},
-        {"pixel-us", required_argument, NULL, O_PIXEL_US},
-        {"payloads", required_argument, NULL, O_PAYLOADS},
-        {"cl-device", required_argument, NULL, O_CL_DEVICE},
-        {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
-        {"pool", required_argument, NULL, O_POOL},
-        {"tags", required_argument, NULL, O_TAGS},
-        {"name", required_argument, NULL, O_NAME},
-        {"terrain-memory", required_argument, NULL, O_TERRAIN_MEMORY},
-        {"max-sessions", required_argument, NULL, O_MAX_SESSIONS},
-        {"idle-only", no_argument, NULL, O_IDLE_ONLY},
-        {"owner", required_argument, NULL, O_OWNER},
-        {"idle-after", required_argument, NULL, O_IDLE_AFTER},
-        {"cpu-threshold", required_argument, NULL, O_CPU_THRESHOLD},
-        {"quiet", no_argument, NULL, 'q'},
-        {"verbose", no_argument, NULL, 'v'},
-        {"help", no_argument, NULL, 'h'},
-        {NULL, 0, NULL, 0},
-    };
-    const char *connect = NULL, *secret = NULL, *backend = "c", *model = NULL, *payloads = NULL;
-    double pixel_us = 50.0;
-    size_t terrain_cache = 0;
-    tf_farm_worker_opts fo = {0};
-    piranha pir = {.idle_after_ms = 60000, .cpu_threshold = 0.25};
-    int nproc = 0, timeout_ms = 10000, ch;
     char *end;
+    long v = strtol(text, &end, 10);
+    if (end == text || *end || v < lo || v > hi) {
+        tf_error("%s '%s': expected %s", flag, text, expect);
+        return -1;
+    }
+    *out = (int)v;
+    return 0;
+}
+
+static int number_option(const char *flag, const char *text, double lo, double hi,
+                         const char *expect, double *out)
+{
+    char *end;
+    double v = strtod(text, &end);
+    if (end == text || *end || !(v >= lo && v <= hi)) {
+        tf_error("%s '%s': expected %s", flag, text, expect);
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+static int duration_option(const char *flag, const char *text, int64_t lo, const char *expect,
+                           int *out_ms)
+{
+    int64_t ms;
+    if (tf_parse_duration_ms(text, &ms) || ms < lo || ms > INT32_MAX) {
+        tf_error("%s '%s': expected %s", flag, text, expect);
+        return -1;
+    }
+    *out_ms = (int)ms;
+    return 0;
+}
+
+static int backend_option(const char *text, const char **out)
+{
+    if (strcmp(text, "c") && strcmp(text, "opencl") && strcmp(text, "auto")) {
+        tf_error("--backend '%s': expected c, opencl or auto", text);
+        return -1;
+    }
+    *out = text;
+    return 0;
+}
+
+/* The options of a standing farm's worker and of a Piranha (--idle-only). */
+static int farm_option(worker_args *wa, int ch, const char *arg)
+{
+    switch (ch) {
+    case O_POOL: wa->fo.pool = arg; return 0;
+    case O_TAGS: wa->fo.tags = arg; return 0;
+    case O_NAME: wa->fo.name = arg; return 0;
+    case O_TERRAIN_MEMORY:
+        return tf_parse_byte_size("--terrain-memory", arg, &wa->fo.terrain_memory) ? -1 : 0;
+    case O_MAX_SESSIONS:
+        return int_option("--max-sessions", arg, 1, INT32_MAX, "a positive integer",
+                          &wa->fo.max_sessions);
+    case O_IDLE_ONLY: wa->pir.on = 1; return 0;
+    case O_OWNER: wa->pir.owner = arg; return 0;
+    case O_IDLE_AFTER:
+        return duration_option("--idle-after", arg, 0, "a duration (e.g. 1s, 5m)",
+                               &wa->pir.idle_after_ms);
+    case O_CPU_THRESHOLD:
+        return number_option("--cpu-threshold", arg, 0, 4096, "a number of cores >= 0",
+                             &wa->pir.cpu_threshold);
+    default:
+        return -1; /* getopt_long gives no other value */
+    }
+}
+
+/* One option with a value (or --idle-only) into wa: 0, or -1 after saying why. */
+static int worker_option(worker_args *wa, int ch, const char *arg)
+{
+    switch (ch) {
+    case 'c': wa->connect = arg; return 0;
+    case O_SECRET: wa->secret = arg; return 0;
+    case O_BACKEND: return backend_option(arg, &wa->backend);
+    case 'j': return int_option("--workers", arg, 1, 4096, "an integer from 1 to 4096", &wa->nproc);
+    case O_TIMEOUT:
+        return duration_option("--timeout", arg, 1, "a positive duration (e.g. 10s, 500ms, 2m; "
+                               "a bare number is milliseconds)", &wa->timeout_ms);
+    case O_SIMULATE: wa->model = arg; return 0;
+    case O_PAYLOADS: wa->payloads = arg; return 0;
+    case O_TERRAIN_CACHE:
+        return tf_parse_byte_size("--terrain-cache", arg, &wa->terrain_cache) ? -1 : 0;
+    case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", arg, 1); return 0;
+    case O_PIXEL_US:
+        return number_option("--pixel-us", arg, 0, 1e9, "a number of microseconds >= 0",
+                             &wa->pixel_us);
+    default: return farm_option(wa, ch, arg);
+    }
+}
+
+/* The command line into wa: -1 to go on, or the exit status (--help, or a refusal). */
+static int parse_worker_args(worker_args *wa, int argc, char **argv)
+{
+    *wa = (worker_args){.backend = "c", .pixel_us = 50.0, .timeout_ms = 10000,
+                        .pir = {.idle_after_ms = 60000, .cpu_threshold = 0.25}};
+    int ch;
     optind = 1;
     opterr = 0;
     while ((ch = getopt_long(argc, argv, ":c:j:qvh", longopts, NULL)) != -1) {
-        switch (ch) {
-        case 'c': connect = optarg; break;
-        case O_SECRET: secret = optarg; break;
-        case O_BACKEND:
-            if (strcmp(optarg, "c") && strcmp(optarg, "opencl") && strcmp(optarg, "auto")) {
-                tf_error("--backend '%s': expected c, opencl or auto", optarg);
-                return TF_EXIT_USAGE;
-            }
-            backend = optarg;
-            break;
-        case 'j':
-            nproc = (int)strtol(optarg, &end, 10);
-            if (end == optarg || *end || nproc < 1 || nproc > 4096) {
-                tf_error("--workers '%s': expected an integer from 1 to 4096", optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        case O_TIMEOUT:
-        {
-            int64_t ms;
-            if (tf_parse_duration_ms(optarg, &ms) || ms < 1 || ms > INT32_MAX) {
-                tf_error("--timeout '%s': expected a positive duration (e.g. 10s, 500ms, 2m; a "
-                         "bare number is milliseconds)", optarg);
-                return TF_EXIT_USAGE;
-            }
-            timeout_ms = (int)ms;
-            break;
-        }
-        case O_SIMULATE: model = optarg; break;
-        case O_PAYLOADS: payloads = optarg; break;
-        case O_TERRAIN_CACHE:
-            if (tf_parse_byte_size("--terrain-cache", optarg, &terrain_cache))
-                return TF_EXIT_USAGE;
-            break;
-        case O_POOL: fo.pool = optarg; break;
-        case O_TAGS: fo.tags = optarg; break;
-        case O_NAME: fo.name = optarg; break;
-        case O_TERRAIN_MEMORY:
-            if (tf_parse_byte_size("--terrain-memory", optarg, &fo.terrain_memory))
-                return TF_EXIT_USAGE;
-            break;
-        case O_MAX_SESSIONS:
-            fo.max_sessions = (int)strtol(optarg, &end, 10);
-            if (end == optarg || *end || fo.max_sessions < 1) {
-                tf_error("--max-sessions '%s': expected a positive integer", optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        case O_IDLE_ONLY: pir.on = 1; break;
-        case O_OWNER: pir.owner = optarg; break;
-        case O_IDLE_AFTER:
-        {
-            int64_t ms;
-            if (tf_parse_duration_ms(optarg, &ms) || ms < 0 || ms > INT32_MAX) {
-                tf_error("--idle-after '%s': expected a duration (e.g. 1s, 5m)", optarg);
-                return TF_EXIT_USAGE;
-            }
-            pir.idle_after_ms = (int)ms;
-            break;
-        }
-        case O_CPU_THRESHOLD:
-            pir.cpu_threshold = strtod(optarg, &end);
-            if (end == optarg || *end || !(pir.cpu_threshold >= 0 && pir.cpu_threshold <= 4096)) {
-                tf_error("--cpu-threshold '%s': expected a number of cores >= 0", optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
-        case O_PIXEL_US:
-            pixel_us = strtod(optarg, &end);
-            if (end == optarg || *end || !(pixel_us >= 0 && pixel_us <= 1e9)) {
-                tf_error("--pixel-us '%s': expected a number of microseconds >= 0", optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        case 'q': tf_log_set_level(TF_LOG_WARN); break;
-        case 'v': tf_log_set_level(TF_LOG_DEBUG); break;
-        case 'h': fputs(usage, stdout); return TF_EXIT_OK;
-        case ':':
+        if (ch == 'q' || ch == 'v') {
+            tf_log_set_level(ch == 'q' ? TF_LOG_WARN : TF_LOG_DEBUG);
+        } else if (ch == 'h') {
+            fputs(usage, stdout);
+            return TF_EXIT_OK;
+        } else if (ch == ':') {
             tf_error("worker: option '%s' needs a value", argv[optind - 1]);
             return TF_EXIT_USAGE;
-        default:
+        } else if (ch == '?') {
             tf_error("worker: unknown option '%s' (see terrafarm worker --help)", argv[optind - 1]);
+            return TF_EXIT_USAGE;
+        } else if (worker_option(wa, ch, optarg)) {
             return TF_EXIT_USAGE;
         }
     }
-    if (!connect || optind != argc) {
-        tf_error(!connect ? "worker: --connect HOST:PORT is required"
-                          : "worker: unexpected argument '%s'",
+    if (!wa->connect || optind != argc) {
+        tf_error(!wa->connect ? "worker: --connect HOST:PORT is required"
+                              : "worker: unexpected argument '%s'",
                  argv[optind]);
         return TF_EXIT_USAGE;
     }
+    return -1;
+}
+
+int cmd_worker(int argc, char **argv)
+{
+    worker_args wa;
+    int status = parse_worker_args(&wa, argc, argv);
+    if (status >= 0)
+        return status;
     signal(SIGPIPE, SIG_IGN);
-    if (!strncmp(connect, "http://", 7)) { /* a standing farm */
-        fo.farm = connect + 7;
-        fo.secret_file = secret;
-        fo.processes = nproc;
-        fo.backend = backend;
-        fo.terrain_cache = terrain_cache;
-        fo.simulate_model = model;
-        fo.pixel_us = pixel_us;
-        fo.payloads = payloads;
-        return run_farm_worker(&fo, &pir);
+    if (!strncmp(wa.connect, "http://", 7)) { /* a standing farm */
+        tf_farm_worker_opts *fo = &wa.fo;
+        fo->farm = wa.connect + 7;
+        fo->secret_file = wa.secret;
+        fo->processes = wa.nproc;
+        fo->backend = wa.backend;
+        fo->terrain_cache = wa.terrain_cache;
+        fo->simulate_model = wa.model;
+        fo->pixel_us = wa.pixel_us;
+        fo->payloads = wa.payloads;
+        return run_farm_worker(fo, &wa.pir);
     }
-    tf_networked_opts o = {connect, secret,   timeout_ms, nproc,   backend,
-                           model,   pixel_us, payloads,   terrain_cache};
+    tf_networked_opts o = {wa.connect, wa.secret,   wa.timeout_ms, wa.nproc,        wa.backend,
+                           wa.model,   wa.pixel_us, wa.payloads,   wa.terrain_cache};
     return tf_networked_worker_run(&o) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
 }

@@ -964,59 +964,71 @@ static cl_int enqueue_pixel_batch(tf_cl_backend *b, tf_rect rect, size_t first, 
     return clEnqueueNDRangeKernel(b->queue, b->k_pixels, 1, NULL, &global, &b->local, 0, NULL, ev);
 }
 
-int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
-                         char *err, size_t errlen)
+/* One rectangle's render: its sizes, and the host buffers its results are read back into. */
+typedef struct cl_task {
+    tf_rect rect;
+    size_t ncorners, npixels; /* the lattice corners (w+1 by h+1) and the pixels */
+    size_t side;              /* a pixel's sample lattice: side by side samples */
+    size_t batch;             /* pixels a launch of the pixel kernel covers */
+    cl_uint *corner_shadow, *pixel_shadow; /* shadow rays per corner and per pixel */
+    float *pix;               /* TF_CL_PIXEL_FLOATS a pixel */
+} cl_task;
+
+/* The rectangle's sizes, and the pixels a launch takes: as many as the sample caches of
+ * b->scratch hold, whole work-items of b->pix pixels, at least one work-item. */
+static void plan_task(const tf_cl_backend *b, tf_rect rect, cl_task *t)
 {
-    if (!b->renderer)
-        return tf_seterr(err, errlen, "OpenCL: no scene attached to the backend");
-    const tf_scene *s = b->renderer->scene;
-    if (rect.w <= 0 || rect.h <= 0 || rect.x < 0 || rect.y < 0 || rect.x > s->width - rect.w ||
-        rect.y > s->height - rect.h) {
-        tf_seterr(err, errlen, "rectangle %dx%d+%d+%d outside the %dx%d image", rect.w, rect.h,
-                 rect.x, rect.y, s->width, s->height);
-        return -1;
-    }
-    const size_t ncorners = (size_t)(rect.w + 1) * (size_t)(rect.h + 1);
-    const size_t npixels = (size_t)rect.w * (size_t)rect.h;
-    const size_t side = (size_t)b->lattice + 1;
-    const size_t per_pixel = side * side *
+    memset(t, 0, sizeof *t);
+    t->rect = rect;
+    t->ncorners = (size_t)(rect.w + 1) * (size_t)(rect.h + 1);
+    t->npixels = (size_t)rect.w * (size_t)rect.h;
+    t->side = (size_t)b->lattice + 1;
+    const size_t per_pixel = t->side * t->side *
                              (TF_CL_SAMPLE_FLOATS * sizeof(float) + 3 * sizeof(double) +
                               sizeof(cl_uint) + sizeof(cl_uint)); /* have, where */
     const size_t per_item = (size_t)b->pix;
-    size_t batch = b->scratch / per_pixel / per_item * per_item;
-    if (batch < per_item)
-        batch = per_item;
-    if (batch > npixels)
-        batch = npixels;
-    cl_uint *corner_shadow = malloc(ncorners * sizeof *corner_shadow);
-    cl_uint *pixel_shadow = malloc(npixels * sizeof *pixel_shadow);
-    float *pix = malloc(npixels * TF_CL_PIXEL_FLOATS * sizeof *pix);
-    int failed = !corner_shadow || !pixel_shadow || !pix ||
-                 ensure(b, &b->corners, &b->corners_cap,
-                        ncorners * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
-                 ensure(b, &b->corner_levels, &b->corner_levels_cap,
-                        ncorners * 3 * sizeof(double)) ||
-                 ensure(b, &b->corner_shadow, &b->corner_shadow_cap, ncorners * sizeof(cl_uint)) ||
-                 ensure(b, &b->corner_records, &b->corner_records_cap,
-                        ncorners * TF_CL_RECORD_DOUBLES * sizeof(double)) ||
-                 ensure(b, &b->cache, &b->cache_cap,
-                        batch * side * side * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
-                 ensure(b, &b->levels, &b->levels_cap, batch * side * side * 3 * sizeof(double)) ||
-                 ensure_have(b, batch * side * side) ||
-                 ensure(b, &b->where, &b->where_cap, batch * side * side * sizeof(cl_uint)) ||
-                 ensure(b, &b->out, &b->out_cap, npixels * TF_CL_PIXEL_FLOATS * sizeof(float)) ||
-                 ensure(b, &b->pixel_shadow, &b->pixel_shadow_cap, npixels * sizeof(cl_uint));
-    if (failed) {
-        free(corner_shadow);
-        free(pixel_shadow);
-        free(pix);
-        tf_seterr(err, errlen, "OpenCL: out of memory for a %dx%d rectangle", rect.w, rect.h);
-        return -1;
-    }
+    t->batch = b->scratch / per_pixel / per_item * per_item;
+    if (t->batch < per_item)
+        t->batch = per_item;
+    if (t->batch > t->npixels)
+        t->batch = t->npixels;
+}
 
-    cl_int rc;
+static void free_task(cl_task *t)
+{
+    free(t->corner_shadow);
+    free(t->pixel_shadow);
+    free(t->pix);
+}
+
+/* The host buffers, and device buffers large enough for t.  0, or -1 without memory. */
+static int alloc_task(tf_cl_backend *b, cl_task *t)
+{
+    const size_t nc = t->ncorners, np = t->npixels, cache = t->batch * t->side * t->side;
+    t->corner_shadow = malloc(nc * sizeof *t->corner_shadow);
+    t->pixel_shadow = malloc(np * sizeof *t->pixel_shadow);
+    t->pix = malloc(np * TF_CL_PIXEL_FLOATS * sizeof *t->pix);
+    int failed = !t->corner_shadow || !t->pixel_shadow || !t->pix ||
+                 ensure(b, &b->corners, &b->corners_cap,
+                        nc * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
+                 ensure(b, &b->corner_levels, &b->corner_levels_cap, nc * 3 * sizeof(double)) ||
+                 ensure(b, &b->corner_shadow, &b->corner_shadow_cap, nc * sizeof(cl_uint)) ||
+                 ensure(b, &b->corner_records, &b->corner_records_cap,
+                        nc * TF_CL_RECORD_DOUBLES * sizeof(double)) ||
+                 ensure(b, &b->cache, &b->cache_cap, cache * TF_CL_SAMPLE_FLOATS * sizeof(float)) ||
+                 ensure(b, &b->levels, &b->levels_cap, cache * 3 * sizeof(double)) ||
+                 ensure_have(b, cache) ||
+                 ensure(b, &b->where, &b->where_cap, cache * sizeof(cl_uint)) ||
+                 ensure(b, &b->out, &b->out_cap, np * TF_CL_PIXEL_FLOATS * sizeof(float)) ||
+                 ensure(b, &b->pixel_shadow, &b->pixel_shadow_cap, np * sizeof(cl_uint));
+    return failed ? -1 : 0;
+}
+
+/* The corner kernel over the rectangle's lattice corners, a strip of them a work-item. */
+static cl_int enqueue_corners(tf_cl_backend *b, tf_rect rect, cl_event *ev)
+{
     cl_int cw = rect.w + 1, ch = rect.h + 1;
-    rc = set_common_args(b, b->k_corners, rect);
+    cl_int rc = set_common_args(b, b->k_corners, rect);
     rc |= clSetKernelArg(b->k_corners, 9, sizeof cw, &cw);
     rc |= clSetKernelArg(b->k_corners, 10, sizeof ch, &ch);
     rc |= clSetKernelArg(b->k_corners, 11, sizeof(cl_mem), &b->corners);
@@ -1025,26 +1037,40 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
     rc |= clSetKernelArg(b->k_corners, 14, sizeof(cl_mem), &b->corner_records);
     const size_t strip = TF_CL_CORNER_STRIP((size_t)b->stream);
     size_t global = round_up(((size_t)cw + strip - 1) / strip, b->local);
-    cl_event corner_ev = NULL;
+    if (rc != CL_SUCCESS)
+        return rc;
+    return clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, &b->local, 0, NULL,
+                                  ev);
+}
+
+/* The results read back, queued behind the kernels: the one clFinish after is the only wait. */
+static cl_int enqueue_reads(tf_cl_backend *b, const cl_task *t)
+{
+    cl_int rc = clEnqueueReadBuffer(b->queue, b->out, CL_FALSE, 0,
+                                    t->npixels * TF_CL_PIXEL_FLOATS * sizeof(float), t->pix, 0,
+                                    NULL, NULL);
     if (rc == CL_SUCCESS)
-        rc = clEnqueueNDRangeKernel(b->queue, b->k_corners, 1, NULL, &global, &b->local, 0, NULL,
-                                    &corner_ev);
-    const size_t nbatches = (npixels + batch - 1) / batch;
+        rc = clEnqueueReadBuffer(b->queue, b->corner_shadow, CL_FALSE, 0,
+                                 t->ncorners * sizeof(cl_uint), t->corner_shadow, 0, NULL, NULL);
+    if (rc == CL_SUCCESS)
+        rc = clEnqueueReadBuffer(b->queue, b->pixel_shadow, CL_FALSE, 0,
+                                 t->npixels * sizeof(cl_uint), t->pixel_shadow, 0, NULL, NULL);
+    return rc;
+}
+
+/* Both kernels and the reads queued, waited for, and their device time counted. */
+static cl_int run_task(tf_cl_backend *b, cl_task *t)
+{
+    cl_event corner_ev = NULL;
+    cl_int rc = enqueue_corners(b, t->rect, &corner_ev);
+    const size_t nbatches = (t->npixels + t->batch - 1) / t->batch;
     cl_event *pixel_ev = calloc(nbatches, sizeof *pixel_ev);
     if (!pixel_ev)
         rc = CL_OUT_OF_HOST_MEMORY;
     for (size_t i = 0; rc == CL_SUCCESS && i < nbatches; i++)
-        rc = enqueue_pixel_batch(b, rect, i * batch, npixels, batch, &pixel_ev[i]);
-    /* queued behind the kernels; the one clFinish below is the only wait */
+        rc = enqueue_pixel_batch(b, t->rect, i * t->batch, t->npixels, t->batch, &pixel_ev[i]);
     if (rc == CL_SUCCESS)
-        rc = clEnqueueReadBuffer(b->queue, b->out, CL_FALSE, 0,
-                                 npixels * TF_CL_PIXEL_FLOATS * sizeof(float), pix, 0, NULL, NULL);
-    if (rc == CL_SUCCESS)
-        rc = clEnqueueReadBuffer(b->queue, b->corner_shadow, CL_FALSE, 0,
-                                 ncorners * sizeof(cl_uint), corner_shadow, 0, NULL, NULL);
-    if (rc == CL_SUCCESS)
-        rc = clEnqueueReadBuffer(b->queue, b->pixel_shadow, CL_FALSE, 0,
-                                 npixels * sizeof(cl_uint), pixel_shadow, 0, NULL, NULL);
+        rc = enqueue_reads(b, t);
     cl_int finished = clFinish(b->queue);
     if (rc == CL_SUCCESS)
         rc = finished;
@@ -1054,29 +1080,52 @@ int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_rende
         if (pixel_ev[i])
             keep_first_error(&rc, account(pixel_ev[i], &b->pixel_seconds));
     free(pixel_ev);
-    if (rc != CL_SUCCESS) {
-        free(corner_shadow);
-        free(pixel_shadow);
-        free(pix);
-        tf_seterr(err, errlen, "OpenCL: rendering %dx%d+%d+%d failed (error %d)", rect.w, rect.h,
-                 rect.x, rect.y, rc);
-        return -1;
-    }
+    return rc;
+}
+
+/* The pixels read back into out, and the rays they took into counts. */
+static void deliver_task(const cl_task *t, tf_pixel *out, tf_render_counts *counts)
+{
     uint64_t inner = 0; /* camera rays traced inside pixels, beyond the corners */
-    for (size_t k = 0; k < npixels; k++) {
-        const float *p = pix + k * TF_CL_PIXEL_FLOATS;
+    for (size_t k = 0; k < t->npixels; k++) {
+        const float *p = t->pix + k * TF_CL_PIXEL_FLOATS;
         out[k] = (tf_pixel){p[0], p[1], p[2], p[3], p[4], p[5]};
         inner += (uint64_t)p[6];
     }
-    if (counts) {
-        counts->primary_rays += ncorners + inner;
-        counts->shadow_rays += sum_u32(corner_shadow, ncorners) + sum_u32(pixel_shadow, npixels);
-        counts->external_rays += (uint64_t)rect.w + (uint64_t)rect.h + 1;
-        counts->pixels += npixels;
+    if (!counts)
+        return;
+    counts->primary_rays += t->ncorners + inner;
+    counts->shadow_rays +=
+        sum_u32(t->corner_shadow, t->ncorners) + sum_u32(t->pixel_shadow, t->npixels);
+    counts->external_rays += (uint64_t)t->rect.w + (uint64_t)t->rect.h + 1;
+    counts->pixels += t->npixels;
+}
+
+int tf_cl_backend_render(tf_cl_backend *b, tf_rect rect, tf_pixel *out, tf_render_counts *counts,
+                         char *err, size_t errlen)
+{
+    if (!b->renderer)
+        return tf_seterr(err, errlen, "OpenCL: no scene attached to the backend");
+    const tf_scene *s = b->renderer->scene;
+    if (rect.w <= 0 || rect.h <= 0 || rect.x < 0 || rect.y < 0 || rect.x > s->width - rect.w ||
+        rect.y > s->height - rect.h)
+        return tf_seterr(err, errlen, "rectangle %dx%d+%d+%d outside the %dx%d image", rect.w,
+                         rect.h, rect.x, rect.y, s->width, s->height);
+    cl_task t;
+    plan_task(b, rect, &t);
+    if (alloc_task(b, &t)) {
+        free_task(&t);
+        return tf_seterr(err, errlen, "OpenCL: out of memory for a %dx%d rectangle", rect.w,
+                         rect.h);
     }
-    free(corner_shadow);
-    free(pixel_shadow);
-    free(pix);
+    cl_int rc = run_task(b, &t);
+    if (rc != CL_SUCCESS) {
+        free_task(&t);
+        return tf_seterr(err, errlen, "OpenCL: rendering %dx%d+%d+%d failed (error %d)", rect.w,
+                         rect.h, rect.x, rect.y, rc);
+    }
+    deliver_task(&t, out, counts);
+    free_task(&t);
     return 0;
 }
 

@@ -277,6 +277,86 @@ tf_worker_stats *sv_add_worker(tf_supervisor *s, int64_t id)
 
 /* ---- public --------------------------------------------------------------------------------- */
 
+/* Job i (a frame, or the still) and its tasks, after the jobs before it.  0, or -1 with err. */
+static int start_job(tf_supervisor *s, int i, char *err, size_t errlen)
+{
+    const tf_supervisor_config *cfg = &s->cfg;
+    job_state *j = &s->jobs[i];
+    j->job = cfg->jobs[i];
+    if (j->job.first_row < 0 || j->job.first_row > cfg->height)
+        return tf_seterr(err, errlen, "internal error: frame job %d starts at row %d of %d", i,
+                         j->job.first_row, cfg->height);
+    tf_tasks_init(&j->tasks, cfg->width, cfg->height, j->job.first_row, cfg->spec);
+    tf_tasks_skip(&j->tasks, j->job.first_tiles);
+    j->first_id = s->total_tasks;
+    j->rows_written = j->job.first_row;
+    s->total_tasks += j->tasks.count;
+    s->stats.frames[i].frame = j->job.frame;
+    s->stats.frames[i].rows_resumed = j->job.first_row;
+    s->stats.rows_resumed += j->job.first_row;
+    return 0;
+}
+
+/* Every job of cfg, numbered into one run of task ids.  0, or -1 with err. */
+static int start_jobs(tf_supervisor *s, char *err, size_t errlen)
+{
+    int n = s->cfg.njobs;
+    s->njobs = n;
+    s->jobs = calloc(n > 0 ? (size_t)n : 1, sizeof *s->jobs);
+    s->stats.frames = calloc(n > 0 ? (size_t)n : 1, sizeof *s->stats.frames);
+    if (!s->jobs || !s->stats.frames)
+        return tf_seterr(err, errlen, "out of memory");
+    if (n < 1)
+        return tf_seterr(err, errlen, "internal error: nothing to render");
+    s->stats.nframes = n;
+    for (int i = 0; i < n; i++)
+        if (start_job(s, i, err, errlen))
+            return -1;
+    return 0;
+}
+
+/* The watermark (a fixed one must let the first band be written) and the ring of outstanding
+ * tasks' slots it needs.  The ring is not initialised: a slot is only read for an outstanding
+ * task (sv_slot_of checks the range first), and dealing a task fills its slot.  Sized for the
+ * largest automatic watermark, it is megabytes that are never touched on a small farm.  0, or
+ * -1 with err. */
+static int start_ring(tf_supervisor *s, char *err, size_t errlen)
+{
+    int wm = s->cfg.watermark;
+    s->band_tasks = s->jobs[0].tasks.cols;
+    s->auto_watermark = wm <= 0;
+    if (!s->auto_watermark && wm < s->band_tasks)
+        return tf_seterr(err, errlen,
+                         "--watermark %d is smaller than the %d tasks of one row band: the first "
+                         "band could never be written; use at least %d",
+                         wm, s->band_tasks, s->band_tasks);
+    int most_ahead = tf_tasks_auto_ahead(&s->jobs[0].tasks, AUTO_WM_MAX_WORKERS);
+    if (most_ahead > s->total_tasks) /* no more can be outstanding: the slots stay small */
+        most_ahead = (int)s->total_tasks;
+    s->ring_size = s->auto_watermark ? s->band_tasks + most_ahead : wm;
+    s->watermark = s->auto_watermark ? 0 : wm;
+    s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
+    return s->ring ? 0 : tf_seterr(err, errlen, "out of memory");
+}
+
+/* What watches the results: affinity, --verify's record of who wrote what, the preview grid,
+ * the pixel checker.  0, or -1 with err. */
+static int start_watch(tf_supervisor *s, char *err, size_t errlen)
+{
+    const tf_supervisor_config *cfg = &s->cfg;
+    if (sv_start_affinity(s, err, errlen))
+        return -1;
+    if (cfg->verify_fraction > 0) {
+        s->written_by = calloc((size_t)(s->total_tasks > 0 ? s->total_tasks : 1),
+                               sizeof *s->written_by);
+        if (!s->written_by)
+            return tf_seterr(err, errlen, "out of memory");
+    }
+    s->grid = tf_preview_grid_for(cfg->width, cfg->height);
+    s->checker = tf_resultcheck_new(&cfg->layout, 1, err, errlen);
+    return s->checker ? 0 : -1;
+}
+
 tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cfg, char *err,
                                  size_t errlen)
 {
@@ -287,80 +367,15 @@ tf_supervisor *tf_supervisor_new(ts_space *space, const tf_supervisor_config *cf
     }
     s->space = space;
     s->last_accepted = -1;
-    s->cfg = *cfg;
+    s->cfg = *cfg; /* its jobs are read in start_jobs, not kept (cfg->jobs is the caller's) */
     s->wait_workers = cfg->wait_workers;
     if (s->cfg.max_task_failures < 1)
         s->cfg.max_task_failures = 3;
-    s->cfg.jobs = NULL; /* copied below */
-    s->njobs = cfg->njobs;
-    s->jobs = calloc(cfg->njobs > 0 ? (size_t)cfg->njobs : 1, sizeof *s->jobs);
-    s->stats.frames = calloc(cfg->njobs > 0 ? (size_t)cfg->njobs : 1, sizeof *s->stats.frames);
-    if (!s->jobs || !s->stats.frames) {
-        tf_seterr(err, errlen, "out of memory");
+    if (start_jobs(s, err, errlen) || start_ring(s, err, errlen) || start_watch(s, err, errlen)) {
         tf_supervisor_free(s);
         return NULL;
     }
-    if (cfg->njobs < 1) {
-        tf_seterr(err, errlen, "internal error: nothing to render");
-        tf_supervisor_free(s);
-        return NULL;
-    }
-    s->stats.nframes = cfg->njobs;
-    for (int i = 0; i < cfg->njobs; i++) {
-        job_state *j = &s->jobs[i];
-        j->job = cfg->jobs[i];
-        if (j->job.first_row < 0 || j->job.first_row > cfg->height) {
-            tf_seterr(err, errlen, "internal error: frame job %d starts at row %d of %d", i,
-                      j->job.first_row, cfg->height);
-            tf_supervisor_free(s);
-            return NULL;
-        }
-        tf_tasks_init(&j->tasks, cfg->width, cfg->height, j->job.first_row, cfg->spec);
-        tf_tasks_skip(&j->tasks, j->job.first_tiles);
-        j->first_id = s->total_tasks;
-        j->rows_written = j->job.first_row;
-        s->total_tasks += j->tasks.count;
-        s->stats.frames[i].frame = j->job.frame;
-        s->stats.frames[i].rows_resumed = j->job.first_row;
-        s->stats.rows_resumed += j->job.first_row;
-    }
-    s->band_tasks = s->jobs[0].tasks.cols;
-    s->auto_watermark = cfg->watermark <= 0;
-    if (!s->auto_watermark && cfg->watermark < s->band_tasks) {
-        snprintf(err, errlen,
-                 "--watermark %d is smaller than the %d tasks of one row band: the first band "
-                 "could never be written; use at least %d",
-                 cfg->watermark, s->band_tasks, s->band_tasks);
-        tf_supervisor_free(s);
-        return NULL;
-    }
-    int most_ahead = tf_tasks_auto_ahead(&s->jobs[0].tasks, AUTO_WM_MAX_WORKERS);
-    if (most_ahead > s->total_tasks) /* no more can be outstanding: the slots stay small */
-        most_ahead = (int)s->total_tasks;
-    s->ring_size = s->auto_watermark ? s->band_tasks + most_ahead : cfg->watermark;
-    s->watermark = s->auto_watermark ? 0 : cfg->watermark;
-    s->ring = calloc((size_t)s->ring_size, sizeof *s->ring);
-    if (sv_start_affinity(s, err, errlen)) {
-        tf_supervisor_free(s);
-        return NULL;
-    }
-    if (cfg->verify_fraction > 0)
-        s->written_by = calloc((size_t)(s->total_tasks > 0 ? s->total_tasks : 1),
-                               sizeof *s->written_by);
-    s->grid = tf_preview_grid_for(cfg->width, cfg->height);
-    s->checker = tf_resultcheck_new(&cfg->layout, 1, err, errlen);
-    if (!s->checker) {
-        tf_supervisor_free(s);
-        return NULL;
-    }
-    if (!s->ring || (cfg->verify_fraction > 0 && !s->written_by)) {
-        tf_seterr(err, errlen, "out of memory");
-        tf_supervisor_free(s);
-        return NULL;
-    }
-    /* The ring is not initialised: a slot is only read for an outstanding task (sv_slot_of checks
-     * the range first), and dealing a task fills its slot.  Sized for the largest automatic
-     * watermark, it is megabytes that are never touched on a small farm. */
+    s->cfg.jobs = NULL;
     s->stats.tasks_total = s->total_tasks;
     s->stats.verify_fraction = cfg->verify_fraction;
     s->stats.watermark = s->watermark;

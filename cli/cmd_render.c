@@ -81,91 +81,104 @@ static int set_value(tf_render_opts *o, const char *flag, const char *value)
     return -1;
 }
 
-int cmd_render(int argc, char **argv)
+enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
+       O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE, O_PIXEL,
+       O_VERIFY_CHUNKS, O_VERIFY, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE,
+       O_WAIT_WORKERS, O_TERRAIN_CACHE, O_AFFINITY };
+
+static const struct option longopts[] = {
+    {"output", required_argument, NULL, 'o'},
+    {"workers", required_argument, NULL, 'j'},
+    {"wait-workers", required_argument, NULL, O_WAIT_WORKERS},
+    {"tasks", required_argument, NULL, O_TASKS},
+    {"watermark", required_argument, NULL, O_WATERMARK},
+    {"affinity", required_argument, NULL, O_AFFINITY},
+    {"size", required_argument, NULL, O_SIZE},
+    {"backend", required_argument, NULL, O_BACKEND},
+    {"listen", required_argument, NULL, O_LISTEN},
+    {"secret-file", required_argument, NULL, O_SECRET},
+    {"resume", no_argument, NULL, O_RESUME},
+    {"overwrite", no_argument, NULL, O_OVERWRITE},
+    {"stats", required_argument, NULL, O_STATS},
+    {"lease-timeout", required_argument, NULL, O_LEASE},
+    {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
+    {"cl-device", required_argument, NULL, O_CL_DEVICE},
+    {"frames", required_argument, NULL, O_FRAMES},
+    {"frame", required_argument, NULL, O_FRAME},
+    {"movie", required_argument, NULL, O_MOVIE},
+    {"pixel", required_argument, NULL, O_PIXEL},
+    {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
+    {"verify", required_argument, NULL, O_VERIFY},
+    {"preview-interval", required_argument, NULL, O_PREVIEW_INTERVAL},
+    {"http", required_argument, NULL, O_HTTP},
+    {"http-token-file", required_argument, NULL, O_HTTP_TOKEN},
+    {"on-done", required_argument, NULL, O_ON_DONE},
+    {"quiet", no_argument, NULL, 'q'},
+    {"verbose", no_argument, NULL, 'v'},
+    {"help", no_argument, NULL, 'h'},
+    {NULL, 0, NULL, 0},
+};
+
+/* An option that names a path or a switch: taken as it is. */
+static void set_plain(tf_render_opts *o, int c, const char *arg)
 {
-    enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_BACKEND, O_LISTEN, O_SECRET, O_RESUME,
-           O_OVERWRITE, O_STATS, O_LEASE, O_CL_DEVICE, O_FRAMES, O_FRAME, O_MOVIE, O_PIXEL,
-           O_VERIFY_CHUNKS, O_VERIFY, O_PREVIEW_INTERVAL, O_HTTP, O_HTTP_TOKEN, O_ON_DONE, O_WAIT_WORKERS,
-           O_TERRAIN_CACHE, O_AFFINITY };
-    static const struct option longopts[] = {
-        {"output", required_argument, NULL, 'o'},
-        {"workers", required_argument, NULL, 'j'},
-        {"wait-workers", required_argument, NULL, O_WAIT_WORKERS},
-        {"tasks", required_argument, NULL, O_TASKS},
-        {"watermark", required_argument, NULL, O_WATERMARK},
-        {"affinity", required_argument, NULL, O_AFFINITY},
-        {"size", required_argument, NULL, O_SIZE},
-        {"backend", required_argument, NULL, O_BACKEND},
-        {"listen", required_argument, NULL, O_LISTEN},
-        {"secret-file", required_argument, NULL, O_SECRET},
-        {"resume", no_argument, NULL, O_RESUME},
-        {"overwrite", no_argument, NULL, O_OVERWRITE},
-        {"stats", required_argument, NULL, O_STATS},
-        {"lease-timeout", required_argument, NULL, O_LEASE},
-        {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
-        {"cl-device", required_argument, NULL, O_CL_DEVICE},
-        {"frames", required_argument, NULL, O_FRAMES},
-        {"frame", required_argument, NULL, O_FRAME},
-        {"movie", required_argument, NULL, O_MOVIE},
-        {"pixel", required_argument, NULL, O_PIXEL},
-        {"verify-chunks", no_argument, NULL, O_VERIFY_CHUNKS},
-        {"verify", required_argument, NULL, O_VERIFY},
-        {"preview-interval", required_argument, NULL, O_PREVIEW_INTERVAL},
-        {"http", required_argument, NULL, O_HTTP},
-        {"http-token-file", required_argument, NULL, O_HTTP_TOKEN},
-        {"on-done", required_argument, NULL, O_ON_DONE},
-        {"quiet", no_argument, NULL, 'q'},
-        {"verbose", no_argument, NULL, 'v'},
-        {"help", no_argument, NULL, 'h'},
-        {NULL, 0, NULL, 0},
-    };
-    tf_render_opts o;
-    tf_render_opts_init(&o);
+    switch (c) {
+    case 'o': o->output = arg; break;
+    case O_LISTEN: o->listen = arg; break;
+    case O_SECRET: o->secret_file = arg; break;
+    case O_RESUME: o->resume = 1; break;
+    case O_OVERWRITE: o->overwrite = 1; break;
+    case O_STATS: o->stats_path = arg; break;
+    case O_HTTP: o->http = arg; break;
+    case O_HTTP_TOKEN: o->http_token_file = arg; break;
+    case O_ON_DONE: o->on_done = arg; break;
+    case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", arg, 1); break;
+    case O_MOVIE: o->movie = arg; break;
+    case O_VERIFY_CHUNKS: o->verify_chunks = 1; break;
+    case 'q': o->quiet = 1; break;
+    case 'v': o->verbose = 1; break;
+    }
+}
+
+/* One option (longopts[longindex] for a long one) into o: 0, or -1 once refused. */
+static int render_option(tf_render_opts *o, int c, int longindex, const char *arg)
+{
+    char flag[40];
+    switch (c) {
+    case 'j':
+        return set_value(o, "--workers", arg);
+    case O_WAIT_WORKERS: case O_TASKS: case O_WATERMARK: case O_AFFINITY: case O_SIZE:
+    case O_BACKEND: case O_FRAMES: case O_FRAME: case O_PIXEL: case O_VERIFY:
+    case O_PREVIEW_INTERVAL: case O_LEASE:
+        snprintf(flag, sizeof flag, "--%s", longopts[longindex].name);
+        return set_value(o, flag, arg);
+    case O_TERRAIN_CACHE:
+        return tf_parse_byte_size("--terrain-cache", arg, &o->terrain_cache) ? -1 : 0;
+    default:
+        set_plain(o, c, arg);
+        return 0;
+    }
+}
+
+/* The command line into o: -1 to render, or the exit status (--help, or a refusal). */
+static int parse_render_args(tf_render_opts *o, int argc, char **argv)
+{
     int c, longindex = 0;
     optind = 1;
     opterr = 0;
     while ((c = getopt_long(argc, argv, ":o:j:qvh", longopts, &longindex)) != -1) {
-        switch (c) {
-        case 'j':
-            if (set_value(&o, "--workers", optarg))
-                return TF_EXIT_USAGE;
-            break;
-        case O_WAIT_WORKERS: case O_TASKS: case O_WATERMARK: case O_AFFINITY: case O_SIZE:
-        case O_BACKEND: case O_FRAMES: case O_FRAME: case O_PIXEL: case O_VERIFY:
-        case O_PREVIEW_INTERVAL: case O_LEASE: {
-            char flag[40];
-            snprintf(flag, sizeof flag, "--%s", longopts[longindex].name);
-            if (set_value(&o, flag, optarg))
-                return TF_EXIT_USAGE;
-            break;
+        if (c == 'h') {
+            fputs(usage, stdout);
+            return TF_EXIT_OK;
         }
-        case 'o': o.output = optarg; break;
-        case O_LISTEN: o.listen = optarg; break;
-        case O_SECRET: o.secret_file = optarg; break;
-        case O_RESUME: o.resume = 1; break;
-        case O_OVERWRITE: o.overwrite = 1; break;
-        case O_STATS: o.stats_path = optarg; break;
-        case O_HTTP: o.http = optarg; break;
-        case O_HTTP_TOKEN: o.http_token_file = optarg; break;
-        case O_ON_DONE: o.on_done = optarg; break;
-        case O_CL_DEVICE: setenv("TERRAFARM_CL_DEVICE", optarg, 1); break;
-        case O_MOVIE: o.movie = optarg; break;
-        case O_VERIFY_CHUNKS: o.verify_chunks = 1; break;
-        case O_TERRAIN_CACHE:
-            if (tf_parse_byte_size("--terrain-cache", optarg, &o.terrain_cache))
-                return TF_EXIT_USAGE;
-            break;
-        case 'q': o.quiet = 1; break;
-        case 'v': o.verbose = 1; break;
-        case 'h': fputs(usage, stdout); return TF_EXIT_OK;
-        case ':':
-            tf_error("render: option '%s' needs a value (see terrafarm render --help)",
+        if (c == ':' || c == '?') {
+            tf_error(c == ':' ? "render: option '%s' needs a value (see terrafarm render --help)"
+                              : "render: unknown option '%s' (see terrafarm render --help)",
                      argv[optind - 1]);
             return TF_EXIT_USAGE;
-        default:
-            tf_error("render: unknown option '%s' (see terrafarm render --help)", argv[optind - 1]);
-            return TF_EXIT_USAGE;
         }
+        if (render_option(o, c, longindex, optarg))
+            return TF_EXIT_USAGE;
     }
     if (optind != argc - 1) {
         tf_error(optind >= argc ? "render: missing SCENE (see terrafarm render --help)"
@@ -173,11 +186,21 @@ int cmd_render(int argc, char **argv)
                                   "terrafarm render --help)");
         return TF_EXIT_USAGE;
     }
-    if (o.resume && o.overwrite) {
+    if (o->resume && o->overwrite) {
         tf_error("render: --resume and --overwrite contradict each other");
         return TF_EXIT_USAGE;
     }
-    o.scene_path = argv[optind];
+    o->scene_path = argv[optind];
+    return -1;
+}
+
+int cmd_render(int argc, char **argv)
+{
+    tf_render_opts o;
+    tf_render_opts_init(&o);
+    int status = parse_render_args(&o, argc, argv);
+    if (status >= 0)
+        return status;
     if (o.quiet)
         tf_log_set_level(TF_LOG_WARN);
     if (o.verbose)

@@ -93,23 +93,100 @@ int tf_output_existing_layout(const char *output, tf_exr_layout *l)
     return 1;
 }
 
+/* What is at an output path already: a terrafarm render's metadata and layout, the chunks on
+ * disk and the rows they make, and whether it is complete. */
+typedef struct found_output {
+    tf_exr_meta have;
+    tf_exr_layout layout;
+    int64_t chunks;
+    int rows, complete;
+} found_output;
+
+/* 1: nothing there; 0: a terrafarm render, in *f; -1: something else (why in err). */
+static int probe_output(const char *output, found_output *f, char *err, size_t errlen)
+{
+    memset(f, 0, sizeof *f);
+    int r = tf_exr_probe_chunks(output, &f->have, &f->chunks, &f->complete, err, errlen);
+    f->layout = tf_exr_meta_layout(&f->have);
+    if (r == 0)
+        f->rows = tf_layout_rows_in_chunks(&f->layout, f->chunks);
+    return r;
+}
+
+/* A render from the start over what f found (no --resume, or --overwrite): beside a finished
+ * render, which is never lost; over a partial one with --overwrite or with no rows; else a
+ * refusal naming --resume and --overwrite.  0, or -1 once refused. */
+static int plan_fresh(const char *output, const found_output *f, int resume, int overwrite,
+                      tf_output_plan *plan)
+{
+    if (f->complete && !resume) {
+        plan->beside = 1;
+        snprintf(plan->working, sizeof plan->working, "%s.rendering.tmp", output);
+        tf_info("%s: a finished render is there; it is replaced only once the new one is "
+                "complete", output);
+        return 0;
+    }
+    if (overwrite) {
+        if (!f->complete)
+            tf_info("%s: discarding a partial render of %d/%d rows (--overwrite)", output,
+                    f->rows, f->have.height);
+        return 0;
+    }
+    if (!f->complete && f->chunks == 0) {
+        tf_info("%s: a partial render with no rows is there; it will be replaced", output);
+        return 0;
+    }
+    tf_error("%s holds a partial render (%d of %d rows on disk): use --resume to continue it "
+             "or --overwrite to start again",
+             output, f->rows, f->have.height);
+    return -1;
+}
+
+/* --resume: the same image size, scene, settings and layout as the file f found, or one line
+ * saying which changed (1). */
+static int resume_refused(const char *output, const found_output *f, const tf_exr_meta *want)
+{
+    const tf_exr_meta *have = &f->have;
+    if (have->width != want->width || have->height != want->height) {
+        tf_error("%s: cannot resume: image size changed (%dx%d on disk, %dx%d now)", output,
+                 have->width, have->height, want->width, want->height);
+        return 1;
+    }
+    if (strcmp(have->scene_hash, want->scene_hash)) {
+        tf_error("%s: cannot resume: the scene changed since the partial render (hash %.12s on "
+                 "disk, %.12s now)",
+                 output, have->scene_hash, want->scene_hash);
+        return 1;
+    }
+    if (strcmp(have->settings, want->settings)) {
+        tf_error("%s: cannot resume: render settings changed ('%s' on disk, '%s' now)", output,
+                 have->settings, want->settings);
+        return 1;
+    }
+    if (have->tiled == want->tiled && have->pixel == want->pixel &&
+        (!have->tiled || (have->tile_w == want->tile_w && have->tile_h == want->tile_h)))
+        return 0;
+    char a[64], b[64];
+    tf_exr_layout want_layout = tf_exr_meta_layout(want);
+    tf_exr_layout_format(&f->layout, a, sizeof a);
+    tf_exr_layout_format(&want_layout, b, sizeof b);
+    tf_error("%s: cannot resume: the file is '%s', this render would write '%s' (resume with the "
+             "same --tasks and --pixel, or without --tasks)",
+             output, a, b);
+    return 1;
+}
+
 int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, int overwrite,
                        tf_output_plan *plan)
 {
-    int *resume_rows = &plan->resume_rows, *already_complete = &plan->complete;
-    tf_exr_meta have;
-    int rows = 0, complete = 0;
-    int64_t chunks = 0;
-    char err[1024];
-    *resume_rows = -1;
+    plan->resume_rows = -1;
     plan->resume_tiles = 0;
-    *already_complete = 0;
+    plan->complete = 0;
     plan->beside = 0;
     snprintf(plan->working, sizeof plan->working, "%s", output);
-    int r = tf_exr_probe_chunks(output, &have, &chunks, &complete, err, sizeof err);
-    tf_exr_layout have_layout = tf_exr_meta_layout(&have);
-    if (r == 0)
-        rows = tf_layout_rows_in_chunks(&have_layout, chunks);
+    found_output f;
+    char err[1024];
+    int r = probe_output(output, &f, err, sizeof err);
     if (r == 1) {
         if (resume)
             tf_info("%s: nothing to resume, starting a fresh render", output);
@@ -123,64 +200,16 @@ int tf_output_plan_for(const char *output, const tf_exr_meta *want, int resume, 
                  output, err);
         return -1;
     }
-    if (complete && !resume) {
-        /* Never lose a finished render: the new one is made beside it. */
-        plan->beside = 1;
-        snprintf(plan->working, sizeof plan->working, "%s.rendering.tmp", output);
-        tf_info("%s: a finished render is there; it is replaced only once the new one is "
-                "complete", output);
+    if (!resume || overwrite)
+        return plan_fresh(output, &f, resume, overwrite, plan);
+    if (resume_refused(output, &f, want))
+        return -1;
+    if (f.complete) {
+        plan->complete = 1;
         return 0;
     }
-    if (overwrite) {
-        if (!complete)
-            tf_info("%s: discarding a partial render of %d/%d rows (--overwrite)", output, rows,
-                    have.height);
-        return 0;
-    }
-    if (!resume) {
-        if (!complete && chunks == 0) {
-            tf_info("%s: a partial render with no rows is there; it will be replaced", output);
-            return 0;
-        }
-        tf_error("%s holds a partial render (%d of %d rows on disk): use --resume to continue it "
-                 "or --overwrite to start again",
-                 output, rows, have.height);
-        return -1;
-    }
-    /* --resume: the same scene, size and settings, or a clear refusal. */
-    if (have.width != want->width || have.height != want->height) {
-        tf_error("%s: cannot resume: image size changed (%dx%d on disk, %dx%d now)", output,
-                 have.width, have.height, want->width, want->height);
-        return -1;
-    }
-    if (strcmp(have.scene_hash, want->scene_hash)) {
-        tf_error("%s: cannot resume: the scene changed since the partial render (hash %.12s on "
-                 "disk, %.12s now)",
-                 output, have.scene_hash, want->scene_hash);
-        return -1;
-    }
-    if (strcmp(have.settings, want->settings)) {
-        tf_error("%s: cannot resume: render settings changed ('%s' on disk, '%s' now)", output,
-                 have.settings, want->settings);
-        return -1;
-    }
-    tf_exr_layout want_layout = tf_exr_meta_layout(want);
-    if (have.tiled != want->tiled || have.pixel != want->pixel ||
-        (have.tiled && (have.tile_w != want->tile_w || have.tile_h != want->tile_h))) {
-        char a[64], b[64];
-        tf_exr_layout_format(&have_layout, a, sizeof a);
-        tf_exr_layout_format(&want_layout, b, sizeof b);
-        tf_error("%s: cannot resume: the file is '%s', this render would write '%s' (resume with "
-                 "the same --tasks and --pixel, or without --tasks)",
-                 output, a, b);
-        return -1;
-    }
-    if (complete) {
-        *already_complete = 1;
-        return 0;
-    }
-    *resume_rows = rows;
-    plan->resume_tiles = (int)(chunks % tf_layout_chunks_x(&have_layout));
+    plan->resume_rows = f.rows;
+    plan->resume_tiles = (int)(f.chunks % tf_layout_chunks_x(&f.layout));
     return 0;
 }
 

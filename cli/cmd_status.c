@@ -109,88 +109,92 @@ static void print_human(json_t *st, json_t *workers)
     }
 }
 
-int cmd_status(int argc, char **argv)
+enum { O_JSON = 256, O_TOKEN, O_SECRET, O_PRINT, O_TIMEOUT };
+
+static const struct option longopts[] = {
+    {"json", no_argument, NULL, O_JSON},
+    {"token-file", required_argument, NULL, O_TOKEN},
+    {"secret-file", required_argument, NULL, O_SECRET},
+    {"print-token", no_argument, NULL, O_PRINT},
+    {"timeout", required_argument, NULL, O_TIMEOUT},
+    {"help", no_argument, NULL, 'h'},
+    {NULL, 0, NULL, 0},
+};
+
+/* What the command line asks for. */
+typedef struct status_args {
+    int as_json, print_token;
+    long timeout_ms;
+    const char *token_file, *secret_file;
+} status_args;
+
+/* The options into a: -1 to go on, or the exit status (--help, or a refusal). */
+static int parse_status_args(status_args *a, int argc, char **argv)
 {
-    enum { O_JSON = 256, O_TOKEN, O_SECRET, O_PRINT, O_TIMEOUT };
-    static const struct option longopts[] = {
-        {"json", no_argument, NULL, O_JSON},
-        {"token-file", required_argument, NULL, O_TOKEN},
-        {"secret-file", required_argument, NULL, O_SECRET},
-        {"print-token", no_argument, NULL, O_PRINT},
-        {"timeout", required_argument, NULL, O_TIMEOUT},
-        {"help", no_argument, NULL, 'h'},
-        {NULL, 0, NULL, 0},
-    };
-    int as_json = 0, print_token = 0;
-    long timeout_ms = 5000;
-    const char *token_file = NULL, *secret_file = NULL;
-    char err[1024];
+    *a = (status_args){.timeout_ms = 5000};
     int c;
+    int64_t ms;
     optind = 1;
     opterr = 0;
     while ((c = getopt_long(argc, argv, ":h", longopts, NULL)) != -1) {
-        switch (c) {
-        case O_JSON: as_json = 1; break;
-        case O_TOKEN: token_file = optarg; break;
-        case O_SECRET: secret_file = optarg; break;
-        case O_PRINT: print_token = 1; break;
-        case O_TIMEOUT: {
-            int64_t ms;
+        if (c == O_JSON || c == O_PRINT) {
+            *(c == O_JSON ? &a->as_json : &a->print_token) = 1;
+        } else if (c == O_TOKEN || c == O_SECRET) {
+            *(c == O_TOKEN ? &a->token_file : &a->secret_file) = optarg;
+        } else if (c == O_TIMEOUT) {
             if (tf_parse_duration_ms(optarg, &ms) || ms < 1 || ms > 3600000) {
                 tf_error("--timeout '%s': expected a duration from 1ms to 1h (e.g. 500ms, 5s)",
                          optarg);
                 return TF_EXIT_USAGE;
             }
-            timeout_ms = (long)ms;
-            break;
-        }
-        case 'h': fputs(usage, stdout); return TF_EXIT_OK;
-        case ':':
-            tf_error("status: option '%s' needs a value (see terrafarm status --help)",
+            a->timeout_ms = (long)ms;
+        } else if (c == 'h') {
+            fputs(usage, stdout);
+            return TF_EXIT_OK;
+        } else {
+            tf_error(c == ':' ? "status: option '%s' needs a value (see terrafarm status --help)"
+                              : "status: unknown option '%s' (see terrafarm status --help)",
                      argv[optind - 1]);
             return TF_EXIT_USAGE;
-        default:
-            tf_error("status: unknown option '%s' (see terrafarm status --help)", argv[optind - 1]);
-            return TF_EXIT_USAGE;
         }
     }
-    char token[TF_HTTP_TOKEN_MAX + 1];
-    int have_token = 0;
-    if (token_file) {
-        if (tf_http_token_load(token_file, token, sizeof token, err, sizeof err)) {
-            tf_error("%s", err);
-            return TF_EXIT_FAIL;
-        }
-        have_token = 1;
-    } else if (secret_file) {
-        uint8_t key[TF_KEY_BYTES];
-        if (tf_auth_init() || tf_secret_load(secret_file, key, err, sizeof err) ||
-            tf_http_token_derive(key, token, sizeof token)) {
-            tf_error("%s", err);
-            return TF_EXIT_FAIL;
-        }
-        have_token = 1;
+    return -1;
+}
+
+/* The dashboard's token: read from --token-file, or derived from --secret-file.  1 with the
+ * token, 0 with neither, -1 when the file cannot give one (said). */
+static int load_token(const status_args *a, char *token, size_t len)
+{
+    char err[1024] = "";
+    uint8_t key[TF_KEY_BYTES];
+    if (a->token_file) {
+        if (tf_http_token_load(a->token_file, token, len, err, sizeof err) == 0)
+            return 1;
+    } else if (a->secret_file) {
+        if (tf_auth_init() != 0)
+            snprintf(err, sizeof err, "status: libsodium cannot start");
+        else if (tf_secret_load(a->secret_file, key, err, sizeof err) == 0 &&
+                 tf_http_token_derive(key, token, len) == 0)
+            return 1;
+        else if (!err[0])
+            snprintf(err, sizeof err, "status: no token can be derived from %s",
+                     a->secret_file);
+    } else {
+        return 0;
     }
-    if (print_token) {
-        if (!secret_file) {
-            tf_error("status: --print-token needs --secret-file FILE");
-            return TF_EXIT_USAGE;
-        }
-        printf("%s\n", token);
-        return TF_EXIT_OK;
-    }
-    if (optind != argc - 1) {
-        tf_error("status: expected one HOST:PORT (see terrafarm status --help)");
-        return TF_EXIT_USAGE;
-    }
-    const char *addr = argv[optind];
-    char host[256], port[32];
+    tf_error("%s", err);
+    return -1;
+}
+
+/* The status and the workers from the dashboard at addr, printed as JSON or as text. */
+static int show_status(const status_args *a, const char *addr, const char *tok)
+{
+    char host[256], port[32], err[1024];
     if (tf_split_hostport(addr, host, sizeof host, port, sizeof port, err, sizeof err)) {
         tf_error("status: %s", err);
         return TF_EXIT_USAGE;
     }
-    int64_t deadline = tf_now_ms() + timeout_ms;
-    const char *tok = have_token ? token : NULL;
+    int64_t deadline = tf_now_ms() + a->timeout_ms;
     json_t *st = get_json(addr, "/api/status", tok, deadline, err, sizeof err);
     json_t *workers = st ? get_json(addr, "/api/workers", tok, deadline, err, sizeof err) : NULL;
     if (!st || !workers) {
@@ -198,7 +202,7 @@ int cmd_status(int argc, char **argv)
         json_decref(st);
         return TF_EXIT_FAIL;
     }
-    if (as_json) {
+    if (a->as_json) {
         json_object_set(st, "workers", json_object_get(workers, "workers"));
         char *text = json_dumps(st, JSON_INDENT(2) | JSON_PRESERVE_ORDER);
         if (text)
@@ -210,4 +214,29 @@ int cmd_status(int argc, char **argv)
     json_decref(st);
     json_decref(workers);
     return fflush(stdout) == 0 ? TF_EXIT_OK : TF_EXIT_FAIL;
+}
+
+int cmd_status(int argc, char **argv)
+{
+    status_args a;
+    int status = parse_status_args(&a, argc, argv);
+    if (status >= 0)
+        return status;
+    char token[TF_HTTP_TOKEN_MAX + 1];
+    int have_token = load_token(&a, token, sizeof token);
+    if (have_token < 0)
+        return TF_EXIT_FAIL;
+    if (a.print_token) {
+        if (!a.secret_file) {
+            tf_error("status: --print-token needs --secret-file FILE");
+            return TF_EXIT_USAGE;
+        }
+        printf("%s\n", token);
+        return TF_EXIT_OK;
+    }
+    if (optind != argc - 1) {
+        tf_error("status: expected one HOST:PORT (see terrafarm status --help)");
+        return TF_EXIT_USAGE;
+    }
+    return show_status(&a, argv[optind], have_token ? token : NULL);
 }

@@ -69,50 +69,23 @@ static void last_line(const char *path, char *out, size_t len)
     fclose(f);
 }
 
-int tf_movie_make(const char *path, const char *const *pngs, int n, double fps, char *err,
-                  size_t errlen)
+/* Frame i's PNG as dir/NNNNNN.png (a symbolic link), the numbered names ffmpeg reads.  0, or -1
+ * with err. */
+static int link_frame(const char *dir, int i, const char *png, char *err, size_t errlen)
 {
-    if (tf_movie_check_name(path, err, errlen))
-        return -1;
-    if (!tf_movie_available())
-        return tf_seterr(err, errlen, "--movie %s: ffmpeg is not installed (apt-get install "
-                         "ffmpeg); the frames and their PNG previews are written", path);
-    if (n < 1)
-        return tf_seterr(err, errlen, "--movie %s: no frames", path);
-    char dir[] = "/tmp/terrafarm-movie.XXXXXX";
-    if (!mkdtemp(dir))
-        return tf_seterr(err, errlen, "--movie: cannot make a temporary directory: %s",
-                         strerror(errno));
-    int rc = -1;
-    char link[PATH_MAX], target[PATH_MAX], tmp[PATH_MAX], log[PATH_MAX], pattern[PATH_MAX];
-    int linked = 0;
-    for (; linked < n; linked++) {
-        snprintf(link, sizeof link, "%s/%06d.png", dir, linked);
-        if (!realpath(pngs[linked], target) || symlink(target, link)) {
-            tf_seterr(err, errlen, "--movie: cannot use %s: %s", pngs[linked], strerror(errno));
-            goto out;
-        }
-    }
-    const char *ext = extension(path);
-    snprintf(tmp, sizeof tmp, "%s.tmp.%s", path, ext);
-    snprintf(log, sizeof log, "%s/ffmpeg.log", dir);
-    snprintf(pattern, sizeof pattern, "%s/%%06d.png", dir);
-    char rate[32];
-    snprintf(rate, sizeof rate, "%.6g", fps);
-    int webm = !strcasecmp(ext, "webm");
-    const char *argv[] = {"ffmpeg", "-nostdin", "-hide_banner", "-loglevel", "error", "-y",
-                          "-framerate", rate, "-i", pattern,
-                          /* even sides, as yuv420p needs */
-                          "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p",
-                          "-c:v", webm ? "libvpx-vp9" : "libx264",
-                          webm ? "-b:v" : "-crf", webm ? "0" : "18",
-                          webm ? "-crf" : "-movflags", webm ? "32" : "+faststart",
-                          tmp, NULL};
+    char link[PATH_MAX], target[PATH_MAX];
+    snprintf(link, sizeof link, "%s/%06d.png", dir, i);
+    if (!realpath(png, target) || symlink(target, link))
+        return tf_seterr(err, errlen, "--movie: cannot use %s: %s", png, strerror(errno));
+    return 0;
+}
+
+/* ffmpeg with argv, its output to the file `log`; its exit status (or -1: not started). */
+static int run_ffmpeg(const char *const *argv, const char *log)
+{
     pid_t pid = fork();
-    if (pid < 0) {
-        tf_seterr(err, errlen, "--movie: cannot start ffmpeg: %s", strerror(errno));
-        goto out;
-    }
+    if (pid < 0)
+        return -1;
     if (pid == 0) {
         int null = open("/dev/null", O_RDONLY);
         int logfd = open(log, O_WRONLY | O_CREAT | O_TRUNC, 0600);
@@ -128,26 +101,77 @@ int tf_movie_make(const char *path, const char *const *pngs, int n, double fps, 
     int status;
     while (waitpid(pid, &status, 0) < 0 && errno == EINTR)
         ;
-    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-        char why[256];
-        last_line(log, why, sizeof why);
-        tf_seterr(err, errlen, "--movie %s: ffmpeg failed: %s", path, why);
-        remove(tmp);
-        goto out;
-    }
-    if (rename(tmp, path)) {
-        tf_seterr(err, errlen, "--movie %s: cannot rename into place: %s", path, strerror(errno));
-        remove(tmp);
-        goto out;
-    }
-    rc = 0;
-out:
-    for (int i = 0; i < linked; i++) {
-        snprintf(link, sizeof link, "%s/%06d.png", dir, i);
-        unlink(link);
-    }
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+/* The numbered frames in dir encoded into tmp at fps (H.264, or VP9 for .webm), even sides as
+ * yuv420p needs.  0, or -1 with err (ffmpeg's last line; what it left at tmp removed). */
+static int encode_frames(const char *dir, const char *path, const char *tmp, double fps,
+                         char *err, size_t errlen)
+{
+    char log[PATH_MAX], pattern[PATH_MAX], rate[32];
     snprintf(log, sizeof log, "%s/ffmpeg.log", dir);
-    unlink(log);
+    snprintf(pattern, sizeof pattern, "%s/%%06d.png", dir);
+    snprintf(rate, sizeof rate, "%.6g", fps);
+    int webm = !strcasecmp(extension(path), "webm");
+    const char *argv[] = {"ffmpeg", "-nostdin", "-hide_banner", "-loglevel", "error", "-y",
+                          "-framerate", rate, "-i", pattern,
+                          "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p",
+                          "-c:v", webm ? "libvpx-vp9" : "libx264",
+                          webm ? "-b:v" : "-crf", webm ? "0" : "18",
+                          webm ? "-crf" : "-movflags", webm ? "32" : "+faststart",
+                          tmp, NULL};
+    int status = run_ffmpeg(argv, log);
+    if (status < 0)
+        return tf_seterr(err, errlen, "--movie: cannot start ffmpeg: %s", strerror(errno));
+    if (status == 0)
+        return 0;
+    char why[256];
+    last_line(log, why, sizeof why);
+    remove(tmp);
+    return tf_seterr(err, errlen, "--movie %s: ffmpeg failed: %s", path, why);
+}
+
+/* The temporary directory's links (the first `linked`) and log removed, then the directory. */
+static void remove_workdir(const char *dir, int linked)
+{
+    char name[PATH_MAX];
+    for (int i = 0; i < linked; i++) {
+        snprintf(name, sizeof name, "%s/%06d.png", dir, i);
+        unlink(name);
+    }
+    snprintf(name, sizeof name, "%s/ffmpeg.log", dir);
+    unlink(name);
     rmdir(dir);
+}
+
+int tf_movie_make(const char *path, const char *const *pngs, int n, double fps, char *err,
+                  size_t errlen)
+{
+    if (tf_movie_check_name(path, err, errlen))
+        return -1;
+    if (!tf_movie_available())
+        return tf_seterr(err, errlen, "--movie %s: ffmpeg is not installed (apt-get install "
+                         "ffmpeg); the frames and their PNG previews are written", path);
+    if (n < 1)
+        return tf_seterr(err, errlen, "--movie %s: no frames", path);
+    char dir[] = "/tmp/terrafarm-movie.XXXXXX";
+    if (!mkdtemp(dir))
+        return tf_seterr(err, errlen, "--movie: cannot make a temporary directory: %s",
+                         strerror(errno));
+    int linked = 0, rc = -1;
+    while (linked < n && link_frame(dir, linked, pngs[linked], err, errlen) == 0)
+        linked++;
+    char tmp[PATH_MAX];
+    snprintf(tmp, sizeof tmp, "%s.tmp.%s", path, extension(path));
+    if (linked == n && encode_frames(dir, path, tmp, fps, err, errlen) == 0) {
+        rc = rename(tmp, path);
+        if (rc != 0) {
+            tf_seterr(err, errlen, "--movie %s: cannot rename into place: %s", path,
+                      strerror(errno));
+            remove(tmp);
+        }
+    }
+    remove_workdir(dir, linked);
     return rc;
 }

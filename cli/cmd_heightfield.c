@@ -119,93 +119,103 @@ static int parse_int(const char *text, int lo, int hi, int *out)
     return 0;
 }
 
+static const struct option longopts[] = {
+    {"output", required_argument, NULL, 'o'},   {"threads", required_argument, NULL, 't'},
+    {"size-exp", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
+    {"srs", required_argument, NULL, 's'},      {"origin", required_argument, NULL, 'O'},
+    {"workers", required_argument, NULL, 'j'},  {"halo", required_argument, NULL, 'H'},
+    {"stats", required_argument, NULL, 'S'},    {"maps", required_argument, NULL, 'M'},
+    {"remote", required_argument, NULL, 'R'},   {"listen", required_argument, NULL, 'L'},
+    {"secret-file", required_argument, NULL, 'F'},
+    {NULL, 0, NULL, 0},
+};
+
+/* An integer option from lo to hi into *out: 0, or -1 after saying what it wants. */
+static int int_option(const char *flag, const char *arg, int lo, int hi, int *out)
+{
+    if (parse_int(arg, lo, hi, out) == 0)
+        return 0;
+    tf_error("heightfield: %s wants an integer %d..%d, not '%s'", flag, lo, hi, arg);
+    return -1;
+}
+
+/* --origin EAST,NORTH: two finite numbers.  0, or -1 after saying so. */
+static int origin_option(const char *arg, struct hf_options *o)
+{
+    char *end;
+    o->east0 = strtod(arg, &end);
+    if (end != arg && *end == ',' && (o->north0 = strtod(end + 1, &end), *end == '\0') &&
+        isfinite(o->east0) && isfinite(o->north0))
+        return 0;
+    tf_error("heightfield: --origin wants EAST,NORTH (two numbers), not '%s'", arg);
+    return -1;
+}
+
+/* One option into o: 0, or -1 after saying why not. */
+static int hf_option(struct hf_options *o, int c, const char *arg)
+{
+    switch (c) {
+    case 'o': o->output = arg; return 0;
+    case 's': o->srs = arg; return 0;
+    case 'S': o->stats = arg; return 0;
+    case 'L': o->listen = arg; return 0;
+    case 'F': o->secret_file = arg; return 0;
+    case 'M': o->maps = arg; return 0;
+    case 'O': return origin_option(arg, o);
+    case 'H': return int_option("--halo", arg, 1, 1024, &o->halo);
+    case 'R': return int_option("--remote", arg, 1, 1024, &o->remote);
+    case 'k': return int_option("--size-exp", arg, 1, TF_TERRAIN_MAX_SIZE_EXP, &o->size_exp);
+    default: /* 't', 'j' */
+        if (int_option("-j", arg, 0, 1024, &o->threads))
+            return -1;
+        o->workers = c == 'j' ? o->threads : 0;
+        return 0;
+    }
+}
+
+/* What the options say together: one SCENE, -o with a known extension, --remote's needs. */
+static int check_options(struct hf_options *o)
+{
+    if (o->remote > 0 && !o->listen)
+        o->listen = "127.0.0.1:7879";
+    if (o->remote > 0 && o->size_exp) {
+        tf_error("heightfield: --remote with --size-exp: networked workers erode the scene's "
+                 "own size_exp; set it in the scene");
+        return -1;
+    }
+    if (!o->output) {
+        tf_error("heightfield: -o FILE.png, -o FILE.exr or -o FILE.tif is required");
+        return -1;
+    }
+    if (!ends_with(o->output, ".png") && !ends_with(o->output, ".exr") &&
+        !ends_with(o->output, ".tif") && !ends_with(o->output, ".tiff")) {
+        tf_error("heightfield: output '%s' must end in .png, .exr or .tif", o->output);
+        return -1;
+    }
+    return 0;
+}
+
 /* Returns -1 to continue, else the exit status (help, usage error). */
 static int parse_options(int argc, char **argv, struct hf_options *o)
 {
-    static const struct option longopts[] = {
-        {"output", required_argument, NULL, 'o'},   {"threads", required_argument, NULL, 't'},
-        {"size-exp", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
-        {"srs", required_argument, NULL, 's'},      {"origin", required_argument, NULL, 'O'},
-        {"workers", required_argument, NULL, 'j'},  {"halo", required_argument, NULL, 'H'},
-        {"stats", required_argument, NULL, 'S'},    {"maps", required_argument, NULL, 'M'},
-        {"remote", required_argument, NULL, 'R'},   {"listen", required_argument, NULL, 'L'},
-        {"secret-file", required_argument, NULL, 'F'},
-        {NULL, 0, NULL, 0},
-    };
     memset(o, 0, sizeof *o);
     opterr = 0;
     optind = 1;
     int c;
     while ((c = getopt_long(argc, argv, ":o:t:j:k:h", longopts, NULL)) != -1) {
-        switch (c) {
-        case 'o':
-            o->output = optarg;
-            break;
-        case 's':
-            o->srs = optarg;
-            break;
-        case 'O': {
-            char *end;
-            o->east0 = strtod(optarg, &end);
-            if (end == optarg || *end != ',' ||
-                (o->north0 = strtod(end + 1, &end), *end != '\0') || !isfinite(o->east0) ||
-                !isfinite(o->north0)) {
-                tf_error("heightfield: --origin wants EAST,NORTH (two numbers), not '%s'",
-                         optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        }
-        case 't':
-        case 'j':
-            if (parse_int(optarg, 0, 1024, &o->threads) != 0) {
-                tf_error("heightfield: -j wants an integer 0..1024, not '%s'", optarg);
-                return TF_EXIT_USAGE;
-            }
-            o->workers = c == 'j' ? o->threads : 0;
-            break;
-        case 'H':
-            if (parse_int(optarg, 1, 1024, &o->halo) != 0) {
-                tf_error("heightfield: --halo wants an integer 1..1024, not '%s'", optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        case 'S':
-            o->stats = optarg;
-            break;
-        case 'R':
-            if (parse_int(optarg, 1, 1024, &o->remote) != 0) {
-                tf_error("heightfield: --remote wants an integer 1..1024, not '%s'", optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        case 'L':
-            o->listen = optarg;
-            break;
-        case 'F':
-            o->secret_file = optarg;
-            break;
-        case 'M':
-            o->maps = optarg;
-            break;
-        case 'k':
-            if (parse_int(optarg, 1, TF_TERRAIN_MAX_SIZE_EXP, &o->size_exp) != 0) {
-                tf_error("heightfield: --size-exp wants an integer 1..%d, not '%s'",
-                         TF_TERRAIN_MAX_SIZE_EXP, optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        case 'h':
+        if (c == 'h') {
             fputs(usage, stdout);
             return TF_EXIT_OK;
-        case ':':
-            tf_error("heightfield: option '%s' needs a value", argv[optind - 1]);
-            return TF_EXIT_USAGE;
-        default:
-            tf_error("heightfield: unknown option '%s' (try 'terrafarm heightfield --help')",
+        }
+        if (c == ':' || c == '?') {
+            tf_error(c == ':' ? "heightfield: option '%s' needs a value"
+                              : "heightfield: unknown option '%s' (try 'terrafarm heightfield "
+                                "--help')",
                      argv[optind - 1]);
             return TF_EXIT_USAGE;
         }
+        if (hf_option(o, c, optarg))
+            return TF_EXIT_USAGE;
     }
     if (optind != argc - 1) {
         tf_error("heightfield: expected exactly one SCENE argument (try 'terrafarm heightfield "
@@ -213,23 +223,7 @@ static int parse_options(int argc, char **argv, struct hf_options *o)
         return TF_EXIT_USAGE;
     }
     o->scene_path = argv[optind];
-    if (o->remote > 0 && !o->listen)
-        o->listen = "127.0.0.1:7879";
-    if (o->remote > 0 && o->size_exp) {
-        tf_error("heightfield: --remote with --size-exp: networked workers erode the scene's "
-                 "own size_exp; set it in the scene");
-        return TF_EXIT_USAGE;
-    }
-    if (!o->output) {
-        tf_error("heightfield: -o FILE.png, -o FILE.exr or -o FILE.tif is required");
-        return TF_EXIT_USAGE;
-    }
-    if (!ends_with(o->output, ".png") && !ends_with(o->output, ".exr") &&
-        !ends_with(o->output, ".tif") && !ends_with(o->output, ".tiff")) {
-        tf_error("heightfield: output '%s' must end in .png, .exr or .tif", o->output);
-        return TF_EXIT_USAGE;
-    }
-    return -1;
+    return check_options(o) ? TF_EXIT_USAGE : -1;
 }
 
 /* What a file says of itself, as name, value pairs for the writers. */

@@ -128,95 +128,93 @@ static int parse_wxh(const char *flag, const char *text, int lo, int hi, int *w,
     return -1;
 }
 
+enum { O_TASKS = 256, O_WATERMARK, O_SIZE, O_CSV, O_PLOT, O_KEEP, O_COST, O_GRID,
+       O_TERRAIN_CACHE, O_AFFINITY };
+
+static const struct option longopts[] = {
+    {"workers", required_argument, NULL, 'w'}, {"repeat", required_argument, NULL, 'r'},
+    {"tasks", required_argument, NULL, O_TASKS},
+    {"watermark", required_argument, NULL, O_WATERMARK},
+    {"size", required_argument, NULL, O_SIZE}, {"csv", required_argument, NULL, O_CSV},
+    {"plot", required_argument, NULL, O_PLOT}, {"keep", required_argument, NULL, O_KEEP},
+    {"cost-map", required_argument, NULL, O_COST}, {"grid", required_argument, NULL, O_GRID},
+    {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
+    {"affinity", required_argument, NULL, O_AFFINITY},
+    {"quiet", no_argument, NULL, 'q'}, {"help", no_argument, NULL, 'h'},
+    {NULL, 0, NULL, 0},
+};
+
+/* The options passed on to each render, checked here so that a bad one stops the bench before
+ * its first render: 0, or -1 after saying why. */
+static int render_option(bench_opts *o, int c, const char *arg)
+{
+    char err[256];
+    tf_task_spec spec;
+    size_t bytes;
+    int w, h;
+    if (c == O_TASKS && tf_task_spec_parse(arg, &spec, err, sizeof err)) {
+        tf_error("%s", err);
+        return -1;
+    }
+    if ((c == O_SIZE && parse_wxh("--size", arg, 1, 65536, &w, &h)) ||
+        (c == O_TERRAIN_CACHE && tf_parse_byte_size("--terrain-cache", arg, &bytes)))
+        return -1;
+    if (c == O_AFFINITY && strcmp(arg, "on") && strcmp(arg, "off")) {
+        tf_error("--affinity '%s': expected on or off", arg);
+        return -1;
+    }
+    const char **to = c == O_TASKS ? &o->tasks : c == O_SIZE ? &o->size
+                    : c == O_TERRAIN_CACHE ? &o->terrain_cache : c == O_AFFINITY ? &o->affinity
+                    : &o->watermark; /* render checks it */
+    *to = arg;
+    return 0;
+}
+
+/* One option into o: 0, or -1 after saying why not. */
+static int bench_option(bench_opts *o, int c, const char *arg)
+{
+    char *end;
+    switch (c) {
+    case 'w':
+    case 'j': /* -j as in render, worker and heightfield */
+        return parse_counts(arg, o);
+    case 'r':
+        o->repeat = (int)strtol(arg, &end, 10);
+        if (end == arg || *end || o->repeat < 1 || o->repeat > MAX_REPEAT) {
+            tf_error("--repeat '%s': expected an integer from 1 to %d", arg, MAX_REPEAT);
+            return -1;
+        }
+        return 0;
+    case O_CSV: o->csv = arg; return 0;
+    case O_PLOT: o->plot = arg; return 0;
+    case O_KEEP: o->keep = arg; return 0;
+    case O_COST: o->cost_map = arg; return 0;
+    case O_GRID: return parse_wxh("--grid", arg, 1, TF_COST_MAP_MAX, &o->grid_w, &o->grid_h);
+    case 'q': o->quiet = 1; return 0;
+    default: return render_option(o, c, arg);
+    }
+}
+
 /* 0 to run, 1 to exit successfully (--help), -1 on a usage error (already reported). */
 static int parse_args(int argc, char **argv, bench_opts *o)
 {
-    enum {
-        O_TASKS = 256, O_WATERMARK, O_SIZE, O_CSV, O_PLOT, O_KEEP, O_COST, O_GRID,
-        O_TERRAIN_CACHE, O_AFFINITY
-    };
-    static const struct option longopts[] = {
-        {"workers", required_argument, NULL, 'w'}, {"repeat", required_argument, NULL, 'r'},
-        {"tasks", required_argument, NULL, O_TASKS},
-        {"watermark", required_argument, NULL, O_WATERMARK},
-        {"size", required_argument, NULL, O_SIZE}, {"csv", required_argument, NULL, O_CSV},
-        {"plot", required_argument, NULL, O_PLOT}, {"keep", required_argument, NULL, O_KEEP},
-        {"cost-map", required_argument, NULL, O_COST}, {"grid", required_argument, NULL, O_GRID},
-        {"terrain-cache", required_argument, NULL, O_TERRAIN_CACHE},
-        {"affinity", required_argument, NULL, O_AFFINITY},
-        {"quiet", no_argument, NULL, 'q'}, {"help", no_argument, NULL, 'h'},
-        {NULL, 0, NULL, 0},
-    };
-    memset(o, 0, sizeof *o);
-    o->repeat = 3;
-    o->grid_w = 48;
-    o->grid_h = 27;
-    o->counts[0] = 1;
-    o->counts[1] = 2;
-    o->ncounts = 2;
-    int c, w, h;
-    char *end, err[256];
-    tf_task_spec spec;
-    size_t bytes;
+    *o = (bench_opts){.repeat = 3, .grid_w = 48, .grid_h = 27, .counts = {1, 2}, .ncounts = 2};
+    int c;
     optind = 1;
     opterr = 0;
     while ((c = getopt_long(argc, argv, ":w:j:r:qh", longopts, NULL)) != -1) {
-        switch (c) {
-        case 'w':
-        case 'j': /* -j as in render, worker and heightfield */
-            if (parse_counts(optarg, o))
-                return -1;
-            break;
-        case 'r':
-            o->repeat = (int)strtol(optarg, &end, 10);
-            if (end == optarg || *end || o->repeat < 1 || o->repeat > MAX_REPEAT) {
-                tf_error("--repeat '%s': expected an integer from 1 to %d", optarg, MAX_REPEAT);
-                return -1;
-            }
-            break;
-        case O_TASKS:
-            if (tf_task_spec_parse(optarg, &spec, err, sizeof err)) {
-                tf_error("%s", err);
-                return -1;
-            }
-            o->tasks = optarg;
-            break;
-        case O_WATERMARK: o->watermark = optarg; break; /* render checks it */
-        case O_SIZE:
-            if (parse_wxh("--size", optarg, 1, 65536, &w, &h))
-                return -1;
-            o->size = optarg;
-            break;
-        case O_TERRAIN_CACHE:
-            if (tf_parse_byte_size("--terrain-cache", optarg, &bytes))
-                return -1;
-            o->terrain_cache = optarg;
-            break;
-        case O_AFFINITY:
-            if (strcmp(optarg, "on") && strcmp(optarg, "off")) {
-                tf_error("--affinity '%s': expected on or off", optarg);
-                return -1;
-            }
-            o->affinity = optarg;
-            break;
-        case O_CSV: o->csv = optarg; break;
-        case O_PLOT: o->plot = optarg; break;
-        case O_KEEP: o->keep = optarg; break;
-        case O_COST: o->cost_map = optarg; break;
-        case O_GRID:
-            if (parse_wxh("--grid", optarg, 1, TF_COST_MAP_MAX, &o->grid_w, &o->grid_h))
-                return -1;
-            break;
-        case 'q': o->quiet = 1; break;
-        case 'h': fputs(usage, stdout); return 1;
-        case ':':
-            tf_error("bench: option '%s' needs a value (see terrafarm bench --help)",
+        if (c == 'h') {
+            fputs(usage, stdout);
+            return 1;
+        }
+        if (c == ':' || c == '?') {
+            tf_error(c == ':' ? "bench: option '%s' needs a value (see terrafarm bench --help)"
+                              : "bench: unknown option '%s' (see terrafarm bench --help)",
                      argv[optind - 1]);
             return -1;
-        default:
-            tf_error("bench: unknown option '%s' (see terrafarm bench --help)", argv[optind - 1]);
-            return -1;
         }
+        if (bench_option(o, c, optarg))
+            return -1;
     }
     if (optind != argc - 1) {
         tf_error(optind >= argc ? "bench: missing SCENE (see terrafarm bench --help)"

@@ -6,6 +6,7 @@
 #include <getopt.h>
 #include <jansson.h>
 #include <sodium.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -325,11 +326,13 @@ static const char *const render_flags[] = {"size", "tasks", "pixel", "verify", "
                                            "watermark", "affinity", "lease-timeout",
                                            "wait-workers", NULL};
 
-int cmd_jobs(int argc, char **argv)
+enum { O_FARM = 256, O_TOKEN, O_JSON, O_NAME, O_PRIORITY, O_POOL, O_TAGS, O_AFTER, O_OUTPUT,
+       O_FRAMEOUT, O_VERIFY_CHUNKS, O_PAINT, O_RENDER };
+
+/* The options: the farm's own, then render_flags, passed on to the job's render. */
+static void jobs_longopts(struct option *longopts)
 {
-    enum { O_FARM = 256, O_TOKEN, O_JSON, O_NAME, O_PRIORITY, O_POOL, O_TAGS, O_AFTER, O_OUTPUT,
-           O_FRAMEOUT, O_VERIFY_CHUNKS, O_PAINT, O_RENDER };
-    struct option longopts[32] = {
+    static const struct option own[] = {
         {"farm", required_argument, NULL, O_FARM}, {"token-file", required_argument, NULL, O_TOKEN},
         {"json", no_argument, NULL, O_JSON},       {"name", required_argument, NULL, O_NAME},
         {"priority", required_argument, NULL, O_PRIORITY},
@@ -340,78 +343,133 @@ int cmd_jobs(int argc, char **argv)
         {"paint", no_argument, NULL, O_PAINT},
         {"help", no_argument, NULL, 'h'},
     };
-    int nopt = 12;
+    int n = (int)(sizeof own / sizeof own[0]);
+    memcpy(longopts, own, sizeof own);
     for (int i = 0; render_flags[i]; i++)
-        longopts[nopt++] = (struct option){render_flags[i], required_argument, NULL, O_RENDER + i};
-    longopts[nopt] = (struct option){NULL, 0, NULL, 0};
-    const char *cmd = argv[0], *farm = NULL, *token = NULL, *output = NULL;
-    json_t *settings = json_object(), *options = json_array();
-    client c = {0};
-    int ch, frame = 0, idx, rc = TF_EXIT_USAGE, paint = 0;
+        longopts[n++] = (struct option){render_flags[i], required_argument, NULL, O_RENDER + i};
+    longopts[n] = (struct option){NULL, 0, NULL, 0};
+}
+
+/* What the command line asks for. */
+typedef struct jobs_args {
+    const char *cmd, *farm, *token, *output;
+    json_t *settings; /* the job's name, pool, tags, priority, after, kind */
+    json_t *options;  /* its render's options, as words */
+    client c;
+    int frame, paint;
+} jobs_args;
+
+/* --priority and --after: integers.  0, or -1 after saying so. */
+static int integer_setting(jobs_args *a, const char *flag, const char *key, const char *arg)
+{
+    char *end;
+    long long v = strtoll(arg, &end, 10);
+    if (end == arg || *end) {
+        tf_error("--%s '%s': expected an integer", flag, arg);
+        return -1;
+    }
+    json_object_set_new(a->settings, key, json_integer(v));
+    return 0;
+}
+
+/* A render option: passed on to the job's render, except `job --frame N`, the frame to fetch. */
+static int render_option(jobs_args *a, int i, const char *arg)
+{
+    char flag[64], *end;
+    snprintf(flag, sizeof flag, "--%s", render_flags[i]);
+    if (!strcmp(a->cmd, "job") && !strcmp(flag, "--frame")) {
+        long v = strtol(arg, &end, 10);
+        if (end == arg || *end || v < 0 || v > INT32_MAX) {
+            tf_error("--frame '%s': expected a frame number (an integer >= 0)", arg);
+            return -1;
+        }
+        a->frame = (int)v;
+        return 0;
+    }
+    json_array_append_new(a->options, json_string(flag));
+    json_array_append_new(a->options, json_string(arg));
+    return 0;
+}
+
+/* One option into a (longopts[idx] for a long one): 0, or -1 after saying why not. */
+static int jobs_option(jobs_args *a, int ch, const char *name, const char *arg)
+{
+    switch (ch) {
+    case O_FARM: a->farm = arg; return 0;
+    case O_TOKEN: a->token = arg; return 0;
+    case O_JSON: a->c.json = 1; return 0;
+    case O_OUTPUT: a->output = arg; return 0;
+    case O_NAME: case O_POOL: case O_TAGS:
+        json_object_set_new(a->settings, name, json_string(arg));
+        return 0;
+    case O_PRIORITY: case O_AFTER:
+        return integer_setting(a, name, name, arg);
+    case O_VERIFY_CHUNKS:
+        json_array_append_new(a->options, json_string("--verify-chunks"));
+        return 0;
+    case O_PAINT:
+        a->paint = 1;
+        json_object_set_new(a->settings, "kind", json_string("paint"));
+        return 0;
+    default:
+        return render_option(a, ch - O_RENDER, arg);
+    }
+}
+
+/* The options into a: -1 to go on, or the exit status (--help, or a refusal). */
+static int parse_jobs_args(jobs_args *a, int argc, char **argv)
+{
+    struct option longopts[32];
+    jobs_longopts(longopts);
+    int ch, idx = 0;
     optind = 1;
     opterr = 0;
     while ((ch = getopt_long(argc, argv, ":h", longopts, &idx)) != -1) {
-        char *end;
-        switch (ch) {
-        case O_FARM: farm = optarg; break;
-        case O_TOKEN: token = optarg; break;
-        case O_JSON: c.json = 1; break;
-        case O_NAME: json_object_set_new(settings, "name", json_string(optarg)); break;
-        case O_POOL: json_object_set_new(settings, "pool", json_string(optarg)); break;
-        case O_TAGS: json_object_set_new(settings, "tags", json_string(optarg)); break;
-        case O_PRIORITY:
-        case O_AFTER: {
-            long long v = strtoll(optarg, &end, 10);
-            if (end == optarg || *end) {
-                tf_error("--%s '%s': expected an integer", longopts[idx].name, optarg);
-                goto out;
-            }
-            json_object_set_new(settings, ch == O_PRIORITY ? "priority" : "after",
-                                json_integer(v));
-            break;
+        if (ch == 'h') {
+            fputs(usage, stdout);
+            return TF_EXIT_OK;
         }
-        case O_OUTPUT: output = optarg; break;
-        case O_VERIFY_CHUNKS: json_array_append_new(options, json_string("--verify-chunks")); break;
-        case O_PAINT:
-            paint = 1;
-            json_object_set_new(settings, "kind", json_string("paint"));
-            break;
-        case 'h': fputs(usage, stdout); rc = TF_EXIT_OK; goto out;
-        case ':': tf_error("%s needs a value", argv[optind - 1]); goto out;
-        case '?': tf_error("unknown option '%s' (see terrafarm %s --help)", argv[optind - 1], cmd);
-            goto out;
-        default: { /* a render option, passed on */
-            char flag[64];
-            snprintf(flag, sizeof flag, "--%s", render_flags[ch - O_RENDER]);
-            if (!strcmp(cmd, "job") && !strcmp(flag, "--frame")) {
-                frame = atoi(optarg);
-                break;
-            }
-            json_array_append_new(options, json_string(flag));
-            json_array_append_new(options, json_string(optarg));
+        if (ch == ':') {
+            tf_error("%s needs a value", argv[optind - 1]);
+            return TF_EXIT_USAGE;
         }
+        if (ch == '?') {
+            tf_error("unknown option '%s' (see terrafarm %s --help)", argv[optind - 1], a->cmd);
+            return TF_EXIT_USAGE;
         }
+        if (jobs_option(a, ch, longopts[idx].name, optarg))
+            return TF_EXIT_USAGE;
     }
-    char **args = argv + optind;
-    int nargs = argc - optind;
-    if (connect_opts(&c, farm, token))
-        goto out;
-    rc = TF_EXIT_USAGE;
+    return -1;
+}
+
+/* The command itself, with its arguments (the words after the options). */
+static int run_command(jobs_args *a, char **args, int nargs)
+{
+    const char *cmd = a->cmd;
     if (!strcmp(cmd, "submit") && nargs == 1)
-        rc = run_submit(&c, args[0], settings, options);
-    else if (!strcmp(cmd, "jobs") && nargs == 0)
-        rc = run_jobs(&c);
-    else if (!strcmp(cmd, "job") && nargs == 1 && paint && !output)
-        rc = run_control(&c, "paint", args, nargs);
-    else if (!strcmp(cmd, "job") && nargs == 1 && !paint)
-        rc = run_job(&c, args[0], output, frame);
-    else if (!strcmp(cmd, "cancel") || !strcmp(cmd, "pause") || !strcmp(cmd, "resume") ||
-             !strcmp(cmd, "priority"))
-        rc = run_control(&c, cmd, args, nargs);
-    else
-        fputs(usage, stderr);
-out:
-    json_decref(settings);
-    json_decref(options);
+        return run_submit(&a->c, args[0], a->settings, a->options);
+    if (!strcmp(cmd, "jobs") && nargs == 0)
+        return run_jobs(&a->c);
+    if (!strcmp(cmd, "job") && nargs == 1 && a->paint && !a->output)
+        return run_control(&a->c, "paint", args, nargs);
+    if (!strcmp(cmd, "job") && nargs == 1 && !a->paint)
+        return run_job(&a->c, args[0], a->output, a->frame);
+    if (!strcmp(cmd, "cancel") || !strcmp(cmd, "pause") || !strcmp(cmd, "resume") ||
+        !strcmp(cmd, "priority"))
+        return run_control(&a->c, cmd, args, nargs);
+    fputs(usage, stderr);
+    return TF_EXIT_USAGE;
+}
+
+int cmd_jobs(int argc, char **argv)
+{
+    jobs_args a = {.cmd = argv[0], .settings = json_object(), .options = json_array()};
+    int rc = parse_jobs_args(&a, argc, argv);
+    if (rc < 0)
+        rc = connect_opts(&a.c, a.farm, a.token) ? TF_EXIT_USAGE
+                                                 : run_command(&a, argv + optind, argc - optind);
+    json_decref(a.settings);
+    json_decref(a.options);
     return rc;
 }

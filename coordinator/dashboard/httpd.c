@@ -288,6 +288,89 @@ static enum MHD_Result serve_get(tf_httpd *h, struct MHD_Connection *c, const ch
     return ok;
 }
 
+/* A control asked for by a POST: the command to queue and what to answer, or the refusal
+ * (status, detail). */
+typedef struct control {
+    tf_command cmd;
+    const char *ok_msg; /* NULL: no command */
+    int status;         /* 0, or the HTTP status of a refusal */
+    char detail[160];
+} control;
+
+static void refuse(control *ctl, int status, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static void refuse(control *ctl, int status, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(ctl->detail, sizeof ctl->detail, fmt, ap);
+    va_end(ap);
+    ctl->status = status;
+}
+
+/* /api/workers/ID/drop: a connected worker's id. */
+static void control_drop(const tf_snapshot *s, const char *url, control *ctl)
+{
+    const char *name = url + 13, *slash = strchr(name, '/');
+    char idtext[32];
+    uint64_t v;
+    if (!slash || strcmp(slash, "/drop") || slash - name >= (long)sizeof idtext) {
+        ctl->status = 404;
+        return;
+    }
+    snprintf(idtext, sizeof idtext, "%.*s", (int)(slash - name), name);
+    if (parse_u64(idtext, &v) || v > INT64_MAX) {
+        refuse(ctl, 400, "worker '%s': expected a worker id", idtext);
+        return;
+    }
+    int64_t id = (int64_t)v;
+    int live = 0;
+    for (int i = 0; i < s->nworkers; i++)
+        live |= s->workers[i].id == id &&
+                (s->workers[i].state == TF_WS_BUSY || s->workers[i].state == TF_WS_IDLE);
+    if (!live)
+        refuse(ctl, 404, "no connected worker %" PRId64, id);
+    ctl->cmd = (tf_command){TF_CMD_DROP_WORKER, id};
+    ctl->ok_msg = "dropping the worker: its task is dealt again";
+}
+
+/* /api/watermark {"watermark": N}: N within the render's bounds. */
+static void control_watermark(const tf_snapshot *s, const tf_web_body *rq, control *ctl)
+{
+    json_error_t jerr;
+    json_t *doc = json_loadb(rq->data, rq->len, JSON_REJECT_DUPLICATES, &jerr);
+    json_t *v = doc ? json_object_get(doc, "watermark") : NULL;
+    if (!json_is_integer(v)) {
+        refuse(ctl, 400, "expected a JSON body {\"watermark\": N}");
+    } else if (json_integer_value(v) < s->watermark_min ||
+               json_integer_value(v) > s->watermark_max) {
+        refuse(ctl, 400,
+               "watermark %" JSON_INTEGER_FORMAT " is outside %d (one band of tasks) .. %d",
+               json_integer_value(v), s->watermark_min, s->watermark_max);
+    } else {
+        ctl->cmd = (tf_command){TF_CMD_WATERMARK, (int64_t)json_integer_value(v)};
+        ctl->ok_msg = "watermark changing";
+    }
+    json_decref(doc);
+}
+
+/* The control a POST to url asks for, while the render runs. */
+static void read_control(const tf_snapshot *s, const char *url, const tf_web_body *rq,
+                         control *ctl)
+{
+    if (s->state != TF_RUN_RENDERING && s->state != TF_RUN_STARTING)
+        refuse(ctl, 409, "the render has ended (%s)", tf_run_state_name(s->state));
+    else if (!strcmp(url, "/api/stop"))
+        *ctl = (control){{TF_CMD_STOP, 0},
+                         "stopping: the rows on disk stay; continue with --resume", 0, ""};
+    else if (!strncmp(url, "/api/workers/", 13))
+        control_drop(s, url, ctl);
+    else if (!strcmp(url, "/api/watermark"))
+        control_watermark(s, rq, ctl);
+    else
+        ctl->status = 404;
+}
+
 /* POST /api/stop, /api/workers/ID/drop, /api/watermark {"watermark": N}. */
 static enum MHD_Result serve_post(tf_httpd *h, struct MHD_Connection *c, const char *url,
                                   tf_web_body *rq)
@@ -295,80 +378,19 @@ static enum MHD_Result serve_post(tf_httpd *h, struct MHD_Connection *c, const c
     tf_snapshot *s = tf_hub_acquire(h->hub);
     if (!s)
         return tf_web_send_text(c, 503, "the render is starting");
-    enum MHD_Result ok;
-    tf_command cmd = {TF_CMD_STOP, 0};
-    int have_cmd = 0;
-    const char *ok_msg = NULL;
-    char detail[160] = "";
-    int status = 0;
-    int64_t id = -1;
-    if (s->state != TF_RUN_RENDERING && s->state != TF_RUN_STARTING) {
-        status = 409;
-        snprintf(detail, sizeof detail, "the render has ended (%s)", tf_run_state_name(s->state));
-    } else if (!strcmp(url, "/api/stop")) {
-        cmd = (tf_command){TF_CMD_STOP, 0};
-        have_cmd = 1;
-        ok_msg = "stopping: the rows on disk stay; continue with --resume";
-    } else if (!strncmp(url, "/api/workers/", 13)) {
-        char idtext[32];
-        const char *slash = strchr(url + 13, '/');
-        uint64_t v;
-        if (!slash || strcmp(slash, "/drop") || slash - (url + 13) >= (long)sizeof idtext) {
-            status = 404;
-        } else {
-            snprintf(idtext, sizeof idtext, "%.*s", (int)(slash - (url + 13)), url + 13);
-            if (parse_u64(idtext, &v) || v > INT64_MAX) {
-                status = 400;
-                snprintf(detail, sizeof detail, "worker '%s': expected a worker id", idtext);
-            } else {
-                id = (int64_t)v;
-                int live = 0;
-                for (int i = 0; i < s->nworkers; i++)
-                    live |= s->workers[i].id == id && (s->workers[i].state == TF_WS_BUSY ||
-                                                       s->workers[i].state == TF_WS_IDLE);
-                if (!live) {
-                    status = 404;
-                    snprintf(detail, sizeof detail, "no connected worker %" PRId64, id);
-                }
-                cmd = (tf_command){TF_CMD_DROP_WORKER, id};
-                have_cmd = 1;
-                ok_msg = "dropping the worker: its task is dealt again";
-            }
-        }
-    } else if (!strcmp(url, "/api/watermark")) {
-        json_error_t jerr;
-        json_t *doc = json_loadb(rq->data, rq->len, JSON_REJECT_DUPLICATES, &jerr);
-        json_t *v = doc ? json_object_get(doc, "watermark") : NULL;
-        if (!json_is_integer(v)) {
-            status = 400;
-            snprintf(detail, sizeof detail, "expected a JSON body {\"watermark\": N}");
-        } else if (json_integer_value(v) < s->watermark_min ||
-                   json_integer_value(v) > s->watermark_max) {
-            status = 400;
-            snprintf(detail, sizeof detail, "watermark %" JSON_INTEGER_FORMAT
-                     " is outside %d (one band of tasks) .. %d", json_integer_value(v),
-                     s->watermark_min, s->watermark_max);
-        } else {
-            cmd = (tf_command){TF_CMD_WATERMARK, (int64_t)json_integer_value(v)};
-            have_cmd = 1;
-            ok_msg = "watermark changing";
-        }
-        json_decref(doc);
-    } else {
-        status = 404;
-    }
+    control ctl = {{TF_CMD_STOP, 0}, NULL, 0, ""};
+    read_control(s, url, rq, &ctl);
     tf_hub_release(h->hub, s);
-    if (status == 404 && !detail[0])
+    if (ctl.status == 404 && !ctl.detail[0])
         return tf_web_send_text(c, 404, "no such control: %s", url);
-    if (status || !have_cmd)
-        return tf_web_send_text(c, status ? (unsigned)status : 500, "%s", detail);
-    if (tf_hub_push_command(h->hub, cmd))
+    if (ctl.status || !ctl.ok_msg)
+        return tf_web_send_text(c, ctl.status ? (unsigned)ctl.status : 500, "%s", ctl.detail);
+    if (tf_hub_push_command(h->hub, ctl.cmd))
         return tf_web_send_text(c, 503, "too many controls queued; try again");
     json_t *o = json_object();
     json_object_set_new(o, "ok", json_true());
-    json_object_set_new(o, "message", json_string(ok_msg));
-    ok = tf_web_send_json(c, 202, o);
-    return ok;
+    json_object_set_new(o, "message", json_string(ctl.ok_msg));
+    return tf_web_send_json(c, 202, o);
 }
 
 static enum MHD_Result handle(void *cls, struct MHD_Connection *c, const char *url,

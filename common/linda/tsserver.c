@@ -995,6 +995,71 @@ static void trim_idle(conn *c)
     tf_buf_trim(&c->raw, TS_BUF_KEEP);
 }
 
+/* How much to read next into *dst, never more than one maximal frame buffered: the parser
+ * refuses longer lengths, so a buffer this full always holds a complete frame to consume first
+ * (sealed: one record at a time, opened as room allows).  The rest of a frame whose length is in
+ * (and passed the parser) is read to its end into a buffer grown once to its size (*exact),
+ * which detach_frame can then hand over as it is.  0: nothing may be read now. */
+static size_t next_read(conn *c, tf_buf **dst, int *exact)
+{
+    if (c->waiting && c->in.len >= TS_MAX_PIPELINE)
+        return 0;
+    *dst = c->sealed ? &c->raw : &c->in;
+    size_t len = (*dst)->len;
+    size_t limit = c->sealed ? (size_t)TF_SEAL_RECORD_MAX + TF_SEAL_ABYTES + 4
+                             : (size_t)conn_max_frame(c) + 4;
+    size_t room = len < limit ? limit - len : 0;
+    size_t chunk = len == 0 && !c->sealed ? TS_FIRST_READ : TS_READ_CHUNK;
+    size_t rest = c->sealed || c->waiting ? 0 : tf_frame_rest(tf_buf_head(*dst), len);
+    *exact = rest > 0 && rest <= TS_EXACT_MAX && rest <= room;
+    return *exact ? rest : room < chunk ? room : chunk;
+}
+
+/* n bytes just received: served.  1 to read on, 0 to stop (the connection died, or a short
+ * read took all the socket had: stop rather than pay a recv that says EAGAIN -- epoll is
+ * level-triggered and reports anything that comes next). */
+static int serve_received(conn *c, size_t n, size_t want)
+{
+    c->last_rx_ms = tf_now_ms();
+    if (c->sealed) {
+        if (unseal_and_serve(c) != 0)
+            return 0;
+    } else {
+        int was_sealed = c->sealed;
+        conn_process_input(c);
+        if (c->dead)
+            return 0;
+        if (!was_sealed && c->sealed && unseal_and_serve(c) != 0)
+            return 0; /* records that came with the AUTH */
+    }
+    if (c->dead)
+        return 0;
+    if (n < want) {
+        trim_idle(c);
+        return 0;
+    }
+    return 1;
+}
+
+/* recv gave n <= 0: 1 to try again (EINTR), 0 when the socket is drained, -1 when the
+ * connection is over (closed by the peer, or an error). */
+static int receive_failed(conn *c, ssize_t n)
+{
+    if (n < 0 && errno == EINTR)
+        return 1;
+    if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+        trim_idle(c);
+        return 0;
+    }
+    if (n == 0 && (c->in.len > 0 || c->raw.len > 0))
+        conn_drop(c, "closed in the middle of a frame");
+    else if (n == 0)
+        conn_close(c);
+    else
+        conn_drop(c, strerror(errno));
+    return -1;
+}
+
 /* Read what is available (bounded), then serve it. */
 static void conn_readable(conn *c)
 {
@@ -1002,25 +1067,11 @@ static void conn_readable(conn *c)
     if (c->sealed && unseal_and_serve(c) != 0)
         return;
     for (;;) {
-        if (c->waiting && c->in.len >= TS_MAX_PIPELINE)
-            break;
-        /* Never buffer more than one maximal frame: the parser refuses longer lengths, so a
-         * buffer this full always holds a complete frame to consume first.  Sealed: one record
-         * at a time, opened as room allows. */
-        tf_buf *dst = c->sealed ? &c->raw : &c->in;
-        size_t limit = c->sealed ? (size_t)TF_SEAL_RECORD_MAX + TF_SEAL_ABYTES + 4
-                                 : (size_t)conn_max_frame(c) + 4;
-        size_t room = dst->len < limit ? limit - dst->len : 0;
-        size_t chunk = dst->len == 0 && !c->sealed ? TS_FIRST_READ : TS_READ_CHUNK;
-        size_t want = room < chunk ? room : chunk;
-        /* The rest of a frame whose length is in (and passed the parser): read to its end into a
-         * buffer grown once to its size, which detach_frame can then hand over as it is. */
-        size_t rest = c->sealed || c->waiting ? 0 : tf_frame_rest(tf_buf_head(dst), dst->len);
-        int exact = rest > 0 && rest <= TS_EXACT_MAX && rest <= room;
-        if (exact)
-            want = rest;
+        tf_buf *dst = NULL;
+        int exact = 0;
+        size_t want = next_read(c, &dst, &exact);
         if (want == 0)
-            break;
+            return;
         if ((exact ? tf_buf_reserve_exact(dst, want) : tf_buf_reserve(dst, want)) != 0) {
             conn_drop(c, "out of memory buffering input");
             return;
@@ -1028,41 +1079,11 @@ static void conn_readable(conn *c)
         ssize_t n = recv(c->fd, dst->data + dst->off + dst->len, want, 0);
         if (n > 0) {
             dst->len += (size_t)n;
-            c->last_rx_ms = tf_now_ms();
-            if (c->sealed) {
-                if (unseal_and_serve(c) != 0)
-                    return;
-            } else {
-                int was_sealed = c->sealed;
-                conn_process_input(c);
-                if (c->dead)
-                    return;
-                if (!was_sealed && c->sealed && unseal_and_serve(c) != 0)
-                    return; /* records that came with the AUTH */
-            }
-            if (c->dead)
+            if (!serve_received(c, (size_t)n, want))
                 return;
-            if ((size_t)n < want) {
-                /* A short read took all the socket had: stop here rather than pay a recv that
-                 * says EAGAIN (epoll is level-triggered and reports anything that comes next). */
-                trim_idle(c);
-                break;
-            }
-            continue;
+        } else if (receive_failed(c, n) != 1) {
+            return;
         }
-        if (n < 0 && errno == EINTR)
-            continue;
-        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
-            trim_idle(c);
-            break;
-        }
-        if (n == 0 && (c->in.len > 0 || c->raw.len > 0))
-            conn_drop(c, "closed in the middle of a frame");
-        else if (n == 0)
-            conn_close(c);
-        else
-            conn_drop(c, strerror(errno));
-        return;
     }
 }
 

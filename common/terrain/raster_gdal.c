@@ -102,71 +102,78 @@ static void last_gdal_message(const tf_gdal *g, char *out, size_t outlen, const 
     out[k] = '\0';
 }
 
+/* The file's bytes as a private /vsimem file that keeps its base name (SRTMHGT reads it), its
+ * path in vpath.  0, or -1 without memory. */
+static int expose_in_memory(const tf_gdal *g, const uint8_t *data, size_t len, const char *name,
+                            char *vpath, size_t vlen)
+{
+    static int counter;
+    const char *base = strrchr(name, '/');
+    base = base ? base + 1 : name;
+    snprintf(vpath, vlen, "/vsimem/terrafarm-%ld-%d/%.120s", (long)getpid(),
+             __atomic_add_fetch(&counter, 1, __ATOMIC_RELAXED), base);
+    VSILFILE *f = g->VSIFileFromMemBuffer(vpath, (GByte *)data, (vsi_l_offset)len, FALSE);
+    if (!f)
+        return -1;
+    g->VSIFCloseL(f);
+    return 0;
+}
+
+/* Band 1 of ds as r's values: its nodata value and non-finite samples become NAN.  0, or -1
+ * with err. */
+static int read_band(const tf_gdal *g, GDALDatasetH ds, const char *name, const char *vpath,
+                     tf_raster *r, char *err, size_t errlen)
+{
+    if (g->GDALGetRasterCount(ds) < 1)
+        return tf_seterr(err, errlen, "%s: raster has no bands", name);
+    int w = g->GDALGetRasterXSize(ds), h = g->GDALGetRasterYSize(ds);
+    if (tf_raster_check_size(w, h, name, err, errlen) != 0)
+        return -1;
+    GDALRasterBandH band = g->GDALGetRasterBand(ds, 1);
+    size_t count = (size_t)w * (size_t)h;
+    r->v = malloc(count * sizeof *r->v);
+    if (!r->v)
+        return tf_seterr(err, errlen, "%s: out of memory for a %dx%d height map", name, w, h);
+    if (g->GDALRasterIO(band, GF_Read, 0, 0, w, h, r->v, w, h, GDT_Float32, 0, 0) != CE_None) {
+        char why[192];
+        last_gdal_message(g, why, sizeof why, vpath);
+        return tf_seterr(err, errlen, "%s: pixels do not decode (corrupt or truncated)%s", name,
+                         why);
+    }
+    int has_nodata = 0;
+    float nodata = (float)g->GDALGetRasterNoDataValue(band, &has_nodata);
+    for (size_t i = 0; i < count; i++)
+        if (!isfinite(r->v[i]) || (has_nodata && r->v[i] == nodata))
+            r->v[i] = NAN;
+    r->width = w;
+    r->height = h;
+    return 0;
+}
+
 int tf_raster_read_gdal(const uint8_t *data, size_t len, const char *name, tf_raster *r,
                         char *err, size_t errlen)
 {
     memset(r, 0, sizeof *r);
-    char why_not[224];
+    char why_not[224], vpath[256], why[192];
     const tf_gdal *g = tf_gdal_load(why_not, sizeof why_not);
     if (!g)
         return tf_seterr(err, errlen, "%s: neither PNG nor OpenEXR, and %s", name, why_not);
     pthread_once(&options_once, set_options);
-    /* A private /vsimem name that keeps the file's base name (SRTMHGT reads it) */
-    static int counter;
-    const char *base = strrchr(name, '/');
-    base = base ? base + 1 : name;
-    char vpath[256];
-    snprintf(vpath, sizeof vpath, "/vsimem/terrafarm-%ld-%d/%.120s", (long)getpid(),
-             __atomic_add_fetch(&counter, 1, __ATOMIC_RELAXED), base);
-    VSILFILE *f = g->VSIFileFromMemBuffer(vpath, (GByte *)data, (vsi_l_offset)len, FALSE);
-    if (!f)
+    if (expose_in_memory(g, data, len, name, vpath, sizeof vpath))
         return tf_seterr(err, errlen, "%s: out of memory", name);
-    g->VSIFCloseL(f);
-
     g->CPLPushErrorHandler(g->CPLQuietErrorHandler);
     g->CPLErrorReset();
     GDALDatasetH ds = g->GDALOpenEx(vpath, GDAL_OF_RASTER | GDAL_OF_READONLY,
-                                 (const char *const *)ALLOWED_DRIVERS, NULL, NULL);
+                                    (const char *const *)ALLOWED_DRIVERS, NULL, NULL);
     int rc = -1;
-    char why[192];
     if (!ds) {
         last_gdal_message(g, why, sizeof why, vpath);
         tf_seterr(err, errlen, "%s: not a raster image terrafarm can read (PNG, OpenEXR, or a "
                   "single-file format of GDAL's such as GeoTIFF)%s", name, why);
-        goto out;
+    } else if (read_band(g, ds, name, vpath, r, err, errlen) == 0) {
+        read_georef(g, ds, r);
+        rc = read_meta(g, ds, name, r, err, errlen) != 0 ? -1 : 0;
     }
-    if (g->GDALGetRasterCount(ds) < 1) {
-        tf_seterr(err, errlen, "%s: raster has no bands", name);
-        goto out;
-    }
-    int w = g->GDALGetRasterXSize(ds), h = g->GDALGetRasterYSize(ds);
-    if (tf_raster_check_size(w, h, name, err, errlen) != 0)
-        goto out;
-    GDALRasterBandH band = g->GDALGetRasterBand(ds, 1);
-    size_t count = (size_t)w * (size_t)h;
-    r->v = malloc(count * sizeof *r->v);
-    if (!r->v) {
-        tf_seterr(err, errlen, "%s: out of memory for a %dx%d height map", name, w, h);
-        goto out;
-    }
-    if (g->GDALRasterIO(band, GF_Read, 0, 0, w, h, r->v, w, h, GDT_Float32, 0, 0) != CE_None) {
-        last_gdal_message(g, why, sizeof why, vpath);
-        tf_seterr(err, errlen, "%s: pixels do not decode (corrupt or truncated)%s", name, why);
-        goto out;
-    }
-    int has_nodata = 0;
-    double nodata = g->GDALGetRasterNoDataValue(band, &has_nodata);
-    float nodata_f = (float)nodata;
-    for (size_t i = 0; i < count; i++)
-        if (!isfinite(r->v[i]) || (has_nodata && r->v[i] == nodata_f))
-            r->v[i] = NAN;
-    r->width = w;
-    r->height = h;
-    read_georef(g, ds, r);
-    if (read_meta(g, ds, name, r, err, errlen) != 0)
-        goto out;
-    rc = 0;
-out:
     if (rc != 0) {
         free(r->v);
         r->v = NULL;

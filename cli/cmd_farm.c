@@ -45,69 +45,97 @@ static int parse_ms(const char *flag, const char *text, int *out)
     return 0;
 }
 
-int cmd_farm(int argc, char **argv)
+enum { O_LISTEN = 256, O_STATE, O_SECRET, O_TIMEOUT, O_FAILURES, O_FORGIVE, O_ADD, O_ROLE,
+       O_PAINT_IDLE };
+
+static const struct option longopts[] = {
+    {"listen", required_argument, NULL, O_LISTEN},
+    {"state", required_argument, NULL, O_STATE},
+    {"secret-file", required_argument, NULL, O_SECRET},
+    {"worker-timeout", required_argument, NULL, O_TIMEOUT},
+    {"max-failures", required_argument, NULL, O_FAILURES},
+    {"forgive", required_argument, NULL, O_FORGIVE},
+    {"paint-idle", required_argument, NULL, O_PAINT_IDLE},
+    {"add-token", required_argument, NULL, O_ADD},
+    {"role", required_argument, NULL, O_ROLE},
+    {"quiet", no_argument, NULL, 'q'},
+    {"verbose", no_argument, NULL, 'v'},
+    {"help", no_argument, NULL, 'h'},
+    {NULL, 0, NULL, 0},
+};
+
+/* What the command line asks for: a farm to run, or a token to add (add, role). */
+typedef struct farm_args {
+    tf_farm_opts o;
+    const char *add, *role;
+} farm_args;
+
+/* One option into a: 0, or -1 after saying why not. */
+static int farm_option(farm_args *a, int ch, const char *arg)
 {
-    enum { O_LISTEN = 256, O_STATE, O_SECRET, O_TIMEOUT, O_FAILURES, O_FORGIVE, O_ADD, O_ROLE,
-           O_PAINT_IDLE };
-    static const struct option longopts[] = {
-        {"listen", required_argument, NULL, O_LISTEN},
-        {"state", required_argument, NULL, O_STATE},
-        {"secret-file", required_argument, NULL, O_SECRET},
-        {"worker-timeout", required_argument, NULL, O_TIMEOUT},
-        {"max-failures", required_argument, NULL, O_FAILURES},
-        {"forgive", required_argument, NULL, O_FORGIVE},
-        {"paint-idle", required_argument, NULL, O_PAINT_IDLE},
-        {"add-token", required_argument, NULL, O_ADD},
-        {"role", required_argument, NULL, O_ROLE},
-        {"quiet", no_argument, NULL, 'q'},
-        {"verbose", no_argument, NULL, 'v'},
-        {"help", no_argument, NULL, 'h'},
-        {NULL, 0, NULL, 0},
-    };
-    tf_farm_opts o = {0};
-    const char *add = NULL, *role = NULL;
+    char *end;
+    long v;
+    switch (ch) {
+    case O_LISTEN: a->o.listen = arg; return 0;
+    case O_STATE: a->o.state_dir = arg; return 0;
+    case O_SECRET: a->o.secret_file = arg; return 0;
+    case O_ADD: a->add = arg; return 0;
+    case O_ROLE: a->role = arg; return 0;
+    case O_TIMEOUT: return parse_ms("--worker-timeout", arg, &a->o.worker_timeout_ms);
+    case O_FORGIVE: return parse_ms("--forgive", arg, &a->o.forgive_ms);
+    case O_PAINT_IDLE: return parse_ms("--paint-idle", arg, &a->o.paint_idle_ms);
+    case O_FAILURES:
+        v = strtol(arg, &end, 10);
+        if (end == arg || *end || v < 1 || v > 1000) {
+            tf_error("--max-failures '%s': expected 1 to 1000", arg);
+            return -1;
+        }
+        a->o.max_failures = (int)v;
+        return 0;
+    case 'q': tf_log_set_level(TF_LOG_ERROR); return 0;
+    case 'v': tf_log_set_level(TF_LOG_DEBUG); return 0;
+    default: return -1;
+    }
+}
+
+/* The command line into a: -1 to go on, or the exit status (--help, or a refusal). */
+static int parse_farm_args(farm_args *a, int argc, char **argv)
+{
+    memset(a, 0, sizeof *a);
     int ch;
     optind = 1;
     opterr = 0;
     while ((ch = getopt_long(argc, argv, ":qvh", longopts, NULL)) != -1) {
-        switch (ch) {
-        case O_LISTEN: o.listen = optarg; break;
-        case O_STATE: o.state_dir = optarg; break;
-        case O_SECRET: o.secret_file = optarg; break;
-        case O_TIMEOUT:
-            if (parse_ms("--worker-timeout", optarg, &o.worker_timeout_ms))
-                return TF_EXIT_USAGE;
-            break;
-        case O_FAILURES:
-            o.max_failures = atoi(optarg);
-            if (o.max_failures < 1 || o.max_failures > 1000) {
-                tf_error("--max-failures '%s': expected 1 to 1000", optarg);
-                return TF_EXIT_USAGE;
-            }
-            break;
-        case O_FORGIVE:
-            if (parse_ms("--forgive", optarg, &o.forgive_ms))
-                return TF_EXIT_USAGE;
-            break;
-        case O_PAINT_IDLE:
-            if (parse_ms("--paint-idle", optarg, &o.paint_idle_ms))
-                return TF_EXIT_USAGE;
-            break;
-        case O_ADD: add = optarg; break;
-        case O_ROLE: role = optarg; break;
-        case 'q': tf_log_set_level(TF_LOG_ERROR); break;
-        case 'v': tf_log_set_level(TF_LOG_DEBUG); break;
-        case 'h': fputs(usage, stdout); return TF_EXIT_OK;
-        case ':': tf_error("%s needs a value", argv[optind - 1]); return TF_EXIT_USAGE;
-        default: tf_error("unknown option '%s' (see terrafarm farm --help)", argv[optind - 1]);
+        if (ch == 'h') {
+            fputs(usage, stdout);
+            return TF_EXIT_OK;
+        }
+        if (ch == ':' || ch == '?') {
+            if (ch == ':')
+                tf_error("%s needs a value", argv[optind - 1]);
+            else
+                tf_error("unknown option '%s' (see terrafarm farm --help)", argv[optind - 1]);
             return TF_EXIT_USAGE;
         }
+        if (farm_option(a, ch, optarg))
+            return TF_EXIT_USAGE;
     }
-    if (optind < argc || !o.state_dir || (!add && (!o.listen || role)) || (add && !role)) {
+    const tf_farm_opts *o = &a->o;
+    if (optind < argc || !o->state_dir || (!a->add && (!o->listen || a->role)) ||
+        (a->add && !a->role)) {
         fputs(usage, stderr);
         return TF_EXIT_USAGE;
     }
-    if (add)
-        return tf_farm_add_token(o.state_dir, add, role);
-    return tf_farm_run(&o);
+    return -1;
+}
+
+int cmd_farm(int argc, char **argv)
+{
+    farm_args a;
+    int status = parse_farm_args(&a, argc, argv);
+    if (status >= 0)
+        return status;
+    if (a.add)
+        return tf_farm_add_token(a.o.state_dir, a.add, a.role);
+    return tf_farm_run(&a.o);
 }

@@ -101,10 +101,11 @@ json_t *farm_list(tf_farm *f, const farm_caller *who, int *status);
 json_t *farm_show(tf_farm *f, const farm_caller *who, int64_t id, int *status);
 json_t *farm_control(tf_farm *f, const farm_caller *who, int64_t id, const char *action,
                      json_t *req, int *status);
-/* The output file of job id (frame for a sequence) for its owner or an admin; 0 or an HTTP
- * status with a message in err. */
-int farm_output_path(tf_farm *f, const farm_caller *who, int64_t id, int frame, char *path,
-                     size_t n, char *err, size_t errlen);
+/* The output file of job id for its owner or an admin: a sequence's frame `frame` (the text of
+ * the request's ?frame=, NULL: frame 0; a still ignores it).  0 or an HTTP status with a message
+ * in err (400 for a frame that is not a number >= 0). */
+int farm_output_path(tf_farm *f, const farm_caller *who, int64_t id, const char *frame,
+                     char *path, size_t n, char *err, size_t errlen);
 json_t *farm_error(int *status, int code, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 

@@ -5,7 +5,10 @@
  * answer is JSON with an HTTP status. */
 #include "coordinator/farm/farm_internal.h"
 
+#include <ctype.h>
+#include <errno.h>
 #include <sodium.h>
+#include <stdint.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -452,16 +455,34 @@ json_t *farm_control(tf_farm *f, const farm_caller *who, int64_t id, const char 
     return job_json(f, i);
 }
 
-int farm_output_path(tf_farm *f, const farm_caller *who, int64_t id, int frame, char *path,
-                     size_t n, char *err, size_t errlen)
+/* A request's ?frame=: digits only, at most INT32_MAX (NULL: frame 0).  0, or -1. */
+static int parse_frame(const char *text, int *frame)
 {
-    int i = farm_job_index(f, id);
+    char *end;
+    *frame = 0;
+    if (!text)
+        return 0;
+    errno = 0;
+    long long v = strtoll(text, &end, 10);
+    if (end == text || *end || !isdigit((unsigned char)text[0]) || errno || v > INT32_MAX)
+        return -1;
+    *frame = (int)v;
+    return 0;
+}
+
+int farm_output_path(tf_farm *f, const farm_caller *who, int64_t id, const char *frame_text,
+                     char *path, size_t n, char *err, size_t errlen)
+{
+    int i = farm_job_index(f, id), frame = 0;
     if (i < 0 || !may_see(who, &f->jobs[i]))
         return tf_seterr(err, errlen, "no job %lld of yours", (long long)id), 404;
     const tf_job *j = &f->jobs[i];
     if (strcmp(j->state, "done"))
         return tf_seterr(err, errlen, "job %lld is %s, not done", (long long)id,
                          shown_state(f, i)), 409;
+    if (j->frames && parse_frame(frame_text, &frame))
+        return tf_seterr(err, errlen, "frame '%.40s': expected a frame number (an integer >= 0)",
+                         frame_text), 400;
     char *name = j->frames ? tf_frame_output_path(j->output, frame) : strdup(j->output);
     int rc = !name || tf_job_path(f->o.state_dir, id, name, path, n);
     free(name);

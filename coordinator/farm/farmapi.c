@@ -245,8 +245,7 @@ static enum MHD_Result serve_output(tf_farm *f, struct MHD_Connection *c, const 
     const char *fr = MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, "frame");
     char path[4200], err[512];
     pthread_mutex_lock(&f->lock);
-    int code = farm_output_path(f, who, id, fr ? atoi(fr) : 0, path, sizeof path, err,
-                                sizeof err);
+    int code = farm_output_path(f, who, id, fr, path, sizeof path, err, sizeof err);
     pthread_mutex_unlock(&f->lock);
     if (code)
         return send_error(c, code, err);

@@ -125,4 +125,24 @@ reference next "$TF_ROOT/scenes/valley.scene" --size 480x270 --tasks rows:2
 check_output "$next" next
 reference long "$TF_ROOT/scenes/alps.scene" --size 480x270 --tasks rows:2
 check_output "$long" long
+say "a sequence job: each frame fetched by --frame; a ?frame= that is not a number is a 400"
+seqjob=$(submit "$TF_ROOT/scenes/flyby.scene" --size 48x30 --frames 0-1 --name seq)
+wait_state "$seqjob" done 600
+for k in 0 1; do
+    reference "seq$k" "$TF_ROOT/scenes/flyby.scene" --size 48x30 --frame $k
+    tf job "$seqjob" --frame $k --output "$T/got/seq$k.exr" ||
+        fail "frame $k of job $seqjob cannot be downloaded"
+    same_pixels "$T/ref/seq$k.exr" "$T/got/seq$k.exr" "job $seqjob frame $k"
+done
+for bad in x -1 1x 99999999999 ''; do
+    got=$(python3 -c 'import http.client, sys
+c = http.client.HTTPConnection("127.0.0.1", int(sys.argv[1]), timeout=30)
+c.request("GET", "/api/jobs/%s/output?frame=%s" % (sys.argv[2], sys.argv[3]),
+          headers={"Authorization": "Bearer " + open(sys.argv[4]).read().split()[-1]})
+r = c.getresponse()
+print(r.status, r.read().decode(errors="replace").replace("\n", " ")[:160])' \
+        "$PORT" "$seqjob" "$bad" "$T/alice")
+    case "$got" in "400 "*"expected a frame number"*) ;; *) fail "?frame=$bad answered: $got" ;; esac
+done
+say "?frame= x, -1, 1x, 99999999999 and empty: 400, one line each"
 echo "standing_farm: priorities, dependency, pause/resume, cancel, pools, tags and a farm kill all hold"

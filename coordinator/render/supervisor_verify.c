@@ -255,6 +255,80 @@ static void exclude_liar(tf_supervisor *s, int64_t liar, int64_t task)
         ts_server_close_conn(s->srv, w->conn);
 }
 
+/* Worker id's result agreed with another's: it has passed a check (unknown ids: nothing). */
+static void mark_checked(tf_supervisor *s, int64_t id)
+{
+    tf_worker_stats *w = sv_worker_by_id(s, id);
+    if (w)
+        w->checked = 1;
+}
+
+/* The second copy's digest d, from worker m->worker: the same bytes as the first pass both; else
+ * a third worker decides. */
+static ts_cap_verdict second_copy(tf_supervisor *s, task_slot *t, const tf_result_msg *m,
+                                  const uint8_t *d)
+{
+    if (sodium_memcmp(d, t->digest[0], TF_DIGEST_BYTES) == 0) {
+        mark_checked(s, t->check_worker[0]);
+        mark_checked(s, m->worker);
+        t->check = CHECK_NONE;
+        sv_withdraw_copies(s, t);
+        return TS_CAP_DISCARD;
+    }
+    s->stats.verify_mismatches++;
+    tf_warn("task %" PRId64 ": workers %" PRId64 " and %" PRId64 " rendered different bytes; "
+            "a third worker decides", t->id, t->check_worker[0], m->worker);
+    t->check = CHECK_THIRD;
+    t->check_worker[1] = m->worker;
+    memcpy(t->digest[1], d, TF_DIGEST_BYTES);
+    sv_withdraw_copies(s, t);
+    t->in_space++;
+    sv_deal_copy(s, t);
+    return TS_CAP_DISCARD;
+}
+
+/* The first result, stored, was the lie: it leaves the space, and no longer counts as its
+ * worker's; the third's, which agrees with the second, takes its place (TS_CAP_ALLOW). */
+static ts_cap_verdict replace_first(tf_supervisor *s, task_slot *t)
+{
+    t->replacing = 1;
+    tf_tuple tmpl, got;
+    tf_tuple_init(&got);
+    if (tf_result_template(&tmpl, t->id, t->check_worker[0]) == 0 &&
+        ts_space_inp(s->space, &tmpl, &got) == 1)
+        tf_tuple_clear(&got);
+    tf_tuple_clear(&tmpl);
+    tf_worker_stats *first = sv_worker_by_id(s, t->check_worker[0]);
+    if (first && first->written == 0 && first->tasks > 0)
+        first->tasks--;
+    exclude_liar(s, t->check_worker[0], t->id);
+    return TS_CAP_ALLOW;
+}
+
+/* The third copy's digest d decides: with the first, the second lied; with the second, the
+ * first did; with neither, a pixel depends on more than the scene and the render stops. */
+static ts_cap_verdict third_copy(tf_supervisor *s, task_slot *t, const tf_result_msg *m,
+                                 const uint8_t *d)
+{
+    sv_withdraw_copies(s, t);
+    t->check = CHECK_NONE;
+    if (sodium_memcmp(d, t->digest[0], TF_DIGEST_BYTES) == 0) {
+        mark_checked(s, t->check_worker[0]);
+        mark_checked(s, m->worker);
+        exclude_liar(s, t->check_worker[1], t->id);
+        return TS_CAP_DISCARD;
+    }
+    if (sodium_memcmp(d, t->digest[1], TF_DIGEST_BYTES) == 0) {
+        mark_checked(s, m->worker);
+        mark_checked(s, t->check_worker[1]);
+        return replace_first(s, t);
+    }
+    sv_fail(s, "task %" PRId64 ": workers %" PRId64 ", %" PRId64 " and %" PRId64 " rendered three "
+         "different results; a pixel should depend only on the scene: stopping", t->id,
+         t->check_worker[0], t->check_worker[1], m->worker);
+    return TS_CAP_DISCARD;
+}
+
 /* A result for a task whose check copy is out, from a worker that has not rendered it: decide.
  * The result is never stored except when it replaces a lying first one (TS_CAP_ALLOW). */
 ts_cap_verdict sv_admit_check(tf_supervisor *s, uint64_t conn, task_slot *t,
@@ -264,63 +338,5 @@ ts_cap_verdict sv_admit_check(tf_supervisor *s, uint64_t conn, task_slot *t,
     tf_result_digest(m, d);
     sv_remove_lease(s, conn, t->id);
     s->stats.verify_busy_s += (double)m->busy_ns * 1e-9;
-    if (t->check == CHECK_SECOND) {
-        if (sodium_memcmp(d, t->digest[0], TF_DIGEST_BYTES) == 0) {
-            tf_worker_stats *a = sv_worker_by_id(s, t->check_worker[0]), *b = sv_worker_by_id(s, m->worker);
-            if (a)
-                a->checked = 1;
-            if (b)
-                b->checked = 1;
-            t->check = CHECK_NONE;
-            sv_withdraw_copies(s, t);
-            return TS_CAP_DISCARD;
-        }
-        s->stats.verify_mismatches++;
-        tf_warn("task %" PRId64 ": workers %" PRId64 " and %" PRId64 " rendered different bytes; "
-                "a third worker decides", t->id, t->check_worker[0], m->worker);
-        t->check = CHECK_THIRD;
-        t->check_worker[1] = m->worker;
-        memcpy(t->digest[1], d, TF_DIGEST_BYTES);
-        sv_withdraw_copies(s, t);
-        t->in_space++;
-        sv_deal_copy(s, t);
-        return TS_CAP_DISCARD;
-    }
-    /* CHECK_THIRD */
-    sv_withdraw_copies(s, t);
-    t->check = CHECK_NONE;
-    tf_worker_stats *third = sv_worker_by_id(s, m->worker);
-    if (sodium_memcmp(d, t->digest[0], TF_DIGEST_BYTES) == 0) {
-        tf_worker_stats *first = sv_worker_by_id(s, t->check_worker[0]);
-        if (first)
-            first->checked = 1;
-        if (third)
-            third->checked = 1;
-        exclude_liar(s, t->check_worker[1], t->id);
-        return TS_CAP_DISCARD;
-    }
-    if (sodium_memcmp(d, t->digest[1], TF_DIGEST_BYTES) == 0) {
-        if (third)
-            third->checked = 1;
-        tf_worker_stats *second = sv_worker_by_id(s, t->check_worker[1]);
-        if (second)
-            second->checked = 1;
-        /* The first was the liar: its stored result leaves, this one takes its place. */
-        t->replacing = 1;
-        tf_tuple tmpl, got;
-        tf_tuple_init(&got);
-        if (tf_result_template(&tmpl, t->id, t->check_worker[0]) == 0 &&
-            ts_space_inp(s->space, &tmpl, &got) == 1)
-            tf_tuple_clear(&got);
-        tf_tuple_clear(&tmpl);
-        tf_worker_stats *first = sv_worker_by_id(s, t->check_worker[0]);
-        if (first && first->written == 0 && first->tasks > 0)
-            first->tasks--; /* that result no longer counts as its */
-        exclude_liar(s, t->check_worker[0], t->id);
-        return TS_CAP_ALLOW;
-    }
-    sv_fail(s, "task %" PRId64 ": workers %" PRId64 ", %" PRId64 " and %" PRId64 " rendered three "
-         "different results; a pixel should depend only on the scene: stopping", t->id,
-         t->check_worker[0], t->check_worker[1], m->worker);
-    return TS_CAP_DISCARD;
+    return t->check == CHECK_SECOND ? second_copy(s, t, m, d) : third_copy(s, t, m, d);
 }

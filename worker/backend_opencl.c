@@ -517,19 +517,23 @@ static void fill_sun_frame(const tf_sun_strips *st, double *P, int *I)
     I[TFI_SUN_N] = f->n;
 }
 
-/* Copy what tf_renderer_new derived into the P[] / I[] blocks. */
-static void fill_params(const tf_renderer *r, double *P, int *I)
+/* The height field's scalars. */
+static void terrain_params(const tf_heightfield *hf, double *P, int *I)
 {
-    const tf_scene *s = r->scene;
-    const tf_heightfield *hf = r->hf;
-    const tf_camera *cam = &r->camera;
-    const tf_shader *sh = &r->shader;
     P[TFP_CELL] = hf->cell;
     P[TFP_EXTENT] = hf->extent;
     P[TFP_HMIN] = hf->hmin;
     P[TFP_HMAX] = hf->hmax;
     /* trace.c's vouched asks a finite bound; NAN makes every kernel vouch fail */
     P[TFP_SLOPE_MAX] = hf->slope_max >= 0 && hf->slope_max < INFINITY ? hf->slope_max : NAN;
+    I[TFI_N] = hf->n;
+    I[TFI_CELLS] = hf->cells;
+    I[TFI_LEVELS] = hf->levels;
+}
+
+/* The camera: its frame, and a panorama's. */
+static void camera_params(const tf_camera *cam, double *P, int *I)
+{
     put3(P, TFP_CAM_POS, cam->position);
     put3(P, TFP_CAM_FORWARD, cam->forward);
     put3(P, TFP_CAM_RIGHT, cam->right);
@@ -542,6 +546,14 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     P[TFP_SWEEP] = cam->sweep;
     P[TFP_V_CENTRE] = cam->v_centre;
     P[TFP_V_HALF] = cam->v_half;
+    I[TFI_WIDTH] = cam->width;
+    I[TFI_HEIGHT] = cam->height;
+    I[TFI_CAM_KIND] = cam->kind == TF_CAMERA_PANORAMA;
+}
+
+/* The shader's derived values, with its own octave weights and snow bounds (shade.h). */
+static void shader_params(const tf_shader *sh, double *P, int *I)
+{
     put3(P, TFP_SUN_DIR, sh->sun_dir);
     put3(P, TFP_SUN_LIGHT, sh->sun_light);
     put3(P, TFP_SKY_LIGHT, sh->sky_light);
@@ -551,6 +563,17 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     P[TFP_RIPPLE_SCALE] = sh->ripple_scale;
     P[TFP_SHADOW_LIFT] = sh->shadow_lift;
     P[TFP_PIXEL_ANGLE] = sh->pixel_angle;
+    tf_shade_octave_weights(TF_BUMP_H, P + TFP_AMP_H08, TF_CL_AMP_TABLE);
+    tf_shade_octave_weights(TF_SNOW_H, P + TFP_AMP_H05, TF_CL_AMP_TABLE); /* = TF_RIPPLE_H */
+    _Static_assert(TF_CL_SNOW_TERMS == (int)TF_SNOW_OCTAVES, "the kernels' snow octaves");
+    tf_shade_snow_rest_bounds(P + TFP_SNOW_REST, TF_CL_SNOW_TERMS);
+    I[TFI_TEXTURED] = sh->textured;
+    I[TFI_SMOOTH] = sh->smooth;
+}
+
+/* The scene's materials, mist and sky as written. */
+static void scene_params(const tf_scene *s, double *P, int *I)
+{
     P[TFP_SEA_LEVEL] = s->materials.sea_level;
     P[TFP_TREE_LINE] = s->materials.tree_line;
     P[TFP_SNOW_LINE] = s->materials.snow_line;
@@ -562,23 +585,18 @@ static void fill_params(const tf_renderer *r, double *P, int *I)
     put3(P, TFP_MIST_EXT, s->mist.extinction);
     put3(P, TFP_SKY_HORIZON, s->sky.horizon);
     put3(P, TFP_SKY_ZENITH, s->sky.zenith);
-    P[TFP_THRESHOLD] = r->threshold;
-    /* the shader's own octave weights and snow bounds (shade.h) */
-    tf_shade_octave_weights(TF_BUMP_H, P + TFP_AMP_H08, TF_CL_AMP_TABLE);
-    tf_shade_octave_weights(TF_SNOW_H, P + TFP_AMP_H05, TF_CL_AMP_TABLE); /* = TF_RIPPLE_H */
-    _Static_assert(TF_CL_SNOW_TERMS == (int)TF_SNOW_OCTAVES, "the kernels' snow octaves");
-    tf_shade_snow_rest_bounds(P + TFP_SNOW_REST, TF_CL_SNOW_TERMS);
-
-    I[TFI_N] = hf->n;
-    I[TFI_CELLS] = hf->cells;
-    I[TFI_LEVELS] = hf->levels;
-    I[TFI_WIDTH] = cam->width;
-    I[TFI_HEIGHT] = cam->height;
-    I[TFI_CAM_KIND] = cam->kind == TF_CAMERA_PANORAMA;
-    I[TFI_TEXTURED] = sh->textured;
-    I[TFI_SMOOTH] = sh->smooth;
     I[TFI_MIST_ENABLED] = s->mist.enabled;
     I[TFI_MIST_HOMOG] = s->mist.homogeneous;
+}
+
+/* Copy what tf_renderer_new derived into the P[] / I[] blocks. */
+static void fill_params(const tf_renderer *r, double *P, int *I)
+{
+    terrain_params(r->hf, P, I);
+    camera_params(&r->camera, P, I);
+    shader_params(&r->shader, P, I);
+    scene_params(r->scene, P, I);
+    P[TFP_THRESHOLD] = r->threshold;
     I[TFI_LATTICE] = r->lattice;
     I[TFI_DEPTH] = r->depth;
     fill_sun_frame(r->sun_strips, P, I);

@@ -152,22 +152,31 @@ static int render_option(bench_opts *o, int c, const char *arg)
     tf_task_spec spec;
     size_t bytes;
     int w, h;
-    if (c == O_TASKS && tf_task_spec_parse(arg, &spec, err, sizeof err)) {
-        tf_error("%s", err);
-        return -1;
+    switch (c) {
+    case O_TASKS:
+        if (tf_task_spec_parse(arg, &spec, err, sizeof err)) {
+            tf_error("%s", err);
+            return -1;
+        }
+        o->tasks = arg;
+        return 0;
+    case O_SIZE:
+        o->size = arg;
+        return parse_wxh("--size", arg, 1, 65536, &w, &h);
+    case O_TERRAIN_CACHE:
+        o->terrain_cache = arg;
+        return tf_parse_byte_size("--terrain-cache", arg, &bytes) ? -1 : 0;
+    case O_AFFINITY:
+        if (strcmp(arg, "on") && strcmp(arg, "off")) {
+            tf_error("--affinity '%s': expected on or off", arg);
+            return -1;
+        }
+        o->affinity = arg;
+        return 0;
+    default: /* O_WATERMARK: render checks it */
+        o->watermark = arg;
+        return 0;
     }
-    if ((c == O_SIZE && parse_wxh("--size", arg, 1, 65536, &w, &h)) ||
-        (c == O_TERRAIN_CACHE && tf_parse_byte_size("--terrain-cache", arg, &bytes)))
-        return -1;
-    if (c == O_AFFINITY && strcmp(arg, "on") && strcmp(arg, "off")) {
-        tf_error("--affinity '%s': expected on or off", arg);
-        return -1;
-    }
-    const char **to = c == O_TASKS ? &o->tasks : c == O_SIZE ? &o->size
-                    : c == O_TERRAIN_CACHE ? &o->terrain_cache : c == O_AFFINITY ? &o->affinity
-                    : &o->watermark; /* render checks it */
-    *to = arg;
-    return 0;
 }
 
 /* One option into o: 0, or -1 after saying why not. */

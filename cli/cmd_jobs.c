@@ -360,15 +360,15 @@ typedef struct jobs_args {
 } jobs_args;
 
 /* --priority and --after: integers.  0, or -1 after saying so. */
-static int integer_setting(jobs_args *a, const char *flag, const char *key, const char *arg)
+static int integer_setting(jobs_args *a, const char *name, const char *arg)
 {
     char *end;
     long long v = strtoll(arg, &end, 10);
     if (end == arg || *end) {
-        tf_error("--%s '%s': expected an integer", flag, arg);
+        tf_error("--%s '%s': expected an integer", name, arg);
         return -1;
     }
-    json_object_set_new(a->settings, key, json_integer(v));
+    json_object_set_new(a->settings, name, json_integer(v));
     return 0;
 }
 
@@ -403,7 +403,7 @@ static int jobs_option(jobs_args *a, int ch, const char *name, const char *arg)
         json_object_set_new(a->settings, name, json_string(arg));
         return 0;
     case O_PRIORITY: case O_AFTER:
-        return integer_setting(a, name, name, arg);
+        return integer_setting(a, name, arg);
     case O_VERIFY_CHUNKS:
         json_array_append_new(a->options, json_string("--verify-chunks"));
         return 0;

@@ -137,10 +137,14 @@ static int parse_status_args(status_args *a, int argc, char **argv)
     optind = 1;
     opterr = 0;
     while ((c = getopt_long(argc, argv, ":h", longopts, NULL)) != -1) {
-        if (c == O_JSON || c == O_PRINT) {
-            *(c == O_JSON ? &a->as_json : &a->print_token) = 1;
-        } else if (c == O_TOKEN || c == O_SECRET) {
-            *(c == O_TOKEN ? &a->token_file : &a->secret_file) = optarg;
+        if (c == O_JSON) {
+            a->as_json = 1;
+        } else if (c == O_PRINT) {
+            a->print_token = 1;
+        } else if (c == O_TOKEN) {
+            a->token_file = optarg;
+        } else if (c == O_SECRET) {
+            a->secret_file = optarg;
         } else if (c == O_TIMEOUT) {
             if (tf_parse_duration_ms(optarg, &ms) || ms < 1 || ms > 3600000) {
                 tf_error("--timeout '%s': expected a duration from 1ms to 1h (e.g. 500ms, 5s)",

@@ -150,6 +150,70 @@ static int read_attributes(exr_context_t ctx, const char *name, tf_raster *r, ch
     return 0;
 }
 
+/* What the header says of the pixels: the data window, the storage and the channel read. */
+typedef struct exr_shape {
+    exr_attr_box2i_t dw;
+    exr_storage_t storage;
+    const char *channel;
+} exr_shape;
+
+/* The part's data window, storage and height channel, its terrafarm.* attributes into r. */
+static int read_header(exr_context_t ctx, const char *name, tf_raster *r, exr_shape *sh,
+                       char *err, size_t errlen)
+{
+    const exr_attr_chlist_t *chlist = NULL;
+    if (exr_get_data_window(ctx, 0, &sh->dw) != EXR_ERR_SUCCESS ||
+        exr_get_channels(ctx, 0, &chlist) != EXR_ERR_SUCCESS || !chlist ||
+        exr_get_storage(ctx, 0, &sh->storage) != EXR_ERR_SUCCESS)
+        return tf_seterr(err, errlen, "%s: OpenEXR header lacks a data window or channels",
+                         name);
+    if (read_attributes(ctx, name, r, err, errlen) != 0)
+        return -1;
+    int c = pick_channel(chlist);
+    if (c < 0)
+        return tf_seterr(err, errlen,
+                         "%s: OpenEXR file has %d channels and none is named Y, Z or R", name,
+                         chlist->num_channels);
+    sh->channel = chlist->entries[c].name.str;
+    return 0;
+}
+
+/* r sized to the data window (within the raster limits), every sample nodata until a chunk
+ * fills it. */
+static int size_raster(const exr_attr_box2i_t *dw, const char *name, tf_raster *r, char *err,
+                       size_t errlen)
+{
+    if (tf_raster_check_size((long long)dw->max.x - dw->min.x + 1,
+                             (long long)dw->max.y - dw->min.y + 1, name, err, errlen) != 0)
+        return -1;
+    r->width = dw->max.x - dw->min.x + 1;
+    r->height = dw->max.y - dw->min.y + 1;
+    size_t count = (size_t)r->width * (size_t)r->height;
+    r->v = malloc(count * sizeof *r->v);
+    if (!r->v)
+        return tf_seterr(err, errlen, "%s: out of memory for a %dx%d height map", name,
+                         r->width, r->height);
+    for (size_t i = 0; i < count; i++)
+        r->v[i] = NAN; /* a chunk the file lacks stays nodata */
+    return 0;
+}
+
+/* Every chunk of the part decoded into r; what is not finite becomes nodata. */
+static int read_pixels(exr_context_t ctx, const exr_shape *sh, const char *name, tf_raster *r,
+                       char *err, size_t errlen)
+{
+    exr_result_t rv = decode_all(ctx, sh->storage, sh->channel, &sh->dw, r);
+    if (rv != EXR_ERR_SUCCESS)
+        return tf_seterr(err, errlen,
+                         "%s: OpenEXR pixels do not decode (%s): corrupt or truncated", name,
+                         exr_get_default_error_message(rv));
+    size_t count = (size_t)r->width * (size_t)r->height;
+    for (size_t i = 0; i < count; i++)
+        if (!isfinite(r->v[i]))
+            r->v[i] = NAN;
+    return 0;
+}
+
 int tf_raster_read_exr(const uint8_t *data, size_t len, const char *name, tf_raster *r,
                        char *err, size_t errlen)
 {
@@ -169,49 +233,12 @@ int tf_raster_read_exr(const uint8_t *data, size_t len, const char *name, tf_ras
         exr_finish(&ctx);
         return -1;
     }
+    exr_shape sh;
     int rc = -1;
-    exr_attr_box2i_t dw;
-    const exr_attr_chlist_t *chlist = NULL;
-    exr_storage_t storage;
-    if (exr_get_data_window(ctx, 0, &dw) != EXR_ERR_SUCCESS ||
-        exr_get_channels(ctx, 0, &chlist) != EXR_ERR_SUCCESS || !chlist ||
-        exr_get_storage(ctx, 0, &storage) != EXR_ERR_SUCCESS) {
-        tf_seterr(err, errlen, "%s: OpenEXR header lacks a data window or channels", name);
-        goto out;
-    }
-    if (read_attributes(ctx, name, r, err, errlen) != 0)
-        goto out;
-    int c = pick_channel(chlist);
-    if (c < 0) {
-        tf_seterr(err, errlen, "%s: OpenEXR file has %d channels and none is named Y, Z or R",
-                  name, chlist->num_channels);
-        goto out;
-    }
-    if (tf_raster_check_size((long long)dw.max.x - dw.min.x + 1,
-                             (long long)dw.max.y - dw.min.y + 1, name, err, errlen) != 0)
-        goto out;
-    r->width = dw.max.x - dw.min.x + 1;
-    r->height = dw.max.y - dw.min.y + 1;
-    size_t count = (size_t)r->width * (size_t)r->height;
-    r->v = malloc(count * sizeof *r->v);
-    if (!r->v) {
-        tf_seterr(err, errlen, "%s: out of memory for a %dx%d height map", name, r->width,
-                  r->height);
-        goto out;
-    }
-    for (size_t i = 0; i < count; i++)
-        r->v[i] = NAN; /* a chunk the file lacks stays nodata */
-    rv = decode_all(ctx, storage, chlist->entries[c].name.str, &dw, r);
-    if (rv != EXR_ERR_SUCCESS) {
-        tf_seterr(err, errlen, "%s: OpenEXR pixels do not decode (%s): corrupt or truncated",
-                  name, exr_get_default_error_message(rv));
-        goto out;
-    }
-    for (size_t i = 0; i < count; i++)
-        if (!isfinite(r->v[i]))
-            r->v[i] = NAN;
-    rc = 0;
-out:
+    if (read_header(ctx, name, r, &sh, err, errlen) == 0 &&
+        size_raster(&sh.dw, name, r, err, errlen) == 0 &&
+        read_pixels(ctx, &sh, name, r, err, errlen) == 0)
+        rc = 0;
     if (rc != 0) {
         free(r->v);
         r->v = NULL;

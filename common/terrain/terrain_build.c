@@ -177,6 +177,69 @@ static float *file_heights(const tf_terrain *t, int threads, double *extent, cha
     return h;
 }
 
+/* The generator's samples into h (n x n, cell apart), scaled by height_scale. */
+static int generate(const tf_terrain *t, const tf_fractal *fractal, int is_point, float *h,
+                    int n, double cell, int threads, char *err, size_t errlen)
+{
+    if (is_point) {
+        tf_noise noise;
+        tf_noise_init(&noise, t->seed);
+        fill_point_generator(fractal, &noise, h, n, cell, t->height_scale, threads);
+        return 0;
+    }
+    if (run_grid_generator(h, t, threads, err, errlen) != 0)
+        return -1;
+    scale_heights(h, n, t->height_scale, threads);
+    return 0;
+}
+
+/* Every height finite, or a message naming the first sample that is not. */
+static int check_finite(const tf_terrain *t, float *h, int n, int threads, char *err,
+                        size_t errlen)
+{
+    ptrdiff_t bad = first_non_finite(h, n, threads);
+    if (bad < 0)
+        return 0;
+    return tf_seterr(err, errlen,
+                     "terrain: %s generator produced a non-finite height at sample (%d, %d); "
+                     "check H, lacunarity, offset, gain and height_scale",
+                     tf_generator_name(t->generator), (int)(bad % n), (int)(bad / n));
+}
+
+/* A generated (not file) terrain's heights, weathered: the grid's size, the generator, the
+ * thermal weathering, the finite check. */
+static float *generated_heights(const tf_terrain *t, int threads, char *err, size_t errlen)
+{
+    if (!(t->extent > 0.0) || !isfinite(t->extent) || !isfinite(t->height_scale)) {
+        tf_seterr(err, errlen, "terrain: extent must be positive and height_scale finite");
+        return NULL;
+    }
+    int n = (1 << t->size_exp) + 1;
+    size_t count = (size_t)n * (size_t)n; /* at most 8193^2: no overflow */
+    double cell = t->extent / (double)(n - 1);
+    threads = resolve_threads(threads, n);
+    tf_fractal fractal;
+    int is_point = tf_fractal_prepare(&fractal, t) == 0;
+    if (is_point && !(t->feature_size > 0.0 && isfinite(t->feature_size))) {
+        tf_seterr(err, errlen, "terrain: feature_size must be positive");
+        return NULL;
+    }
+    float *h = tf_alloc_heights(count * sizeof *h);
+    if (!h) {
+        tf_seterr(err, errlen, "out of memory: a %dx%d height field needs %zu MB", n, n,
+                 (count * sizeof *h + (1u << 20) - 1) >> 20);
+        return NULL;
+    }
+    if (generate(t, &fractal, is_point, h, n, cell, threads, err, errlen) != 0 ||
+        (t->thermal_iterations > 0 &&
+         tf_weather_thermal(h, n, cell, t, threads, err, errlen) != 0) ||
+        check_finite(t, h, n, threads, err, errlen) != 0) {
+        free(h);
+        return NULL;
+    }
+    return h;
+}
+
 /* The generator's heights, then thermal weathering: everything but the erosion. */
 static float *raw_heights(const tf_terrain *t, int threads, double *extent, char *err,
                           size_t errlen)
@@ -192,57 +255,7 @@ static float *raw_heights(const tf_terrain *t, int threads, double *extent, char
     if (t->generator == TF_GEN_FILE)
         return file_heights(t, threads, extent, err, errlen);
     *extent = t->extent;
-    if (!(t->extent > 0.0) || !isfinite(t->extent) || !isfinite(t->height_scale)) {
-        tf_seterr(err, errlen, "terrain: extent must be positive and height_scale finite");
-        return NULL;
-    }
-    int n = (1 << t->size_exp) + 1;
-    size_t count = (size_t)n * (size_t)n; /* at most 8193^2: no overflow */
-    double cell = t->extent / (double)(n - 1);
-    threads = resolve_threads(threads, n);
-
-    tf_fractal fractal;
-    int is_point = tf_fractal_prepare(&fractal, t) == 0;
-    if (is_point && !(t->feature_size > 0.0 && isfinite(t->feature_size))) {
-        tf_seterr(err, errlen, "terrain: feature_size must be positive");
-        return NULL;
-    }
-
-    float *h = tf_alloc_heights(count * sizeof *h);
-    if (!h) {
-        tf_seterr(err, errlen, "out of memory: a %dx%d height field needs %zu MB", n, n,
-                 (count * sizeof *h + (1u << 20) - 1) >> 20);
-        return NULL;
-    }
-
-    if (is_point) {
-        tf_noise noise;
-        tf_noise_init(&noise, t->seed);
-        fill_point_generator(&fractal, &noise, h, n, cell, t->height_scale, threads);
-    } else {
-        if (run_grid_generator(h, t, threads, err, errlen) != 0) {
-            free(h);
-            return NULL;
-        }
-        scale_heights(h, n, t->height_scale, threads);
-    }
-
-    if (t->thermal_iterations > 0 &&
-        tf_weather_thermal(h, n, cell, t, threads, err, errlen) != 0) {
-        free(h);
-        return NULL;
-    }
-
-    ptrdiff_t bad = first_non_finite(h, n, threads);
-    if (bad >= 0) {
-        snprintf(err, errlen,
-                 "terrain: %s generator produced a non-finite height at sample (%d, %d); "
-                 "check H, lacunarity, offset, gain and height_scale",
-                 tf_generator_name(t->generator), (int)(bad % n), (int)(bad / n));
-        free(h);
-        return NULL;
-    }
-    return h;
+    return generated_heights(t, threads, err, errlen);
 }
 
 int tf_terrain_erosion_start(const tf_terrain *t, double *extent, tf_erosion_model *m,

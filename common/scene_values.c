@@ -479,50 +479,73 @@ static int parse_sha256_value(struct parser *p, int key, const char *value, char
     return 0;
 }
 
+/* A KT_INT value into *dst. */
+static int set_int(struct parser *p, int key, const char *value, int *dst)
+{
+    double d;
+    if (parse_int_value(p, key, value, &d) < 0)
+        return -1;
+    *dst = (int)d;
+    return 0;
+}
+
+/* A KT_DOUBLE value, in its key's range, into *dst. */
+static int set_double(struct parser *p, int key, const char *value, double *dst)
+{
+    const char *s = value;
+    double d;
+    if (take_double(p, SCENE_KEYS[key].name, &s, &d) < 0 ||
+        expect_end(p, SCENE_KEYS[key].name, s) < 0 || check_range(p, key, d) < 0)
+        return -1;
+    *dst = d;
+    return 0;
+}
+
+/* A KT_BOOL value into *dst (0 or 1). */
+static int set_bool(struct parser *p, int key, const char *value, int *dst)
+{
+    int i = parse_bool_value(p, key, value);
+    if (i < 0)
+        return -1;
+    *dst = i;
+    return 0;
+}
+
+/* One of names[0..count) into the enum field at dst: its index. */
+static int set_name(struct parser *p, int key, const char *value, const char *const *names,
+                    int count, void *dst)
+{
+    int i = parse_name_value(p, key, value, names, count);
+    if (i < 0)
+        return -1;
+    memcpy(dst, &i, sizeof i);
+    return 0;
+}
+
 /* Store `value` for SCENE_KEYS[key] in the scene, or fail_at. */
 int scene_set_value(struct parser *p, int key, const char *value)
 {
     const struct key_def *k = &SCENE_KEYS[key];
     void *dst = scene_field(p->s, key);
-    double d;
-    int i;
     if (k->type != KT_ENVELOPE && *value == '\0') {
         scene_fail_at(p, p->line, "%s: missing value", k->name);
         return -1;
     }
     switch (k->type) {
     case KT_INT:
-        if (parse_int_value(p, key, value, &d) < 0)
-            return -1;
-        *(int *)dst = (int)d;
-        return 0;
+        return set_int(p, key, value, (int *)dst);
     case KT_U64:
         return parse_u64_value(p, key, value, (uint64_t *)dst);
-    case KT_DOUBLE: {
-        const char *s = value;
-        if (take_double(p, k->name, &s, &d) < 0 || expect_end(p, k->name, s) < 0 ||
-            check_range(p, key, d) < 0)
-            return -1;
-        *(double *)dst = d;
-        return 0;
-    }
+    case KT_DOUBLE:
+        return set_double(p, key, value, (double *)dst);
     case KT_VEC3:
         return parse_vec3_value(p, key, value, (tf_vec3 *)dst);
     case KT_BOOL:
-        if ((i = parse_bool_value(p, key, value)) < 0)
-            return -1;
-        *(int *)dst = i;
-        return 0;
+        return set_bool(p, key, value, (int *)dst);
     case KT_GENERATOR:
-        if ((i = parse_name_value(p, key, value, SCENE_GENERATOR_NAMES, SCENE_GENERATOR_COUNT)) < 0)
-            return -1;
-        memcpy(dst, &i, sizeof i);
-        return 0;
+        return set_name(p, key, value, SCENE_GENERATOR_NAMES, SCENE_GENERATOR_COUNT, dst);
     case KT_CAMERA:
-        if ((i = parse_name_value(p, key, value, SCENE_CAMERA_NAMES, SCENE_CAMERA_COUNT)) < 0)
-            return -1;
-        memcpy(dst, &i, sizeof i);
-        return 0;
+        return set_name(p, key, value, SCENE_CAMERA_NAMES, SCENE_CAMERA_COUNT, dst);
     case KT_ENVELOPE:
         return add_envelope_numbers(p, key, value);
     case KT_CAMERA_KEY:
@@ -534,15 +557,9 @@ int scene_set_value(struct parser *p, int key, const char *value)
     case KT_SHA256:
         return parse_sha256_value(p, key, value, (char *)dst);
     case KT_NODATA:
-        if ((i = parse_name_value(p, key, value, SCENE_NODATA_NAMES, SCENE_NODATA_COUNT)) < 0)
-            return -1;
-        memcpy(dst, &i, sizeof i);
-        return 0;
+        return set_name(p, key, value, SCENE_NODATA_NAMES, SCENE_NODATA_COUNT, dst);
     case KT_FIRST_ROW:
-        if ((i = parse_name_value(p, key, value, SCENE_FIRST_ROW_NAMES, SCENE_FIRST_ROW_COUNT)) < 0)
-            return -1;
-        memcpy(dst, &i, sizeof i);
-        return 0;
+        return set_name(p, key, value, SCENE_FIRST_ROW_NAMES, SCENE_FIRST_ROW_COUNT, dst);
     }
     return -1;
 }

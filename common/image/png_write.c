@@ -72,15 +72,10 @@ static void png_failure(const tf_png_writer *w, const char *what, char *err, siz
         tf_seterr(err, errlen, "%s: %s", w->path, what);
 }
 
-tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_depth, int channels,
-                             char *err, size_t errlen)
+/* A writer with its buffers and PATH.tmp created, libpng not started; NULL and a message. */
+static tf_png_writer *new_writer(const char *path, int width, int height, int bit_depth,
+                                 int channels, char *err, size_t errlen)
 {
-    if ((bit_depth != 8 && bit_depth != 16) || (channels != 1 && channels != 3) || width <= 0 ||
-        height <= 0) {
-        tf_seterr(err, errlen, "%s: unsupported PNG format %dx%d depth %d channels %d", path, width,
-                 height, bit_depth, channels);
-        return NULL;
-    }
     tf_png_writer *w = calloc(1, sizeof *w);
     if (!w) {
         tf_seterr(err, errlen, "%s: out of memory", path);
@@ -105,28 +100,47 @@ tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_de
         free_writer(w, 0);
         return NULL;
     }
-    w->png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, quiet_png_error, quiet_png_warning);
+    return w;
+}
+
+/* libpng started on w's file and the header written (IHDR, sRGB for 8-bit colour).  0, or -1
+ * with a message (the caller frees w, its temporary file removed). */
+static int start_png(tf_png_writer *w, char *err, size_t errlen)
+{
+    w->png =
+        png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, quiet_png_error, quiet_png_warning);
     w->info = w->png ? png_create_info_struct(w->png) : NULL;
-    if (!w->info) {
-        tf_seterr(err, errlen, "%s: libpng initialisation failed", path);
-        free_writer(w, 1);
-        return NULL;
-    }
-    if (setjmp(png_jmpbuf(w->png))) {
-        tf_seterr(err, errlen, "%s: libpng error writing header", path);
-        free_writer(w, 1);
-        return NULL;
-    }
+    if (!w->info)
+        return tf_seterr(err, errlen, "%s: libpng initialisation failed", w->path);
+    if (setjmp(png_jmpbuf(w->png)))
+        return tf_seterr(err, errlen, "%s: libpng error writing header", w->path);
     png_set_write_fn(w->png, w, write_bytes, flush_nothing);
     /* zlib level 3: the coordinator streams the preview of every render it writes; level 6
      * (the default) costs it about twice the CPU for a file a few percent smaller. */
     png_set_compression_level(w->png, 3);
-    png_set_IHDR(w->png, w->info, (png_uint_32)width, (png_uint_32)height, bit_depth,
-                 channels == 1 ? PNG_COLOR_TYPE_GRAY : PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
-                 PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-    if (channels == 3 && bit_depth == 8)
+    png_set_IHDR(w->png, w->info, (png_uint_32)w->width, (png_uint_32)w->height, w->depth,
+                 w->channels == 1 ? PNG_COLOR_TYPE_GRAY : PNG_COLOR_TYPE_RGB,
+                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+    if (w->channels == 3 && w->depth == 8)
         png_set_sRGB(w->png, w->info, PNG_sRGB_INTENT_PERCEPTUAL);
     png_write_info(w->png, w->info);
+    return 0;
+}
+
+tf_png_writer *tf_png_create(const char *path, int width, int height, int bit_depth, int channels,
+                             char *err, size_t errlen)
+{
+    if ((bit_depth != 8 && bit_depth != 16) || (channels != 1 && channels != 3) || width <= 0 ||
+        height <= 0) {
+        tf_seterr(err, errlen, "%s: unsupported PNG format %dx%d depth %d channels %d", path, width,
+                 height, bit_depth, channels);
+        return NULL;
+    }
+    tf_png_writer *w = new_writer(path, width, height, bit_depth, channels, err, errlen);
+    if (w && start_png(w, err, errlen) != 0) {
+        free_writer(w, 1);
+        return NULL;
+    }
     return w;
 }
 

@@ -44,58 +44,63 @@ static ssize_t read_bounded(int fd, uint8_t *buf, size_t cap)
     return (ssize_t)got;
 }
 
-int tf_secret_load(const char *path, uint8_t key[TF_KEY_BYTES], char *err, size_t errlen)
+/* The secret file opened for reading, refused when its group or others may read it; the
+ * descriptor, or -1 and a message. */
+static int open_private(const char *path, char *err, size_t errlen)
 {
     int fd = open(path, O_RDONLY | O_CLOEXEC);
-    if (fd < 0) {
-        tf_seterr(err, errlen, "cannot read secret file %s: %s", path, strerror(errno));
-        return -1;
-    }
+    if (fd < 0)
+        return tf_seterr(err, errlen, "cannot read secret file %s: %s", path, strerror(errno));
     struct stat st;
     if (fstat(fd, &st) != 0) {
         int saved = errno;
         close(fd);
-        tf_seterr(err, errlen, "cannot stat secret file %s: %s", path, strerror(saved));
-        return -1;
+        return tf_seterr(err, errlen, "cannot stat secret file %s: %s", path, strerror(saved));
     }
     if (st.st_mode & (S_IRGRP | S_IROTH)) {
         /* Anyone who can read it can join the farm (and, with the frames sealed under keys
          * derived from it, read the scene): refuse rather than warn. */
         close(fd);
-        tf_seterr(err, errlen, "secret file %s is readable by %s (mode %04o): chmod 600 it",
-                  path, (st.st_mode & S_IROTH) ? "others" : "its group",
-                  (unsigned)(st.st_mode & 07777));
-        return -1;
+        return tf_seterr(err, errlen, "secret file %s is readable by %s (mode %04o): chmod 600 it",
+                         path, (st.st_mode & S_IROTH) ? "others" : "its group",
+                         (unsigned)(st.st_mode & 07777));
     }
-    uint8_t buf[TF_SECRET_FILE_MAX + 1];
-    ssize_t n = read_bounded(fd, buf, sizeof buf);
+    return fd;
+}
+
+/* The file's bytes into buf (TF_SECRET_FILE_MAX + 1), trailing line ends dropped, fd closed:
+ * the count, or -1 and a message (a read error, a file too large or too short). */
+static ssize_t read_secret(int fd, const char *path, uint8_t *buf, char *err, size_t errlen)
+{
+    ssize_t n = read_bounded(fd, buf, TF_SECRET_FILE_MAX + 1);
     int saved = errno;
     close(fd);
-    if (n < 0) {
-        tf_seterr(err, errlen, "cannot read secret file %s: %s", path, strerror(saved));
-        return -1;
-    }
-    if (n > TF_SECRET_FILE_MAX) {
-        tf_seterr(err, errlen, "secret file %s is larger than %d bytes", path, TF_SECRET_FILE_MAX);
-        sodium_memzero(buf, sizeof buf);
-        return -1;
-    }
+    if (n < 0)
+        return tf_seterr(err, errlen, "cannot read secret file %s: %s", path, strerror(saved));
+    if (n > TF_SECRET_FILE_MAX)
+        return tf_seterr(err, errlen, "secret file %s is larger than %d bytes", path,
+                         TF_SECRET_FILE_MAX);
     while (n > 0 && (buf[n - 1] == '\n' || buf[n - 1] == '\r'))
         n--;
-    if (n > 0 && n < TF_SECRET_MIN_BYTES) {
-        sodium_memzero(buf, sizeof buf);
-        tf_seterr(err, errlen, "secret file %s holds %zd bytes; at least %d are needed (e.g. "
-                  "head -c 32 /dev/urandom | od -An -tx1 >%s)", path, n, TF_SECRET_MIN_BYTES,
-                  path);
+    if (n > 0 && n < TF_SECRET_MIN_BYTES)
+        return tf_seterr(err, errlen, "secret file %s holds %zd bytes; at least %d are needed "
+                         "(e.g. head -c 32 /dev/urandom | od -An -tx1 >%s)", path, n,
+                         TF_SECRET_MIN_BYTES, path);
+    return n;
+}
+
+int tf_secret_load(const char *path, uint8_t key[TF_KEY_BYTES], char *err, size_t errlen)
+{
+    int fd = open_private(path, err, errlen);
+    if (fd < 0)
         return -1;
-    }
-    int rc = tf_secret_from_bytes(buf, (size_t)n, key);
+    uint8_t buf[TF_SECRET_FILE_MAX + 1];
+    ssize_t n = read_secret(fd, path, buf, err, errlen);
+    int rc = n < 0 ? -1 : tf_secret_from_bytes(buf, (size_t)n, key);
     sodium_memzero(buf, sizeof buf);
-    if (rc != 0) {
+    if (n >= 0 && rc != 0)
         tf_seterr(err, errlen, "secret file %s is empty", path);
-        return -1;
-    }
-    return 0;
+    return rc != 0 ? -1 : 0;
 }
 
 void tf_auth_nonce(uint8_t nonce[TF_NONCE_BYTES])

@@ -148,6 +148,63 @@ static ts_cap_verdict admit_task_return(tf_supervisor *s, uint64_t conn, const t
     return TS_CAP_DISCARD;
 }
 
+/* ("next_worker", ?n): a connection joins once, and not from an address whose worker failed a
+ * spot check. */
+static ts_cap_verdict admit_join(tf_supervisor *s, uint64_t conn, const tf_worker_stats *w,
+                                 char *why, size_t len)
+{
+    if (w)
+        return refuse(why, len, "joins twice (already worker %" PRId64 ")", w->id);
+    if (s->nexcluded_addr > 0 && sv_address_excluded(s, sv_peer_name(s, conn)))
+        return refuse(why, len, "joins from an address whose worker failed a spot check");
+    return TS_CAP_ALLOW;
+}
+
+/* A hello names the worker it comes from. */
+static ts_cap_verdict admit_hello(const tf_worker_stats *w, const tf_tuple *tuple, char *why,
+                                  size_t len)
+{
+    tf_hello_msg m;
+    if (tf_hello_unpack(tuple, &m))
+        return refuse(why, len, "malformed hello tuple");
+    if (m.worker != w->id)
+        return refuse(why, len, "hello as worker %" PRId64 " from worker %" PRId64, m.worker,
+                      w->id);
+    return TS_CAP_ALLOW;
+}
+
+/* The take of a task: any task, never one chosen by id or place (a client may not pick the
+ * task it wants to fail or to sit on), and one at a time. */
+static ts_cap_verdict admit_take(tf_supervisor *s, uint64_t conn, const tf_tuple *tuple,
+                                 char *why, size_t len)
+{
+    for (int i = 1; i < tuple->nfields; i++)
+        if (!tuple->f[i].formal)
+            return refuse(why, len, "takes a task by a template with actual fields (only "
+                          "(\"task\", ?id, ?x, ?y, ?w, ?h, ?excluded) is a worker's)");
+    int64_t held = -1;
+    if (sv_held_task(s, conn, &held))
+        return refuse(why, len, "takes another task while holding task %" PRId64
+                      " (one at a time)", held);
+    return TS_CAP_ALLOW;
+}
+
+/* A failure report: from the worker it names, of a task its connection holds. */
+static ts_cap_verdict admit_failed(tf_supervisor *s, uint64_t conn, const tf_worker_stats *w,
+                                   const tf_tuple *tuple, char *why, size_t len)
+{
+    tf_failed_msg m;
+    if (tf_failed_unpack(tuple, &m))
+        return refuse(why, len, "malformed failed tuple");
+    if (m.worker != w->id)
+        return refuse(why, len, "failure reported as worker %" PRId64 " by worker %" PRId64,
+                      m.worker, w->id);
+    if (!holds_lease(s, conn, m.id))
+        return refuse(why, len, "failure of task %" PRId64 ", which this connection does not "
+                      "hold", m.id);
+    return TS_CAP_ALLOW;
+}
+
 ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blocking,
                                    const tf_tuple *tuple, char *why, size_t len)
 {
@@ -155,55 +212,21 @@ ts_cap_verdict tf_supervisor_admit(void *ctx, uint64_t conn, int op, int blockin
     tf_supervisor *s = ctx;
     const char *name = tf_tuple_name(tuple);
     tf_worker_stats *w = sv_worker_by_conn(s, conn);
-    if (!strcmp(name, TF_TAG_NEXT_WORKER)) {
-        if (w)
-            return refuse(why, len, "joins twice (already worker %" PRId64 ")", w->id);
-        if (s->nexcluded_addr > 0 && sv_address_excluded(s, sv_peer_name(s, conn)))
-            return refuse(why, len, "joins from an address whose worker failed a spot check");
-        return TS_CAP_ALLOW;
-    }
+    if (!strcmp(name, TF_TAG_NEXT_WORKER))
+        return admit_join(s, conn, w, why, len);
     if (!w)
         return refuse(why, len, "%s (\"%s\", ...) before joining (take (\"next_worker\", ?n) "
                       "first)", ts_cap_op_name(op), name);
     if (w->excluded)
         return refuse(why, len, "worker %" PRId64 " is excluded (it failed a spot check)", w->id);
-    if (!strcmp(name, TF_TAG_HELLO)) {
-        tf_hello_msg m;
-        if (tf_hello_unpack(tuple, &m))
-            return refuse(why, len, "malformed hello tuple");
-        if (m.worker != w->id)
-            return refuse(why, len, "hello as worker %" PRId64 " from worker %" PRId64, m.worker,
-                          w->id);
-        return TS_CAP_ALLOW;
-    }
-    if (!strcmp(name, TF_TAG_TASK) && op == TS_CAP_IN) {
-        /* Any task, never one chosen by id or place: a client may not pick the task it wants
-         * to fail or to sit on. */
-        for (int i = 1; i < tuple->nfields; i++)
-            if (!tuple->f[i].formal)
-                return refuse(why, len, "takes a task by a template with actual fields (only "
-                              "(\"task\", ?id, ?x, ?y, ?w, ?h, ?excluded) is a worker's)");
-        int64_t held = -1;
-        if (sv_held_task(s, conn, &held))
-            return refuse(why, len, "takes another task while holding task %" PRId64
-                          " (one at a time)", held);
-        return TS_CAP_ALLOW;
-    }
+    if (!strcmp(name, TF_TAG_HELLO))
+        return admit_hello(w, tuple, why, len);
     if (!strcmp(name, TF_TAG_TASK))
-        return admit_task_return(s, conn, tuple, why, len);
+        return op == TS_CAP_IN ? admit_take(s, conn, tuple, why, len)
+                               : admit_task_return(s, conn, tuple, why, len);
     if (!strcmp(name, TF_TAG_RESULT))
         return admit_result(s, conn, w, tuple, why, len);
-    if (!strcmp(name, TF_TAG_FAILED)) {
-        tf_failed_msg m;
-        if (tf_failed_unpack(tuple, &m))
-            return refuse(why, len, "malformed failed tuple");
-        if (m.worker != w->id)
-            return refuse(why, len, "failure reported as worker %" PRId64 " by worker %" PRId64,
-                          m.worker, w->id);
-        if (!holds_lease(s, conn, m.id))
-            return refuse(why, len, "failure of task %" PRId64 ", which this connection does not "
-                          "hold", m.id);
-        return TS_CAP_ALLOW;
-    }
+    if (!strcmp(name, TF_TAG_FAILED))
+        return admit_failed(s, conn, w, tuple, why, len);
     return refuse(why, len, "%s (\"%s\", ...) is not a worker's", ts_cap_op_name(op), name);
 }

@@ -432,13 +432,13 @@ static entry *find_ranked(ts_space *s, const elist *l, int link, const tf_tuple 
     for (entry *e = l->head; e; e = e->next[link]) {
         if (comparisons)
             (*comparisons)++;
-        if (!tf_tuple_match(tmpl, &e->t))
-            continue;
+        /* Ranked before it is matched: a tuple that cannot outrank the best match so far is
+         * not compared with the template (the same choice, fewer matches). */
         uint64_t r = s->rank(s->rank_ctx, taker, &e->t);
-        if (!best || r < best_rank) {
-            best = e;
-            best_rank = r;
-        }
+        if ((best && r >= best_rank) || !tf_tuple_match(tmpl, &e->t))
+            continue;
+        best = e;
+        best_rank = r;
         if (r == 0)
             break;
     }

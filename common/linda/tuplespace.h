@@ -77,7 +77,9 @@ int ts_wait(ts_space *s, const tf_tuple *tmpl, int take, ts_wait_fn fn, void *ct
 int ts_cancel(ts_space *s, uint64_t waiter_id);
 
 /* A take's preference among the tuples matching it: lower is better, 0 is the best there is.
- * Called with the taker named by the take; must not call into the space. */
+ * Called with the taker named by the take; must not call into the space.  It may be called on
+ * a stored tuple the take's template does not match (a take ranks a tuple before matching it,
+ * and matches it only if it could win): its rank then counts for nothing. */
 typedef uint64_t (*ts_rank_fn)(void *ctx, uint64_t taker, const tf_tuple *t);
 /* Rank the matches of takes that name a taker with fn from now on (NULL: plain FIFO again). */
 void ts_space_set_chooser(ts_space *s, ts_rank_fn fn, void *ctx);

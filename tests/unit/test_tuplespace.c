@@ -326,6 +326,43 @@ static void test_chooser_ranks_stored_tuples(void **state)
     ts_space_free(s);
 }
 
+/* A take of ("task", ?id, 1.0) as taker. */
+static int64_t take_v1_as(ts_space *s, uint64_t taker)
+{
+    tf_tuple m, got;
+    int64_t id = -1;
+    tf_tuple_init(&m);
+    assert_int_equal(tf_tuple_pack(&m, "sId", "task", 1.0), 0);
+    if (ts_space_inp_as(s, &m, taker, &got) == 1) {
+        tf_tuple_get_int(&got, 1, &id);
+        tf_tuple_clear(&got);
+    }
+    tf_tuple_clear(&m);
+    return id;
+}
+
+/* The scan ranks a tuple before it matches it (and matches only what could win): the
+ * best-ranked match is taken, whatever the ranks of the tuples the template rejects. */
+static void test_chooser_takes_the_best_match(void **state)
+{
+    (void)state;
+    ts_space *s = ts_space_new();
+    int calls = 0;
+    ts_space_set_chooser(s, rank_by_tens, &calls);
+    out_task(s, "task", 20, 0.0); /* taker 2's own (rank 0), but v = 0 */
+    out_task(s, "task", 5, 1.0);  /* rank 6 */
+    out_task(s, "task", 3, 0.0);  /* rank 4: outranks 5 and 4, but v = 0 */
+    out_task(s, "task", 4, 1.0);  /* rank 5 */
+    out_task(s, "task", 21, 1.0); /* taker 2's own */
+    assert_int_equal(take_v1_as(s, 2), 21);
+    assert_int_equal(take_v1_as(s, 2), 4);
+    assert_int_equal(take_v1_as(s, 2), 5);
+    assert_int_equal(take_v1_as(s, 2), -1); /* 20 and 3 stay: no match */
+    assert_int_equal(take_as(s, 2), 20);
+    assert_int_equal(take_as(s, 2), 3);
+    ts_space_free(s);
+}
+
 static void test_chooser_picks_the_waiter(void **state)
 {
     (void)state;
@@ -374,6 +411,7 @@ int main(void)
         cmocka_unit_test(test_accounting),
         cmocka_unit_test(test_index_ignores_other_names),
         cmocka_unit_test(test_chooser_ranks_stored_tuples),
+        cmocka_unit_test(test_chooser_takes_the_best_match),
         cmocka_unit_test(test_chooser_picks_the_waiter),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

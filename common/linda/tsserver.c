@@ -61,9 +61,12 @@
 #define TS_BUF_KEEP (256 * 1024)
 /* An OUT frame whose body is at least this large is not copied out of the buffer it was read
  * into: the buffer becomes the stored tuple's (detach_frame), for its blobs of at least
- * TS_SHARE_BLOB_MIN bytes (a result's chunks); smaller fields are copied as usual. */
+ * TS_SHARE_BLOB_MIN bytes (a result's chunks, and its preview share when that is 1 KB or more:
+ * a 128x128 stamp's is 3 KB, whose copy was a malloc above glibc's small bins, which
+ * consolidates its fast bins each time); smaller fields are copied as usual.  The buffer is
+ * kept while the tuple is anyway: its chunks hold it. */
 #define TS_SHARE_MIN (32 * 1024)
-#define TS_SHARE_BLOB_MIN (16 * 1024)
+#define TS_SHARE_BLOB_MIN 1024
 /* The most a frame's length field makes the server reserve before its bytes come (a longer
  * frame's buffer grows as they do): a peer's header alone never costs more than a connection
  * may keep anyway. */

@@ -289,17 +289,24 @@ static uint64_t rank_by_tens(void *ctx, uint64_t taker, const tf_tuple *t)
     return (uint64_t)id / 10 == taker ? 0 : 1 + (uint64_t)id;
 }
 
-static int64_t take_as(ts_space *s, uint64_t taker)
+/* The id of the tuple taker takes with template m (which it clears), or -1. */
+static int64_t take_with(ts_space *s, tf_tuple *m, uint64_t taker)
 {
-    tf_tuple m, got;
+    tf_tuple got;
     int64_t id = -1;
-    make_tmpl(&m, "task");
-    if (ts_space_inp_as(s, &m, taker, &got) == 1) {
+    if (ts_space_inp_as(s, m, taker, &got) == 1) {
         tf_tuple_get_int(&got, 1, &id);
         tf_tuple_clear(&got);
     }
-    tf_tuple_clear(&m);
+    tf_tuple_clear(m);
     return id;
+}
+
+static int64_t take_as(ts_space *s, uint64_t taker)
+{
+    tf_tuple m;
+    make_tmpl(&m, "task");
+    return take_with(s, &m, taker);
 }
 
 static void test_chooser_ranks_stored_tuples(void **state)
@@ -329,16 +336,10 @@ static void test_chooser_ranks_stored_tuples(void **state)
 /* A take of ("task", ?id, 1.0) as taker. */
 static int64_t take_v1_as(ts_space *s, uint64_t taker)
 {
-    tf_tuple m, got;
-    int64_t id = -1;
+    tf_tuple m;
     tf_tuple_init(&m);
     assert_int_equal(tf_tuple_pack(&m, "sId", "task", 1.0), 0);
-    if (ts_space_inp_as(s, &m, taker, &got) == 1) {
-        tf_tuple_get_int(&got, 1, &id);
-        tf_tuple_clear(&got);
-    }
-    tf_tuple_clear(&m);
-    return id;
+    return take_with(s, &m, taker);
 }
 
 /* The scan ranks a tuple before it matches it (and matches only what could win): the

@@ -34,8 +34,9 @@ CFLAGS   ?= -O2 -g -DNDEBUG
 # with HOT_CFLAGS after CFLAGS: -O3 takes 4-5% off a render's CPU against -O2, and
 # -fno-math-errno (sqrt inline: the layer never reads errno) 1-2% more, with the same bits
 # (neither changes floating point; bench/README.md section 38).  So is the filter every result
-# goes through before deflate (image/exrzip.c), whose loops -O3 vectorises (section 42).
-# `make asan` clears it.
+# goes through before deflate (image/exrzip.c), whose loops -O3 vectorises (section 42), and
+# the procedural terrain's levels, bounds and tile cache, which a procedural trace asks at
+# every node of its quad-tree (section 47).  `make asan` clears it.
 HOT_CFLAGS ?= -O3 -fno-math-errno
 SAN      ?=
 ALL_CFLAGS := $(CFLAGS) $(SAN) -std=c11 -D_GNU_SOURCE -Wall -Wextra -ffp-contract=off -pthread \
@@ -63,6 +64,7 @@ TERRAIN_SRC := $(wildcard common/terrain/*.c)
 IMAGE_SRC   := $(wildcard common/image/*.c)
 # 3. render: camera, grid tracing, shading and mist, adaptive antialiasing over a rectangle
 RENDER_SRC  := $(wildcard common/render/*.c)
+HOT_TERRAIN_OBJ := $(BUILD)/common/terrain/procedural.o $(BUILD)/common/terrain/tilecache.o
 # 4. linda: tuples, the wire protocol, sockets, authentication, the store, client and server
 LINDA_SRC   := $(wildcard common/linda/*.c)
 # 5. the farm's tuples (task, result, failure, scene, height map), spoken by both sides
@@ -123,7 +125,7 @@ $(BUILD)/%.o: %.c $(FLAGS_STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(ALL_CFLAGS) -MMD -MP -c $< -o $@
 # private: the flags stamp, a prerequisite of these objects too, records the common flags only
-$(RENDER_SRC:%.c=$(BUILD)/%.o) $(BUILD)/common/image/exrzip.o: private ALL_CFLAGS += $(HOT_CFLAGS)
+$(RENDER_SRC:%.c=$(BUILD)/%.o) $(BUILD)/common/image/exrzip.o $(HOT_TERRAIN_OBJ): private ALL_CFLAGS += $(HOT_CFLAGS)
 
 $(LIB): $(LIB_OBJ)
 	@mkdir -p $(dir $@)

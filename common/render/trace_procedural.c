@@ -7,6 +7,7 @@
 #include "render/trace_procedural.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 
 #define MAX_LEAF_LEVELS 6
@@ -24,6 +25,7 @@ typedef struct pray {
     double t;       /* the hit */
     tf_vec3 n;      /* its normal */
     int want_normal;
+    struct node_memo *memo; /* this thread's, or NULL */
 } pray;
 
 /* One level's samples over a leaf: n x n cells from cell (ci, cj), spacing s. */
@@ -168,7 +170,7 @@ static int march(pray *r, const leaf *f, double t0, double t1)
 
 static void node_box(const pray *r, int q, int64_t i, int64_t j, double *box)
 {
-    double size = ldexp(r->p->extent, -q);
+    double size = tf_proc_halved(r->p->extent, q);
     box[0] = (double)i * size, box[1] = (double)(i + 1) * size;
     box[2] = (double)j * size, box[3] = (double)(j + 1) * size;
 }
@@ -182,28 +184,70 @@ static double cross_at(const pray *r, int a, double c)
 
 static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1, int plo, int phi);
 
-/* Node bounds are costly (an interval sum over the octaves) and each serves many rays: a
- * direct-mapped table per thread remembers them.  A bound is a function of the terrain, the
- * node and its levels only, so a hit returns exactly what the computation would. */
+/* A thread's memory of nodes, so that the rays after the first through a node skip what it
+ * costs to describe: a direct-mapped table of node bounds (an interval sum over the octaves,
+ * a function of the terrain, the node and its levels: it serves every view), and one of node
+ * facts (node_facts: a function of the terrain, the node and the view; a node's parent is
+ * unique, so the levels it inherits from above are too).  A hit returns exactly what the
+ * computation would. */
 #define BOUND_TABLE_BITS 16
+#define FACT_TABLE_BITS 15
 typedef struct bound_entry {
     uint64_t proc;
     int64_t i, j;
     int q, lo, hi;
     tf_interval b;
 } bound_entry;
-static __thread bound_entry *bound_table;
+
+/* What a ray asks of a node: the levels used over it and the top of the surface there. */
+typedef struct node_facts {
+    int lo, hi;
+    double top;
+} node_facts;
+
+typedef struct fact_entry {
+    uint64_t proc, view; /* 0: empty (ids start at 1) */
+    int64_t i, j;
+    int q;
+    node_facts f;
+} fact_entry;
+
+typedef struct node_memo {
+    bound_entry bounds[1 << BOUND_TABLE_BITS];
+    fact_entry facts[1 << FACT_TABLE_BITS];
+} node_memo;
+
+static __thread node_memo *thread_memo; /* NULL: none yet, or no memory for one */
+static pthread_key_t memo_key;
+static pthread_once_t memo_key_once = PTHREAD_ONCE_INIT;
+
+static void make_memo_key(void) { pthread_key_create(&memo_key, free); }
+
+/* This thread's memo, or NULL when there is no memory for it (then everything is computed). */
+static node_memo *memo(void)
+{
+    if (!thread_memo) {
+        pthread_once(&memo_key_once, make_memo_key);
+        thread_memo = calloc(1, sizeof *thread_memo);
+        if (thread_memo)
+            pthread_setspecific(memo_key, thread_memo);
+    }
+    return thread_memo;
+}
+
+static uint64_t node_hash(int q, int64_t i, int64_t j, int lo, int hi)
+{
+    return tf_hash64((uint64_t)i * 0x9e3779b97f4a7c15ULL ^ (uint64_t)j ^ ((uint64_t)q << 56) ^
+                     ((uint64_t)lo << 48) ^ ((uint64_t)hi << 40));
+}
 
 static tf_interval node_bound(const pray *r, int q, int64_t i, int64_t j, const double *box,
                               int lo, int hi)
 {
-    if (!bound_table)
-        bound_table = calloc((size_t)1 << BOUND_TABLE_BITS, sizeof *bound_table);
-    if (!bound_table) /* no memory: compute every time */
+    node_memo *m = r->memo;
+    if (!m)
         return tf_proc_bound_levels(r->p, box[0], box[1], box[2], box[3], lo, hi);
-    uint64_t h = tf_hash64((uint64_t)i * 0x9e3779b97f4a7c15ULL ^ (uint64_t)j ^
-                           ((uint64_t)q << 56) ^ ((uint64_t)lo << 48) ^ ((uint64_t)hi << 40));
-    bound_entry *e = &bound_table[h >> (64 - BOUND_TABLE_BITS)];
+    bound_entry *e = &m->bounds[node_hash(q, i, j, lo, hi) >> (64 - BOUND_TABLE_BITS)];
     if (e->proc == r->p->id && e->i == i && e->j == j && e->q == q && e->lo == lo &&
         e->hi == hi)
         return e->b;
@@ -254,24 +298,47 @@ static tf_interval sample_bound(const pray *r, int q, int64_t i, int64_t j, int 
     return b;
 }
 
-/* Node (q, i, j) over [t0, t1] of the ray; plo, phi: its parent's levels (a child's lie
- * within them, so a parent with one level pair passes it down without computing). */
+/* Node (q, i, j)'s facts, computed; plo, phi: its parent's levels (a child's lie within them,
+ * so a parent with one level pair passes it down without computing). */
+static node_facts compute_facts(const pray *r, int q, int64_t i, int64_t j, const double *box,
+                                int plo, int phi)
+{
+    node_facts f = {plo, phi, 0};
+    if (phi - plo > 1 || (phi == r->p->max_level && plo == phi)) /* may narrow */
+        tf_proc_box_levels(r->p, r->v, box[0], box[1], box[2], box[3], &f.lo, &f.hi);
+    f.top = q >= f.hi ? sample_bound(r, q, i, j, f.lo, f.hi).hi
+                      : node_bound(r, q, i, j, box, f.lo, f.hi).hi;
+    return f;
+}
+
+/* The same, remembered for the view (node_memo). */
+static node_facts facts_of(const pray *r, int q, int64_t i, int64_t j, const double *box,
+                           int plo, int phi)
+{
+    node_memo *m = r->memo;
+    if (!m)
+        return compute_facts(r, q, i, j, box, plo, phi);
+    fact_entry *e = &m->facts[node_hash(q, i, j, 0, 0) >> (64 - FACT_TABLE_BITS)];
+    if (!(e->view == r->v->id && e->proc == r->p->id && e->i == i && e->j == j && e->q == q))
+        *e = (fact_entry){r->p->id, r->v->id, i, j, q, compute_facts(r, q, i, j, box, plo, phi)};
+    return e->f;
+}
+
+/* Node (q, i, j) over [t0, t1] of the ray; plo, phi: its parent's levels. */
 static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1, int plo, int phi)
 {
     double box[4];
-    int lo = plo, hi = phi;
     node_box(r, q, i, j, box);
-    if (phi - plo > 1 || (phi == r->p->max_level && plo == phi)) /* may narrow */
-        tf_proc_box_levels(r->p, r->v, box[0], box[1], box[2], box[3], &lo, &hi);
-    tf_interval b = q >= hi ? sample_bound(r, q, i, j, lo, hi) : node_bound(r, q, i, j, box, lo, hi);
-    if (fmin(z_at(r, t0), z_at(r, t1)) > b.hi)
+    node_facts f = facts_of(r, q, i, j, box, plo, phi);
+    if (fmin(z_at(r, t0), z_at(r, t1)) > f.top)
         return 0;
+    int lo = f.lo, hi = f.hi;
     if ((q >= hi + 4 && hi - lo < MAX_LEAF_LEVELS) || q >= r->max_q) {
-        leaf f;
+        leaf l;
         if (hi - lo >= MAX_LEAF_LEVELS)
             lo = hi - MAX_LEAF_LEVELS + 1; /* q >= max_q: unreachable for any real view */
-        load_leaf(r, q, i, j, lo, hi, box, &f);
-        return march(r, &f, t0, t1);
+        load_leaf(r, q, i, j, lo, hi, box, &l);
+        return march(r, &l, t0, t1);
     }
     return visit_children(r, q, i, j, box, t0, t1, lo, hi);
 }
@@ -296,7 +363,8 @@ static int clip_to_square(const pray *r, double *t0, double *t1)
 static int trace(pray *r, double tmin, double tmax)
 {
     r->dxy = hypot(r->d.x, r->d.y);
-    r->max_q = r->p->max_level + 4 + 2 * MAX_LEAF_LEVELS;
+    r->max_q = r->p->max_level + 4 + 2 * MAX_LEAF_LEVELS; /* < 64: tf_proc_halved */
+    r->memo = memo();
     double t0 = tmin, t1 = tmax;
     if (!clip_to_square(r, &t0, &t1))
         return 0;

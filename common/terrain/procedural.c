@@ -19,8 +19,6 @@ static uint64_t tile_key(int level, int64_t tx, int64_t ty)
     return ((uint64_t)level << 58) | ((uint64_t)tx << 29) | (uint64_t)ty;
 }
 
-double tf_proc_spacing(const tf_procedural *p, int level) { return ldexp(p->spacing0, -level); }
-
 static int64_t level_cells(int level) { return (int64_t)TILE << level; }
 
 /* World coordinate of grid line i of a level: one expression, so every tile agrees. */
@@ -237,7 +235,9 @@ static tf_tilecache *cache_of(const tf_procedural *p)
 
 tf_proc_view tf_proc_view_of(const tf_procedural *p, tf_vec3 eye, double pixel_angle)
 {
+    static uint64_t next_id;
     tf_proc_view v;
+    v.id = __atomic_add_fetch(&next_id, 1, __ATOMIC_RELAXED);
     v.eye = eye;
     v.pixel_angle = pixel_angle > 0 ? pixel_angle : 1e-3;
     v.dz = eye.z > p->hi ? eye.z - p->hi : 0.0;

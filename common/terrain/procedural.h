@@ -61,6 +61,7 @@ typedef struct tf_procedural {
 
 /* What a view needs to pick levels: see above. */
 typedef struct tf_proc_view {
+    uint64_t id;        /* unique in the process (tf_proc_view_of): what a view's caches key on */
     tf_vec3 eye;
     double pixel_angle; /* radians per pixel (or tangent units for a pinhole: the same use) */
     double dz;          /* the eye's height above p->hi, or 0 */
@@ -89,7 +90,19 @@ void tf_procedural_set_cache(tf_procedural *p, size_t bytes);
 size_t tf_procedural_default_cache_bytes(void);
 
 tf_proc_view tf_proc_view_of(const tf_procedural *p, tf_vec3 eye, double pixel_angle);
-double tf_proc_spacing(const tf_procedural *p, int level);
+
+/* x / 2^n for 0 <= n < 64: the bits of ldexp(x, -n) (a product by a power of two is exact, or
+ * rounded once), without a call. */
+static inline double tf_proc_halved(double x, int n)
+{
+    return x * (1.0 / (double)((uint64_t)1 << n));
+}
+
+/* Level L's spacing s_L. */
+static inline double tf_proc_spacing(const tf_procedural *p, int level)
+{
+    return tf_proc_halved(p->spacing0, level);
+}
 /* lambda at horizontal distance-squared d2 from the eye (see above). */
 double tf_proc_lambda(const tf_procedural *p, const tf_proc_view *v, double d2);
 /* A bound of |grad lambda| over the box: 1 / (ln 2 * its nearest distance, or min_dist). */

@@ -5,7 +5,8 @@
  * is continuous where the level of detail changes and fades the finer level in from nothing; the
  * quad-tree's bound is never below the surface on random boxes; random rays find every hit a
  * brute-force dense march of the same surface finds, and only true ones, over a noise generator
- * and over a grid with detail added; and no hit depends on the cache's budget. */
+ * and over a grid with detail added; and no hit depends on the cache's budget, nor on what the
+ * tracer's node memo holds from another view. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -14,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
+#include <pthread.h>
 #include <cmocka.h>
 #include "terrain/fractal_bound.h"
 #include "terrain/heightfield.h"
@@ -409,6 +411,61 @@ static void test_hits_independent_of_cache(void **state)
     tf_procedural_free(p);
 }
 
+/* Rays traced by a thread of its own, whose node memo starts empty. */
+typedef struct ray_batch {
+    const tf_procedural *p;
+    const tf_proc_view *v;
+    int n;
+    const tf_vec3 *o, *d;
+    tf_hit *hit;
+    int *found;
+} ray_batch;
+
+static void *trace_batch(void *arg)
+{
+    ray_batch *b = arg;
+    for (int k = 0; k < b->n; k++)
+        b->found[k] = tf_proc_trace(b->p, b->v, b->o[k], b->d[k], 0, 200, &b->hit[k]);
+    return NULL;
+}
+
+static void trace_in_fresh_thread(ray_batch *b)
+{
+    pthread_t t;
+    assert_int_equal(pthread_create(&t, NULL, trace_batch, b), 0);
+    assert_int_equal(pthread_join(t, NULL), 0);
+}
+
+/* A node's levels depend on the view: two views traced in turn by one thread (each node
+ * remembered for one, then asked for by the other) give the bits each gives alone. */
+static void test_node_memo_keyed_by_view(void **state)
+{
+    (void)state;
+    tf_procedural *p = make(TF_GEN_FBM);
+    tf_proc_view va = view_of(p), vb = tf_proc_view_of(p, (tf_vec3){300, 700, 120}, 0.002);
+    enum { RAYS = 1500 };
+    static tf_vec3 o[RAYS], d[RAYS];
+    static tf_hit ha[RAYS], hb[RAYS];
+    static int fa[RAYS], fb[RAYS];
+    for (int k = 0; k < RAYS; k++)
+        random_ray(p, &va, &o[k], &d[k]);
+    trace_in_fresh_thread(&(ray_batch){p, &va, RAYS, o, d, ha, fa});
+    trace_in_fresh_thread(&(ray_batch){p, &vb, RAYS, o, d, hb, fb});
+    int differ = 0;
+    for (int k = 0; k < RAYS; k++) {
+        tf_hit h;
+        assert_int_equal(tf_proc_trace(p, &va, o[k], d[k], 0, 200, &h), fa[k]);
+        if (fa[k])
+            assert_memory_equal(&h, &ha[k], sizeof h);
+        assert_int_equal(tf_proc_trace(p, &vb, o[k], d[k], 0, 200, &h), fb[k]);
+        if (fb[k])
+            assert_memory_equal(&h, &hb[k], sizeof h);
+        differ += fa[k] != fb[k] || (fa[k] && ha[k].t != hb[k].t);
+    }
+    assert_true(differ > RAYS / 10); /* the views do see different surfaces */
+    tf_procedural_free(p);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -424,6 +481,7 @@ int main(void)
         cmocka_unit_test(test_no_missed_hits),
         cmocka_unit_test(test_no_missed_hits_detail_over_grid),
         cmocka_unit_test(test_hits_independent_of_cache),
+        cmocka_unit_test(test_node_memo_keyed_by_view),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

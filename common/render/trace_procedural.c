@@ -9,6 +9,7 @@
 #include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
+#include <string.h>
 
 #define MAX_LEAF_LEVELS 6
 #define LEAF_SAMPLES 9
@@ -191,7 +192,7 @@ static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1, int
  * unique, so the levels it inherits from above are too).  A hit returns exactly what the
  * computation would. */
 #define BOUND_TABLE_BITS 16
-#define FACT_TABLE_BITS 15
+#define FACT_TABLE_BITS 17 /* 4 MiB: a ray visits ~160 nodes, and 2^15 entries missed */
 typedef struct bound_entry {
     uint64_t proc;
     int64_t i, j;
@@ -205,15 +206,20 @@ typedef struct node_facts {
     double top;
 } node_facts;
 
+/* Facts of the memo's terrain and view: those of its generation.  32 bytes, and a node's four
+ * siblings side by side (facts_of), so that a ray's next node is often in a line just read. */
 typedef struct fact_entry {
-    uint64_t proc, view; /* 0: empty (ids start at 1) */
-    int64_t i, j;
-    int q;
-    node_facts f;
+    uint64_t qi; /* q << 58 | i (i < 2^(q + 1) and q < 58) */
+    int64_t j;
+    uint32_t gen;
+    int16_t lo, hi;
+    double top;
 } fact_entry;
 
 typedef struct node_memo {
     bound_entry bounds[1 << BOUND_TABLE_BITS];
+    uint64_t proc, view; /* whose facts the table holds */
+    uint32_t gen;        /* theirs; entries of other generations are empty */
     fact_entry facts[1 << FACT_TABLE_BITS];
 } node_memo;
 
@@ -318,10 +324,29 @@ static node_facts facts_of(const pray *r, int q, int64_t i, int64_t j, const dou
     node_memo *m = r->memo;
     if (!m)
         return compute_facts(r, q, i, j, box, plo, phi);
-    fact_entry *e = &m->facts[node_hash(q, i, j, 0, 0) >> (64 - FACT_TABLE_BITS)];
-    if (!(e->view == r->v->id && e->proc == r->p->id && e->i == i && e->j == j && e->q == q))
-        *e = (fact_entry){r->p->id, r->v->id, i, j, q, compute_facts(r, q, i, j, box, plo, phi)};
-    return e->f;
+    uint64_t family = node_hash(q, i >> 1, j >> 1, 0, 0) >> (64 - FACT_TABLE_BITS + 2);
+    fact_entry *e = &m->facts[family << 2 | (uint64_t)(i & 1) | (uint64_t)(j & 1) << 1];
+    const uint64_t qi = (uint64_t)q << 58 | (uint64_t)i;
+    if (e->gen == m->gen && e->qi == qi && e->j == j)
+        return (node_facts){e->lo, e->hi, e->top};
+    node_facts f = compute_facts(r, q, i, j, box, plo, phi);
+    *e = (fact_entry){qi, j, m->gen, (int16_t)f.lo, (int16_t)f.hi, f.top};
+    return f;
+}
+
+/* This thread's memo, its facts those of terrain p and view v (a new generation if they were
+ * another's), or NULL. */
+static node_memo *memo_for(const tf_procedural *p, const tf_proc_view *v)
+{
+    node_memo *m = memo();
+    if (m && (m->proc != p->id || m->view != v->id)) {
+        if (++m->gen == 0) { /* after 2^32 views: old entries could pass for new */
+            memset(m->facts, 0, sizeof m->facts);
+            m->gen = 1;
+        }
+        m->proc = p->id, m->view = v->id;
+    }
+    return m;
 }
 
 /* Node (q, i, j) over [t0, t1] of the ray; plo, phi: its parent's levels. */
@@ -364,7 +389,7 @@ static int trace(pray *r, double tmin, double tmax)
 {
     r->dxy = hypot(r->d.x, r->d.y);
     r->max_q = r->p->max_level + 4 + 2 * MAX_LEAF_LEVELS; /* < 64: tf_proc_halved */
-    r->memo = memo();
+    r->memo = memo_for(r->p, r->v);
     double t0 = tmin, t1 = tmax;
     if (!clip_to_square(r, &t0, &t1))
         return 0;

@@ -47,6 +47,13 @@ typedef struct leaf {
 
 static double z_at(const pray *r, double t) { return r->o.z + t * r->d.z; }
 
+/* fmax and fmin as glibc computes them on x86-64 (maxsd, minsd: a tie, +0 against -0 included,
+ * gives y; a quiet NaN gives the other operand), inline: a call each was 5% of a procedural
+ * render, and the tie no longer depends on the machine's libm. */
+static inline double larger(double x, double y) { return x > y || y != y ? x : y; }
+static inline double smaller(double x, double y) { return x < y || y != y ? x : y; }
+
+
 /* ------------------------------------------------------------------------------ leaves */
 
 static void read_level(const pray *r, int q, int64_t i, int64_t j, int level, leaf_level *l)
@@ -67,12 +74,12 @@ static double level_slope(const leaf_level *l, double *lo, double *hi)
     for (int b = 0; b < m; b++)
         for (int a = 0; a < m; a++) {
             double v = l->v[b * m + a];
-            *lo = fmin(*lo, v);
-            *hi = fmax(*hi, v);
+            *lo = smaller(*lo, v);
+            *hi = larger(*hi, v);
             if (a + 1 < m)
-                gx = fmax(gx, fabs(l->v[b * m + a + 1] - v));
+                gx = larger(gx, fabs(l->v[b * m + a + 1] - v));
             if (b + 1 < m)
-                gy = fmax(gy, fabs(l->v[(b + 1) * m + a] - v));
+                gy = larger(gy, fabs(l->v[(b + 1) * m + a] - v));
         }
     return hypot(gx, gy) / l->s;
 }
@@ -87,7 +94,7 @@ static void load_leaf(const pray *r, int q, int64_t i, int64_t j, int lo, int hi
     double steepest = 0;
     for (int level = lo; level <= hi; level++) {
         read_level(r, q, i, j, level, &f->lev[level - lo]);
-        steepest = fmax(steepest, level_slope(&f->lev[level - lo], &f->zlo, &f->zhi));
+        steepest = larger(steepest, level_slope(&f->lev[level - lo], &f->zlo, &f->zhi));
     }
     f->slope = steepest + (f->zhi - f->zlo) * tf_proc_lambda_slope(r->p, r->v, box[0], box[1],
                                                                    box[2], box[3]);
@@ -99,7 +106,7 @@ static double level_height(const leaf_level *l, double x, double y, double *g)
 {
     double gx = x / l->s - (double)l->ci, gy = y / l->s - (double)l->cj;
     int a = gx < 1 || l->n == 1 ? 0 : 1, b = gy < 1 || l->n == 1 ? 0 : 1;
-    double fx = fmin(fmax(gx - a, 0.0), 1.0), fy = fmin(fmax(gy - b, 0.0), 1.0);
+    double fx = smaller(larger(gx - a, 0.0), 1.0), fy = smaller(larger(gy - b, 0.0), 1.0);
     int m = l->n + 1;
     const float *c = l->v + b * m + a;
     double c00 = c[0], c10 = c[1], c01 = c[m], c11 = c[m + 1];
@@ -118,7 +125,7 @@ static double leaf_height(const pray *r, const leaf *f, double x, double y, doub
     double lambda = tf_proc_lambda(r->p, r->v, d2);
     int level = (int)lambda;
     level = level < f->lo ? f->lo : level > f->hi ? f->hi : level;
-    double w = fmin(fmax(lambda - level, 0.0), 1.0);
+    double w = smaller(larger(lambda - level, 0.0), 1.0);
     double g0[2], g1[2];
     double h = level_height(&f->lev[level - f->lo], x, y, g ? g0 : NULL);
     if (!(w > 0) || level >= f->hi) {
@@ -146,7 +153,7 @@ static void hit_normal(pray *r, const leaf *f, double x, double y)
 /* March the leaf's surface from t0 to t1 with steps the slope bound makes safe. */
 static int march(pray *r, const leaf *f, double t0, double t1)
 {
-    if (fmin(z_at(r, t0), z_at(r, t1)) > f->zhi)
+    if (smaller(z_at(r, t0), z_at(r, t1)) > f->zhi)
         return 0;
     double climb = f->slope * r->dxy - r->d.z; /* how fast the gap can close, at most */
     double t = t0;
@@ -355,7 +362,7 @@ static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1, int
     double box[4];
     node_box(r, q, i, j, box);
     node_facts f = facts_of(r, q, i, j, box, plo, phi);
-    if (fmin(z_at(r, t0), z_at(r, t1)) > f.top)
+    if (smaller(z_at(r, t0), z_at(r, t1)) > f.top)
         return 0;
     int lo = f.lo, hi = f.hi;
     if ((q >= hi + 4 && hi - lo < MAX_LEAF_LEVELS) || q >= r->max_q) {
@@ -379,8 +386,8 @@ static int clip_to_square(const pray *r, double *t0, double *t1)
             continue;
         }
         double ta = (0 - o) / d, tb = (r->p->extent - o) / d;
-        *t0 = fmax(*t0, fmin(ta, tb));
-        *t1 = fmin(*t1, fmax(ta, tb));
+        *t0 = larger(*t0, smaller(ta, tb));
+        *t1 = smaller(*t1, larger(ta, tb));
     }
     return *t1 > *t0;
 }

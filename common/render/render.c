@@ -35,11 +35,12 @@
  *
  * A corner row's samples are coherent camera rays: on a grid terrain with coherence off
  * (tf_render_coherence_force, TF_COHERENCE=0) they are traced together in SIMD packets
- * (trace_packet.h), then shaded up to their shadow rays, which are traced
- * together too, then finished (tf_shade_begin / tf_shade_end): the same bits as one
- * tf_shade_ray a sample.  Whether packets are used is tf_trace_packets_enabled's choice
- * (TF_TRACE_PACKETS; unset, the AVX-512 kernel only); a procedural terrain is always traced one
- * ray at a time (its packets are not done). */
+ * (trace_packet.h), on a procedural terrain in packets through its quad-tree
+ * (tf_proc_trace_packet), then shaded up to their shadow rays, which are traced together too,
+ * then finished (tf_shade_begin / tf_shade_end): the same bits as one tf_shade_ray a sample.
+ * Whether packets are used is row_packets' choice (TF_TRACE_PACKETS; unset, a grid's with the
+ * AVX-512 kernel only, a procedural terrain's always).  A pixel's inner samples are traced one
+ * at a time. */
 #include "render/render.h"
 
 #include <math.h>
@@ -51,6 +52,7 @@
 #include "render/sample_math.h"
 #include "render/sun_strips.h"
 #include "render/trace_packet.h"
+#include "render/trace_procedural.h"
 #include "terrain/tilecache.h"
 
 /* Are the sun's strips worth their build (about 5 ns a cell) for this image?  A render casts
@@ -562,9 +564,18 @@ static void corner_row_packets(const tf_renderer *r, tf_rect rect, int cy, row_r
 {
     const int n = rect.w + 1;
     camera_rays(r, rect, cy, q);
-    tf_trace_packets(r->hf, n, q->o, q->d, q->tmin, q->tmax, q->found, q->hits);
+    const tf_procedural *proc = r->hf->proc;
+    if (proc)
+        tf_proc_trace_packet(proc, &r->shader.view, n, q->o, q->d, q->tmin, q->tmax, q->found,
+                             q->hits);
+    else
+        tf_trace_packets(r->hf, n, q->o, q->d, q->tmin, q->tmax, q->found, q->hits);
     int shadows = shade_begin_row(r, n, q);
-    tf_occluded_packets(r->hf, shadows, q->so, q->sd, q->stmin, q->stmax, q->occluded);
+    if (proc)
+        tf_proc_occluded_packet(proc, &r->shader.view, shadows, q->so, q->sd, q->stmin,
+                                q->stmax, q->occluded);
+    else
+        tf_occluded_packets(r->hf, shadows, q->so, q->sd, q->stmin, q->stmax, q->occluded);
     for (int c = 0, k = 0; c < n; c++) {
         int occluded = q->pending[c].shadow ? q->occluded[k++] : 0;
         tf_shade_end(&r->shader, q->o[c], q->d[c], &q->pending[c], occluded, &row[c]);
@@ -665,6 +676,14 @@ static void rect_state_free(rect_state *st)
         row_rays_free(st->how.q);
 }
 
+/* Whether corner rows go in packets: a grid's where tf_trace_packets_enabled says (the SIMD
+ * walks pay on AVX-512 only); a procedural terrain's unless TF_TRACE_PACKETS=0 (they share the
+ * quad-tree's nodes and leaves, tf_proc_trace_packet, on any ISA). */
+static int row_packets(const tf_renderer *r)
+{
+    return r->hf->proc ? tf_trace_packets_wanted(1) : tf_trace_packets_enabled();
+}
+
 static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
 {
     const size_t w1 = (size_t)rect.w + 1, side = (size_t)r->lattice + 1;
@@ -680,7 +699,7 @@ static void rect_state_alloc(const tf_renderer *r, tf_rect rect, rect_state *st)
         st->how.column = calloc(w1, sizeof *st->how.column);
         st->ring = calloc(w1 * TF_CORNER_RING, sizeof *st->ring);
         ok = ok && st->how.column && st->ring;
-    } else if (!r->hf->proc && tf_trace_packets_enabled()) {
+    } else if (row_packets(r)) {
         st->how.q = &st->rays;
         ok = ok && row_rays_alloc(&st->rays, w1);
     }

@@ -49,19 +49,24 @@ static int packets_forced = -1;
 /* Unset, packets are on only with the AVX-512 kernel, the one not slower than single rays
  * (bench/README.md, "Packets of rays": a whole render 1.00-1.01x with it; the AVX2 kernel
  * 0.97-0.98x, its rays 0.7x; the portable one 0.3x). */
-int tf_trace_packets_enabled(void)
+int tf_trace_packets_wanted(int unset)
 {
     if (packets_forced >= 0)
         return packets_forced;
     const char *v = getenv("TF_TRACE_PACKETS");
     if (v && *v)
         return strcmp(v, "0") != 0;
-    return !strcmp(kernels[chosen()].name, "avx512");
+    return unset;
+}
+
+int tf_trace_packets_enabled(void)
+{
+    return tf_trace_packets_wanted(!strcmp(kernels[chosen()].name, "avx512"));
 }
 
 void tf_trace_packets_force(int on) { packets_forced = on < 0 ? -1 : on != 0; }
 
-/* A procedural terrain has no packet walk (trace_packet.h: not done): one ray at a time. */
+/* A procedural terrain without its view (trace_packet.h): one ray at a time. */
 static void single_rays(const tf_heightfield *hf, int n, const tf_vec3 *o, const tf_vec3 *d,
                         const double *tmin, const double *tmax, unsigned char *found,
                         tf_hit *hits)

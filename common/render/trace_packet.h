@@ -10,10 +10,9 @@
  * render unchanged (1.00-1.01x); the AVX2 and portable walks are slower than the scalar walk,
  * kept correct and tested for A/B and for other CPUs).
  *
- * NOT DONE: procedural terrain (`procedural = yes`, trace_procedural.c's quad-tree) has no
- * packet tracer.  These functions take grid height fields only; for a procedural terrain
- * (hf->proc) they fall back to the single-ray calls, and the renderer does not use packets
- * for it at all. */
+ * These functions walk grid height fields; a procedural terrain's packets need its view and
+ * go through the quad-tree (tf_proc_trace_packet, trace_procedural.h): given one (hf->proc),
+ * these fall back to single rays. */
 #ifndef TF_TRACE_PACKET_H
 #define TF_TRACE_PACKET_H
 
@@ -35,10 +34,13 @@ int tf_trace_packet_lanes(void);
  * -1 if the name is unknown or this CPU cannot run it. */
 int tf_trace_packet_force_isa(const char *isa);
 
-/* Whether the renderer traces in packets: TF_TRACE_PACKETS ("0": no, anything else: yes;
- * unset: yes with the AVX-512 kernel only), unless forced (1 on, 0 off, -1: the variable
- * decides again). */
+/* Whether the renderer traces a grid's rays in packets: TF_TRACE_PACKETS ("0": no, anything
+ * else: yes; unset: yes with the AVX-512 kernel only), unless forced (1 on, 0 off, -1: the
+ * variable decides again). */
 int tf_trace_packets_enabled(void);
 void tf_trace_packets_force(int on);
+/* The same switch with `unset` as the answer when neither the variable nor a force says (a
+ * procedural terrain's packets, trace_procedural.h, pay on any ISA: on unless switched off). */
+int tf_trace_packets_wanted(int unset);
 
 #endif

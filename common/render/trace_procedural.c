@@ -269,24 +269,41 @@ static tf_interval node_bound(const pray *r, int q, int64_t i, int64_t j, const 
     return b;
 }
 
-/* The four children in the order the ray meets them over [t0, t1]. */
-static int visit_children(pray *r, int q, int64_t i, int64_t j, const double *box, double t0,
-                          double t1, int lo, int hi)
+/* Where the ray crosses the node's midlines xm and ym within [t0, t1], in its order: cut[0]
+ * = t0, cut[3] = t1 (a crossing outside is t1). */
+static void cuts(const pray *r, double xm, double ym, double t0, double t1, double *cut)
 {
-    double xm = 0.5 * (box[0] + box[1]), ym = 0.5 * (box[2] + box[3]);
-    double cut[4] = {t0, cross_at(r, 0, xm), cross_at(r, 1, ym), t1};
+    cut[0] = t0, cut[1] = cross_at(r, 0, xm), cut[2] = cross_at(r, 1, ym), cut[3] = t1;
     for (int a = 1; a < 3; a++)
         cut[a] = cut[a] > t0 && cut[a] < t1 ? cut[a] : t1;
     if (cut[1] > cut[2]) {
         double s = cut[1];
         cut[1] = cut[2], cut[2] = s;
     }
+}
+
+/* The child (cx + 2 cy) the ray is in over [cut[k], cut[k + 1]], or -1 if that is empty. */
+static int child_over(const pray *r, double xm, double ym, const double *cut, int k)
+{
+    if (!(cut[k + 1] > cut[k]))
+        return -1;
+    double tm = 0.5 * (cut[k] + cut[k + 1]);
+    return (r->o.x + tm * r->d.x >= xm) + 2 * (r->o.y + tm * r->d.y >= ym);
+}
+
+/* The four children in the order the ray meets them over [t0, t1].  Inlined by force, as is
+ * facts_of: as calls of their own (the packets are their second callers) single rays cost 5%
+ * more. */
+static inline __attribute__((always_inline)) int visit_children(pray *r, int q, int64_t i,
+                                                                 int64_t j, const double *box,
+                                                                 double t0, double t1, int lo,
+                                                                 int hi)
+{
+    double xm = 0.5 * (box[0] + box[1]), ym = 0.5 * (box[2] + box[3]), cut[4];
+    cuts(r, xm, ym, t0, t1, cut);
     for (int k = 0; k < 3; k++) {
-        if (!(cut[k + 1] > cut[k]))
-            continue;
-        double tm = 0.5 * (cut[k] + cut[k + 1]);
-        int cx = r->o.x + tm * r->d.x >= xm, cy = r->o.y + tm * r->d.y >= ym;
-        if (visit(r, q + 1, 2 * i + cx, 2 * j + cy, cut[k], cut[k + 1], lo, hi))
+        int c = child_over(r, xm, ym, cut, k);
+        if (c >= 0 && visit(r, q + 1, 2 * i + (c & 1), 2 * j + (c >> 1), cut[k], cut[k + 1], lo, hi))
             return 1;
     }
     return 0;
@@ -325,8 +342,10 @@ static node_facts compute_facts(const pray *r, int q, int64_t i, int64_t j, cons
 }
 
 /* The same, remembered for the view (node_memo). */
-static node_facts facts_of(const pray *r, int q, int64_t i, int64_t j, const double *box,
-                           int plo, int phi)
+static inline __attribute__((always_inline)) node_facts facts_of(const pray *r, int q,
+                                                                 int64_t i, int64_t j,
+                                                                 const double *box, int plo,
+                                                                 int phi)
 {
     node_memo *m = r->memo;
     if (!m)
@@ -356,23 +375,42 @@ static node_memo *memo_for(const tf_procedural *p, const tf_proc_view *v)
     return m;
 }
 
+/* Whether the ray passes above a node whose facts are f over [t0, t1]. */
+static int passes_above(const pray *r, const node_facts *f, double t0, double t1)
+{
+    return smaller(z_at(r, t0), z_at(r, t1)) > f->top;
+}
+
+/* Whether node (q, .) with facts f is a leaf. */
+static int is_leaf(const pray *r, int q, const node_facts *f)
+{
+    return (q >= f->hi + 4 && f->hi - f->lo < MAX_LEAF_LEVELS) || q >= r->max_q;
+}
+
+/* Leaf node (q, i, j)'s samples into l. */
+static void leaf_of(const pray *r, int q, int64_t i, int64_t j, const node_facts *f,
+                    double *box, leaf *l)
+{
+    int lo = f->lo, hi = f->hi;
+    if (hi - lo >= MAX_LEAF_LEVELS)
+        lo = hi - MAX_LEAF_LEVELS + 1; /* q >= max_q: unreachable for any real view */
+    load_leaf(r, q, i, j, lo, hi, box, l);
+}
+
 /* Node (q, i, j) over [t0, t1] of the ray; plo, phi: its parent's levels. */
 static int visit(pray *r, int q, int64_t i, int64_t j, double t0, double t1, int plo, int phi)
 {
     double box[4];
     node_box(r, q, i, j, box);
     node_facts f = facts_of(r, q, i, j, box, plo, phi);
-    if (smaller(z_at(r, t0), z_at(r, t1)) > f.top)
+    if (passes_above(r, &f, t0, t1))
         return 0;
-    int lo = f.lo, hi = f.hi;
-    if ((q >= hi + 4 && hi - lo < MAX_LEAF_LEVELS) || q >= r->max_q) {
+    if (is_leaf(r, q, &f)) {
         leaf l;
-        if (hi - lo >= MAX_LEAF_LEVELS)
-            lo = hi - MAX_LEAF_LEVELS + 1; /* q >= max_q: unreachable for any real view */
-        load_leaf(r, q, i, j, lo, hi, box, &l);
+        leaf_of(r, q, i, j, &f, box, &l);
         return march(r, &l, t0, t1);
     }
-    return visit_children(r, q, i, j, box, t0, t1, lo, hi);
+    return visit_children(r, q, i, j, box, t0, t1, f.lo, f.hi);
 }
 
 /* Clip [*t0, *t1] to the ray's stretch over the square [0, extent]^2; 0 if none. */
@@ -421,6 +459,201 @@ int tf_proc_occluded(const tf_procedural *p, const tf_proc_view *v, tf_vec3 orig
 {
     pray r = {.p = p, .v = v, .o = origin, .d = dir, .want_normal = 0};
     return trace(&r, tmin, tmax);
+}
+
+/* ------------------------------------------------------------------------------ packets */
+
+/* Rays traced together through the tree: each node's facts are asked once for all the rays in
+ * it, each leaf loaded once for all the rays that reach it.  A ray's arithmetic is visit's, so
+ * its hit is the same bits.  The rays of a packet head the same way across the ground (d.x >=
+ * 0 alike and d.y >= 0 alike): then every ray meets a node's children in a subsequence of one
+ * order, children_order's, and the packet visits them in it; a ray whose crossings say
+ * otherwise (rounding near a corner) goes on from that node alone, through visit. */
+#define PACKET_RAYS 16
+
+typedef struct packet {
+    pray r[PACKET_RAYS];
+    unsigned char hit[PACKET_RAYS]; /* its first hit found */
+    int heading;                    /* (d.x >= 0) + 2 (d.y >= 0), every ray's */
+} packet;
+
+/* The rays of a packet in a node: which, and over what stretch of each. */
+typedef struct packet_part {
+    int n;
+    int id[PACKET_RAYS];
+    double t0[PACKET_RAYS], t1[PACKET_RAYS];
+} packet_part;
+
+static int heading_of(tf_vec3 d) { return (d.x >= 0) + 2 * (d.y >= 0); }
+
+/* The children (cx + 2 cy) in the order a ray of the heading meets them: the nearest corner
+ * first, the farthest last. */
+static void children_order(int heading, int order[4])
+{
+    int fx = heading & 1 ? 0 : 1, fy = heading & 2 ? 0 : 2;
+    order[0] = fx + fy, order[1] = (fx ^ 1) + fy, order[2] = fx + (fy ^ 2),
+    order[3] = (fx ^ 1) + (fy ^ 2);
+}
+
+static void visit_packet(packet *pk, int q, int64_t i, int64_t j, node_facts f,
+                         const packet_part *in);
+
+/* Leaf node (q, i, j): loaded once, marched by each ray in it. */
+static void march_packet(packet *pk, int q, int64_t i, int64_t j, const node_facts *f,
+                         double *box, const packet_part *in)
+{
+    leaf l;
+    leaf_of(&pk->r[in->id[0]], q, i, j, f, box, &l);
+    for (int s = 0; s < in->n; s++)
+        pk->hit[in->id[s]] = (unsigned char)march(&pk->r[in->id[s]], &l, in->t0[s], in->t1[s]);
+}
+
+/* Ray s of `in`'s stretches in each child (by children_order's position) into part[]; 0 if
+ * its crossings do not follow that order. */
+static int split_ray(const packet *pk, const double *box, const packet_part *in, int s,
+                     const int pos[4], packet_part part[4])
+{
+    const pray *r = &pk->r[in->id[s]];
+    double xm = 0.5 * (box[0] + box[1]), ym = 0.5 * (box[2] + box[3]), cut[4];
+    cuts(r, xm, ym, in->t0[s], in->t1[s], cut);
+    int c[3], last = -1;
+    for (int k = 0; k < 3; k++) {
+        c[k] = child_over(r, xm, ym, cut, k);
+        if (c[k] >= 0 && pos[c[k]] <= last)
+            return 0;
+        last = c[k] >= 0 ? pos[c[k]] : last;
+    }
+    for (int k = 0; k < 3; k++)
+        if (c[k] >= 0) {
+            packet_part *p = &part[pos[c[k]]];
+            p->id[p->n] = in->id[s], p->t0[p->n] = cut[k], p->t1[p->n] = cut[k + 1];
+            p->n++;
+        }
+    return 1;
+}
+
+/* The rays of `in` through node (q, i, j)'s children, in the packet's order; a ray that
+ * found its hit in one goes no further. */
+static void children_packet(packet *pk, int q, int64_t i, int64_t j, const node_facts *f,
+                            const double *box, const packet_part *in)
+{
+    int order[4], pos[4];
+    children_order(pk->heading, order);
+    for (int k = 0; k < 4; k++)
+        pos[order[k]] = k;
+    packet_part part[4]; /* only the counts need a start */
+    for (int k = 0; k < 4; k++)
+        part[k].n = 0;
+    for (int s = 0; s < in->n; s++) {
+        pray *r = &pk->r[in->id[s]];
+        if (!split_ray(pk, box, in, s, pos, part)) /* on alone, as visit would */
+            pk->hit[in->id[s]] = (unsigned char)visit_children(r, q, i, j, box, in->t0[s],
+                                                               in->t1[s], f->lo, f->hi);
+    }
+    for (int k = 0; k < 4; k++) {
+        packet_part *p = &part[k];
+        int live = 0; /* those that found no hit in an earlier child */
+        for (int s = 0; s < p->n; s++)
+            if (!pk->hit[p->id[s]])
+                p->id[live] = p->id[s], p->t0[live] = p->t0[s], p->t1[live++] = p->t1[s];
+        p->n = live;
+        if (!live)
+            continue;
+        int64_t ci = 2 * i + (order[k] & 1), cj = 2 * j + (order[k] >> 1);
+        double cbox[4];
+        node_box(&pk->r[p->id[0]], q + 1, ci, cj, cbox);
+        visit_packet(pk, q + 1, ci, cj, facts_of(&pk->r[p->id[0]], q + 1, ci, cj, cbox, f->lo,
+                                                 f->hi), p);
+    }
+}
+
+/* Node (q, i, j), facts f, for the rays of `in` over their stretches. */
+static void visit_packet(packet *pk, int q, int64_t i, int64_t j, node_facts f,
+                         const packet_part *in)
+{
+    packet_part below;
+    below.n = 0;
+    for (int s = 0; s < in->n; s++)
+        if (!passes_above(&pk->r[in->id[s]], &f, in->t0[s], in->t1[s])) {
+            below.id[below.n] = in->id[s], below.t0[below.n] = in->t0[s];
+            below.t1[below.n++] = in->t1[s];
+        }
+    if (!below.n)
+        return;
+    const pray *r = &pk->r[below.id[0]];
+    double box[4];
+    node_box(r, q, i, j, box);
+    if (is_leaf(r, q, &f))
+        march_packet(pk, q, i, j, &f, box, &below);
+    else
+        children_packet(pk, q, i, j, &f, box, &below);
+}
+
+/* Trace rays ids[0..n) (n <= PACKET_RAYS, one heading) of o, d, tmin, tmax as a packet; each
+ * one's hit (and normal, with want_normal) in pk->r, found in pk->hit. */
+static void trace_packet(packet *pk, const tf_procedural *p, const tf_proc_view *v, int n,
+                         const int *ids, const tf_vec3 *o, const tf_vec3 *d, const double *tmin,
+                         const double *tmax, int want_normal)
+{
+    packet_part root;
+    root.n = 0;
+    for (int s = 0; s < n; s++) {
+        pray *r = &pk->r[s];
+        *r = (pray){.p = p, .v = v, .o = o[ids[s]], .d = d[ids[s]], .want_normal = want_normal};
+        r->dxy = hypot(r->d.x, r->d.y);
+        r->max_q = p->max_level + 4 + 2 * MAX_LEAF_LEVELS;
+        r->memo = memo_for(p, v);
+        pk->hit[s] = 0;
+        double t0 = tmin[ids[s]], t1 = tmax[ids[s]];
+        if (clip_to_square(r, &t0, &t1))
+            root.id[root.n] = s, root.t0[root.n] = t0, root.t1[root.n++] = t1;
+    }
+    if (!root.n)
+        return;
+    double box[4];
+    node_box(&pk->r[0], 0, 0, 0, box);
+    visit_packet(pk, 0, 0, 0, facts_of(&pk->r[0], 0, 0, 0, box, 0, p->max_level), &root);
+}
+
+/* The rays in packets of one heading and at most PACKET_RAYS; want_normal: hits into hits[]
+ * (camera rays), else occlusion only. */
+static void trace_packets(const tf_procedural *p, const tf_proc_view *v, int n, const tf_vec3 *o,
+                          const tf_vec3 *d, const double *tmin, const double *tmax,
+                          unsigned char *found, tf_hit *hits)
+{
+    packet pk;
+    int ids[PACKET_RAYS];
+    for (int heading = 0; heading < 4; heading++) {
+        pk.heading = heading;
+        for (int k = 0, m = 0; k < n; k++) {
+            if (heading_of(d[k]) == heading)
+                ids[m++] = k;
+            if (m < PACKET_RAYS && !(k == n - 1 && m > 0))
+                continue;
+            trace_packet(&pk, p, v, m, ids, o, d, tmin, tmax, hits != NULL);
+            for (int s = 0; s < m; s++) {
+                found[ids[s]] = pk.hit[s];
+                if (hits && pk.hit[s])
+                    hits[ids[s]] = (tf_hit){pk.r[s].t, v3_add(o[ids[s]], v3_scale(d[ids[s]],
+                                            pk.r[s].t)), pk.r[s].n, 0, 0};
+            }
+            m = 0;
+        }
+    }
+}
+
+void tf_proc_trace_packet(const tf_procedural *p, const tf_proc_view *v, int n, const tf_vec3 *o,
+                          const tf_vec3 *d, const double *tmin, const double *tmax,
+                          unsigned char *found, tf_hit *hits)
+{
+    trace_packets(p, v, n, o, d, tmin, tmax, found, hits);
+}
+
+void tf_proc_occluded_packet(const tf_procedural *p, const tf_proc_view *v, int n,
+                             const tf_vec3 *o, const tf_vec3 *d, const double *tmin,
+                             const double *tmax, unsigned char *occluded)
+{
+    trace_packets(p, v, n, o, d, tmin, tmax, occluded, NULL);
 }
 
 double tf_proc_shadow_lift(const tf_procedural *p, const tf_proc_view *v, tf_vec3 p_hit)

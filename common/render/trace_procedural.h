@@ -22,6 +22,17 @@ int tf_proc_trace(const tf_procedural *p, const tf_proc_view *v, tf_vec3 origin,
                   double tmin, double tmax, tf_hit *hit);
 int tf_proc_occluded(const tf_procedural *p, const tf_proc_view *v, tf_vec3 origin, tf_vec3 dir,
                      double tmin, double tmax);
+/* For k < n: found[k] = tf_proc_trace(p, v, o[k], d[k], tmin[k], tmax[k], &hits[k]) (hits[k]
+ * written only on a hit), the same bits, the rays traced in packets: each node's facts asked
+ * and each leaf loaded once for the rays that reach it.  Coherent rays (a row of a camera's,
+ * shadow rays toward one sun) share most of their nodes. */
+void tf_proc_trace_packet(const tf_procedural *p, const tf_proc_view *v, int n, const tf_vec3 *o,
+                          const tf_vec3 *d, const double *tmin, const double *tmax,
+                          unsigned char *found, tf_hit *hits);
+/* For k < n: occluded[k] = tf_proc_occluded(p, v, o[k], d[k], tmin[k], tmax[k]), in packets. */
+void tf_proc_occluded_packet(const tf_procedural *p, const tf_proc_view *v, int n,
+                             const tf_vec3 *o, const tf_vec3 *d, const double *tmin,
+                             const double *tmax, unsigned char *occluded);
 /* How far a shadow ray from a hit at p starts above the surface: well above the hit
  * tolerance of the levels there. */
 double tf_proc_shadow_lift(const tf_procedural *p, const tf_proc_view *v, tf_vec3 p_hit);

@@ -3,7 +3,8 @@
 # of detail depends on the camera only, so the decoded pixels are bit-identical whatever the task
 # shape (rows:1 scanline, stamps:16x16 and stamps:37x23 tiled), the worker count (-j 1, 2, 4), a
 # mix of forked and networked workers, the per-worker tile cache budget (--terrain-cache 1M, which
-# thrashes, to 512M), and a coordinator SIGKILLed mid-render then resumed (with another budget).
+# thrashes, to 512M), corner rows in packets or one ray at a time (TF_TRACE_PACKETS=0), and a
+# coordinator SIGKILLed mid-render then resumed (with another budget).
 # The statistics: per worker samples_evaluated / cache_hits / cache_evictions, their sum is
 # terrain_samples_evaluated; a tiny cache evicts and evaluates more.  Refusals, each exit 2 and
 # one line: --backend opencl, --terrain-cache 12Q, detail = METRES on a noise generator.
@@ -83,6 +84,12 @@ render -q -j 2 --size $SIZE --tasks stamps:37x23 --terrain-cache $TINY -o "$T/ti
     fail "tiny cache, stamps: $(cat "$T/last.err")"
 stats "$T/tiny_st.json" any   # evictions here depend on what each worker is dealt
 same "$T/stamps_37x23_j2.exr" "$T/tiny_st.exr" "stamps:37x23, -j 2, --terrain-cache $TINY vs $BIG"
+
+# corner rows go through the quad-tree in packets unless TF_TRACE_PACKETS=0: the same bits
+say "packets off: TF_TRACE_PACKETS=0"
+(export TF_TRACE_PACKETS=0; render -q -j 1 --size $SIZE --tasks stamps:37x23 --terrain-cache $BIG \
+    -o "$T/single.exr") || fail "packets off: $(cat "$T/last.err")"
+same_pixels "$T/ref.exr" "$T/single.exr" "TF_TRACE_PACKETS=0"
 
 # forked (tiny cache) plus networked (large cache); --wait-workers 2 so both render
 say "forked plus networked: -j 1 --terrain-cache $TINY and a terrafarm worker -j 1 --terrain-cache $BIG"

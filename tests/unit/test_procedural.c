@@ -6,7 +6,8 @@
  * quad-tree's bound is never below the surface on random boxes; random rays find every hit a
  * brute-force dense march of the same surface finds, and only true ones, over a noise generator
  * and over a grid with detail added; and no hit depends on the cache's budget, nor on what the
- * tracer's node memo holds from another view. */
+ * tracer's node memo holds from another view; and rays traced in packets get the bits each gets
+ * alone. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -466,6 +467,76 @@ static void test_node_memo_keyed_by_view(void **state)
     tf_procedural_free(p);
 }
 
+/* n rays for the packet test, of every kind a packet must take as single rays take them:
+ * random ones of every heading, rows of a camera's (one eye, neighbouring directions), shadow
+ * rays toward one sun from points on the surface, vertical rays, rays along an axis (d.x or
+ * d.y zero, of either sign), rays from below the surface. */
+static void packet_rays(const tf_procedural *p, const tf_proc_view *v, int n, tf_vec3 *o,
+                        tf_vec3 *d)
+{
+    const tf_vec3 eye = {500, 500, 150}, sun = v3_norm((tf_vec3){0.6, -0.3, 0.35});
+    for (int k = 0; k < n; k++) {
+        double x = uniform(100, 900), y = uniform(100, 900), h = tf_proc_height(p, v, x, y);
+        switch (k % 6) {
+        case 0:
+            random_ray(p, v, &o[k], &d[k]);
+            break;
+        case 1: /* a camera row: the eye, directions a hair apart */
+            o[k] = eye;
+            d[k] = v3_norm((tf_vec3){cos(0.001 * k), sin(0.001 * k), -0.2});
+            break;
+        case 2:
+            o[k] = (tf_vec3){x, y, h + 0.01};
+            d[k] = sun;
+            break;
+        case 3:
+            o[k] = (tf_vec3){x, y, h + uniform(0.1, 50)};
+            d[k] = (tf_vec3){0, 0, -1};
+            break;
+        case 4: /* along an axis, signed zeros too */
+            o[k] = (tf_vec3){x, y, h + uniform(0.1, 5)};
+            d[k] = k % 4 < 2 ? (tf_vec3){k % 8 < 4 ? 0.0 : -0.0, 1, -0.05}
+                             : (tf_vec3){-1, k % 8 < 4 ? 0.0 : -0.0, -0.05};
+            break;
+        default:
+            o[k] = (tf_vec3){x, y, h - uniform(0.1, 5)};
+            d[k] = v3_norm((tf_vec3){uniform(-1, 1), uniform(-1, 1), uniform(-0.2, 0.6)});
+        }
+    }
+}
+
+/* Packets give every ray the bits tf_proc_trace and tf_proc_occluded give it alone. */
+static void test_packets_match_single_rays(void **state)
+{
+    (void)state;
+    enum { RAYS = 1200 };
+    static tf_vec3 o[RAYS], d[RAYS];
+    static double tmin[RAYS], tmax[RAYS];
+    static tf_hit hits[RAYS];
+    static unsigned char found[RAYS], occluded[RAYS];
+    for (int g = 0; g < 2; g++) {
+        tf_procedural *p = make(g ? TF_GEN_RIDGED : TF_GEN_FBM);
+        tf_proc_view v = view_of(p);
+        packet_rays(p, &v, RAYS, o, d);
+        for (int k = 0; k < RAYS; k++)
+            tmin[k] = 0, tmax[k] = k % 7 ? 400 : uniform(1, 40);
+        tf_proc_trace_packet(p, &v, RAYS, o, d, tmin, tmax, found, hits);
+        tf_proc_occluded_packet(p, &v, RAYS, o, d, tmin, tmax, occluded);
+        int hit = 0;
+        for (int k = 0; k < RAYS; k++) {
+            tf_hit h;
+            int single = tf_proc_trace(p, &v, o[k], d[k], tmin[k], tmax[k], &h);
+            assert_int_equal(found[k], single);
+            if (single)
+                assert_memory_equal(&hits[k], &h, sizeof h);
+            assert_int_equal(occluded[k], tf_proc_occluded(p, &v, o[k], d[k], tmin[k], tmax[k]));
+            hit += single;
+        }
+        assert_true(hit > RAYS / 4 && hit < RAYS); /* both kinds of answer were asked */
+        tf_procedural_free(p);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -482,6 +553,7 @@ int main(void)
         cmocka_unit_test(test_no_missed_hits_detail_over_grid),
         cmocka_unit_test(test_hits_independent_of_cache),
         cmocka_unit_test(test_node_memo_keyed_by_view),
+        cmocka_unit_test(test_packets_match_single_rays),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

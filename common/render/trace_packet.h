@@ -40,7 +40,8 @@ int tf_trace_packet_force_isa(const char *isa);
 int tf_trace_packets_enabled(void);
 void tf_trace_packets_force(int on);
 /* The same switch with `unset` as the answer when neither the variable nor a force says (a
- * procedural terrain's packets, trace_procedural.h, pay on any ISA: on unless switched off). */
+ * procedural terrain's packets, trace_procedural.h, are no SIMD kernel: on unless switched
+ * off, as fast as single rays, bench/README.md section 47). */
 int tf_trace_packets_wanted(int unset);
 
 #endif

@@ -41,22 +41,48 @@ static void add_base(const tf_procedural *p, int level, int64_t tx, int64_t ty, 
 }
 
 /* A row buffer per thread for the fills (tf_fractal_row_at: octave by octave over a row, the
- * lattice columns hashed once for the samples that share them; the same bits as a point). */
-static __thread tf_fractal_rowbuf fill_row;
-static __thread int fill_row_ready;
+ * lattice columns hashed once for the samples that share them; the same bits as a point),
+ * freed when the thread ends. */
+static __thread tf_fractal_rowbuf *fill_row; /* NULL: none yet, or none to be had */
+static __thread int fill_row_tried;
+static pthread_key_t fill_row_key;
+static pthread_once_t fill_row_once = PTHREAD_ONCE_INIT;
+
+static void free_fill_row(void *b)
+{
+    tf_fractal_rowbuf_free(b);
+    free(b);
+}
+
+static void make_fill_row_key(void) { pthread_key_create(&fill_row_key, free_fill_row); }
+
+/* This thread's row buffer, or NULL without memory (the fills then go point by point). */
+static tf_fractal_rowbuf *row_buffer(void)
+{
+    if (!fill_row_tried) {
+        fill_row_tried = 1;
+        pthread_once(&fill_row_once, make_fill_row_key);
+        tf_fractal_rowbuf *b = malloc(sizeof *b);
+        if (b && tf_fractal_rowbuf_init(b, TF_TILE_SAMPLES) == 0) {
+            fill_row = b;
+            pthread_setspecific(fill_row_key, b);
+        } else {
+            free(b);
+        }
+    }
+    return fill_row;
+}
 
 static uint64_t fill_tile(void *ctx, uint64_t key, float *samples)
 {
     const tf_procedural *p = ctx;
     int level = (int)(key >> 58);
     int64_t tx = (int64_t)((key >> 29) & ((1u << 29) - 1)), ty = (int64_t)(key & ((1u << 29) - 1));
-    if (!fill_row_ready)
-        fill_row_ready = tf_fractal_rowbuf_init(&fill_row, TF_TILE_SAMPLES) == 0 ? 1 : -1;
+    tf_fractal_rowbuf *row = row_buffer();
     for (int b = 0; b < TF_TILE_SAMPLES; b++)
         tf_fractal_row_at(&p->level[level], &p->noise, grid_coord(p, level, ty * TILE + b),
                           tf_proc_spacing(p, level), tx * TILE, TF_TILE_SAMPLES,
-                          p->height_scale * p->fade[level], samples + b * TF_TILE_SAMPLES,
-                          fill_row_ready > 0 ? &fill_row : NULL);
+                          p->height_scale * p->fade[level], samples + b * TF_TILE_SAMPLES, row);
     if (p->base)
         add_base(p, level, tx, ty, samples);
     return (uint64_t)TF_TILE_SAMPLES * TF_TILE_SAMPLES;

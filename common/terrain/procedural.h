@@ -27,6 +27,7 @@
 #ifndef TF_PROCEDURAL_H
 #define TF_PROCEDURAL_H
 
+#include <assert.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -95,6 +96,7 @@ tf_proc_view tf_proc_view_of(const tf_procedural *p, tf_vec3 eye, double pixel_a
  * rounded once), without a call. */
 static inline double tf_proc_halved(double x, int n)
 {
+    assert(n >= 0 && n < 64);
     return x * (1.0 / (double)((uint64_t)1 << n));
 }
 

@@ -430,15 +430,29 @@ static int clip_to_square(const pray *r, double *t0, double *t1)
     return *t1 > *t0;
 }
 
-static int trace(pray *r, double tmin, double tmax)
+/* Ready ray r (its p, v, o, d and want_normal set) for [tmin, tmax]: its stretch over the
+ * terrain's square into *t0, *t1; 0 if it has none. */
+static int start_ray(pray *r, double tmin, double tmax, double *t0, double *t1)
 {
     r->dxy = hypot(r->d.x, r->d.y);
     r->max_q = r->p->max_level + 4 + 2 * MAX_LEAF_LEVELS; /* < 64: tf_proc_halved */
     r->memo = memo_for(r->p, r->v);
-    double t0 = tmin, t1 = tmax;
-    if (!clip_to_square(r, &t0, &t1))
+    *t0 = tmin, *t1 = tmax;
+    return clip_to_square(r, t0, t1);
+}
+
+static int trace(pray *r, double tmin, double tmax)
+{
+    double t0, t1;
+    if (!start_ray(r, tmin, tmax, &t0, &t1))
         return 0;
     return visit(r, 0, 0, 0, t0, t1, 0, r->p->max_level);
+}
+
+/* The hit ray r found. */
+static tf_hit hit_of(const pray *r)
+{
+    return (tf_hit){r->t, v3_add(r->o, v3_scale(r->d, r->t)), r->n, 0, 0};
 }
 
 int tf_proc_trace(const tf_procedural *p, const tf_proc_view *v, tf_vec3 origin, tf_vec3 dir,
@@ -447,10 +461,7 @@ int tf_proc_trace(const tf_procedural *p, const tf_proc_view *v, tf_vec3 origin,
     pray r = {.p = p, .v = v, .o = origin, .d = dir, .want_normal = 1};
     if (!trace(&r, tmin, tmax))
         return 0;
-    hit->t = r.t;
-    hit->p = v3_add(origin, v3_scale(dir, r.t));
-    hit->n = r.n;
-    hit->ci = hit->cj = 0;
+    *hit = hit_of(&r);
     return 1;
 }
 
@@ -600,12 +611,9 @@ static void trace_packet(packet *pk, const tf_procedural *p, const tf_proc_view 
     for (int s = 0; s < n; s++) {
         pray *r = &pk->r[s];
         *r = (pray){.p = p, .v = v, .o = o[ids[s]], .d = d[ids[s]], .want_normal = want_normal};
-        r->dxy = hypot(r->d.x, r->d.y);
-        r->max_q = p->max_level + 4 + 2 * MAX_LEAF_LEVELS;
-        r->memo = memo_for(p, v);
         pk->hit[s] = 0;
-        double t0 = tmin[ids[s]], t1 = tmax[ids[s]];
-        if (clip_to_square(r, &t0, &t1))
+        double t0, t1;
+        if (start_ray(r, tmin[ids[s]], tmax[ids[s]], &t0, &t1))
             root.id[root.n] = s, root.t0[root.n] = t0, root.t1[root.n++] = t1;
     }
     if (!root.n)
@@ -634,8 +642,7 @@ static void trace_packets(const tf_procedural *p, const tf_proc_view *v, int n, 
             for (int s = 0; s < m; s++) {
                 found[ids[s]] = pk.hit[s];
                 if (hits && pk.hit[s])
-                    hits[ids[s]] = (tf_hit){pk.r[s].t, v3_add(o[ids[s]], v3_scale(d[ids[s]],
-                                            pk.r[s].t)), pk.r[s].n, 0, 0};
+                    hits[ids[s]] = hit_of(&pk.r[s]);
             }
             m = 0;
         }
